@@ -1,0 +1,105 @@
+/* The control step every port calls: inverse dynamics + method + safety layer. */
+#ifndef ARM_CONTROLLER_H
+#define ARM_CONTROLLER_H
+
+#include <stdint.h>
+
+#include "arm/robot_model.h"
+
+typedef enum {
+    ARM_METHOD_PD = 0, /* IDC + PD: u = -kp e - kd e_dot */
+    ARM_METHOD_COUNT
+} arm_method_t;
+
+typedef enum {
+    ARM_STATE_INIT = 0,  /* configured, no valid input yet */
+    ARM_STATE_RUNNING,   /* method output reaches the drives */
+    ARM_STATE_FAULT,     /* a fault was detected this period; the safe-stop output is commanded */
+    ARM_STATE_SAFE_STOP, /* latched after a fault: safe-stop output until re-initialised */
+} arm_state_t;
+
+typedef enum {
+    ARM_FAULT_NONE = 0,
+    ARM_FAULT_NONFINITE_INPUT,  /* NaN/Inf in q, qd or the reference */
+    ARM_FAULT_NONFINITE_OUTPUT, /* the method produced NaN/Inf */
+    ARM_FAULT_STALE_INPUT,      /* joint state older than watchdog_periods */
+    ARM_FAULT_EXTERNAL,         /* the port reported a fault (bus, drive, peer lost) */
+} arm_fault_t;
+
+typedef enum {
+    ARM_SAFE_STOP_ZERO_TORQUE = 0,
+    ARM_SAFE_STOP_DAMPING, /* tau = -damping * qd, clamped */
+} arm_safe_stop_mode_t;
+
+typedef struct {
+    arm_method_t method;
+    float period_s;
+    float kp; /* 1/s^2 */
+    float kd; /* 1/s */
+    float torque_limit[ARM_N_JOINTS];      /* Nm */
+    float torque_rate_limit[ARM_N_JOINTS]; /* Nm per period */
+    uint32_t watchdog_periods;             /* stale periods tolerated before safe stop */
+    arm_safe_stop_mode_t safe_stop_mode;
+    float safe_stop_damping; /* Nm s/rad */
+} arm_ctl_config_t;
+
+typedef struct {
+    float q[ARM_N_JOINTS];
+    float qd[ARM_N_JOINTS];
+    float q_d[ARM_N_JOINTS];
+    float qd_d[ARM_N_JOINTS];
+    float qdd_d[ARM_N_JOINTS];
+    uint32_t fresh_mask; /* bit i: joint i's state arrived this period */
+} arm_ctl_input_t;
+
+typedef struct {
+    float tau[ARM_N_JOINTS]; /* what goes to the drives, after the safety layer */
+    /* internals, for telemetry */
+    float e[ARM_N_JOINTS];
+    float e_dot[ARM_N_JOINTS];
+    float w_hat[ARM_N_JOINTS];
+    float u_o[ARM_N_JOINTS];
+    float tau_method[ARM_N_JOINTS]; /* before limits */
+    uint32_t saturated_mask;        /* bit i: joint i's torque or rate was limited */
+    arm_state_t state;
+    arm_fault_t fault;
+} arm_ctl_output_t;
+
+typedef struct {
+    const arm_robot_model_t *model;
+    arm_ctl_config_t cfg;
+    arm_state_t state;
+    arm_fault_t fault;
+    uint32_t stale_periods;
+    float last_q[ARM_N_JOINTS];
+    float last_qd[ARM_N_JOINTS];
+    float tau_prev[ARM_N_JOINTS];
+} arm_ctl_t;
+
+typedef enum {
+    ARM_CTL_OK = 0,
+    ARM_CTL_BAD_METHOD,
+    ARM_CTL_BAD_PERIOD,
+    ARM_CTL_BAD_GAIN,
+    ARM_CTL_BAD_LIMIT,
+} arm_ctl_init_result_t;
+
+/* Fills cfg with the defaults for the model: PD at 20 rad/s, critically damped; the model's
+ * torque limits; a rate limit of full scale per 10 ms; zero-torque safe stop after 3 stale periods. */
+void arm_ctl_default_config(const arm_robot_model_t *model, arm_ctl_config_t *cfg);
+arm_ctl_init_result_t arm_ctl_init(arm_ctl_t *ctl, const arm_robot_model_t *model,
+                                   const arm_ctl_config_t *cfg);
+const char *arm_ctl_init_result_str(arm_ctl_init_result_t r);
+
+void arm_ctl_step(arm_ctl_t *ctl, const arm_ctl_input_t *in, arm_ctl_output_t *out);
+
+/* The port detected a fault the core cannot see (lost peer, drive fault): latch safe stop. */
+void arm_ctl_external_fault(arm_ctl_t *ctl);
+
+const char *arm_state_str(arm_state_t s);
+const char *arm_fault_str(arm_fault_t f);
+const char *arm_method_str(arm_method_t m);
+/* Returns ARM_METHOD_COUNT if the name is unknown. */
+arm_method_t arm_method_from_str(const char *name);
+
+#endif

@@ -1,0 +1,81 @@
+/* Bus master side of the drive protocol (firmware/protocol/arm_drives.dbc): builds the frames the
+ * controller sends and validates and decodes the frames the drives send. No I/O here. */
+#ifndef ARM_DRIVE_BUS_H
+#define ARM_DRIVE_BUS_H
+
+#include <stdint.h>
+
+#include "arm/can_frame.h"
+#include "arm/robot_model.h"
+
+#define ARM_NMT_START 0x01u
+#define ARM_NMT_STOP 0x02u
+#define ARM_NMT_STATE_OPERATIONAL 0x05u
+
+/* CiA 402 controlwords the controller uses. */
+#define ARM_CW_SHUTDOWN 0x0006u
+#define ARM_CW_SWITCH_ON 0x0007u
+#define ARM_CW_ENABLE_OPERATION 0x000Fu
+
+static inline int arm_sw_operation_enabled(uint16_t sw)
+{
+    return (sw & 0x006Fu) == 0x0027u;
+}
+
+static inline int arm_sw_fault(uint16_t sw)
+{
+    return (sw & 0x004Fu) == 0x0008u;
+}
+
+/* The controlword that moves a drive one step towards operation enabled (CiA 402 device
+ * control: switch on disabled -> ready to switch on -> switched on -> operation enabled).
+ * A drive in fault is not reset automatically: that is an operator's decision. */
+uint16_t arm_cia402_enable_controlword(uint16_t statusword);
+
+typedef enum {
+    ARM_RX_STATE = 0,      /* a joint state for the current period */
+    ARM_RX_HEARTBEAT,
+    ARM_RX_EMCY,
+    ARM_RX_OWN_ECHO,       /* a frame this node sends (UDP loopback echoes it back): ignored */
+    ARM_RX_UNKNOWN_ID,
+    ARM_RX_BAD_LENGTH,
+    ARM_RX_WRONG_COUNTER,  /* a state for another period (late or duplicated) */
+    ARM_RX_BAD_FORMAT,     /* FD/classic or RTR/ERR flags do not match the definition */
+} arm_rx_kind_t;
+
+typedef struct {
+    uint32_t state;
+    uint32_t heartbeat;
+    uint32_t emcy;
+    uint32_t own_echo;
+    uint32_t unknown_id;
+    uint32_t bad_length;
+    uint32_t wrong_counter;
+    uint32_t bad_format;
+} arm_rx_counters_t;
+
+typedef struct {
+    uint8_t counter;    /* SYNC counter of the current period */
+    uint32_t fresh_mask; /* bit i: joint i's state for this period arrived */
+    float q[ARM_N_JOINTS];
+    float qd[ARM_N_JOINTS];
+    float tau_measured[ARM_N_JOINTS];
+    uint16_t statusword[ARM_N_JOINTS];
+    uint8_t drive_error[ARM_N_JOINTS];
+    uint8_t nmt_state[ARM_N_JOINTS];
+    uint32_t heartbeat_mask; /* bit i: drive i has sent a heartbeat since boot */
+    uint16_t last_emcy_code[ARM_N_JOINTS];
+    arm_rx_counters_t rx;
+} arm_drive_bus_t;
+
+void arm_bus_init(arm_drive_bus_t *bus);
+/* Start period k: the returned SYNC carries k mod 256; states of other periods are rejected. */
+void arm_bus_begin_period(arm_drive_bus_t *bus, uint32_t step, arm_can_frame_t *sync);
+void arm_bus_make_nmt(uint8_t command, uint8_t node_id, arm_can_frame_t *out);
+void arm_bus_make_cmd(const arm_drive_bus_t *bus, int joint, uint16_t controlword, float torque_nm,
+                      arm_can_frame_t *out);
+arm_rx_kind_t arm_bus_handle_rx(arm_drive_bus_t *bus, const arm_can_frame_t *frame);
+/* Joint index of a drive frame's node, or -1. */
+int arm_bus_joint_of(const arm_can_frame_t *frame);
+
+#endif

@@ -1,0 +1,26 @@
+/* Nominal rigid-body model of a serial arm of revolute joints (filled by a generated header). */
+#ifndef ARM_ROBOT_MODEL_TYPES_H
+#define ARM_ROBOT_MODEL_TYPES_H
+
+#include "arm_robot_dims.h" /* generated: ARM_N_JOINTS */
+
+#if !defined(ARM_N_JOINTS) || ARM_N_JOINTS < 1 || ARM_N_JOINTS > 16
+#error "arm_robot_dims.h must define ARM_N_JOINTS in 1..16"
+#endif
+
+typedef struct {
+    float pos[3];         /* parent -> body translation, parent frame */
+    float rot[3][3];      /* parent -> body rotation at q = 0 */
+    float axis[3];        /* joint axis, body frame, unit length */
+    float mass;           /* kg */
+    float com[3];         /* centre of mass, body frame */
+    float inertia[3][3];  /* about the centre of mass, body frame */
+    float torque_limit;   /* Nm, the drive's limit */
+} arm_link_t;
+
+typedef struct {
+    float gravity[3]; /* world frame, m/s^2 (base frame = world frame) */
+    arm_link_t link[ARM_N_JOINTS];
+} arm_robot_model_t;
+
+#endif

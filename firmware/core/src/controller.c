@@ -1,0 +1,225 @@
+#include "arm/controller.h"
+
+#include <math.h>
+#include <string.h>
+
+#include "arm/rnea.h"
+
+#define ARM_ALL_JOINTS_MASK ((uint32_t)((1ull << ARM_N_JOINTS) - 1u))
+
+static const char *const k_method_names[ARM_METHOD_COUNT] = {"pd"};
+
+void arm_ctl_default_config(const arm_robot_model_t *model, arm_ctl_config_t *cfg)
+{
+    const float wn = 20.0f; /* rad/s: well below the 1 kHz loop, above the reference's content */
+    memset(cfg, 0, sizeof(*cfg));
+    cfg->method = ARM_METHOD_PD;
+    cfg->period_s = 0.001f;
+    cfg->kp = wn * wn;
+    cfg->kd = 2.0f * wn;
+    for (int i = 0; i < ARM_N_JOINTS; ++i) {
+        cfg->torque_limit[i] = model->link[i].torque_limit;
+        /* Full scale in 10 ms: fast enough to take the arm's weight within a few periods of
+         * enabling, slow enough to turn a corrupted command into a ramp rather than a jump. */
+        cfg->torque_rate_limit[i] = model->link[i].torque_limit * (cfg->period_s / 0.010f);
+    }
+    cfg->watchdog_periods = 3u;
+    cfg->safe_stop_mode = ARM_SAFE_STOP_ZERO_TORQUE;
+    cfg->safe_stop_damping = 0.0f;
+}
+
+arm_ctl_init_result_t arm_ctl_init(arm_ctl_t *ctl, const arm_robot_model_t *model,
+                                   const arm_ctl_config_t *cfg)
+{
+    if ((unsigned)cfg->method >= (unsigned)ARM_METHOD_COUNT) {
+        return ARM_CTL_BAD_METHOD;
+    }
+    if (!(cfg->period_s > 0.0f && cfg->period_s < 1.0f)) {
+        return ARM_CTL_BAD_PERIOD;
+    }
+    if (!(isfinite(cfg->kp) && isfinite(cfg->kd) && cfg->kp >= 0.0f && cfg->kd >= 0.0f &&
+          isfinite(cfg->safe_stop_damping) && cfg->safe_stop_damping >= 0.0f)) {
+        return ARM_CTL_BAD_GAIN;
+    }
+    for (int i = 0; i < ARM_N_JOINTS; ++i) {
+        if (!(cfg->torque_limit[i] > 0.0f && isfinite(cfg->torque_limit[i]) &&
+              cfg->torque_rate_limit[i] > 0.0f && isfinite(cfg->torque_rate_limit[i]))) {
+            return ARM_CTL_BAD_LIMIT;
+        }
+    }
+    memset(ctl, 0, sizeof(*ctl));
+    ctl->model = model;
+    ctl->cfg = *cfg;
+    ctl->state = ARM_STATE_INIT;
+    ctl->fault = ARM_FAULT_NONE;
+    return ARM_CTL_OK;
+}
+
+static int all_finite(const float *v, int n)
+{
+    for (int i = 0; i < n; ++i) {
+        if (!isfinite(v[i])) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+static int input_finite(const arm_ctl_input_t *in)
+{
+    return all_finite(in->q, ARM_N_JOINTS) && all_finite(in->qd, ARM_N_JOINTS) &&
+           all_finite(in->q_d, ARM_N_JOINTS) && all_finite(in->qd_d, ARM_N_JOINTS) &&
+           all_finite(in->qdd_d, ARM_N_JOINTS);
+}
+
+static void latch_fault(arm_ctl_t *ctl, arm_fault_t fault)
+{
+    if (ctl->state != ARM_STATE_SAFE_STOP && ctl->state != ARM_STATE_FAULT) {
+        ctl->state = ARM_STATE_FAULT;
+        ctl->fault = fault;
+    }
+}
+
+void arm_ctl_external_fault(arm_ctl_t *ctl)
+{
+    latch_fault(ctl, ARM_FAULT_EXTERNAL);
+}
+
+static float clampf(float x, float lo, float hi)
+{
+    return x < lo ? lo : (x > hi ? hi : x);
+}
+
+static void safe_stop_output(const arm_ctl_t *ctl, arm_ctl_output_t *out)
+{
+    for (int i = 0; i < ARM_N_JOINTS; ++i) {
+        float tau = 0.0f;
+        if (ctl->cfg.safe_stop_mode == ARM_SAFE_STOP_DAMPING && isfinite(ctl->last_qd[i])) {
+            const float lim = ctl->cfg.torque_limit[i];
+            tau = clampf(-ctl->cfg.safe_stop_damping * ctl->last_qd[i], -lim, lim);
+        }
+        out->tau[i] = tau;
+    }
+}
+
+static void method_pd(const arm_ctl_t *ctl, const arm_ctl_input_t *in, arm_ctl_output_t *out)
+{
+    float acc[ARM_N_JOINTS];
+    for (int i = 0; i < ARM_N_JOINTS; ++i) {
+        out->e[i] = in->q_d[i] - ctl->last_q[i];
+        out->e_dot[i] = in->qd_d[i] - ctl->last_qd[i];
+        out->w_hat[i] = 0.0f;
+        out->u_o[i] = -ctl->cfg.kp * out->e[i] - ctl->cfg.kd * out->e_dot[i];
+        /* IDC: commanding q_ddot_d - u makes the nominal error dynamics e_ddot = u. */
+        acc[i] = in->qdd_d[i] - (out->u_o[i] - out->w_hat[i]);
+    }
+    arm_rnea(ctl->model, ctl->last_q, ctl->last_qd, acc, out->tau_method);
+}
+
+static void apply_limits(arm_ctl_t *ctl, arm_ctl_output_t *out)
+{
+    out->saturated_mask = 0u;
+    for (int i = 0; i < ARM_N_JOINTS; ++i) {
+        const float lim = ctl->cfg.torque_limit[i];
+        const float rate = ctl->cfg.torque_rate_limit[i];
+        const float want = out->tau_method[i];
+        float tau = clampf(want, ctl->tau_prev[i] - rate, ctl->tau_prev[i] + rate);
+        tau = clampf(tau, -lim, lim);
+        if (tau != want) {
+            out->saturated_mask |= 1u << i;
+        }
+        out->tau[i] = tau;
+    }
+}
+
+void arm_ctl_step(arm_ctl_t *ctl, const arm_ctl_input_t *in, arm_ctl_output_t *out)
+{
+    memset(out, 0, sizeof(*out));
+    const int all_fresh = (in->fresh_mask & ARM_ALL_JOINTS_MASK) == ARM_ALL_JOINTS_MASK;
+
+    if (ctl->state == ARM_STATE_INIT || ctl->state == ARM_STATE_RUNNING) {
+        if (!input_finite(in)) {
+            latch_fault(ctl, ARM_FAULT_NONFINITE_INPUT);
+        } else if (all_fresh) {
+            memcpy(ctl->last_q, in->q, sizeof(ctl->last_q));
+            memcpy(ctl->last_qd, in->qd, sizeof(ctl->last_qd));
+            ctl->stale_periods = 0u;
+            ctl->state = ARM_STATE_RUNNING;
+        } else if (ctl->state == ARM_STATE_RUNNING &&
+                   ++ctl->stale_periods > ctl->cfg.watchdog_periods) {
+            latch_fault(ctl, ARM_FAULT_STALE_INPUT);
+        }
+    }
+
+    if (ctl->state == ARM_STATE_RUNNING) {
+        /* Stale periods within the watchdog reuse the last state: the hold is bounded. */
+        method_pd(ctl, in, out);
+        if (!all_finite(out->tau_method, ARM_N_JOINTS)) {
+            latch_fault(ctl, ARM_FAULT_NONFINITE_OUTPUT);
+        } else {
+            apply_limits(ctl, out);
+        }
+    }
+
+    if (ctl->state == ARM_STATE_FAULT || ctl->state == ARM_STATE_SAFE_STOP) {
+        safe_stop_output(ctl, out);
+    }
+    /* INIT commands zero torque: out->tau is already zero. */
+
+    memcpy(ctl->tau_prev, out->tau, sizeof(ctl->tau_prev));
+    out->state = ctl->state;
+    out->fault = ctl->fault;
+    if (ctl->state == ARM_STATE_FAULT) {
+        ctl->state = ARM_STATE_SAFE_STOP; /* FAULT is reported for exactly one period */
+    }
+}
+
+const char *arm_state_str(arm_state_t s)
+{
+    switch (s) {
+    case ARM_STATE_INIT: return "init";
+    case ARM_STATE_RUNNING: return "running";
+    case ARM_STATE_FAULT: return "fault";
+    case ARM_STATE_SAFE_STOP: return "safe-stop";
+    }
+    return "?";
+}
+
+const char *arm_fault_str(arm_fault_t f)
+{
+    switch (f) {
+    case ARM_FAULT_NONE: return "none";
+    case ARM_FAULT_NONFINITE_INPUT: return "non-finite input";
+    case ARM_FAULT_NONFINITE_OUTPUT: return "non-finite output";
+    case ARM_FAULT_STALE_INPUT: return "stale joint state (watchdog)";
+    case ARM_FAULT_EXTERNAL: return "external fault reported by the port";
+    }
+    return "?";
+}
+
+const char *arm_method_str(arm_method_t m)
+{
+    return (unsigned)m < (unsigned)ARM_METHOD_COUNT ? k_method_names[m] : "?";
+}
+
+arm_method_t arm_method_from_str(const char *name)
+{
+    for (int i = 0; i < (int)ARM_METHOD_COUNT; ++i) {
+        if (strcmp(name, k_method_names[i]) == 0) {
+            return (arm_method_t)i;
+        }
+    }
+    return ARM_METHOD_COUNT;
+}
+
+const char *arm_ctl_init_result_str(arm_ctl_init_result_t r)
+{
+    switch (r) {
+    case ARM_CTL_OK: return "ok";
+    case ARM_CTL_BAD_METHOD: return "unknown method";
+    case ARM_CTL_BAD_PERIOD: return "period_s must be in (0, 1)";
+    case ARM_CTL_BAD_GAIN: return "gains must be finite and >= 0";
+    case ARM_CTL_BAD_LIMIT: return "torque and torque-rate limits must be finite and > 0";
+    }
+    return "?";
+}

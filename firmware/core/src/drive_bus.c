@@ -1,0 +1,183 @@
+#include "arm/drive_bus.h"
+
+#include <string.h>
+
+#include "arm_drives.h" /* generated from firmware/protocol/arm_drives.dbc by cantools */
+
+#if ARM_N_JOINTS > 6
+#error "arm_drives.dbc defines 6 drives; add nodes to the DBC for a longer arm"
+#endif
+
+typedef int (*state_unpack_fn)(void *dst, const uint8_t *src, size_t size);
+
+/* Every drive's frames share one layout in the DBC, but the generated code has one struct per
+ * drive; the tables keep the lookups data-driven rather than switch-per-drive. */
+static const uint32_t k_state_id[6] = {
+    ARM_DRIVES_DRIVE_1_STATE_FRAME_ID, ARM_DRIVES_DRIVE_2_STATE_FRAME_ID,
+    ARM_DRIVES_DRIVE_3_STATE_FRAME_ID, ARM_DRIVES_DRIVE_4_STATE_FRAME_ID,
+    ARM_DRIVES_DRIVE_5_STATE_FRAME_ID, ARM_DRIVES_DRIVE_6_STATE_FRAME_ID};
+static const uint32_t k_cmd_id[6] = {
+    ARM_DRIVES_DRIVE_1_CMD_FRAME_ID, ARM_DRIVES_DRIVE_2_CMD_FRAME_ID,
+    ARM_DRIVES_DRIVE_3_CMD_FRAME_ID, ARM_DRIVES_DRIVE_4_CMD_FRAME_ID,
+    ARM_DRIVES_DRIVE_5_CMD_FRAME_ID, ARM_DRIVES_DRIVE_6_CMD_FRAME_ID};
+static const uint32_t k_hb_id[6] = {
+    ARM_DRIVES_DRIVE_1_HEARTBEAT_FRAME_ID, ARM_DRIVES_DRIVE_2_HEARTBEAT_FRAME_ID,
+    ARM_DRIVES_DRIVE_3_HEARTBEAT_FRAME_ID, ARM_DRIVES_DRIVE_4_HEARTBEAT_FRAME_ID,
+    ARM_DRIVES_DRIVE_5_HEARTBEAT_FRAME_ID, ARM_DRIVES_DRIVE_6_HEARTBEAT_FRAME_ID};
+static const uint32_t k_emcy_id[6] = {
+    ARM_DRIVES_DRIVE_1_EMCY_FRAME_ID, ARM_DRIVES_DRIVE_2_EMCY_FRAME_ID,
+    ARM_DRIVES_DRIVE_3_EMCY_FRAME_ID, ARM_DRIVES_DRIVE_4_EMCY_FRAME_ID,
+    ARM_DRIVES_DRIVE_5_EMCY_FRAME_ID, ARM_DRIVES_DRIVE_6_EMCY_FRAME_ID};
+
+static int index_of(const uint32_t table[6], uint32_t id)
+{
+    for (int i = 0; i < ARM_N_JOINTS; ++i) {
+        if (table[i] == id) {
+            return i;
+        }
+    }
+    return -1;
+}
+
+int arm_bus_joint_of(const arm_can_frame_t *frame)
+{
+    int j = index_of(k_state_id, frame->id);
+    if (j < 0) j = index_of(k_cmd_id, frame->id);
+    if (j < 0) j = index_of(k_hb_id, frame->id);
+    if (j < 0) j = index_of(k_emcy_id, frame->id);
+    return j;
+}
+
+void arm_bus_init(arm_drive_bus_t *bus)
+{
+    memset(bus, 0, sizeof(*bus));
+}
+
+void arm_bus_begin_period(arm_drive_bus_t *bus, uint32_t step, arm_can_frame_t *sync)
+{
+    struct arm_drives_sync_t msg;
+    bus->counter = (uint8_t)(step & 0xFFu);
+    bus->fresh_mask = 0u;
+    memset(sync, 0, sizeof(*sync));
+    arm_drives_sync_init(&msg);
+    msg.counter = bus->counter;
+    sync->id = ARM_DRIVES_SYNC_FRAME_ID;
+    sync->len = (uint8_t)arm_drives_sync_pack(sync->data, &msg, sizeof(sync->data));
+}
+
+void arm_bus_make_nmt(uint8_t command, uint8_t node_id, arm_can_frame_t *out)
+{
+    struct arm_drives_nmt_t msg;
+    memset(out, 0, sizeof(*out));
+    arm_drives_nmt_init(&msg);
+    msg.command = command;
+    msg.node_id = node_id;
+    out->id = ARM_DRIVES_NMT_FRAME_ID;
+    out->len = (uint8_t)arm_drives_nmt_pack(out->data, &msg, sizeof(out->data));
+}
+
+void arm_bus_make_cmd(const arm_drive_bus_t *bus, int joint, uint16_t controlword, float torque_nm,
+                      arm_can_frame_t *out)
+{
+    /* Identical layout for every drive (checked by the protocol tests): pack with drive 1's code. */
+    struct arm_drives_drive_1_cmd_t msg;
+    memset(out, 0, sizeof(*out));
+    arm_drives_drive_1_cmd_init(&msg);
+    msg.controlword = controlword;
+    /* The generated encoder truncates toward zero; round to the nearest step instead so the
+     * quantisation error is at most half a step and unbiased. */
+    const double want = (double)torque_nm;
+    const double step = arm_drives_drive_1_cmd_target_torque_decode(1) -
+                        arm_drives_drive_1_cmd_target_torque_decode(0);
+    int32_t raw = arm_drives_drive_1_cmd_target_torque_encode(want);
+    const double residual = want - arm_drives_drive_1_cmd_target_torque_decode(raw);
+    if (residual >= 0.5 * step) {
+        raw += 1;
+    } else if (residual <= -0.5 * step) {
+        raw -= 1;
+    }
+    msg.target_torque = raw;
+    msg.sync_counter = bus->counter;
+    out->id = k_cmd_id[joint];
+    out->len = (uint8_t)arm_drives_drive_1_cmd_pack(out->data, &msg, sizeof(out->data));
+}
+
+static arm_rx_kind_t handle_state(arm_drive_bus_t *bus, int j, const arm_can_frame_t *f)
+{
+    struct arm_drives_drive_1_state_t msg;
+    if ((f->flags & ARM_CAN_FLAG_FD) == 0u) {
+        bus->rx.bad_format++;
+        return ARM_RX_BAD_FORMAT;
+    }
+    if (f->len != ARM_DRIVES_DRIVE_1_STATE_LENGTH ||
+        arm_drives_drive_1_state_unpack(&msg, f->data, f->len) != 0) {
+        bus->rx.bad_length++;
+        return ARM_RX_BAD_LENGTH;
+    }
+    if (msg.sync_counter != bus->counter) {
+        bus->rx.wrong_counter++;
+        return ARM_RX_WRONG_COUNTER;
+    }
+    bus->q[j] = (float)arm_drives_drive_1_state_position_decode(msg.position);
+    bus->qd[j] = (float)arm_drives_drive_1_state_velocity_decode(msg.velocity);
+    bus->tau_measured[j] = (float)arm_drives_drive_1_state_torque_decode(msg.torque);
+    bus->statusword[j] = msg.statusword;
+    bus->drive_error[j] = msg.error_code;
+    bus->fresh_mask |= 1u << j;
+    bus->rx.state++;
+    return ARM_RX_STATE;
+}
+
+arm_rx_kind_t arm_bus_handle_rx(arm_drive_bus_t *bus, const arm_can_frame_t *f)
+{
+    if ((f->flags & (ARM_CAN_FLAG_RTR | ARM_CAN_FLAG_ERR | ARM_CAN_FLAG_EXT)) != 0u) {
+        bus->rx.bad_format++;
+        return ARM_RX_BAD_FORMAT;
+    }
+    int j = index_of(k_state_id, f->id);
+    if (j >= 0) {
+        return handle_state(bus, j, f);
+    }
+    j = index_of(k_hb_id, f->id);
+    if (j >= 0) {
+        if (f->len != ARM_DRIVES_DRIVE_1_HEARTBEAT_LENGTH) {
+            bus->rx.bad_length++;
+            return ARM_RX_BAD_LENGTH;
+        }
+        bus->nmt_state[j] = f->data[0];
+        bus->heartbeat_mask |= 1u << j;
+        bus->rx.heartbeat++;
+        return ARM_RX_HEARTBEAT;
+    }
+    j = index_of(k_emcy_id, f->id);
+    if (j >= 0) {
+        if (f->len != ARM_DRIVES_DRIVE_1_EMCY_LENGTH) {
+            bus->rx.bad_length++;
+            return ARM_RX_BAD_LENGTH;
+        }
+        bus->last_emcy_code[j] = (uint16_t)(f->data[0] | (uint16_t)(f->data[1] << 8));
+        bus->rx.emcy++;
+        return ARM_RX_EMCY;
+    }
+    if (f->id == ARM_DRIVES_SYNC_FRAME_ID || f->id == ARM_DRIVES_NMT_FRAME_ID ||
+        index_of(k_cmd_id, f->id) >= 0) {
+        bus->rx.own_echo++;
+        return ARM_RX_OWN_ECHO;
+    }
+    bus->rx.unknown_id++;
+    return ARM_RX_UNKNOWN_ID;
+}
+
+uint16_t arm_cia402_enable_controlword(uint16_t sw)
+{
+    if ((sw & 0x004Fu) == 0x0040u) { /* switch on disabled */
+        return ARM_CW_SHUTDOWN;
+    }
+    if ((sw & 0x006Fu) == 0x0021u) { /* ready to switch on */
+        return ARM_CW_SWITCH_ON;
+    }
+    if ((sw & 0x006Fu) == 0x0023u || arm_sw_operation_enabled(sw)) {
+        return ARM_CW_ENABLE_OPERATION;
+    }
+    return ARM_CW_SHUTDOWN; /* fault or unknown: keep the power stage off */
+}

@@ -1,0 +1,29 @@
+#include "arm/reference.h"
+
+#include <math.h>
+
+#define ARM_TWO_PI 6.28318531f
+
+void arm_reference_default(arm_reference_t *ref, const float q0[ARM_N_JOINTS])
+{
+    for (int i = 0; i < ARM_N_JOINTS; ++i) {
+        /* Distinct, incommensurate frequencies so the joints excite each other's coupling. */
+        const float k = (float)i;
+        ref->q0[i] = q0[i];
+        ref->amp[i] = 0.25f + 0.03f * k;
+        ref->omega[i] = ARM_TWO_PI * (0.2f + 0.05f * k);
+    }
+}
+
+void arm_reference_eval(const arm_reference_t *ref, float t, float q_d[ARM_N_JOINTS],
+                        float qd_d[ARM_N_JOINTS], float qdd_d[ARM_N_JOINTS])
+{
+    for (int i = 0; i < ARM_N_JOINTS; ++i) {
+        const float wt = ref->omega[i] * t;
+        const float a = ref->amp[i];
+        const float w = ref->omega[i];
+        q_d[i] = ref->q0[i] + a * (1.0f - cosf(wt));
+        qd_d[i] = a * w * sinf(wt);
+        qdd_d[i] = a * w * w * cosf(wt);
+    }
+}

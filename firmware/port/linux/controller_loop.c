@@ -1,0 +1,353 @@
+#define _GNU_SOURCE
+#include "controller_loop.h"
+
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "arm/can_udp.h"
+#include "arm/reference.h"
+
+#define ALL_JOINTS ((uint32_t)((1ull << ARM_N_JOINTS) - 1u))
+#define ENABLE_TIMEOUT_PERIODS 100u /* CiA 402 enable sequence: 3 periods when all is well */
+
+static int64_t now_ns(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (int64_t)ts.tv_sec * 1000000000LL + ts.tv_nsec;
+}
+
+static double wall_clock_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_REALTIME, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+typedef struct {
+    arm_can_udp_t udp;
+    arm_drive_bus_t drives;
+    run_report_t *report;
+} link_t;
+
+static int send_frame(link_t *l, const arm_can_frame_t *f)
+{
+    const int rc = arm_can_udp_send(&l->udp, f, wall_clock_s());
+    if (rc == 0) {
+        l->report->frames_tx++;
+    } else {
+        /* A full socket buffer must not stall the period: the frame is dropped and counted;
+         * the drive's own command timeout covers a lost command. */
+        l->report->tx_would_block++;
+    }
+    return rc;
+}
+
+/* Receive and dispatch frames until want_mask is complete (for states) or the deadline passes. */
+static void pump(link_t *l, int64_t deadline_ns, uint32_t (*done)(const arm_drive_bus_t *))
+{
+    for (;;) {
+        if (done != NULL && done(&l->drives) == ALL_JOINTS) {
+            return;
+        }
+        const int64_t left = deadline_ns - now_ns();
+        if (left <= 0) {
+            return;
+        }
+        arm_can_frame_t f;
+        double ts = 0.0;
+        const int rc = arm_can_udp_recv(&l->udp, &f, &ts, (int)(left / 1000 + 1));
+        if (rc == 1) {
+            l->report->frames_rx++;
+            (void)arm_bus_handle_rx(&l->drives, &f);
+        } else if (rc < 0) {
+            return;
+        }
+    }
+}
+
+static uint32_t states_done(const arm_drive_bus_t *b)
+{
+    return b->fresh_mask & ALL_JOINTS;
+}
+
+static uint32_t drives_operational(const arm_drive_bus_t *b)
+{
+    uint32_t m = 0u;
+    for (int j = 0; j < ARM_N_JOINTS; ++j) {
+        if ((b->heartbeat_mask & (1u << j)) != 0u && b->nmt_state[j] == ARM_NMT_STATE_OPERATIONAL) {
+            m |= 1u << j;
+        }
+    }
+    return m;
+}
+
+static void list_joints(uint32_t mask, char *out, size_t cap)
+{
+    size_t len = 0;
+    out[0] = '\0';
+    for (int j = 0; j < ARM_N_JOINTS && len + 4 < cap; ++j) {
+        if ((mask & (1u << j)) != 0u) {
+            len += (size_t)snprintf(out + len, cap - len, "%s%d", len > 0 ? "," : "", j + 1);
+        }
+    }
+}
+
+static int boot(link_t *l, const options_t *opt, telemetry_t *telem)
+{
+    const int64_t start = now_ns();
+    const int64_t give_up = start + (int64_t)(opt->boot_timeout_s * 1e9);
+    arm_can_frame_t nmt;
+    arm_bus_make_nmt(ARM_NMT_START, 0u, &nmt);
+    /* NMT start is repeated because the drives may join the bus after us. */
+    while (now_ns() < give_up) {
+        send_frame(l, &nmt);
+        int64_t slice = now_ns() + 50000000LL;
+        if (slice > give_up) slice = give_up;
+        pump(l, slice, drives_operational);
+        if (drives_operational(&l->drives) == ALL_JOINTS) {
+            l->report->boot_s = (double)(now_ns() - start) * 1e-9;
+            telemetry_event(telem, 0, "info", "all drives operational");
+            return 0;
+        }
+    }
+    char missing[64];
+    list_joints(ALL_JOINTS & ~drives_operational(&l->drives), missing, sizeof(missing));
+    snprintf(l->report->reason, sizeof(l->report->reason),
+             "boot: drive(s) %s not operational within %.1f s (no heartbeat with NMT state "
+             "operational; is the simulator on bus '%s'?)",
+             missing, opt->boot_timeout_s, opt->bus);
+    return -1;
+}
+
+static void send_commands(link_t *l, const arm_ctl_output_t *out)
+{
+    const int enabled = out->state == ARM_STATE_RUNNING || out->state == ARM_STATE_INIT;
+    for (int j = 0; j < ARM_N_JOINTS; ++j) {
+        arm_can_frame_t f;
+        arm_bus_make_cmd(&l->drives, j, enabled ? ARM_CW_ENABLE_OPERATION : ARM_CW_SHUTDOWN,
+                         out->tau[j], &f);
+        send_frame(l, &f);
+    }
+}
+
+static int parse_bus(const char *spec, char *group, size_t cap, uint16_t *port)
+{
+    snprintf(group, cap, "239.74.163.2");
+    *port = 43113u;
+    if (strcmp(spec, "udp") == 0) {
+        return 0;
+    }
+    const char *g = spec + 4;
+    const char *colon = strrchr(g, ':');
+    if (colon == NULL || (size_t)(colon - g) >= cap) {
+        return -1;
+    }
+    memcpy(group, g, (size_t)(colon - g));
+    group[colon - g] = '\0';
+    char *end = NULL;
+    const long p = strtol(colon + 1, &end, 10);
+    if (*end != '\0' || p < 1 || p > 65535) {
+        return -1;
+    }
+    *port = (uint16_t)p;
+    return 0;
+}
+
+void controller_run(const options_t *opt, const arm_robot_model_t *model, telemetry_t *telem,
+                    run_report_t *report)
+{
+    static link_t l; /* static: the loop's working set is fixed at start-up */
+    memset(&l, 0, sizeof(l));
+    memset(report, 0, sizeof(*report));
+    l.report = report;
+    report->final_state = ARM_STATE_INIT;
+
+    char group[64];
+    uint16_t port = 0;
+    char err[200];
+    if (parse_bus(opt->bus, group, sizeof(group), &port) != 0) {
+        snprintf(report->reason, sizeof(report->reason), "--bus: cannot parse '%s'", opt->bus);
+        report->result = RUN_BUS_ERROR;
+        return;
+    }
+    if (arm_can_udp_open(&l.udp, group, port, err, sizeof(err)) != 0) {
+        snprintf(report->reason, sizeof(report->reason), "bus: %s", err);
+        report->result = RUN_BUS_ERROR;
+        return;
+    }
+    arm_bus_init(&l.drives);
+
+    static arm_ctl_t ctl;
+    const arm_ctl_init_result_t ir = arm_ctl_init(&ctl, model, &opt->ctl);
+    if (ir != ARM_CTL_OK) {
+        snprintf(report->reason, sizeof(report->reason), "controller config: %s",
+                 arm_ctl_init_result_str(ir));
+        report->result = RUN_FAULT;
+        arm_can_udp_close(&l.udp);
+        return;
+    }
+
+    const int64_t t_start = now_ns();
+    if (boot(&l, opt, telem) != 0) {
+        report->result = RUN_BOOT_FAILED;
+        telemetry_event(telem, 0, "fault", report->reason);
+        arm_can_udp_close(&l.udp);
+        report->wall_s = (double)(now_ns() - t_start) * 1e-9;
+        return;
+    }
+
+    const int64_t period_ns = (int64_t)(1e9 / opt->rate_hz);
+    const float period_s = opt->ctl.period_s;
+    arm_reference_t ref;
+    arm_ctl_input_t in;
+    arm_ctl_output_t out;
+    telem_controller_t snap;
+    memset(&in, 0, sizeof(in));
+    memset(&out, 0, sizeof(out));
+    arm_state_t last_state = ARM_STATE_INIT;
+    int64_t next_deadline = now_ns();
+    report->result = RUN_OK;
+    int enabling = 1;
+    uint32_t k_run = 0;
+
+    /* k counts bus periods (SYNCs); the first few bring the drives to operation enabled. */
+    for (uint32_t k = 0; k_run < opt->steps; ++k) {
+        int64_t wake_latency = 0;
+        if (opt->mode == MODE_REALTIME) {
+            const struct timespec dl = {.tv_sec = next_deadline / 1000000000LL,
+                                        .tv_nsec = next_deadline % 1000000000LL};
+            while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &dl, NULL) == EINTR) {
+            }
+            wake_latency = now_ns() - next_deadline;
+        }
+        const int64_t cycle_start = now_ns();
+        arm_can_frame_t sync;
+        arm_bus_begin_period(&l.drives, k, &sync);
+        send_frame(&l, &sync);
+        const int64_t wait_until = opt->mode == MODE_REALTIME
+                                       ? next_deadline + period_ns * 8 / 10
+                                       : cycle_start + (int64_t)(opt->lockstep_timeout_s * 1e9);
+        pump(&l, wait_until, states_done);
+        const uint32_t fresh = l.drives.fresh_mask & ALL_JOINTS;
+
+        if (enabling) {
+            uint32_t enabled = 0u;
+            for (int j = 0; j < ARM_N_JOINTS; ++j) {
+                const uint16_t sw = l.drives.statusword[j];
+                if ((fresh & (1u << j)) != 0u && arm_sw_operation_enabled(sw)) {
+                    enabled |= 1u << j;
+                }
+                arm_can_frame_t f;
+                arm_bus_make_cmd(&l.drives, j, arm_cia402_enable_controlword(sw), 0.0f, &f);
+                send_frame(&l, &f);
+            }
+            if (enabled == ALL_JOINTS) {
+                enabling = 0;
+                arm_reference_default(&ref, l.drives.q);
+                telemetry_event(telem, 0, "info", "all drives operation enabled; tracking starts");
+            } else if (k >= ENABLE_TIMEOUT_PERIODS) {
+                char missing[64];
+                list_joints(ALL_JOINTS & ~enabled, missing, sizeof(missing));
+                const int j0 = __builtin_ctz(ALL_JOINTS & ~enabled);
+                snprintf(report->reason, sizeof(report->reason),
+                         "boot: drive(s) %s not operation enabled after %u periods (drive %d "
+                         "statusword 0x%04x%s)",
+                         missing, ENABLE_TIMEOUT_PERIODS, j0 + 1, l.drives.statusword[j0],
+                         (fresh & (1u << j0)) ? "" : ", no state received");
+                report->result = RUN_BOOT_FAILED;
+                telemetry_event(telem, 0, "fault", report->reason);
+                break;
+            }
+            if (opt->mode == MODE_REALTIME) {
+                next_deadline += period_ns;
+            }
+            continue;
+        }
+
+        if (opt->mode == MODE_LOCKSTEP && fresh != ALL_JOINTS) {
+            char missing[64];
+            list_joints(ALL_JOINTS & ~fresh, missing, sizeof(missing));
+            snprintf(report->reason, sizeof(report->reason),
+                     "period %u: no joint state from drive(s) %s within %.3f s (simulator stopped?)",
+                     k_run, missing, opt->lockstep_timeout_s);
+            arm_ctl_external_fault(&ctl);
+        }
+        for (int j = 0; j < ARM_N_JOINTS; ++j) {
+            if ((fresh & (1u << j)) != 0u && !arm_sw_operation_enabled(l.drives.statusword[j]) &&
+                ctl.state == ARM_STATE_RUNNING) {
+                snprintf(report->reason, sizeof(report->reason),
+                         "period %u: drive %d left operation enabled (statusword 0x%04x, error %u)",
+                         k_run, j + 1, l.drives.statusword[j], l.drives.drive_error[j]);
+                arm_ctl_external_fault(&ctl);
+            }
+        }
+        memcpy(in.q, l.drives.q, sizeof(in.q));
+        memcpy(in.qd, l.drives.qd, sizeof(in.qd));
+        in.fresh_mask = fresh;
+        arm_reference_eval(&ref, (float)k_run * period_s, in.q_d, in.qd_d, in.qdd_d);
+
+        const int64_t c0 = now_ns();
+        arm_ctl_step(&ctl, &in, &out);
+        const int64_t compute = now_ns() - c0;
+        send_commands(&l, &out);
+        const int64_t cycle = now_ns() - cycle_start;
+
+        snap.step = k_run;
+        snap.t = (double)k_run * (double)period_s;
+        snap.method = (int8_t)opt->ctl.method;
+        memcpy(snap.q, in.q, sizeof(snap.q));
+        memcpy(snap.qd, in.qd, sizeof(snap.qd));
+        memcpy(snap.q_d, in.q_d, sizeof(snap.q_d));
+        snap.out = out;
+        telemetry_controller(telem, &snap);
+        if (opt->mode == MODE_REALTIME) {
+            next_deadline += period_ns;
+            if (now_ns() > next_deadline) {
+                report->overruns++;
+                /* Skip the missed deadlines instead of bursting to catch up. */
+                while (next_deadline < now_ns()) next_deadline += period_ns;
+            }
+        }
+        const telem_timing_t tm = {
+            .step = k_run,
+            .period_ns = (int32_t)period_ns,
+            .wake_latency_ns = (int32_t)wake_latency,
+            .compute_ns = (int32_t)compute,
+            .cycle_ns = (int32_t)cycle,
+            .overruns = (int64_t)report->overruns,
+        };
+        telemetry_timing(telem, &tm);
+
+        report->steps_done = ++k_run;
+        if (out.state != last_state) {
+            char text[160];
+            snprintf(text, sizeof(text), "state %s -> %s (fault: %s)", arm_state_str(last_state),
+                     arm_state_str(out.state), arm_fault_str(out.fault));
+            telemetry_event(telem, k_run, out.state == ARM_STATE_FAULT ? "fault" : "info", text);
+            last_state = out.state;
+        }
+        if (out.state == ARM_STATE_FAULT || out.state == ARM_STATE_SAFE_STOP) {
+            if (report->reason[0] == '\0') {
+                snprintf(report->reason, sizeof(report->reason), "period %u: %s", k_run,
+                         arm_fault_str(out.fault));
+            }
+            telemetry_event(telem, k_run, "fault", report->reason);
+            report->result = RUN_FAULT;
+            break;
+        }
+    }
+
+    /* Stop the drives: they go to a stopped NMT state and stop applying torque. */
+    arm_can_frame_t stop;
+    arm_bus_make_nmt(ARM_NMT_STOP, 0u, &stop);
+    send_frame(&l, &stop);
+    report->final_state = out.state;
+    report->final_fault = out.fault;
+    report->rx = l.drives.rx;
+    report->wall_s = (double)(now_ns() - t_start) * 1e-9;
+    arm_can_udp_close(&l.udp);
+}

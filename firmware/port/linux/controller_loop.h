@@ -1,0 +1,36 @@
+/* The controller process: boot the drives, run the periodic loop, stop safely. */
+#ifndef ARM_CONTROLLER_LOOP_H
+#define ARM_CONTROLLER_LOOP_H
+
+#include <stdint.h>
+
+#include "arm/drive_bus.h"
+#include "options.h"
+#include "telemetry.h"
+
+typedef enum {
+    RUN_OK = 0,
+    RUN_BUS_ERROR = 1,   /* could not open or use the bus */
+    RUN_BOOT_FAILED = 3, /* a drive did not come up */
+    RUN_FAULT = 4,       /* runtime fault: safe stop was commanded */
+} run_result_t;
+
+typedef struct {
+    run_result_t result;
+    char reason[512];
+    uint32_t steps_done;
+    uint64_t frames_tx;
+    uint64_t frames_rx;
+    uint64_t tx_would_block;
+    uint64_t overruns;
+    double wall_s;
+    double boot_s;
+    arm_state_t final_state;
+    arm_fault_t final_fault;
+    arm_rx_counters_t rx;
+} run_report_t;
+
+void controller_run(const options_t *opt, const arm_robot_model_t *model, telemetry_t *telem,
+                    run_report_t *report);
+
+#endif

@@ -1,0 +1,50 @@
+/* arm_controller: the Linux controller binary (bus master of the six joint drives). */
+#define _GNU_SOURCE
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "arm_robot_model_data.h"
+#include "controller_loop.h"
+#include "options.h"
+#include "summary.h"
+#include "telemetry.h"
+
+int main(int argc, char **argv)
+{
+    static options_t opt;
+    char err[512];
+    const int prc = options_parse(argc, argv, &ARM_ROBOT_MODEL, &opt, err, sizeof(err));
+    if (prc == 1) {
+        return 0;
+    }
+    if (prc != 0) {
+        fprintf(stderr, "arm_controller: %s\n", err);
+        return 2;
+    }
+    telemetry_t *telem = telemetry_start(opt.lcm_url, err, sizeof(err));
+    if (telem == NULL) {
+        fprintf(stderr, "arm_controller: %s\n", err);
+        return 1;
+    }
+    static run_report_t report;
+    controller_run(&opt, &ARM_ROBOT_MODEL, telem, &report);
+    telemetry_stop(telem);
+
+    if (opt.summary_path[0] != '\0' &&
+        summary_write(opt.summary_path, &opt, &report, telem, err, sizeof(err)) != 0) {
+        fprintf(stderr, "arm_controller: %s\n", err);
+        free(telem);
+        return 1;
+    }
+    free(telem);
+    if (report.result != RUN_OK) {
+        fprintf(stderr, "arm_controller: %s; state %s, zero torque commanded\n", report.reason,
+                arm_state_str(report.final_state));
+        return (int)report.result;
+    }
+    printf("arm_controller: %u periods, %llu frames sent, %llu received, final state %s\n",
+           report.steps_done, (unsigned long long)report.frames_tx,
+           (unsigned long long)report.frames_rx, arm_state_str(report.final_state));
+    return 0;
+}

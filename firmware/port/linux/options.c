@@ -1,0 +1,187 @@
+#include "options.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+void options_usage(const char *prog)
+{
+    printf("usage: %s [options]\n"
+           "  --bus SPEC              udp | udp:GROUP:PORT (python-can udp_multicast wire format,\n"
+           "                          loopback only, TTL 0)            [udp:239.74.163.2:43113]\n"
+           "  --lcm-url URL           LCM telemetry; must have ttl=0, '' for none\n"
+           "                          [udpm://239.255.76.67:7667?ttl=0]\n"
+           "  --mode lockstep|realtime                                [lockstep]\n"
+           "  --duration S            run length in seconds (> 0)     [5]\n"
+           "  --rate HZ               control rate                    [1000]\n"
+           "  --method NAME           pd                              [pd]\n"
+           "  --kp X --kd X           PD gains (1/s^2, 1/s)           [400, 40]\n"
+           "  --torque-rate-limit X   Nm per period, all joints [each joint's limit / 10 ms]\n"
+           "  --watchdog-periods N    stale periods before safe stop  [3]\n"
+           "  --safe-stop zero|damping[:GAIN]                         [zero]\n"
+           "  --boot-timeout S        wait for the drives' heartbeats [20]\n"
+           "  --lockstep-timeout S    lockstep: wait for a period's joint states [0.25]\n"
+           "  --summary FILE          write a JSON summary of the run (atomically)\n",
+           prog);
+}
+
+static int parse_double(const char *name, const char *s, double lo, double hi, double *out,
+                        char *err, unsigned long errcap)
+{
+    char *end = NULL;
+    errno = 0;
+    const double v = strtod(s, &end);
+    if (errno != 0 || end == s || *end != '\0' || !isfinite(v) || v < lo || v > hi) {
+        snprintf(err, errcap, "%s: '%s' is not a number in [%g, %g]", name, s, lo, hi);
+        return -1;
+    }
+    *out = v;
+    return 0;
+}
+
+static int copy_str(const char *name, const char *s, char *dst, size_t cap, char *err,
+                    unsigned long errcap)
+{
+    if (strlen(s) >= cap) {
+        snprintf(err, errcap, "%s: value longer than %zu characters", name, cap - 1u);
+        return -1;
+    }
+    strcpy(dst, s);
+    return 0;
+}
+
+static int check_lcm_url(const char *url, char *err, unsigned long errcap)
+{
+    /* The multicast rule: telemetry must never leave this host. */
+    if (url[0] != '\0' && strncmp(url, "udpm://", 7) == 0 && strstr(url, "ttl=0") == NULL) {
+        snprintf(err, errcap, "--lcm-url: '%s' must set ttl=0 (telemetry stays on this host)", url);
+        return -1;
+    }
+    return 0;
+}
+
+int options_parse(int argc, char **argv, const arm_robot_model_t *model, options_t *opt, char *err,
+                  unsigned long errcap)
+{
+    memset(opt, 0, sizeof(*opt));
+    strcpy(opt->bus, "udp:239.74.163.2:43113");
+    strcpy(opt->lcm_url, "udpm://239.255.76.67:7667?ttl=0");
+    opt->mode = MODE_LOCKSTEP;
+    opt->duration_s = 5.0;
+    opt->rate_hz = 1000.0;
+    opt->boot_timeout_s = 20.0;
+    opt->lockstep_timeout_s = 0.25;
+    arm_ctl_default_config(model, &opt->ctl);
+    int rate_limit_given = 0;
+
+    for (int i = 1; i < argc; ++i) {
+        const char *a = argv[i];
+        if (strcmp(a, "--help") == 0 || strcmp(a, "-h") == 0) {
+            options_usage(argv[0]);
+            return 1;
+        }
+        if (strncmp(a, "--", 2) != 0) {
+            snprintf(err, errcap, "unexpected argument '%s' (options start with --)", a);
+            return -1;
+        }
+        if (i + 1 >= argc) {
+            snprintf(err, errcap, "%s: missing value", a);
+            return -1;
+        }
+        const char *v = argv[++i];
+        double d = 0.0;
+        int rc = 0;
+        if (strcmp(a, "--bus") == 0) {
+            rc = copy_str(a, v, opt->bus, sizeof(opt->bus), err, errcap);
+            if (rc == 0 && strcmp(v, "udp") != 0 && strncmp(v, "udp:", 4) != 0) {
+                snprintf(err, errcap, "--bus: unknown bus '%s' (expected udp or udp:GROUP:PORT)", v);
+                rc = -1;
+            }
+        } else if (strcmp(a, "--lcm-url") == 0) {
+            rc = copy_str(a, v, opt->lcm_url, sizeof(opt->lcm_url), err, errcap);
+            if (rc == 0) rc = check_lcm_url(v, err, errcap);
+        } else if (strcmp(a, "--summary") == 0) {
+            rc = copy_str(a, v, opt->summary_path, sizeof(opt->summary_path), err, errcap);
+        } else if (strcmp(a, "--mode") == 0) {
+            if (strcmp(v, "lockstep") == 0) {
+                opt->mode = MODE_LOCKSTEP;
+            } else if (strcmp(v, "realtime") == 0) {
+                opt->mode = MODE_REALTIME;
+            } else {
+                snprintf(err, errcap, "--mode: '%s' is not lockstep or realtime", v);
+                rc = -1;
+            }
+        } else if (strcmp(a, "--duration") == 0) {
+            rc = parse_double(a, v, 1e-3, 86400.0, &opt->duration_s, err, errcap);
+        } else if (strcmp(a, "--rate") == 0) {
+            rc = parse_double(a, v, 10.0, 20000.0, &opt->rate_hz, err, errcap);
+        } else if (strcmp(a, "--method") == 0) {
+            const arm_method_t m = arm_method_from_str(v);
+            if (m == ARM_METHOD_COUNT) {
+                snprintf(err, errcap, "--method: unknown method '%s' (known: pd)", v);
+                rc = -1;
+            }
+            opt->ctl.method = m;
+        } else if (strcmp(a, "--kp") == 0) {
+            rc = parse_double(a, v, 0.0, 1e7, &d, err, errcap);
+            opt->ctl.kp = (float)d;
+        } else if (strcmp(a, "--kd") == 0) {
+            rc = parse_double(a, v, 0.0, 1e5, &d, err, errcap);
+            opt->ctl.kd = (float)d;
+        } else if (strcmp(a, "--torque-rate-limit") == 0) {
+            rc = parse_double(a, v, 1e-6, 1e6, &d, err, errcap);
+            for (int j = 0; j < ARM_N_JOINTS; ++j) opt->ctl.torque_rate_limit[j] = (float)d;
+            rate_limit_given = 1;
+        } else if (strcmp(a, "--watchdog-periods") == 0) {
+            rc = parse_double(a, v, 1.0, 1e6, &d, err, errcap);
+            if (rc == 0 && d != floor(d)) {
+                snprintf(err, errcap, "--watchdog-periods: '%s' is not a whole number", v);
+                rc = -1;
+            }
+            opt->ctl.watchdog_periods = (uint32_t)d;
+        } else if (strcmp(a, "--safe-stop") == 0) {
+            if (strcmp(v, "zero") == 0) {
+                opt->ctl.safe_stop_mode = ARM_SAFE_STOP_ZERO_TORQUE;
+            } else if (strncmp(v, "damping", 7) == 0) {
+                opt->ctl.safe_stop_mode = ARM_SAFE_STOP_DAMPING;
+                opt->ctl.safe_stop_damping = 5.0f;
+                if (v[7] == ':') {
+                    rc = parse_double("--safe-stop damping gain", v + 8, 0.0, 1e4, &d, err, errcap);
+                    opt->ctl.safe_stop_damping = (float)d;
+                } else if (v[7] != '\0') {
+                    snprintf(err, errcap, "--safe-stop: '%s' is not zero, damping or damping:GAIN", v);
+                    rc = -1;
+                }
+            } else {
+                snprintf(err, errcap, "--safe-stop: '%s' is not zero, damping or damping:GAIN", v);
+                rc = -1;
+            }
+        } else if (strcmp(a, "--boot-timeout") == 0) {
+            rc = parse_double(a, v, 0.01, 3600.0, &opt->boot_timeout_s, err, errcap);
+        } else if (strcmp(a, "--lockstep-timeout") == 0) {
+            rc = parse_double(a, v, 0.001, 3600.0, &opt->lockstep_timeout_s, err, errcap);
+        } else {
+            snprintf(err, errcap, "unknown option '%s' (see --help)", a);
+            rc = -1;
+        }
+        if (rc != 0) {
+            return -1;
+        }
+    }
+    const float default_period = opt->ctl.period_s;
+    opt->ctl.period_s = (float)(1.0 / opt->rate_hz);
+    if (!rate_limit_given) {
+        for (int j = 0; j < ARM_N_JOINTS; ++j) {
+            opt->ctl.torque_rate_limit[j] *= opt->ctl.period_s / default_period;
+        }
+    }
+    const double steps = floor(opt->duration_s * opt->rate_hz + 0.5);
+    if (steps < 1.0 || steps > 4e9) {
+        snprintf(err, errcap, "--duration x --rate gives %.0f periods; need 1..4e9", steps);
+        return -1;
+    }
+    opt->steps = (uint32_t)steps;
+    return 0;
+}

@@ -1,0 +1,30 @@
+/* Command-line options of the Linux controller binary. */
+#ifndef ARM_OPTIONS_H
+#define ARM_OPTIONS_H
+
+#include <stdint.h>
+
+#include "arm/controller.h"
+
+typedef enum { MODE_LOCKSTEP = 0, MODE_REALTIME } run_mode_t;
+
+typedef struct {
+    char bus[128];          /* "udp" or "udp:GROUP:PORT" */
+    char lcm_url[256];      /* "" = no telemetry */
+    char summary_path[512]; /* "" = none */
+    run_mode_t mode;
+    double duration_s;
+    uint32_t steps;          /* derived from duration and rate */
+    double rate_hz;
+    double boot_timeout_s;
+    double lockstep_timeout_s; /* lockstep: wall time to wait for a period's states */
+    arm_ctl_config_t ctl;
+} options_t;
+
+/* Parses argv into opt (starting from the defaults). On a bad argument writes a message naming
+ * the option and value into err and returns -1; returns 1 if --help was printed, 0 otherwise. */
+int options_parse(int argc, char **argv, const arm_robot_model_t *model, options_t *opt, char *err,
+                  unsigned long errcap);
+void options_usage(const char *prog);
+
+#endif

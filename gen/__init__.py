@@ -1,0 +1,1 @@
+"""Offline generation: synthesis, verification and C emission."""

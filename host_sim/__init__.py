@@ -1,0 +1,1 @@
+"""MuJoCo host simulator: the arm and its six emulated motor drives on a CAN bus."""

@@ -1,0 +1,54 @@
+"""The simulated arm (MuJoCo) and the nominal model the controller believes in."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+REPO = Path(__file__).resolve().parent.parent
+DEFAULT_MJCF = REPO / "host_sim" / "models" / "ur5e_arm.xml"
+
+
+class Arm:
+    def __init__(self, mjcf: Path = DEFAULT_MJCF, keyframe: str = "home") -> None:
+        self.model = mujoco.MjModel.from_xml_path(str(mjcf))
+        self.data = mujoco.MjData(self.model)
+        # The nominal model: what the firmware's header was generated from. Uncertainty makes
+        # self.model differ from it; w is measured against it.
+        self.nominal = mujoco.MjModel.from_xml_path(str(mjcf))
+        self.nominal_data = mujoco.MjData(self.nominal)
+        key = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_KEY, keyframe)
+        if key < 0:
+            raise ValueError(f"{mjcf}: no keyframe '{keyframe}'")
+        mujoco.mj_resetDataKeyframe(self.model, self.data, key)
+        mujoco.mj_forward(self.model, self.data)
+        self.n = self.model.nu
+        self.torque_limit = self.model.actuator_ctrlrange[:, 1].copy()
+        self.period = float(self.model.opt.timestep)
+        self.step_count = 0
+
+    @property
+    def q(self) -> np.ndarray:
+        return self.data.qpos.copy()
+
+    @property
+    def qd(self) -> np.ndarray:
+        return self.data.qvel.copy()
+
+    def step(self, tau: np.ndarray) -> np.ndarray:
+        """Advance one period under tau; returns w, the total uncertainty over this period.
+
+        w = (acceleration the nominal model predicts for tau) - (true acceleration), which is
+        exactly the w of e_ddot = u + w under inverse dynamics control.
+        """
+        self.data.ctrl[:] = tau
+        nd = self.nominal_data
+        nd.qpos[:] = self.data.qpos
+        nd.qvel[:] = self.data.qvel
+        nd.ctrl[:] = tau
+        mujoco.mj_forward(self.nominal, nd)
+        mujoco.mj_step(self.model, self.data)  # qacc is the acceleration at the step's start
+        self.step_count += 1
+        return nd.qacc - self.data.qacc

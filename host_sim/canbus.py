@@ -1,0 +1,70 @@
+"""Open the python-can bus the simulator and tools use; multicast never leaves this host."""
+
+from __future__ import annotations
+
+import socket
+import struct
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import can
+
+DEFAULT_UDP_GROUP = "239.74.163.2"
+DEFAULT_UDP_PORT = 43113
+
+
+class BusSpecError(ValueError):
+    pass
+
+
+def parse_udp_spec(spec: str) -> tuple[str, int]:
+    if spec == "udp":
+        return DEFAULT_UDP_GROUP, DEFAULT_UDP_PORT
+    if not spec.startswith("udp:"):
+        raise BusSpecError(f"bus '{spec}': expected udp or udp:GROUP:PORT")
+    group, _, port = spec[4:].rpartition(":")
+    try:
+        port_n = int(port)
+        socket.inet_aton(group)
+    except (ValueError, OSError) as exc:
+        raise BusSpecError(f"bus '{spec}': expected udp:GROUP:PORT, e.g. udp:239.74.163.2:43113") from exc
+    if not (1 <= port_n <= 65535) or not 224 <= int(group.split(".")[0]) <= 239:
+        raise BusSpecError(f"bus '{spec}': group must be IPv4 multicast and port 1..65535")
+    return group, port_n
+
+
+@contextmanager
+def _inaddr_any_is_loopback() -> Iterator[None]:
+    """python-can joins its group with INADDR_ANY, which the kernel places on the default-route
+    interface (eth0), and the kernel then sends IGMP reports off the host. While the bus is
+    built, "any" means 127.0.0.1 (python-can packs it native-endian with struct "@I"), so the
+    only membership is on lo."""
+    saved = socket.INADDR_ANY
+    socket.INADDR_ANY = struct.unpack("@I", socket.inet_aton("127.0.0.1"))[0]
+    try:
+        yield
+    finally:
+        socket.INADDR_ANY = saved
+
+
+def restrict_to_loopback(sock: socket.socket) -> None:
+    """TTL 0 keeps datagrams on this host; sending via lo keeps them off eth0 too."""
+    sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, struct.pack("@I", 0))
+    sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
+    sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
+
+
+def open_bus(spec: str) -> can.BusABC:
+    """udp | udp:GROUP:PORT (python-can udp_multicast, loopback only) | socketcan:IFACE."""
+    if spec.startswith("socketcan:"):
+        return can.Bus(interface="socketcan", channel=spec.split(":", 1)[1], fd=True)
+    group, port = parse_udp_spec(spec)
+    with _inaddr_any_is_loopback():
+        bus = can.Bus(interface="udp_multicast", channel=group, port=port, hop_limit=0, fd=True)
+    restrict_to_loopback(udp_socket(bus))  # python-can exposes no option for this
+    return bus
+
+
+def udp_socket(bus: can.BusABC) -> socket.socket:
+    return bus._multicast._socket  # type: ignore[attr-defined, no-any-return]

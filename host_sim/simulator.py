@@ -1,0 +1,226 @@
+"""Lockstep simulator: six drives on the bus, the arm advancing one period per controller SYNC."""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import can
+import lcm
+import numpy as np
+
+from gen import lcmtypes
+from host_sim.arm import Arm
+from host_sim.drive import Drive
+from host_sim.protocol import NMT_STATE_BOOT, DriveProtocol
+
+HEARTBEAT_PERIODS = 100
+
+
+@dataclass
+class SimConfig:
+    bus: str = "udp"
+    lcm_url: str = "udpm://239.255.76.67:7667?ttl=0"
+    boot_timeout_s: float = 60.0
+    idle_timeout_s: float = 5.0
+    command_timeout_periods: int = 3
+    summary_path: str = ""
+
+
+@dataclass
+class SimReport:
+    result: str = "ok"
+    reason: str = ""
+    periods: int = 0
+    frames_tx: int = 0
+    frames_rx: int = 0
+    rx_own_echo: int = 0
+    rx_unknown_id: int = 0
+    rx_bad_frame: int = 0
+    commands_missed: int = 0
+    telemetry_sent: dict[str, int] = field(default_factory=lambda: {"ARM_SIM": 0, "ARM_SIM_EVENT": 0})
+    wall_s: float = 0.0
+    drive_faults: list[int] = field(default_factory=list)
+
+
+class Simulator:
+    def __init__(self, cfg: SimConfig, bus: can.BusABC, arm: Arm) -> None:
+        self.cfg = cfg
+        self.bus = bus
+        self.arm = arm
+        self.proto = DriveProtocol(arm.n)
+        self.drives = [
+            Drive(node_id=i + 1, torque_limit=float(arm.torque_limit[i]),
+                  command_timeout_periods=cfg.command_timeout_periods)
+            for i in range(arm.n)
+        ]
+        self.report = SimReport()
+        self.types = lcmtypes.load()
+        self.lc = lcm.LCM(cfg.lcm_url) if cfg.lcm_url else None
+        self.counter: int | None = None  # SYNC counter of the period being served
+        self.got_cmd = [False] * arm.n
+        self.last_w = np.zeros(arm.n)
+        self.last_tau = np.zeros(arm.n)
+
+    # ---- bus -------------------------------------------------------------------------------
+    def send(self, frame_id: int, data: bytes, fd: bool = False) -> None:
+        msg = can.Message(arbitration_id=frame_id, data=data, is_extended_id=False, is_fd=fd,
+                          bitrate_switch=fd)
+        self.bus.send(msg)
+        self.report.frames_tx += 1
+
+    def send_heartbeat(self, d: Drive, state: int | None = None) -> None:
+        self.send(self.proto.heartbeat[d.node_id - 1].frame_id, bytes([d.nmt_state if state is None else state]))
+
+    def send_emcy(self, d: Drive, code: int) -> None:
+        m = self.proto.emcy[d.node_id - 1]
+        self.send(m.frame_id, m.encode({"error_code": code, "error_register": 0x01, "detail": 0}))
+        self.event(f"drive{d.node_id}", "fault", f"EMCY 0x{code:04x}: drive {d.node_id} fault, torque off")
+
+    # ---- telemetry -------------------------------------------------------------------------
+    def event(self, source: str, level: str, text: str) -> None:
+        if self.lc is None:
+            return
+        m = self.types.event_t()
+        m.seq = self.report.telemetry_sent["ARM_SIM_EVENT"]
+        m.step = self.arm.step_count
+        m.source, m.level, m.text = source, level, text
+        self.lc.publish("ARM_SIM_EVENT", m.encode())
+        self.report.telemetry_sent["ARM_SIM_EVENT"] += 1
+
+    def publish_truth(self) -> None:
+        if self.lc is None:
+            return
+        m = self.types.sim_truth_t()
+        m.seq = self.report.telemetry_sent["ARM_SIM"]
+        m.step = self.arm.step_count
+        m.t = self.arm.step_count * self.arm.period
+        m.n = self.arm.n
+        m.q = self.arm.q.tolist()
+        m.qd = self.arm.qd.tolist()
+        m.tau_applied = self.last_tau.tolist()
+        m.w_true = self.last_w.tolist()
+        m.drive_faults = sum(1 << i for i, d in enumerate(self.drives) if d.error_code)
+        self.lc.publish("ARM_SIM", m.encode())
+        self.report.telemetry_sent["ARM_SIM"] += 1
+
+    # ---- one period ------------------------------------------------------------------------
+    def finish_period(self) -> None:
+        """Apply the period's commands and advance the arm by one step."""
+        for d, got in zip(self.drives, self.got_cmd):
+            was_fault = d.error_code
+            d.on_period_end(got)
+            if d.emcy_pending:
+                for code in d.emcy_pending:
+                    self.send_emcy(d, code)
+                d.emcy_pending.clear()
+            if not got and not was_fault:
+                self.report.commands_missed += 1
+        tau = np.array([d.applied_torque for d in self.drives])
+        self.last_tau = tau
+        self.last_w = self.arm.step(tau)
+        self.report.periods += 1
+        self.publish_truth()
+        if self.arm.step_count % HEARTBEAT_PERIODS == 0:
+            for d in self.drives:
+                self.send_heartbeat(d)
+        self.counter = None
+
+    def on_sync(self, counter: int) -> None:
+        if self.counter is not None:
+            self.finish_period()  # commands missing: the drives count it, the arm still moves
+        self.counter = counter
+        self.got_cmd = [False] * self.arm.n
+        q, qd = self.arm.q, self.arm.qd
+        for i, d in enumerate(self.drives):
+            data = self.proto.state_codec[i].encode({
+                "position": float(q[i]), "velocity": float(qd[i]), "torque": d.applied_torque,
+                "statusword": d.power.statusword, "sync_counter": counter, "error_code": d.error_code,
+            })
+            self.send(self.proto.state[i].frame_id, data, fd=True)
+
+    def on_command(self, joint: int, data: bytes) -> None:
+        try:
+            v = self.proto.cmd_codec[joint].decode(data)
+        except Exception:  # noqa: BLE001 - a malformed frame is counted, never fatal
+            self.report.rx_bad_frame += 1
+            return
+        if self.counter is None or int(v["sync_counter"]) != self.counter:
+            return  # a command for another period: a real drive ignores it too
+        self.drives[joint].on_command(int(v["controlword"]), float(v["target_torque"]))
+        self.got_cmd[joint] = True
+        if all(self.got_cmd):
+            self.finish_period()
+
+    def on_nmt(self, data: bytes) -> bool:
+        """Returns False when the controller stopped the node set (end of run)."""
+        if len(data) != 2:
+            self.report.rx_bad_frame += 1
+            return True
+        command, node = data[0], data[1]
+        for d in self.drives:
+            if node in (0, d.node_id) and d.on_nmt(command):
+                self.send_heartbeat(d)
+        return not all(d.nmt_state == 0x04 for d in self.drives)
+
+    # ---- main loop -------------------------------------------------------------------------
+    def run(self) -> SimReport:
+        t0 = time.monotonic()
+        for d in self.drives:
+            self.send_heartbeat(d, NMT_STATE_BOOT)  # CANopen boot-up message
+        self.event("sim", "info", f"{self.arm.n} drives up on bus {self.cfg.bus}")
+        booted = False
+        cmd_joint, sync_id, nmt_id = self.proto.cmd_joint, self.proto.sync.frame_id, self.proto.nmt.frame_id
+        own = self.proto.own_ids
+        while True:
+            timeout = self.cfg.idle_timeout_s if booted else self.cfg.boot_timeout_s
+            msg = self.bus.recv(timeout)
+            if msg is None:
+                who = "controller silent" if booted else "no controller on the bus"
+                self.report.result = "controller-lost"
+                self.report.reason = f"{who} for {timeout:g} s: drives faulted, torque off"
+                for d in self.drives:
+                    d.fault(1, 0x8130)  # CiA 301: life guard / heartbeat error
+                    for code in d.emcy_pending:
+                        self.send_emcy(d, code)
+                    d.emcy_pending.clear()
+                break
+            self.report.frames_rx += 1
+            fid = msg.arbitration_id
+            if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id:
+                self.report.rx_bad_frame += 1
+            elif fid == sync_id:
+                booted = True
+                if len(msg.data) != 1:
+                    self.report.rx_bad_frame += 1
+                else:
+                    self.on_sync(msg.data[0])
+            elif fid in cmd_joint:
+                self.on_command(cmd_joint[fid], bytes(msg.data))
+            elif fid == nmt_id:
+                booted = True
+                if not self.on_nmt(bytes(msg.data)):
+                    break
+            elif fid in own:
+                self.report.rx_own_echo += 1
+            else:
+                self.report.rx_unknown_id += 1
+        self.report.wall_s = time.monotonic() - t0
+        self.report.drive_faults = [d.node_id for d in self.drives if d.error_code]
+        self.event("sim", "info" if self.report.result == "ok" else "fault",
+                   self.report.reason or f"stopped by the controller after {self.report.periods} periods")
+        return self.report
+
+
+def write_summary(path: str, report: SimReport) -> None:
+    tmp = f"{path}.tmp.{os.getpid()}"
+    Path(tmp).write_text(json.dumps(asdict(report), indent=2))
+    os.replace(tmp, path)
+
+
+def report_dict(report: SimReport) -> dict[str, Any]:
+    return asdict(report)

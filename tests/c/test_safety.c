@@ -1,0 +1,158 @@
+/* Behaviour of the safety layer after the method: each rule as a scenario. */
+#include <math.h>
+#include <string.h>
+
+#include "arm/controller.h"
+#include "arm_robot_model_data.h"
+#include "check.h"
+
+#define ALL ((uint32_t)((1u << ARM_N_JOINTS) - 1u))
+
+static void home_input(arm_ctl_input_t *in)
+{
+    memset(in, 0, sizeof(*in));
+    const float home[6] = {0.0f, -1.3f, 1.6f, -1.87f, -1.5708f, 0.0f};
+    for (int j = 0; j < ARM_N_JOINTS; ++j) {
+        in->q[j] = home[j % 6];
+        in->q_d[j] = in->q[j];
+    }
+    in->fresh_mask = ALL;
+}
+
+static void start(arm_ctl_t *ctl, arm_ctl_config_t *cfg)
+{
+    arm_ctl_default_config(&ARM_ROBOT_MODEL, cfg);
+    CHECK(arm_ctl_init(ctl, &ARM_ROBOT_MODEL, cfg) == ARM_CTL_OK);
+}
+
+static void test_starts_in_init_with_zero_torque(void)
+{
+    arm_ctl_t ctl;
+    arm_ctl_config_t cfg;
+    arm_ctl_input_t in;
+    arm_ctl_output_t out;
+    start(&ctl, &cfg);
+    home_input(&in);
+    in.fresh_mask = 0u;
+    arm_ctl_step(&ctl, &in, &out);
+    CHECK(out.state == ARM_STATE_INIT);
+    for (int j = 0; j < ARM_N_JOINTS; ++j) CHECK(out.tau[j] == 0.0f);
+    in.fresh_mask = ALL;
+    arm_ctl_step(&ctl, &in, &out);
+    CHECK(out.state == ARM_STATE_RUNNING);
+}
+
+static void test_nan_input_gives_safe_stop_and_zero_torque(void)
+{
+    arm_ctl_t ctl;
+    arm_ctl_config_t cfg;
+    arm_ctl_input_t in;
+    arm_ctl_output_t out;
+    start(&ctl, &cfg);
+    home_input(&in);
+    for (int k = 0; k < 50; ++k) arm_ctl_step(&ctl, &in, &out);
+    CHECK(out.state == ARM_STATE_RUNNING);
+    CHECK(fabsf(out.tau[1]) > 1.0f); /* holding the shoulder against gravity */
+    in.qd[2] = NAN;
+    arm_ctl_step(&ctl, &in, &out);
+    CHECK(out.state == ARM_STATE_FAULT);
+    CHECK(out.fault == ARM_FAULT_NONFINITE_INPUT);
+    for (int j = 0; j < ARM_N_JOINTS; ++j) CHECK(out.tau[j] == 0.0f);
+    /* Latched: good input afterwards does not restart the arm. */
+    in.qd[2] = 0.0f;
+    arm_ctl_step(&ctl, &in, &out);
+    CHECK(out.state == ARM_STATE_SAFE_STOP);
+    CHECK(out.fault == ARM_FAULT_NONFINITE_INPUT);
+    for (int j = 0; j < ARM_N_JOINTS; ++j) CHECK(out.tau[j] == 0.0f);
+}
+
+static void test_torque_and_rate_limits(void)
+{
+    arm_ctl_t ctl;
+    arm_ctl_config_t cfg;
+    arm_ctl_input_t in;
+    arm_ctl_output_t out;
+    start(&ctl, &cfg);
+    home_input(&in);
+    in.q_d[3] += 10.0f; /* a huge error demands far more than the wrist's 28 Nm */
+    float prev[ARM_N_JOINTS] = {0};
+    for (int k = 0; k < 100; ++k) {
+        arm_ctl_step(&ctl, &in, &out);
+        for (int j = 0; j < ARM_N_JOINTS; ++j) {
+            CHECK(fabsf(out.tau[j]) <= cfg.torque_limit[j]);
+            CHECK(fabsf(out.tau[j] - prev[j]) <= cfg.torque_rate_limit[j] * (1.0f + 1e-6f));
+            prev[j] = out.tau[j];
+        }
+    }
+    CHECK(fabsf(out.tau[3]) == cfg.torque_limit[3]);
+    CHECK((out.saturated_mask & (1u << 3)) != 0u);
+    CHECK(out.state == ARM_STATE_RUNNING);
+}
+
+static void test_watchdog_trips_after_configured_stale_periods(void)
+{
+    arm_ctl_t ctl;
+    arm_ctl_config_t cfg;
+    arm_ctl_input_t in;
+    arm_ctl_output_t out;
+    arm_ctl_default_config(&ARM_ROBOT_MODEL, &cfg);
+    cfg.watchdog_periods = 4u;
+    cfg.safe_stop_mode = ARM_SAFE_STOP_DAMPING;
+    cfg.safe_stop_damping = 2.0f;
+    CHECK(arm_ctl_init(&ctl, &ARM_ROBOT_MODEL, &cfg) == ARM_CTL_OK);
+    home_input(&in);
+    in.qd[0] = 0.5f;
+    arm_ctl_step(&ctl, &in, &out);
+    in.fresh_mask = ALL & ~(1u << 4); /* drive 5 goes quiet */
+    for (uint32_t k = 0; k < cfg.watchdog_periods; ++k) {
+        arm_ctl_step(&ctl, &in, &out);
+        CHECK(out.state == ARM_STATE_RUNNING); /* within the watchdog: last state is held */
+    }
+    arm_ctl_step(&ctl, &in, &out);
+    CHECK(out.state == ARM_STATE_FAULT);
+    CHECK(out.fault == ARM_FAULT_STALE_INPUT);
+    CHECK(fabsf(out.tau[0] - (-2.0f * 0.5f)) < 1e-6f); /* damping safe stop uses the last qd */
+}
+
+static void test_bad_config_refused(void)
+{
+    arm_ctl_t ctl;
+    arm_ctl_config_t cfg;
+    arm_ctl_default_config(&ARM_ROBOT_MODEL, &cfg);
+    cfg.torque_limit[2] = -1.0f;
+    CHECK(arm_ctl_init(&ctl, &ARM_ROBOT_MODEL, &cfg) == ARM_CTL_BAD_LIMIT);
+    arm_ctl_default_config(&ARM_ROBOT_MODEL, &cfg);
+    cfg.kp = NAN;
+    CHECK(arm_ctl_init(&ctl, &ARM_ROBOT_MODEL, &cfg) == ARM_CTL_BAD_GAIN);
+    arm_ctl_default_config(&ARM_ROBOT_MODEL, &cfg);
+    cfg.method = ARM_METHOD_COUNT;
+    CHECK(arm_ctl_init(&ctl, &ARM_ROBOT_MODEL, &cfg) == ARM_CTL_BAD_METHOD);
+    CHECK(arm_method_from_str("pd") == ARM_METHOD_PD);
+    CHECK(arm_method_from_str("nope") == ARM_METHOD_COUNT);
+}
+
+static void test_external_fault_latches(void)
+{
+    arm_ctl_t ctl;
+    arm_ctl_config_t cfg;
+    arm_ctl_input_t in;
+    arm_ctl_output_t out;
+    start(&ctl, &cfg);
+    home_input(&in);
+    arm_ctl_step(&ctl, &in, &out);
+    arm_ctl_external_fault(&ctl);
+    arm_ctl_step(&ctl, &in, &out);
+    CHECK(out.state == ARM_STATE_FAULT && out.fault == ARM_FAULT_EXTERNAL);
+    for (int j = 0; j < ARM_N_JOINTS; ++j) CHECK(out.tau[j] == 0.0f);
+}
+
+int main(void)
+{
+    test_starts_in_init_with_zero_torque();
+    test_nan_input_gives_safe_stop_and_zero_torque();
+    test_torque_and_rate_limits();
+    test_watchdog_trips_after_configured_stale_periods();
+    test_bad_config_refused();
+    test_external_fault_latches();
+    TEST_MAIN_END();
+}

@@ -1,0 +1,171 @@
+"""End-to-end HIL: the C controller and the MuJoCo simulator as two processes on a CAN bus."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hil_procs import BusRecorder, start_controller, start_sim, wait_exit
+from host_sim.canbus import open_bus, udp_socket
+from tools.hil import HilOptions, run_hil
+from tools.telemetry_log import read_log
+
+CMD_IDS = set(range(0x201, 0x207))
+
+
+@pytest.fixture(scope="module")
+def short_run(tmp_path_factory: pytest.TempPathFactory, controller_bin: Path) -> tuple[Path, dict]:
+    out = tmp_path_factory.mktemp("hil")
+    run = run_hil(HilOptions(out=out, duration_s=1.0, preset=controller_bin.parent.parent.name))
+    return out, run
+
+
+def test_short_lockstep_run_tracks_within_a_degree(short_run: tuple[Path, dict]) -> None:
+    _, run = short_run
+    assert run["result"] == "ok", run
+    assert run["controller"]["steps"] == 1000
+    assert run["controller"]["final_state"] == "running"
+    assert len(run["tracking"]["max_abs_deg"]) == 6
+    assert max(run["tracking"]["max_abs_deg"]) < 1.0
+
+
+def test_every_period_is_accounted_for(short_run: tuple[Path, dict]) -> None:
+    out, run = short_run
+    ctl = json.loads((out / "controller_summary.json").read_text())
+    sim = json.loads((out / "sim_summary.json").read_text())
+    # One state per drive per SYNC, including the few enabling periods before tracking starts.
+    assert ctl["frames"]["rx_state"] == 6 * sim["periods"]
+    assert sim["periods"] >= ctl["steps_done"]
+    assert sim["commands_missed"] == 0
+    assert ctl["frames"]["rx_unknown_id"] == 0 and ctl["frames"]["rx_wrong_counter"] == 0
+
+
+def test_telemetry_log_is_complete_and_recomputes_the_table(short_run: tuple[Path, dict]) -> None:
+    out, run = short_run
+    for channel, acct in run["telemetry"].items():
+        assert acct["sequence_gaps"] == 0, channel
+        assert acct["lost"] == 0, channel
+    log = read_log(out / "telemetry.lcmlog")
+    ctl = [m for m in log["ARM_CTL"].messages if m.state == 1]
+    e = np.array([m.e for m in ctl])
+    q_err = np.array([np.subtract(m.q_d, m.q) for m in ctl])
+    assert np.allclose(e, q_err, atol=1e-6)  # e is q_d - q, as published
+    assert np.allclose(np.degrees(np.abs(e).max(axis=0)), run["tracking"]["max_abs_deg"])
+    assert len(log["ARM_SIM"].messages) == run["simulator"]["periods"]
+
+
+def test_controller_safe_stops_when_the_simulator_dies(controller_bin: Path, bus_spec: str) -> None:
+    rec = BusRecorder(bus_spec)
+    sim = start_sim(bus_spec)
+    ctl = start_controller(controller_bin, bus_spec, "--duration", "600")
+    try:
+        time.sleep(3.0)  # booted and running
+        assert ctl.poll() is None and sim.poll() is None
+        sim.kill()
+        code, seconds, err = wait_exit(ctl, timeout=10)
+    finally:
+        for p in (sim, ctl):
+            if p.poll() is None:
+                p.kill()
+        frames = rec.close()
+    assert code == 4, err
+    assert "no joint state from drive(s) 1,2,3,4,5,6" in err and "zero torque" in err
+    assert seconds < 2.0  # lockstep timeout 0.25 s by default
+    last_cmds = [f for f in frames if f.arbitration_id in CMD_IDS][-6:]
+    assert sorted(f.arbitration_id for f in last_cmds) == sorted(CMD_IDS)
+    for f in last_cmds:
+        controlword = int.from_bytes(f.data[0:2], "little")
+        torque_raw = int.from_bytes(f.data[2:6], "little", signed=True)
+        assert torque_raw == 0 and controlword == 0x0006  # zero torque, power stage off
+
+
+def test_simulator_faults_the_drives_when_the_controller_dies(controller_bin: Path, bus_spec: str,
+                                                              tmp_path: Path) -> None:
+    rec = BusRecorder(bus_spec)
+    sim = start_sim(bus_spec, "--idle-timeout", "0.5", summary=tmp_path / "sim.json")
+    ctl = start_controller(controller_bin, bus_spec, "--duration", "600")
+    try:
+        time.sleep(3.0)
+        ctl.kill()
+        code, seconds, err = wait_exit(sim, timeout=10)
+    finally:
+        for p in (sim, ctl):
+            if p.poll() is None:
+                p.kill()
+        frames = rec.close()
+    assert code == 3, err
+    assert "controller silent" in err
+    emcy = {f.arbitration_id for f in frames if 0x81 <= f.arbitration_id <= 0x86}
+    assert emcy == set(range(0x81, 0x87))
+    summary = json.loads((tmp_path / "sim.json").read_text())
+    assert summary["drive_faults"] == [1, 2, 3, 4, 5, 6]
+
+
+def test_controller_boot_names_the_missing_drives(controller_bin: Path, bus_spec: str) -> None:
+    ctl = start_controller(controller_bin, bus_spec, "--boot-timeout", "0.3")
+    code, _, err = wait_exit(ctl, timeout=10)
+    assert code == 3
+    assert "drive(s) 1,2,3,4,5,6 not operational" in err
+
+
+@pytest.mark.parametrize(("args", "named"), [
+    (["--duration", "-1"], "--duration"),
+    (["--duration", "abc"], "--duration"),
+    (["--method", "magic"], "--method"),
+    (["--mode", "fast"], "--mode"),
+    (["--bus", "can9"], "--bus"),
+    (["--lcm-url", "udpm://239.255.76.67:7667?ttl=1"], "ttl=0"),
+    (["--kp"], "--kp: missing value"),
+    (["--frobnicate", "1"], "--frobnicate"),
+    (["stray"], "stray"),
+])
+def test_controller_refuses_bad_arguments(controller_bin: Path, args: list[str], named: str) -> None:
+    import subprocess
+
+    r = subprocess.run([str(controller_bin), *args], capture_output=True, text=True, timeout=10)
+    assert r.returncode == 2
+    assert named in r.stderr
+
+
+def _igmp_groups() -> dict[str, set[str]]:
+    groups: dict[str, set[str]] = {}
+    dev = ""
+    for line in open("/proc/net/igmp").read().splitlines()[1:]:
+        if not line.startswith("\t"):
+            dev = line.split()[1]
+            groups.setdefault(dev, set())
+        else:
+            groups[dev].add(line.split()[0])
+    return groups
+
+
+def _hex_group(addr: str) -> str:
+    return "".join(f"{int(b):02X}" for b in reversed(addr.split(".")))
+
+
+def test_multicast_stays_on_loopback(controller_bin: Path, bus_spec: str) -> None:
+    bus = open_bus(bus_spec)
+    try:
+        s = udp_socket(bus)
+        import socket
+
+        assert s.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL) == 0
+        assert socket.inet_ntoa(s.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, 4)) == "127.0.0.1"
+        can_group = _hex_group(bus_spec.split(":")[1])
+        for dev, groups in _igmp_groups().items():
+            if dev != "lo":
+                assert can_group not in groups, f"CAN group joined on {dev}"
+        assert can_group in _igmp_groups()["lo"]
+    finally:
+        bus.shutdown()
+
+
+def test_telemetry_group_is_routed_to_loopback() -> None:
+    import subprocess
+
+    r = subprocess.run(["ip", "route", "get", "239.255.76.67"], capture_output=True, text=True)
+    assert " dev lo " in f" {r.stdout} "

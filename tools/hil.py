@@ -1,0 +1,158 @@
+"""One hardware-in-the-loop run: logger, simulator and controller as separate processes."""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import lcm
+
+from tools.paths import REPO, controller_binary, env_with_repo
+from tools.run_analysis import analyse
+
+JOINT_NAMES = ["shoulder_pan", "shoulder_lift", "elbow", "wrist_1", "wrist_2", "wrist_3"]
+
+
+@dataclass
+class HilOptions:
+    out: Path
+    duration_s: float = 5.0
+    method: str = "pd"
+    mode: str = "lockstep"
+    preset: str = "release"
+    can_port: int | None = None  # None: pick one, so concurrent runs do not share a bus
+    lcm_port: int | None = None
+
+
+class HilError(RuntimeError):
+    pass
+
+
+def _ports(opt: HilOptions) -> tuple[int, int]:
+    rng = random.Random()
+    return opt.can_port or rng.randint(43200, 43999), opt.lcm_port or rng.randint(7700, 7999)
+
+
+def _logger_priority() -> None:
+    """The logger only receives and queues (a separate thread writes), so a real-time priority costs
+    the others little and keeps a busy machine from overflowing its socket buffer."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(10))
+    except (PermissionError, OSError):
+        pass  # not root: ordinary priority; any loss shows up as sequence gaps in run.json
+
+
+def _wait_for_logger(url: str, log_path: Path, proc: subprocess.Popen[bytes], timeout: float = 10.0) -> None:
+    """The logger is ready once a probe message has reached its file."""
+    probe = lcm.LCM(url)
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if proc.poll() is not None:
+            raise HilError(f"lcm-logger exited with {proc.returncode}")
+        probe.publish("ARM_PROBE", b"ready?")
+        time.sleep(0.15)
+        if log_path.exists() and log_path.stat().st_size > 0:
+            return
+    raise HilError(f"lcm-logger did not start writing {log_path} within {timeout:g} s")
+
+
+def _load_json(path: Path) -> dict[str, Any]:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def write_json_atomic(path: Path, data: dict[str, Any]) -> None:
+    tmp = path.with_name(f".{path.name}.tmp.{os.getpid()}")
+    tmp.write_text(json.dumps(data, indent=2) + "\n")
+    os.replace(tmp, path)
+
+
+def check_loopback_route(group: str) -> None:
+    """Refuse to run unless the group is routed to lo: every membership then stays on lo."""
+    r = subprocess.run(["ip", "route", "get", group], capture_output=True, text=True)
+    if r.returncode != 0 or " dev lo " not in f" {r.stdout} ":
+        net = "239.255.76.67/32" if group.startswith("239.255.") else "239.74.163.0/24"
+        raise HilError(f"multicast group {group} is not routed to lo (route: {r.stdout.strip() or r.stderr.strip()}); "
+                       f"run as root: ip route replace {net} dev lo (tools/armctl does this when run as root)")
+
+
+def run_hil(opt: HilOptions) -> dict[str, Any]:
+    for group in ("239.255.76.67", "239.74.163.2"):
+        check_loopback_route(group)
+    binary = controller_binary(opt.preset)
+    if not binary.exists():
+        raise HilError(f"{binary} is missing: run tools/armctl build")
+    opt.out.mkdir(parents=True, exist_ok=True)
+    for stale in ("telemetry.lcmlog", "controller_summary.json", "sim_summary.json", "run.json"):
+        (opt.out / stale).unlink(missing_ok=True)
+    can_port, lcm_port = _ports(opt)
+    bus = f"udp:239.74.163.2:{can_port}"
+    url = f"udpm://239.255.76.67:{lcm_port}?ttl=0&recv_buf_size=8388608"
+    log_path = opt.out / "telemetry.lcmlog"
+    logs = {name: open(opt.out / f"{name}.log", "w") for name in ("controller", "simulator", "logger")}
+
+    # The C logger itself, not the wheel's Python wrapper: SIGINT must reach the process that
+    # flushes the file.
+    logger_exe = Path(lcm.__file__).resolve().parent.parent / "bin" / "lcm-logger"
+    logger = subprocess.Popen([str(logger_exe), "-q", "-f", f"--lcm-url={url}", str(log_path)],
+                              stdout=logs["logger"], stderr=subprocess.STDOUT, preexec_fn=_logger_priority)
+    procs: list[subprocess.Popen[bytes]] = [logger]
+    t0 = time.monotonic()
+    try:
+        _wait_for_logger(url, log_path, logger)
+        sim = subprocess.Popen(
+            [sys.executable, "-m", "host_sim", "--bus", bus, "--lcm-url", url,
+             "--summary", str(opt.out / "sim_summary.json")],
+            cwd=REPO, env=env_with_repo(), stdout=logs["simulator"], stderr=subprocess.STDOUT)
+        procs.append(sim)
+        ctl = subprocess.Popen(
+            [str(binary), "--bus", bus, "--lcm-url", url, "--duration", f"{opt.duration_s:g}",
+             "--method", opt.method, "--mode", opt.mode, "--summary", str(opt.out / "controller_summary.json")],
+            stdout=logs["controller"], stderr=subprocess.STDOUT)
+        procs.append(ctl)
+        # Generous: the run is deterministic, not timed; this only bounds a hung process.
+        deadline = time.monotonic() + 120.0 + 60.0 * opt.duration_s
+        while time.monotonic() < deadline and (ctl.poll() is None or sim.poll() is None):
+            time.sleep(0.05)
+        for p in (ctl, sim):
+            if p.poll() is None:
+                p.kill()
+                raise HilError(f"{p.args[0]} did not finish in time; killed")
+        wall = time.monotonic() - t0
+        time.sleep(0.3)  # the logger flushes every 100 ms
+    finally:
+        for p in reversed(procs):
+            if p.poll() is None:
+                p.send_signal(signal.SIGINT)
+                try:
+                    p.wait(timeout=5)
+                except subprocess.TimeoutExpired:
+                    p.kill()
+        for f in logs.values():
+            f.close()
+
+    controller = _load_json(opt.out / "controller_summary.json")
+    simulator = _load_json(opt.out / "sim_summary.json")
+    if not controller:
+        tail = (opt.out / "controller.log").read_text()[-500:]
+        raise HilError(f"the controller wrote no summary (exit {ctl.returncode}): {tail.strip()}")
+    if not simulator:
+        tail = (opt.out / "simulator.log").read_text()[-500:]
+        raise HilError(f"the simulator wrote no summary (exit {sim.returncode}): {tail.strip()}")
+    run = analyse(opt.out, controller, simulator, {
+        "method": opt.method, "mode": opt.mode, "duration_s": opt.duration_s, "bus": bus,
+        "lcm_url": url, "wall_s": wall, "joint_names": JOINT_NAMES,
+        "exit_codes": {"controller": ctl.returncode, "simulator": sim.returncode},
+    })
+    write_json_atomic(opt.out / "run.json", run)
+    return run

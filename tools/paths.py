@@ -1,0 +1,27 @@
+"""Where things live in the repository and the build tree."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+BUILD = REPO / "build"
+
+
+def build_dir(preset: str) -> Path:
+    return BUILD / preset
+
+
+def controller_binary(preset: str = "release") -> Path:
+    return build_dir(preset) / "firmware" / "arm_controller"
+
+
+def venv_bin(name: str) -> Path:
+    return REPO / ".venv" / "bin" / name
+
+
+def env_with_repo() -> dict[str, str]:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(REPO) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    return env
