@@ -7,7 +7,7 @@
 #include <string.h>
 #include <time.h>
 
-#include "arm/can_udp.h"
+#include "arm/can_bus.h"
 #include "arm/reference.h"
 
 #define ALL_JOINTS ((uint32_t)((1ull << ARM_N_JOINTS) - 1u))
@@ -20,22 +20,15 @@ static int64_t now_ns(void)
     return (int64_t)ts.tv_sec * 1000000000LL + ts.tv_nsec;
 }
 
-static double wall_clock_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_REALTIME, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
 typedef struct {
-    arm_can_udp_t udp;
+    arm_can_bus_t bus;
     arm_drive_bus_t drives;
     run_report_t *report;
 } link_t;
 
 static int send_frame(link_t *l, const arm_can_frame_t *f)
 {
-    const int rc = arm_can_udp_send(&l->udp, f, wall_clock_s());
+    const int rc = arm_can_bus_send(&l->bus, f);
     if (rc == 0) {
         l->report->frames_tx++;
     } else {
@@ -58,8 +51,7 @@ static void pump(link_t *l, int64_t deadline_ns, uint32_t (*done)(const arm_driv
             return;
         }
         arm_can_frame_t f;
-        double ts = 0.0;
-        const int rc = arm_can_udp_recv(&l->udp, &f, &ts, (int)(left / 1000 + 1));
+        const int rc = arm_can_bus_recv(&l->bus, &f, (int)(left / 1000 + 1));
         if (rc == 1) {
             l->report->frames_rx++;
             (void)arm_bus_handle_rx(&l->drives, &f);
@@ -134,29 +126,6 @@ static void send_commands(link_t *l, const arm_ctl_output_t *out)
     }
 }
 
-static int parse_bus(const char *spec, char *group, size_t cap, uint16_t *port)
-{
-    snprintf(group, cap, "239.74.163.2");
-    *port = 43113u;
-    if (strcmp(spec, "udp") == 0) {
-        return 0;
-    }
-    const char *g = spec + 4;
-    const char *colon = strrchr(g, ':');
-    if (colon == NULL || (size_t)(colon - g) >= cap) {
-        return -1;
-    }
-    memcpy(group, g, (size_t)(colon - g));
-    group[colon - g] = '\0';
-    char *end = NULL;
-    const long p = strtol(colon + 1, &end, 10);
-    if (*end != '\0' || p < 1 || p > 65535) {
-        return -1;
-    }
-    *port = (uint16_t)p;
-    return 0;
-}
-
 void controller_run(const options_t *opt, const arm_robot_model_t *model, telemetry_t *telem,
                     run_report_t *report)
 {
@@ -166,15 +135,8 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
     l.report = report;
     report->final_state = ARM_STATE_INIT;
 
-    char group[64];
-    uint16_t port = 0;
     char err[200];
-    if (parse_bus(opt->bus, group, sizeof(group), &port) != 0) {
-        snprintf(report->reason, sizeof(report->reason), "--bus: cannot parse '%s'", opt->bus);
-        report->result = RUN_BUS_ERROR;
-        return;
-    }
-    if (arm_can_udp_open(&l.udp, group, port, err, sizeof(err)) != 0) {
+    if (arm_can_bus_open(&l.bus, opt->bus, err, sizeof(err)) != 0) {
         snprintf(report->reason, sizeof(report->reason), "bus: %s", err);
         report->result = RUN_BUS_ERROR;
         return;
@@ -187,7 +149,7 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
         snprintf(report->reason, sizeof(report->reason), "controller config: %s",
                  arm_ctl_init_result_str(ir));
         report->result = RUN_FAULT;
-        arm_can_udp_close(&l.udp);
+        arm_can_bus_close(&l.bus);
         return;
     }
 
@@ -195,7 +157,7 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
     if (boot(&l, opt, telem) != 0) {
         report->result = RUN_BOOT_FAILED;
         telemetry_event(telem, 0, "fault", report->reason);
-        arm_can_udp_close(&l.udp);
+        arm_can_bus_close(&l.bus);
         report->wall_s = (double)(now_ns() - t_start) * 1e-9;
         return;
     }
@@ -349,5 +311,5 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
     report->final_fault = out.fault;
     report->rx = l.drives.rx;
     report->wall_s = (double)(now_ns() - t_start) * 1e-9;
-    arm_can_udp_close(&l.udp);
+    arm_can_bus_close(&l.bus);
 }

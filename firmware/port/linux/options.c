@@ -1,5 +1,7 @@
 #include "options.h"
 
+#include "arm/can_bus.h"
+
 #include <errno.h>
 #include <math.h>
 #include <stdio.h>
@@ -95,10 +97,7 @@ int options_parse(int argc, char **argv, const arm_robot_model_t *model, options
         int rc = 0;
         if (strcmp(a, "--bus") == 0) {
             rc = copy_str(a, v, opt->bus, sizeof(opt->bus), err, errcap);
-            if (rc == 0 && strcmp(v, "udp") != 0 && strncmp(v, "udp:", 4) != 0) {
-                snprintf(err, errcap, "--bus: unknown bus '%s' (expected udp or udp:GROUP:PORT)", v);
-                rc = -1;
-            }
+            if (rc == 0) rc = arm_can_bus_spec_valid(v, err, errcap);
         } else if (strcmp(a, "--lcm-url") == 0) {
             rc = copy_str(a, v, opt->lcm_url, sizeof(opt->lcm_url), err, errcap);
             if (rc == 0) rc = check_lcm_url(v, err, errcap);
