@@ -7,7 +7,8 @@
 
 #define ARM_ALL_JOINTS_MASK ((uint32_t)((1ull << ARM_N_JOINTS) - 1u))
 
-static const char *const k_method_names[ARM_METHOD_COUNT] = {"pd"};
+static const char *const k_method_names[ARM_METHOD_COUNT] = {"pd",  "pm",  "pm-paper",
+                                                              "gh2", "tde", "usde-smc"};
 
 void arm_ctl_default_config(const arm_robot_model_t *model, arm_ctl_config_t *cfg)
 {
@@ -17,6 +18,13 @@ void arm_ctl_default_config(const arm_robot_model_t *model, arm_ctl_config_t *cf
     cfg->period_s = 0.001f;
     cfg->kp = wn * wn;
     cfg->kd = 2.0f * wn;
+    cfg->numeric = ARM_NUMERIC_FLOAT;
+    cfg->tde_cutoff_hz = 50.0f;
+    cfg->usde_k = 0.01f;
+    cfg->smc_lambda = 20.0f;
+    cfg->smc_eta = 1.0f;
+    cfg->smc_phi = 0.05f;
+    cfg->smc_ks = 20.0f;
     for (int i = 0; i < ARM_N_JOINTS; ++i) {
         cfg->torque_limit[i] = model->link[i].torque_limit;
         /* Full scale in 10 ms: fast enough to take the arm's weight within a few periods of
@@ -41,6 +49,20 @@ arm_ctl_init_result_t arm_ctl_init(arm_ctl_t *ctl, const arm_robot_model_t *mode
           isfinite(cfg->safe_stop_damping) && cfg->safe_stop_damping >= 0.0f)) {
         return ARM_CTL_BAD_GAIN;
     }
+    if ((unsigned)cfg->numeric > (unsigned)ARM_NUMERIC_FIXED) {
+        return ARM_CTL_BAD_NUMERIC;
+    }
+    if (!(cfg->tde_cutoff_hz > 0.0f && cfg->usde_k > 0.0f && cfg->smc_lambda >= 0.0f &&
+          cfg->smc_eta >= 0.0f && cfg->smc_phi > 0.0f && cfg->smc_ks >= 0.0f &&
+          isfinite(cfg->tde_cutoff_hz) && isfinite(cfg->usde_k) && isfinite(cfg->smc_lambda) &&
+          isfinite(cfg->smc_eta) && isfinite(cfg->smc_phi) && isfinite(cfg->smc_ks))) {
+        return ARM_CTL_BAD_GAIN;
+    }
+    const int uses_design = cfg->method == ARM_METHOD_PM || cfg->method == ARM_METHOD_PM_PAPER ||
+                            cfg->method == ARM_METHOD_GH2;
+    if (uses_design && arm_pm_check_design(1.0f / cfg->period_s) != 0) {
+        return ARM_CTL_BAD_DESIGN_RATE;
+    }
     for (int i = 0; i < ARM_N_JOINTS; ++i) {
         if (!(cfg->torque_limit[i] > 0.0f && isfinite(cfg->torque_limit[i]) &&
               cfg->torque_rate_limit[i] > 0.0f && isfinite(cfg->torque_rate_limit[i]))) {
@@ -52,6 +74,18 @@ arm_ctl_init_result_t arm_ctl_init(arm_ctl_t *ctl, const arm_robot_model_t *mode
     ctl->cfg = *cfg;
     ctl->state = ARM_STATE_INIT;
     ctl->fault = ARM_FAULT_NONE;
+    switch (cfg->method) {
+    case ARM_METHOD_PM: arm_pm_init(&ctl->m.pm, cfg->numeric, ARM_PM_DECOUPLED); break;
+    case ARM_METHOD_PM_PAPER: arm_pm_init(&ctl->m.pm, cfg->numeric, ARM_PM_PAPER); break;
+    case ARM_METHOD_GH2: arm_pm_init(&ctl->m.pm, cfg->numeric, ARM_PM_NO_ESTIMATOR); break;
+    case ARM_METHOD_TDE: arm_tde_init(&ctl->m.tde, cfg->period_s, cfg->tde_cutoff_hz); break;
+    case ARM_METHOD_USDE_SMC:
+        arm_usde_smc_init(&ctl->m.usde_smc, cfg->period_s, cfg->usde_k, cfg->smc_lambda,
+                          cfg->smc_eta, cfg->smc_phi, cfg->smc_ks);
+        break;
+    case ARM_METHOD_PD:
+    case ARM_METHOD_COUNT: break;
+    }
     return ARM_CTL_OK;
 }
 
@@ -102,15 +136,60 @@ static void safe_stop_output(const arm_ctl_t *ctl, arm_ctl_output_t *out)
     }
 }
 
-static void method_pd(const arm_ctl_t *ctl, const arm_ctl_input_t *in, arm_ctl_output_t *out)
+/* This period's u_o and w_hat from the method's current state. */
+static void method_output(arm_ctl_t *ctl, arm_ctl_output_t *out)
 {
-    float acc[ARM_N_JOINTS];
+    const arm_ctl_config_t *c = &ctl->cfg;
+    switch (c->method) {
+    case ARM_METHOD_PM:
+    case ARM_METHOD_PM_PAPER:
+    case ARM_METHOD_GH2:
+        arm_pm_output(&ctl->m.pm, out->e, out->e_dot, out->u_o, out->w_hat);
+        break;
+    case ARM_METHOD_USDE_SMC:
+        arm_usde_smc_output(&ctl->m.usde_smc, out->e, out->e_dot, ctl->last_qd, out->u_o,
+                            out->w_hat);
+        break;
+    case ARM_METHOD_TDE:
+    case ARM_METHOD_PD:
+    case ARM_METHOD_COUNT:
+        for (int i = 0; i < ARM_N_JOINTS; ++i) {
+            out->u_o[i] = -c->kp * out->e[i] - c->kd * out->e_dot[i];
+            out->w_hat[i] = 0.0f;
+        }
+        if (c->method == ARM_METHOD_TDE) {
+            arm_tde_output(&ctl->m.tde, ctl->last_qd, out->w_hat);
+        }
+        break;
+    }
+}
+
+/* Advance the method's states; hold_mask: joints whose torque the safety layer limited. */
+static void method_update(arm_ctl_t *ctl, const float acc[ARM_N_JOINTS], uint32_t hold_mask)
+{
+    switch (ctl->cfg.method) {
+    case ARM_METHOD_PM:
+    case ARM_METHOD_PM_PAPER:
+    case ARM_METHOD_GH2: arm_pm_update(&ctl->m.pm, hold_mask); break;
+    case ARM_METHOD_TDE: arm_tde_update(&ctl->m.tde, ctl->last_qd, acc, hold_mask); break;
+    case ARM_METHOD_USDE_SMC:
+        arm_usde_smc_update(&ctl->m.usde_smc, ctl->last_qd, acc, hold_mask);
+        break;
+    case ARM_METHOD_PD:
+    case ARM_METHOD_COUNT: break;
+    }
+}
+
+static void run_method(arm_ctl_t *ctl, const arm_ctl_input_t *in, arm_ctl_output_t *out,
+                       float acc[ARM_N_JOINTS])
+{
     for (int i = 0; i < ARM_N_JOINTS; ++i) {
         out->e[i] = in->q_d[i] - ctl->last_q[i];
         out->e_dot[i] = in->qd_d[i] - ctl->last_qd[i];
-        out->w_hat[i] = 0.0f;
-        out->u_o[i] = -ctl->cfg.kp * out->e[i] - ctl->cfg.kd * out->e_dot[i];
-        /* IDC: commanding q_ddot_d - u makes the nominal error dynamics e_ddot = u. */
+    }
+    method_output(ctl, out);
+    for (int i = 0; i < ARM_N_JOINTS; ++i) {
+        /* IDC: commanding q_ddot_d - u makes the nominal error dynamics e_ddot = u (+ w). */
         acc[i] = in->qdd_d[i] - (out->u_o[i] - out->w_hat[i]);
     }
     arm_rnea(ctl->model, ctl->last_q, ctl->last_qd, acc, out->tau_method);
@@ -153,11 +232,13 @@ void arm_ctl_step(arm_ctl_t *ctl, const arm_ctl_input_t *in, arm_ctl_output_t *o
 
     if (ctl->state == ARM_STATE_RUNNING) {
         /* Stale periods within the watchdog reuse the last state: the hold is bounded. */
-        method_pd(ctl, in, out);
+        float acc[ARM_N_JOINTS];
+        run_method(ctl, in, out, acc);
         if (!all_finite(out->tau_method, ARM_N_JOINTS)) {
             latch_fault(ctl, ARM_FAULT_NONFINITE_OUTPUT);
         } else {
             apply_limits(ctl, out);
+            method_update(ctl, acc, out->saturated_mask);
         }
     }
 
@@ -220,6 +301,10 @@ const char *arm_ctl_init_result_str(arm_ctl_init_result_t r)
     case ARM_CTL_BAD_PERIOD: return "period_s must be in (0, 1)";
     case ARM_CTL_BAD_GAIN: return "gains must be finite and >= 0";
     case ARM_CTL_BAD_LIMIT: return "torque and torque-rate limits must be finite and > 0";
+    case ARM_CTL_BAD_DESIGN_RATE:
+        return "the loop rate differs from the rate the design was discretised for "
+               "(pm_design_float.h ARM_LOOP_RATE_HZ): re-run armctl synth for this rate";
+    case ARM_CTL_BAD_NUMERIC: return "numeric must be float or fixed";
     }
     return "?";
 }

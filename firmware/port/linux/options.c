@@ -18,7 +18,11 @@ void options_usage(const char *prog)
            "  --mode lockstep|realtime                                [lockstep]\n"
            "  --duration S            run length in seconds (> 0)     [5]\n"
            "  --rate HZ               control rate                    [1000]\n"
-           "  --method NAME           pd                              [pd]\n"
+           "  --method NAME           pm | pm-paper | gh2 | pd | tde | usde-smc [pd]\n"
+           "  --numeric float|fixed   pm, pm-paper, gh2: float32 or int32 Q-format blocks [float]\n"
+           "  --tde-cutoff HZ         tde: low-pass on the estimate   [50]\n"
+           "  --usde-k S              usde-smc: filter time constant  [0.01]\n"
+           "  --smc-lambda X --smc-eta X --smc-phi X --smc-ks X  usde-smc sliding mode [20 1 0.05 20]\n"
            "  --kp X --kd X           PD gains (1/s^2, 1/s)           [400, 40]\n"
            "  --torque-rate-limit X   Nm per period, all joints [each joint's limit / 10 ms]\n"
            "  --watchdog-periods N    stale periods before safe stop  [3]\n"
@@ -119,10 +123,40 @@ int options_parse(int argc, char **argv, const arm_robot_model_t *model, options
         } else if (strcmp(a, "--method") == 0) {
             const arm_method_t m = arm_method_from_str(v);
             if (m == ARM_METHOD_COUNT) {
-                snprintf(err, errcap, "--method: unknown method '%s' (known: pd)", v);
+                snprintf(err, errcap,
+                         "--method: unknown method '%s' (known: pm, pm-paper, gh2, pd, tde, "
+                         "usde-smc)",
+                         v);
                 rc = -1;
             }
             opt->ctl.method = m;
+        } else if (strcmp(a, "--numeric") == 0) {
+            if (strcmp(v, "float") == 0) {
+                opt->ctl.numeric = ARM_NUMERIC_FLOAT;
+            } else if (strcmp(v, "fixed") == 0) {
+                opt->ctl.numeric = ARM_NUMERIC_FIXED;
+            } else {
+                snprintf(err, errcap, "--numeric: '%s' is not float or fixed", v);
+                rc = -1;
+            }
+        } else if (strcmp(a, "--tde-cutoff") == 0) {
+            rc = parse_double(a, v, 0.1, 1e5, &d, err, errcap);
+            opt->ctl.tde_cutoff_hz = (float)d;
+        } else if (strcmp(a, "--usde-k") == 0) {
+            rc = parse_double(a, v, 1e-5, 10.0, &d, err, errcap);
+            opt->ctl.usde_k = (float)d;
+        } else if (strcmp(a, "--smc-lambda") == 0) {
+            rc = parse_double(a, v, 0.0, 1e4, &d, err, errcap);
+            opt->ctl.smc_lambda = (float)d;
+        } else if (strcmp(a, "--smc-eta") == 0) {
+            rc = parse_double(a, v, 0.0, 1e5, &d, err, errcap);
+            opt->ctl.smc_eta = (float)d;
+        } else if (strcmp(a, "--smc-phi") == 0) {
+            rc = parse_double(a, v, 1e-6, 1e3, &d, err, errcap);
+            opt->ctl.smc_phi = (float)d;
+        } else if (strcmp(a, "--smc-ks") == 0) {
+            rc = parse_double(a, v, 0.0, 1e4, &d, err, errcap);
+            opt->ctl.smc_ks = (float)d;
         } else if (strcmp(a, "--kp") == 0) {
             rc = parse_double(a, v, 0.0, 1e7, &d, err, errcap);
             opt->ctl.kp = (float)d;

@@ -4,10 +4,18 @@
 
 #include <stdint.h>
 
+#include "arm/baselines.h"
+#include "arm/pm.h"
 #include "arm/robot_model.h"
 
+/* Every method runs on the same inverse dynamics control and produces u_o and w_hat. */
 typedef enum {
-    ARM_METHOD_PD = 0, /* IDC + PD: u = -kp e - kd e_dot */
+    ARM_METHOD_PD = 0,   /* u_o = -kp e - kd e_dot, w_hat = 0 */
+    ARM_METHOD_PM,       /* the paper's method, decoupled estimator structure (the product) */
+    ARM_METHOD_PM_PAPER, /* the paper's method as printed: K fed y directly */
+    ARM_METHOD_GH2,      /* generalized-H2 controller alone (the paper's Example 1) */
+    ARM_METHOD_TDE,      /* PD + time-delay estimation */
+    ARM_METHOD_USDE_SMC, /* USDE estimator + sliding-mode control with a boundary layer */
     ARM_METHOD_COUNT
 } arm_method_t;
 
@@ -33,9 +41,13 @@ typedef enum {
 
 typedef struct {
     arm_method_t method;
+    arm_numeric_t numeric; /* pm, pm-paper, gh2: float32 or int32 fixed-point blocks */
     float period_s;
-    float kp; /* 1/s^2 */
-    float kd; /* 1/s */
+    float kp; /* 1/s^2, pd and tde */
+    float kd; /* 1/s, pd and tde */
+    float tde_cutoff_hz;
+    float usde_k; /* s, USDE filter time constant */
+    float smc_lambda, smc_eta, smc_phi, smc_ks;
     float torque_limit[ARM_N_JOINTS];      /* Nm */
     float torque_rate_limit[ARM_N_JOINTS]; /* Nm per period */
     uint32_t watchdog_periods;             /* stale periods tolerated before safe stop */
@@ -68,6 +80,11 @@ typedef struct {
 typedef struct {
     const arm_robot_model_t *model;
     arm_ctl_config_t cfg;
+    union {
+        arm_pm_t pm;
+        arm_tde_t tde;
+        arm_usde_smc_t usde_smc;
+    } m;
     arm_state_t state;
     arm_fault_t fault;
     uint32_t stale_periods;
@@ -82,6 +99,8 @@ typedef enum {
     ARM_CTL_BAD_PERIOD,
     ARM_CTL_BAD_GAIN,
     ARM_CTL_BAD_LIMIT,
+    ARM_CTL_BAD_DESIGN_RATE, /* the synthesised design was discretised for another loop rate */
+    ARM_CTL_BAD_NUMERIC,
 } arm_ctl_init_result_t;
 
 /* Fills cfg with the defaults for the model: PD at 20 rad/s, critically damped; the model's

@@ -1,0 +1,5 @@
+import sys
+
+from gen.synth.cli import main
+
+sys.exit(main())
