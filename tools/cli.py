@@ -104,14 +104,17 @@ def main(argv: list[str] | None = None) -> int:
     t.add_argument("pytest_args", nargs="*", help="extra pytest arguments, e.g. -k hil")
     t.set_defaults(fn=cmd_test)
 
-    try:
-        from gen.synth import cli as synth_cli
+    from gen.synth import cli as synth_cli
 
-        s = sub.add_parser("synth", help="LMI synthesis of the estimator and controller, emitted as C")
-        synth_cli.add_arguments(s)
-        s.set_defaults(fn=cmd_synth)
-    except ImportError:
-        pass  # gen.synth not present in this checkout
+    s = sub.add_parser("synth", help="LMI synthesis of the estimator and controller, emitted as C")
+    synth_cli.add_arguments(s)
+    s.set_defaults(fn=cmd_synth)
+
+    from tools import bench
+
+    bn = sub.add_parser("bench", help="benchmarks that write results files (instructions per step; synthesis time)")
+    bench.add_arguments(bn)
+    bn.set_defaults(fn=bench.run)
 
     ns = p.parse_args(argv)
     return int(ns.fn(ns))

@@ -30,6 +30,11 @@ class HilOptions:
     preset: str = "release"
     can_port: int | None = None  # None: pick one, so concurrent runs do not share a bus
     lcm_port: int | None = None
+    # Another controller binary (default: controller_binary(preset)), a command it runs under
+    # (e.g. ("qemu-aarch64-static",) for a cross-compiled one) and extra controller arguments.
+    controller: Path | None = None
+    controller_cmd_prefix: tuple[str, ...] = ()
+    controller_args: tuple[str, ...] = ()
 
 
 class HilError(RuntimeError):
@@ -89,7 +94,7 @@ def check_loopback_route(group: str) -> None:
 def run_hil(opt: HilOptions) -> dict[str, Any]:
     for group in ("239.255.76.67", "239.74.163.2"):
         check_loopback_route(group)
-    binary = controller_binary(opt.preset)
+    binary = opt.controller or controller_binary(opt.preset)
     if not binary.exists():
         raise HilError(f"{binary} is missing: run tools/armctl build")
     opt.out.mkdir(parents=True, exist_ok=True)
@@ -116,8 +121,9 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
             cwd=REPO, env=env_with_repo(), stdout=logs["simulator"], stderr=subprocess.STDOUT)
         procs.append(sim)
         ctl = subprocess.Popen(
-            [str(binary), "--bus", bus, "--lcm-url", url, "--duration", f"{opt.duration_s:g}",
-             "--method", opt.method, "--mode", opt.mode, "--summary", str(opt.out / "controller_summary.json")],
+            [*opt.controller_cmd_prefix, str(binary), "--bus", bus, "--lcm-url", url,
+             "--duration", f"{opt.duration_s:g}", "--method", opt.method, "--mode", opt.mode,
+             "--summary", str(opt.out / "controller_summary.json"), *opt.controller_args],
             stdout=logs["controller"], stderr=subprocess.STDOUT)
         procs.append(ctl)
         # Generous: the run is deterministic, not timed; this only bounds a hung process.

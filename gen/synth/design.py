@@ -45,7 +45,6 @@ class Synthesised:
     full_order_poles: list[complex]
     residualised_poles: list[complex]
     i_minus_xy_singular_values: list[float]
-    lmi_status: str
     rungs: list[Rung]
     verification: dict[str, Any]
     degeneracy: Degeneracy | None = None
@@ -114,7 +113,6 @@ def _controller(Po: GeneralizedPlant, cfg: DesignConfig, m: int) -> Synthesised:
             full_order_poles=[],
             residualised_poles=[],
             i_minus_xy_singular_values=[],
-            lmi_status=opt.status,
             rungs=[Rung(0.0, 0.0, True, reason, checks)],
             verification={"gh2_norm": norm, "lmi_gamma": 0.0, "within_bound": bool(norm <= 1e-9)},
             degeneracy=deg,
@@ -153,7 +151,6 @@ def _controller(Po: GeneralizedPlant, cfg: DesignConfig, m: int) -> Synthesised:
         full_order_poles=[complex(p) for p in np.linalg.eigvals(rec.full.A)],
         residualised_poles=rec.residualised_poles,
         i_minus_xy_singular_values=rec.i_minus_xy_singular_values,
-        lmi_status=opt.status,
         rungs=res.rungs,
         verification={"gh2_norm": norm, "lmi_gamma": res.rung.gamma, "within_bound": True},
         degeneracy=deg,
@@ -200,7 +197,6 @@ def _estimator(Pf: GeneralizedPlant, C: StateSpace, cfg: DesignConfig, m: int) -
         full_order_poles=[complex(p) for p in np.linalg.eigvals(rec.full.A)],
         residualised_poles=rec.residualised_poles,
         i_minus_xy_singular_values=rec.i_minus_xy_singular_values,
-        lmi_status=opt.status,
         rungs=res.rungs,
         verification={
             "hinf_norm": norm,

@@ -72,7 +72,10 @@ def _usage(m: dict[str, Any]) -> str:
  *   controller C: u_o[k] = C x[k] + D y[k];    x[k+1] = A x[k] + B y[k]
  *   internal model (decoupled only, per joint): x_m[k+1] = A x_m[k] + B u_o[k]   (x_m = [e_m, e_dot_m])
  *   auxiliary input u = u_o - w_hat; torque tau = M_hat(q) (q_ddot_d - u) + V_hat + G.
- * Outputs are computed from x[k] before the state update. All states start at 0.
+ * Outputs are computed from x[k] before the state update. K's and C's states start at 0; x_m starts
+ * at the first measurement y[0] (and is re-set to y when the loop is (re)started), so K does not
+ * mistake the initial error for a disturbance. x_m also drifts slowly under a constant w (the
+ * estimator's slow mode, see the manifest's poles): re-set it when idle.
  * Static gains: C forbids zero-size arrays, so a system with no states is emitted with
  * ARM_*_NX_PADDING = 1 inert state (A = 0, B = 0, C = 0); running it like any other is exact."""
 

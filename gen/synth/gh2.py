@@ -16,6 +16,8 @@ from gen.synth.plants import GeneralizedPlant
 
 
 def _constraints(P: GeneralizedPlant, c: Calligraphic, gamma: cp.Expression) -> list[cp.Constraint]:
+    if P.D21 is not None or np.any(P.D11):
+        raise ValueError("the generalized-H2 norm needs a strictly proper closed loop (D11 = 0, D21 = 0)")
     n2 = 2 * P.nx
     lyap = cp.bmat([[c.A.T + c.A, c.B], [c.B.T, -gamma * np.eye(P.nw)]])
     peak = cp.bmat([[c.X, c.C.T], [c.C, gamma * np.eye(P.nz)]])

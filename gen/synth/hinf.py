@@ -14,8 +14,8 @@ def _constraints(P: GeneralizedPlant, c: Calligraphic, gamma: cp.Expression) -> 
     big = cp.bmat(
         [
             [c.A.T + c.A, c.B, c.C.T],
-            [c.B.T, -gamma * np.eye(P.nw), P.D11.T],
-            [c.C, P.D11, -gamma * np.eye(P.nz)],
+            [c.B.T, -gamma * np.eye(P.nw), c.D.T],
+            [c.C, c.D, -gamma * np.eye(P.nz)],
         ]
     )
     return [

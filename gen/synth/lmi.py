@@ -42,6 +42,7 @@ class Calligraphic:
     B: cp.Expression  # 2nx x nw
     C: cp.Expression  # nz x 2nx
     X: cp.Expression  # [[Y, I], [I, X]]
+    D: cp.Expression  # closed-loop feedthrough D11 + D12 N D21
 
 
 @dataclass(frozen=True, eq=False)
@@ -74,11 +75,18 @@ def calligraphic(P: GeneralizedPlant, v: Variables) -> Calligraphic:
     """The matrices of Theorem 1 (and, with P_o, Theorem 3) as printed in the paper."""
     A, B1, B2, C1, D12, C2 = P.A, P.B1, P.B2, P.C1, P.D12, P.C2
     I = np.eye(P.nx)
+    if P.D21 is None:  # the paper's form
+        B = cp.bmat([[B1], [v.X @ B1]])
+        D = cp.Constant(P.D11)
+    else:  # general D21 (Scherer-Gahinet-Chilali)
+        B = cp.bmat([[B1 + B2 @ v.N @ P.D21], [v.X @ B1 + v.L @ P.D21]])
+        D = P.D11 + D12 @ v.N @ P.D21
     return Calligraphic(
         A=cp.bmat([[A @ v.Y + B2 @ v.M, A + B2 @ v.N @ C2], [v.J, v.X @ A + v.L @ C2]]),
-        B=cp.bmat([[B1], [v.X @ B1]]),
+        B=B,
         C=cp.bmat([[C1 @ v.Y + D12 @ v.M, C1 + D12 @ v.N @ C2]]),
         X=cp.bmat([[v.Y, I], [I, v.X]]),
+        D=D,
     )
 
 
@@ -134,7 +142,10 @@ class LmiSynthesis:
             self._fixed = (prob, v, g)
         prob, v, g = self._fixed
         g.value = gamma
-        dt = self._solve(prob)
+        try:
+            dt = self._solve(prob)
+        except SynthesisError:
+            return None  # numerical breakdown this close to the boundary counts as infeasible
         if prob.status not in _ACCEPTED:
             return None
         return self._result(v, gamma, prob.status, "min trace(X+Y) at fixed gamma", dt)

@@ -21,11 +21,12 @@ STRUCTURES = ("decoupled", "paper")
 
 
 def design_loop(P: GeneralizedPlant, K: StateSpace) -> StateSpace:
-    """Exogenous input -> performance output of P closed by K (D21 = 0)."""
+    """Exogenous input -> performance output of P closed by K (D22 = 0)."""
+    D21 = P.d21
     A = np.block([[P.A + P.B2 @ K.D @ P.C2, P.B2 @ K.C], [K.B @ P.C2, K.A]])
-    B = np.vstack([P.B1, np.zeros((K.n_states, P.nw))])
+    B = np.vstack([P.B1 + P.B2 @ K.D @ D21, K.B @ D21])
     C = np.hstack([P.C1 + P.D12 @ K.D @ P.C2, P.D12 @ K.C])
-    return StateSpace(A, B, C, P.D11.copy())
+    return StateSpace(A, B, C, P.D11 + P.D12 @ K.D @ D21)
 
 
 def combined_loop(

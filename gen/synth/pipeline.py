@@ -225,6 +225,6 @@ def synthesize(cfg: DesignConfig) -> Design:
     d = Design(cfg, mode, per_joint, m, comps, solved, keys, est, ctl, im, y_frac, {})
     t1 = time.perf_counter()
     d.verification = _verify(d, Pf, Po, T, cfg.delay_margin_samples)
-    d.timings = {"solve_s": t_solve, "emit_prepare_s": t1 - t0 - t_solve, "verify_s": time.perf_counter() - t1}
+    d.timings = {"solve_s": t_solve, "discretise_quantise_s": t1 - t0 - t_solve, "verify_s": time.perf_counter() - t1}
     return d
 

@@ -5,7 +5,8 @@ y = [e; e_dot]. The estimator is designed as if u_o = 0: in the 'decoupled' stru
 model removes u_o from what K sees, so this is exactly the plant K faces.
 P_o (eq. 3.18), controller design: states [e; e_dot], inputs d = w - w_hat and u_o,
 z_o = E1 e + E2 e_dot + D12 u_o, y = [e; e_dot].
-In both, y is noise-free (D21 = 0) and there is no feedthrough to y (D22 = 0).
+In both, y is noise-free (D21 = 0) and there is no feedthrough to y (D22 = 0). D21 is still
+supported (the benchmark needs it to meet python-control's hinfsyn on a regularised plant).
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg as sla
 from gen.synth.config import TransferFunction
 
 
@@ -25,6 +27,11 @@ class GeneralizedPlant:
     D11: np.ndarray
     D12: np.ndarray
     C2: np.ndarray  # measurement
+    D21: np.ndarray | None = None  # exogenous input -> measurement; None = 0 (the paper's plants)
+
+    @property
+    def d21(self) -> np.ndarray:
+        return np.zeros((self.ny, self.nw)) if self.D21 is None else self.D21
 
     @property
     def nx(self) -> int:
@@ -47,7 +54,10 @@ class GeneralizedPlant:
         return int(self.C2.shape[0])
 
     def to_json(self) -> dict[str, list[list[float]]]:
-        return {k: getattr(self, k).tolist() for k in ("A", "B1", "B2", "C1", "D11", "D12", "C2")}
+        out = {k: getattr(self, k).tolist() for k in ("A", "B1", "B2", "C1", "D11", "D12", "C2")}
+        if self.D21 is not None:
+            out["D21"] = self.D21.tolist()
+        return out
 
 
 def double_integrator(m: int) -> tuple[np.ndarray, np.ndarray]:
@@ -78,11 +88,37 @@ def realise(tf: TransferFunction) -> tuple[np.ndarray, np.ndarray, np.ndarray, n
     return A, B, c.reshape(1, r), np.array([[d]])
 
 
+def balance(A: np.ndarray, B: np.ndarray, C: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Balanced realisation of a stable minimal SISO system (equal, diagonal Gramians).
+
+    The LMI solver is sensitive to how F is realised: for F = 100/(s + 100) the canonical form
+    (B = 1, C = 100) makes Clarabel fail near gamma_opt where the balanced one (B = C = 10) solves.
+    Non-minimal F (singular Gramians) keeps the canonical form.
+    """
+    if A.shape[0] == 0:
+        return A, B, C
+    Wc = sla.solve_continuous_lyapunov(A, -B @ B.T)
+    Wo = sla.solve_continuous_lyapunov(A.T, -C.T @ C)
+    try:
+        Lc = np.linalg.cholesky((Wc + Wc.T) / 2)
+    except np.linalg.LinAlgError:
+        return A, B, C
+    U, s2, _ = np.linalg.svd(Lc.T @ ((Wo + Wo.T) / 2) @ Lc)
+    if s2[-1] <= 1e-12 * s2[0]:
+        return A, B, C
+    T = Lc @ U @ np.diag(s2**-0.25)
+    Ti = np.linalg.inv(T)
+    return Ti @ A @ T, Ti @ B, C @ T
+
+
 def estimator_plant(F: list[TransferFunction], H: np.ndarray) -> GeneralizedPlant:
     """P_f for len(F) joints; F(s) = diag(F), H is len(F) x len(F)."""
     m = len(F)
     Ad, Bd = double_integrator(m)
-    parts = [realise(f) for f in F]
+    parts = []
+    for f in F:
+        a, b, c, d = realise(f)
+        parts.append((*balance(a, b, c), d))
     nf = sum(p[0].shape[0] for p in parts)
     AF, BF, CF = np.zeros((nf, nf)), np.zeros((nf, m)), np.zeros((m, nf))
     DF = np.zeros((m, m))

@@ -48,6 +48,8 @@ def hinf_norm(sys: StateSpace, rtol: float = 1e-7) -> tuple[float, float]:
     d = float(np.linalg.norm(D, 2))
     if d > lb:
         lb, w_peak = d, float("inf")
+    if lb == 0.0:  # G(jw) = 0 on the whole grid: only the zero system gets here
+        return 0.0, 0.0
     for _ in range(100):
         g = lb * (1.0 + 2.0 * rtol)
         # Hamiltonian of ||G|| < g: imaginary-axis eigenvalues are exactly the frequencies where

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from gen.synth.cli import DEFAULT_CONFIG
-from gen.synth.config import TransferFunction, parse_config
+from gen.synth.config import TransferFunction, load_config, parse_config
 from gen.synth.design import DesignRefused, subproblem_plants
 from gen.synth.gh2 import detect_degenerate, gh2_synthesis
 from gen.synth.hinf import hinf_synthesis
@@ -184,3 +184,10 @@ def test_coupled_n6_solve_agrees_with_per_joint(paper: Design) -> None:
     assert detect_degenerate(Po).degenerate
     assert gh2_synthesis(Po).min_gamma().gamma < 1e-4
     assert gh2_norm(design_loop(Po, StateSpace(np.zeros((0, 0)), np.zeros((0, 12)), np.zeros((6, 0)), np.kron(sub.controller.system.D, np.eye(6))))) < 1e-9
+
+
+@pytest.mark.parametrize("path", sorted(DEFAULT_CONFIG.parent.glob("*.toml")), ids=lambda p: p.name)
+def test_every_shipped_config_synthesises(path: Any) -> None:
+    d = synthesize(load_config(path))
+    assert all(d.verification["combined_loop"][st]["stable_with_margin"] for st in ("decoupled", "paper"))
+    assert d.verification["estimator_loop"]["within_bound"] and d.verification["controller_loop"]["within_bound"]

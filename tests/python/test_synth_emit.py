@@ -114,10 +114,13 @@ static int32_t toq(double v, int frac, int32_t lim) {
 int main(void) {
     const double T = (double)ARM_LOOP_PERIOD_S, w = 1.0;
     double pf[2] = {0.2, 0.0}, pq[2] = {0.2, 0.0};  /* plants (e, e_dot) in double */
-    float xk[ARM_EST_NX] = {0}, xc[ARM_CTL_NX] = {0}, xm[2] = {0};
-    int32_t qk[ARM_EST_NX] = {0}, qc[ARM_CTL_NX] = {0}, qm[2] = {0};
+    float xk[ARM_EST_NX] = {0}, xc[ARM_CTL_NX] = {0};
+    int32_t qk[ARM_EST_NX] = {0}, qc[ARM_CTL_NX] = {0};
     const int32_t lim[2] = {ARM_RANGE_E_MAX_Q, ARM_RANGE_E_DOT_MAX_Q};
     const int32_t imlim[2] = {ARM_IM_E_MAX_Q, ARM_IM_E_DOT_MAX_Q};
+    /* the internal model starts at the first measurement, so K sees no fictitious disturbance */
+    float xm[2] = {(float)pf[0], (float)pf[1]};
+    int32_t qm[2] = {toq(pq[0], ARM_Y_FRAC, lim[0]), toq(pq[1], ARM_Y_FRAC, lim[1])};
     for (int k = 0; k < 3000; ++k) {
         /* ---- float32 */
         float y[2] = {(float)pf[0], (float)pf[1]}, v[2], uo = 0.0f, wh = 0.0f;
@@ -165,7 +168,8 @@ def _python_reference(m: dict[str, Any], steps: int = 3000) -> dict[int, float]:
     C = {k: np.array(v) for k, v in m["controller"]["discrete"].items() if k in "ABCD"}
     IM = {k: np.array(v) for k, v in m["internal_model"]["discrete"].items() if k in "AB"}
     T, w = m["loop_period_s"], 1.0
-    p, xk, xc, xm = np.array([0.2, 0.0]), np.zeros(K["A"].shape[0]), np.zeros(C["A"].shape[0]), np.zeros(2)
+    p, xk, xc = np.array([0.2, 0.0]), np.zeros(K["A"].shape[0]), np.zeros(C["A"].shape[0])
+    xm = p.copy()
     out = {}
     for k in range(steps):
         y = p.copy()

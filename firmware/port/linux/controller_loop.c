@@ -254,6 +254,9 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
 
         const int64_t c0 = now_ns();
         arm_ctl_step(&ctl, &in, &out);
+        if (opt->rt.debug_slow_step_us > 0u) {
+            rt_debug_busy_wait_us(opt->rt.debug_slow_step_us); /* TEST HOOK: forces overruns */
+        }
         const int64_t compute = now_ns() - c0;
         send_commands(&l, &out);
         const int64_t cycle = now_ns() - cycle_start;

@@ -7,6 +7,7 @@
 #include "arm_robot_model_data.h"
 #include "controller_loop.h"
 #include "options.h"
+#include "rt.h"
 #include "summary.h"
 #include "telemetry.h"
 
@@ -27,6 +28,16 @@ int main(int argc, char **argv)
         fprintf(stderr, "arm_controller: %s\n", err);
         return 1;
     }
+    /* After telemetry_start: only this (the loop's) thread gets SCHED_FIFO and the CPU pin. */
+    static rt_status_t rt;
+    if (rt_setup(&opt.rt, opt.mode == MODE_REALTIME, &rt) != 0) {
+        fprintf(stderr, "arm_controller: %s\n", rt.message);
+        telemetry_stop(telem);
+        free(telem);
+        return 2;
+    }
+    fprintf(stderr, "arm_controller: rt: %s\n", rt.message);
+    telemetry_event(telem, 0, rt.sched_fifo || opt.mode != MODE_REALTIME ? "info" : "warn", rt.message);
     static run_report_t report;
     controller_run(&opt, &ARM_ROBOT_MODEL, telem, &report);
     telemetry_stop(telem);

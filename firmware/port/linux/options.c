@@ -31,6 +31,7 @@ void options_usage(const char *prog)
            "  --lockstep-timeout S    lockstep: wait for a period's joint states [0.25]\n"
            "  --summary FILE          write a JSON summary of the run (atomically)\n",
            prog);
+    rt_usage();
 }
 
 static int parse_double(const char *name, const char *s, double lo, double hi, double *out,
@@ -80,6 +81,7 @@ int options_parse(int argc, char **argv, const arm_robot_model_t *model, options
     opt->boot_timeout_s = 20.0;
     opt->lockstep_timeout_s = 0.25;
     arm_ctl_default_config(model, &opt->ctl);
+    rt_options_default(&opt->rt);
     int rate_limit_given = 0;
 
     for (int i = 1; i < argc; ++i) {
@@ -195,6 +197,8 @@ int options_parse(int argc, char **argv, const arm_robot_model_t *model, options
             rc = parse_double(a, v, 0.01, 3600.0, &opt->boot_timeout_s, err, errcap);
         } else if (strcmp(a, "--lockstep-timeout") == 0) {
             rc = parse_double(a, v, 0.001, 3600.0, &opt->lockstep_timeout_s, err, errcap);
+        } else if (rt_option_known(a)) {
+            rc = rt_option_parse(a, v, &opt->rt, err, errcap);
         } else {
             snprintf(err, errcap, "unknown option '%s' (see --help)", a);
             rc = -1;

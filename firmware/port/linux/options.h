@@ -5,6 +5,7 @@
 #include <stdint.h>
 
 #include "arm/controller.h"
+#include "rt.h"
 
 typedef enum { MODE_LOCKSTEP = 0, MODE_REALTIME } run_mode_t;
 
@@ -19,6 +20,7 @@ typedef struct {
     double boot_timeout_s;
     double lockstep_timeout_s; /* lockstep: wall time to wait for a period's states */
     arm_ctl_config_t ctl;
+    rt_options_t rt; /* --rt-priority, --cpu (rt.h) */
 } options_t;
 
 /* Parses argv into opt (starting from the defaults). On a bad argument writes a message naming

@@ -1,0 +1,10 @@
+# Fails if any object of the portable core references the heap (run as a ctest with -P).
+execute_process(COMMAND nm -u ${CORE_LIB} OUTPUT_VARIABLE undefined RESULT_VARIABLE rc)
+if(NOT rc EQUAL 0)
+  message(FATAL_ERROR "nm failed on ${CORE_LIB}")
+endif()
+string(REGEX MATCHALL "[ \t](malloc|calloc|realloc|free|aligned_alloc|posix_memalign)\n" hits "${undefined}")
+if(hits)
+  message(FATAL_ERROR "the firmware core references the heap: ${hits}")
+endif()
+message(STATUS "no heap symbols in ${CORE_LIB}")
