@@ -12,7 +12,13 @@ configuration, its architectures and its package lists stay untouched):
 The LCM wire format is the same in 1.3.1 and the wheel's 1.5.3 (the host side: lcm-logger,
 Python), and lcm-gen 1.5.3's C compiles against 1.3.1's lcm_coretypes.h.
 
+With --qemu it fetches instead qemu-aarch64 (x86-64 host binary, statically linked) from the
+release's backports (bookworm-backports: QEMU 10) into OUT/qemu-aarch64: bookworm's own QEMU 7.2
+does not translate setsockopt(IP_MULTICAST_IF), which the CAN transport needs to pin its multicast
+to the loopback interface, so the cross-compiled controller cannot open its bus under it.
+
 Usage: python3 cmake/fetch_aarch64_deps.py --out build/deps/aarch64   (idempotent; ~10 s, ~5 MB)
+       python3 cmake/fetch_aarch64_deps.py --qemu --out build/deps/qemu   (~15 s, 63 MB download)
 """
 
 from __future__ import annotations
@@ -31,6 +37,35 @@ ARCH = "arm64"
 BINARY_PACKAGES = ["libglib2.0-dev", "libpcre2-dev"]
 SOURCE_PACKAGE = "lcm"
 STAMP = "fetched.json"
+
+
+def _codename() -> str:
+    for line in Path("/etc/os-release").read_text().splitlines():
+        if line.startswith("VERSION_CODENAME="):
+            return line.split("=", 1)[1].strip().strip('"')
+    raise SystemExit("fetch_aarch64_deps: no VERSION_CODENAME in /etc/os-release")
+
+
+def _backports_sources() -> list[tuple[str, str]]:
+    """The machine's own archive URI(s) for its release, with the release's backports suite."""
+    code = _codename()
+    uris: list[str] = []
+    for _, text in _system_sources():
+        for stanza in text.split("\n\n"):
+            fields = dict(l.split(":", 1) for l in stanza.splitlines() if ":" in l and not l.startswith("#"))
+            suites = fields.get("Suites", "").split()
+            if code in suites:
+                uris += fields.get("URIs", "").split()
+        for line in text.splitlines():
+            parts = line.split()
+            if len(parts) >= 3 and parts[0] == "deb" and parts[2] == code:
+                uris.append(parts[1])
+    if not uris:
+        raise SystemExit(f"fetch_aarch64_deps: no apt source for {code} found")
+    key = "/usr/share/keyrings/debian-archive-keyring.gpg"
+    text = (f"Types: deb\nURIs: {uris[0]}\nSuites: {code}-backports\nComponents: main\n"
+            + (f"Signed-By: {key}\n" if os.path.exists(key) else ""))
+    return [("backports.sources", text)]
 
 
 def _system_sources() -> list[tuple[str, str]]:
@@ -57,15 +92,15 @@ def _system_sources() -> list[tuple[str, str]]:
     return out
 
 
-def _apt(root: Path, *args: str, cwd: Path | None = None, check: bool = True) -> str:
+def _apt(root: Path, *args: str, cwd: Path | None = None, check: bool = True, arch: str = ARCH) -> str:
     opts = [
         f"-oDir::State={root}/state",
         f"-oDir::State::status={root}/state/status",
         f"-oDir::Cache={root}/cache",
         f"-oDir::Etc::SourceList={root}/etc/none.list",
         f"-oDir::Etc::SourceParts={root}/etc/sources.list.d",
-        f"-oAPT::Architecture={ARCH}",
-        f"-oAPT::Architectures::={ARCH}",
+        f"-oAPT::Architecture={arch}",
+        f"-oAPT::Architectures::={arch}",
         "-oAPT::Sandbox::User=root",
         "-qq",
     ]
@@ -126,11 +161,47 @@ def fetch(out: Path) -> dict[str, str]:
     return versions
 
 
+def fetch_qemu(out: Path) -> dict[str, str]:
+    stamp = out / STAMP
+    if stamp.exists():
+        return json.loads(stamp.read_text())
+    host = subprocess.run(["dpkg", "--print-architecture"], capture_output=True, text=True,
+                          check=True).stdout.strip()
+    tmp = out.with_name(out.name + ".partial")
+    shutil.rmtree(tmp, ignore_errors=True)
+    apt = tmp / "apt"
+    for d in ("state/lists/partial", "cache/archives/partial", "etc/sources.list.d"):
+        (apt / d).mkdir(parents=True)
+    (apt / "state" / "status").touch()
+    (apt / "etc" / "none.list").touch()
+    for name, text in _backports_sources():
+        (apt / "etc" / "sources.list.d" / name).write_text(text)
+    _apt(apt, "update", arch=host)
+    debs = tmp / "debs"
+    debs.mkdir()
+    _apt(apt, "download", "qemu-user", cwd=debs, arch=host)
+    deb = next(debs.glob("qemu-user_*.deb"))
+    root = tmp / "root"
+    subprocess.run(["dpkg-deb", "-x", str(deb), str(root)], check=True)
+    exe = root / "usr" / "bin" / "qemu-aarch64"
+    if not exe.exists():
+        raise SystemExit(f"fetch_aarch64_deps: {deb.name} has no usr/bin/qemu-aarch64")
+    shutil.copy2(exe, tmp / "qemu-aarch64")
+    versions = {"qemu-user": deb.name.split("_")[1].replace("%3a", ":")}
+    for d in (apt, debs, root):
+        shutil.rmtree(d)
+    (tmp / STAMP).write_text(json.dumps(versions, indent=2) + "\n")
+    shutil.rmtree(out, ignore_errors=True)
+    tmp.rename(out)
+    return versions
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--qemu", action="store_true", help="fetch qemu-aarch64 from backports instead")
     ns = p.parse_args()
-    versions = fetch(ns.out.resolve())
+    versions = fetch_qemu(ns.out.resolve()) if ns.qemu else fetch(ns.out.resolve())
     print("aarch64 deps: " + ", ".join(f"{k} {v}" for k, v in versions.items()))
     return 0
 

@@ -48,6 +48,8 @@ def simulate_float(a: dict[str, np.ndarray], e: np.ndarray, e_dot: np.ndarray, h
     u_out, w_out = np.zeros(len(e)), np.zeros(len(e))
     for k in range(len(e)):
         y = np.array([e[k], e_dot[k]], dtype=np.float64)
+        if k == 0:
+            xm = y.copy()  # the internal model starts at the first measurement
         u = float((d["ARM_CTL_C"] @ xc + d["ARM_CTL_D"] @ y)[0])
         v = y - xm if structure == "decoupled" else y
         w = float((d["ARM_EST_C"] @ xk + d["ARM_EST_D"] @ v)[0]) if structure != "none" else 0.0
@@ -97,6 +99,8 @@ def simulate_fixed(mac: dict[str, float], a: dict[str, np.ndarray], e: np.ndarra
     u_out, w_out = np.zeros(len(e)), np.zeros(len(e))
     for k in range(len(e)):
         y = [_to_q(e[k], yf, e_lim), _to_q(e_dot[k], yf, ed_lim)]
+        if k == 0:
+            xm = list(y)
         uq = _round_shift(_mv(a["ARM_CTL_C_Q"], xc)[0] + _mv(a["ARM_CTL_D_Q"], y)[0], g("ARM_CTL_ACC_U_SHIFT"))
         if structure == "decoupled":
             v = [_clamp(y[0] - xm[0], e_lim), _clamp(y[1] - xm[1], ed_lim)]

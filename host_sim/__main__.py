@@ -9,6 +9,7 @@ from pathlib import Path
 from host_sim.arm import DEFAULT_MJCF, Arm
 from host_sim.canbus import BusSpecError, open_bus
 from host_sim.simulator import SimConfig, Simulator, write_summary
+from host_sim.uncertainty import UncertaintyConfig
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -20,6 +21,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--idle-timeout", type=float, default=5.0, help="s of silence that faults the drives")
     p.add_argument("--command-timeout-periods", type=int, default=3)
     p.add_argument("--summary", default="", help="write a JSON summary here (atomically)")
+    p.add_argument("--uncertainty", type=Path, default=None,
+                   help="JSON file of host_sim.uncertainty.UncertaintyConfig fields (default: none)")
     ns = p.parse_args(argv)
     if ns.lcm_url.startswith("udpm://") and "ttl=0" not in ns.lcm_url:
         p.error(f"--lcm-url: '{ns.lcm_url}' must set ttl=0 (telemetry stays on this host)")
@@ -29,6 +32,10 @@ def main(argv: list[str] | None = None) -> int:
     if ns.command_timeout_periods < 1:
         p.error("--command-timeout-periods: must be >= 1")
     try:
+        ucfg = UncertaintyConfig.from_file(ns.uncertainty) if ns.uncertainty else UncertaintyConfig()
+    except (OSError, ValueError, TypeError) as exc:
+        p.error(f"--uncertainty: {exc}")
+    try:
         bus = open_bus(ns.bus)
     except BusSpecError as exc:
         p.error(str(exc))
@@ -36,7 +43,7 @@ def main(argv: list[str] | None = None) -> int:
         cfg = SimConfig(bus=ns.bus, lcm_url=ns.lcm_url, boot_timeout_s=ns.boot_timeout,
                         idle_timeout_s=ns.idle_timeout, command_timeout_periods=ns.command_timeout_periods,
                         summary_path=ns.summary)
-        report = Simulator(cfg, bus, Arm(ns.mjcf)).run()
+        report = Simulator(cfg, bus, Arm(ns.mjcf, uncertainty=ucfg)).run()
     finally:
         bus.shutdown()
     if ns.summary:

@@ -7,14 +7,21 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from host_sim.uncertainty import Uncertainty, UncertaintyConfig, perturb_model
+
 REPO = Path(__file__).resolve().parent.parent
 DEFAULT_MJCF = REPO / "host_sim" / "models" / "ur5e_arm.xml"
 
 
 class Arm:
-    def __init__(self, mjcf: Path = DEFAULT_MJCF, keyframe: str = "home") -> None:
+    def __init__(self, mjcf: Path = DEFAULT_MJCF, keyframe: str = "home",
+                 uncertainty: UncertaintyConfig | None = None) -> None:
         self.model = mujoco.MjModel.from_xml_path(str(mjcf))
+        ucfg = uncertainty or UncertaintyConfig()
+        self.uncertainty = Uncertainty(ucfg, self.model.nu)
+        perturb_model(self.model, ucfg, self.uncertainty.rng)
         self.data = mujoco.MjData(self.model)
+        self._mass = np.zeros((self.model.nv, self.model.nv))
         # The nominal model: what the firmware's header was generated from. Uncertainty makes
         # self.model differ from it; w is measured against it.
         self.nominal = mujoco.MjModel.from_xml_path(str(mjcf))
@@ -44,6 +51,14 @@ class Arm:
         exactly the w of e_ddot = u + w under inverse dynamics control.
         """
         self.data.ctrl[:] = tau
+        u = self.uncertainty
+        if u.time_varying:
+            mujoco.mj_forward(self.model, self.data)  # M and V at the step's start
+            mujoco.mj_fullM(self.model, self.data, self._mass)
+            self.data.qfrc_applied[:] = u.extra_force(self.step_count * self.period, self._mass,
+                                                      self.data.qfrc_bias, tau, self.data.qvel)
+        else:
+            self.data.qfrc_applied[:] = u.extra_force(0.0, self._mass, self.data.qfrc_bias, tau, self.data.qvel)
         nd = self.nominal_data
         nd.qpos[:] = self.data.qpos
         nd.qvel[:] = self.data.qvel

@@ -97,8 +97,8 @@ class Simulator:
             return
         m = self.types.sim_truth_t()
         m.seq = self.report.telemetry_sent["ARM_SIM"]
-        m.step = self.arm.step_count
-        m.t = self.arm.step_count * self.arm.period
+        m.step = self.arm.step_count - 1  # the period whose torque produced w_true
+        m.t = m.step * self.arm.period
         m.n = self.arm.n
         m.q = self.arm.q.tolist()
         m.qd = self.arm.qd.tolist()

@@ -8,7 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from tools.build import PRESETS, build
+from tools.build import PRESETS, TARGETS, ToolchainMissing, build
 from tools.paths import REPO, build_dir, env_with_repo
 
 
@@ -21,14 +21,18 @@ def cmd_setup(ns: argparse.Namespace) -> int:
 
 
 def cmd_build(ns: argparse.Namespace) -> int:
-    build(ns.preset, quiet=False)
+    try:
+        build(TARGETS[ns.target] if ns.target else ns.preset, quiet=False)
+    except ToolchainMissing as exc:
+        print(exc, file=sys.stderr)
+        return 1
     return 0
 
 
 def _print_run(run: dict) -> None:
     from tools.run_analysis import table
 
-    print(table(run, run["joint_names"]))
+    print(table(run))
 
 
 def cmd_hil(ns: argparse.Namespace) -> int:
@@ -45,7 +49,7 @@ def cmd_hil(ns: argparse.Namespace) -> int:
         return 1
     _print_run(run)
     print(f"results: {ns.out / 'run.json'}  log: {ns.out / 'telemetry.lcmlog'}")
-    return 0 if run["result"] == "ok" else 1
+    return 0 if run["results"]["result"] == "ok" else 1
 
 
 def cmd_demo(ns: argparse.Namespace) -> int:
@@ -87,7 +91,15 @@ def main(argv: list[str] | None = None) -> int:
 
     b = sub.add_parser("build", help="build the firmware and tests with a CMake preset")
     b.add_argument("--preset", choices=PRESETS, default="release")
+    b.add_argument("--target", choices=tuple(TARGETS),
+                   help="cross target (host = release; aarch64; cortex-m4/m7/m3 images); overrides --preset")
     b.set_defaults(fn=cmd_build)
+
+    from tools import timing
+
+    tm = sub.add_parser("timing", help="real-time loop latency vs cyclictest in the same run")
+    timing.add_arguments(tm)
+    tm.set_defaults(fn=timing.run)
 
     h = sub.add_parser("hil", help="one hardware-in-the-loop run")
     h.add_argument("--duration", type=float, default=5.0, help="simulated seconds")
@@ -109,6 +121,16 @@ def main(argv: list[str] | None = None) -> int:
     s = sub.add_parser("synth", help="LMI synthesis of the estimator and controller, emitted as C")
     synth_cli.add_arguments(s)
     s.set_defaults(fn=cmd_synth)
+
+    from tools import busload, vcan
+
+    vc = sub.add_parser("vcan", help="real SocketCAN: vcan0 natively, or a qemu VM that has it (status/up/setup/run)")
+    vcan.add_arguments(vc)
+    vc.set_defaults(fn=vcan.run)
+
+    bl = sub.add_parser("busload", help="worst-case CAN bus load per control period from the DBC; refuses > budget")
+    busload.add_arguments(bl)
+    bl.set_defaults(fn=busload.run)
 
     from tools import bench
 

@@ -9,7 +9,7 @@ import signal
 import subprocess
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -35,6 +35,10 @@ class HilOptions:
     controller: Path | None = None
     controller_cmd_prefix: tuple[str, ...] = ()
     controller_args: tuple[str, ...] = ()
+    # host_sim.uncertainty.UncertaintyConfig fields (None: the simulated arm is the nominal one).
+    uncertainty: dict[str, Any] | None = None
+    # Recorded in run.json's results, e.g. the study's seed and trajectory.
+    labels: dict[str, Any] = field(default_factory=dict)
 
 
 class HilError(RuntimeError):
@@ -98,7 +102,7 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
     if not binary.exists():
         raise HilError(f"{binary} is missing: run tools/armctl build")
     opt.out.mkdir(parents=True, exist_ok=True)
-    for stale in ("telemetry.lcmlog", "controller_summary.json", "sim_summary.json", "run.json"):
+    for stale in ("telemetry.lcmlog", "controller_summary.json", "sim_summary.json", "run.json", "uncertainty.json"):
         (opt.out / stale).unlink(missing_ok=True)
     can_port, lcm_port = _ports(opt)
     bus = f"udp:239.74.163.2:{can_port}"
@@ -115,9 +119,13 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
     t0 = time.monotonic()
     try:
         _wait_for_logger(url, log_path, logger)
+        sim_args = []
+        if opt.uncertainty is not None:
+            write_json_atomic(opt.out / "uncertainty.json", opt.uncertainty)
+            sim_args = ["--uncertainty", str(opt.out / "uncertainty.json")]
         sim = subprocess.Popen(
             [sys.executable, "-m", "host_sim", "--bus", bus, "--lcm-url", url,
-             "--summary", str(opt.out / "sim_summary.json")],
+             "--summary", str(opt.out / "sim_summary.json"), *sim_args],
             cwd=REPO, env=env_with_repo(), stdout=logs["simulator"], stderr=subprocess.STDOUT)
         procs.append(sim)
         ctl = subprocess.Popen(
@@ -147,18 +155,17 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
         for f in logs.values():
             f.close()
 
-    controller = _load_json(opt.out / "controller_summary.json")
-    simulator = _load_json(opt.out / "sim_summary.json")
-    if not controller:
-        tail = (opt.out / "controller.log").read_text()[-500:]
-        raise HilError(f"the controller wrote no summary (exit {ctl.returncode}): {tail.strip()}")
-    if not simulator:
-        tail = (opt.out / "simulator.log").read_text()[-500:]
-        raise HilError(f"the simulator wrote no summary (exit {sim.returncode}): {tail.strip()}")
-    run = analyse(opt.out, controller, simulator, {
-        "method": opt.method, "mode": opt.mode, "duration_s": opt.duration_s, "bus": bus,
-        "lcm_url": url, "wall_s": wall, "joint_names": JOINT_NAMES,
-        "exit_codes": {"controller": ctl.returncode, "simulator": sim.returncode},
-    })
+    # A process that died wrote no summary: the run still ends in a defined, named state and
+    # the partial log is analysed.
+    controller = _load_json(opt.out / "controller_summary.json") or {
+        "result": ctl.returncode, "reason": f"controller died (exit code {ctl.returncode}); see controller.log"}
+    simulator = _load_json(opt.out / "sim_summary.json") or {
+        "result": "died", "reason": f"simulator died (exit code {sim.returncode}); see simulator.log"}
+    config = {"method": opt.method, "mode": opt.mode, "duration_s": opt.duration_s,
+              "joint_names": JOINT_NAMES, "controller_args": list(opt.controller_args),
+              "uncertainty": opt.uncertainty, **opt.labels}
+    run = analyse(opt.out, controller, simulator, config, {
+        "bus": bus, "lcm_url": url, "wall_s": wall,
+        "exit_codes": {"controller": ctl.returncode, "simulator": sim.returncode}})
     write_json_atomic(opt.out / "run.json", run)
     return run

@@ -1,4 +1,9 @@
-"""Turn a HIL run's log and the two processes' summaries into run.json."""
+"""Turn a HIL run's LCM log and the two processes' summaries into run.json.
+
+run.json has three parts: `results` (everything a lockstep run determines: the same seed gives
+the same numbers), `transport` (frame and telemetry accounting) and `environment` (ports, wall
+time: what differs between two runs of the same configuration).
+"""
 
 from __future__ import annotations
 
@@ -9,86 +14,116 @@ import numpy as np
 
 from tools.telemetry_log import ChannelLog, read_log
 
+STATE_NAMES = {0: "init", 1: "running", 2: "fault", 3: "safe-stop"}
 STATE_RUNNING = 1
 
 
-def joint_errors(ctl: ChannelLog) -> dict[str, list[float]]:
-    running = [m for m in ctl.messages if m.state == STATE_RUNNING]
+def _rms(x: np.ndarray) -> list[float]:
+    return np.sqrt((x**2).mean(axis=0)).tolist() if len(x) else []
+
+
+def control_metrics(ctl: ChannelLog, sim: ChannelLog, hold_s: float) -> dict[str, Any]:
+    """Over the trajectory: running periods after the start-pose hold."""
+    running = [m for m in ctl.messages if m.state == STATE_RUNNING and m.t >= hold_s - 1e-9]
     if not running:
-        return {"max_abs_deg": [], "rms_deg": []}
+        return {"periods_running": 0}
     e = np.array([m.e for m in running], dtype=float)
-    return {
-        "max_abs_deg": np.degrees(np.abs(e).max(axis=0)).tolist(),
-        "rms_deg": np.degrees(np.sqrt((e**2).mean(axis=0))).tolist(),
+    tau = np.array([m.tau for m in running], dtype=float)
+    qd = np.array([m.qd for m in running], dtype=float)
+    w_hat = {m.bus_period: np.array(m.w_hat, dtype=float) for m in running}
+    w_true = {m.step: np.array(m.w_true, dtype=float) for m in sim.messages}
+    paired = [(w_true[p], w_hat[p]) for p in sorted(w_hat) if p in w_true]
+    out: dict[str, Any] = {
+        "periods_running": len(running),
+        "tracking_max_abs_rad": np.abs(e).max(axis=0).tolist(),
+        "tracking_rms_rad": _rms(e),
+        "tracking_max_abs_deg": np.degrees(np.abs(e).max(axis=0)).tolist(),
+        "tracking_rms_deg": np.degrees(np.sqrt((e**2).mean(axis=0))).tolist(),
+        "max_abs_torque_nm": np.abs(tau).max(axis=0).tolist(),
+        # Mechanical power the joints deliver, |tau . qd| summed over joints, averaged in time.
+        "torque_power_w": float(np.abs(tau * qd).sum(axis=1).mean()),
+        "mean_sum_tau_squared_nm2": float((tau**2).sum(axis=1).mean()),
+        "saturated_fraction": [float(np.mean([(m.saturated_mask >> j) & 1 for m in running]))
+                               for j in range(e.shape[1])],
     }
+    if paired:
+        wt = np.array([p[0] for p in paired])
+        wh = np.array([p[1] for p in paired])
+        out["w_rms"] = _rms(wt)
+        out["estimation_error_rms"] = _rms(wt - wh)
+        out["estimation_periods"] = len(paired)
+    return out
 
 
 def telemetry_accounting(log: dict[str, ChannelLog], sent: dict[str, int]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for ch, n_sent in sent.items():
         logged = len(log[ch].messages) if ch in log else 0
-        out[ch] = {
-            "sent": n_sent,
-            "logged": logged,
-            "lost": n_sent - logged,
-            "sequence_gaps": log[ch].gaps if ch in log else 0,
-        }
+        out[ch] = {"sent": n_sent, "logged": logged, "lost": n_sent - logged,
+                   "sequence_gaps": log[ch].gaps if ch in log else 0}
     return out
 
 
-def analyse(out_dir: Path, controller: dict[str, Any], sim: dict[str, Any], extra: dict[str, Any]) -> dict[str, Any]:
+def final_state(log: dict[str, ChannelLog], controller: dict[str, Any]) -> str:
+    if controller.get("final_state"):
+        return str(controller["final_state"])
+    msgs = log["ARM_CTL"].messages
+    return STATE_NAMES.get(msgs[-1].state, "?") if msgs else "unknown"
+
+
+def analyse(out_dir: Path, controller: dict[str, Any], sim: dict[str, Any], config: dict[str, Any],
+            environment: dict[str, Any]) -> dict[str, Any]:
     log = read_log(out_dir / "telemetry.lcmlog")
     sent = dict(controller.get("telemetry", {}).get("sent", {}))
     sent.update(sim.get("telemetry_sent", {}))
-    errors = joint_errors(log["ARM_CTL"])
     tele = telemetry_accounting(log, sent)
+    ok = controller.get("result") == 0 and sim.get("result") == "ok"
+    problems = [s for s in (controller.get("reason"), sim.get("reason")) if s]
     return {
-        **extra,
-        "result": "ok" if controller.get("result") == 0 and sim.get("result") == "ok" else "failed",
-        "controller": {
-            "result_code": controller.get("result"),
-            "reason": controller.get("reason", ""),
-            "final_state": controller.get("final_state"),
+        "results": {
+            **config,
+            "result": "ok" if ok else "failed",
+            "problems": problems,
+            "final_state": final_state(log, controller),
+            "final_fault": controller.get("final_fault", "unknown"),
             "steps": controller.get("steps_done", 0),
-            "wall_s": controller.get("wall_s"),
-            "frames": controller.get("frames", {}),
-        },
-        "simulator": {
-            "result": sim.get("result"),
-            "reason": sim.get("reason", ""),
-            "periods": sim.get("periods", 0),
-            "frames_tx": sim.get("frames_tx", 0),
-            "frames_rx": sim.get("frames_rx", 0),
+            "simulated_periods": sim.get("periods", 0),
             "commands_missed": sim.get("commands_missed", 0),
             "drive_faults": sim.get("drive_faults", []),
+            "ref_hold_s": controller.get("ref_hold_s", 0.0),
+            "design_hash": controller.get("design_hash", ""),
+            **control_metrics(log["ARM_CTL"], log["ARM_SIM"], float(controller.get("ref_hold_s", 0.0))),
         },
-        "tracking": errors,
-        "telemetry": tele,
-        "telemetry_lost_total": int(sum(v["lost"] for v in tele.values())),
+        "transport": {
+            "controller_frames": controller.get("frames", {}),
+            "simulator_frames": {k: sim.get(k, 0) for k in ("frames_tx", "frames_rx", "rx_own_echo",
+                                                            "rx_unknown_id", "rx_bad_frame")},
+            "overruns": controller.get("overruns", 0),
+            "telemetry": tele,
+            "telemetry_lost_total": int(sum(v["lost"] for v in tele.values())),
+            "telemetry_gaps_total": int(sum(v["sequence_gaps"] for v in tele.values())),
+        },
+        "environment": environment,
     }
 
 
-def table(run: dict[str, Any], joint_names: list[str]) -> str:
-    lines = [f"{'joint':<14}{'max |e| (deg)':>15}{'RMS e (deg)':>14}"]
-    tr = run["tracking"]
-    for i, name in enumerate(joint_names[: len(tr["max_abs_deg"])]):
-        lines.append(f"{name:<14}{tr['max_abs_deg'][i]:>15.4f}{tr['rms_deg'][i]:>14.4f}")
-    c, s = run["controller"], run["simulator"]
-    f = c["frames"]
-    lines.append(
-        f"result {run['result']}: controller {c['final_state']} after {c['steps']} periods"
-        + (f" ({c['reason']})" if c["reason"] else "")
-        + (f"; simulator: {s['reason']}" if s["reason"] else "")
-    )
-    lines.append(
-        f"frames: controller sent {f.get('tx', 0)} / received {f.get('rx', 0)}, "
-        f"simulator sent {s['frames_tx']} / received {s['frames_rx']}"
-    )
-    sent = sum(v["sent"] for v in run["telemetry"].values())
-    logged = sum(v["logged"] for v in run["telemetry"].values())
-    lines.append(f"telemetry: {sent} messages sent, {logged} logged, {run['telemetry_lost_total']} lost")
-    if "wall_s" in run and run.get("duration_s"):
-        lines.append(f"wall time {run['wall_s']:.1f} s for {run['duration_s']:g} s simulated "
-                     f"({run['duration_s'] / run['wall_s']:.2f}x real time)")
+def table(run: dict[str, Any]) -> str:
+    r, t, env = run["results"], run["transport"], run["environment"]
+    names = r.get("joint_names", [f"joint{i + 1}" for i in range(6)])
+    lines = [f"{'joint':<14}{'max |e| (deg)':>15}{'RMS e (deg)':>14}{'RMS w-w_hat':>14}"]
+    for i, name in enumerate(names[: len(r.get("tracking_max_abs_deg", []))]):
+        est = r.get("estimation_error_rms")
+        est_s = f"{est[i]:>14.4f}" if est else f"{'-':>14}"
+        lines.append(f"{name:<14}{r['tracking_max_abs_deg'][i]:>15.4f}{r['tracking_rms_deg'][i]:>14.4f}{est_s}")
+    lines.append(f"result {r['result']}: method {r['method']}, controller {r['final_state']} after {r['steps']} periods"
+                 + (f" ({'; '.join(r['problems'])})" if r["problems"] else ""))
+    cf, sf = t["controller_frames"], t["simulator_frames"]
+    lines.append(f"frames: controller sent {cf.get('tx', 0)} / received {cf.get('rx', 0)}, "
+                 f"simulator sent {sf['frames_tx']} / received {sf['frames_rx']}")
+    sent = sum(v["sent"] for v in t["telemetry"].values())
+    logged = sum(v["logged"] for v in t["telemetry"].values())
+    lines.append(f"telemetry: {sent} messages sent, {logged} logged, {t['telemetry_lost_total']} lost")
+    if env.get("wall_s") and r.get("duration_s"):
+        lines.append(f"wall time {env['wall_s']:.1f} s for {r['duration_s']:g} s simulated "
+                     f"({r['duration_s'] / env['wall_s']:.2f}x real time)")
     return "\n".join(lines)
-

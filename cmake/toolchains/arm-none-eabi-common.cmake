@@ -14,9 +14,9 @@ set(CMAKE_SIZE arm-none-eabi-size CACHE FILEPATH "")
 set(CMAKE_TRY_COMPILE_TARGET_TYPE STATIC_LIBRARY)
 
 # -ffunction-sections/-fdata-sections + --gc-sections drop what the image does not call.
-# -fstack-usage and -fcallgraph-info=su feed the worst-case stack check (firmware/port/cortex_m).
+# -fstack-usage feeds the worst-case stack check (firmware/port/cortex_m/stack_usage.py).
 set(CMAKE_C_FLAGS_INIT
-    "${ARM_MCU_FLAGS} -ffunction-sections -fdata-sections -fno-common -fstack-usage -fcallgraph-info=su")
+    "${ARM_MCU_FLAGS} -ffunction-sections -fdata-sections -fno-common -fstack-usage")
 set(CMAKE_ASM_FLAGS_INIT "${ARM_MCU_FLAGS}")
 set(CMAKE_EXE_LINKER_FLAGS_INIT "${ARM_MCU_FLAGS} --specs=nano.specs --specs=nosys.specs -nostartfiles -Wl,--gc-sections")
 

@@ -85,8 +85,15 @@ def _controller(Po: GeneralizedPlant, cfg: DesignConfig, m: int) -> Synthesised:
     T, delay = cfg.period_s, cfg.delay_margin_samples
     pc, pd = _plants(m, T)
     synth = gh2_synthesis(Po)
-    opt: LmiSolution = _quiet(synth.min_gamma)
     deg = detect_degenerate(Po)
+    opt: LmiSolution | None
+    try:
+        opt, opt_note = _quiet(synth.min_gamma), ""
+    except SynthesisError as exc:
+        if not deg.degenerate:
+            raise
+        # gamma* = 0 is already established structurally; the LMI only corroborates it.
+        opt, opt_note = None, f"solver failed ({exc}); gamma* = 0 from the structural test"
     if deg.degenerate:
         assert deg.zeroing_gain is not None
         C = static_gain(deg.zeroing_gain)
@@ -100,8 +107,8 @@ def _controller(Po: GeneralizedPlant, cfg: DesignConfig, m: int) -> Synthesised:
         return Synthesised(
             kind="controller",
             plant=Po,
-            gamma_opt=opt.gamma,
-            gamma_opt_status=opt.status,
+            gamma_opt=opt.gamma if opt is not None else 0.0,
+            gamma_opt_status=opt.status if opt is not None else opt_note,
             gamma_design=0.0,
             rule=(
                 "degenerate generalized-H2 problem (gamma* = 0): emit the static zeroing gain u_o = -D12^+ C1 y, "
@@ -132,6 +139,7 @@ def _controller(Po: GeneralizedPlant, cfg: DesignConfig, m: int) -> Synthesised:
         checks["gh2_norm"] = norm
         return ((rec, norm) if ok else None), Rung(rel, gamma, ok, reason, checks)
 
+    assert opt is not None  # only the degenerate case tolerates a failed min-gamma solve
     res = walk_ladder(opt.gamma, cfg.backoff_ladder, attempt)
     if res.chosen is None:
         raise DesignRefused(

@@ -159,8 +159,10 @@ def fixed_header(m: dict[str, Any]) -> str:
  *      e_dot-entries to +-ARM_RANGE_E_DOT_MAX_Q (the declared ranges the proof assumes).
  *      Decoupled structure: x_m is saturated to +-ARM_IM_E_MAX_Q / +-ARM_IM_E_DOT_MAX_Q after each
  *      update, and K's input v = y_q - x_m_q (int32, cannot overflow) is saturated like y.
+ *   v_q below is the system's input: y_q for CTL, v (or y) for EST, u_o (Q ARM_CTL_U_FRAC) for IM.
  *   2. Output first: acc = sum_j (int64_t)ARM_S_C_Q[i][j] * x_q[j] + sum_j (int64_t)ARM_S_D_Q[i][j] * v_q[j];
  *      out_q[i] = sat32((acc + ((int64_t)1 << (ARM_S_ACC_U_SHIFT - 1))) >> ARM_S_ACC_U_SHIFT).
+ *      (The IM has no output step: its output is its state.)
  *   3. Then the state: acc = sum_j (int64_t)ARM_S_A_Q[i][j] * x_q[j] + sum_j (int64_t)ARM_S_B_Q[i][j] * v_q[j];
  *      x_q_next[i] = sat32((acc + ((int64_t)1 << (ARM_S_ACC_X_SHIFT - 1))) >> ARM_S_ACC_X_SHIFT).
  *   The two sums of one accumulator share a binary point (A_FRAC + X_FRAC == B_FRAC + Y_FRAC,

@@ -123,13 +123,26 @@ class LmiSynthesis:
         return LmiSolution(float(gamma), (X + X.T) / 2, (Y + Y.T) / 2, J, L, M, N, status, objective, dt)
 
     def min_gamma(self) -> LmiSolution:
-        v = make_variables(self.P)
-        g = cp.Variable(nonneg=True)
-        prob = cp.Problem(cp.Minimize(g), self._build(self.P, calligraphic(self.P, v), g))
-        dt = self._solve(prob)
-        if prob.status not in _ACCEPTED or g.value is None:
-            raise SynthesisError(f"{self.name}: minimising gamma failed (status {prob.status})")
-        return self._result(v, float(g.value), prob.status, "min gamma", dt)
+        """min gamma; if Clarabel breaks down (the optimum is an unattained infimum, so X and Y
+        grow without bound), retry with ||X||, ||Y|| <= 1e6, which keeps the problem compact at the
+        price of a slightly larger gamma (the status says so)."""
+        for bound in (None, 1e6):
+            v = make_variables(self.P)
+            g = cp.Variable(nonneg=True)
+            cons = self._build(self.P, calligraphic(self.P, v), g)
+            if bound is not None:
+                cons += [v.X << bound * np.eye(self.P.nx), v.Y << bound * np.eye(self.P.nx)]
+            prob = cp.Problem(cp.Minimize(g), cons)
+            try:
+                dt = self._solve(prob)
+            except SynthesisError:
+                if bound is None:
+                    continue
+                raise
+            if prob.status in _ACCEPTED and g.value is not None:
+                status = prob.status if bound is None else f"{prob.status} (with ||X||, ||Y|| <= {bound:g})"
+                return self._result(v, float(g.value), status, "min gamma", dt)
+        raise SynthesisError(f"{self.name}: minimising gamma failed (status {prob.status})")
 
     def at_gamma(self, gamma: float) -> LmiSolution | None:
         """The well-conditioned point at a fixed gamma, or None when that gamma is infeasible."""

@@ -26,11 +26,12 @@ def short_run(tmp_path_factory: pytest.TempPathFactory, controller_bin: Path) ->
 
 def test_short_lockstep_run_tracks_within_a_degree(short_run: tuple[Path, dict]) -> None:
     _, run = short_run
-    assert run["result"] == "ok", run
-    assert run["controller"]["steps"] == 1000
-    assert run["controller"]["final_state"] == "running"
-    assert len(run["tracking"]["max_abs_deg"]) == 6
-    assert max(run["tracking"]["max_abs_deg"]) < 1.0
+    r = run["results"]
+    assert r["result"] == "ok", run
+    assert r["steps"] == 1000
+    assert r["final_state"] == "running"
+    assert len(r["tracking_max_abs_deg"]) == 6
+    assert max(r["tracking_max_abs_deg"]) < 1.0
 
 
 def test_every_period_is_accounted_for(short_run: tuple[Path, dict]) -> None:
@@ -46,7 +47,7 @@ def test_every_period_is_accounted_for(short_run: tuple[Path, dict]) -> None:
 
 def test_telemetry_log_is_complete_and_recomputes_the_table(short_run: tuple[Path, dict]) -> None:
     out, run = short_run
-    for channel, acct in run["telemetry"].items():
+    for channel, acct in run["transport"]["telemetry"].items():
         assert acct["sequence_gaps"] == 0, channel
         assert acct["lost"] == 0, channel
     log = read_log(out / "telemetry.lcmlog")
@@ -54,8 +55,8 @@ def test_telemetry_log_is_complete_and_recomputes_the_table(short_run: tuple[Pat
     e = np.array([m.e for m in ctl])
     q_err = np.array([np.subtract(m.q_d, m.q) for m in ctl])
     assert np.allclose(e, q_err, atol=1e-6)  # e is q_d - q, as published
-    assert np.allclose(np.degrees(np.abs(e).max(axis=0)), run["tracking"]["max_abs_deg"])
-    assert len(log["ARM_SIM"].messages) == run["simulator"]["periods"]
+    assert np.allclose(np.degrees(np.abs(e).max(axis=0)), run["results"]["tracking_max_abs_deg"])
+    assert len(log["ARM_SIM"].messages) == run["results"]["simulated_periods"]
 
 
 def test_controller_safe_stops_when_the_simulator_dies(controller_bin: Path, bus_spec: str) -> None:

@@ -74,7 +74,7 @@ else
 fi
 poweroff -f
 """
-NINEP_CACHE_OPT = ""  # default cache=none: what the host writes is seen at once, and vice versa
+NINEP_CACHE_OPT = ",cache=loose"  # default cache=none: what the host writes is seen at once, and vice versa
 
 
 class VmError(RuntimeError):

@@ -170,6 +170,10 @@ void arm_pm_output(arm_pm_t *pm, const float e[ARM_N_JOINTS], const float e_dot[
             float *v = pm->s.f.v[j];
             y[0] = e[j];
             y[1] = e_dot[j];
+            if (!pm->primed) {
+                pm->s.f.im[j][0] = y[0];
+                pm->s.f.im[j][1] = y[1];
+            }
             pm->s.f.u_o[j] = ctl_output_f(pm->s.f.ctl[j], y);
             v[0] = decoupled ? y[0] - pm->s.f.im[j][0] : y[0];
             v[1] = decoupled ? y[1] - pm->s.f.im[j][1] : y[1];
@@ -180,6 +184,10 @@ void arm_pm_output(arm_pm_t *pm, const float e[ARM_N_JOINTS], const float e_dot[
             int32_t *v = pm->s.q.v[j];
             y[0] = to_q(e[j], ARM_Y_FRAC, ARM_RANGE_E_MAX_Q);
             y[1] = to_q(e_dot[j], ARM_Y_FRAC, ARM_RANGE_E_DOT_MAX_Q);
+            if (!pm->primed) {
+                pm->s.q.im[j][0] = y[0];
+                pm->s.q.im[j][1] = y[1];
+            }
             pm->s.q.u_o[j] = ctl_output_q(pm->s.q.ctl[j], y);
             v[0] = decoupled ? sat_range(y[0] - pm->s.q.im[j][0], ARM_RANGE_E_MAX_Q) : y[0];
             v[1] = decoupled ? sat_range(y[1] - pm->s.q.im[j][1], ARM_RANGE_E_DOT_MAX_Q) : y[1];
@@ -188,6 +196,7 @@ void arm_pm_output(arm_pm_t *pm, const float e[ARM_N_JOINTS], const float e_dot[
                                       : 0.0f;
         }
     }
+    pm->primed = 1;
 }
 
 void arm_pm_update(arm_pm_t *pm, uint32_t hold_mask)

@@ -209,7 +209,12 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
             }
             if (enabled == ALL_JOINTS) {
                 enabling = 0;
-                arm_reference_default(&ref, l.drives.q);
+                if (opt->ref_given) {
+                    arm_reference_set(&ref, l.drives.q, opt->ref_amp, opt->ref_freq_hz);
+                } else {
+                    arm_reference_default(&ref, l.drives.q);
+                }
+                arm_reference_set_hold(&ref, (float)opt->ref_hold_s);
                 telemetry_event(telem, 0, "info", "all drives operation enabled; tracking starts");
             } else if (k >= ENABLE_TIMEOUT_PERIODS) {
                 char missing[64];
@@ -262,6 +267,7 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
         const int64_t cycle = now_ns() - cycle_start;
 
         snap.step = k_run;
+        snap.bus_period = k;
         snap.t = (double)k_run * (double)period_s;
         snap.method = (int8_t)opt->ctl.method;
         memcpy(snap.q, in.q, sizeof(snap.q));

@@ -16,7 +16,8 @@ void options_usage(const char *prog)
            "  --lcm-url URL           LCM telemetry; must have ttl=0, '' for none\n"
            "                          [udpm://239.255.76.67:7667?ttl=0]\n"
            "  --mode lockstep|realtime                                [lockstep]\n"
-           "  --duration S            run length in seconds (> 0)     [5]\n"
+           "  --duration S            trajectory length in seconds (> 0) [5]\n"
+           "  --ref-hold S            hold the start pose this long first (added to the run) [0.5]\n"
            "  --rate HZ               control rate                    [1000]\n"
            "  --method NAME           pm | pm-paper | gh2 | pd | tde | usde-smc [pd]\n"
            "  --numeric float|fixed   pm, pm-paper, gh2: float32 or int32 Q-format blocks [float]\n"
@@ -29,6 +30,8 @@ void options_usage(const char *prog)
            "  --safe-stop zero|damping[:GAIN]                         [zero]\n"
            "  --boot-timeout S        wait for the drives' heartbeats [20]\n"
            "  --lockstep-timeout S    lockstep: wait for a period's joint states [0.25]\n"
+           "  --ref-amp A1,..,An --ref-freq F1,..,Fn  reference q_d = q0 + A (1 - cos 2 pi F t)\n"
+           "                          per joint (both or neither)     [built-in]\n"
            "  --summary FILE          write a JSON summary of the run (atomically)\n",
            prog);
     rt_usage();
@@ -59,6 +62,27 @@ static int copy_str(const char *name, const char *s, char *dst, size_t cap, char
     return 0;
 }
 
+/* "a,b,c,..." with exactly ARM_N_JOINTS numbers in [lo, hi]. */
+static int parse_list(const char *name, const char *s, double lo, double hi, float out[ARM_N_JOINTS],
+                      char *err, unsigned long errcap)
+{
+    const char *p = s;
+    for (int j = 0; j < ARM_N_JOINTS; ++j) {
+        char *end = NULL;
+        errno = 0;
+        const double v = strtod(p, &end);
+        const char want = j + 1 < ARM_N_JOINTS ? ',' : '\0';
+        if (errno != 0 || end == p || *end != want || !isfinite(v) || v < lo || v > hi) {
+            snprintf(err, errcap, "%s: '%s' is not %d comma-separated numbers in [%g, %g]", name, s,
+                     ARM_N_JOINTS, lo, hi);
+            return -1;
+        }
+        out[j] = (float)v;
+        p = end + 1;
+    }
+    return 0;
+}
+
 static int check_lcm_url(const char *url, char *err, unsigned long errcap)
 {
     /* The multicast rule: telemetry must never leave this host. */
@@ -80,9 +104,12 @@ int options_parse(int argc, char **argv, const arm_robot_model_t *model, options
     opt->rate_hz = 1000.0;
     opt->boot_timeout_s = 20.0;
     opt->lockstep_timeout_s = 0.25;
+    opt->ref_hold_s = 0.5;
     arm_ctl_default_config(model, &opt->ctl);
     rt_options_default(&opt->rt);
     int rate_limit_given = 0;
+    int ref_amp_given = 0;
+    int ref_freq_given = 0;
 
     for (int i = 1; i < argc; ++i) {
         const char *a = argv[i];
@@ -193,6 +220,14 @@ int options_parse(int argc, char **argv, const arm_robot_model_t *model, options
                 snprintf(err, errcap, "--safe-stop: '%s' is not zero, damping or damping:GAIN", v);
                 rc = -1;
             }
+        } else if (strcmp(a, "--ref-hold") == 0) {
+            rc = parse_double(a, v, 0.0, 3600.0, &opt->ref_hold_s, err, errcap);
+        } else if (strcmp(a, "--ref-amp") == 0) {
+            rc = parse_list(a, v, 0.0, 3.2, opt->ref_amp, err, errcap);
+            ref_amp_given = 1;
+        } else if (strcmp(a, "--ref-freq") == 0) {
+            rc = parse_list(a, v, 0.0, 50.0, opt->ref_freq_hz, err, errcap);
+            ref_freq_given = 1;
         } else if (strcmp(a, "--boot-timeout") == 0) {
             rc = parse_double(a, v, 0.01, 3600.0, &opt->boot_timeout_s, err, errcap);
         } else if (strcmp(a, "--lockstep-timeout") == 0) {
@@ -207,6 +242,11 @@ int options_parse(int argc, char **argv, const arm_robot_model_t *model, options
             return -1;
         }
     }
+    if (ref_amp_given != ref_freq_given) {
+        snprintf(err, errcap, "--ref-amp and --ref-freq go together (one was given without the other)");
+        return -1;
+    }
+    opt->ref_given = ref_amp_given;
     const float default_period = opt->ctl.period_s;
     opt->ctl.period_s = (float)(1.0 / opt->rate_hz);
     if (!rate_limit_given) {
@@ -214,7 +254,7 @@ int options_parse(int argc, char **argv, const arm_robot_model_t *model, options
             opt->ctl.torque_rate_limit[j] *= opt->ctl.period_s / default_period;
         }
     }
-    const double steps = floor(opt->duration_s * opt->rate_hz + 0.5);
+    const double steps = floor((opt->ref_hold_s + opt->duration_s) * opt->rate_hz + 0.5);
     if (steps < 1.0 || steps > 4e9) {
         snprintf(err, errcap, "--duration x --rate gives %.0f periods; need 1..4e9", steps);
         return -1;

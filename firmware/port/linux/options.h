@@ -21,6 +21,10 @@ typedef struct {
     double lockstep_timeout_s; /* lockstep: wall time to wait for a period's states */
     arm_ctl_config_t ctl;
     rt_options_t rt; /* --rt-priority, --cpu (rt.h) */
+    double ref_hold_s;               /* --ref-hold: settle on the start pose first */
+    int ref_given;                   /* 1: --ref-amp/--ref-freq replace the default reference */
+    float ref_amp[ARM_N_JOINTS];     /* rad */
+    float ref_freq_hz[ARM_N_JOINTS]; /* Hz */
 } options_t;
 
 /* Parses argv into opt (starting from the defaults). On a bad argument writes a message naming

@@ -1,6 +1,8 @@
 #define _GNU_SOURCE
 #include "summary.h"
 
+#include "arm/pm.h"
+
 #include <errno.h>
 #include <stdio.h>
 #include <string.h>
@@ -38,6 +40,8 @@ int summary_write(const char *path, const options_t *opt, const run_report_t *r,
             opt->mode == MODE_LOCKSTEP ? "lockstep" : "realtime");
     fprintf(f, "  \"rate_hz\": %.17g,\n  \"steps_requested\": %u,\n  \"steps_done\": %u,\n",
             opt->rate_hz, opt->steps, r->steps_done);
+    fprintf(f, "  \"ref_hold_s\": %.17g,\n  \"design_hash\": \"%s\",\n", opt->ref_hold_s,
+            arm_pm_design_hash());
     fprintf(f, "  \"final_state\": \"%s\",\n  \"final_fault\": \"%s\",\n",
             arm_state_str(r->final_state), arm_fault_str(r->final_fault));
     fprintf(f, "  \"wall_s\": %.6f,\n  \"boot_s\": %.6f,\n  \"overruns\": %llu,\n", r->wall_s,

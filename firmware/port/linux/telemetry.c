@@ -97,6 +97,7 @@ static void publish(telemetry_t *t, const telem_slot_t *s)
         armlcm_controller_t m = {
             .seq = s->seq,
             .step = c->step,
+            .bus_period = c->bus_period,
             .t = c->t,
             .method = c->method,
             .state = (int8_t)c->out.state,

@@ -11,6 +11,7 @@ typedef enum { TELEM_CONTROLLER = 0, TELEM_TIMING, TELEM_EVENT, TELEM_KIND_COUNT
 
 typedef struct {
     int64_t step;
+    int64_t bus_period;
     double t;
     int8_t method;
     float q[ARM_N_JOINTS];

@@ -116,6 +116,8 @@ VecN Step::step(const VecN &q, const VecN &qd, const VecN &q_d, const VecN &qd_d
                     cfg_.method == ARM_METHOD_GH2;
     VecN u_o, w_hat = VecN::Zero();
     Eigen::VectorXd v = y;
+    if (first_) xm_ = y;  // the internal model starts at the first measurement
+    first_ = false;
     if (pm) {
         u_o = Cc_ * xc_ + Dc_ * y;
         if (cfg_.method == ARM_METHOD_PM) v = y - xm_;

@@ -33,6 +33,7 @@ class Step {
     Eigen::MatrixXd Ak_, Bk_, Ck_, Dk_, Ac_, Bc_, Cc_, Dc_, Am_, Bm_;
     Eigen::VectorXd xk_, xc_, xm_;
     VecN tau_prev_;
+    bool first_ = true;
 };
 
 }  // namespace ref

@@ -27,6 +27,7 @@ typedef enum {
 typedef struct {
     arm_numeric_t numeric;
     arm_pm_structure_t structure;
+    int primed; /* the internal model starts at the first measurement, as the header says */
     union {
         struct {
             float est[ARM_N_JOINTS][ARM_EST_NX];

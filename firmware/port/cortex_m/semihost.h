@@ -1,0 +1,14 @@
+/* Arm semihosting (BKPT 0xAB on M-profile): console output and exit status through the debugger,
+ * here QEMU's -semihosting. Only what the golden-vector image needs. */
+#ifndef ARM_SEMIHOST_H
+#define ARM_SEMIHOST_H
+
+#include <stdint.h>
+
+void sh_puts(const char *s);               /* SYS_WRITE0 */
+void sh_put_u32(uint32_t v);                /* decimal */
+void sh_put_i32(int32_t v);
+void sh_put_sci(float v);                   /* d.ddde[+-]NN, no printf needed */
+__attribute__((noreturn)) void sh_exit(int code); /* SYS_EXIT_EXTENDED: QEMU exits with code */
+
+#endif

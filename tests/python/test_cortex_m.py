@@ -1,0 +1,63 @@
+"""The bare-metal Cortex-M images: built with arm-none-eabi (newlib-nano), run under
+qemu-system-arm with semihosting, pass their golden vectors (MuJoCo's RNEA, the host build's
+closed loop for every method), and fit the part's flash, RAM and stack budget."""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+import subprocess
+
+import pytest
+
+from tools.build import build, toolchain_missing
+from tools.paths import build_dir
+
+MACHINES = {"cortex-m4": "mps2-an386", "cortex-m7": "mps2-an500", "cortex-m3": "mps2-an385"}
+
+
+def _image(preset: str):
+    missing = toolchain_missing(preset)
+    if missing:
+        pytest.skip(f"{preset}: {missing}")
+    if shutil.which("qemu-system-arm") is None:
+        pytest.skip("qemu-system-arm not found: apt-get install qemu-system-arm (tools/armctl does as root)")
+    build(preset)
+    return build_dir(preset) / "firmware" / "port" / "cortex_m"
+
+
+@pytest.fixture(scope="module", params=list(MACHINES))
+def image_run(request: pytest.FixtureRequest) -> tuple[str, dict, subprocess.CompletedProcess[str]]:
+    preset = request.param
+    d = _image(preset)
+    report = json.loads((d / "memory_report.json").read_text())
+    run = subprocess.run(
+        ["qemu-system-arm", "-M", MACHINES[preset], "-nographic", "-monitor", "none", "-serial", "none",
+         "-semihosting-config", "enable=on,target=native", "-kernel", str(d / f"golden_{preset}.elf")],
+        capture_output=True, text=True, timeout=600)
+    return preset, report, run
+
+
+def test_image_passes_its_golden_vectors(image_run) -> None:
+    preset, _, run = image_run
+    out = run.stdout + run.stderr
+    assert run.returncode == 0, out
+    assert f"golden vectors on {preset}" in out
+    assert "RESULT: PASS" in out
+    assert re.search(r"rnea: 200 states vs mj_inverse, worst relative error \S+ ok", out), out
+    loops = re.findall(r"^closed loop: (\S+) (float|fixed), .* ok$", out, re.M)
+    assert len(loops) >= 6 and {"pd", "pm"} <= {m for m, _ in loops}, out
+    assert "FAIL" not in out
+
+
+def test_memory_fits_the_part_and_the_static_stack_bound_covers_the_measured_one(image_run) -> None:
+    preset, report, run = image_run
+    assert report["ok"] and not report["problems"] and not report["over_budget"], report
+    assert 0 < report["flash_bytes"] <= report["flash_budget"]
+    assert 0 < report["ram_bytes"] <= report["ram_budget"]
+    assert report["stack_worst_case_bytes"] <= report["stack_reserved_bytes"] <= report["stack_budget"]
+    assert report["stack_main_path"][:2] == ["Reset_Handler", "main"]
+    measured = int(re.search(r"stack high-water mark \(measured\): (\d+) bytes", run.stdout + run.stderr).group(1))
+    # The call-graph sum is an upper bound of what any run can use; the painted stack is one run.
+    assert 0 < measured <= report["stack_worst_case_bytes"], (measured, report["stack_worst_case_bytes"])

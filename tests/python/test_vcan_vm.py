@@ -1,0 +1,235 @@
+"""HIL over a real SocketCAN bus: the controller and the simulator on vcan0 inside the qemu VM.
+
+This machine's kernel has no CAN, so tools/vm boots Debian's kernel under qemu (software
+emulation), where vcan0 (CAN FD, MTU 72) exists, chroots into this very filesystem and runs
+VM_SCRIPT below. One boot serves every test in this module (the VM is slow: ~15 s to boot,
+`import mujoco` 20-60 s, ~10-45 lockstep periods/s):
+
+1. the SocketCAN unit test again, now on a kernel that has AF_CAN, and the live transport selftest;
+2. `candump -L vcan0` records the bus while `arm_controller --bus socketcan:vcan0` and
+   `python -m host_sim --bus socketcan:vcan0` run 300 lockstep periods;
+3. after the 20th SYNC a misbehaving node (`cansend`) puts frames on the bus that nobody may act
+   on: unknown ids, wrong lengths, a classic frame where FD is expected, remote and 29-bit frames.
+
+On the host: both processes succeeded; every captured frame is either one of the injected ones
+(each exactly once) or decodes with the DBC via cantools with the DBC's length and FD/BRS format;
+both sides counted each injected frame in the right counter and nothing else went wrong.
+
+Skipped (with the reason) only if the VM cannot be set up on this machine (no qemu/busybox and not
+root to install them, no Debian kernel package reachable).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import re
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import cantools
+import pytest
+
+from host_sim.protocol import DBC_PATH
+from tools.paths import REPO, env_with_repo
+
+PERIODS = 300
+VM_TIMEOUT_S = 420.0  # generous: the whole module takes ~2-4 min on the 2-core CI machine
+
+# (cansend argument, where the controller counts it, where the simulator counts it)
+GARBAGE = [
+    ("123#DEADBEEF", "rx_unknown_id", "rx_unknown_id"),                          # unknown id
+    ("345##100112233445566778899AABBCCDDEEFF", "rx_unknown_id", "rx_unknown_id"),  # unknown id, FD
+    ("181#01020304", "rx_bad_format", "rx_own_echo"),    # DRIVE_1_STATE as a classic frame
+    ("182##10011223344556677", "rx_bad_length", "rx_own_echo"),  # DRIVE_2_STATE, FD, 8 bytes
+    ("701#0005", "rx_bad_length", "rx_own_echo"),        # heartbeat with 2 bytes
+    ("201#0102", "rx_own_echo", "rx_bad_frame"),         # DRIVE_1_CMD with 2 bytes
+    ("080#0102", "rx_own_echo", "rx_bad_frame"),         # SYNC with 2 bytes
+    ("7FF#R", "rx_bad_format", "rx_bad_frame"),          # remote frame
+    ("12345678#00", "rx_bad_format", "rx_bad_frame"),    # 29-bit id
+]
+
+VM_SCRIPT = r"""#!/bin/sh
+# Runs inside the VM, chrooted into the host's filesystem (tests/python/test_vcan_vm.py).
+OUT=$1; CTL=$2; PY=$3; UNIT=$4; SELFTEST=$5; DURATION=$6; GARBAGE=$7
+"$UNIT" > "$OUT/unit.out" 2>&1; echo $? > "$OUT/unit.rc"
+"$SELFTEST" vcan0 > "$OUT/selftest.out" 2>&1; echo $? > "$OUT/selftest.rc"
+
+candump -L vcan0 > "$OUT/candump.log" 2> "$OUT/candump.err" &
+CD=$!
+"$PY" -m host_sim --bus socketcan:vcan0 --lcm-url "" --boot-timeout 180 --idle-timeout 60 \
+    --summary "$OUT/sim.json" > "$OUT/sim.out" 2> "$OUT/sim.err" &
+SIM=$!
+(   # a misbehaving node: once 20 periods ran, frames that nobody may act on
+    n=0
+    while [ "$(grep -c ' 080#' "$OUT/candump.log")" -lt 20 ] && [ $n -lt 1500 ]; do
+        sleep 0.2; n=$((n + 1))
+    done
+    for f in $GARBAGE; do cansend vcan0 "$f" || echo "cansend $f failed" >> "$OUT/garbage.err"; done
+    [ -f "$OUT/ctl.rc" ] || echo sent > "$OUT/garbage.done"
+) &
+INJ=$!
+"$CTL" --bus socketcan:vcan0 --lcm-url "" --duration "$DURATION" --boot-timeout 180 \
+    --lockstep-timeout 5 --summary "$OUT/ctl.json" > "$OUT/ctl.out" 2> "$OUT/ctl.err"
+echo $? > "$OUT/ctl.rc"
+wait $SIM; echo $? > "$OUT/sim.rc"
+kill $INJ 2>/dev/null; wait $INJ 2>/dev/null
+sleep 0.5; kill $CD; wait $CD 2>/dev/null
+exit 0
+"""
+
+
+@dataclass(frozen=True)
+class Frame:
+    can_id: int
+    extended: bool
+    fd: bool
+    brs: bool
+    remote: bool
+    data: bytes
+
+
+_LINE = re.compile(r"^\((\d+\.\d+)\) (\S+) ([0-9A-Fa-f]{3}|[0-9A-Fa-f]{8})(##|#)(\S*)$")
+
+
+def parse_frame(text: str) -> Frame:
+    """A frame in candump -L / cansend notation: ID#DATA, ID#R, ID##<flags>DATA."""
+    m = re.fullmatch(r"([0-9A-Fa-f]{3}|[0-9A-Fa-f]{8})(##|#)(\S*)", text)
+    assert m, f"not a frame: {text!r}"
+    ident, sep, rest = m.groups()
+    ext = len(ident) == 8
+    if sep == "##":
+        flags = int(rest[0], 16)
+        return Frame(int(ident, 16), ext, True, bool(flags & 1), False, bytes.fromhex(rest[1:].replace(".", "")))
+    if rest.startswith("R"):
+        return Frame(int(ident, 16), ext, False, False, True, b"")
+    return Frame(int(ident, 16), ext, False, False, False, bytes.fromhex(rest.replace(".", "")))
+
+
+def parse_capture(path: Path) -> list[Frame]:
+    frames = []
+    for line in path.read_text().splitlines():
+        m = _LINE.match(line.strip())
+        assert m, f"{path.name}: unexpected line {line!r}"
+        frames.append(parse_frame(m.group(3) + m.group(4) + m.group(5)))
+    return frames
+
+
+@pytest.fixture(scope="module")
+def vm_run(tmp_path_factory: pytest.TempPathFactory, build_dir: Path) -> dict:
+    from tools.vm.image import APT_HINT, VmError, ensure_image, missing_tools
+    from tools.vm.run import run_in_vm
+
+    exes = {name: build_dir / rel for name, rel in {
+        "ctl": "firmware/arm_controller",
+        "unit": "tests/c/transport/test_can_socketcan",
+        "selftest": "tests/c/transport/can_socketcan_selftest"}.items()}
+    for exe in exes.values():
+        if not exe.exists():
+            pytest.skip(f"{exe} not built (run tools/armctl build --preset debug)")
+    missing = missing_tools()
+    if missing:
+        pytest.skip(f"no qemu VM here: missing {', '.join(missing)} ({APT_HINT})")
+    try:
+        ensure_image()
+    except VmError as exc:
+        pytest.skip(f"the qemu VM cannot be set up on this machine: {exc}")
+
+    out = tmp_path_factory.mktemp("vcan_vm")
+    script = out / "vm_script.sh"
+    script.write_text(VM_SCRIPT)
+    log = io.BytesIO()
+    res = run_in_vm(
+        ["sh", str(script), str(out), str(exes["ctl"]), sys.executable, str(exes["unit"]),
+         str(exes["selftest"]), f"{PERIODS / 1000:g}", " ".join(g for g, _, _ in GARBAGE)],
+        cwd=REPO, env=env_with_repo(), timeout=VM_TIMEOUT_S, stdout=log, stderr=log)
+    console = "\n".join(res.console_tail)
+    assert not res.timed_out, f"VM timed out after {VM_TIMEOUT_S:g} s; console:\n{console}"
+    assert res.returncode == 0, f"VM script exit {res.returncode}: {log.getvalue().decode()}\n{console}"
+    timing = {"boot_s": res.boot_s, "command_s": res.command_s, "total_s": res.total_s}
+    (out / "vm_timing.json").write_text(json.dumps(timing))
+
+    def read(name: str) -> str:
+        p = out / name
+        return p.read_text() if p.exists() else f"<{name} missing>"
+
+    return {"out": out, "read": read, "timing": timing}
+
+
+def _rc(vm_run: dict, name: str) -> int:
+    text = vm_run["read"](f"{name}.rc").strip()
+    assert text.lstrip("-").isdigit(), f"{name} never finished in the VM ({text})"
+    return int(text)
+
+
+def test_socketcan_transport_on_a_kernel_with_can(vm_run: dict) -> None:
+    unit = vm_run["read"]("unit.out")
+    assert _rc(vm_run, "unit") == 0, unit
+    assert "kernel AF_CAN: yes" in unit  # the open-error branch for a kernel that has CAN ran
+    selftest = vm_run["read"]("selftest.out")
+    assert _rc(vm_run, "selftest") == 0, selftest
+    assert re.search(r"\b0 failed", selftest), selftest
+
+
+def test_hil_run_over_vcan_succeeds(vm_run: dict) -> None:
+    read = vm_run["read"]
+    assert _rc(vm_run, "ctl") == 0, read("ctl.err") + read("ctl.out")
+    assert _rc(vm_run, "sim") == 0, read("sim.err") + read("sim.out")
+    ctl = json.loads(read("ctl.json"))
+    sim = json.loads(read("sim.json"))
+    assert ctl["result"] == 0 and ctl["final_state"] == "running", ctl
+    assert ctl["steps_done"] == PERIODS
+    assert ctl["frames"]["tx_dropped"] == 0 and ctl["frames"]["rx_wrong_counter"] == 0
+    assert sim["result"] == "ok" and sim["drive_faults"] == [] and sim["commands_missed"] == 0, sim
+    assert sim["periods"] >= PERIODS
+
+
+def test_every_captured_frame_decodes_with_the_dbc(vm_run: dict) -> None:
+    db = cantools.database.load_file(str(DBC_PATH))
+    frames = parse_capture(vm_run["out"] / "candump.log")
+    sim = json.loads(vm_run["read"]("sim.json"))
+
+    injected = [parse_frame(g) for g, _, _ in GARBAGE]
+    for g in injected:  # each injected frame is on the bus exactly once, unchanged
+        assert frames.count(g) == 1, f"injected {g} seen {frames.count(g)} times"
+        frames.remove(g)
+
+    counts: dict[str, int] = {}
+    for f in frames:
+        msg = db.get_message_by_frame_id(f.can_id)  # KeyError: a frame the DBC does not define
+        assert not f.extended and not f.remote
+        assert len(f.data) == msg.length, f"{msg.name}: {len(f.data)} bytes"
+        assert f.fd == msg.is_fd, f"{msg.name}: fd={f.fd}"
+        if f.fd:
+            assert f.brs, f"{msg.name}: FD frame without bit-rate switch"
+        db.decode_message(f.can_id, f.data)  # raises on anything that does not decode
+        counts[msg.name] = counts.get(msg.name, 0) + 1
+
+    n_sync = counts["SYNC"]
+    assert n_sync == sim["periods"] >= PERIODS
+    for i in range(1, 7):
+        assert counts[f"DRIVE_{i}_STATE"] == n_sync
+        assert counts[f"DRIVE_{i}_CMD"] == n_sync
+        assert counts[f"DRIVE_{i}_HEARTBEAT"] >= 3  # boot-up, operational, stopped
+    assert counts.get("NMT", 0) >= 2  # start ... stop
+    assert not any(name.endswith("_EMCY") for name in counts), counts
+    assert len(frames) + len(injected) > 13 * PERIODS
+
+
+def test_garbage_frames_are_counted_and_ignored(vm_run: dict) -> None:
+    read = vm_run["read"]
+    assert read("garbage.done").strip() == "sent", (
+        "the garbage was not sent while the run was going: " + read("garbage.err"))
+    ctl = json.loads(read("ctl.json"))["frames"]
+    sim = json.loads(read("sim.json"))
+    want_ctl = {k: 0 for k in ("rx_unknown_id", "rx_bad_format", "rx_bad_length", "rx_own_echo")}
+    want_sim = {k: 0 for k in ("rx_unknown_id", "rx_own_echo", "rx_bad_frame")}
+    for _, c, s in GARBAGE:
+        want_ctl[c] += 1
+        want_sim[s] += 1
+    # the clean run counts zero in each of these; every injected frame landed in exactly one
+    assert {k: ctl[k] for k in want_ctl} == want_ctl
+    assert {k: sim[k] for k in want_sim} == want_sim
+    # and changed nothing: every period's joint states arrived, no drive faulted
+    assert ctl["rx_wrong_counter"] == 0 and sim["drive_faults"] == []

@@ -1,0 +1,357 @@
+"""armctl busload: worst-case CAN bus load of the drive protocol per control period.
+
+Reads firmware/protocol/arm_drives.dbc: the messages with a GenMsgCycleTime are sent once per
+control period (SYNC, DRIVE_i_STATE, DRIVE_i_CMD); heartbeats are time-based (CANopen producer
+time, --heartbeat-ms) and amortised over the periods; NMT and EMCY are events and not counted.
+Each message goes on the bus of the drive it is sent to or from; SYNC (to every drive) goes on
+every bus that has drives. Frame format (classic / FD, bit-rate switch) is the DBC's.
+
+Frame lengths are exact worst cases (every bit the frame can take, including worst-case dynamic
+stuffing and the 3-bit intermission):
+
+Classic CAN (ISO 11898-1), n data bytes:
+    11-bit id: 8n + 47 + floor((34 + 8n - 1) / 4) bits   (34 + 8n bits SOF..CRC are stuffed)
+    29-bit id: 8n + 67 + floor((54 + 8n - 1) / 4) bits   (54 + 8n bits SOF..CRC are stuffed)
+    e.g. 8 bytes, 11-bit: 64 + 47 + 24 = 135 bits. The worst case inserts a stuff bit after the
+    first 5 bits and then after every 4 (the stuff bit starts the next run): floor((L - 1) / 4).
+
+CAN FD (ISO 11898-1:2015, ISO CRC), n data bytes (a DLC step), id 11-bit (29-bit):
+    nominal rate: SOF, id, RRS, IDE, FDF, res, BRS = 17 (36) bits, their worst-case stuff bits
+                  floor((17 - 1) / 4) = 4 (floor((36 - 1) / 4) = 8), CRC delimiter 1, ACK slot 1,
+                  ACK delimiter 1, EOF 7, intermission 3
+    data rate:    ESI 1, DLC 4, data 8n, the rest of the dynamic stuff bits
+                  floor((A + 5 + 8n - 1) / 4) - floor((A - 1) / 4) with A = 17 (36),
+                  stuff count 4 (3-bit Gray count + parity), CRC 17 (n <= 16) or 21 (n > 16),
+                  fixed stuff bits: one before the stuff count and one after every 4 bits of
+                  stuff count + CRC: 6 with CRC17 (21 bits), 7 with CRC21 (25 bits)
+    The bit rate switches inside BRS and inside the CRC delimiter (at their sample points); both
+    boundary bits, and the stuff bits of the arbitration field, are counted at the slower nominal
+    rate: the figures are upper bounds, never below the real length. Without BRS (or on a bus
+    without a data rate) every bit is at the nominal rate.
+    e.g. 16 bytes, 11-bit: nominal 17 + 4 + 13 = 34, data 1 + 4 + 128 + 33 + 4 + 17 + 6 = 193
+    -> 34 us + 38.6 us = 72.6 us at 1 / 5 Mbit/s.
+
+A message longer than 8 bytes on a classic bus (DRIVE_i_STATE is 16 bytes) is carried as
+ceil(n / 8) frames of 8 bytes, the way a classic CiA 402 drive maps it onto two TPDOs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import re
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+DEFAULT_DBC = Path(__file__).resolve().parent.parent / "firmware" / "protocol" / "arm_drives.dbc"
+FD_LENGTHS = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)
+# CRC delimiter, ACK slot, ACK delimiter, EOF, intermission: never stuffed, always nominal rate
+TRAILER_BITS = 1 + 1 + 1 + 7 + 3
+EXIT_OVER_BUDGET = 2
+
+
+class ConfigError(ValueError):
+    pass
+
+
+def _worst_stuff(stuffed_bits: int) -> int:
+    return (stuffed_bits - 1) // 4 if stuffed_bits > 0 else 0
+
+
+def classic_frame_bits(n_bytes: int, extended: bool = False) -> int:
+    """Worst-case length in bits of a classic data frame with n_bytes (0..8), incl. intermission."""
+    if not 0 <= n_bytes <= 8:
+        raise ValueError(f"classic CAN carries 0..8 data bytes, not {n_bytes}")
+    # SOF 1, id 11 | (11 + SRR 1 + IDE 1 + 18), RTR 1, IDE/r1 1, r0 1, DLC 4, data, CRC 15
+    stuffed = (1 + 11 + 1 + 1 + 1 + 4 if not extended else 1 + 11 + 1 + 1 + 18 + 1 + 1 + 1 + 4) + 8 * n_bytes + 15
+    return stuffed + _worst_stuff(stuffed) + TRAILER_BITS
+
+
+def fd_frame_bits(n_bytes: int, extended: bool = False, brs: bool = True) -> tuple[int, int]:
+    """Worst-case (nominal-rate bits, data-rate bits) of a CAN FD data frame; with brs False all
+    bits are returned as nominal-rate bits (data-rate count 0)."""
+    if n_bytes not in FD_LENGTHS:
+        raise ValueError(f"CAN FD data length must be one of {FD_LENGTHS}, not {n_bytes}")
+    arb = 1 + 11 + 1 + 1 + 1 + 1 + 1 if not extended else 1 + 11 + 1 + 1 + 18 + 1 + 1 + 1 + 1
+    ctrl_data = 1 + 4 + 8 * n_bytes  # ESI, DLC, data
+    stuff_arb = _worst_stuff(arb)
+    stuff_data = _worst_stuff(arb + ctrl_data) - stuff_arb
+    crc = 17 if n_bytes <= 16 else 21
+    crc_field = 4 + crc  # stuff count + CRC sequence
+    fixed_stuff = 1 + (crc_field - 1) // 4  # one before the stuff count, then one per 4 bits
+    nominal = arb + stuff_arb + TRAILER_BITS
+    data = ctrl_data + stuff_data + crc_field + fixed_stuff
+    return (nominal + data, 0) if not brs else (nominal, data)
+
+
+@dataclass
+class Bus:
+    name: str
+    fd: bool
+    nominal_bps: float
+    data_bps: float | None  # FD with bit-rate switch; None: no BRS
+    drives: list[int]
+
+    def describe(self) -> str:
+        if not self.fd:
+            return f"classic {_fmt_rate(self.nominal_bps)}"
+        if self.data_bps is None:
+            return f"CAN FD {_fmt_rate(self.nominal_bps)}, no bit-rate switch"
+        return f"CAN FD {_fmt_rate(self.nominal_bps)} arbitration / {_fmt_rate(self.data_bps)} data"
+
+
+@dataclass
+class FrameLoad:
+    message: str
+    frames: int           # frames per occurrence (2 for a 16-byte message on classic)
+    per_period: float     # occurrences per control period (heartbeat: a fraction)
+    nominal_bits: int     # per frame
+    data_bits: int        # per frame
+    time_s: float         # per frame
+
+
+@dataclass
+class BusLoad:
+    bus: Bus
+    rate_hz: float
+    frames: list[FrameLoad] = field(default_factory=list)
+    periodic_s: float = 0.0      # bus time of the per-period frames, per period
+    background_load: float = 0.0  # time-based traffic (heartbeats) as a fraction of bus time
+
+    @property
+    def load(self) -> float:
+        return self.periodic_s * self.rate_hz + self.background_load
+
+    def max_rate_hz(self, budget: float) -> float:
+        if self.periodic_s <= 0:
+            return math.inf
+        return max(0.0, (budget - self.background_load) / self.periodic_s)
+
+
+def _fmt_rate(bps: float) -> str:
+    for unit, scale in (("Mbit/s", 1e6), ("kbit/s", 1e3)):
+        if bps >= scale:
+            return f"{bps / scale:g} {unit}"
+    return f"{bps:g} bit/s"
+
+
+def parse_rate(text: str) -> float:
+    m = re.fullmatch(r"\s*([0-9]+(?:\.[0-9]+)?)\s*([kKmM]?)\s*", text)
+    if not m:
+        raise ConfigError(f"bit rate '{text}': expected e.g. 500k, 1M, 5M or 1000000")
+    v = float(m.group(1)) * {"": 1, "k": 1e3, "K": 1e3, "m": 1e6, "M": 1e6}[m.group(2)]
+    if not 10e3 <= v <= 20e6:
+        raise ConfigError(f"bit rate '{text}': outside 10 kbit/s .. 20 Mbit/s")
+    return v
+
+
+def parse_drives(text: str) -> list[int]:
+    out: list[int] = []
+    for part in text.split(","):
+        a, sep, b = part.partition("-")
+        try:
+            lo, hi = int(a), int(b) if sep else int(a)
+        except ValueError as exc:
+            raise ConfigError(f"drives '{text}': expected e.g. 1-6 or 1,3,5") from exc
+        if lo > hi:
+            raise ConfigError(f"drives '{text}': range {part} is empty")
+        out.extend(range(lo, hi + 1))
+    return out
+
+
+def parse_bus(text: str, index: int) -> Bus:
+    """[NAME=]classic:RATE:DRIVES | [NAME=]fd:NOMINAL[/DATA]:DRIVES, e.g. can0=fd:1M/5M:1-6."""
+    name, _, spec = text.rpartition("=")
+    parts = spec.split(":")
+    if len(parts) != 3 or parts[0] not in ("classic", "fd"):
+        raise ConfigError(f"--bus '{text}': expected classic:RATE:DRIVES or fd:NOMINAL[/DATA]:DRIVES "
+                          "(e.g. fd:1M/5M:1-6, classic:1M:1-3)")
+    kind, rates, drives = parts
+    nominal, _, data = rates.partition("/")
+    if kind == "classic" and data:
+        raise ConfigError(f"--bus '{text}': a classic bus has one bit rate")
+    return Bus(name=name or f"can{index}", fd=kind == "fd", nominal_bps=parse_rate(nominal),
+               data_bps=parse_rate(data) if data else None, drives=parse_drives(drives))
+
+
+class Protocol:
+    """The per-period and heartbeat messages of the DBC, each tagged with its drive (or all)."""
+
+    def __init__(self, dbc: Path = DEFAULT_DBC) -> None:
+        import cantools
+
+        self.db = cantools.database.load_file(str(dbc))
+        self.drive_nodes = sorted((n.name for n in self.db.nodes if re.fullmatch(r"DRIVE_\d+", n.name)),
+                                  key=lambda s: int(s.split("_")[1]))
+        self.n_drives = len(self.drive_nodes)
+
+    def drive_of(self, msg) -> int | None:  # noqa: ANN001 - cantools Message
+        """The one drive a message is sent by or to; None if it goes to every drive (SYNC)."""
+        nodes = set(msg.senders)
+        for s in msg.signals:
+            nodes |= set(s.receivers)
+        drives = sorted(n for n in nodes if n in self.drive_nodes)
+        if len(drives) == 1:
+            return int(drives[0].split("_")[1])
+        return None
+
+    def periodic(self):  # noqa: ANN201
+        return [m for m in self.db.messages if m.cycle_time]
+
+    def heartbeats(self):  # noqa: ANN201
+        return [m for m in self.db.messages if m.name.endswith("_HEARTBEAT")]
+
+    @staticmethod
+    def brs(msg) -> bool:  # noqa: ANN001
+        attr = msg.dbc.attributes.get("CANFD_BRS") if msg.dbc else None
+        return True if attr is None else int(attr.value) == 1
+
+
+def frame_time(msg, bus: Bus) -> tuple[int, int, int, float]:  # noqa: ANN001
+    """(frames, nominal bits, data bits, seconds) per frame of msg on bus."""
+    n = msg.length
+    if msg.is_fd and bus.fd:
+        brs = Protocol.brs(msg) and bus.data_bps is not None
+        nom, dat = fd_frame_bits(n, msg.is_extended_frame, brs)
+        return 1, nom, dat, nom / bus.nominal_bps + (dat / bus.data_bps if dat else 0.0)  # type: ignore[operator]
+    frames = max(1, math.ceil(n / 8))
+    per = min(n, 8)
+    bits = classic_frame_bits(per, msg.is_extended_frame)
+    return frames, bits, 0, bits / bus.nominal_bps
+
+
+def compute(buses: list[Bus], rate_hz: float, heartbeat_ms: float, proto: Protocol) -> list[BusLoad]:
+    seen: dict[int, str] = {}
+    for b in buses:
+        for d in b.drives:
+            if not 1 <= d <= proto.n_drives:
+                raise ConfigError(f"bus {b.name}: drive {d} does not exist (the DBC has drives 1..{proto.n_drives})")
+            if d in seen:
+                raise ConfigError(f"drive {d} is on two buses ({seen[d]} and {b.name})")
+            seen[d] = b.name
+    missing = [d for d in range(1, proto.n_drives + 1) if d not in seen]
+    if missing:
+        raise ConfigError(f"drives {', '.join(map(str, missing))} are on no bus")
+    out = []
+    for b in buses:
+        bl = BusLoad(bus=b, rate_hz=rate_hz)
+        for m in proto.periodic():
+            d = proto.drive_of(m)
+            if (d is None and b.drives) or d in b.drives:
+                frames, nom, dat, t = frame_time(m, b)
+                bl.frames.append(FrameLoad(m.name, frames, 1.0, nom, dat, t))
+                bl.periodic_s += frames * t
+        for m in proto.heartbeats():
+            if proto.drive_of(m) in b.drives:
+                frames, nom, dat, t = frame_time(m, b)
+                share = 1.0 / (rate_hz * heartbeat_ms * 1e-3)
+                bl.frames.append(FrameLoad(m.name, frames, share, nom, dat, t))
+                bl.background_load += frames * t / (heartbeat_ms * 1e-3)
+        out.append(bl)
+    return out
+
+
+def even_split(bus: Bus, n_drives: int, k: int) -> list[Bus]:
+    """Drives 1..n in k contiguous groups, sizes differing by at most one (larger groups first)."""
+    out, first = [], 1
+    for i in range(k):
+        size = n_drives // k + (1 if i < n_drives % k else 0)
+        out.append(Bus(f"can{i}", bus.fd, bus.nominal_bps, bus.data_bps, list(range(first, first + size))))
+        first += size
+    return out
+
+
+def report(loads: list[BusLoad], budget: float) -> str:
+    lines = []
+    for bl in loads:
+        b = bl.bus
+        lines.append(f"{b.name}: {b.describe()}, drives {','.join(map(str, b.drives))}, {bl.rate_hz:g} Hz loop")
+        lines.append(f"  {'message':<22}{'frames/period':>14}{'bits (nom+data)':>17}{'us/frame':>10}")
+        for f in bl.frames:
+            bits = f"{f.nominal_bits}+{f.data_bits}" if f.data_bits else f"{f.nominal_bits}"
+            per = f"{f.per_period * f.frames:g}" if f.per_period >= 1 else f"{f.frames}/{1 / f.per_period:g}"
+            lines.append(f"  {f.message:<22}{per:>14}{bits:>17}{f.time_s * 1e6:>10.1f}")
+        lines.append(f"  per period {bl.periodic_s * 1e6:.1f} us + heartbeats {bl.background_load * 100:.2f}% "
+                     f"-> load {bl.load * 100:.1f}% (budget {budget * 100:g}%); "
+                     f"highest loop rate within budget: {math.floor(bl.max_rate_hz(budget))} Hz")
+    return "\n".join(lines)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--bus", action="append", default=[], metavar="SPEC",
+                   help="[NAME=]fd:NOMINAL[/DATA]:DRIVES or [NAME=]classic:RATE:DRIVES, repeatable "
+                        "[fd:1M/5M:1-6]")
+    p.add_argument("--rate", type=float, default=1000.0, help="control loop rate, Hz [1000]")
+    p.add_argument("--budget", type=float, default=70.0, help="highest acceptable bus load, %% [70]")
+    p.add_argument("--heartbeat-ms", type=float, default=100.0, help="drive heartbeat period [100]")
+    p.add_argument("--dbc", type=Path, default=DEFAULT_DBC)
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+
+
+def run(ns: argparse.Namespace) -> int:
+    try:
+        if not 0 < ns.budget <= 100:
+            raise ConfigError(f"--budget {ns.budget:g}: must be in (0, 100] %")
+        if not ns.rate > 0 or not ns.heartbeat_ms > 0:
+            raise ConfigError("--rate and --heartbeat-ms must be > 0")
+        proto = Protocol(ns.dbc)
+        specs = ns.bus or [f"fd:1M/5M:1-{proto.n_drives}"]
+        buses = [parse_bus(s, i) for i, s in enumerate(specs)]
+        loads = compute(buses, ns.rate, ns.heartbeat_ms, proto)
+    except ConfigError as exc:
+        print(f"armctl busload: {exc}", file=sys.stderr)
+        return 2
+    budget = ns.budget / 100.0
+    over = [bl for bl in loads if bl.load > budget]
+    max_rate = math.floor(min(bl.max_rate_hz(budget) for bl in loads))
+    if ns.json:
+        print(json.dumps({
+            "rate_hz": ns.rate, "budget": budget, "fits": not over, "max_rate_hz": max_rate,
+            "buses": [{"name": bl.bus.name, "kind": bl.bus.describe(), "drives": bl.bus.drives,
+                       "load": bl.load, "periodic_us": bl.periodic_s * 1e6,
+                       "max_rate_hz": math.floor(bl.max_rate_hz(budget)),
+                       "frames": [f.__dict__ for f in bl.frames]} for bl in loads]}, indent=2))
+    else:
+        print(report(loads, budget))
+    if not over:
+        if not ns.json:
+            print(f"fits: every bus within {ns.budget:g}% at {ns.rate:g} Hz (highest rate that fits: {max_rate} Hz)")
+        return 0
+    worst = max(over, key=lambda bl: bl.load)
+    msg = (f"armctl busload: bus {worst.bus.name} ({worst.bus.describe()}) is at {worst.load * 100:.1f}% "
+           f"at {ns.rate:g} Hz, above the {ns.budget:g}% budget; the highest loop rate that fits is "
+           f"{max_rate} Hz")
+    if len(buses) == 1 and proto.n_drives > 1:
+        for k in range(2, proto.n_drives + 1):
+            split = even_split(buses[0], proto.n_drives, k)
+            if all(bl.load <= budget for bl in compute(split, ns.rate, ns.heartbeat_ms, proto)):
+                msg += (f"; {k} such buses fit at {ns.rate:g} Hz ("
+                        + " ".join(f"--bus {'fd' if b.fd else 'classic'}:{_rate_arg(b)}:{_drives_arg(b)}"
+                                   for b in split) + ")")
+                break
+    print(msg, file=sys.stderr)
+    return EXIT_OVER_BUDGET
+
+
+def _drives_arg(b: Bus) -> str:
+    return str(b.drives[0]) if len(b.drives) == 1 else f"{b.drives[0]}-{b.drives[-1]}"
+
+
+def _rate_arg(b: Bus) -> str:
+    def r(v: float) -> str:
+        return f"{v / 1e6:g}M" if v >= 1e6 else f"{v / 1e3:g}k"
+
+    return r(b.nominal_bps) + (f"/{r(b.data_bps)}" if b.data_bps else "")
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="armctl busload", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_arguments(p)
+    return run(p.parse_args(argv))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
