@@ -28,7 +28,7 @@ def test_short_lockstep_run_tracks_within_a_degree(short_run: tuple[Path, dict])
     _, run = short_run
     r = run["results"]
     assert r["result"] == "ok", run
-    assert r["steps"] == 1000
+    assert r["steps"] == round((r["duration_s"] + r["ref_hold_s"]) * 1000)  # hold, then the trajectory
     assert r["final_state"] == "running"
     assert len(r["tracking_max_abs_deg"]) == 6
     assert max(r["tracking_max_abs_deg"]) < 1.0
@@ -51,7 +51,8 @@ def test_telemetry_log_is_complete_and_recomputes_the_table(short_run: tuple[Pat
         assert acct["sequence_gaps"] == 0, channel
         assert acct["lost"] == 0, channel
     log = read_log(out / "telemetry.lcmlog")
-    ctl = [m for m in log["ARM_CTL"].messages if m.state == 1]
+    hold = run["results"]["ref_hold_s"]
+    ctl = [m for m in log["ARM_CTL"].messages if m.state == 1 and m.t >= hold - 1e-9]  # the trajectory
     e = np.array([m.e for m in ctl])
     q_err = np.array([np.subtract(m.q_d, m.q) for m in ctl])
     assert np.allclose(e, q_err, atol=1e-6)  # e is q_d - q, as published
