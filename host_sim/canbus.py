@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import socket
 import struct
 from collections.abc import Iterator
@@ -58,7 +59,18 @@ def restrict_to_loopback(sock: socket.socket) -> None:
 def open_bus(spec: str) -> can.BusABC:
     """udp | udp:GROUP:PORT (python-can udp_multicast, loopback only) | socketcan:IFACE."""
     if spec.startswith("socketcan:"):
-        return can.Bus(interface="socketcan", channel=spec.split(":", 1)[1], fd=True)
+        iface = spec.split(":", 1)[1]
+        if not iface or len(iface) > 15 or any(c in iface for c in "/: \t"):
+            raise BusSpecError(f"bus '{spec}': expected socketcan:IFACE, e.g. socketcan:vcan0")
+        try:
+            return can.Bus(interface="socketcan", channel=iface, fd=True)
+        except OSError as exc:  # same wording as the C transport (firmware/transport/src/can_socketcan.c)
+            if exc.errno == errno.EAFNOSUPPORT:
+                raise BusSpecError(f"{spec}: this kernel has no SocketCAN (AF_CAN): use --bus udp or "
+                                   "tools/armctl vcan run") from exc
+            if exc.errno == errno.ENODEV:
+                raise BusSpecError(f"{spec}: no such interface (create it: tools/armctl vcan up)") from exc
+            raise BusSpecError(f"{spec}: {exc.strerror or exc}") from exc
     group, port = parse_udp_spec(spec)
     with _inaddr_any_is_loopback():
         bus = can.Bus(interface="udp_multicast", channel=group, port=port, hop_limit=0, fd=True)

@@ -16,6 +16,7 @@ import numpy as np
 from gen import lcmtypes
 from host_sim.arm import Arm
 from host_sim.drive import Drive
+from host_sim.frame_io import FrameIO
 from host_sim.protocol import NMT_STATE_BOOT, DriveProtocol
 
 HEARTBEAT_PERIODS = 100
@@ -59,6 +60,7 @@ class Simulator:
             for i in range(arm.n)
         ]
         self.report = SimReport()
+        self.io = FrameIO(bus, self.proto.own_ids)
         self.types = lcmtypes.load()
         self.lc = lcm.LCM(cfg.lcm_url) if cfg.lcm_url else None
         self.counter: int | None = None  # SYNC counter of the period being served
@@ -68,9 +70,7 @@ class Simulator:
 
     # ---- bus -------------------------------------------------------------------------------
     def send(self, frame_id: int, data: bytes, fd: bool = False) -> None:
-        msg = can.Message(arbitration_id=frame_id, data=data, is_extended_id=False, is_fd=fd,
-                          bitrate_switch=fd)
-        self.bus.send(msg)
+        self.io.send(frame_id, data, fd)
         self.report.frames_tx += 1
 
     def send_heartbeat(self, d: Drive, state: int | None = None) -> None:
@@ -175,10 +175,9 @@ class Simulator:
         self.event("sim", "info", f"{self.arm.n} drives up on bus {self.cfg.bus}")
         booted = False
         cmd_joint, sync_id, nmt_id = self.proto.cmd_joint, self.proto.sync.frame_id, self.proto.nmt.frame_id
-        own = self.proto.own_ids
         while True:
             timeout = self.cfg.idle_timeout_s if booted else self.cfg.boot_timeout_s
-            msg = self.bus.recv(timeout)
+            msg = self.io.recv(timeout)
             if msg is None:
                 who = "controller silent" if booted else "no controller on the bus"
                 self.report.result = "controller-lost"
@@ -190,8 +189,8 @@ class Simulator:
                     d.emcy_pending.clear()
                 break
             self.report.frames_rx += 1
-            fid = msg.arbitration_id
-            if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id:
+            fid = msg.id
+            if msg.bad:
                 self.report.rx_bad_frame += 1
             elif fid == sync_id:
                 booted = True
@@ -200,16 +199,16 @@ class Simulator:
                 else:
                     self.on_sync(msg.data[0])
             elif fid in cmd_joint:
-                self.on_command(cmd_joint[fid], bytes(msg.data))
+                self.on_command(cmd_joint[fid], msg.data)
             elif fid == nmt_id:
                 booted = True
-                if not self.on_nmt(bytes(msg.data)):
+                if not self.on_nmt(msg.data):
                     break
-            elif fid in own:
-                self.report.rx_own_echo += 1
             else:
                 self.report.rx_unknown_id += 1
         self.report.wall_s = time.monotonic() - t0
+        self.report.rx_own_echo = self.io.echoes
+        self.report.rx_bad_frame += self.io.undecodable
         self.report.drive_faults = [d.node_id for d in self.drives if d.error_code]
         self.event("sim", "info" if self.report.result == "ok" else "fault",
                    self.report.reason or f"stopped by the controller after {self.report.periods} periods")

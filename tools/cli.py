@@ -132,6 +132,15 @@ def main(argv: list[str] | None = None) -> int:
     busload.add_arguments(bl)
     bl.set_defaults(fn=busload.run)
 
+    from tools import study
+
+    st = sub.add_parser("study", help="every method on the same trajectory, uncertainty and seed; the report")
+    study.add_study_arguments(st)
+    st.set_defaults(fn=study.cmd_study)
+    tu = sub.add_parser("tune", help="the baselines' gains: grid search on the tuning seed and trajectory")
+    study.add_tune_arguments(tu)
+    tu.set_defaults(fn=study.cmd_tune)
+
     from tools import bench
 
     bn = sub.add_parser("bench", help="benchmarks that write results files (instructions per step; synthesis time)")

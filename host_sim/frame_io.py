@@ -1,0 +1,78 @@
+"""Frame send/receive for the simulator's hot path, on a python-can bus.
+
+On the udp_multicast bus every frame a process sends comes back to it (loopback membership), so
+half of what the simulator receives is its own echo. python-can builds and validates a Message
+for each (~50 us); here a datagram is decoded with the same msgpack wire format python-can uses
+and an echo is dropped by its id before any Message exists, and frames are sent by packing the
+same dict pack_message writes. The socket, its options and the format stay python-can's. On
+SocketCAN the bus's own recv/send are used unchanged (the kernel does not echo to the sender).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import NamedTuple
+
+import can
+import msgpack
+
+
+class Frame(NamedTuple):
+    id: int
+    data: bytes
+    is_fd: bool
+    bad: bool  # error/remote/extended frame: not part of the protocol
+
+
+class FrameIO:
+    def __init__(self, bus: can.BusABC, ignore_ids: set[int]) -> None:
+        self.bus = bus
+        self.ignore = ignore_ids
+        self.udp = getattr(bus, "_multicast", None)
+        self.echoes = 0
+        self.undecodable = 0
+
+    def send(self, frame_id: int, data: bytes, fd: bool) -> None:
+        if self.udp is None:
+            self.bus.send(can.Message(arbitration_id=frame_id, data=data, is_extended_id=False, is_fd=fd,
+                                      bitrate_switch=fd))
+            return
+        self.udp.send(msgpack.packb({
+            "timestamp": time.time(), "arbitration_id": frame_id, "is_extended_id": False,
+            "is_remote_frame": False, "is_error_frame": False, "channel": None, "dlc": len(data),
+            "data": data, "is_fd": fd, "bitrate_switch": fd, "error_state_indicator": False,
+        }, use_bin_type=True))
+
+    def recv(self, timeout: float) -> Frame | None:
+        """The next frame that is not one of ignore_ids, or None after timeout seconds."""
+        end = time.monotonic() + timeout
+        while True:
+            left = end - time.monotonic()
+            if left < 0:
+                return None
+            if self.udp is None:
+                msg = self.bus.recv(left)
+                if msg is None:
+                    return None
+                if msg.arbitration_id in self.ignore:
+                    self.echoes += 1
+                    continue
+                return Frame(msg.arbitration_id, bytes(msg.data), msg.is_fd,
+                             msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id)
+            got = self.udp.recv(left)
+            if got is None:
+                return None
+            try:
+                d = msgpack.unpackb(got[0], raw=False)
+                fid = d["arbitration_id"]
+                data = bytes(d["data"])
+                if d["dlc"] != len(data):
+                    raise ValueError("dlc does not match the data")
+            except Exception:  # noqa: BLE001 - a garbage datagram is counted, never fatal
+                self.undecodable += 1
+                continue
+            if fid in self.ignore:
+                self.echoes += 1
+                continue
+            return Frame(fid, data, bool(d.get("is_fd")),
+                         bool(d.get("is_error_frame") or d.get("is_remote_frame") or d.get("is_extended_id")))
