@@ -59,10 +59,11 @@ def build(preset: str = "release", quiet: bool = True) -> None:
     if not quiet:
         lines = r.stdout.strip().splitlines()
         # The Cortex-M images print their memory and stack report (firmware/port/cortex_m).
-        report = [ln for ln in lines if "cortex-m" in ln.lower() and ("flash" in ln or "stack" in ln or "ram" in ln)]
+        report = [ln for ln in lines if ln.startswith(f"{preset}: ")]
         for ln in report:
             print(ln)
-        print(lines[-1] if lines else "up to date")
+        if lines and lines[-1] not in report:
+            print(lines[-1])
 
 
 def qemu_aarch64() -> Path:

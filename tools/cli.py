@@ -53,9 +53,12 @@ def cmd_hil(ns: argparse.Namespace) -> int:
 
 
 def cmd_demo(ns: argparse.Namespace) -> int:
-    ns.duration, ns.method, ns.mode = 5.0, "pd", "lockstep"
-    print(f"armctl demo: {ns.duration:g} s lockstep HIL run of the default arm -> {ns.out}")
-    return cmd_hil(ns)
+    from tools import study
+
+    print(f"armctl demo: a short study, every method {ns.duration:g} s in lockstep HIL on the default arm "
+          f"with the paper's 5 % uncertainty -> {ns.out}")
+    ns.config, ns.methods = study.DEFAULT_CONFIG, None
+    return study.cmd_study(ns)
 
 
 def cmd_test(ns: argparse.Namespace) -> int:
@@ -108,8 +111,9 @@ def main(argv: list[str] | None = None) -> int:
     h.add_argument("--out", type=Path, default=REPO / "runs" / "hil")
     h.set_defaults(fn=cmd_hil)
 
-    d = sub.add_parser("demo", help="the main job: set-up if needed, the default HIL run, the table")
+    d = sub.add_parser("demo", help="the main job: set-up if needed, a short study of every method, the table")
     d.add_argument("--out", type=Path, default=REPO / "runs" / "demo")
+    d.add_argument("--duration", type=float, default=3.0, help="trajectory seconds per method")
     d.set_defaults(fn=cmd_demo)
 
     t = sub.add_parser("test", help="every test: ctest (ASan/UBSan build) and pytest")

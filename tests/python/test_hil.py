@@ -76,7 +76,7 @@ def test_controller_safe_stops_when_the_simulator_dies(controller_bin: Path, bus
         frames = rec.close()
     assert code == 4, err
     assert "no joint state from drive(s) 1,2,3,4,5,6" in err and "zero torque" in err
-    assert seconds < 2.0  # lockstep timeout 0.25 s by default
+    assert seconds < 4.0  # lockstep timeout 1 s by default, plus process start-up margin
     last_cmds = [f for f in frames if f.arbitration_id in CMD_IDS][-6:]
     assert sorted(f.arbitration_id for f in last_cmds) == sorted(CMD_IDS)
     for f in last_cmds:

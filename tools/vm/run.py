@@ -116,7 +116,7 @@ def qemu_command(img: Image, run_dir: Path, console: Path) -> list[str]:
         "-nic", "none", "-no-reboot",
         "-kernel", img.vmlinuz, "-initrd", img.initrd,
         "-append", f"console=ttyS0 panic=-1 quiet armvm.run={run_dir}",
-        "-virtfs", "local,path=/,mount_tag=host,security_model=passthrough,id=host",
+        "-virtfs", "local,path=/,mount_tag=host,security_model=passthrough,multidevs=remap,id=host",
     ]
 
 
@@ -149,8 +149,10 @@ def run_in_vm(argv: Sequence[str], cwd: Path | str | None = None, env: Mapping[s
         t.start()
     res = VmResult(returncode=EXIT_SETUP, setup_s=round(setup_s, 2))
     t0 = time.monotonic()
-    proc = subprocess.Popen(qemu_command(img, run_dir, console), stdin=subprocess.DEVNULL,
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    qemu_log = run_dir / "qemu.log"
+    with open(qemu_log, "wb") as qlog:
+        proc = subprocess.Popen(qemu_command(img, run_dir, console), stdin=subprocess.DEVNULL,
+                                stdout=qlog, stderr=subprocess.STDOUT)
     started = None
     try:
         while proc.poll() is None:
@@ -161,7 +163,7 @@ def run_in_vm(argv: Sequence[str], cwd: Path | str | None = None, env: Mapping[s
                 proc.kill()
                 break
             time.sleep(0.1)
-        qemu_out = proc.communicate()[0].decode(errors="replace")
+        proc.wait()
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -174,8 +176,9 @@ def run_in_vm(argv: Sequence[str], cwd: Path | str | None = None, env: Mapping[s
         started = t_end
     try:
         res.console_tail = console.read_text(errors="replace").splitlines()[-30:]
+        qemu_out = qemu_log.read_text(errors="replace")
     except OSError:
-        res.console_tail = []
+        qemu_out = ""
     rc_file = run_dir / "rc"
     try:
         if res.timed_out:

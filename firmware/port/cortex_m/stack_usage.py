@@ -4,8 +4,8 @@ Worst-case stack = the deepest path of the static call graph from the reset hand
 deepest exception handler on top of it with its hardware-stacked frame:
 
 - frame sizes: GCC's -fstack-usage (.su files of every object of this build) where it has them;
-  for library code without .su (newlib-nano, libgcc) the prologue in the disassembly
-  (push/stmdb, vpush/vstmdb, sub sp) is read;
+  for library code without .su (newlib-nano, libgcc) every instruction in the disassembly that
+  moves sp down (push/stmdb, vpush/vstmdb, sub sp, str/strd with pre-decrement) is summed;
 - call edges: bl/blx <symbol> and tail calls (b/b.w <symbol>) in the disassembly of the linked
   image, so library calls (sinf, memcpy, soft-float helpers) are on the path too.
 
@@ -40,6 +40,8 @@ def read_su(root: Path) -> tuple[dict[str, int], set[str]]:
     frames: dict[str, int] = {}
     dynamic: set[str] = set()
     for su in root.rglob("*.su"):
+        if "CompilerId" in str(su):  # CMake's compiler identification, not part of the image
+            continue
         for line in su.read_text().splitlines():
             parts = line.split("\t")
             if len(parts) < 3:
@@ -82,15 +84,17 @@ def disassemble(objdump: str, elf: Path) -> dict[str, dict]:
             continue
         op, args = m.group(1), m.group(2).split(";")[0].strip()
         cur["n"] += 1
-        # Prologue: the stack the function allocates for itself (first few instructions).
-        if cur["n"] <= 8:
-            if op in ("push", "push.w") or (op in ("stmdb", "stmdb.w") and args.startswith("sp!")):
-                cur["prologue"] += 4 * reglist_count(args)
-            elif op in ("vpush", "vstmdb") :
-                regs = reglist_count(args)
-                cur["prologue"] += (8 if "d" in args.split("{")[1][:2] else 4) * regs
-            elif op.startswith("sub") and re.match(r"sp,\s*(sp,\s*)?#", args):
-                cur["prologue"] += int(re.search(r"#(\d+)", args).group(1))
+        # Every instruction that moves sp down, anywhere in the function (compilers shrink-wrap:
+        # the push may come after an early-return test). Summed: an upper bound of the frame.
+        if op in ("push", "push.w") or (op in ("stmdb", "stmdb.w") and args.startswith("sp!")):
+            cur["prologue"] += 4 * reglist_count(args)
+        elif op in ("vpush", "vpush.64", "vpush.32") or (op.startswith("vstmdb") and args.startswith("sp!")):
+            regs = reglist_count(args)
+            cur["prologue"] += (8 if args.split("{")[1].strip().startswith("d") else 4) * regs
+        elif re.match(r"subw?(\.w)?$", op) and re.match(r"sp,\s*(sp,\s*)?#", args):
+            cur["prologue"] += int(re.search(r"#(\d+)", args).group(1))
+        elif op.startswith("str") and re.search(r"\[sp, #-(\d+)\]!", args):
+            cur["prologue"] += int(re.search(r"\[sp, #-(\d+)\]!", args).group(1))
         if op in ("bl", "blx") and TARGET_RE.match(args):
             cur["calls"].add(TARGET_RE.match(args).group(1))
         elif op == "blx":
@@ -132,7 +136,8 @@ def worst_paths(funcs: dict[str, dict], su: dict[str, int], dynamic: set[str], r
         return memo[f]
 
     depth, path = visit(root, [])
-    return depth, path, problems
+    frames = [{"function": f, "frame_bytes": frame(f), "from": "su" if f in su else "objdump"} for f in path]
+    return depth, frames, problems
 
 
 def section_sizes(objdump: str, elf: Path) -> dict[str, int]:
@@ -167,14 +172,17 @@ def main() -> int:
 
     su, dynamic = read_su(ns.su_root)
     funcs = disassemble(ns.objdump, ns.elf)
-    main_depth, main_path, problems = worst_paths(funcs, su, dynamic, ENTRY)
+    main_depth, main_frames, problems = worst_paths(funcs, su, dynamic, ENTRY)
+    main_path = [f["function"] for f in main_frames]
     handler_depth, handler_path = 0, []
     for h in HANDLERS:
-        d, path, prob = worst_paths(funcs, su, dynamic, h)
+        d, frames, prob = worst_paths(funcs, su, dynamic, h)
         problems += prob
         if d > handler_depth:
-            handler_depth, handler_path = d, path
+            handler_depth, handler_path = d, [f["function"] for f in frames]
     stack = main_depth + handler_depth + EXC_FRAME[ns.fpu]
+    # The control step alone (what a product firmware's control task needs on top of its caller).
+    step_depth, step_frames, _ = worst_paths(funcs, su, dynamic, "arm_ctl_step") if "arm_ctl_step" in funcs else (0, [], [])
 
     over = []
     if flash > ns.flash_budget:
@@ -189,9 +197,10 @@ def main() -> int:
         "ram_bytes": ram, "ram_static_bytes": ram_static, "ram_budget": ns.ram_budget,
         "stack_reserved_bytes": sec.get(".stack", 0),
         "stack_worst_case_bytes": stack, "stack_budget": ns.stack_budget,
-        "stack_main_path": main_path, "stack_main_bytes": main_depth,
+        "stack_main_path": main_path, "stack_main_frames": main_frames, "stack_main_bytes": main_depth,
         "stack_handler_path": handler_path, "stack_handler_bytes": handler_depth,
         "exception_frame_bytes": EXC_FRAME[ns.fpu],
+        "stack_ctl_step_bytes": step_depth, "stack_ctl_step_path": [f["function"] for f in step_frames],
         "sections": sec, "problems": sorted(set(problems)), "over_budget": over,
         "ok": not over and not problems,
     }
@@ -202,6 +211,7 @@ def main() -> int:
     print(f"{ns.mcu}: worst-case stack {stack} B of {ns.stack_budget} B reserved "
           f"(main path {main_depth} B: {' > '.join(main_path[:12])}{' ...' if len(main_path) > 12 else ''}; "
           f"+ handler {handler_depth} B + exception frame {EXC_FRAME[ns.fpu]} B)")
+    print(f"{ns.mcu}: arm_ctl_step alone needs {step_depth} B of stack ({' > '.join(f['function'] for f in step_frames)})")
     for prob in report["problems"]:
         print(f"{ns.mcu}: stack analysis: {prob}", file=sys.stderr)
     for o in over:

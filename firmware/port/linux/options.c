@@ -29,7 +29,7 @@ void options_usage(const char *prog)
            "  --watchdog-periods N    stale periods before safe stop  [3]\n"
            "  --safe-stop zero|damping[:GAIN]                         [zero]\n"
            "  --boot-timeout S        wait for the drives' heartbeats [20]\n"
-           "  --lockstep-timeout S    lockstep: wait for a period's joint states [0.25]\n"
+           "  --lockstep-timeout S    lockstep: wall time to wait for a period's joint states [1]\n"
            "  --ref-amp A1,..,An --ref-freq F1,..,Fn  reference q_d = q0 + A (1 - cos 2 pi F t)\n"
            "                          per joint (both or neither)     [built-in]\n"
            "  --summary FILE          write a JSON summary of the run (atomically)\n",
@@ -103,7 +103,7 @@ int options_parse(int argc, char **argv, const arm_robot_model_t *model, options
     opt->duration_s = 5.0;
     opt->rate_hz = 1000.0;
     opt->boot_timeout_s = 20.0;
-    opt->lockstep_timeout_s = 0.25;
+    opt->lockstep_timeout_s = 1.0; /* a slow or preempted simulator is not a dead one */
     opt->ref_hold_s = 0.5;
     arm_ctl_default_config(model, &opt->ctl);
     rt_options_default(&opt->rt);
