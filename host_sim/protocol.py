@@ -37,12 +37,13 @@ class FastCodec:
     names: tuple[str, ...]
     scales: tuple[float, ...]
     offsets: tuple[float, ...]
+    raw_limits: tuple[tuple[int, int], ...]
 
     @classmethod
     def from_message(cls, msg: Message) -> "FastCodec":
         fmt = "<"
         pos = 0
-        names, scales, offsets = [], [], []
+        names, scales, offsets, limits = [], [], [], []
         for sig in sorted(msg.signals, key=lambda s: s.start):
             if sig.byte_order != "little_endian" or sig.start % 8 or (sig.length, sig.is_signed) not in _INT_CODES:
                 raise ValueError(f"{msg.name}.{sig.name}: not a byte-aligned little-endian 8/16/32-bit integer")
@@ -53,11 +54,15 @@ class FastCodec:
             names.append(sig.name)
             scales.append(float(sig.scale))
             offsets.append(float(sig.offset))
+            bits = sig.length
+            limits.append((-(1 << (bits - 1)), (1 << (bits - 1)) - 1) if sig.is_signed else (0, (1 << bits) - 1))
         fmt += "x" * ((msg.length * 8 - pos) // 8)
-        return cls(msg, struct.Struct(fmt), tuple(names), tuple(scales), tuple(offsets))
+        return cls(msg, struct.Struct(fmt), tuple(names), tuple(scales), tuple(offsets), tuple(limits))
 
     def encode(self, values: dict[str, float]) -> bytes:
-        raw = [round((values[n] - o) / s) for n, s, o in zip(self.names, self.scales, self.offsets)]
+        """Values beyond a signal's range saturate, as a drive's register would (never a crash)."""
+        raw = [min(hi, max(lo, round((values[n] - o) / s)))
+               for n, s, o, (lo, hi) in zip(self.names, self.scales, self.offsets, self.raw_limits)]
         return self.fmt.pack(*raw)
 
     def decode(self, data: bytes) -> dict[str, float]:

@@ -41,15 +41,35 @@ def cmd_hil(ns: argparse.Namespace) -> int:
     if not ns.duration > 0:
         print(f"armctl hil: --duration: must be > 0, got {ns.duration}", file=sys.stderr)
         return 2
+    if ns.bus == "vm":
+        return _hil_in_vm(ns)
     build("release")
     try:
-        run = run_hil(HilOptions(out=ns.out, duration_s=ns.duration, method=ns.method, mode=ns.mode))
+        run = run_hil(HilOptions(out=ns.out, duration_s=ns.duration, method=ns.method, mode=ns.mode,
+                                 bus=ns.bus))
+        print(f"bus: {run['environment']['bus_choice']}")
     except HilError as exc:
         print(f"armctl hil: {exc}", file=sys.stderr)
         return 1
     _print_run(run)
     print(f"results: {ns.out / 'run.json'}  log: {ns.out / 'telemetry.lcmlog'}")
     return 0 if run["results"]["result"] == "ok" else 1
+
+
+def _hil_in_vm(ns: argparse.Namespace) -> int:
+    """The same HIL run inside the qemu VM whose kernel has vcan0 (tools/vm)."""
+    from tools.vm.image import VmError
+    from tools.vm.run import run_in_vm
+
+    build("release")
+    inner = ["tools/armctl", "hil", "--bus", "vcan", "--duration", f"{ns.duration:g}", "--method", ns.method,
+             "--mode", ns.mode, "--out", str(ns.out.resolve())]
+    print("armctl hil: running inside the qemu VM (software emulation: minutes, not seconds)")
+    try:
+        return run_in_vm(inner, timeout=3600.0 + 600.0 * ns.duration, keep=False).returncode
+    except VmError as exc:
+        print(f"armctl hil --bus vm: {exc}", file=sys.stderr)
+        return 1
 
 
 def cmd_demo(ns: argparse.Namespace) -> int:
@@ -108,6 +128,9 @@ def main(argv: list[str] | None = None) -> int:
     h.add_argument("--duration", type=float, default=5.0, help="simulated seconds")
     h.add_argument("--method", default="pd")
     h.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
+    h.add_argument("--bus", choices=("auto", "udp", "vcan", "vm"), default="auto",
+                   help="auto: vcan if this kernel has SocketCAN and vcan0, else udp (says which); "
+                        "vm: the whole run inside the qemu VM that has vcan0")
     h.add_argument("--out", type=Path, default=REPO / "runs" / "hil")
     h.set_defaults(fn=cmd_hil)
 

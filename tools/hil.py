@@ -28,6 +28,7 @@ class HilOptions:
     method: str = "pd"
     mode: str = "lockstep"
     preset: str = "release"
+    bus: str = "udp"  # udp | vcan | auto (vcan if this kernel has SocketCAN and vcan0, else udp)
     can_port: int | None = None  # None: pick one, so concurrent runs do not share a bus
     lcm_port: int | None = None
     # Another controller binary (default: controller_binary(preset)), a command it runs under
@@ -95,9 +96,30 @@ def check_loopback_route(group: str) -> None:
                        f"run as root: ip route replace {net} dev lo (tools/armctl does this when run as root)")
 
 
+def resolve_bus(choice: str) -> tuple[str, str]:
+    """(udp|vcan, why): auto takes vcan when the kernel has SocketCAN and vcan0 is up."""
+    from tools.vcan import can_interfaces, kernel_has_can
+
+    if choice == "udp":
+        return "udp", "asked for"
+    ok, why = kernel_has_can()
+    has_vcan0 = ok and any(i.get("name") == "vcan0" for i in can_interfaces())
+    if choice == "vcan":
+        if not has_vcan0:
+            raise HilError(f"--bus vcan: {why or 'no vcan0 interface'} (tools/armctl vcan up, or --bus vm "
+                           "to run inside the VM that has one)")
+        return "vcan", "asked for"
+    if choice != "auto":
+        raise HilError(f"--bus: unknown bus '{choice}' (auto, udp, vcan, vm)")
+    if has_vcan0:
+        return "vcan", "this kernel has SocketCAN and vcan0"
+    return "udp", why or "no vcan0 interface"
+
+
 def run_hil(opt: HilOptions) -> dict[str, Any]:
     for group in ("239.255.76.67", "239.74.163.2"):
         check_loopback_route(group)
+    bus_kind, bus_why = resolve_bus(opt.bus)
     binary = opt.controller or controller_binary(opt.preset)
     if not binary.exists():
         raise HilError(f"{binary} is missing: run tools/armctl build")
@@ -105,7 +127,7 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
     for stale in ("telemetry.lcmlog", "controller_summary.json", "sim_summary.json", "run.json", "uncertainty.json"):
         (opt.out / stale).unlink(missing_ok=True)
     can_port, lcm_port = _ports(opt)
-    bus = f"udp:239.74.163.2:{can_port}"
+    bus = f"udp:239.74.163.2:{can_port}" if bus_kind == "udp" else "socketcan:vcan0"
     url = f"udpm://239.255.76.67:{lcm_port}?ttl=0&recv_buf_size=8388608"
     log_path = opt.out / "telemetry.lcmlog"
     logs = {name: open(opt.out / f"{name}.log", "w") for name in ("controller", "simulator", "logger")}
@@ -165,7 +187,7 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
               "joint_names": JOINT_NAMES, "controller_args": list(opt.controller_args),
               "uncertainty": opt.uncertainty, **opt.labels}
     run = analyse(opt.out, controller, simulator, config, {
-        "bus": bus, "lcm_url": url, "wall_s": wall,
+        "bus": bus, "bus_choice": f"{opt.bus} -> {bus_kind} ({bus_why})", "lcm_url": url, "wall_s": wall,
         "exit_codes": {"controller": ctl.returncode, "simulator": sim.returncode}})
     write_json_atomic(opt.out / "run.json", run)
     return run

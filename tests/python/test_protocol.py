@@ -54,3 +54,11 @@ def test_torque_resolution_is_a_micro_newton_metre(proto: DriveProtocol) -> None
     assert sig.scale == pytest.approx(1e-6)
     # The last wrist (about 1e-4 kg m^2) then sees at most 0.005 rad/s^2 from rounding.
     assert 0.5 * sig.scale / 1e-4 <= 0.01
+
+
+def test_out_of_range_values_saturate_instead_of_crashing(proto: DriveProtocol) -> None:
+    codec = FastCodec.from_message(proto.state[0])
+    data = codec.encode({"position": 1e9, "velocity": -1e9, "torque": 0.0, "statusword": 0x237,
+                         "sync_counter": 1, "error_code": 0})
+    v = codec.decode(data)
+    assert v["position"] == pytest.approx(2147.483647) and v["velocity"] == pytest.approx(-2147.483648)
