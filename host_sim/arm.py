@@ -20,6 +20,7 @@ class Arm:
         ucfg = uncertainty or UncertaintyConfig()
         self.uncertainty = Uncertainty(ucfg, self.model.nu)
         perturb_model(self.model, ucfg, self.uncertainty.rng)
+        self.parametric = bool(ucfg.mass_error or ucfg.inertia_error or ucfg.com_error_m)
         self.data = mujoco.MjData(self.model)
         self._mass = np.zeros((self.model.nv, self.model.nv))
         # The nominal model: what the firmware's header was generated from. Uncertainty makes
@@ -51,19 +52,24 @@ class Arm:
         exactly the w of e_ddot = u + w under inverse dynamics control.
         """
         self.data.ctrl[:] = tau
-        u = self.uncertainty
-        if u.time_varying:
-            mujoco.mj_forward(self.model, self.data)  # M and V at the step's start
-            mujoco.mj_fullM(self.model, self.data, self._mass)
-            self.data.qfrc_applied[:] = u.extra_force(self.step_count * self.period, self._mass,
-                                                      self.data.qfrc_bias, tau, self.data.qvel)
-        else:
-            self.data.qfrc_applied[:] = u.extra_force(0.0, self._mass, self.data.qfrc_bias, tau, self.data.qvel)
         nd = self.nominal_data
         nd.qpos[:] = self.data.qpos
         nd.qvel[:] = self.data.qvel
         nd.ctrl[:] = tau
         mujoco.mj_forward(self.nominal, nd)
+        u = self.uncertainty
+        if u.time_varying:
+            # M and V of the true arm at the step's start. Without parametric error the true arm's
+            # are the nominal one's, just computed: no second forward pass.
+            src_model, src_data = self.nominal, nd
+            if self.parametric:
+                mujoco.mj_forward(self.model, self.data)
+                src_model, src_data = self.model, self.data
+            mujoco.mj_fullM(src_model, src_data, self._mass)
+            self.data.qfrc_applied[:] = u.extra_force(self.step_count * self.period, self._mass,
+                                                      src_data.qfrc_bias, tau, self.data.qvel)
+        else:
+            self.data.qfrc_applied[:] = u.extra_force(0.0, self._mass, self.data.qfrc_bias, tau, self.data.qvel)
         mujoco.mj_step(self.model, self.data)  # qacc is the acceleration at the step's start
         self.step_count += 1
         return nd.qacc - self.data.qacc

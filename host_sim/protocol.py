@@ -61,9 +61,11 @@ class FastCodec:
 
     def encode(self, values: dict[str, float]) -> bytes:
         """Values beyond a signal's range saturate, as a drive's register would (never a crash)."""
-        raw = [min(hi, max(lo, round((values[n] - o) / s)))
-               for n, s, o, (lo, hi) in zip(self.names, self.scales, self.offsets, self.raw_limits)]
-        return self.fmt.pack(*raw)
+        raw = [round((values[n] - o) / s) for n, s, o in zip(self.names, self.scales, self.offsets)]
+        try:
+            return self.fmt.pack(*raw)
+        except struct.error:  # rare: clamp only when a value is out of range
+            return self.fmt.pack(*(min(hi, max(lo, r)) for r, (lo, hi) in zip(raw, self.raw_limits)))
 
     def decode(self, data: bytes) -> dict[str, float]:
         raw = self.fmt.unpack(data)

@@ -91,28 +91,30 @@ class Uncertainty:
         self.rng = np.random.default_rng(cfg.seed)
         self.n = n
         r = cfg.paper_ratio
-        self.d_m = RandomSignal(self.rng, n, r, cfg.paper_knot_s) if r else None
-        self.d_v = RandomSignal(self.rng, n, r, cfg.paper_knot_s) if r else None
+        # One signal of 2n channels: d for M~ (first n) and d' for V~ (last n).
+        self.d = RandomSignal(self.rng, 2 * n, r, cfg.paper_knot_s) if r else None
         self.viscous = np.array(cfg.viscous or [0.0] * n)
         self.coulomb = np.array(cfg.coulomb or [0.0] * n)
         if len(self.viscous) != n or len(self.coulomb) != n:
             raise ValueError(f"uncertainty.viscous/coulomb: need {n} values each")
+        self.friction = bool(self.viscous.any() or self.coulomb.any())
 
     @property
     def time_varying(self) -> bool:
-        return self.d_m is not None
+        return self.d is not None
 
-    def extra_force(self, t: float, mass: np.ndarray, bias: np.ndarray, tau: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    def extra_force(self, t: float, mass: np.ndarray, bias: np.ndarray, tau: np.ndarray,
+                    qd: np.ndarray) -> np.ndarray:
         """The generalized force that makes MuJoCo integrate the uncertain dynamics.
 
         With M, V from MuJoCo for the (parametrically perturbed) arm, the true acceleration is
         qdd = (M + M~)^-1 (tau + tau_f - V - V~); returned is f with M qdd + V = tau + f.
         """
-        tau_f = -self.viscous * qd - self.coulomb * np.tanh(qd / 0.01)
-        if self.d_m is None:
+        tau_f = -self.viscous * qd - self.coulomb * np.tanh(qd / 0.01) if self.friction else 0.0
+        if self.d is None:
             return tau_f
-        d = self.d_m(t)
-        m_tilde = 0.5 * (d[:, None] * mass + mass * d[None, :])
-        v_tilde = self.d_v(t) * bias
-        qdd = np.linalg.solve(mass + m_tilde, tau + tau_f - bias - v_tilde)
+        dd = self.d(t)
+        d, dv = dd[: self.n], dd[self.n:]
+        m_true = mass + 0.5 * (d[:, None] * mass + mass * d[None, :])
+        qdd = np.linalg.solve(m_true, tau + tau_f - bias * (1.0 + dv))
         return mass @ qdd + bias - tau
