@@ -17,10 +17,6 @@ def controller_binary(preset: str = "release") -> Path:
     return build_dir(preset) / "firmware" / "arm_controller"
 
 
-def venv_bin(name: str) -> Path:
-    return REPO / ".venv" / "bin" / name
-
-
 def env_with_repo() -> dict[str, str]:
     env = dict(os.environ)
     env["PYTHONPATH"] = str(REPO) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")

@@ -3,7 +3,7 @@
 The C side is reached through two test binaries built by tests/c/transport:
   pycan_wire_tool   codec CLI (encode/decode/batch)
   can_udp_selftest  live bus checks (send/recv/--print-sockopts)
-found under $ARM_BUILD_DIR (default /work/main/build/debug)/tests/c/transport.
+found under $ARM_BUILD_DIR (default build/debug of this checkout)/tests/c/transport.
 
 Every multicast socket opened here stays on this host: TTL 0, outgoing
 interface 127.0.0.1, membership only on 127.0.0.1 (see _loopback_bus).
@@ -23,7 +23,7 @@ can = pytest.importorskip("can")
 msgpack = pytest.importorskip("msgpack")
 from can.interfaces.udp_multicast.utils import pack_message, unpack_message  # noqa: E402
 
-BUILD_DIR = Path(os.environ.get("ARM_BUILD_DIR", "/work/main/build/debug"))
+BUILD_DIR = Path(os.environ.get("ARM_BUILD_DIR", Path(__file__).resolve().parents[2] / "build" / "debug"))
 TOOL_DIR = BUILD_DIR / "tests" / "c" / "transport"
 TOOL = TOOL_DIR / "pycan_wire_tool"
 SELFTEST = TOOL_DIR / "can_udp_selftest"
