@@ -189,9 +189,10 @@ def write_report(out: Path, study: dict[str, Any]) -> None:
         rows.append([m, _fmt(r.get("torque_power_w", float("nan"))),
                      " ".join(f"{v:.1f}" for v in r.get("max_abs_torque_nm", [])),
                      " ".join(f"{100 * v:.1f}" for v in r.get("saturated_fraction", [])),
-                     str(tr["telemetry_lost_total"]), str(tr["overruns"]), r["final_state"], r["result"]])
+                     str(r.get("commands_missed", 0)), str(tr["telemetry_lost_total"]), str(tr["overruns"]),
+                     r["final_state"], r["result"]])
     md += [_md_table(["method", "power (W)", "max |tau| per joint (Nm)", "time limited per joint (%)",
-                      "telemetry lost", "overruns", "final state", "result"], rows), ""]
+                      "CAN commands missed", "telemetry lost", "overruns", "final state", "result"], rows), ""]
 
     if "gh2" in runs:
         r = runs["gh2"]
