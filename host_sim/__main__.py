@@ -7,14 +7,16 @@ import sys
 from pathlib import Path
 
 from host_sim.arm import DEFAULT_MJCF, Arm
-from host_sim.canbus import BusSpecError, open_bus
+from host_sim.canbus import BusSpecError, open_bus, parse_bus_assignments
 from host_sim.simulator import SimConfig, Simulator, write_summary
 from host_sim.uncertainty import UncertaintyConfig
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="host_sim", description=__doc__)
-    p.add_argument("--bus", default="udp", help="udp | udp:GROUP:PORT | socketcan:IFACE")
+    p.add_argument("--bus", action="append", default=[], metavar="SPEC[@DRIVES]",
+                   help="udp | udp:GROUP:PORT | socketcan:IFACE, optionally @DRIVES (e.g. @1-3, @4,5,6); "
+                        "repeatable (up to 4 buses), every drive on exactly one bus [udp, all drives]")
     p.add_argument("--mjcf", type=Path, default=DEFAULT_MJCF)
     p.add_argument("--lcm-url", default="udpm://239.255.76.67:7667?ttl=0")
     p.add_argument("--boot-timeout", type=float, default=60.0, help="s to wait for the controller")
@@ -35,17 +37,31 @@ def main(argv: list[str] | None = None) -> int:
         ucfg = UncertaintyConfig.from_file(ns.uncertainty) if ns.uncertainty else UncertaintyConfig()
     except (OSError, ValueError, TypeError) as exc:
         p.error(f"--uncertainty: {exc}")
+    n_drives = 6  # the arm's drives (host_sim/models/ur5e_arm.xml; checked against the model below)
     try:
-        bus = open_bus(ns.bus)
+        assignment = parse_bus_assignments(ns.bus or ["udp"], n_drives)
     except BusSpecError as exc:
         p.error(str(exc))
+    buses = []
     try:
-        cfg = SimConfig(bus=ns.bus, lcm_url=ns.lcm_url, boot_timeout_s=ns.boot_timeout,
+        for spec, _ in assignment:
+            buses.append(open_bus(spec))
+    except BusSpecError as exc:
+        for b in buses:
+            b.shutdown()
+        p.error(str(exc))
+    bus_of = [next(i for i, (_, drives) in enumerate(assignment) if d in drives) for d in range(1, n_drives + 1)]
+    try:
+        cfg = SimConfig(bus=" ".join(ns.bus or ["udp"]), lcm_url=ns.lcm_url, boot_timeout_s=ns.boot_timeout,
                         idle_timeout_s=ns.idle_timeout, command_timeout_periods=ns.command_timeout_periods,
                         summary_path=ns.summary)
-        report = Simulator(cfg, bus, Arm(ns.mjcf, uncertainty=ucfg)).run()
+        arm = Arm(ns.mjcf, uncertainty=ucfg)
+        if arm.n != n_drives:
+            p.error(f"--mjcf: the arm has {arm.n} joints; the drive protocol has {n_drives} drives")
+        report = Simulator(cfg, buses, arm, bus_of).run()
     finally:
-        bus.shutdown()
+        for b in buses:
+            b.shutdown()
     if ns.summary:
         write_summary(ns.summary, report)
     if report.result != "ok":

@@ -18,6 +18,73 @@ class BusSpecError(ValueError):
     pass
 
 
+MAX_BUSES = 4
+
+
+def parse_drive_list(text: str, n_drives: int) -> list[int]:
+    """"1-3", "4,5,6", "1-2,6" -> sorted drive numbers in 1..n_drives; ValueError otherwise."""
+    out: set[int] = set()
+    for part in text.split(","):
+        a, sep, b = part.partition("-")
+        if not a.isdigit() or (sep and not b.isdigit()):
+            raise ValueError(text)
+        lo, hi = int(a), int(b) if sep else int(a)
+        if lo < 1 or hi < lo or hi > n_drives:
+            raise ValueError(text)
+        out.update(range(lo, hi + 1))
+    return sorted(out)
+
+
+def _spec_key(spec: str) -> tuple[str, ...]:
+    if spec.startswith("socketcan:"):
+        iface = spec.split(":", 1)[1]
+        if not iface or len(iface) > 15 or any(c in iface for c in "/: \t"):
+            raise BusSpecError(f"bus '{spec}': expected socketcan:IFACE, e.g. socketcan:vcan0")
+        return ("socketcan", iface)
+    group, port = parse_udp_spec(spec)
+    return ("udp", group, str(port))
+
+
+def parse_bus_assignments(args: list[str], n_drives: int, option: str = "--bus") -> list[tuple[str, list[int]]]:
+    """The repeatable SPEC[@DRIVES] option (same rules as the controller's --bus): at most
+    MAX_BUSES buses, no bus twice, every drive 1..n_drives on exactly one bus; without @DRIVES a
+    bus carries every drive. BusSpecError names the option."""
+    if not args:
+        raise BusSpecError(f"{option}: no bus given")
+    if len(args) > MAX_BUSES:
+        raise BusSpecError(f"{option}: at most {MAX_BUSES} buses, got {len(args)}")
+    out: list[tuple[str, list[int]]] = []
+    keys: dict[tuple[str, ...], str] = {}
+    owner: dict[int, str] = {}
+    for arg in args:
+        spec, at, drives_text = arg.rpartition("@") if "@" in arg else (arg, "", "")
+        try:
+            key = _spec_key(spec) if spec.startswith(("socketcan:", "udp")) else None
+        except BusSpecError as exc:
+            raise BusSpecError(f"{option}: {exc}") from exc
+        if key is None:
+            raise BusSpecError(f"{option}: unknown bus '{spec}' (expected udp, udp:GROUP:PORT or socketcan:IFACE)")
+        if key in keys:
+            raise BusSpecError(f"{option}: bus '{spec}' is given twice ('{keys[key]}' and '{spec}')")
+        keys[key] = spec
+        try:
+            drives = parse_drive_list(drives_text, n_drives) if at else list(range(1, n_drives + 1))
+        except ValueError:
+            raise BusSpecError(f"{option}: '{arg}': drives '{drives_text}' are not a list of drives 1..{n_drives} "
+                               "(e.g. @1-3 or @4,5,6)") from None
+        for d in drives:
+            if d in owner:
+                raise BusSpecError(f"{option}: drive {d} is on two buses ('{owner[d]}' and '{spec}'); "
+                                   "each drive on exactly one")
+            owner[d] = spec
+        out.append((spec, drives))
+    missing = [d for d in range(1, n_drives + 1) if d not in owner]
+    if missing:
+        raise BusSpecError(f"{option}: drive(s) {','.join(map(str, missing))} on no bus (give each drive a bus: "
+                           f"SPEC@DRIVES, e.g. {out[0][0]}@1-3)")
+    return out
+
+
 def parse_udp_spec(spec: str) -> tuple[str, int]:
     if spec == "udp":
         return DEFAULT_UDP_GROUP, DEFAULT_UDP_PORT

@@ -58,6 +58,45 @@ class FrameIO:
             if left < 0 or not select.select([self.sock], [], [], left)[0]:
                 return None
 
+    def fileno(self) -> int:
+        return self.sock.fileno() if self.sock is not None else self.bus.fileno()
+
+    def poll(self) -> Frame | None:
+        """A frame that is already queued (not one of ignore_ids), else None at once."""
+        while True:
+            if self.udp is None:
+                msg = self.bus.recv(0)
+                if msg is None:
+                    return None
+                if msg.arbitration_id in self.ignore:
+                    self.echoes += 1
+                    continue
+                return Frame(msg.arbitration_id, bytes(msg.data), msg.is_fd,
+                             msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id)
+            try:
+                datagram = self.sock.recv(4096, socket.MSG_DONTWAIT)
+            except BlockingIOError:
+                return None
+            f = self._decode(datagram)
+            if f is not None:
+                return f
+
+    def _decode(self, datagram: bytes) -> Frame | None:
+        try:
+            d = msgpack.unpackb(datagram, raw=False)
+            fid = d["arbitration_id"]
+            data = bytes(d["data"])
+            if d["dlc"] != len(data):
+                raise ValueError("dlc does not match the data")
+        except Exception:  # noqa: BLE001 - a garbage datagram is counted, never fatal
+            self.undecodable += 1
+            return None
+        if fid in self.ignore:
+            self.echoes += 1
+            return None
+        return Frame(fid, data, bool(d.get("is_fd")),
+                     bool(d.get("is_error_frame") or d.get("is_remote_frame") or d.get("is_extended_id")))
+
     def recv(self, timeout: float) -> Frame | None:
         """The next frame that is not one of ignore_ids, or None after timeout seconds."""
         end = time.monotonic() + timeout
@@ -91,3 +130,37 @@ class FrameIO:
                 continue
             return Frame(fid, data, bool(d.get("is_fd")),
                          bool(d.get("is_error_frame") or d.get("is_remote_frame") or d.get("is_extended_id")))
+
+
+class MultiFrameIO:
+    """Several buses (one FrameIO each, so own echoes are dropped per bus); recv returns
+    (bus index, frame) from whichever bus has one, waiting in one select() over all of them."""
+
+    def __init__(self, ios: list[FrameIO]) -> None:
+        self.ios = ios
+        self.next = 0
+
+    @property
+    def echoes(self) -> int:
+        return sum(io.echoes for io in self.ios)
+
+    @property
+    def undecodable(self) -> int:
+        return sum(io.undecodable for io in self.ios)
+
+    def recv(self, timeout: float) -> tuple[int, Frame] | None:
+        if len(self.ios) == 1:
+            f = self.ios[0].recv(timeout)
+            return None if f is None else (0, f)
+        end = time.monotonic() + timeout
+        n = len(self.ios)
+        while True:
+            for k in range(n):  # drain what is queued, round-robin so no bus starves another
+                i = (self.next + k) % n
+                f = self.ios[i].poll()
+                if f is not None:
+                    self.next = (i + 1) % n
+                    return i, f
+            left = end - time.monotonic()
+            if left < 0 or not select.select(self.ios, [], [], left)[0]:
+                return None

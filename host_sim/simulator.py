@@ -17,10 +17,11 @@ import numpy as np
 from gen import lcmtypes
 from host_sim.arm import Arm
 from host_sim.drive import Drive
-from host_sim.frame_io import FrameIO
+from host_sim.frame_io import Frame, FrameIO, MultiFrameIO
 from host_sim.protocol import NMT_STATE_BOOT, DriveProtocol
 
 HEARTBEAT_PERIODS = 100
+DEFER_S = 0.2  # longest a next-period SYNC waits for this period's commands on another bus
 
 
 @dataclass
@@ -43,6 +44,7 @@ class SimReport:
     rx_own_echo: int = 0
     rx_unknown_id: int = 0
     rx_bad_frame: int = 0
+    rx_wrong_bus: int = 0  # a command for a drive that is not on the bus it arrived on: ignored
     commands_missed: int = 0
     telemetry_sent: dict[str, int] = field(default_factory=lambda: {"ARM_SIM": 0, "ARM_SIM_EVENT": 0})
     wall_s: float = 0.0
@@ -50,9 +52,15 @@ class SimReport:
 
 
 class Simulator:
-    def __init__(self, cfg: SimConfig, bus: can.BusABC, arm: Arm) -> None:
+    def __init__(self, cfg: SimConfig, bus: can.BusABC | list[can.BusABC], arm: Arm,
+                 bus_of: list[int] | None = None) -> None:
+        """bus: one bus (every drive on it) or a list; bus_of[i]: index of drive i+1's bus."""
         self.cfg = cfg
-        self.bus = bus
+        self.buses = list(bus) if isinstance(bus, (list, tuple)) else [bus]
+        self.bus = self.buses[0]
+        self.bus_of = list(bus_of) if bus_of is not None else [0] * arm.n
+        if len(self.bus_of) != arm.n or any(not 0 <= b < len(self.buses) for b in self.bus_of):
+            raise ValueError(f"bus_of {self.bus_of}: one bus index per drive, each < {len(self.buses)}")
         self.arm = arm
         self.proto = DriveProtocol(arm.n)
         self.drives = [
@@ -61,25 +69,29 @@ class Simulator:
             for i in range(arm.n)
         ]
         self.report = SimReport()
-        self.io = FrameIO(bus, self.proto.own_ids)
+        self.ios = [FrameIO(b, self.proto.own_ids) for b in self.buses]
+        self.io = MultiFrameIO(self.ios)
         self.types = lcmtypes.load()
         self.lc = lcm.LCM(cfg.lcm_url) if cfg.lcm_url else None
         self.counter: int | None = None  # SYNC counter of the period being served
+        self.synced: set[int] = set()  # buses whose SYNC for this period arrived
         self.got_cmd = [False] * arm.n
         self.last_w = np.zeros(arm.n)
         self.last_tau = np.zeros(arm.n)
 
     # ---- bus -------------------------------------------------------------------------------
-    def send(self, frame_id: int, data: bytes, fd: bool = False) -> None:
-        self.io.send(frame_id, data, fd)
+    def send(self, frame_id: int, data: bytes, fd: bool = False, bus: int = 0) -> None:
+        self.ios[bus].send(frame_id, data, fd)
         self.report.frames_tx += 1
 
     def send_heartbeat(self, d: Drive, state: int | None = None) -> None:
-        self.send(self.proto.heartbeat[d.node_id - 1].frame_id, bytes([d.nmt_state if state is None else state]))
+        self.send(self.proto.heartbeat[d.node_id - 1].frame_id, bytes([d.nmt_state if state is None else state]),
+                  bus=self.bus_of[d.node_id - 1])
 
     def send_emcy(self, d: Drive, code: int) -> None:
         m = self.proto.emcy[d.node_id - 1]
-        self.send(m.frame_id, m.encode({"error_code": code, "error_register": 0x01, "detail": 0}))
+        self.send(m.frame_id, m.encode({"error_code": code, "error_register": 0x01, "detail": 0}),
+                  bus=self.bus_of[d.node_id - 1])
         self.event(f"drive{d.node_id}", "fault", f"EMCY 0x{code:04x}: drive {d.node_id} fault, torque off")
 
     # ---- telemetry -------------------------------------------------------------------------
@@ -133,20 +145,44 @@ class Simulator:
                 self.send_heartbeat(d)
         self.counter = None
 
-    def on_sync(self, counter: int) -> None:
-        if self.counter is not None:
+    def on_sync(self, counter: int, bus: int = 0) -> None:
+        """SYNC goes on every bus; the drives on `bus` answer on it. A period starts with its
+        first SYNC; the same counter on another bus joins it."""
+        if self.counter is not None and (counter != self.counter or bus in self.synced):
             self.finish_period()  # commands missing: the drives count it, the arm still moves
-        self.counter = counter
-        self.got_cmd = [False] * self.arm.n
+        if self.counter is None:
+            self.counter = counter
+            self.got_cmd = [False] * self.arm.n
+            self.synced = set()
+        self.synced.add(bus)
         q, qd = self.arm.q, self.arm.qd
         for i, d in enumerate(self.drives):
+            if self.bus_of[i] != bus:
+                continue
             data = self.proto.state_codec[i].encode({
                 "position": float(q[i]), "velocity": float(qd[i]), "torque": d.applied_torque,
                 "statusword": d.power.statusword, "sync_counter": counter, "error_code": d.error_code,
             })
-            self.send(self.proto.state[i].frame_id, data, fd=True)
+            self.send(self.proto.state[i].frame_id, data, fd=True, bus=bus)
 
-    def on_command(self, joint: int, data: bytes) -> None:
+    def _holds_back(self, bus: int, msg: Frame) -> bool:
+        """A SYNC on `bus` for the next period while this period's commands for drives on other
+        buses are still missing, and the drives on `bus` have theirs. Such commands may still be
+        on their way: a socket per bus (and, on vcan, a per-CPU receive backlog) does not keep
+        the order between buses, so the next SYNC on one bus can overtake the commands on
+        another. Commands missing on `bus` itself are really missing (one bus keeps its order)."""
+        if len(self.ios) < 2 or self.counter is None or len(msg.data) != 1:
+            return False
+        if msg.data[0] == self.counter and bus not in self.synced:
+            return False  # this period's SYNC on another bus
+        mine = [self.got_cmd[j] for j in range(self.arm.n) if self.bus_of[j] == bus]
+        others = [self.got_cmd[j] for j in range(self.arm.n) if self.bus_of[j] != bus]
+        return all(mine) and not all(others)
+
+    def on_command(self, joint: int, data: bytes, bus: int = 0) -> None:
+        if self.bus_of[joint] != bus:
+            self.report.rx_wrong_bus += 1  # not this drive's bus: a real drive never sees it
+            return
         try:
             v = self.proto.cmd_codec[joint].decode(data)
         except Exception:  # noqa: BLE001 - a malformed frame is counted, never fatal
@@ -159,14 +195,15 @@ class Simulator:
         if all(self.got_cmd):
             self.finish_period()
 
-    def on_nmt(self, data: bytes) -> bool:
-        """Returns False when the controller stopped the node set (end of run)."""
+    def on_nmt(self, data: bytes, bus: int = 0) -> bool:
+        """NMT goes on every bus and reaches the drives on it. Returns False when the controller
+        stopped the node set (end of run)."""
         if len(data) != 2:
             self.report.rx_bad_frame += 1
             return True
         command, node = data[0], data[1]
         for d in self.drives:
-            if node in (0, d.node_id) and d.on_nmt(command):
+            if self.bus_of[d.node_id - 1] == bus and node in (0, d.node_id) and d.on_nmt(command):
                 self.send_heartbeat(d)
         return not all(d.nmt_state == 0x04 for d in self.drives)
 
@@ -187,10 +224,43 @@ class Simulator:
         self.event("sim", "info", f"{self.arm.n} drives up on bus {self.cfg.bus}")
         booted = False
         cmd_joint, sync_id, nmt_id = self.proto.cmd_joint, self.proto.sync.frame_id, self.proto.nmt.frame_id
+        # Frames read but not handled yet: (bus, frame, flag);
+        # flag: 0 fresh, 1 other buses already drained for it, 2 that and never held back again
+        pending: list[tuple[int, Frame, int]] = []
+        # Next-period SYNCs held back while the current period still waits for commands on other
+        # buses (see _holds_back): handled once the period is complete, every bus moved on, or
+        # DEFER_S passed without the missing commands.
+        deferred: list[tuple[int, Frame, int]] = []
         while True:
             timeout = self.cfg.idle_timeout_s if booted else self.cfg.boot_timeout_s
-            msg = self.io.recv(timeout)
-            if msg is None:
+            if deferred and (self.counter is None or len(deferred) >= len(self.ios)):
+                pending[:0] = [(b, f, 2) for b, f, _ in deferred]
+                deferred = []
+            flag = 0
+            if pending:
+                bus, msg, flag = pending.pop(0)
+                got = (bus, msg)
+            else:
+                got = self.io.recv(min(timeout, DEFER_S) if deferred else timeout)
+                if got is None and deferred:
+                    # the missing commands never came: the period ends without them
+                    pending[:0] = [(b, f, 2) for b, f, _ in deferred]
+                    deferred = []
+                    continue
+            if got is not None and len(self.ios) > 1 and not flag and got[1].id in (sync_id, nmt_id):
+                # SYNC and NMT go on every bus. Order between buses is lost in the sockets: what is
+                # already queued on the other buses was sent before this frame (e.g. the previous
+                # period's commands), so it is handled first.
+                earlier = [(i, f, 1) for i, io in enumerate(self.ios) if i != got[0]
+                           for f in iter(io.poll, None)]
+                if earlier:
+                    pending[:0] = [*earlier, (got[0], got[1], 1)]
+                    continue
+            if got is not None and flag != 2 and got[1].id == sync_id and self._holds_back(got[0], got[1]) \
+                    and all(b != got[0] for b, _, _ in deferred):
+                deferred.append((got[0], got[1], 1))
+                continue
+            if got is None:
                 who = "controller silent" if booted else "no controller on the bus"
                 self.report.result = "controller-lost"
                 self.report.reason = f"{who} for {timeout:g} s: drives faulted, torque off"
@@ -200,6 +270,7 @@ class Simulator:
                         self.send_emcy(d, code)
                     d.emcy_pending.clear()
                 break
+            bus, msg = got
             self.report.frames_rx += 1
             fid = msg.id
             if msg.bad:
@@ -209,12 +280,12 @@ class Simulator:
                 if len(msg.data) != 1:
                     self.report.rx_bad_frame += 1
                 else:
-                    self.on_sync(msg.data[0])
+                    self.on_sync(msg.data[0], bus)
             elif fid in cmd_joint:
-                self.on_command(cmd_joint[fid], msg.data)
+                self.on_command(cmd_joint[fid], msg.data, bus)
             elif fid == nmt_id:
                 booted = True
-                if not self.on_nmt(msg.data):
+                if not self.on_nmt(msg.data, bus):
                     break
             else:
                 self.report.rx_unknown_id += 1

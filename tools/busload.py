@@ -46,6 +46,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 DEFAULT_DBC = Path(__file__).resolve().parent.parent / "firmware" / "protocol" / "arm_drives.dbc"
+DEFAULT_TOPOLOGY = Path(__file__).resolve().parent.parent / "firmware" / "protocol" / "buses.toml"
 FD_LENGTHS = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)
 # CRC delimiter, ACK slot, ACK delimiter, EOF, intermission: never stuffed, always nominal rate
 TRAILER_BITS = 1 + 1 + 1 + 7 + 3
@@ -176,6 +177,74 @@ def parse_bus(text: str, index: int) -> Bus:
                data_bps=parse_rate(data) if data else None, drives=parse_drives(drives))
 
 
+def load_topology(path: Path = DEFAULT_TOPOLOGY, n_drives: int = 6) -> list[Bus]:
+    """The [[bus]] tables of a topology file (firmware/protocol/buses.toml), validated: known
+    fields and kinds, valid rates, unique names, every drive 1..n_drives on exactly one bus.
+    Errors name the file, the bus and the field."""
+    import tomllib
+
+    try:
+        doc = tomllib.loads(Path(path).read_text())
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise ConfigError(f"{path}: {exc}") from exc
+    unknown = set(doc) - {"bus"}
+    if unknown:
+        raise ConfigError(f"{path}: unknown top-level key(s) {', '.join(sorted(unknown))} (expected [[bus]] tables)")
+    tables = doc.get("bus")
+    if not isinstance(tables, list) or not tables:
+        raise ConfigError(f"{path}: bus: expected one or more [[bus]] tables")
+    buses: list[Bus] = []
+    names: set[str] = set()
+    for i, t in enumerate(tables):
+        where = f"{path}: bus[{i}]"
+        if not isinstance(t, dict):
+            raise ConfigError(f"{where}: expected a table")
+        extra = set(t) - {"name", "kind", "nominal", "data", "drives"}
+        if extra:
+            raise ConfigError(f"{where}: unknown field(s) {', '.join(sorted(extra))}")
+        name = t.get("name")
+        if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9_.-]{1,15}", name):
+            raise ConfigError(f"{where}.name: expected 1..15 characters [A-Za-z0-9_.-], got {name!r}")
+        if name in names:
+            raise ConfigError(f"{where}.name: bus name '{name}' is used twice")
+        names.add(name)
+        where = f"{path}: bus {name}"
+        kind = t.get("kind")
+        if kind not in ("fd", "classic"):
+            raise ConfigError(f"{where}.kind: expected \"fd\" or \"classic\", got {kind!r}")
+        rates = {}
+        for key in ("nominal", "data"):
+            v = t.get(key)
+            if v is None:
+                rates[key] = None
+                continue
+            try:
+                rates[key] = parse_rate(str(v))
+            except ConfigError as exc:
+                raise ConfigError(f"{where}.{key}: {exc}") from exc
+        if rates["nominal"] is None:
+            raise ConfigError(f"{where}.nominal: missing (bit rate, e.g. \"1M\")")
+        if kind == "classic" and rates["data"] is not None:
+            raise ConfigError(f"{where}.data: a classic bus has one bit rate (no data rate)")
+        drives = t.get("drives")
+        if (not isinstance(drives, list) or not drives
+                or not all(isinstance(d, int) and not isinstance(d, bool) for d in drives)):
+            raise ConfigError(f"{where}.drives: expected a non-empty list of drive numbers, got {drives!r}")
+        buses.append(Bus(name, kind == "fd", rates["nominal"], rates["data"], list(drives)))
+    seen: dict[int, str] = {}
+    for b in buses:
+        for d in b.drives:
+            if not 1 <= d <= n_drives:
+                raise ConfigError(f"{path}: bus {b.name}.drives: drive {d} does not exist (drives 1..{n_drives})")
+            if d in seen:
+                raise ConfigError(f"{path}: bus {b.name}.drives: drive {d} is on two buses ({seen[d]} and {b.name})")
+            seen[d] = b.name
+    missing = [d for d in range(1, n_drives + 1) if d not in seen]
+    if missing:
+        raise ConfigError(f"{path}: drives: drive(s) {', '.join(map(str, missing))} are on no bus")
+    return buses
+
+
 class Protocol:
     """The per-period and heartbeat messages of the DBC, each tagged with its drive (or all)."""
 
@@ -282,7 +351,9 @@ def report(loads: list[BusLoad], budget: float) -> str:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--bus", action="append", default=[], metavar="SPEC",
                    help="[NAME=]fd:NOMINAL[/DATA]:DRIVES or [NAME=]classic:RATE:DRIVES, repeatable "
-                        "[fd:1M/5M:1-6]")
+                        "[the buses of --topology]")
+    p.add_argument("--topology", type=Path, default=DEFAULT_TOPOLOGY,
+                   help="bus topology file used when no --bus is given [firmware/protocol/buses.toml]")
     p.add_argument("--rate", type=float, default=1000.0, help="control loop rate, Hz [1000]")
     p.add_argument("--budget", type=float, default=70.0, help="highest acceptable bus load, %% [70]")
     p.add_argument("--heartbeat-ms", type=float, default=100.0, help="drive heartbeat period [100]")
@@ -297,8 +368,10 @@ def run(ns: argparse.Namespace) -> int:
         if not ns.rate > 0 or not ns.heartbeat_ms > 0:
             raise ConfigError("--rate and --heartbeat-ms must be > 0")
         proto = Protocol(ns.dbc)
-        specs = ns.bus or [f"fd:1M/5M:1-{proto.n_drives}"]
-        buses = [parse_bus(s, i) for i, s in enumerate(specs)]
+        if ns.bus:
+            buses = [parse_bus(s, i) for i, s in enumerate(ns.bus)]
+        else:
+            buses = load_topology(ns.topology, proto.n_drives)
         loads = compute(buses, ns.rate, ns.heartbeat_ms, proto)
     except ConfigError as exc:
         print(f"armctl busload: {exc}", file=sys.stderr)

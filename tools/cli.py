@@ -57,7 +57,7 @@ def cmd_hil(ns: argparse.Namespace) -> int:
 
 
 def _hil_in_vm(ns: argparse.Namespace) -> int:
-    """The same HIL run inside the qemu VM whose kernel has vcan0 (tools/vm)."""
+    """The same HIL run inside the qemu VM whose kernel has vcan0 and vcan1 (tools/vm)."""
     from tools.vm.image import VmError
     from tools.vm.run import run_in_vm
 
@@ -126,11 +126,12 @@ def main(argv: list[str] | None = None) -> int:
 
     h = sub.add_parser("hil", help="one hardware-in-the-loop run")
     h.add_argument("--duration", type=float, default=5.0, help="simulated seconds")
-    h.add_argument("--method", default="pd")
+    h.add_argument("--method", default="pm", choices=("pm", "pm-paper", "gh2", "pd", "tde", "usde-smc"))
     h.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
     h.add_argument("--bus", choices=("auto", "udp", "vcan", "vm"), default="auto",
-                   help="auto: vcan if this kernel has SocketCAN and vcan0, else udp (says which); "
-                        "vm: the whole run inside the qemu VM that has vcan0")
+                   help="auto: vcan if this kernel has SocketCAN and vcan0, vcan1 (one per bus of "
+                        "firmware/protocol/buses.toml), else udp (one port per bus; says which); "
+                        "vm: the whole run inside the qemu VM that has vcan0, vcan1")
     h.add_argument("--out", type=Path, default=REPO / "runs" / "hil")
     h.set_defaults(fn=cmd_hil)
 
@@ -151,7 +152,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from tools import busload, vcan
 
-    vc = sub.add_parser("vcan", help="real SocketCAN: vcan0 natively, or a qemu VM that has it (status/up/setup/run)")
+    vc = sub.add_parser("vcan", help="real SocketCAN: vcan interfaces natively, or a qemu VM that has them (status/up/setup/run)")
     vcan.add_arguments(vc)
     vc.set_defaults(fn=vcan.run)
 

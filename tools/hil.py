@@ -28,8 +28,10 @@ class HilOptions:
     method: str = "pd"
     mode: str = "lockstep"
     preset: str = "release"
-    bus: str = "udp"  # udp | vcan | auto (vcan if this kernel has SocketCAN and vcan0, else udp)
-    can_port: int | None = None  # None: pick one, so concurrent runs do not share a bus
+    bus: str = "udp"  # udp | vcan | auto (vcan if this kernel has SocketCAN and vcan0.., else udp)
+    can_port: int | None = None  # None: pick one, so concurrent runs do not share a bus; bus i: port + i
+    # Which drive is on which bus (firmware/protocol/buses.toml; None: that default file).
+    topology: Path | None = None
     lcm_port: int | None = None
     # Another controller binary (default: controller_binary(preset)), a command it runs under
     # (e.g. ("qemu-aarch64-static",) for a cross-compiled one) and extra controller arguments.
@@ -48,7 +50,7 @@ class HilError(RuntimeError):
 
 def _ports(opt: HilOptions) -> tuple[int, int]:
     rng = random.Random()
-    return opt.can_port or rng.randint(43200, 43999), opt.lcm_port or rng.randint(7700, 7999)
+    return opt.can_port or rng.randint(43200, 43990), opt.lcm_port or rng.randint(7700, 7999)
 
 
 def _logger_priority() -> None:
@@ -96,30 +98,65 @@ def check_loopback_route(group: str) -> None:
                        f"run as root: ip route replace {net} dev lo (tools/armctl does this when run as root)")
 
 
-def resolve_bus(choice: str) -> tuple[str, str]:
-    """(udp|vcan, why): auto takes vcan when the kernel has SocketCAN and vcan0 is up."""
+def load_topology(path: Path | None = None) -> list[Any]:
+    """The buses of the topology file (tools.busload.Bus: name, kind, rates, drives)."""
+    from tools.busload import DEFAULT_TOPOLOGY, ConfigError
+    from tools.busload import load_topology as _load
+
+    try:
+        return _load(path or DEFAULT_TOPOLOGY, len(JOINT_NAMES))
+    except ConfigError as exc:
+        raise HilError(f"bus topology: {exc}") from exc
+
+
+def vcan_names(n: int) -> list[str]:
+    return [f"vcan{i}" for i in range(n)]
+
+
+def bus_args(kind: str, can_port: int, topology: list[Any]) -> list[str]:
+    """SPEC@DRIVES per bus of the topology: udp on port can_port + i, or vcan0, vcan1, ..."""
+    out = []
+    for i, b in enumerate(topology):
+        spec = f"udp:239.74.163.2:{can_port + i}" if kind == "udp" else f"socketcan:vcan{i}"
+        out.append(f"{spec}@{','.join(map(str, b.drives))}")
+    return out
+
+
+def resolve_bus(choice: str, n_buses: int = 1) -> tuple[str, str]:
+    """(udp|vcan, why): auto takes vcan when the kernel has SocketCAN and vcan0..vcan<n-1> are up."""
     from tools.vcan import can_interfaces, kernel_has_can
 
     if choice == "udp":
         return "udp", "asked for"
     ok, why = kernel_has_can()
-    has_vcan0 = ok and any(i.get("name") == "vcan0" for i in can_interfaces())
+    names = vcan_names(n_buses)
+    present = {i.get("name") for i in can_interfaces()} if ok else set()
+    missing = [n for n in names if n not in present]
+    has_vcan = ok and not missing
     if choice == "vcan":
-        if not has_vcan0:
-            raise HilError(f"--bus vcan: {why or 'no vcan0 interface'} (tools/armctl vcan up, or --bus vm "
-                           "to run inside the VM that has one)")
+        if not has_vcan:
+            raise HilError(f"--bus vcan: {why or 'no ' + ', '.join(missing) + ' interface'} (the topology has "
+                           f"{n_buses} bus(es): {', '.join(names)}; tools/armctl vcan up --iface NAME, or --bus vm "
+                           "to run inside the VM that has them)")
         return "vcan", "asked for"
     if choice != "auto":
         raise HilError(f"--bus: unknown bus '{choice}' (auto, udp, vcan, vm)")
-    if has_vcan0:
-        return "vcan", "this kernel has SocketCAN and vcan0"
-    return "udp", why or "no vcan0 interface"
+    if has_vcan:
+        return "vcan", f"this kernel has SocketCAN and {', '.join(names)}"
+    return "udp", why or f"no {', '.join(missing)} interface"
+
+
+def _default_topology_path() -> Path:
+    from tools.busload import DEFAULT_TOPOLOGY
+
+    return DEFAULT_TOPOLOGY
 
 
 def run_hil(opt: HilOptions) -> dict[str, Any]:
     for group in ("239.255.76.67", "239.74.163.2"):
         check_loopback_route(group)
-    bus_kind, bus_why = resolve_bus(opt.bus)
+    topology = load_topology(opt.topology)
+    bus_kind, bus_why = resolve_bus(opt.bus, len(topology))
     binary = opt.controller or controller_binary(opt.preset)
     if not binary.exists():
         raise HilError(f"{binary} is missing: run tools/armctl build")
@@ -127,7 +164,8 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
     for stale in ("telemetry.lcmlog", "controller_summary.json", "sim_summary.json", "run.json", "uncertainty.json"):
         (opt.out / stale).unlink(missing_ok=True)
     can_port, lcm_port = _ports(opt)
-    bus = f"udp:239.74.163.2:{can_port}" if bus_kind == "udp" else "socketcan:vcan0"
+    buses = bus_args(bus_kind, can_port, topology)
+    bus_argv = [a for spec in buses for a in ("--bus", spec)]
     url = f"udpm://239.255.76.67:{lcm_port}?ttl=0&recv_buf_size=8388608"
     log_path = opt.out / "telemetry.lcmlog"
     logs = {name: open(opt.out / f"{name}.log", "w") for name in ("controller", "simulator", "logger")}
@@ -146,12 +184,12 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
             write_json_atomic(opt.out / "uncertainty.json", opt.uncertainty)
             sim_args = ["--uncertainty", str(opt.out / "uncertainty.json")]
         sim = subprocess.Popen(
-            [sys.executable, "-m", "host_sim", "--bus", bus, "--lcm-url", url,
+            [sys.executable, "-m", "host_sim", *bus_argv, "--lcm-url", url,
              "--summary", str(opt.out / "sim_summary.json"), *sim_args],
             cwd=REPO, env=env_with_repo(), stdout=logs["simulator"], stderr=subprocess.STDOUT)
         procs.append(sim)
         ctl = subprocess.Popen(
-            [*opt.controller_cmd_prefix, str(binary), "--bus", bus, "--lcm-url", url,
+            [*opt.controller_cmd_prefix, str(binary), *bus_argv, "--lcm-url", url,
              "--duration", f"{opt.duration_s:g}", "--method", opt.method, "--mode", opt.mode,
              "--summary", str(opt.out / "controller_summary.json"), *opt.controller_args],
             stdout=logs["controller"], stderr=subprocess.STDOUT)
@@ -187,7 +225,11 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
               "joint_names": JOINT_NAMES, "controller_args": list(opt.controller_args),
               "uncertainty": opt.uncertainty, **opt.labels}
     run = analyse(opt.out, controller, simulator, config, {
-        "bus": bus, "bus_choice": f"{opt.bus} -> {bus_kind} ({bus_why})", "lcm_url": url, "wall_s": wall,
+        "bus": " ".join(buses), "bus_choice": f"{opt.bus} -> {bus_kind} ({bus_why})",
+        "topology": {"file": str(opt.topology or _default_topology_path()),
+                     "buses": [{"name": b.name, "spec": spec.rpartition("@")[0], "kind": b.describe(),
+                                "drives": b.drives} for b, spec in zip(topology, buses)]},
+        "lcm_url": url, "wall_s": wall,
         "exit_codes": {"controller": ctl.returncode, "simulator": sim.returncode}})
     write_json_atomic(opt.out / "run.json", run)
     return run

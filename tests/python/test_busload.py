@@ -7,6 +7,7 @@ import json
 import math
 
 import pytest
+from pathlib import Path
 
 from tools import busload
 from tools.busload import Bus, Protocol, classic_frame_bits, compute, fd_frame_bits
@@ -142,8 +143,17 @@ def _run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]
     return rc, out, err
 
 
-def test_default_is_refused_naming_bus_load_and_rate(capsys: pytest.CaptureFixture[str]) -> None:
-    rc, out, err = _run(capsys)
+def test_default_topology_fits(capsys: pytest.CaptureFixture[str]) -> None:
+    # firmware/protocol/buses.toml: two CAN FD 1/5 Mbit/s buses, drives 1-3 and 4-6: 69.0 % each
+    rc, out, _ = _run(capsys)
+    assert rc == 0 and "fits" in out
+    assert "can0: CAN FD 1 Mbit/s arbitration / 5 Mbit/s data, drives 1,2,3" in out
+    assert "can1: CAN FD 1 Mbit/s arbitration / 5 Mbit/s data, drives 4,5,6" in out
+    assert out.count("load 69.0%") == 2
+
+
+def test_one_fd_bus_is_refused_naming_bus_load_and_rate(capsys: pytest.CaptureFixture[str]) -> None:
+    rc, out, err = _run(capsys, "--bus", "fd:1M/5M:1-6")
     assert rc == 2
     assert "bus can0" in err and "131.4%" in err and "70% budget" in err
     assert "highest loop rate that fits is 531 Hz" in err
@@ -164,7 +174,7 @@ def test_a_fitting_config_exits_0(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 def test_json_output(capsys: pytest.CaptureFixture[str]) -> None:
-    rc, out, _ = _run(capsys, "--json", "--rate", "500")
+    rc, out, _ = _run(capsys, "--json", "--rate", "500", "--bus", "fd:1M/5M:1-6")
     doc = json.loads(out)
     assert rc == 0 and doc["fits"] and doc["max_rate_hz"] == 531
     assert doc["buses"][0]["periodic_us"] == pytest.approx(1310.6)
@@ -182,3 +192,43 @@ def test_json_output(capsys: pytest.CaptureFixture[str]) -> None:
 def test_config_errors_exit_2(capsys: pytest.CaptureFixture[str], argv: list[str], needle: str) -> None:
     rc, _, err = _run(capsys, *argv)
     assert rc == 2 and needle in err
+
+
+def _topology(tmp_path: Path, text: str) -> Path:
+    p = tmp_path / "buses.toml"
+    p.write_text(text)
+    return p
+
+
+BUS = '[[bus]]\nname = "{name}"\nkind = "{kind}"\nnominal = "1M"\n{data}drives = {drives}\n'
+
+
+def _bus(name: str = "can0", kind: str = "fd", data: str = 'data = "5M"\n', drives: str = "[1, 2, 3]") -> str:
+    return BUS.format(name=name, kind=kind, data=data, drives=drives)
+
+
+@pytest.mark.parametrize(("text", "needle"), [
+    (_bus() + _bus("can1", drives="[3, 4, 5, 6]"), "bus can1.drives: drive 3 is on two buses (can0 and can1)"),
+    (_bus(), "drives: drive(s) 4, 5, 6 are on no bus"),
+    (_bus(drives="[1, 2, 3, 4, 5, 6, 7]"), "bus can0.drives: drive 7 does not exist"),
+    (_bus(kind="lin", drives="[1, 2, 3, 4, 5, 6]"), "bus can0.kind: expected"),
+    (_bus(kind="classic", drives="[1, 2, 3, 4, 5, 6]"), "bus can0.data: a classic bus has one bit rate"),
+    (_bus(data='data = "fast"\n', drives="[1, 2, 3, 4, 5, 6]"), "bus can0.data: bit rate 'fast'"),
+    (_bus(drives='"1-6"'), "bus can0.drives: expected a non-empty list"),
+    (_bus() + _bus(drives="[4, 5, 6]"), "bus[1].name: bus name 'can0' is used twice"),
+    (_bus(drives="[1, 2, 3, 4, 5, 6]") + "speed = 3\n", "bus[0]: unknown field(s) speed"),
+    ("bus = 1\n", "bus: expected one or more [[bus]] tables"),
+])
+def test_topology_errors_name_the_field(tmp_path: Path, text: str, needle: str) -> None:
+    with pytest.raises(busload.ConfigError) as exc:
+        busload.load_topology(_topology(tmp_path, text), 6)
+    assert needle in str(exc.value)
+
+
+def test_topology_file_drives_the_default(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    p = _topology(tmp_path, _bus(drives="[1, 2, 3, 4, 5, 6]"))
+    rc, _, err = _run(capsys, "--topology", str(p))
+    assert rc == 2 and "131.4%" in err
+    bad = _topology(tmp_path, _bus())
+    rc, _, err = _run(capsys, "--topology", str(bad))
+    assert rc == 2 and "are on no bus" in err

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import time
 from pathlib import Path
 
@@ -43,6 +44,24 @@ def test_every_period_is_accounted_for(short_run: tuple[Path, dict]) -> None:
     assert sim["periods"] >= ctl["steps_done"]
     assert sim["commands_missed"] == 0
     assert ctl["frames"]["rx_unknown_id"] == 0 and ctl["frames"]["rx_wrong_counter"] == 0
+    assert ctl["frames"]["rx_wrong_bus"] == 0 and sim["rx_wrong_bus"] == 0
+
+
+def test_default_run_uses_the_two_bus_topology(short_run: tuple[Path, dict]) -> None:
+    # firmware/protocol/buses.toml: can0 carries drives 1-3, can1 drives 4-6 (one UDP port each)
+    out, run = short_run
+    topo = run["environment"]["topology"]
+    assert [b["drives"] for b in topo["buses"]] == [[1, 2, 3], [4, 5, 6]]
+    assert [b["name"] for b in topo["buses"]] == ["can0", "can1"]
+    specs = [b["spec"] for b in topo["buses"]]
+    ports = [int(s.rpartition(":")[2]) for s in specs]
+    assert specs[0].startswith("udp:239.74.163.2:") and ports[1] == ports[0] + 1
+    assert run["environment"]["bus"] == f"{specs[0]}@1,2,3 {specs[1]}@4,5,6"
+    ctl = json.loads((out / "controller_summary.json").read_text())
+    sim = json.loads((out / "sim_summary.json").read_text())
+    # SYNC goes on both buses, each command on its drive's bus (plus the two NMT frames per bus):
+    # per period the controller sends 2 SYNC + 6 CMD.
+    assert ctl["frames"]["tx"] >= 8 * sim["periods"]
 
 
 def test_telemetry_log_is_complete_and_recomputes_the_table(short_run: tuple[Path, dict]) -> None:
@@ -75,7 +94,9 @@ def test_controller_safe_stops_when_the_simulator_dies(controller_bin: Path, bus
                 p.kill()
         frames = rec.close()
     assert code == 4, err
-    assert "no joint state from drive(s) 1,2,3,4,5,6" in err and "zero torque" in err
+    # Killed mid-period, the simulator may have sent some drives' states already: the message names
+    # exactly the ones missing.
+    assert re.search(r"no joint state from drive\(s\) [1-6](,[1-6])* within", err) and "zero torque" in err
     assert seconds < 4.0  # lockstep timeout 1 s by default, plus process start-up margin
     last_cmds = [f for f in frames if f.arbitration_id in CMD_IDS][-6:]
     assert sorted(f.arbitration_id for f in last_cmds) == sorted(CMD_IDS)
@@ -120,6 +141,11 @@ def test_controller_boot_names_the_missing_drives(controller_bin: Path, bus_spec
     (["--method", "magic"], "--method"),
     (["--mode", "fast"], "--mode"),
     (["--bus", "can9"], "--bus"),
+    (["--bus", "udp:239.74.163.2:44001@1-4", "--bus", "udp:239.74.163.2:44002@4-6"],
+     "--bus: drive 4 is on two buses"),
+    (["--bus", "udp:239.74.163.2:44001@1-3"], "--bus: drive(s) 4,5,6 on no bus"),
+    (["--bus", "udp:239.74.163.2:44001@1-3", "--bus", "udp:239.74.163.2:44001@4-6"], "--bus: bus"),
+    (["--bus", "udp@1-7"], "--bus: 'udp@1-7': drives '1-7'"),
     (["--lcm-url", "udpm://239.255.76.67:7667?ttl=1"], "ttl=0"),
     (["--kp"], "--kp: missing value"),
     (["--frobnicate", "1"], "--frobnicate"),
@@ -171,3 +197,63 @@ def test_telemetry_group_is_routed_to_loopback() -> None:
 
     r = subprocess.run(["ip", "route", "get", "239.255.76.67"], capture_output=True, text=True)
     assert " dev lo " in f" {r.stdout} "
+
+
+@pytest.mark.parametrize(("args", "named"), [
+    (["--bus", "udp:239.74.163.2:44001@1-4", "--bus", "udp:239.74.163.2:44002@4-6"],
+     "--bus: drive 4 is on two buses"),
+    (["--bus", "udp:239.74.163.2:44001@1-3"], "--bus: drive(s) 4,5,6 on no bus"),
+])
+def test_simulator_refuses_bad_bus_mappings(args: list[str], named: str) -> None:
+    import subprocess
+    import sys
+
+    from tools.paths import REPO, env_with_repo
+
+    r = subprocess.run([sys.executable, "-m", "host_sim", *args, "--lcm-url", ""], capture_output=True, text=True,
+                       timeout=60, cwd=REPO, env=env_with_repo())
+    assert r.returncode == 2
+    assert named in r.stderr
+
+
+def test_a_drive_frame_on_the_wrong_bus_is_counted_and_ignored(controller_bin: Path, bus_spec: str,
+                                                               tmp_path: Path) -> None:
+    """Drive 1 is on bus 0; its STATE and HEARTBEAT ids injected on bus 1 must not reach it."""
+    group, port = bus_spec.rsplit(":", 1)
+    bus0, bus1 = bus_spec, f"{group}:{int(port) + 1000 if int(port) < 44500 else int(port) - 1000}"
+    summary = tmp_path / "ctl.json"
+    sim = start_sim(f"{bus0}@1-3", "--bus", f"{bus1}@4-6", summary=tmp_path / "sim.json")
+    ctl = start_controller(controller_bin, f"{bus0}@1-3", "--bus", f"{bus1}@4-6", "--duration", "20",
+                           "--summary", str(summary))
+    intruder = open_bus(bus1)
+    import can
+
+    injected = 0
+    try:
+        time.sleep(2.5)  # booted and tracking (20 s of lockstep periods take several seconds more)
+        assert ctl.poll() is None and sim.poll() is None
+        for _ in range(5):  # a burst: all of it lands while the run is going
+            state = bytes(range(16))  # DRIVE_1_STATE: CAN FD, 16 bytes; a counter that may even match
+            intruder.send(can.Message(arbitration_id=0x181, data=state, is_extended_id=False, is_fd=True,
+                                      bitrate_switch=True))
+            intruder.send(can.Message(arbitration_id=0x701, data=bytes([0x7F]), is_extended_id=False))
+            injected += 2
+        time.sleep(0.1)
+        assert ctl.poll() is None, "the run ended before the injected frames could arrive"
+        code, _, err = wait_exit(ctl, timeout=60)
+        sim_code, _, sim_err = wait_exit(sim, timeout=30)
+    finally:
+        intruder.shutdown()
+        for p in (sim, ctl):
+            if p.poll() is None:
+                p.kill()
+    assert code == 0, err
+    assert sim_code == 0, sim_err
+    s = json.loads(summary.read_text())
+    sim_s = json.loads((tmp_path / "sim.json").read_text())
+    assert s["result"] == 0 and s["final_state"] == "running"
+    assert s["frames"]["rx_wrong_bus"] == injected
+    # ignored: no extra state or heartbeat accepted, nothing else counted as bad
+    assert s["frames"]["rx_state"] == 6 * sim_s["periods"]
+    assert s["frames"]["rx_wrong_counter"] == 0 and s["frames"]["rx_bad_length"] == 0
+    assert sim_s["commands_missed"] == 0

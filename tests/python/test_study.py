@@ -4,6 +4,7 @@ report; deterministic lockstep runs; a killed process ends the run in a defined,
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import threading
 import time
@@ -82,7 +83,7 @@ def _kill_when_running(pattern: str, after_s: float) -> threading.Thread:
 
 @pytest.mark.parametrize("victim", ["simulator", "controller"])
 def test_a_killed_process_ends_the_run_in_a_named_state(tmp_path: Path, controller_bin: Path, victim: str) -> None:
-    port = 43900 if victim == "simulator" else 43901
+    port = 43900 if victim == "simulator" else 43910
     pattern = f"host_sim --bus udp:239.74.163.2:{port}" if victim == "simulator" else \
         f"arm_controller --bus udp:239.74.163.2:{port}"
     killer = _kill_when_running(pattern, after_s=2.5)
@@ -93,7 +94,7 @@ def test_a_killed_process_ends_the_run_in_a_named_state(tmp_path: Path, controll
     assert r["result"] == "failed"
     text = " ".join(r["problems"])
     if victim == "simulator":
-        assert "simulator died" in text and "no joint state from drive(s) 1,2,3,4,5,6" in text
+        assert "simulator died" in text and re.search(r"no joint state from drive\(s\) [1-6](,[1-6])* within", text)
         assert r["final_state"] in ("fault", "safe-stop")
     else:
         assert "controller died" in text and "controller silent" in text

@@ -1,15 +1,17 @@
-"""HIL over a real SocketCAN bus: the controller and the simulator on vcan0 inside the qemu VM.
+"""HIL over real SocketCAN buses: the controller and the simulator on vcan0 + vcan1 inside the qemu VM.
 
 This machine's kernel has no CAN, so tools/vm boots Debian's kernel under qemu (software
-emulation), where vcan0 (CAN FD, MTU 72) exists, chroots into this very filesystem and runs
+emulation), where vcan0 and vcan1 (CAN FD, MTU 72) exist, chroots into this very filesystem and runs
 VM_SCRIPT below. One boot serves every test in this module (the VM is slow: ~15 s to boot,
 `import mujoco` 20-60 s, ~10-45 lockstep periods/s):
 
 1. the SocketCAN unit test again, now on a kernel that has AF_CAN, and the live transport selftest;
-2. `candump -L vcan0` records the bus while `arm_controller --bus socketcan:vcan0` and
-   `python -m host_sim --bus socketcan:vcan0` run 300 lockstep periods;
+2. `candump -L vcan0 vcan1` records both buses while `arm_controller` and `python -m host_sim`
+   run 300 lockstep periods on the default topology (firmware/protocol/buses.toml): drives 1-3
+   on vcan0, 4-6 on vcan1 (`--bus socketcan:vcan0@1-3 --bus socketcan:vcan1@4-6`);
 3. after the 20th SYNC a misbehaving node (`cansend`) puts frames on the bus that nobody may act
-   on: unknown ids, wrong lengths, a classic frame where FD is expected, remote and 29-bit frames.
+   on: unknown ids, wrong lengths, a classic frame where FD is expected, remote and 29-bit frames,
+   and drive 1's STATE on vcan1 (not drive 1's bus).
 
 On the host: both processes succeeded; every captured frame is either one of the injected ones
 (each exactly once) or decodes with the DBC via cantools with the DBC's length and FD/BRS format;
@@ -38,43 +40,49 @@ from tools.paths import REPO, env_with_repo
 PERIODS = 300
 VM_TIMEOUT_S = 420.0  # generous: the whole module takes ~2-4 min on the 2-core CI machine
 
-# (cansend argument, where the controller counts it, where the simulator counts it)
+# (IFACE/cansend argument, where the controller counts it, where the simulator counts it)
 GARBAGE = [
-    ("123#DEADBEEF", "rx_unknown_id", "rx_unknown_id"),                          # unknown id
-    ("345##100112233445566778899AABBCCDDEEFF", "rx_unknown_id", "rx_unknown_id"),  # unknown id, FD
-    ("181#01020304", "rx_bad_format", "rx_own_echo"),    # DRIVE_1_STATE as a classic frame
-    ("182##10011223344556677", "rx_bad_length", "rx_own_echo"),  # DRIVE_2_STATE, FD, 8 bytes
-    ("701#0005", "rx_bad_length", "rx_own_echo"),        # heartbeat with 2 bytes
-    ("201#0102", "rx_own_echo", "rx_bad_frame"),         # DRIVE_1_CMD with 2 bytes
-    ("080#0102", "rx_own_echo", "rx_bad_frame"),         # SYNC with 2 bytes
-    ("7FF#R", "rx_bad_format", "rx_bad_frame"),          # remote frame
-    ("12345678#00", "rx_bad_format", "rx_bad_frame"),    # 29-bit id
+    ("vcan0/123#DEADBEEF", "rx_unknown_id", "rx_unknown_id"),                          # unknown id
+    ("vcan0/345##100112233445566778899AABBCCDDEEFF", "rx_unknown_id", "rx_unknown_id"),  # unknown id, FD
+    ("vcan0/181#01020304", "rx_bad_format", "rx_own_echo"),    # DRIVE_1_STATE as a classic frame
+    ("vcan0/182##10011223344556677", "rx_bad_length", "rx_own_echo"),  # DRIVE_2_STATE, FD, 8 bytes
+    ("vcan0/701#0005", "rx_bad_length", "rx_own_echo"),        # heartbeat with 2 bytes
+    ("vcan0/201#0102", "rx_own_echo", "rx_bad_frame"),         # DRIVE_1_CMD with 2 bytes
+    ("vcan0/080#0102", "rx_own_echo", "rx_bad_frame"),         # SYNC with 2 bytes
+    ("vcan0/7FF#R", "rx_bad_format", "rx_bad_frame"),          # remote frame
+    ("vcan0/12345678#00", "rx_bad_format", "rx_bad_frame"),    # 29-bit id
+    ("vcan1/181##1FFEEDDCCBBAA99887766554433221100", "rx_wrong_bus", "rx_own_echo"),  # drive 1's STATE on vcan1
 ]
+BUSES = "--bus socketcan:vcan0@1-3 --bus socketcan:vcan1@4-6"
+
+
+def _frame_text(g: str) -> str:
+    return g.split("/", 1)[1]
 
 VM_SCRIPT = r"""#!/bin/sh
 # Runs inside the VM, chrooted into the host's filesystem (tests/python/test_vcan_vm.py).
-OUT=$1; CTL=$2; PY=$3; UNIT=$4; SELFTEST=$5; DURATION=$6; GARBAGE=$7; CTL_EXTRA=$8
+OUT=$1; CTL=$2; PY=$3; UNIT=$4; SELFTEST=$5; DURATION=$6; GARBAGE=$7; CTL_EXTRA=$8; BUSES=$9
 "$UNIT" > "$OUT/unit.out" 2>&1; echo $? > "$OUT/unit.rc"
 "$SELFTEST" vcan0 > "$OUT/selftest.out" 2>&1; echo $? > "$OUT/selftest.rc"
 
 # candump writes to the guest's tmpfs with a large socket buffer (-r, SO_RCVBUFFORCE): a capture
 # must not lose frames while 9p writes stall on a busy host; copied out at the end.
 CAP=/dev/shm/candump.log
-candump -L -r 8388608 vcan0 > "$CAP" 2> "$OUT/candump.err" &
+candump -L -r 8388608 vcan0 vcan1 > "$CAP" 2> "$OUT/candump.err" &
 CD=$!
-"$PY" -m host_sim --bus socketcan:vcan0 --lcm-url "" --boot-timeout 180 --idle-timeout 60 \
+"$PY" -m host_sim $BUSES --lcm-url "" --boot-timeout 180 --idle-timeout 60 \
     --summary "$OUT/sim.json" > "$OUT/sim.out" 2> "$OUT/sim.err" &
 SIM=$!
-(   # a misbehaving node: once 20 periods ran, frames that nobody may act on
+(   # a misbehaving node: once 20 periods ran (SYNC on both buses), frames that nobody may act on
     n=0
-    while [ "$(grep -c ' 080#' "$CAP")" -lt 20 ] && [ $n -lt 1500 ]; do
+    while [ "$(grep -c ' 080#' "$CAP")" -lt 40 ] && [ $n -lt 1500 ]; do
         sleep 0.2; n=$((n + 1))
     done
-    for f in $GARBAGE; do cansend vcan0 "$f" || echo "cansend $f failed" >> "$OUT/garbage.err"; done
+    for f in $GARBAGE; do cansend "${f%%/*}" "${f#*/}" || echo "cansend $f failed" >> "$OUT/garbage.err"; done
     [ -f "$OUT/ctl.rc" ] || echo sent > "$OUT/garbage.done"
 ) &
 INJ=$!
-"$CTL" --bus socketcan:vcan0 --lcm-url "" --duration "$DURATION" --boot-timeout 180 \
+"$CTL" $BUSES --lcm-url "" --duration "$DURATION" --boot-timeout 180 \
     --lockstep-timeout 5 $CTL_EXTRA --summary "$OUT/ctl.json" > "$OUT/ctl.out" 2> "$OUT/ctl.err"
 echo $? > "$OUT/ctl.rc"
 wait $SIM; echo $? > "$OUT/sim.rc"
@@ -112,12 +120,13 @@ def parse_frame(text: str) -> Frame:
     return Frame(int(ident, 16), ext, False, False, False, bytes.fromhex(rest.replace(".", "")))
 
 
-def parse_capture(path: Path) -> list[Frame]:
+def parse_capture(path: Path, with_iface: bool = False) -> list:
     frames = []
     for line in path.read_text().splitlines():
         m = _LINE.match(line.strip())
         assert m, f"{path.name}: unexpected line {line!r}"
-        frames.append(parse_frame(m.group(3) + m.group(4) + m.group(5)))
+        f = parse_frame(m.group(3) + m.group(4) + m.group(5))
+        frames.append((m.group(2), f) if with_iface else f)
     return frames
 
 
@@ -150,7 +159,7 @@ def vm_run(tmp_path_factory: pytest.TempPathFactory, build_dir: Path) -> dict:
     log = io.BytesIO()
     res = run_in_vm(
         ["sh", str(script), str(out), str(exes["ctl"]), sys.executable, str(exes["unit"]),
-         str(exes["selftest"]), f"{PERIODS / 1000:g}", " ".join(g for g, _, _ in GARBAGE), ctl_extra],
+         str(exes["selftest"]), f"{PERIODS / 1000:g}", " ".join(g for g, _, _ in GARBAGE), ctl_extra, BUSES],
         cwd=REPO, env=env_with_repo(), timeout=VM_TIMEOUT_S, stdout=log, stderr=log)
     console = "\n".join(res.console_tail)
     assert not res.timed_out, f"VM timed out after {VM_TIMEOUT_S:g} s; console:\n{console}"
@@ -195,13 +204,21 @@ def test_hil_run_over_vcan_succeeds(vm_run: dict) -> None:
 
 def test_every_captured_frame_decodes_with_the_dbc(vm_run: dict) -> None:
     db = cantools.database.load_file(str(DBC_PATH))
-    frames = parse_capture(vm_run["out"] / "candump.log")
+    frames = parse_capture(vm_run["out"] / "candump.log", with_iface=True)
     sim = json.loads(vm_run["read"]("sim.json"))
 
-    injected = [parse_frame(g) for g, _, _ in GARBAGE]
-    for g in injected:  # each injected frame is on the bus exactly once, unchanged
+    injected = [(g.split("/")[0], parse_frame(_frame_text(g))) for g, _, _ in GARBAGE]
+    for g in injected:  # each injected frame is on its bus exactly once, unchanged
         assert frames.count(g) == 1, f"injected {g} seen {frames.count(g)} times"
         frames.remove(g)
+    # every drive's STATE, CMD and HEARTBEAT on its own bus only: drives 1-3 on vcan0, 4-6 on vcan1
+    for iface, f in frames:
+        if f.can_id in (*range(0x181, 0x187), *range(0x201, 0x207), *range(0x701, 0x707)):
+            drive = f.can_id & 0x7F
+            assert iface == ("vcan0" if drive <= 3 else "vcan1"), f"drive {drive} frame {f} on {iface}"
+    sync_per_bus = {i: sum(1 for b, f in frames if b == i and f.can_id == 0x080) for i in ("vcan0", "vcan1")}
+    assert sync_per_bus["vcan0"] == sync_per_bus["vcan1"] == sim["periods"]
+    frames = [f for _, f in frames]
 
     counts: dict[str, int] = {}
     for f in frames:
@@ -214,13 +231,13 @@ def test_every_captured_frame_decodes_with_the_dbc(vm_run: dict) -> None:
         db.decode_message(f.can_id, f.data)  # raises on anything that does not decode
         counts[msg.name] = counts.get(msg.name, 0) + 1
 
-    n_sync = counts["SYNC"]
+    n_sync = counts["SYNC"] // 2  # SYNC goes on both buses
     assert n_sync == sim["periods"] >= PERIODS
     for i in range(1, 7):
         assert counts[f"DRIVE_{i}_STATE"] == n_sync
         assert counts[f"DRIVE_{i}_CMD"] == n_sync
         assert counts[f"DRIVE_{i}_HEARTBEAT"] >= 3  # boot-up, operational, stopped
-    assert counts.get("NMT", 0) >= 2  # start ... stop
+    assert counts.get("NMT", 0) >= 4  # start ... stop, on both buses
     assert not any(name.endswith("_EMCY") for name in counts), counts
     assert len(frames) + len(injected) > 13 * PERIODS
 
@@ -231,7 +248,7 @@ def test_garbage_frames_are_counted_and_ignored(vm_run: dict) -> None:
         "the garbage was not sent while the run was going: " + read("garbage.err"))
     ctl = json.loads(read("ctl.json"))["frames"]
     sim = json.loads(read("sim.json"))
-    want_ctl = {k: 0 for k in ("rx_unknown_id", "rx_bad_format", "rx_bad_length", "rx_own_echo")}
+    want_ctl = {k: 0 for k in ("rx_unknown_id", "rx_bad_format", "rx_bad_length", "rx_own_echo", "rx_wrong_bus")}
     want_sim = {k: 0 for k in ("rx_unknown_id", "rx_own_echo", "rx_bad_frame")}
     for _, c, s in GARBAGE:
         want_ctl[c] += 1

@@ -8,6 +8,7 @@
 #include <time.h>
 
 #include "arm/can_bus.h"
+#include "arm_drives.h"
 #include "arm/reference.h"
 
 #define ALL_JOINTS ((uint32_t)((1ull << ARM_N_JOINTS) - 1u))
@@ -21,14 +22,15 @@ static int64_t now_ns(void)
 }
 
 typedef struct {
-    arm_can_bus_t bus;
+    arm_can_bus_set_t buses;
+    int bus_of[ARM_N_JOINTS]; /* index into buses of each drive's bus */
     arm_drive_bus_t drives;
     run_report_t *report;
 } link_t;
 
-static int send_frame(link_t *l, const arm_can_frame_t *f)
+static int send_frame(link_t *l, unsigned bus, const arm_can_frame_t *f)
 {
-    const int rc = arm_can_bus_send(&l->bus, f);
+    const int rc = arm_can_bus_set_send(&l->buses, bus, f);
     if (rc == 0) {
         l->report->frames_tx++;
     } else {
@@ -37,6 +39,24 @@ static int send_frame(link_t *l, const arm_can_frame_t *f)
         l->report->tx_would_block++;
     }
     return rc;
+}
+
+/* SYNC and NMT address every drive: they go on every bus. */
+static void send_all(link_t *l, const arm_can_frame_t *f)
+{
+    for (unsigned b = 0; b < l->buses.n; ++b) {
+        (void)send_frame(l, b, f);
+    }
+}
+
+/* The drive a frame comes from (STATE, HEARTBEAT, EMCY), or -1 (CMD: a frame we send). */
+static int sender_joint(const arm_can_frame_t *f)
+{
+    const int j = arm_bus_joint_of(f);
+    if (j < 0 || f->id == ARM_DRIVES_DRIVE_1_CMD_FRAME_ID + (uint32_t)j) {
+        return -1;
+    }
+    return j;
 }
 
 /* Receive and dispatch frames until want_mask is complete (for states) or the deadline passes. */
@@ -51,9 +71,15 @@ static void pump(link_t *l, int64_t deadline_ns, uint32_t (*done)(const arm_driv
             return;
         }
         arm_can_frame_t f;
-        const int rc = arm_can_bus_recv(&l->bus, &f, (int)(left / 1000 + 1));
+        unsigned bus = 0u;
+        const int rc = arm_can_bus_set_recv(&l->buses, &f, &bus, (int)(left / 1000 + 1));
         if (rc == 1) {
             l->report->frames_rx++;
+            const int j = sender_joint(&f);
+            if (j >= 0 && l->bus_of[j] != (int)bus) {
+                l->report->rx_wrong_bus++; /* drive j is not on this bus: not its frame */
+                continue;
+            }
             (void)arm_bus_handle_rx(&l->drives, &f);
         } else if (rc < 0) {
             return;
@@ -96,7 +122,7 @@ static int boot(link_t *l, const options_t *opt, telemetry_t *telem)
     arm_bus_make_nmt(ARM_NMT_START, 0u, &nmt);
     /* NMT start is repeated because the drives may join the bus after us. */
     while (now_ns() < give_up) {
-        send_frame(l, &nmt);
+        send_all(l, &nmt);
         int64_t slice = now_ns() + 50000000LL;
         if (slice > give_up) slice = give_up;
         pump(l, slice, drives_operational);
@@ -110,7 +136,7 @@ static int boot(link_t *l, const options_t *opt, telemetry_t *telem)
     list_joints(ALL_JOINTS & ~drives_operational(&l->drives), missing, sizeof(missing));
     snprintf(l->report->reason, sizeof(l->report->reason),
              "boot: drive(s) %s not operational within %.1f s (no heartbeat with NMT state "
-             "operational; is the simulator on bus '%s'?)",
+             "operational; is the simulator on bus '%.200s'?)",
              missing, opt->boot_timeout_s, opt->bus);
     return -1;
 }
@@ -122,7 +148,7 @@ static void send_commands(link_t *l, const arm_ctl_output_t *out)
         arm_can_frame_t f;
         arm_bus_make_cmd(&l->drives, j, enabled ? ARM_CW_ENABLE_OPERATION : ARM_CW_SHUTDOWN,
                          out->tau[j], &f);
-        send_frame(l, &f);
+        send_frame(l, (unsigned)l->bus_of[j], &f);
     }
 }
 
@@ -136,7 +162,10 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
     report->final_state = ARM_STATE_INIT;
 
     char err[200];
-    if (arm_can_bus_open(&l.bus, opt->bus, err, sizeof(err)) != 0) {
+    for (int j = 0; j < ARM_N_JOINTS; ++j) {
+        l.bus_of[j] = arm_can_bus_set_bus_of(&opt->buses, (unsigned)j);
+    }
+    if (arm_can_bus_set_open(&l.buses, &opt->buses, err, sizeof(err)) != 0) {
         snprintf(report->reason, sizeof(report->reason), "bus: %s", err);
         report->result = RUN_BUS_ERROR;
         return;
@@ -149,7 +178,7 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
         snprintf(report->reason, sizeof(report->reason), "controller config: %s",
                  arm_ctl_init_result_str(ir));
         report->result = RUN_FAULT;
-        arm_can_bus_close(&l.bus);
+        arm_can_bus_set_close(&l.buses);
         return;
     }
 
@@ -157,7 +186,7 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
     if (boot(&l, opt, telem) != 0) {
         report->result = RUN_BOOT_FAILED;
         telemetry_event(telem, 0, "fault", report->reason);
-        arm_can_bus_close(&l.bus);
+        arm_can_bus_set_close(&l.buses);
         report->wall_s = (double)(now_ns() - t_start) * 1e-9;
         return;
     }
@@ -189,7 +218,7 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
         const int64_t cycle_start = now_ns();
         arm_can_frame_t sync;
         arm_bus_begin_period(&l.drives, k, &sync);
-        send_frame(&l, &sync);
+        send_all(&l, &sync);
         const int64_t wait_until = opt->mode == MODE_REALTIME
                                        ? next_deadline + period_ns * 8 / 10
                                        : cycle_start + (int64_t)(opt->lockstep_timeout_s * 1e9);
@@ -205,7 +234,7 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
                 }
                 arm_can_frame_t f;
                 arm_bus_make_cmd(&l.drives, j, arm_cia402_enable_controlword(sw), 0.0f, &f);
-                send_frame(&l, &f);
+                send_frame(&l, (unsigned)l.bus_of[j], &f);
             }
             if (enabled == ALL_JOINTS) {
                 enabling = 0;
@@ -315,10 +344,10 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
     /* Stop the drives: they go to a stopped NMT state and stop applying torque. */
     arm_can_frame_t stop;
     arm_bus_make_nmt(ARM_NMT_STOP, 0u, &stop);
-    send_frame(&l, &stop);
+    send_all(&l, &stop);
     report->final_state = out.state;
     report->final_fault = out.fault;
     report->rx = l.drives.rx;
     report->wall_s = (double)(now_ns() - t_start) * 1e-9;
-    arm_can_bus_close(&l.bus);
+    arm_can_bus_set_close(&l.buses);
 }

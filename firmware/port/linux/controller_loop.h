@@ -22,6 +22,7 @@ typedef struct {
     uint64_t frames_tx;
     uint64_t frames_rx;
     uint64_t tx_would_block;
+    uint64_t rx_wrong_bus; /* a drive's frame (STATE/HEARTBEAT/EMCY) on a bus that is not its own */
     uint64_t overruns;
     double wall_s;
     double boot_s;

@@ -11,8 +11,10 @@
 void options_usage(const char *prog)
 {
     printf("usage: %s [options]\n"
-           "  --bus SPEC              udp | udp:GROUP:PORT (python-can udp_multicast wire format,\n"
-           "                          loopback only, TTL 0)            [udp:239.74.163.2:43113]\n"
+           "  --bus SPEC[@DRIVES]     udp | udp:GROUP:PORT (python-can udp_multicast wire format,\n"
+           "                          loopback only, TTL 0) | socketcan:IFACE; repeatable (up to 4\n"
+           "                          buses), DRIVES e.g. 1-3 or 4,5,6 (default: all); every drive\n"
+           "                          on exactly one bus             [udp:239.74.163.2:43113]\n"
            "  --lcm-url URL           LCM telemetry; must have ttl=0, '' for none\n"
            "                          [udpm://239.255.76.67:7667?ttl=0]\n"
            "  --mode lockstep|realtime                                [lockstep]\n"
@@ -98,6 +100,11 @@ int options_parse(int argc, char **argv, const arm_robot_model_t *model, options
 {
     memset(opt, 0, sizeof(*opt));
     strcpy(opt->bus, "udp:239.74.163.2:43113");
+    arm_can_bus_set_config_init(&opt->buses);
+    if (arm_can_bus_set_add(&opt->buses, opt->bus, ARM_N_JOINTS, "--bus", err, errcap) != 0) {
+        return -1;
+    }
+    int bus_given = 0;
     strcpy(opt->lcm_url, "udpm://239.255.76.67:7667?ttl=0");
     opt->mode = MODE_LOCKSTEP;
     opt->duration_s = 5.0;
@@ -129,8 +136,16 @@ int options_parse(int argc, char **argv, const arm_robot_model_t *model, options
         double d = 0.0;
         int rc = 0;
         if (strcmp(a, "--bus") == 0) {
-            rc = copy_str(a, v, opt->bus, sizeof(opt->bus), err, errcap);
-            if (rc == 0) rc = arm_can_bus_spec_valid(v, err, errcap);
+            if (!bus_given) {
+                arm_can_bus_set_config_init(&opt->buses);
+                opt->bus[0] = '\0';
+                bus_given = 1;
+            }
+            rc = arm_can_bus_set_add(&opt->buses, v, ARM_N_JOINTS, a, err, errcap);
+            if (rc == 0) {
+                const size_t len = strlen(opt->bus);
+                snprintf(opt->bus + len, sizeof(opt->bus) - len, "%s%s", len ? " " : "", v);
+            }
         } else if (strcmp(a, "--lcm-url") == 0) {
             rc = copy_str(a, v, opt->lcm_url, sizeof(opt->lcm_url), err, errcap);
             if (rc == 0) rc = check_lcm_url(v, err, errcap);
@@ -241,6 +256,9 @@ int options_parse(int argc, char **argv, const arm_robot_model_t *model, options
         if (rc != 0) {
             return -1;
         }
+    }
+    if (arm_can_bus_set_check(&opt->buses, ARM_N_JOINTS, "--bus", err, errcap) != 0) {
+        return -1;
     }
     if (ref_amp_given != ref_freq_given) {
         snprintf(err, errcap, "--ref-amp and --ref-freq go together (one was given without the other)");

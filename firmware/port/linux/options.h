@@ -4,13 +4,15 @@
 
 #include <stdint.h>
 
+#include "arm/can_bus.h"
 #include "arm/controller.h"
 #include "rt.h"
 
 typedef enum { MODE_LOCKSTEP = 0, MODE_REALTIME } run_mode_t;
 
 typedef struct {
-    char bus[128];          /* "udp" or "udp:GROUP:PORT" */
+    char bus[600];          /* the --bus arguments as given, space-separated (for messages) */
+    arm_can_bus_set_config_t buses; /* --bus SPEC[@DRIVES], repeatable; default: one udp bus */
     char lcm_url[256];      /* "" = no telemetry */
     char summary_path[512]; /* "" = none */
     run_mode_t mode;

@@ -46,4 +46,46 @@ int arm_can_bus_send(arm_can_bus_t *bus, const arm_can_frame_t *f);
 int arm_can_bus_recv(arm_can_bus_t *bus, arm_can_frame_t *f, int timeout_us);
 void arm_can_bus_close(arm_can_bus_t *bus);
 
+/* ---- bus set: several buses, drives assigned to buses -------------------------------------
+ * Command-line form (controller and host_sim --bus, repeatable): SPEC[@DRIVES], DRIVES a list of
+ * drive numbers and ranges (1-3, 4,5,6, 1-2,6); without @ the bus carries every drive. Each drive
+ * must be on exactly one bus. No heap: everything lives in the structs. */
+#define ARM_CAN_BUS_SET_MAX 4u
+#define ARM_CAN_BUS_SPEC_MAX 128u
+#define ARM_CAN_BUS_SET_MAX_DRIVES 32u
+
+typedef struct {
+    unsigned n;                                            /* buses given */
+    char spec[ARM_CAN_BUS_SET_MAX][ARM_CAN_BUS_SPEC_MAX]; /* the SPEC part, e.g. "socketcan:can0" */
+    arm_can_bus_spec_t parsed[ARM_CAN_BUS_SET_MAX];
+    uint32_t drive_mask[ARM_CAN_BUS_SET_MAX];             /* bit j: drive j + 1 */
+} arm_can_bus_set_config_t;
+
+void arm_can_bus_set_config_init(arm_can_bus_set_config_t *cfg);
+/* Adds one "SPEC[@DRIVES]" (drives 1..n_drives). -1 with a message naming `option` on a bad spec,
+ * a bad drive list, a spec given twice or more than ARM_CAN_BUS_SET_MAX buses. */
+int arm_can_bus_set_add(arm_can_bus_set_config_t *cfg, const char *arg, unsigned n_drives,
+                        const char *option, char *err, size_t errcap);
+/* Every drive 1..n_drives on exactly one bus; -1 with a message naming `option` otherwise. */
+int arm_can_bus_set_check(const arm_can_bus_set_config_t *cfg, unsigned n_drives,
+                          const char *option, char *err, size_t errcap);
+/* Index of the bus that carries drive (0-based joint index), or -1. */
+int arm_can_bus_set_bus_of(const arm_can_bus_set_config_t *cfg, unsigned joint);
+
+typedef struct {
+    unsigned n;
+    arm_can_bus_t bus[ARM_CAN_BUS_SET_MAX];
+    unsigned next; /* round-robin start of the next drain, so no bus starves another */
+} arm_can_bus_set_t;
+
+/* Opens every bus of cfg; on failure closes the ones opened and returns -1 (err names the spec). */
+int arm_can_bus_set_open(arm_can_bus_set_t *set, const arm_can_bus_set_config_t *cfg, char *err,
+                         size_t errcap);
+int arm_can_bus_set_send(arm_can_bus_set_t *set, unsigned index, const arm_can_frame_t *f);
+/* A frame from whichever bus has one (1, *index = that bus), 0 on timeout, <0 on error (*index =
+ * the failing bus). Queued frames are drained first; waits in one ppoll over every bus.
+ * timeout_us < 0: no limit. */
+int arm_can_bus_set_recv(arm_can_bus_set_t *set, arm_can_frame_t *f, unsigned *index, int timeout_us);
+void arm_can_bus_set_close(arm_can_bus_set_t *set);
+
 #endif

@@ -1,0 +1,146 @@
+/* The bus set (several buses, drives assigned to buses): SPEC[@DRIVES] parsing and validation,
+ * and a live two-bus loopback check (UDP multicast on lo) that recv reports which bus a frame
+ * came from, waiting on both at once. */
+#define _GNU_SOURCE
+#include <string.h>
+
+#include "arm/can_bus.h"
+#include "check.h"
+
+#define N 6u
+
+static int add(arm_can_bus_set_config_t *c, const char *arg, char *err, size_t cap)
+{
+    return arm_can_bus_set_add(c, arg, N, "--bus", err, cap);
+}
+
+static void test_two_buses(void)
+{
+    char err[300];
+    arm_can_bus_set_config_t c;
+    arm_can_bus_set_config_init(&c);
+    CHECK(add(&c, "socketcan:can0@1-3", err, sizeof err) == 0);
+    CHECK(add(&c, "socketcan:can1@4,5,6", err, sizeof err) == 0);
+    CHECK(c.n == 2u);
+    CHECK(strcmp(c.spec[0], "socketcan:can0") == 0 && strcmp(c.spec[1], "socketcan:can1") == 0);
+    CHECK(c.drive_mask[0] == 0x07u && c.drive_mask[1] == 0x38u);
+    CHECK(arm_can_bus_set_check(&c, N, "--bus", err, sizeof err) == 0);
+    for (unsigned j = 0; j < N; ++j) {
+        CHECK(arm_can_bus_set_bus_of(&c, j) == (j < 3u ? 0 : 1));
+    }
+    CHECK(arm_can_bus_set_bus_of(&c, 6u) == -1);
+}
+
+static void test_without_drives_is_all(void)
+{
+    char err[300];
+    arm_can_bus_set_config_t c;
+    arm_can_bus_set_config_init(&c);
+    CHECK(add(&c, "udp:239.74.163.2:43113", err, sizeof err) == 0);
+    CHECK(c.drive_mask[0] == 0x3Fu && c.parsed[0].kind == ARM_BUS_UDP && c.parsed[0].port == 43113u);
+    CHECK(arm_can_bus_set_check(&c, N, "--bus", err, sizeof err) == 0);
+    arm_can_bus_set_config_init(&c);
+    CHECK(add(&c, "udp@1-2,6", err, sizeof err) == 0 && c.drive_mask[0] == 0x23u);
+}
+
+static void expect_add_error(const char *first, const char *arg, const char *needle)
+{
+    char err[300] = "";
+    arm_can_bus_set_config_t c;
+    arm_can_bus_set_config_init(&c);
+    if (first != NULL) CHECK(add(&c, first, err, sizeof err) == 0);
+    const unsigned n = c.n;
+    CHECK_MSG(add(&c, arg, err, sizeof err) == -1, "%s accepted", arg);
+    CHECK(c.n == n);
+    CHECK_MSG(strncmp(err, "--bus: ", 7) == 0 && strstr(err, needle) != NULL, "'%s' lacks '%s'", err, needle);
+}
+
+static void expect_check_error(const char *a, const char *b, const char *needle)
+{
+    char err[300] = "";
+    arm_can_bus_set_config_t c;
+    arm_can_bus_set_config_init(&c);
+    CHECK(add(&c, a, err, sizeof err) == 0);
+    if (b != NULL) CHECK(add(&c, b, err, sizeof err) == 0);
+    CHECK(arm_can_bus_set_check(&c, N, "--bus", err, sizeof err) == -1);
+    CHECK_MSG(strncmp(err, "--bus: ", 7) == 0 && strstr(err, needle) != NULL, "'%s' lacks '%s'", err, needle);
+}
+
+static void test_errors(void)
+{
+    expect_add_error(NULL, "can9@1-6", "unknown bus 'can9'");
+    expect_add_error(NULL, "socketcan:@1-3", "interface name");
+    expect_add_error(NULL, "udp@0-3", "drives '0-3'");
+    expect_add_error(NULL, "udp@1-7", "drives '1-7'");
+    expect_add_error(NULL, "udp@3-1", "drives '3-1'");
+    expect_add_error(NULL, "udp@", "drives ''");
+    expect_add_error(NULL, "udp@1,", "drives '1,'");
+    expect_add_error(NULL, "udp@1-3x", "drives '1-3x'");
+    expect_add_error("udp@1-3", "udp:239.74.163.2:43113@4-6", "given twice");
+    expect_add_error("socketcan:vcan0@1-3", "socketcan:vcan0@4-6", "given twice");
+    char err[300];
+    arm_can_bus_set_config_t c;
+    arm_can_bus_set_config_init(&c);
+    CHECK(add(&c, "udp:239.74.163.2:1@1", err, sizeof err) == 0);
+    CHECK(add(&c, "udp:239.74.163.2:2@2", err, sizeof err) == 0);
+    CHECK(add(&c, "udp:239.74.163.2:3@3", err, sizeof err) == 0);
+    CHECK(add(&c, "udp:239.74.163.2:4@4-6", err, sizeof err) == 0);
+    CHECK(add(&c, "udp:239.74.163.2:5@5", err, sizeof err) == -1 && strstr(err, "at most 4 buses") != NULL);
+    expect_check_error("socketcan:can0@1-4", "socketcan:can1@4-6",
+                       "drive 4 is on two buses ('socketcan:can0' and 'socketcan:can1')");
+    expect_check_error("socketcan:can0@1-3", NULL, "drive(s) 4,5,6 on no bus");
+    expect_check_error("socketcan:can0@1-2", "socketcan:can1@4-5", "drive(s) 3,6 on no bus");
+}
+
+static arm_can_frame_t frame(uint32_t id)
+{
+    arm_can_frame_t f;
+    memset(&f, 0, sizeof f);
+    f.id = id;
+    f.len = 1;
+    f.data[0] = (uint8_t)id;
+    return f;
+}
+
+/* Two UDP buses on lo: a frame sent on bus b comes back (the UDP bus hears itself) on bus b. */
+static void test_live_two_udp_buses(void)
+{
+    char err[300];
+    arm_can_bus_set_config_t c;
+    arm_can_bus_set_config_init(&c);
+    CHECK(add(&c, "udp:239.74.163.2:43191@1-3", err, sizeof err) == 0);
+    CHECK(add(&c, "udp:239.74.163.2:43192@4-6", err, sizeof err) == 0);
+    static arm_can_bus_set_t set;
+    if (arm_can_bus_set_open(&set, &c, err, sizeof err) != 0) {
+        CHECK_MSG(0, "open: %s", err);
+        return;
+    }
+    arm_can_frame_t f = frame(0x101);
+    CHECK(arm_can_bus_set_send(&set, 1u, &f) == 0);
+    f = frame(0x102);
+    CHECK(arm_can_bus_set_send(&set, 0u, &f) == 0);
+    CHECK(arm_can_bus_set_send(&set, 2u, &f) == ARM_BUS_E_INVALID);
+    unsigned seen = 0u;
+    for (int k = 0; k < 2; ++k) {
+        unsigned idx = 9u;
+        arm_can_frame_t r;
+        CHECK(arm_can_bus_set_recv(&set, &r, &idx, 500000) == 1);
+        CHECK((r.id == 0x101 && idx == 1u) || (r.id == 0x102 && idx == 0u));
+        seen |= 1u << idx;
+    }
+    CHECK(seen == 3u);
+    unsigned idx = 9u;
+    arm_can_frame_t r;
+    CHECK(arm_can_bus_set_recv(&set, &r, &idx, 20000) == 0); /* nothing left: times out */
+    arm_can_bus_set_close(&set);
+    CHECK(set.n == 0u);
+}
+
+int main(void)
+{
+    test_two_buses();
+    test_without_drives_is_all();
+    test_errors();
+    test_live_two_udp_buses();
+    TEST_MAIN_END();
+}
