@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from host_sim.arm import DEFAULT_MJCF, Arm
+from host_sim.bus_timing import MODES, parse_phy, timelines
 from host_sim.canbus import BusSpecError, open_bus, parse_bus_assignments
 from host_sim.simulator import SimConfig, Simulator, write_summary
 from host_sim.uncertainty import UncertaintyConfig
@@ -25,6 +26,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--summary", default="", help="write a JSON summary here (atomically)")
     p.add_argument("--uncertainty", type=Path, default=None,
                    help="JSON file of host_sim.uncertainty.UncertaintyConfig fields (default: none)")
+    p.add_argument("--bus-timing", choices=MODES, default="off",
+                   help="emulate CAN bit timing (vcan and UDP have none): virtual = commands act when their "
+                        "frames would end on the bus (lockstep); wallclock = that, and state frames leave no "
+                        "earlier than they would end (realtime) [off]")
+    p.add_argument("--bus-phy", action="append", default=[], metavar="fd:NOMINAL[/DATA]|classic:RATE",
+                   help="physical layer of each --bus, in order (one value: every bus) [fd:1M/5M]")
+    p.add_argument("--controller-latency-us", type=float, default=0.0,
+                   help="bus timing: last state frame in -> commands queued, in us [0]")
     ns = p.parse_args(argv)
     if ns.lcm_url.startswith("udpm://") and "ttl=0" not in ns.lcm_url:
         p.error(f"--lcm-url: '{ns.lcm_url}' must set ttl=0 (telemetry stays on this host)")
@@ -42,6 +51,20 @@ def main(argv: list[str] | None = None) -> int:
         assignment = parse_bus_assignments(ns.bus or ["udp"], n_drives)
     except BusSpecError as exc:
         p.error(str(exc))
+    timing = None
+    if ns.bus_timing != "off":
+        phys_text = ns.bus_phy or ["fd:1M/5M"]
+        if len(phys_text) not in (1, len(assignment)):
+            p.error(f"--bus-phy: {len(phys_text)} given for {len(assignment)} buses (give one, or one per --bus)")
+        try:
+            phys = [parse_phy(t) for t in phys_text] * (len(assignment) if len(phys_text) == 1 else 1)
+        except ValueError as exc:
+            p.error(f"--bus-phy: {exc}")
+        if not 0.0 <= ns.controller_latency_us <= 1e6:
+            p.error("--controller-latency-us: must be in 0..1e6")
+        timing = timelines(phys, [drives for _, drives in assignment])
+    elif ns.bus_phy:
+        p.error("--bus-phy: only with --bus-timing virtual|wallclock")
     buses = []
     try:
         for spec, _ in assignment:
@@ -54,11 +77,12 @@ def main(argv: list[str] | None = None) -> int:
     try:
         cfg = SimConfig(bus=" ".join(ns.bus or ["udp"]), lcm_url=ns.lcm_url, boot_timeout_s=ns.boot_timeout,
                         idle_timeout_s=ns.idle_timeout, command_timeout_periods=ns.command_timeout_periods,
-                        summary_path=ns.summary)
+                        summary_path=ns.summary, bus_timing=ns.bus_timing,
+                        controller_latency_s=ns.controller_latency_us * 1e-6)
         arm = Arm(ns.mjcf, uncertainty=ucfg)
         if arm.n != n_drives:
             p.error(f"--mjcf: the arm has {arm.n} joints; the drive protocol has {n_drives} drives")
-        report = Simulator(cfg, buses, arm, bus_of).run()
+        report = Simulator(cfg, buses, arm, bus_of, timing).run()
     finally:
         for b in buses:
             b.shutdown()

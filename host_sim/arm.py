@@ -45,17 +45,19 @@ class Arm:
     def qd(self) -> np.ndarray:
         return self.data.qvel.copy()
 
-    def step(self, tau: np.ndarray) -> np.ndarray:
+    def step(self, tau: np.ndarray, tau_commanded: np.ndarray | None = None) -> np.ndarray:
         """Advance one period under tau; returns w, the total uncertainty over this period.
 
-        w = (acceleration the nominal model predicts for tau) - (true acceleration), which is
-        exactly the w of e_ddot = u + w under inverse dynamics control.
+        w = (acceleration the nominal model predicts for the commanded torque) - (true
+        acceleration), which is exactly the w of e_ddot = u + w under inverse dynamics control.
+        tau_commanded differs from tau when the bus delays a new command into the period (bus
+        timing emulation): the torque that did not act is then part of w, as the controller sees it.
         """
         self.data.ctrl[:] = tau
         nd = self.nominal_data
         nd.qpos[:] = self.data.qpos
         nd.qvel[:] = self.data.qvel
-        nd.ctrl[:] = tau
+        nd.ctrl[:] = tau if tau_commanded is None else tau_commanded
         mujoco.mj_forward(self.nominal, nd)
         u = self.uncertainty
         if u.time_varying:

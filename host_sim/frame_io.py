@@ -2,9 +2,10 @@
 
 On the udp_multicast bus every frame a process sends comes back to it (loopback membership), so
 half of what the simulator receives is its own echo. python-can builds and validates a Message
-for each (~50 us); here a datagram is decoded with the same msgpack wire format python-can uses
-and an echo is dropped by its id before any Message exists, and frames are sent by packing the
-same dict pack_message writes. The socket, its options and the format stay python-can's. On
+for each (~50 us); here an echo is recognised by its bytes (the very datagram this process sent,
+timestamp included) before any decoding, other datagrams are decoded with the same msgpack wire
+format python-can uses, ignored ids are dropped before any Message exists, and frames are sent by
+packing the same dict pack_message writes. The socket, its options and the format stay python-can's. On
 SocketCAN the bus's own recv/send are used unchanged (the kernel does not echo to the sender).
 """
 
@@ -34,17 +35,23 @@ class FrameIO:
         self.sock = self.udp._socket if self.udp is not None else None
         self.echoes = 0
         self.undecodable = 0
+        # Datagrams sent and not yet seen back (insertion-ordered; bounded in case one is lost).
+        self._unechoed: dict[bytes, None] = {}
 
     def send(self, frame_id: int, data: bytes, fd: bool) -> None:
         if self.udp is None:
             self.bus.send(can.Message(arbitration_id=frame_id, data=data, is_extended_id=False, is_fd=fd,
                                       bitrate_switch=fd))
             return
-        self.udp.send(msgpack.packb({
+        datagram = msgpack.packb({
             "timestamp": time.time(), "arbitration_id": frame_id, "is_extended_id": False,
             "is_remote_frame": False, "is_error_frame": False, "channel": None, "dlc": len(data),
             "data": data, "is_fd": fd, "bitrate_switch": fd, "error_state_indicator": False,
-        }, use_bin_type=True))
+        }, use_bin_type=True)
+        self._unechoed[datagram] = None
+        if len(self._unechoed) > 256:
+            del self._unechoed[next(iter(self._unechoed))]
+        self.udp.send(datagram)
 
     def _recv_datagram(self, end: float) -> bytes | None:
         """A queued datagram at once; otherwise wait for one until end (python-can's recv would
@@ -63,25 +70,21 @@ class FrameIO:
 
     def poll(self) -> Frame | None:
         """A frame that is already queued (not one of ignore_ids), else None at once."""
-        while True:
-            if self.udp is None:
-                msg = self.bus.recv(0)
-                if msg is None:
-                    return None
-                if msg.arbitration_id in self.ignore:
-                    self.echoes += 1
-                    continue
-                return Frame(msg.arbitration_id, bytes(msg.data), msg.is_fd,
-                             msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id)
-            try:
-                datagram = self.sock.recv(4096, socket.MSG_DONTWAIT)
-            except BlockingIOError:
-                return None
-            f = self._decode(datagram)
-            if f is not None:
-                return f
+        return self.recv(0.0)
+
+    def _from_message(self, msg: can.Message) -> Frame | None:
+        """A python-can Message (SocketCAN path) as a Frame; None for an ignored id."""
+        if msg.arbitration_id in self.ignore:
+            self.echoes += 1
+            return None
+        return Frame(msg.arbitration_id, bytes(msg.data), msg.is_fd,
+                     msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id)
 
     def _decode(self, datagram: bytes) -> Frame | None:
+        if datagram in self._unechoed:
+            del self._unechoed[datagram]
+            self.echoes += 1
+            return None
         try:
             d = msgpack.unpackb(datagram, raw=False)
             fid = d["arbitration_id"]
@@ -98,38 +101,22 @@ class FrameIO:
                      bool(d.get("is_error_frame") or d.get("is_remote_frame") or d.get("is_extended_id")))
 
     def recv(self, timeout: float) -> Frame | None:
-        """The next frame that is not one of ignore_ids, or None after timeout seconds."""
+        """The next frame that is not one of ignore_ids, or None after timeout seconds (what is
+        already queued is always read, also with timeout 0)."""
         end = time.monotonic() + timeout
         while True:
             if self.udp is None:
-                left = end - time.monotonic()
-                if left < 0:
-                    return None
-                msg = self.bus.recv(left)
+                msg = self.bus.recv(max(0.0, end - time.monotonic()))
                 if msg is None:
                     return None
-                if msg.arbitration_id in self.ignore:
-                    self.echoes += 1
-                    continue
-                return Frame(msg.arbitration_id, bytes(msg.data), msg.is_fd,
-                             msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id)
-            datagram = self._recv_datagram(end)
-            if datagram is None:
-                return None
-            try:
-                d = msgpack.unpackb(datagram, raw=False)
-                fid = d["arbitration_id"]
-                data = bytes(d["data"])
-                if d["dlc"] != len(data):
-                    raise ValueError("dlc does not match the data")
-            except Exception:  # noqa: BLE001 - a garbage datagram is counted, never fatal
-                self.undecodable += 1
-                continue
-            if fid in self.ignore:
-                self.echoes += 1
-                continue
-            return Frame(fid, data, bool(d.get("is_fd")),
-                         bool(d.get("is_error_frame") or d.get("is_remote_frame") or d.get("is_extended_id")))
+                f = self._from_message(msg)
+            else:
+                datagram = self._recv_datagram(end)
+                if datagram is None:
+                    return None
+                f = self._decode(datagram)
+            if f is not None:
+                return f
 
 
 class MultiFrameIO:

@@ -16,6 +16,7 @@ import numpy as np
 
 from gen import lcmtypes
 from host_sim.arm import Arm
+from host_sim.bus_timing import BusTimeline
 from host_sim.drive import Drive
 from host_sim.frame_io import Frame, FrameIO, MultiFrameIO
 from host_sim.protocol import NMT_STATE_BOOT, DriveProtocol
@@ -32,6 +33,11 @@ class SimConfig:
     idle_timeout_s: float = 5.0
     command_timeout_periods: int = 3
     summary_path: str = ""
+    # Bus timing emulation (host_sim/bus_timing.py): off; virtual (commands take effect when
+    # their frames would end on the bus; for lockstep); wallclock (that, and state frames are sent
+    # no earlier than they would end; for realtime runs).
+    bus_timing: str = "off"
+    controller_latency_s: float = 0.0  # virtual: last state frame in -> commands queued
 
 
 @dataclass
@@ -46,6 +52,8 @@ class SimReport:
     rx_bad_frame: int = 0
     rx_wrong_bus: int = 0  # a command for a drive that is not on the bus it arrived on: ignored
     commands_missed: int = 0
+    commands_late: int = 0  # bus timing: the command's frame ended after its period (not applied)
+    bus_timing: list[dict[str, Any]] = field(default_factory=list)  # per bus, when emulated
     telemetry_sent: dict[str, int] = field(default_factory=lambda: {"ARM_SIM": 0, "ARM_SIM_EVENT": 0})
     wall_s: float = 0.0
     drive_faults: list[int] = field(default_factory=list)
@@ -53,8 +61,9 @@ class SimReport:
 
 class Simulator:
     def __init__(self, cfg: SimConfig, bus: can.BusABC | list[can.BusABC], arm: Arm,
-                 bus_of: list[int] | None = None) -> None:
-        """bus: one bus (every drive on it) or a list; bus_of[i]: index of drive i+1's bus."""
+                 bus_of: list[int] | None = None, timing: list[BusTimeline] | None = None) -> None:
+        """bus: one bus (every drive on it) or a list; bus_of[i]: index of drive i+1's bus;
+        timing: one timeline per bus when cfg.bus_timing is not off."""
         self.cfg = cfg
         self.buses = list(bus) if isinstance(bus, (list, tuple)) else [bus]
         self.bus = self.buses[0]
@@ -76,6 +85,13 @@ class Simulator:
         self.counter: int | None = None  # SYNC counter of the period being served
         self.synced: set[int] = set()  # buses whose SYNC for this period arrived
         self.got_cmd = [False] * arm.n
+        self.cmd: list[tuple[int, float]] = [(0, 0.0)] * arm.n  # this period's (controlword, torque)
+        if (cfg.bus_timing != "off") != (timing is not None) or (timing is not None and len(timing) != len(self.buses)):
+            raise ValueError(f"bus timing '{cfg.bus_timing}' needs one timeline per bus ({len(self.buses)})")
+        self.timing = timing
+        self.period_wall = 0.0  # monotonic time of the period's first SYNC (wallclock timing)
+        self.cmd_at = [0.0] * arm.n  # s after period_wall a command arrived (wallclock timing)
+        self.states_end = 0.0  # bus timing: when the last state frame of the period ended
         self.last_w = np.zeros(arm.n)
         self.last_tau = np.zeros(arm.n)
 
@@ -85,14 +101,48 @@ class Simulator:
         self.report.frames_tx += 1
 
     def send_heartbeat(self, d: Drive, state: int | None = None) -> None:
-        self.send(self.proto.heartbeat[d.node_id - 1].frame_id, bytes([d.nmt_state if state is None else state]),
-                  bus=self.bus_of[d.node_id - 1])
+        fid = self.proto.heartbeat[d.node_id - 1].frame_id
+        self.send(fid, bytes([d.nmt_state if state is None else state]), bus=self.bus_of[d.node_id - 1])
+        self._occupy_at_period_end(d, fid)
 
     def send_emcy(self, d: Drive, code: int) -> None:
         m = self.proto.emcy[d.node_id - 1]
         self.send(m.frame_id, m.encode({"error_code": code, "error_register": 0x01, "detail": 0}),
                   bus=self.bus_of[d.node_id - 1])
+        self._occupy_at_period_end(d, m.frame_id)
         self.event(f"drive{d.node_id}", "fault", f"EMCY 0x{code:04x}: drive {d.node_id} fault, torque off")
+
+    def _occupy_at_period_end(self, d: Drive, frame_id: int) -> None:
+        """Heartbeats and EMCY are sent after a period's step: they delay the next SYNC if the
+        bus is still busy with them."""
+        if self.timing is not None and self.report.periods > 0:
+            self.timing[self.bus_of[d.node_id - 1]].transmit(self.arm.period, [frame_id])
+
+    def _emulate_commands(self) -> list[float | None]:
+        """Bus timing: put this period's commands on their buses; per joint, the fraction of
+        the period before its new command took effect, None if it ended after the period."""
+        assert self.timing is not None
+        period = self.arm.period
+        effect: list[float | None] = [0.0] * self.arm.n
+        queued = self.states_end + self.cfg.controller_latency_s
+        for b, tl in enumerate(self.timing):
+            joints = [j for j in range(self.arm.n) if self.bus_of[j] == b and self.got_cmd[j]]
+            if not joints:
+                continue
+            ready = max(queued, min(self.cmd_at[j] for j in joints))
+            ends = tl.transmit(ready, [self.proto.cmd[j].frame_id for j in joints])
+            last = max(ends.values())
+            tl.stats.periods += 1
+            tl.stats.sync_to_last_cmd_sum_s += last
+            tl.stats.sync_to_last_cmd_max_s = max(tl.stats.sync_to_last_cmd_max_s, last)
+            for j in joints:
+                end = ends[self.proto.cmd[j].frame_id]
+                if end > period:
+                    effect[j] = None
+                    tl.stats.commands_late += 1
+                else:
+                    effect[j] = end / period
+        return effect
 
     # ---- telemetry -------------------------------------------------------------------------
     def event(self, source: str, level: str, text: str) -> None:
@@ -124,7 +174,20 @@ class Simulator:
     # ---- one period ------------------------------------------------------------------------
     def finish_period(self) -> None:
         """Apply the period's commands and advance the arm by one step."""
-        for d, got in zip(self.drives, self.got_cmd):
+        effect = self._emulate_commands() if self.timing is not None else None
+        tau = np.empty(self.arm.n)
+        tau_cmd = np.empty(self.arm.n)
+        for j, (d, got) in enumerate(zip(self.drives, self.got_cmd)):
+            before = d.applied_torque
+            held_for = 0.0  # fraction of the period the previous torque still acts (bus timing)
+            if got and effect is not None:
+                if effect[j] is None:
+                    got = False  # its frame ended after the period: too late for it
+                    self.report.commands_late += 1
+                else:
+                    held_for = effect[j]  # type: ignore[assignment]
+            if got:
+                d.on_command(*self.cmd[j])
             was_fault = d.error_code
             d.on_period_end(got)
             if d.emcy_pending:
@@ -133,9 +196,11 @@ class Simulator:
                 d.emcy_pending.clear()
             if not got and not was_fault:
                 self.report.commands_missed += 1
-        tau = np.array([d.applied_torque for d in self.drives])
+            # One physics step per period: a torque that changes inside it acts as its time average.
+            tau_cmd[j] = d.applied_torque
+            tau[j] = held_for * before + (1.0 - held_for) * tau_cmd[j]
         self.last_tau = tau
-        self.last_w = self.arm.step(tau)
+        self.last_w = self.arm.step(tau, tau_cmd if self.timing is not None else None)
         self.report.periods += 1
         if self.report.periods % 2000 == 0:
             gc.collect(0)
@@ -154,8 +219,20 @@ class Simulator:
             self.counter = counter
             self.got_cmd = [False] * self.arm.n
             self.synced = set()
+            if self.timing is not None:
+                self.period_wall = time.monotonic()
+                self.states_end = 0.0
+                for tl in self.timing:
+                    tl.new_period(self.arm.period)
         self.synced.add(bus)
         q, qd = self.arm.q, self.arm.qd
+        send_at: dict[int, float] = {}
+        if self.timing is not None:  # SYNC, then the drives' states in id order once it has ended
+            tl = self.timing[bus]
+            sync_end = tl.transmit(0.0, [self.proto.sync.frame_id])[self.proto.sync.frame_id]
+            send_at = tl.transmit(sync_end, [self.proto.state[i].frame_id for i in range(self.arm.n)
+                                             if self.bus_of[i] == bus])
+            self.states_end = max([self.states_end, *send_at.values()])
         for i, d in enumerate(self.drives):
             if self.bus_of[i] != bus:
                 continue
@@ -163,7 +240,12 @@ class Simulator:
                 "position": float(q[i]), "velocity": float(qd[i]), "torque": d.applied_torque,
                 "statusword": d.power.statusword, "sync_counter": counter, "error_code": d.error_code,
             })
-            self.send(self.proto.state[i].frame_id, data, fd=True, bus=bus)
+            fid = self.proto.state[i].frame_id
+            if self.cfg.bus_timing == "wallclock":  # not before the frame would have ended on the bus
+                wait = self.period_wall + send_at[fid] - time.monotonic()
+                if wait > 0:
+                    time.sleep(wait)
+            self.send(fid, data, fd=True, bus=bus)
 
     def _holds_back(self, bus: int, msg: Frame) -> bool:
         """A SYNC on `bus` for the next period while this period's commands for drives on other
@@ -190,7 +272,9 @@ class Simulator:
             return
         if self.counter is None or int(v["sync_counter"]) != self.counter:
             return  # a command for another period: a real drive ignores it too
-        self.drives[joint].on_command(int(v["controlword"]), float(v["target_torque"]))
+        self.cmd[joint] = (int(v["controlword"]), float(v["target_torque"]))
+        if self.cfg.bus_timing == "wallclock":
+            self.cmd_at[joint] = time.monotonic() - self.period_wall
         self.got_cmd[joint] = True
         if all(self.got_cmd):
             self.finish_period()
@@ -293,6 +377,9 @@ class Simulator:
         self.report.rx_own_echo = self.io.echoes
         self.report.rx_bad_frame += self.io.undecodable
         self.report.drive_faults = [d.node_id for d in self.drives if d.error_code]
+        if self.timing is not None:
+            self.report.bus_timing = [{"bus": i, "phy": tl.bus.describe(), "drives": tl.bus.drives,
+                                       **tl.stats.as_dict()} for i, tl in enumerate(self.timing)]
         self.event("sim", "info" if self.report.result == "ok" else "fault",
                    self.report.reason or f"stopped by the controller after {self.report.periods} periods")
         return self.report

@@ -419,6 +419,11 @@ def _rate_arg(b: Bus) -> str:
     return r(b.nominal_bps) + (f"/{r(b.data_bps)}" if b.data_bps else "")
 
 
+def phy_spec(b: Bus) -> str:
+    """The bus's physical layer as host_sim --bus-phy takes it: fd:1M/5M, fd:1M, classic:500k."""
+    return f"{'fd' if b.fd else 'classic'}:{_rate_arg(b)}"
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="armctl busload", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)

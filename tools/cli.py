@@ -46,8 +46,13 @@ def cmd_hil(ns: argparse.Namespace) -> int:
     build("release")
     try:
         run = run_hil(HilOptions(out=ns.out, duration_s=ns.duration, method=ns.method, mode=ns.mode,
-                                 bus=ns.bus))
+                                 bus=ns.bus, topology=ns.topology, bus_timing=ns.bus_timing))
         print(f"bus: {run['environment']['bus_choice']}")
+        for name, pct in run["environment"]["bus_load_pct"].items():
+            if pct > 100.0:
+                print(f"armctl hil: bus {name} needs {pct:g} % of its time at 1 kHz (tools/armctl busload): the "
+                      "frames of a period do not fit in it" + (", so commands end late (--bus-timing)"
+                                                               if ns.bus_timing else ""), file=sys.stderr)
     except HilError as exc:
         print(f"armctl hil: {exc}", file=sys.stderr)
         return 1
@@ -63,7 +68,9 @@ def _hil_in_vm(ns: argparse.Namespace) -> int:
 
     build("release")
     inner = ["tools/armctl", "hil", "--bus", "vcan", "--duration", f"{ns.duration:g}", "--method", ns.method,
-             "--mode", ns.mode, "--out", str(ns.out.resolve())]
+             "--mode", ns.mode, "--out", str(ns.out.resolve()),
+             *(["--topology", str(ns.topology.resolve())] if ns.topology else []),
+             *(["--bus-timing"] if ns.bus_timing else [])]
     print("armctl hil: running inside the qemu VM (software emulation: minutes, not seconds)")
     try:
         return run_in_vm(inner, timeout=3600.0 + 600.0 * ns.duration, keep=False).returncode
@@ -132,6 +139,11 @@ def main(argv: list[str] | None = None) -> int:
                    help="auto: vcan if this kernel has SocketCAN and vcan0, vcan1 (one per bus of "
                         "firmware/protocol/buses.toml), else udp (one port per bus; says which); "
                         "vm: the whole run inside the qemu VM that has vcan0, vcan1")
+    h.add_argument("--topology", type=Path, default=None,
+                   help="which drive is on which bus, and each bus's bit rates [firmware/protocol/buses.toml]")
+    h.add_argument("--bus-timing", action="store_true",
+                   help="emulate the buses' bit timing in the simulator (frame lengths, arbitration by id): "
+                        "commands act when their frames would end on the bus")
     h.add_argument("--out", type=Path, default=REPO / "runs" / "hil")
     h.set_defaults(fn=cmd_hil)
 

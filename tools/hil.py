@@ -42,6 +42,9 @@ class HilOptions:
     uncertainty: dict[str, Any] | None = None
     # Recorded in run.json's results, e.g. the study's seed and trajectory.
     labels: dict[str, Any] = field(default_factory=dict)
+    # Emulate each bus's bit timing in the simulator (host_sim/bus_timing.py) with the topology's
+    # physical layers: virtual in lockstep, wallclock in realtime.
+    bus_timing: bool = False
 
 
 class HilError(RuntimeError):
@@ -122,6 +125,23 @@ def bus_args(kind: str, can_port: int, topology: list[Any]) -> list[str]:
     return out
 
 
+def topology_load_pct(topology: list[Any], rate_hz: float = 1000.0) -> dict[str, float]:
+    """Worst-case load of each bus of the topology at the loop rate (tools/armctl busload)."""
+    from tools.busload import Protocol, compute
+
+    return {bl.bus.name: round(bl.load * 100.0, 2) for bl in compute(topology, rate_hz, 100.0, Protocol())}
+
+
+def bus_timing_args(mode: str, topology: list[Any]) -> list[str]:
+    """host_sim arguments that emulate the topology's bit timing (one --bus-phy per bus, in order)."""
+    from tools.busload import phy_spec
+
+    args = ["--bus-timing", "virtual" if mode == "lockstep" else "wallclock"]
+    for b in topology:
+        args += ["--bus-phy", phy_spec(b)]
+    return args
+
+
 def resolve_bus(choice: str, n_buses: int = 1) -> tuple[str, str]:
     """(udp|vcan, why): auto takes vcan when the kernel has SocketCAN and vcan0..vcan<n-1> are up."""
     from tools.vcan import can_interfaces, kernel_has_can
@@ -179,10 +199,10 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
     t0 = time.monotonic()
     try:
         _wait_for_logger(url, log_path, logger)
-        sim_args = []
+        sim_args = bus_timing_args(opt.mode, topology) if opt.bus_timing else []
         if opt.uncertainty is not None:
             write_json_atomic(opt.out / "uncertainty.json", opt.uncertainty)
-            sim_args = ["--uncertainty", str(opt.out / "uncertainty.json")]
+            sim_args += ["--uncertainty", str(opt.out / "uncertainty.json")]
         sim = subprocess.Popen(
             [sys.executable, "-m", "host_sim", *bus_argv, "--lcm-url", url,
              "--summary", str(opt.out / "sim_summary.json"), *sim_args],
@@ -223,12 +243,14 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
         "result": "died", "reason": f"simulator died (exit code {sim.returncode}); see simulator.log"}
     config = {"method": opt.method, "mode": opt.mode, "duration_s": opt.duration_s,
               "joint_names": JOINT_NAMES, "controller_args": list(opt.controller_args),
-              "uncertainty": opt.uncertainty, **opt.labels}
+              "uncertainty": opt.uncertainty,
+              "bus_timing": (bus_timing_args(opt.mode, topology)[1] if opt.bus_timing else "off"), **opt.labels}
     run = analyse(opt.out, controller, simulator, config, {
         "bus": " ".join(buses), "bus_choice": f"{opt.bus} -> {bus_kind} ({bus_why})",
         "topology": {"file": str(opt.topology or _default_topology_path()),
                      "buses": [{"name": b.name, "spec": spec.rpartition("@")[0], "kind": b.describe(),
                                 "drives": b.drives} for b, spec in zip(topology, buses)]},
+        "bus_load_pct": topology_load_pct(topology),
         "lcm_url": url, "wall_s": wall,
         "exit_codes": {"controller": ctl.returncode, "simulator": sim.returncode}})
     write_json_atomic(opt.out / "run.json", run)

@@ -142,7 +142,10 @@ def write_report(out: Path, study: dict[str, Any]) -> None:
     md = [f"# Study: {study['description']}", "",
           f"Config `{study['config']}`, seed {study['seed']}, trajectory {study['duration_s']:g} s after a "
           f"{study['hold_s']:g} s hold on the start pose (metrics cover the trajectory only), lockstep HIL "
-          "over CAN (python-can udp_multicast wire format) at 1 kHz.", "",
+          "at 1 kHz over the default two CAN buses (firmware/protocol/buses.toml; python-can udp_multicast "
+          "wire format), bus bit timing "
+          + ("emulated: each command acts from the end of its frame on the bus (host_sim/bus_timing.py)."
+             if study.get("bus_timing") else "not emulated: each command acts from the start of its period."), "",
           f"Uncertainty: `{study['uncertainty']}`.", "",
           "## Baseline gains", "", study["tuning"].get("procedure", ""), ""]
     md.append(_md_table(["method", "gains"], [[m, f"`{g}`"] for m, g in study["tuning"].get("methods", {}).items()]))

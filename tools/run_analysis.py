@@ -89,6 +89,7 @@ def analyse(out_dir: Path, controller: dict[str, Any], sim: dict[str, Any], conf
             "steps": controller.get("steps_done", 0),
             "simulated_periods": sim.get("periods", 0),
             "commands_missed": sim.get("commands_missed", 0),
+            "commands_late": sim.get("commands_late", 0),
             "drive_faults": sim.get("drive_faults", []),
             "ref_hold_s": controller.get("ref_hold_s", 0.0),
             "design_hash": controller.get("design_hash", ""),
@@ -99,6 +100,7 @@ def analyse(out_dir: Path, controller: dict[str, Any], sim: dict[str, Any], conf
             "simulator_frames": {k: sim.get(k, 0) for k in ("frames_tx", "frames_rx", "rx_own_echo",
                                                             "rx_unknown_id", "rx_bad_frame")},
             "overruns": controller.get("overruns", 0),
+            "bus_timing": sim.get("bus_timing", []),
             "telemetry": tele,
             "telemetry_lost_total": int(sum(v["lost"] for v in tele.values())),
             "telemetry_gaps_total": int(sum(v["sequence_gaps"] for v in tele.values())),
@@ -123,6 +125,10 @@ def table(run: dict[str, Any]) -> str:
     sent = sum(v["sent"] for v in t["telemetry"].values())
     logged = sum(v["logged"] for v in t["telemetry"].values())
     lines.append(f"telemetry: {sent} messages sent, {logged} logged, {t['telemetry_lost_total']} lost")
+    for b in t.get("bus_timing", []):
+        lines.append(f"bus timing ({r.get('bus_timing', '?')}), bus {b['bus']} ({b['phy']}, drives "
+                     f"{','.join(map(str, b['drives']))}): SYNC -> last command {b['sync_to_last_cmd_mean_us']:.1f} us "
+                     f"mean, {b['sync_to_last_cmd_max_us']:.1f} us max; {b['commands_late']} commands late")
     if env.get("wall_s") and r.get("duration_s"):
         lines.append(f"wall time {env['wall_s']:.1f} s for {r['duration_s']:g} s simulated "
                      f"({r['duration_s'] / env['wall_s']:.2f}x real time)")

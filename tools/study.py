@@ -26,7 +26,7 @@ def run_method(cfg: StudyConfig, method: str, out: Path, gains: dict[str, float]
     args = [*gain_args(method, gains), *trajectory_args, "--ref-hold", f"{cfg.hold_s:g}"]
     return run_hil(HilOptions(out=out, duration_s=duration_s, method=method, preset=preset,
                               controller_args=tuple(args), uncertainty=cfg.uncertainty_for(seed),
-                              labels={"seed": seed, "gains": gains}))
+                              labels={"seed": seed, "gains": gains}, bus_timing=cfg.bus_timing))
 
 
 def run_study(cfg: StudyConfig, out: Path, duration_s: float | None = None, preset: str = "release",
@@ -46,6 +46,7 @@ def run_study(cfg: StudyConfig, out: Path, duration_s: float | None = None, pres
         "seed": cfg.seed,
         "duration_s": duration,
         "hold_s": cfg.hold_s,
+        "bus_timing": cfg.bus_timing,
         "uncertainty": cfg.uncertainty_for(cfg.seed),
         "trajectory": {"amp": cfg.trajectory.amp, "freq_hz": cfg.trajectory.freq_hz},
         "tuning": gains,

@@ -45,6 +45,7 @@ class StudyConfig:
     tuning_objective: str
     gains_file: Path
     grid: dict[str, dict[str, list[float]]] = field(default_factory=dict)
+    bus_timing: bool = False  # emulate the buses' bit timing in every run (tools/hil.py)
 
     def uncertainty_for(self, seed: int) -> dict[str, Any]:
         return {**self.uncertainty, "seed": seed}
@@ -90,6 +91,9 @@ def load(path: Path) -> StudyConfig:
         raise StudyConfigError(f"uncertainty: {exc}") from exc
     except ValueError as exc:
         raise StudyConfigError(str(exc)) from exc
+    bus_timing = data.get("bus_timing", False)
+    if not isinstance(bus_timing, bool):
+        raise StudyConfigError(f"study.bus_timing: expected true or false, got {bus_timing!r}")
     tuning = _get(data, "tuning", "study", dict)
     grid = tuning.get("grid", {})
     for m, g in grid.items():
@@ -113,6 +117,7 @@ def load(path: Path) -> StudyConfig:
         tuning_objective=str(tuning.get("objective", "")),
         gains_file=path.parent / _get(tuning, "gains_file", "tuning", str),
         grid=grid,
+        bus_timing=bus_timing,
     )
 
 

@@ -111,6 +111,7 @@ def test_a_killed_process_ends_the_run_in_a_named_state(tmp_path: Path, controll
     (("amp = [0.4, 0.3, 0.35, 0.5, 0.5, 0.6]", "amp = [0.4, 0.3]"), "trajectory.amp"),
     (("duration_s = 10.0", "duration_s = -1.0"), "study.duration_s"),
     (("wn = [10.0, 20.0, 40.0]", "wn = []"), "tuning.grid.pd.wn"),
+    (("seed = 1\n", "seed = 1\nbus_timing = 1\n"), "study.bus_timing"),
 ])
 def test_bad_study_config_names_the_field(tmp_path: Path, edit: tuple[str, str], named: str) -> None:
     text = DEFAULT_CONFIG.read_text()
@@ -119,3 +120,11 @@ def test_bad_study_config_names_the_field(tmp_path: Path, edit: tuple[str, str],
     bad.write_text(text.replace(edit[0], edit[1], 1))
     with pytest.raises(StudyConfigError, match=named.replace(".", r"\.")):
         load(bad)
+
+
+def test_the_bus_timing_study_differs_from_the_default_only_in_timing_and_gains() -> None:
+    default, timed = load(DEFAULT_CONFIG), load(DEFAULT_CONFIG.parent / "paper_bus_timing.toml")
+    assert not default.bus_timing and timed.bus_timing and timed.gains_file != default.gains_file
+    for name in ("duration_s", "hold_s", "seed", "methods", "uncertainty", "trajectory", "tuning_seed",
+                 "tuning_trajectory", "grid"):
+        assert getattr(timed, name) == getattr(default, name), name
