@@ -15,6 +15,7 @@ from typing import Any
 
 import lcm
 
+from tools import busload
 from tools.paths import REPO, controller_binary, env_with_repo
 from tools.run_analysis import analyse
 
@@ -65,6 +66,27 @@ def _logger_priority() -> None:
         pass  # not root: ordinary priority; any loss shows up as sequence gaps in run.json
 
 
+SIM_RT_PRIORITY = 70  # realtime runs: below the controller's loop (80) and above the logger (10)
+
+
+def _simulator_priority() -> None:
+    """In a realtime run the simulator is the other half of the loop: at ordinary priority a
+    2-core machine delays it by more than the watchdog's 3 periods within a second or two."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(SIM_RT_PRIORITY))
+    except (PermissionError, OSError):
+        pass  # not root: ordinary priority; run.json's environment says which
+
+
+def _scheduling(pid: int) -> str:
+    try:
+        policy = os.sched_getscheduler(pid)
+        prio = os.sched_getparam(pid).sched_priority
+    except OSError as exc:
+        return f"unknown ({exc.strerror})"
+    return f"SCHED_FIFO {prio}" if policy == os.SCHED_FIFO else "SCHED_OTHER"
+
+
 def _wait_for_logger(url: str, log_path: Path, proc: subprocess.Popen[bytes], timeout: float = 10.0) -> None:
     """The logger is ready once a probe message has reached its file."""
     probe = lcm.LCM(url)
@@ -101,14 +123,11 @@ def check_loopback_route(group: str) -> None:
                        f"run as root: ip route replace {net} dev lo (tools/armctl does this when run as root)")
 
 
-def load_topology(path: Path | None = None) -> list[Any]:
-    """The buses of the topology file (tools.busload.Bus: name, kind, rates, drives)."""
-    from tools.busload import DEFAULT_TOPOLOGY, ConfigError
-    from tools.busload import load_topology as _load
-
+def load_topology(path: Path | None = None) -> list[busload.Bus]:
+    """The buses of the topology file (name, kind, rates, drives)."""
     try:
-        return _load(path or DEFAULT_TOPOLOGY, len(JOINT_NAMES))
-    except ConfigError as exc:
+        return busload.load_topology(path or busload.DEFAULT_TOPOLOGY, len(JOINT_NAMES))
+    except busload.ConfigError as exc:
         raise HilError(f"bus topology: {exc}") from exc
 
 
@@ -116,7 +135,7 @@ def vcan_names(n: int) -> list[str]:
     return [f"vcan{i}" for i in range(n)]
 
 
-def bus_args(kind: str, can_port: int, topology: list[Any]) -> list[str]:
+def bus_args(kind: str, can_port: int, topology: list[busload.Bus]) -> list[str]:
     """SPEC@DRIVES per bus of the topology: udp on port can_port + i, or vcan0, vcan1, ..."""
     out = []
     for i, b in enumerate(topology):
@@ -125,20 +144,17 @@ def bus_args(kind: str, can_port: int, topology: list[Any]) -> list[str]:
     return out
 
 
-def topology_load_pct(topology: list[Any], rate_hz: float = 1000.0) -> dict[str, float]:
+def topology_load_pct(topology: list[busload.Bus], rate_hz: float = 1000.0) -> dict[str, float]:
     """Worst-case load of each bus of the topology at the loop rate (tools/armctl busload)."""
-    from tools.busload import Protocol, compute
+    loads = busload.compute(topology, rate_hz, 100.0, busload.Protocol())
+    return {bl.bus.name: round(bl.load * 100.0, 2) for bl in loads}
 
-    return {bl.bus.name: round(bl.load * 100.0, 2) for bl in compute(topology, rate_hz, 100.0, Protocol())}
 
-
-def bus_timing_args(mode: str, topology: list[Any]) -> list[str]:
+def bus_timing_args(mode: str, topology: list[busload.Bus]) -> list[str]:
     """host_sim arguments that emulate the topology's bit timing (one --bus-phy per bus, in order)."""
-    from tools.busload import phy_spec
-
     args = ["--bus-timing", "virtual" if mode == "lockstep" else "wallclock"]
     for b in topology:
-        args += ["--bus-phy", phy_spec(b)]
+        args += ["--bus-phy", busload.phy_spec(b)]
     return args
 
 
@@ -164,12 +180,6 @@ def resolve_bus(choice: str, n_buses: int = 1) -> tuple[str, str]:
     if has_vcan:
         return "vcan", f"this kernel has SocketCAN and {', '.join(names)}"
     return "udp", why or f"no {', '.join(missing)} interface"
-
-
-def _default_topology_path() -> Path:
-    from tools.busload import DEFAULT_TOPOLOGY
-
-    return DEFAULT_TOPOLOGY
 
 
 def run_hil(opt: HilOptions) -> dict[str, Any]:
@@ -206,8 +216,10 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
         sim = subprocess.Popen(
             [sys.executable, "-m", "host_sim", *bus_argv, "--lcm-url", url,
              "--summary", str(opt.out / "sim_summary.json"), *sim_args],
-            cwd=REPO, env=env_with_repo(), stdout=logs["simulator"], stderr=subprocess.STDOUT)
+            cwd=REPO, env=env_with_repo(), stdout=logs["simulator"], stderr=subprocess.STDOUT,
+            preexec_fn=_simulator_priority if opt.mode == "realtime" else None)
         procs.append(sim)
+        sim_scheduling = _scheduling(sim.pid)
         ctl = subprocess.Popen(
             [*opt.controller_cmd_prefix, str(binary), *bus_argv, "--lcm-url", url,
              "--duration", f"{opt.duration_s:g}", "--method", opt.method, "--mode", opt.mode,
@@ -247,11 +259,11 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
               "bus_timing": (bus_timing_args(opt.mode, topology)[1] if opt.bus_timing else "off"), **opt.labels}
     run = analyse(opt.out, controller, simulator, config, {
         "bus": " ".join(buses), "bus_choice": f"{opt.bus} -> {bus_kind} ({bus_why})",
-        "topology": {"file": str(opt.topology or _default_topology_path()),
+        "topology": {"file": str(opt.topology or busload.DEFAULT_TOPOLOGY),
                      "buses": [{"name": b.name, "spec": spec.rpartition("@")[0], "kind": b.describe(),
                                 "drives": b.drives} for b, spec in zip(topology, buses)]},
         "bus_load_pct": topology_load_pct(topology),
-        "lcm_url": url, "wall_s": wall,
+        "lcm_url": url, "wall_s": wall, "simulator_scheduling": sim_scheduling,
         "exit_codes": {"controller": ctl.returncode, "simulator": sim.returncode}})
     write_json_atomic(opt.out / "run.json", run)
     return run

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import shutil
 import subprocess
 import sys
@@ -72,6 +73,9 @@ def test_overruns_are_counted_when_every_step_is_forced_slow(tmp_path: Path, con
     assert summary["steps_done"] > 0, run["results"]["problems"]
     assert summary["overruns"] == summary["steps_done"]
     assert run["transport"]["overruns"] == summary["overruns"]
+    # the simulator is the other half of a realtime loop: real-time priority when permitted
+    expected = "SCHED_FIFO 70" if os.geteuid() == 0 else "SCHED_OTHER"
+    assert run["environment"]["simulator_scheduling"] == expected
 
 
 def test_rt_options_are_validated(controller_bin: Path) -> None:
