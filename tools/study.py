@@ -14,7 +14,6 @@ from tqdm import tqdm
 from tools.build import build
 from tools.hil import HilError, HilOptions, run_hil, write_json_atomic
 from tools.paths import REPO
-from tools.report import write_report
 from tools.study_config import (TUNED, StudyConfig, StudyConfigError, gain_args, grid_points, load,
                                 load_gains)
 
@@ -54,6 +53,8 @@ def run_study(cfg: StudyConfig, out: Path, duration_s: float | None = None, pres
         "transport": {m: r["transport"] for m, r in runs.items()},
     }
     write_json_atomic(out / "study.json", study)
+    from tools.report import write_report  # matplotlib: only when there is a report to draw
+
     write_report(out, study)
     return study
 
