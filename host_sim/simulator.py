@@ -141,6 +141,10 @@ class Simulator:
                 if end > period:
                     effect[j] = None
                     tl.stats.commands_late += 1
+                    if tl.stats.commands_late == 1:  # the first one says so; the count says the rest
+                        self.event(f"bus{b}", "warning",
+                                   f"bus timing: drive {j + 1}'s command ended {end * 1e3:.3f} ms after its SYNC, "
+                                   f"after its {period * 1e3:g} ms period: not applied (bus overloaded?)")
                 else:
                     effect[j] = end / period
         return effect

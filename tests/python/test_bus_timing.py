@@ -16,6 +16,7 @@ from host_sim.protocol import NMT_START
 from host_sim.simulator import SimConfig, Simulator
 from tools.busload import Bus, ConfigError, Protocol, compute
 from tools.hil import HilOptions, run_hil
+from tools.telemetry_log import read_log
 
 FD = (True, 1e6, 5e6)
 SYNC, STATE1, CMD1 = 0x080, 0x181, 0x201
@@ -145,3 +146,5 @@ def test_hil_with_bus_timing_on_one_overloaded_bus_fails_and_says_why(tmp_path: 
     assert r["result"] == "failed" and r["commands_late"] > 0 and t["bus_timing"][0]["commands_late"] > 0
     assert any(re.search(r"drive\(s\) [1-6](,[1-6])* not operation enabled", p) for p in r["problems"]), r["problems"]
     assert run["environment"]["bus_load_pct"] == {"can0": pytest.approx(131.4, abs=0.1)}
+    events = [m.text for m in read_log(tmp_path / "run" / "telemetry.lcmlog")["ARM_SIM_EVENT"].messages]
+    assert sum("bus timing: drive" in t and "not applied" in t for t in events) == 1, events  # said once
