@@ -1,5 +1,6 @@
 #define _GNU_SOURCE
 #include "arm/can_bus.h"
+#include "arm/fd_wait.h"
 
 #include <errno.h>
 #include <poll.h>
@@ -296,13 +297,6 @@ static int bus_fd(const arm_can_bus_t *b)
     return b->kind == ARM_BUS_SOCKETCAN ? b->socketcan.fd : b->udp.fd;
 }
 
-static int64_t mono_us(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (int64_t)ts.tv_sec * 1000000 + ts.tv_nsec / 1000;
-}
-
 int arm_can_bus_set_recv(arm_can_bus_set_t *set, arm_can_frame_t *f, unsigned *index, int timeout_us)
 {
     if (set->n == 0u) return ARM_BUS_E_CLOSED;
@@ -310,7 +304,7 @@ int arm_can_bus_set_recv(arm_can_bus_set_t *set, arm_can_frame_t *f, unsigned *i
         *index = 0u;
         return arm_can_bus_recv(&set->bus[0], f, timeout_us);
     }
-    const int64_t end = timeout_us < 0 ? 0 : mono_us() + timeout_us;
+    const int64_t deadline = arm_deadline_ns(timeout_us);
     for (;;) {
         /* Drain: whatever is queued on any bus, starting after the last bus served. */
         for (unsigned k = 0; k < set->n; ++k) {
@@ -330,11 +324,11 @@ int arm_can_bus_set_recv(arm_can_bus_set_t *set, arm_can_frame_t *f, unsigned *i
         }
         struct timespec ts;
         const struct timespec *tsp = NULL;
-        if (timeout_us >= 0) {
-            const int64_t left = end - mono_us();
+        if (deadline >= 0) {
+            const int64_t left = deadline - arm_mono_ns();
             if (left <= 0) return 0;
-            ts.tv_sec = (time_t)(left / 1000000);
-            ts.tv_nsec = (long)(left % 1000000) * 1000L;
+            ts.tv_sec = (time_t)(left / 1000000000);
+            ts.tv_nsec = (long)(left % 1000000000);
             tsp = &ts;
         }
         const int pr = ppoll(pfd, (nfds_t)set->n, tsp, NULL);

@@ -9,6 +9,7 @@
 #define _GNU_SOURCE /* ppoll, SOCK_NONBLOCK regardless of -std */
 
 #include "arm/can_socketcan.h"
+#include "arm/fd_wait.h"
 
 #include <errno.h>
 #include <net/if.h>
@@ -25,7 +26,6 @@
 #include <linux/can/raw.h>
 #include <linux/if_arp.h>
 
-#define NS_PER_S 1000000000LL
 
 #ifndef CANFD_FDF
 #define CANFD_FDF 0x04 /* linux >= 5.14 headers; older kernels ignore it */
@@ -318,13 +318,6 @@ int arm_can_socketcan_send(arm_can_socketcan_t *bus, const arm_can_frame_t *f)
     return ARM_CAN_SOCKETCAN_OK;
 }
 
-static int64_t mono_ns(void)
-{
-    struct timespec ts;
-    (void)clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (int64_t)ts.tv_sec * NS_PER_S + (int64_t)ts.tv_nsec;
-}
-
 /* One non-blocking read: 1 frame, 0 nothing queued, 2 skipped frame, <0 error. */
 static int try_read_one(arm_can_socketcan_t *bus, arm_can_frame_t *f)
 {
@@ -379,7 +372,7 @@ int arm_can_socketcan_recv(arm_can_socketcan_t *bus, arm_can_frame_t *f, int tim
     if (bus->fd < 0) {
         return ARM_CAN_SOCKETCAN_E_CLOSED;
     }
-    const int64_t deadline = timeout_us >= 0 ? mono_ns() + (int64_t)timeout_us * 1000 : 0;
+    const int64_t deadline = arm_deadline_ns(timeout_us);
     int skipped = 0;
     for (;;) {
         const int rc = try_read_one(bus, f);
@@ -392,30 +385,16 @@ int arm_can_socketcan_recv(arm_can_socketcan_t *bus, arm_can_frame_t *f, int tim
             }
             continue;
         }
-        struct timespec wait;
-        struct timespec *waitp = NULL;
-        if (timeout_us >= 0) {
-            const int64_t left = deadline - mono_ns();
-            if (left <= 0) {
-                return 0;
-            }
-            wait.tv_sec = (time_t)(left / NS_PER_S);
-            wait.tv_nsec = (long)(left % NS_PER_S);
-            waitp = &wait;
-        }
-        struct pollfd pfd = {bus->fd, POLLIN, 0};
-        const int pr = ppoll(&pfd, 1, waitp, NULL);
-        if (pr < 0) {
-            if (errno == EINTR) {
-                continue;
-            }
+        short revents = 0;
+        const int w = arm_fd_wait(bus->fd, deadline, &revents);
+        if (w < 0) {
             bus->rx_errors++;
             return ARM_CAN_SOCKETCAN_E_IO;
         }
-        if (pr == 0) {
+        if (w == 0) {
             return 0;
         }
-        if ((pfd.revents & (POLLERR | POLLHUP | POLLNVAL)) != 0 && (pfd.revents & POLLIN) == 0) {
+        if ((revents & (POLLERR | POLLHUP | POLLNVAL)) != 0 && (revents & POLLIN) == 0) {
             /* e.g. the interface went down: report instead of spinning until the deadline */
             int soerr = 0;
             socklen_t len = (socklen_t)sizeof soerr;

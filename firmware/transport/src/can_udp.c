@@ -21,10 +21,10 @@
 #include <unistd.h>
 
 #include "arm/pycan_wire.h"
+#include "arm/fd_wait.h"
 
 /* Same as python-can's GeneralPurposeUdpMulticastBus.max_buffer: what it can read, we can. */
 #define RX_BUF_BYTES 4096u
-#define NS_PER_S 1000000000LL
 
 static int fail(arm_can_udp_t *bus, char *err, size_t errcap, const char *step)
 {
@@ -133,7 +133,9 @@ int arm_can_udp_open(arm_can_udp_t *bus, const char *group, uint16_t port, char 
     }
 #endif
     if (verify_loopback_only(bus->fd) != 0) {
-        return fail(bus, err, errcap, "verify IP_MULTICAST_TTL==0 and IP_MULTICAST_IF==127.0.0.1");
+        return fail(bus, err, errcap,
+                    "verify that the multicast TTL is zero and the interface is loopback "
+                    "(IP_MULTICAST_TTL, IP_MULTICAST_IF)");
     }
 
     /* Binding the group (not INADDR_ANY) keeps unicast to this port out. */
@@ -194,13 +196,6 @@ int arm_can_udp_send(arm_can_udp_t *bus, const arm_can_frame_t *f, double timest
     return ARM_CAN_UDP_OK;
 }
 
-static int64_t mono_ns(void)
-{
-    struct timespec ts;
-    (void)clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (int64_t)ts.tv_sec * NS_PER_S + (int64_t)ts.tv_nsec;
-}
-
 /* One non-blocking read: 1 frame, 0 nothing queued, 2 skipped datagram, <0 error. */
 static int try_read_one(arm_can_udp_t *bus, arm_can_frame_t *f, double *timestamp)
 {
@@ -241,7 +236,7 @@ int arm_can_udp_recv(arm_can_udp_t *bus, arm_can_frame_t *f, double *timestamp, 
     if (bus->fd < 0) {
         return ARM_CAN_UDP_E_CLOSED;
     }
-    const int64_t deadline = timeout_us >= 0 ? mono_ns() + (int64_t)timeout_us * 1000 : 0;
+    const int64_t deadline = arm_deadline_ns(timeout_us);
     int skipped = 0;
     for (;;) {
         /* Drain first: queued datagrams are served without a poll syscall, even at timeout 0. */
@@ -255,27 +250,13 @@ int arm_can_udp_recv(arm_can_udp_t *bus, arm_can_frame_t *f, double *timestamp, 
             }
             continue;
         }
-        struct timespec wait;
-        struct timespec *waitp = NULL;
-        if (timeout_us >= 0) {
-            const int64_t left = deadline - mono_ns();
-            if (left <= 0) {
-                return 0;
-            }
-            wait.tv_sec = (time_t)(left / NS_PER_S);
-            wait.tv_nsec = (long)(left % NS_PER_S);
-            waitp = &wait;
-        }
-        struct pollfd pfd = {bus->fd, POLLIN, 0};
-        const int pr = ppoll(&pfd, 1, waitp, NULL);
-        if (pr < 0) {
-            if (errno == EINTR) {
-                continue;
-            }
+        short revents = 0;
+        const int w = arm_fd_wait(bus->fd, deadline, &revents);
+        if (w < 0) {
             bus->rx_errors++;
             return ARM_CAN_UDP_E_IO;
         }
-        if (pr == 0) {
+        if (w == 0) {
             return 0;
         }
         /* readable (or error pending): the next try_read_one sorts it out */
