@@ -16,7 +16,7 @@ from typing import Any
 import lcm
 
 from tools import busload
-from tools.paths import REPO, controller_binary, env_with_repo
+from tools.paths import REPO, controller_binary, env_with_repo, logger_binary
 from tools.run_analysis import analyse
 
 JOINT_NAMES = ["shoulder_pan", "shoulder_lift", "elbow", "wrist_1", "wrist_2", "wrist_3"]
@@ -58,8 +58,8 @@ def _ports(opt: HilOptions) -> tuple[int, int]:
 
 
 def _logger_priority() -> None:
-    """The logger only receives and queues (a separate thread writes), so a real-time priority costs
-    the others little and keeps a busy machine from overflowing its socket buffer."""
+    """The logger mostly waits for messages, so a real-time priority costs the others little and
+    keeps a busy machine from delaying it (its queue has no limit, so a delay costs no data)."""
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(10))
     except (PermissionError, OSError):
@@ -93,12 +93,12 @@ def _wait_for_logger(url: str, log_path: Path, proc: subprocess.Popen[bytes], ti
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         if proc.poll() is not None:
-            raise HilError(f"lcm-logger exited with {proc.returncode}")
+            raise HilError(f"the telemetry logger exited with {proc.returncode}; see logger.log")
         probe.publish("ARM_PROBE", b"ready?")
         time.sleep(0.15)
         if log_path.exists() and log_path.stat().st_size > 0:
             return
-    raise HilError(f"lcm-logger did not start writing {log_path} within {timeout:g} s")
+    raise HilError(f"the telemetry logger did not start writing {log_path} within {timeout:g} s")
 
 
 def _load_json(path: Path) -> dict[str, Any]:
@@ -188,8 +188,10 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
     topology = load_topology(opt.topology)
     bus_kind, bus_why = resolve_bus(opt.bus, len(topology))
     binary = opt.controller or controller_binary(opt.preset)
-    if not binary.exists():
-        raise HilError(f"{binary} is missing: run tools/armctl build")
+    logger_exe = logger_binary(opt.preset)
+    for exe in (binary, logger_exe):
+        if not exe.exists():
+            raise HilError(f"{exe} is missing: run tools/armctl build")
     opt.out.mkdir(parents=True, exist_ok=True)
     for stale in ("telemetry.lcmlog", "controller_summary.json", "sim_summary.json", "run.json", "uncertainty.json"):
         (opt.out / stale).unlink(missing_ok=True)
@@ -200,10 +202,9 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
     log_path = opt.out / "telemetry.lcmlog"
     logs = {name: open(opt.out / f"{name}.log", "w") for name in ("controller", "simulator", "logger")}
 
-    # The C logger itself, not the wheel's Python wrapper: SIGINT must reach the process that
-    # flushes the file.
-    logger_exe = Path(lcm.__file__).resolve().parent.parent / "bin" / "lcm-logger"
-    logger = subprocess.Popen([str(logger_exe), "-q", "-f", f"--lcm-url={url}", str(log_path)],
+    # Not lcm-logger: its subscription queue of 30 messages drops telemetry whenever it falls
+    # behind for a moment (tools/lcm_logger/arm_lcm_logger.c).
+    logger = subprocess.Popen([str(logger_exe), "--lcm-url", url, str(log_path)],
                               stdout=logs["logger"], stderr=subprocess.STDOUT, preexec_fn=_logger_priority)
     procs: list[subprocess.Popen[bytes]] = [logger]
     t0 = time.monotonic()
@@ -235,7 +236,7 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
                 p.kill()
                 raise HilError(f"{p.args[0]} did not finish in time; killed")
         wall = time.monotonic() - t0
-        time.sleep(0.3)  # the logger flushes every 100 ms
+        time.sleep(0.3)  # telemetry still on its way reaches the logger; SIGINT then drains and flushes it
     finally:
         for p in reversed(procs):
             if p.poll() is None:

@@ -17,6 +17,11 @@ def controller_binary(preset: str = "release") -> Path:
     return build_dir(preset) / "firmware" / "arm_controller"
 
 
+def logger_binary(preset: str = "release") -> Path:
+    """The HIL run's telemetry logger (tools/lcm_logger)."""
+    return build_dir(preset) / "tools" / "lcm_logger" / "arm_lcm_logger"
+
+
 def env_with_repo() -> dict[str, str]:
     env = dict(os.environ)
     env["PYTHONPATH"] = str(REPO) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
