@@ -8,8 +8,9 @@
  * (measured: a 50 ms SIGSTOP lost 206 of 13,500 messages). Here the queue is unbounded and the
  * socket buffer comes from the URL (recv_buf_size), so a stall only delays writing.
  *
- * Usage: arm_lcm_logger --lcm-url URL FILE. Flushes at most 100 ms after a message arrives;
- * SIGINT/SIGTERM: writes what is queued, closes the file, exits 0. Prints the message count. */
+ * Usage: arm_lcm_logger --lcm-url URL FILE. Flushes the file about every 100 ms while messages come;
+ * SIGINT/SIGTERM: writes what is queued, closes the file, prints the count and exits 0 (1 if a
+ * write failed). */
 #define _POSIX_C_SOURCE 200809L
 #include <lcm/lcm.h>
 #include <signal.h>
