@@ -56,6 +56,7 @@ class SimReport:
     rx_wrong_bus: int = 0  # a command for a drive that is not on the bus it arrived on: ignored
     commands_missed: int = 0
     commands_late: int = 0  # bus timing: the command's frame ended after its period (not applied)
+    commands_missed_per_drive: list[int] = field(default_factory=list)  # drive i+1, while operation enabled
     bus_timing: list[dict[str, Any]] = field(default_factory=list)  # per bus, when emulated
     telemetry_sent: dict[str, int] = field(default_factory=lambda: {"ARM_SIM": 0, "ARM_SIM_EVENT": 0})
     wall_s: float = 0.0
@@ -380,6 +381,7 @@ class Simulator:
         self.report.rx_own_echo = self.io.echoes
         self.report.rx_bad_frame += self.io.undecodable
         self.report.drive_faults = [d.node_id for d in self.drives if d.error_code]
+        self.report.commands_missed_per_drive = [d.commands_missed for d in self.drives]
         if self.timing is not None:
             self.report.bus_timing = [{"bus": i, "phy": tl.bus.describe(), "drives": tl.bus.drives,
                                        **tl.stats.as_dict()} for i, tl in enumerate(self.timing)]

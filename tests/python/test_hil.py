@@ -42,7 +42,7 @@ def test_every_period_is_accounted_for(short_run: tuple[Path, dict]) -> None:
     # One state per drive per SYNC, including the few enabling periods before tracking starts.
     assert ctl["frames"]["rx_state"] == 6 * sim["periods"]
     assert sim["periods"] >= ctl["steps_done"]
-    assert sim["commands_missed"] == 0
+    assert sim["commands_missed"] == 0 and sim["commands_missed_per_drive"] == [0] * 6
     assert ctl["frames"]["rx_unknown_id"] == 0 and ctl["frames"]["rx_wrong_counter"] == 0
     assert ctl["frames"]["rx_wrong_bus"] == 0 and sim["rx_wrong_bus"] == 0
 
