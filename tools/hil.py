@@ -150,9 +150,14 @@ def topology_load_pct(topology: list[busload.Bus], rate_hz: float = 1000.0) -> d
     return {bl.bus.name: round(bl.load * 100.0, 2) for bl in loads}
 
 
+def bus_timing_mode(mode: str) -> str:
+    """host_sim's bus timing for a run mode: lockstep has no wall clock to delay frames on."""
+    return "virtual" if mode == "lockstep" else "wallclock"
+
+
 def bus_timing_args(mode: str, topology: list[busload.Bus]) -> list[str]:
     """host_sim arguments that emulate the topology's bit timing (one --bus-phy per bus, in order)."""
-    args = ["--bus-timing", "virtual" if mode == "lockstep" else "wallclock"]
+    args = ["--bus-timing", bus_timing_mode(mode)]
     for b in topology:
         args += ["--bus-phy", busload.phy_spec(b)]
     return args
@@ -257,7 +262,7 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
     config = {"method": opt.method, "mode": opt.mode, "duration_s": opt.duration_s,
               "joint_names": JOINT_NAMES, "controller_args": list(opt.controller_args),
               "uncertainty": opt.uncertainty,
-              "bus_timing": (bus_timing_args(opt.mode, topology)[1] if opt.bus_timing else "off"), **opt.labels}
+              "bus_timing": bus_timing_mode(opt.mode) if opt.bus_timing else "off", **opt.labels}
     run = analyse(opt.out, controller, simulator, config, {
         "bus": " ".join(buses), "bus_choice": f"{opt.bus} -> {bus_kind} ({bus_why})",
         "topology": {"file": str(opt.topology or busload.DEFAULT_TOPOLOGY),
