@@ -13,6 +13,7 @@ import json
 import os
 import re
 import subprocess
+import sys
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -39,27 +40,31 @@ def _instructions(exe: Path, method: str, numeric: str, steps: int) -> int:
         return int(m.group(1))
 
 
-def per_step(exe: Path, method: str, numeric: str) -> float:
+def per_step(exe: Path, method: str, numeric: str, steps: int = STEPS) -> float:
     a = _instructions(exe, method, numeric, WARMUP)
-    b = _instructions(exe, method, numeric, WARMUP + STEPS)
-    return (b - a) / STEPS
+    b = _instructions(exe, method, numeric, WARMUP + steps)
+    return (b - a) / steps
 
 
-def bench_step(out: Path) -> dict[str, Any]:
+def bench_step(out: Path, quick: bool = False) -> dict[str, Any]:
+    """quick: pm only, 200 measured steps (a check that the benchmark runs, not a figure)."""
     build("release")
     exe = build_dir("release") / "tests" / "bench" / "bench_step"
-    jobs = [(m, n) for m in METHODS for n in ("float", "fixed") if n == "float" or m in ("pm", "pm-paper", "gh2")]
-    jobs += [(m, "eigen") for m in ("pd", "pm", "pm-paper", "gh2")]
+    methods = ("pm",) if quick else METHODS
+    steps = 200 if quick else STEPS
+    jobs = [(m, n) for m in methods for n in ("float", "fixed") if n == "float" or m in ("pm", "pm-paper", "gh2")]
+    jobs += [(m, "eigen") for m in methods if m in ("pd", "pm", "pm-paper", "gh2")]
     rows: dict[str, dict[str, float]] = {}
     for method, numeric in tqdm(jobs, desc="callgrind", unit="run"):
-        rows.setdefault(method, {})[numeric] = per_step(exe, method, numeric)
+        rows.setdefault(method, {})[numeric] = per_step(exe, method, numeric, steps)
     for method, r in rows.items():
         if "eigen" in r:
             r["eigen_over_float"] = r["eigen"] / r["float"]
     result = {
         "what": "instructions per control step (callgrind Ir inside the step function), n = 6, release build",
         "compiler": subprocess.run(["cc", "--version"], capture_output=True, text=True).stdout.splitlines()[0],
-        "steps_measured": STEPS,
+        "steps_measured": steps,
+        "quick": quick,
         "methods": rows,
     }
     tmp = out.with_name(f".{out.name}.tmp.{os.getpid()}")
@@ -82,15 +87,19 @@ def table(result: dict[str, Any]) -> str:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("what", choices=("step", "synth"))
     p.add_argument("--out", type=Path, default=None, help="results file (JSON)")
+    p.add_argument("--quick", action="store_true",
+                   help="a short form that checks the benchmark runs (step: pm only; synth: one repeat, "
+                        "no coupled solve, n = 1 comparison); its figures are not the documented ones")
 
 
 def run(ns: argparse.Namespace) -> int:
     if ns.what == "step":
         out = ns.out or REPO / "runs" / "bench" / "step_instructions.json"
-        result = bench_step(out)
+        result = bench_step(out, ns.quick)
         print(table(result))
         print(f"results: {out}")
         return 0
     out = ns.out or REPO / "runs" / "bench" / "synth.json"
-    return subprocess.run([str(REPO / ".venv" / "bin" / "python"), "-m", "gen.synth.bench", "--out", str(out)],
+    quick = ["--repeats", "1", "--skip-coupled", "--quick"] if ns.quick else []
+    return subprocess.run([sys.executable, "-m", "gen.synth.bench", "--out", str(out), *quick],
                           cwd=REPO).returncode

@@ -7,6 +7,10 @@ aarch64 (static Linux controller, LCM built for the target), cortex-m4, cortex-m
 
 from __future__ import annotations
 
+import hashlib
+import json
+import os
+import platform
 import shutil
 import subprocess
 import sys
@@ -27,7 +31,11 @@ _COMPILERS = {
 }
 
 
-class ToolchainMissing(RuntimeError):
+class BuildError(RuntimeError):
+    """A build that cannot be done; the message says why and what to do."""
+
+
+class ToolchainMissing(BuildError):
     pass
 
 
@@ -41,21 +49,113 @@ def toolchain_missing(preset: str) -> str | None:
     return None
 
 
-def build(preset: str = "release", quiet: bool = True) -> None:
+# Written after a successful configure; a build directory without it, or with another
+# fingerprint, is configured again from scratch (`cmake --fresh`).
+STAMP = ".armctl-configured.json"
+
+
+class ConfigureFailed(BuildError):
+    pass
+
+
+def _first_line(argv: list[str]) -> str:
+    try:
+        r = subprocess.run(argv, capture_output=True, text=True, timeout=30)
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        return f"unavailable ({exc})"
+    return (r.stdout.strip().splitlines() or [""])[0]
+
+
+def _file_digest(path: Path) -> str:
+    try:
+        return hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+    except OSError:
+        return "missing"
+
+
+def configure_fingerprint(preset: str, cache: dict[str, str] | None = None) -> dict[str, str]:
+    """What a configured build directory depends on besides its sources (CMake itself re-runs
+    for changed CMakeLists): the checkout's location, the machine, the preset and its toolchain
+    file, the compilers, CMake and the Python that generates code. Any change means the cached
+    configuration (compiler paths, found libraries, ...) may be wrong for this machine."""
+    presets = json.loads((REPO / "CMakePresets.json").read_text())["configurePresets"]
+    entry = next(p for p in presets if p["name"] == preset)
+    toolchain = entry.get("toolchainFile", "").replace("${sourceDir}", str(REPO))
+    exe = _COMPILERS.get(preset, (os.environ.get("CC") or "cc", ""))[0]
+    compilers = [exe] if preset in _COMPILERS else [exe, os.environ.get("CXX") or "c++"]
+    fp = {
+        "source_dir": str(REPO),
+        "machine": _machine_id(),
+        "preset": json.dumps(entry, sort_keys=True),
+        "toolchain_file": _file_digest(Path(toolchain)) if toolchain else "",
+        "cmake": _first_line(["cmake", "--version"]),
+        "python": sys.executable,
+        **{f"cache:{k}": v for k, v in sorted((cache or {}).items())},
+    }
+    for c in compilers:
+        path = shutil.which(c)
+        fp[f"compiler:{c}"] = f"{os.path.realpath(path)} {_first_line([path, '--version'])}" if path else "missing"
+    return fp
+
+
+def _machine_id() -> str:
+    for p in (Path("/etc/machine-id"), Path("/var/lib/dbus/machine-id")):
+        try:
+            return p.read_text().strip()
+        except OSError:
+            continue
+    return platform.node()
+
+
+def ensure_configured(preset: str, bdir: Path, quiet: bool = True, cache: dict[str, str] | None = None) -> None:
+    """Configure the preset in bdir unless a successful configure of this very fingerprint is
+    recorded there. A failed or foreign configure is redone from scratch, and a failure shows
+    CMake's own output."""
+    stamp = bdir / STAMP
+    want = configure_fingerprint(preset, cache)
+    try:
+        have = json.loads(stamp.read_text())
+    except (OSError, ValueError):
+        have = None
+    if have == want and (bdir / "build.ninja").exists():
+        return
+    if have is not None or (bdir / "CMakeCache.txt").exists():
+        changed = sorted(k for k in want if have is None or have.get(k) != want[k])
+        why = (f"configured with a different {', '.join(changed)}" if have is not None
+               else "no record of a successful configure")
+        print(f"armctl: build ({preset}): configuring {bdir} again ({why})", file=sys.stderr)
+    stamp.unlink(missing_ok=True)
+    defs = [f"-D{k}={v}" for k, v in sorted({"ARM_PYTHON": sys.executable, **(cache or {})}.items())]
+    r = subprocess.run(["cmake", "--preset", preset, "-B", str(bdir), "--fresh", *defs], cwd=REPO,
+                       stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    if r.returncode != 0:
+        print(r.stdout, file=sys.stderr)
+        raise ConfigureFailed(f"armctl: build ({preset}): configure failed (CMake's output above); "
+                              "fix that and re-run: the next build configures again")
+    if not quiet:
+        tail = [ln for ln in r.stdout.splitlines() if ln.startswith("-- Build files")]
+        print("\n".join(tail))
+    tmp = stamp.with_name(f"{STAMP}.tmp.{os.getpid()}")
+    tmp.write_text(json.dumps(want, indent=2) + "\n")
+    os.replace(tmp, stamp)
+
+
+def build(preset: str = "release", quiet: bool = True, bdir: Path | None = None,
+          cache: dict[str, str] | None = None) -> None:
+    """Configure (when needed) and build a preset, in build/<preset> unless bdir is given;
+    cache: CMake cache variables (-D) of this build, part of its configure fingerprint."""
     if preset not in PRESETS + CROSS_PRESETS:
         raise ValueError(f"preset '{preset}': expected one of {', '.join(PRESETS + CROSS_PRESETS)}")
     missing = toolchain_missing(preset)
     if missing:
         raise ToolchainMissing(f"armctl: build ({preset}): {missing}")
-    out = subprocess.DEVNULL if quiet else None
-    py = f"-DARM_PYTHON={sys.executable}"
-    if not (build_dir(preset) / "CMakeCache.txt").exists():
-        subprocess.run(["cmake", "--preset", preset, py], cwd=REPO, check=True, stdout=out)
-    r = subprocess.run(["cmake", "--build", "--preset", preset], cwd=REPO, stdout=subprocess.PIPE,
+    bdir = bdir or build_dir(preset)
+    ensure_configured(preset, bdir, quiet, cache)
+    r = subprocess.run(["cmake", "--build", str(bdir)], cwd=REPO, stdout=subprocess.PIPE,
                        stderr=subprocess.STDOUT, text=True)
     if r.returncode != 0:
         print(r.stdout, file=sys.stderr)
-        raise SystemExit(f"armctl: build ({preset}) failed")
+        raise BuildError(f"armctl: build ({preset}) failed (the compiler's output above)")
     if not quiet:
         lines = r.stdout.strip().splitlines()
         # The Cortex-M images print their memory and stack report (firmware/port/cortex_m).

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
 
-from tools.build import PRESETS, TARGETS, ToolchainMissing, build
+from tools.build import PRESETS, TARGETS, BuildError, build
 from tools.paths import REPO, build_dir, env_with_repo
 
 
@@ -21,11 +22,7 @@ def cmd_setup(ns: argparse.Namespace) -> int:
 
 
 def cmd_build(ns: argparse.Namespace) -> int:
-    try:
-        build(TARGETS[ns.target] if ns.target else ns.preset, quiet=False)
-    except ToolchainMissing as exc:
-        print(exc, file=sys.stderr)
-        return 1
+    build(TARGETS[ns.target] if ns.target else ns.preset, quiet=False)
     return 0
 
 
@@ -97,6 +94,9 @@ def cmd_test(ns: argparse.Namespace) -> int:
         failed.append("ctest")
     env = env_with_repo()
     env["ARM_BUILD_DIR"] = str(build_dir("debug"))
+    # As root on Debian, tools/armctl has installed every package: no test may skip for a missing one.
+    if os.geteuid() == 0 and shutil.which("dpkg-query"):
+        env["ARM_TEST_STRICT"] = "1"
     r = subprocess.run([sys.executable, "-m", "pytest", "-q", "tests/python", *ns.pytest_args], cwd=REPO, env=env)
     if r.returncode != 0:
         failed.append("pytest")
@@ -188,7 +188,11 @@ def main(argv: list[str] | None = None) -> int:
     bn.set_defaults(fn=bench.run)
 
     ns = p.parse_args(argv)
-    return int(ns.fn(ns))
+    try:
+        return int(ns.fn(ns))
+    except BuildError as exc:
+        print(exc, file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

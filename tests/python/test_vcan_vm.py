@@ -258,3 +258,47 @@ def test_garbage_frames_are_counted_and_ignored(vm_run: dict) -> None:
     assert {k: sim[k] for k in want_sim} == want_sim
     # and changed nothing: every period's joint states arrived, no drive faulted
     assert ctl["rx_wrong_counter"] == 0 and sim["drive_faults"] == []
+
+
+def _vm_or_skip() -> None:
+    from tools.vm.image import APT_HINT, VmError, ensure_image, missing_tools
+
+    missing = missing_tools()
+    if missing:
+        pytest.skip(f"no qemu VM here: missing {', '.join(missing)} ({APT_HINT})")
+    try:
+        ensure_image()
+    except VmError as exc:
+        pytest.skip(f"the qemu VM cannot be set up on this machine: {exc}")
+
+
+ARMCTL = str(REPO / "tools" / "armctl")
+
+
+def test_hil_in_the_vm_through_the_cli(tmp_path: Path) -> None:
+    """The README's way to run HIL over real SocketCAN, as a user types it: armctl (bash, its
+    bootstrap and the CLI) boots the VM and runs itself there with --bus vcan."""
+    _vm_or_skip()
+    r = subprocess.run([ARMCTL, "hil", "--bus", "vm", "--duration", "0.3", "--out", str(tmp_path)], cwd=REPO,
+                       capture_output=True, text=True, timeout=VM_TIMEOUT_S)
+    assert r.returncode == 0, r.stdout + r.stderr
+    run = json.loads((tmp_path / "run.json").read_text())
+    assert run["results"]["result"] == "ok", run["results"]
+    assert run["environment"]["bus"].split() == ["socketcan:vcan0@1,2,3", "socketcan:vcan1@4,5,6"]
+    assert run["environment"]["bus_choice"].startswith("vcan -> vcan")
+
+
+def test_vcan_setup_run_and_up_in_the_vm() -> None:
+    """`vcan setup` leaves a bootable image; in the VM a command gets a normal /dev (process
+    substitution, /dev/std*, /dev/shm, /dev/pts) and `vcan up` creates an interface."""
+    _vm_or_skip()
+    r = subprocess.run([ARMCTL, "vcan", "setup"], cwd=REPO, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0 and "VM image ready" in r.stdout, r.stdout + r.stderr
+    script = ("set -e; cat <(echo procsub-ok); echo to-stderr >> /dev/stderr; echo to-stdout >> /dev/stdout; "
+              "test -L /dev/stdin; mountpoint -q /dev/shm; mountpoint -q /dev/pts; "
+              "tools/armctl vcan up --iface vcan2; ip -details link show vcan2")
+    r = subprocess.run([ARMCTL, "vcan", "run", "--", "bash", "-c", script], cwd=REPO, capture_output=True,
+                       text=True, timeout=VM_TIMEOUT_S)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "procsub-ok" in r.stdout and "to-stdout" in r.stdout and "to-stderr" in r.stderr
+    assert "vcan2 up (mtu 72 = CAN FD, txqueuelen 1000)" in r.stdout and "vcan" in r.stdout.split("vcan2:")[-1]

@@ -63,6 +63,12 @@ if mount -t 9p -o trans=virtio,version=9p2000.L,msize=512000@CACHE_OPT@ host /mn
     mkdir -p /mnt/dev/shm /mnt/dev/pts
     mount -t tmpfs -o mode=1777 shm /mnt/dev/shm
     mount -t devpts devpts /mnt/dev/pts
+    # What udev and systemd add on a normal system: bash's process substitution needs /dev/fd,
+    # many scripts write to /dev/stdout or /dev/stderr.
+    ln -sfn /proc/self/fd /mnt/dev/fd
+    ln -sfn /proc/self/fd/0 /mnt/dev/stdin
+    ln -sfn /proc/self/fd/1 /mnt/dev/stdout
+    ln -sfn /proc/self/fd/2 /mnt/dev/stderr
     if [ -n "$run" ] && [ -f "/mnt$run/run.sh" ]; then
         chroot /mnt /bin/sh "$run/run.sh"
     else
