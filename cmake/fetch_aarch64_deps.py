@@ -110,6 +110,24 @@ def _apt(root: Path, *args: str, cwd: Path | None = None, check: bool = True, ar
     return r.stdout + r.stderr
 
 
+def safe_extract(tf: tarfile.TarFile, dest: Path) -> None:
+    """Extract refusing members that leave dest (absolute paths, .., links out). Python 3.11.4+
+    has the "data" filter for that; Debian 12's 3.11.2 does not, so check by hand there."""
+    if hasattr(tarfile, "data_filter"):
+        tf.extractall(dest, filter="data")
+        return
+    root = dest.resolve()
+    for m in tf.getmembers():
+        target = (root / m.name).resolve()
+        if root not in target.parents and target != root:
+            raise SystemExit(f"fetch_aarch64_deps: {m.name}: outside the extraction folder")
+        if (m.issym() or m.islnk()) and not (target.parent / m.linkname).resolve().is_relative_to(root):
+            raise SystemExit(f"fetch_aarch64_deps: {m.name}: links outside the extraction folder")
+        if not (m.isfile() or m.isdir() or m.issym() or m.islnk()):
+            raise SystemExit(f"fetch_aarch64_deps: {m.name}: not a file, folder or link")
+    tf.extractall(dest)
+
+
 def fetch(out: Path) -> dict[str, str]:
     stamp = out / STAMP
     if stamp.exists():
@@ -146,7 +164,7 @@ def fetch(out: Path) -> dict[str, str]:
     if not origs:
         raise SystemExit(f"fetch_aarch64_deps: no {SOURCE_PACKAGE} source tarball was downloaded:\n{apt_said}")
     with tarfile.open(origs[0]) as tf:
-        tf.extractall(src, filter="data")
+        safe_extract(tf, src)
     tops = [p for p in src.iterdir() if p.is_dir() and (p / "lcm" / "lcm.c").exists()]
     if not tops:
         raise SystemExit(f"fetch_aarch64_deps: {origs[0].name} has no lcm/lcm.c")

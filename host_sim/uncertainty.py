@@ -1,24 +1,28 @@
-"""Model uncertainty of the simulated arm, seeded and combinable.
+"""The simulated arm's model uncertainty, as configured (the dynamics are host_sim/native/sim_arm.c).
 
 - paper-style (Kim & Kim 2024, Example 1 / Fig. 1): the true dynamics are
   (M + M~(t)) q_ddot + V + V~(t) = tau with random, time-varying M~, V~ bounded by
   ||M~|| <= r ||M|| and |V~_j| <= r |V_j| (r = 0.05 in the paper): M~ = (D M + M D) / 2 with
   D = diag(d_j(t)), V~_j = d'_j(t) V_j, and every d(t) a random piecewise-linear signal in [-r, r]
-  with a new value every `knot_s` seconds (so w has the high-frequency content of the paper's
-  Fig. 6). V is MuJoCo's bias force: Coriolis, centrifugal and gravity.
+  with a new value every `paper_knot_s` seconds (so w has the high-frequency content of the
+  paper's Fig. 6). V is MuJoCo's bias force: Coriolis, centrifugal and gravity.
 - parametric: link masses, centres of mass and inertias of the simulated arm off from the
   nominal model (uniform in +-error, per link, seeded), plus joint friction the nominal model
   lacks: tau_f = -b qd - c tanh(qd / 0.01).
+
+One seed fixes everything: arm_sim draws from numpy's own generator (np.random.default_rng(seed),
+reproduced bit for bit in host_sim/native/sim_rng.c), in a fixed order.
 """
 
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass, field
+import math
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
+from typing import Any
 
-import mujoco
-import numpy as np
+MIN_KNOT_S = 1e-4  # arm_sim's bound: a new random value at most every 0.1 ms
 
 
 @dataclass
@@ -33,88 +37,37 @@ class UncertaintyConfig:
     coulomb: list[float] = field(default_factory=list)  # Nm per joint
 
     @classmethod
-    def from_file(cls, path: Path) -> "UncertaintyConfig":
-        data = json.loads(path.read_text())
-        unknown = set(data) - set(cls.__dataclass_fields__)
+    def from_dict(cls, data: dict[str, Any], where: str = "uncertainty") -> "UncertaintyConfig":
+        if not isinstance(data, dict):
+            raise ValueError(f"{where}: expected a table of fields, got {type(data).__name__}")
+        known = {f.name for f in fields(cls)}
+        unknown = set(data) - known
         if unknown:
-            raise ValueError(f"{path}: unknown uncertainty field(s) {sorted(unknown)}")
+            raise ValueError(f"{where}: unknown field(s) {sorted(unknown)} (known: {', '.join(sorted(known))})")
         cfg = cls(**data)
-        cfg.validate()
+        cfg.validate(where)
         return cfg
 
-    def validate(self) -> None:
+    @classmethod
+    def from_file(cls, path: Path) -> "UncertaintyConfig":
+        return cls.from_dict(json.loads(path.read_text()), str(path))
+
+    def validate(self, where: str = "uncertainty") -> None:
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not 0 <= self.seed < 2**64:
+            raise ValueError(f"{where}.seed: must be a whole number in 0..2^64-1, got {self.seed!r}")
         for name in ("paper_ratio", "mass_error", "inertia_error", "com_error_m"):
             v = getattr(self, name)
-            if not (0.0 <= v < 1.0):
-                raise ValueError(f"uncertainty.{name}: must be in [0, 1), got {v}")
-        if not self.paper_knot_s > 0:
-            raise ValueError(f"uncertainty.paper_knot_s: must be > 0, got {self.paper_knot_s}")
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0.0 <= v < 1.0):
+                raise ValueError(f"{where}.{name}: must be a number in [0, 1), got {v!r}")
+        k = self.paper_knot_s
+        if isinstance(k, bool) or not isinstance(k, (int, float)) or not (MIN_KNOT_S <= k <= 3600.0):
+            raise ValueError(f"{where}.paper_knot_s: must be a number of seconds in [{MIN_KNOT_S:g}, 3600], got {k!r}")
         for name in ("viscous", "coulomb"):
-            if any(x < 0 for x in getattr(self, name)):
-                raise ValueError(f"uncertainty.{name}: friction coefficients must be >= 0")
+            vals = getattr(self, name)
+            if not isinstance(vals, list) or not all(
+                    isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) and 0 <= x <= 1e6
+                    for x in vals):
+                raise ValueError(f"{where}.{name}: must be a list of friction coefficients in [0, 1e6], got {vals!r}")
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return asdict(self)
-
-
-class RandomSignal:
-    """Piecewise-linear random signal in [-amp, amp], one value per knot, per channel."""
-
-    def __init__(self, rng: np.random.Generator, channels: int, amp: float, knot_s: float) -> None:
-        self.rng, self.amp, self.knot_s = rng, amp, knot_s
-        self.knots = [rng.uniform(-amp, amp, channels), rng.uniform(-amp, amp, channels)]
-        self.index = 0
-
-    def __call__(self, t: float) -> np.ndarray:
-        k = int(t // self.knot_s)
-        while self.index < k:  # time only moves forward in a run
-            self.knots = [self.knots[1], self.rng.uniform(-self.amp, self.amp, len(self.knots[1]))]
-            self.index += 1
-        frac = t / self.knot_s - k
-        return (1.0 - frac) * self.knots[0] + frac * self.knots[1]
-
-
-def perturb_model(model: mujoco.MjModel, cfg: UncertaintyConfig, rng: np.random.Generator) -> None:
-    """Parametric error: the simulated arm's links differ from the nominal ones."""
-    for b in range(1, model.nbody):
-        if cfg.mass_error:
-            model.body_mass[b] *= 1.0 + rng.uniform(-cfg.mass_error, cfg.mass_error)
-        if cfg.inertia_error:
-            model.body_inertia[b] *= 1.0 + rng.uniform(-cfg.inertia_error, cfg.inertia_error)
-        if cfg.com_error_m:
-            model.body_ipos[b] += rng.uniform(-cfg.com_error_m, cfg.com_error_m, 3)
-
-
-class Uncertainty:
-    def __init__(self, cfg: UncertaintyConfig, n: int) -> None:
-        self.cfg = cfg
-        self.rng = np.random.default_rng(cfg.seed)
-        self.n = n
-        r = cfg.paper_ratio
-        # One signal of 2n channels: d for M~ (first n) and d' for V~ (last n).
-        self.d = RandomSignal(self.rng, 2 * n, r, cfg.paper_knot_s) if r else None
-        self.viscous = np.array(cfg.viscous or [0.0] * n)
-        self.coulomb = np.array(cfg.coulomb or [0.0] * n)
-        if len(self.viscous) != n or len(self.coulomb) != n:
-            raise ValueError(f"uncertainty.viscous/coulomb: need {n} values each")
-        self.friction = bool(self.viscous.any() or self.coulomb.any())
-
-    @property
-    def time_varying(self) -> bool:
-        return self.d is not None
-
-    def extra_force(self, t: float, mass: np.ndarray, bias: np.ndarray, tau: np.ndarray,
-                    qd: np.ndarray) -> np.ndarray:
-        """The generalized force that makes MuJoCo integrate the uncertain dynamics.
-
-        With M, V from MuJoCo for the (parametrically perturbed) arm, the true acceleration is
-        qdd = (M + M~)^-1 (tau + tau_f - V - V~); returned is f with M qdd + V = tau + f.
-        """
-        tau_f = -self.viscous * qd - self.coulomb * np.tanh(qd / 0.01) if self.friction else 0.0
-        if self.d is None:
-            return tau_f
-        dd = self.d(t)
-        d, dv = dd[: self.n], dd[self.n:]
-        m_true = mass + 0.5 * (d[:, None] * mass + mass * d[None, :])
-        qdd = np.linalg.solve(m_true, tau + tau_f - bias * (1.0 + dv))
-        return mass @ qdd + bias - tau

@@ -4,6 +4,9 @@
 seconds, so the figure repeats on a busy machine) for every method, float32 and fixed point,
 next to the dense double-precision Eigen reference of the same step.
 `armctl bench synth`: wall time of the synthesis (gen.synth.bench).
+`armctl bench sim`: the simulator's speed: the default 10 s lockstep HIL run five times (real-time
+factor after boot, wall time), one period's CPU broken down by activity, and MuJoCo's bare
+mj_step on the same model beside it as the limit.
 """
 
 from __future__ import annotations
@@ -67,10 +70,7 @@ def bench_step(out: Path, quick: bool = False) -> dict[str, Any]:
         "quick": quick,
         "methods": rows,
     }
-    tmp = out.with_name(f".{out.name}.tmp.{os.getpid()}")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp.write_text(json.dumps(result, indent=2) + "\n")
-    tmp.replace(out)
+    _write_json(out, result)
     return result
 
 
@@ -84,12 +84,79 @@ def table(result: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def bench_sim(out: Path, quick: bool = False) -> dict[str, Any]:
+    """The default lockstep run, repeated; the per-period breakdown; the bare-MuJoCo limit."""
+    import statistics
+
+    from host_sim.launch import sim_binary
+    from tools.hil import HilOptions, run_hil
+
+    build("release")
+    repeats, duration = (1, 1.0) if quick else (5, 10.0)
+    runs = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for i in tqdm(range(repeats + 1), desc="hil", unit="run"):
+            profile = i == repeats  # the last run measures where the time goes (costs a little)
+            run = run_hil(HilOptions(out=Path(tmp) / str(i), duration_s=duration, method="pm",
+                                     sim_args=("--profile",) if profile else ()))
+            if run["results"]["result"] != "ok":
+                raise RuntimeError(f"bench run {i} failed: {run['results']['problems']}")
+            sim = json.loads((Path(tmp) / str(i) / "sim_summary.json").read_text())
+            entry = {"realtime_factor": sim["realtime_factor"], "wall_s": run["environment"]["wall_s"],
+                     "boot_s": sim["boot_s"], "period_cost_us": sim["period_cost_us"]}
+            if profile:
+                breakdown = sim["profile_us_per_period"]
+            else:
+                runs.append(entry)
+    r = subprocess.run([str(sim_binary("release")), "--bench-mj-step", "20000"], capture_output=True, text=True,
+                       check=True)
+    mj_step_us = json.loads(r.stdout)["mj_step_ns"] / 1e3
+    other = breakdown["total"] - sum(breakdown[k] for k in ("physics", "bus_tx", "bus_rx", "telemetry"))
+    factors = [x["realtime_factor"] for x in runs]
+    cost_mean = statistics.median(x["period_cost_us"]["mean"] for x in runs)
+    result = {
+        "what": (f"the default lockstep HIL run (pm, {duration:g} s after the 0.5 s hold), {repeats} time(s): "
+                 "arm_sim's real-time factor after boot and its CPU time per period; one more run with "
+                 "--profile breaks a period down by activity (thread CPU time); bare mj_step: MuJoCo alone "
+                 "on the same model, the limit of a period"),
+        "quick": quick,
+        "runs": runs,
+        "realtime_factor_median": statistics.median(factors),
+        "realtime_factor_min": min(factors),
+        "period_cost_us_mean_median": cost_mean,
+        "breakdown_us_per_period": {**{k: breakdown[k] for k in ("physics", "bus_tx", "bus_rx", "telemetry")},
+                                    "drives_and_rest": other, "total": breakdown["total"]},
+        "bare_mj_step_us": mj_step_us,
+        "period_cost_over_bare_mj_step": cost_mean / mj_step_us,
+    }
+    _write_json(out, result)
+    return result
+
+
+def sim_table(r: dict[str, Any]) -> str:
+    b = r["breakdown_us_per_period"]
+    lines = [f"real-time factor after boot: median {r['realtime_factor_median']:.1f}x "
+             f"(min {r['realtime_factor_min']:.1f}x) over {len(r['runs'])} run(s)",
+             "one period's simulator CPU (us, --profile run): " + ", ".join(f"{k} {v:.1f}" for k, v in b.items()),
+             f"bare mj_step on the same model: {r['bare_mj_step_us']:.2f} us; a whole period costs "
+             f"{r['period_cost_over_bare_mj_step']:.1f}x that"]
+    return "\n".join(lines)
+
+
+def _write_json(out: Path, result: dict[str, Any]) -> None:
+    tmp = out.with_name(f".{out.name}.tmp.{os.getpid()}")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp.write_text(json.dumps(result, indent=2) + "\n")
+    tmp.replace(out)
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("what", choices=("step", "synth"))
+    p.add_argument("what", choices=("step", "synth", "sim"))
     p.add_argument("--out", type=Path, default=None, help="results file (JSON)")
     p.add_argument("--quick", action="store_true",
                    help="a short form that checks the benchmark runs (step: pm only; synth: one repeat, "
-                        "no coupled solve, n = 1 comparison); its figures are not the documented ones")
+                        "no coupled solve, n = 1 comparison; sim: one 1 s run); its figures are not the "
+                        "documented ones")
 
 
 def run(ns: argparse.Namespace) -> int:
@@ -97,6 +164,11 @@ def run(ns: argparse.Namespace) -> int:
         out = ns.out or REPO / "runs" / "bench" / "step_instructions.json"
         result = bench_step(out, ns.quick)
         print(table(result))
+        print(f"results: {out}")
+        return 0
+    if ns.what == "sim":
+        out = ns.out or REPO / "runs" / "bench" / "sim.json"
+        print(sim_table(bench_sim(out, ns.quick)))
         print(f"results: {out}")
         return 0
     out = ns.out or REPO / "runs" / "bench" / "synth.json"

@@ -38,6 +38,7 @@ ceil(n / 8) frames of 8 bytes, the way a classic CiA 402 drive maps it onto two 
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import re
@@ -243,6 +244,12 @@ def load_topology(path: Path = DEFAULT_TOPOLOGY, n_drives: int = 6) -> list[Bus]
     if missing:
         raise ConfigError(f"{path}: drives: drive(s) {', '.join(map(str, missing))} are on no bus")
     return buses
+
+
+@functools.cache
+def default_protocol() -> "Protocol":
+    """The project's DBC, parsed once per process (a study asks for it in every run)."""
+    return Protocol()
 
 
 class Protocol:

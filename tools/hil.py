@@ -5,18 +5,18 @@ from __future__ import annotations
 import json
 import os
 import random
+import select
 import signal
 import subprocess
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import lcm
 
+from host_sim.launch import sim_argv, sim_binary
 from tools import busload
-from tools.paths import REPO, controller_binary, env_with_repo, logger_binary
+from tools.paths import REPO, controller_binary, logger_binary
 from tools.run_analysis import analyse
 
 JOINT_NAMES = ["shoulder_pan", "shoulder_lift", "elbow", "wrist_1", "wrist_2", "wrist_3"]
@@ -39,10 +39,13 @@ class HilOptions:
     controller: Path | None = None
     controller_cmd_prefix: tuple[str, ...] = ()
     controller_args: tuple[str, ...] = ()
+    sim_args: tuple[str, ...] = ()  # extra arm_sim arguments (e.g. --profile)
     # host_sim.uncertainty.UncertaintyConfig fields (None: the simulated arm is the nominal one).
     uncertainty: dict[str, Any] | None = None
     # Recorded in run.json's results, e.g. the study's seed and trajectory.
     labels: dict[str, Any] = field(default_factory=dict)
+    # Realtime: the CPU the controller's loop and the simulator share (default: the last one).
+    cpu: int | None = None
     # Emulate each bus's bit timing in the simulator (host_sim/bus_timing.py) with the topology's
     # physical layers: virtual in lockstep, wallclock in realtime.
     bus_timing: bool = False
@@ -57,9 +60,32 @@ def _ports(opt: HilOptions) -> tuple[int, int]:
     return opt.can_port or rng.randint(43200, 43990), opt.lcm_port or rng.randint(7700, 7999)
 
 
+# Lockstep: both sides poll the bus this long before they sleep on it. A period's answer comes
+# within tens of microseconds, sooner than a sleeping process is woken on a VM: measured on this
+# 2-core machine, 10-11x real time without, 11-14x with (host_sim/README.md).
+LOCKSTEP_SPIN_US = 50
+
+
+def spin_args(mode: str) -> list[str]:
+    return ["--spin-us", str(LOCKSTEP_SPIN_US)] if mode == "lockstep" else []
+
+
+# Realtime: a next-period SYNC that overtook this period's commands on another bus is held back
+# at most this long (arm_sim --reorder-wait-us). Loopback UDP keeps no order between the buses'
+# sockets only for microseconds; holding a SYNC back longer makes its states late, and three
+# late periods in a row trip the controller's watchdog (lockstep waits up to 0.2 s: nothing is
+# timed there).
+REALTIME_REORDER_WAIT_US = 200
+
+
+def sim_mode_args(mode: str) -> list[str]:
+    return spin_args(mode) + (["--reorder-wait-us", str(REALTIME_REORDER_WAIT_US)] if mode == "realtime" else [])
+
+
 def _logger_priority() -> None:
-    """The logger mostly waits for messages, so a real-time priority costs the others little and
-    keeps a busy machine from delaying it (its queue has no limit, so a delay costs no data)."""
+    """Realtime runs: the logger mostly waits for messages, so a real-time priority costs the
+    others little and keeps a busy machine from delaying it (the kernel socket buffer is its
+    queue, seconds deep). Not in lockstep: there it would only preempt the run itself."""
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(10))
     except (PermissionError, OSError):
@@ -69,13 +95,25 @@ def _logger_priority() -> None:
 SIM_RT_PRIORITY = 70  # realtime runs: below the controller's loop (80) and above the logger (10)
 
 
-def _simulator_priority() -> None:
-    """In a realtime run the simulator is the other half of the loop: at ordinary priority a
-    2-core machine delays it by more than the watchdog's 3 periods within a second or two."""
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(SIM_RT_PRIORITY))
-    except (PermissionError, OSError):
-        pass  # not root: ordinary priority; run.json's environment says which
+def realtime_cpu(opt: "HilOptions") -> int:
+    """The CPU a realtime run's loop and simulator share (HilOptions.cpu; default the last one)."""
+    return opt.cpu if opt.cpu is not None else (os.cpu_count() or 1) - 1
+
+
+def _simulator_realtime(cpu: int):  # noqa: ANN202 - a preexec_fn
+    """In a realtime run the simulator is the other half of the loop. It runs SCHED_FIFO below
+    the loop (at ordinary priority a 2-core machine delays it past the watchdog's 3 periods within
+    a second or two), on the loop's own CPU: this VM stops one vCPU now and then for 1-6 ms
+    (measured: a spinning process sees such gaps every few seconds, on one CPU at a time). Drives
+    on the other CPU would then fall silent while the loop runs, and the watchdog safe-stops it;
+    on one CPU a stall pauses the whole rig, and the loop counts the deadlines it missed."""
+    def setup() -> None:
+        try:
+            os.sched_setaffinity(0, {cpu})
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(SIM_RT_PRIORITY))
+        except (PermissionError, OSError):
+            pass  # not root: ordinary priority; run.json's environment says which
+    return setup
 
 
 def _scheduling(pid: int) -> str:
@@ -84,21 +122,22 @@ def _scheduling(pid: int) -> str:
         prio = os.sched_getparam(pid).sched_priority
     except OSError as exc:
         return f"unknown ({exc.strerror})"
-    return f"SCHED_FIFO {prio}" if policy == os.SCHED_FIFO else "SCHED_OTHER"
+    try:
+        cpus = ",".join(map(str, sorted(os.sched_getaffinity(pid))))
+    except OSError:
+        cpus = "?"
+    return (f"SCHED_FIFO {prio}" if policy == os.SCHED_FIFO else "SCHED_OTHER") + f" on CPU {cpus}"
 
 
-def _wait_for_logger(url: str, log_path: Path, proc: subprocess.Popen[bytes], timeout: float = 10.0) -> None:
-    """The logger is ready once a probe message has reached its file."""
-    probe = lcm.LCM(url)
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if proc.poll() is not None:
-            raise HilError(f"the telemetry logger exited with {proc.returncode}; see logger.log")
-        probe.publish("ARM_PROBE", b"ready?")
-        time.sleep(0.15)
-        if log_path.exists() and log_path.stat().st_size > 0:
-            return
-    raise HilError(f"the telemetry logger did not start writing {log_path} within {timeout:g} s")
+def _wait_for_logger(proc: subprocess.Popen[bytes], timeout: float = 10.0) -> None:
+    """The logger says "ready" on stdout once it receives (tools/lcm_logger)."""
+    assert proc.stdout is not None
+    ready, _, _ = select.select([proc.stdout], [], [], timeout)
+    line = proc.stdout.readline() if ready else b""
+    if b"ready" not in line:
+        proc.poll()
+        why = f"exited with {proc.returncode}" if proc.returncode is not None else f"not ready within {timeout:g} s"
+        raise HilError(f"the telemetry logger {why}; see logger.log")
 
 
 def _load_json(path: Path) -> dict[str, Any]:
@@ -146,21 +185,13 @@ def bus_args(kind: str, can_port: int, topology: list[busload.Bus]) -> list[str]
 
 def topology_load_pct(topology: list[busload.Bus], rate_hz: float = 1000.0) -> dict[str, float]:
     """Worst-case load of each bus of the topology at the loop rate (tools/armctl busload)."""
-    loads = busload.compute(topology, rate_hz, 100.0, busload.Protocol())
+    loads = busload.compute(topology, rate_hz, 100.0, busload.default_protocol())
     return {bl.bus.name: round(bl.load * 100.0, 2) for bl in loads}
 
 
 def bus_timing_mode(mode: str) -> str:
     """host_sim's bus timing for a run mode: lockstep has no wall clock to delay frames on."""
     return "virtual" if mode == "lockstep" else "wallclock"
-
-
-def bus_timing_args(mode: str, topology: list[busload.Bus]) -> list[str]:
-    """host_sim arguments that emulate the topology's bit timing (one --bus-phy per bus, in order)."""
-    args = ["--bus-timing", bus_timing_mode(mode)]
-    for b in topology:
-        args += ["--bus-phy", busload.phy_spec(b)]
-    return args
 
 
 def resolve_bus(choice: str, n_buses: int = 1) -> tuple[str, str]:
@@ -194,7 +225,8 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
     bus_kind, bus_why = resolve_bus(opt.bus, len(topology))
     binary = opt.controller or controller_binary(opt.preset)
     logger_exe = logger_binary(opt.preset)
-    for exe in (binary, logger_exe):
+    sim_exe = sim_binary(opt.preset)
+    for exe in (binary, logger_exe, sim_exe):
         if not exe.exists():
             raise HilError(f"{exe} is missing: run tools/armctl build")
     opt.out.mkdir(parents=True, exist_ok=True)
@@ -210,38 +242,41 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
     # Not lcm-logger: its subscription queue of 30 messages drops telemetry whenever it falls
     # behind for a moment (tools/lcm_logger/arm_lcm_logger.c).
     logger = subprocess.Popen([str(logger_exe), "--lcm-url", url, str(log_path)],
-                              stdout=logs["logger"], stderr=subprocess.STDOUT, preexec_fn=_logger_priority)
+                              stdout=subprocess.PIPE, stderr=logs["logger"],
+                              preexec_fn=_logger_priority if opt.mode == "realtime" else None)
     procs: list[subprocess.Popen[bytes]] = [logger]
     t0 = time.monotonic()
     try:
-        _wait_for_logger(url, log_path, logger)
-        sim_args = bus_timing_args(opt.mode, topology) if opt.bus_timing else []
+        _wait_for_logger(logger)
         if opt.uncertainty is not None:
-            write_json_atomic(opt.out / "uncertainty.json", opt.uncertainty)
-            sim_args += ["--uncertainty", str(opt.out / "uncertainty.json")]
+            write_json_atomic(opt.out / "uncertainty.json", opt.uncertainty)  # the record of what ran
         sim = subprocess.Popen(
-            [sys.executable, "-m", "host_sim", *bus_argv, "--lcm-url", url,
-             "--summary", str(opt.out / "sim_summary.json"), *sim_args],
-            cwd=REPO, env=env_with_repo(), stdout=logs["simulator"], stderr=subprocess.STDOUT,
-            preexec_fn=_simulator_priority if opt.mode == "realtime" else None)
+            sim_argv(sim_exe, buses, lcm_url=url, summary=opt.out / "sim_summary.json", uncertainty=opt.uncertainty,
+                     timing=bus_timing_mode(opt.mode) if opt.bus_timing else "off", phys=topology,
+                     extra=[*sim_mode_args(opt.mode), *opt.sim_args]),
+            cwd=REPO, stdout=logs["simulator"], stderr=subprocess.STDOUT,
+            preexec_fn=_simulator_realtime(realtime_cpu(opt)) if opt.mode == "realtime" else None)
         procs.append(sim)
         sim_scheduling = _scheduling(sim.pid)
         ctl = subprocess.Popen(
             [*opt.controller_cmd_prefix, str(binary), *bus_argv, "--lcm-url", url,
              "--duration", f"{opt.duration_s:g}", "--method", opt.method, "--mode", opt.mode,
-             "--summary", str(opt.out / "controller_summary.json"), *opt.controller_args],
+             "--summary", str(opt.out / "controller_summary.json"), *spin_args(opt.mode),
+             *(["--cpu", str(realtime_cpu(opt))] if opt.mode == "realtime" else []), *opt.controller_args],
             stdout=logs["controller"], stderr=subprocess.STDOUT)
         procs.append(ctl)
         # Generous: the run is deterministic, not timed; this only bounds a hung process.
+        # Generous: the run is deterministic, not timed; this only bounds a hung process. The
+        # controller ends first (or, when the simulator died, within its lockstep timeout); the
+        # simulator follows on the controller's NMT stop or after its idle timeout.
         deadline = time.monotonic() + 120.0 + 60.0 * opt.duration_s
-        while time.monotonic() < deadline and (ctl.poll() is None or sim.poll() is None):
-            time.sleep(0.05)
         for p in (ctl, sim):
-            if p.poll() is None:
+            try:
+                p.wait(timeout=max(1.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
                 p.kill()
-                raise HilError(f"{p.args[0]} did not finish in time; killed")
+                raise HilError(f"{p.args[0]} did not finish in time; killed") from None
         wall = time.monotonic() - t0
-        time.sleep(0.3)  # telemetry still on its way reaches the logger; SIGINT then drains and flushes it
     finally:
         for p in reversed(procs):
             if p.poll() is None:
@@ -252,6 +287,8 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
                     p.kill()
         for f in logs.values():
             f.close()
+        if logger.stdout is not None:
+            logger.stdout.close()
 
     # A process that died wrote no summary: the run still ends in a defined, named state and
     # the partial log is analysed.
@@ -270,6 +307,10 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
                                 "drives": b.drives} for b, spec in zip(topology, buses)]},
         "bus_load_pct": topology_load_pct(topology),
         "lcm_url": url, "wall_s": wall, "simulator_scheduling": sim_scheduling,
-        "exit_codes": {"controller": ctl.returncode, "simulator": sim.returncode}})
+        # the simulator's speed: simulated seconds per wall second after boot, and its CPU time
+        # per period (arm_sim measures both)
+        "realtime_factor": simulator.get("realtime_factor"),
+        "simulator_period_cost_us": simulator.get("period_cost_us"),
+        "exit_codes": {"controller": ctl.returncode, "simulator": sim.returncode, "logger": logger.returncode}})
     write_json_atomic(opt.out / "run.json", run)
     return run

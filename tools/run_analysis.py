@@ -97,8 +97,9 @@ def analyse(out_dir: Path, controller: dict[str, Any], sim: dict[str, Any], conf
         },
         "transport": {
             "controller_frames": controller.get("frames", {}),
-            "simulator_frames": {k: sim.get(k, 0) for k in ("frames_tx", "frames_rx", "rx_own_echo",
-                                                            "rx_unknown_id", "rx_bad_frame")},
+            "simulator_frames": {k: sim.get(k) for k in ("frames_tx", "frames_rx", "tx_dropped", "rx_foreign_drive",
+                                                         "rx_unknown_id", "rx_bad_frame", "rx_undecodable",
+                                                         "rx_wrong_bus")},
             "overruns": controller.get("overruns", 0),
             "bus_timing": sim.get("bus_timing", []),
             "telemetry": tele,
@@ -129,7 +130,8 @@ def table(run: dict[str, Any]) -> str:
         lines.append(f"bus timing ({r.get('bus_timing', '?')}), bus {b['bus']} ({b['phy']}, drives "
                      f"{','.join(map(str, b['drives']))}): SYNC -> last command {b['sync_to_last_cmd_mean_us']:.1f} us "
                      f"mean, {b['sync_to_last_cmd_max_us']:.1f} us max; {b['commands_late']} commands late")
-    if env.get("wall_s") and r.get("duration_s"):
-        lines.append(f"wall time {env['wall_s']:.1f} s for {r['duration_s']:g} s simulated "
-                     f"({r['duration_s'] / env['wall_s']:.2f}x real time)")
+    if env.get("realtime_factor"):
+        cost = env.get("simulator_period_cost_us") or {}
+        lines.append(f"wall time {env['wall_s']:.1f} s; after boot the simulation ran at {env['realtime_factor']:.1f}x "
+                     f"real time (simulator CPU per period p50 {cost.get('p50', '?')} us, p99 {cost.get('p99', '?')} us)")
     return "\n".join(lines)

@@ -17,13 +17,13 @@ at the same interval and SCHED_FIFO priority. Written to DIR:
 Nothing here is compared with a fixed number: the machine (a shared VM, stock kernel) decides the
 figures; cyclictest measured in the same window is the reference.
 
-The simulator is Python (MuJoCo + python-can): in realtime mode it may not answer every SYNC
-within the period (the controller waits 0.8 period for the joint states). For this run it gets
-SCHED_FIFO 10 below the loop (when permitted), nothing else is relaxed: late states are counted
-and discarded, and more than 3 periods in a row without states safe-stop the loop (the watchdog),
-which ends the measurement early; timing.json says so. Use --rate for a rate the simulator
-sustains. Measured on the 2-core development VM: at 1 kHz with the simulator at SCHED_FIFO a few
-late states per 10^4 and no safe stop; at ordinary priority it fell behind within 15 periods.
+The simulator (arm_sim, C) runs SCHED_FIFO below the loop on the loop's CPU, and cyclictest is
+pinned there too (--cpu, default the last CPU): the loop and its reference measured under the same
+conditions, and a stall of that vCPU (this VM stops one for 1-6 ms every few seconds) pauses the
+whole rig instead of silencing the drives under a running loop. Nothing is relaxed: late states are
+counted and discarded, and more than 3 periods in a row without states safe-stop the loop (the
+watchdog), which ends the measurement early. A run that ends early is not "ok": timing.json's
+verdict says "incomplete" with the reason, and the command exits 1.
 """
 
 from __future__ import annotations
@@ -41,7 +41,6 @@ from pathlib import Path
 from typing import Any
 
 HISTMAX_US = 20000  # cyclictest histogram range (1 us buckets); beyond it: overflows
-SIM_RT_PRIORITY_BELOW = 10  # the simulator runs SCHED_FIFO this far below the loop (when permitted)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -49,7 +48,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, default=Path("runs/timing"))
     p.add_argument("--rate", type=float, default=1000.0, help="control rate, Hz (cyclictest interval = 1/rate)")
     p.add_argument("--rt-priority", type=int, default=80, help="SCHED_FIFO priority of both loops")
-    p.add_argument("--cpu", type=int, default=None, help="pin the controller's loop and cyclictest to this CPU")
+    p.add_argument("--cpu", type=int, default=None,
+                   help="the CPU of the controller's loop, the simulator and cyclictest [the last one]")
     p.add_argument("--method", default="pd")
 
 
@@ -126,31 +126,6 @@ def _first_timing_message(log: Path) -> bool:
         ev_log.close()
 
 
-def _simulator_realtime(hil_dir: Path, priority: int) -> dict[str, Any]:
-    """Gives the simulator process of this run (all its threads) SCHED_FIFO at priority, so the
-    peer of a real-time loop is not at the mercy of every other process on a shared machine.
-    Returns {} while the simulator is not started yet."""
-    import os
-
-    marker = str(hil_dir / "sim_summary.json")
-    for proc in Path("/proc").iterdir():
-        if not proc.name.isdigit():
-            continue
-        try:
-            cmd = (proc / "cmdline").read_bytes().split(b"\0")
-        except OSError:
-            continue
-        if b"host_sim" not in cmd or marker.encode() not in cmd:
-            continue
-        try:
-            for task in (proc / "task").iterdir():
-                os.sched_setscheduler(int(task.name), os.SCHED_FIFO, os.sched_param(priority))
-            return {"pid": int(proc.name), "policy": f"SCHED_FIFO {priority}"}
-        except (PermissionError, OSError) as exc:
-            return {"pid": int(proc.name), "policy": f"SCHED_OTHER (SCHED_FIFO refused: {exc})"}
-    return {}
-
-
 def _plot(path: Path, ctl_wake: list[float], cyc_hist: dict[int, int], compute: list[float],
           cycle: list[float], period_us: float, title: str) -> None:
     import matplotlib
@@ -197,7 +172,7 @@ def _plot(path: Path, ctl_wake: list[float], cyc_hist: dict[int, int], compute: 
 def measure(out: Path, duration_s: float, rate_hz: float, rt_priority: int, cpu: int | None,
             method: str = "pd", preset: str = "release") -> dict[str, Any]:
     """The measurement itself (the command and the tests call this). Returns timing.json's data."""
-    from tools.hil import HilError, HilOptions, run_hil, write_json_atomic
+    from tools.hil import HilError, HilOptions, realtime_cpu, run_hil, write_json_atomic
     from tools.telemetry_log import read_log
 
     out.mkdir(parents=True, exist_ok=True)
@@ -207,14 +182,14 @@ def measure(out: Path, duration_s: float, rate_hz: float, rt_priority: int, cpu:
     hil_dir = out / "hil"
     (hil_dir / "telemetry.lcmlog").unlink(missing_ok=True)  # a previous run's log must not start cyclictest
     ctl_args = ["--rate", f"{rate_hz:g}", "--rt-priority", str(rt_priority)]
-    if cpu is not None:
-        ctl_args += ["--cpu", str(cpu)]
+    opts = HilOptions(out=hil_dir, duration_s=duration_s, method=method, mode="realtime", preset=preset,
+                      controller_args=tuple(ctl_args), cpu=cpu)
+    cpu = realtime_cpu(opts)  # the loop, the simulator and cyclictest: one CPU, the same conditions
     result: dict[str, Any] = {}
 
     def hil() -> None:
         try:
-            result["run"] = run_hil(HilOptions(out=hil_dir, duration_s=duration_s, method=method, mode="realtime",
-                                               preset=preset, controller_args=tuple(ctl_args)))
+            result["run"] = run_hil(opts)
         except HilError as exc:  # noqa: PERF203
             result["error"] = str(exc)
         except Exception as exc:  # noqa: BLE001 - reported in timing.json, never swallowed silently
@@ -224,17 +199,12 @@ def measure(out: Path, duration_s: float, rate_hz: float, rt_priority: int, cpu:
     t.start()
     # cyclictest measures while the control loop runs: it starts at the loop's first period.
     log = hil_dir / "telemetry.lcmlog"
-    sim_prio: dict[str, Any] = {}
     while t.is_alive() and not _first_timing_message(log):
-        if not sim_prio:
-            sim_prio = _simulator_realtime(hil_dir, max(1, rt_priority - SIM_RT_PRIORITY_BELOW))
         time.sleep(0.05)
     # No loop count: it runs exactly while the loop does and is stopped (SIGINT: it prints its
     # histogram) when the controller has finished (its summary is written).
     cyc_cmd = ["cyclictest", "-m", "-q", "-t", "1", "--policy=fifo", "-p", str(rt_priority),
-               "-i", str(int(round(period_us))), "-h", str(HISTMAX_US)]
-    if cpu is not None:
-        cyc_cmd += ["-a", str(cpu)]
+               "-i", str(int(round(period_us))), "-h", str(HISTMAX_US), "-a", str(cpu)]
     cyc: dict[str, Any] = {"command": cyc_cmd}
     if shutil.which("cyclictest") is None:
         cyc["error"] = "cyclictest not found: apt-get install rt-tests (tools/armctl does as root)"
@@ -289,7 +259,7 @@ def measure(out: Path, duration_s: float, rate_hz: float, rt_priority: int, cpu:
                    "rt_priority": rt_priority, "cpu": cpu, "method": method, "mode": "realtime",
                    "controller_args": ctl_args, "cyclictest": cyc_cmd},
         "controller_rt_setup": rt_line,
-        "simulator_scheduling": sim_prio.get("policy", "not found (ordinary priority)"),
+        "simulator_scheduling": run.get("environment", {}).get("simulator_scheduling", "unknown"),
         "run": {"ok": bool(run) and run["results"]["result"] == "ok",
                 "result": run.get("results", {}).get("result", "failed"),
                 "problems": run.get("results", {}).get("problems", []) + ([result["error"]] if "error" in result else []),
@@ -323,6 +293,21 @@ def measure(out: Path, duration_s: float, rate_hz: float, rt_priority: int, cpu:
                        "are skipped, the schedule never drifts)",
         },
     }
+    # The verdict: every period the controller was asked for ran, and cyclictest ran beside it.
+    requested, done = summary.get("steps_requested"), summary.get("steps_done")
+    if not summary:
+        verdict, why = "failed", "the controller wrote no summary: " + "; ".join(data["run"]["problems"])
+    elif done != requested:
+        verdict, why = "incomplete", (f"the loop ran {done} of {requested} periods: "
+                                      + ("; ".join(data["run"]["problems"]) or summary.get("reason", "")))
+    elif "error" in cyc:
+        verdict, why = "incomplete", f"cyclictest did not measure beside the loop: {cyc['error']}"
+    elif not data["run"]["ok"]:
+        verdict, why = "failed", "; ".join(data["run"]["problems"]) or "the HIL run failed"
+    else:
+        verdict, why = "ok", ""
+    data["verdict"], data["verdict_reason"] = verdict, why
+    data["controller"]["periods_requested"] = requested
     if periods or cyc.get("histogram_us"):
         _plot(out / "timing.png", wake, cyc.get("histogram_us", {}), compute, cycle, period_us,
               f"controller vs cyclictest, {rate_hz:g} Hz, SCHED_FIFO {rt_priority}, {duration_s:g} s")
@@ -366,5 +351,6 @@ def run(ns: argparse.Namespace) -> int:
     build("release")
     d = measure(ns.out, ns.duration, ns.rate, ns.rt_priority, ns.cpu, ns.method)
     print(table(d))
+    print(f"verdict: {d['verdict']}" + (f": {d['verdict_reason']}" if d["verdict_reason"] else ""))
     print(f"results: {ns.out / 'timing.json'}  plot: {ns.out / 'timing.png'}")
-    return 0 if d["controller"]["periods_measured"] > 0 and "error" not in d["cyclictest"] else 1
+    return 0 if d["verdict"] == "ok" else 1

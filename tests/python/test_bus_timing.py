@@ -1,30 +1,36 @@
-"""Bus timing emulation: frame lengths, arbitration, backlog, and what the arm feels of them."""
+"""Bus timing emulation (host_sim/native/sim_bus_timing.c): frame lengths, arbitration, backlog,
+and what the arm feels of them, checked on the real arm_sim driven frame by frame (sim_master.py)
+and in whole HIL runs. The timeline's own arithmetic has a C unit test (tests/c/sim)."""
 
 from __future__ import annotations
 
+import json
 import re
-from collections.abc import Iterator
 from pathlib import Path
 
-import can
 import pytest
 
-from host_sim.arm import Arm
-from host_sim.bus_timing import BusTimeline, parse_phy, timelines
-from host_sim.cia402 import PowerState
-from host_sim.protocol import NMT_START
-from host_sim.simulator import SimConfig, Simulator
+from host_sim.launch import frame_times, parse_phy, sim_binary
 from tools.busload import Bus, ConfigError, Protocol, compute
 from tools.hil import HilOptions, run_hil
 from tools.telemetry_log import read_log
 
+from sim_master import SimMaster
+
 FD = (True, 1e6, 5e6)
-SYNC, STATE1, CMD1 = 0x080, 0x181, 0x201
 
 
 @pytest.fixture(scope="module")
 def proto() -> Protocol:
     return Protocol()
+
+
+@pytest.fixture(scope="module")
+def sim_exe(controller_bin: Path) -> Path:
+    exe = sim_binary(controller_bin.parent.parent.name)
+    if not exe.exists():
+        pytest.skip(f"{exe} not built")
+    return exe
 
 
 def test_parse_phy_names_what_is_wrong() -> None:
@@ -36,84 +42,76 @@ def test_parse_phy_names_what_is_wrong() -> None:
             parse_phy(bad)
 
 
-def test_lowest_id_first_and_backlog_carries_over() -> None:
-    tl = BusTimeline(Bus("b", True, 1e6, 5e6, [1]), {1: 1e-4, 2: 2e-4, 3: 3e-4})
-    ends = tl.transmit(0.0, [3, 1, 2])
-    assert ends == pytest.approx({1: 1e-4, 2: 3e-4, 3: 6e-4})
-    assert tl.transmit(1e-4, [1]) == pytest.approx({1: 7e-4})  # waits for the bus
-    tl.transmit(9e-4, [3])  # ends at 1.2 ms: 0.2 ms into the next period
-    tl.new_period(1e-3)
-    assert tl.free == pytest.approx(2e-4) and tl.stats.backlog_max_s == pytest.approx(2e-4)
-    assert tl.transmit(0.0, [1]) == pytest.approx({1: 3e-4})
+def test_frame_times_are_busloads(proto: Protocol) -> None:
+    """The frame lengths arm_sim is given are exactly busload's, for every message of the DBC."""
+    bus = Bus("b", *FD, [1, 2, 3])
+    given = dict(item.split(":") for item in frame_times(bus, proto).split(","))
+    load = compute([bus, Bus("c", *FD, [4, 5, 6])], 1000.0, 100.0, proto)[0]
+    per_period = sum(float(given[str(fid)]) for fid in (0x080, 0x181, 0x182, 0x183, 0x201, 0x202, 0x203))
+    assert per_period * 1e-6 == pytest.approx(load.periodic_s, rel=1e-9)
+    assert float(given[str(0x080)]) == pytest.approx(65.0)  # 1 byte classic at 1 Mbit/s: 65 bits worst case
+    assert float(given[str(0x181)]) == pytest.approx(72.6)  # 16-byte FD state at 1/5 Mbit/s
+    assert len(given) == len(proto.db.messages)
 
 
-@pytest.mark.parametrize("drives", [[1, 2, 3], [1, 2, 3, 4, 5, 6]])
-def test_one_period_costs_what_busload_says(proto: Protocol, drives: list[int]) -> None:
-    """SYNC, the states and the commands of one period end exactly at busload's per-period time."""
-    (tl,) = timelines([FD], [drives], proto)
-    sync_end = tl.transmit(0.0, [SYNC])[SYNC]
-    states = tl.transmit(sync_end, [STATE1 + d - 1 for d in drives])
-    cmds = tl.transmit(max(states.values()), [CMD1 + d - 1 for d in drives])
-    rest = [d for d in range(1, 7) if d not in drives]
-    load = compute([Bus("b", *FD, drives), *([Bus("c", *FD, rest)] if rest else [])], 1000.0, 100.0, proto)[0]
-    assert max(cmds.values()) == pytest.approx(load.periodic_s, rel=1e-12)
-    assert sync_end == pytest.approx(65e-6)  # 1 byte classic at 1 Mbit/s: 65 bits worst case
-    assert [round(states[STATE1 + d - 1] * 1e7) for d in drives[:2]] == [round((65 + 72.6) * 10),
-                                                                       round((65 + 2 * 72.6) * 10)]
+def _phys(spec: list[str], drives: list[list[int]]) -> list[Bus]:
+    return [Bus(f"b{i}", *parse_phy(s), d) for i, (s, d) in enumerate(zip(spec, drives))]
 
 
-@pytest.fixture()
-def virtual_buses() -> Iterator[list[can.BusABC]]:
-    """In-process python-can buses: the simulator's logic without any transport."""
-    buses = [can.Bus(interface="virtual", channel=f"timing-test-{i}", receive_own_messages=False) for i in range(2)]
-    yield buses
-    for b in buses:
-        b.shutdown()
-
-
-def running_sim(buses: list[can.BusABC], bus_of: list[int], phys: list[tuple[bool, float, float | None]]) -> Simulator:
-    arm = Arm()
-    drives = [[j + 1 for j in range(arm.n) if bus_of[j] == b] for b in range(len(buses))]
-    sim = Simulator(SimConfig(lcm_url="", bus_timing="virtual"), buses, arm, bus_of, timelines(phys, drives))
-    for d in sim.drives:
-        d.on_nmt(NMT_START)
-        d.power = PowerState.OPERATION_ENABLED
-    return sim
-
-
-def serve_period(sim: Simulator, counter: int, torque: float) -> None:
-    for b in range(len(sim.buses)):
-        sim.on_sync(counter, b)
-    for j in range(sim.arm.n):
-        data = sim.proto.cmd_codec[j].encode({"controlword": 0x0F, "target_torque": torque, "sync_counter": counter})
-        sim.on_command(j, data, sim.bus_of[j])
-
-
-def test_a_new_torque_acts_from_the_end_of_its_frame(virtual_buses: list[can.BusABC]) -> None:
+def test_a_new_torque_acts_from_the_end_of_its_frame(sim_exe: Path) -> None:
     """Two buses (default wiring): drive 1's command ends 417.8 us into the period (SYNC 65,
     three states 3 x 72.6, its own 135), so a step from 0 to 1 N m acts for 58.22 % of it."""
-    sim = running_sim(virtual_buses, [0, 0, 0, 1, 1, 1], [FD, FD])
-    serve_period(sim, 0, 1.0)
-    first_cmd_end = 65 + 3 * 72.6 + 135
-    expected = [1.0 - (first_cmd_end + 135 * (j % 3)) * 1e-3 for j in range(6)]
-    assert sim.last_tau == pytest.approx(expected, abs=1e-9)
-    serve_period(sim, 1, 1.0)  # the same torque again: no change inside the period
-    assert sim.last_tau == pytest.approx([1.0] * 6)
-    assert sim.report.commands_late == 0 and sim.report.commands_missed == 0
+    drives = [[1, 2, 3], [4, 5, 6]]
+    m = SimMaster(sim_exe, drives, timing="virtual", phys=_phys(["fd:1M/5M"] * 2, drives))
+    try:
+        m.boot_and_enable()
+        step = m.counter  # the next period's index (no heartbeat round yet)
+        m.period([0x0F] * 6, [1.0] * 6)
+        m.period([0x0F] * 6, [1.0] * 6)  # the same torque again: no change inside the period
+        m.period([0x0F] * 6, [1.0] * 6)  # (a period's truth is published once the next one began)
+        first_cmd_end = 65 + 3 * 72.6 + 135
+        expected = [1.0 - (first_cmd_end + 135 * (j % 3)) * 1e-3 for j in range(6)]
+        assert list(m.truth_of(step).tau_applied) == pytest.approx(expected, abs=1e-9)
+        assert list(m.truth_of(step + 1).tau_applied) == pytest.approx([1.0] * 6)
+    finally:
+        code, err = m.stop()
+    assert code == 0, err
+    s = json.loads(m.summary.read_text())
+    assert s["commands_late"] == 0 and s["commands_missed"] == 0
+    assert [b["sync_to_last_cmd_max_us"] for b in s["bus_timing"]] == pytest.approx([687.8, 687.8])
 
 
-def test_one_overloaded_bus_makes_commands_late_and_faults_the_drives(virtual_buses: list[can.BusABC]) -> None:
-    """All six drives on one CAN FD 1/5 Mbit/s bus: 1310.6 us per period (busload: 131 %). The
-    last commands end after their period, the backlog grows, and the drives whose commands keep
-    arriving late fault on their command timeout (3 periods), as a real overloaded bus would."""
-    sim = running_sim(virtual_buses[:1], [0] * 6, [FD])
-    for k in range(3):
-        serve_period(sim, k, 1.0)
-    late_first = sim.timing[0].stats.commands_late  # type: ignore[index]
-    assert late_first >= 3 * 3  # drives 4-6 late in every period, more as the backlog grows
-    assert sim.report.commands_late == late_first
-    assert [d.node_id for d in sim.drives if d.power is PowerState.FAULT] == [4, 5, 6]
-    assert sim.timing[0].stats.backlog_max_s > 0.3e-3  # type: ignore[index]
+def test_a_late_command_is_not_applied_and_the_drive_faults_on_its_timeout(sim_exe: Path, proto: Protocol) -> None:
+    """Bus 1 at 1 / 2 Mbit/s: its states end at 456.5 us, and the controller's commands for both
+    buses follow the last state of the period, so every command ends by 861.5 us. After a
+    heartbeat round (three heartbeats of 65 us per bus) the next SYNC waits 195 us, and the last
+    command on each bus (drives 3 and 6) ends at 1056.5 us, after its period. It is not applied,
+    counted late, and with a one-period command timeout those drives fault (EMCY) - what a real
+    drive does when its RPDO does not come in time."""
+    drives = [[1, 2, 3], [4, 5, 6]]
+    phys = _phys(["fd:1M/5M", "fd:1M/2M"], drives)
+    m = SimMaster(sim_exe, drives, timing="virtual", phys=phys, extra=["--command-timeout-periods", "1"])
+    try:
+        m.boot_and_enable()
+        while m.counter <= 102:  # the heartbeat round ends period 99: period 100's SYNC waits for it
+            m.period([0x0F] * 6, [0.5] * 6)
+        time_course = [m.truth_of(k) for k in (99, 100, 101)]
+    finally:
+        code, err = m.stop()
+    assert code == 0, err
+    s = json.loads(m.summary.read_text())
+    assert s["drive_faults"] == [3, 6], s
+    # and once more in period 101: period 100 left the buses busy past its end, and the faults' EMCY
+    # frames (135 us) delay 101's SYNC again
+    assert [b["commands_late"] for b in s["bus_timing"]] == [2, 2] and s["commands_late"] == 4, s
+    assert [b["sync_to_last_cmd_max_us"] for b in s["bus_timing"]] == pytest.approx([1056.5, 1056.5], abs=0.01)
+    assert time_course[0].drive_faults == 0 and time_course[0].tau_applied[5] == pytest.approx(0.5)
+    faulted = (1 << 2) | (1 << 5)
+    assert time_course[1].drive_faults == faulted and time_course[1].tau_applied[5] == 0.0  # torque off
+    assert time_course[2].tau_applied[2] == 0.0 and time_course[2].tau_applied[4] == pytest.approx(0.5)
+    assert sum("command ended 1.056 ms after its SYNC" in e for e in m.events) == 2, m.events  # one per bus
+    assert {e for e in m.events if e.startswith("EMCY")} == {"EMCY 0x8250: drive 3 fault, torque off",
+                                                             "EMCY 0x8250: drive 6 fault, torque off"}
 
 
 def test_hil_with_bus_timing_on_the_default_wiring(tmp_path: Path, controller_bin: Path) -> None:

@@ -30,6 +30,7 @@ EXERCISED: dict[str, str] = {
     "build": "test_documented_commands.py::test_build",
     "bench step": "test_documented_commands.py::test_bench",
     "bench synth": "test_documented_commands.py::test_bench",
+    "bench sim": "test_documented_commands.py::test_bench",
     "timing": "test_timing.py::timing_run",
     "busload": "test_documented_commands.py::test_busload",
     "vcan status": "test_documented_commands.py::test_vcan_status_and_up",
@@ -140,6 +141,12 @@ def test_bench(tmp_path: Path) -> None:
     r = armctl("bench", "synth", "--quick", "--out", str(tmp_path / "synth.json"))
     assert r.returncode == 0, r.stdout + r.stderr
     assert json.loads((tmp_path / "synth.json").read_text())["synth_n6"][0]["wall_time_median_s"] > 0
+    r = armctl("bench", "sim", "--quick", "--out", str(tmp_path / "sim.json"))
+    assert r.returncode == 0, r.stdout + r.stderr
+    sim = json.loads((tmp_path / "sim.json").read_text())
+    assert sim["quick"] and sim["realtime_factor_median"] > 0 and sim["bare_mj_step_us"] > 0
+    assert set(sim["breakdown_us_per_period"]) == {"physics", "bus_tx", "bus_rx", "telemetry", "drives_and_rest",
+                                                   "total"}
 
 
 def test_busload() -> None:

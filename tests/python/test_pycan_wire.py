@@ -383,6 +383,9 @@ def test_c_socket_options_are_loopback_only(selftest):
     assert int(opts["loop"]) == 1
     assert int(opts["multicast_all"]) in (0, -1)  # -1: option unavailable on this kernel
     assert opts["bound"] == f"{GROUP}:{PORT_SOCKOPTS}"
+    # frames leave through a socket of their own: the same TTL 0 and loopback interface
+    assert int(opts["tx_ttl"]) == 0 and opts["tx_if"] == "127.0.0.1" and int(opts["tx_loop"]) == 1
+    assert opts["tx_bound"].startswith("127.0.0.1:") and opts["tx_bound"] != "127.0.0.1:0"
 
 
 def _igmp_devices(group):

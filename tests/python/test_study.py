@@ -84,7 +84,7 @@ def _kill_when_running(pattern: str, after_s: float) -> threading.Thread:
 @pytest.mark.parametrize("victim", ["simulator", "controller"])
 def test_a_killed_process_ends_the_run_in_a_named_state(tmp_path: Path, controller_bin: Path, victim: str) -> None:
     port = 43900 if victim == "simulator" else 43910
-    pattern = f"host_sim --bus udp:239.74.163.2:{port}" if victim == "simulator" else \
+    pattern = f"arm_sim --bus udp:239.74.163.2:{port}" if victim == "simulator" else \
         f"arm_controller --bus udp:239.74.163.2:{port}"
     killer = _kill_when_running(pattern, after_s=2.5)
     run = run_hil(HilOptions(out=tmp_path, duration_s=600.0, method="pm", can_port=port,

@@ -2,18 +2,19 @@
 
 This machine's kernel has no CAN, so tools/vm boots Debian's kernel under qemu (software
 emulation), where vcan0 and vcan1 (CAN FD, MTU 72) exist, chroots into this very filesystem and runs
-VM_SCRIPT below. One boot serves every test in this module (the VM is slow: ~15 s to boot,
-`import mujoco` 20-60 s, ~10-45 lockstep periods/s):
+VM_SCRIPT below. One boot serves the tests that read its results (software emulation: ~10 s to
+boot, far slower than the host):
 
 1. the SocketCAN unit test again, now on a kernel that has AF_CAN, and the live transport selftest;
 2. `candump -L vcan0 vcan1` records both buses while `arm_controller` and `python -m host_sim`
-   run 300 lockstep periods on the default topology (firmware/protocol/buses.toml): drives 1-3
+   (arm_sim) run lockstep on the default topology (firmware/protocol/buses.toml): drives 1-3
    on vcan0, 4-6 on vcan1 (`--bus socketcan:vcan0@1-3 --bus socketcan:vcan1@4-6`);
 3. after the 20th SYNC a misbehaving node (`cansend`) puts frames on the bus that nobody may act
    on: unknown ids, wrong lengths, a classic frame where FD is expected, remote and 29-bit frames,
-   and drive 1's STATE on vcan1 (not drive 1's bus).
+   and drive 1's STATE on vcan1 (not drive 1's bus); 300 periods later SIGTERM stops the
+   controller (a safe stop: zero torque, shutdown, NMT stop, then its summary).
 
-On the host: both processes succeeded; every captured frame is either one of the injected ones
+On the host: both processes ended as they should; every captured frame is either one of the injected ones
 (each exactly once) or decodes with the DBC via cantools with the DBC's length and FD/BRS format;
 both sides counted each injected frame in the right counter and nothing else went wrong.
 
@@ -44,14 +45,14 @@ VM_TIMEOUT_S = 420.0  # generous: the whole module takes ~2-4 min on the 2-core 
 GARBAGE = [
     ("vcan0/123#DEADBEEF", "rx_unknown_id", "rx_unknown_id"),                          # unknown id
     ("vcan0/345##100112233445566778899AABBCCDDEEFF", "rx_unknown_id", "rx_unknown_id"),  # unknown id, FD
-    ("vcan0/181#01020304", "rx_bad_format", "rx_own_echo"),    # DRIVE_1_STATE as a classic frame
-    ("vcan0/182##10011223344556677", "rx_bad_length", "rx_own_echo"),  # DRIVE_2_STATE, FD, 8 bytes
-    ("vcan0/701#0005", "rx_bad_length", "rx_own_echo"),        # heartbeat with 2 bytes
-    ("vcan0/201#0102", "rx_own_echo", "rx_bad_frame"),         # DRIVE_1_CMD with 2 bytes
-    ("vcan0/080#0102", "rx_own_echo", "rx_bad_frame"),         # SYNC with 2 bytes
+    ("vcan0/181#01020304", "rx_bad_format", "rx_foreign_drive"),    # DRIVE_1_STATE as a classic frame
+    ("vcan0/182##10011223344556677", "rx_bad_length", "rx_foreign_drive"),  # DRIVE_2_STATE, FD, 8 bytes
+    ("vcan0/701#0005", "rx_bad_length", "rx_foreign_drive"),        # heartbeat with 2 bytes
+    ("vcan0/201#0102", "rx_foreign_master", "rx_bad_frame"),         # DRIVE_1_CMD with 2 bytes
+    ("vcan0/080#0102", "rx_foreign_master", "rx_bad_frame"),         # SYNC with 2 bytes
     ("vcan0/7FF#R", "rx_bad_format", "rx_bad_frame"),          # remote frame
     ("vcan0/12345678#00", "rx_bad_format", "rx_bad_frame"),    # 29-bit id
-    ("vcan1/181##1FFEEDDCCBBAA99887766554433221100", "rx_wrong_bus", "rx_own_echo"),  # drive 1's STATE on vcan1
+    ("vcan1/181##1FFEEDDCCBBAA99887766554433221100", "rx_wrong_bus", "rx_foreign_drive"),  # drive 1's STATE on vcan1
 ]
 BUSES = "--bus socketcan:vcan0@1-3 --bus socketcan:vcan1@4-6"
 
@@ -61,7 +62,8 @@ def _frame_text(g: str) -> str:
 
 VM_SCRIPT = r"""#!/bin/sh
 # Runs inside the VM, chrooted into the host's filesystem (tests/python/test_vcan_vm.py).
-OUT=$1; CTL=$2; PY=$3; UNIT=$4; SELFTEST=$5; DURATION=$6; GARBAGE=$7; CTL_EXTRA=$8; BUSES=$9
+OUT=$1; CTL=$2; PY=$3; UNIT=$4; SELFTEST=$5; PERIODS=$6; GARBAGE=$7; CTL_EXTRA=$8; BUSES=$9
+DURATION=$PERIODS
 "$UNIT" > "$OUT/unit.out" 2>&1; echo $? > "$OUT/unit.rc"
 "$SELFTEST" vcan0 > "$OUT/selftest.out" 2>&1; echo $? > "$OUT/selftest.rc"
 
@@ -73,18 +75,25 @@ CD=$!
 "$PY" -m host_sim $BUSES --lcm-url "" --boot-timeout 180 --idle-timeout 60 \
     --summary "$OUT/sim.json" > "$OUT/sim.out" 2> "$OUT/sim.err" &
 SIM=$!
-(   # a misbehaving node: once 20 periods ran (SYNC on both buses), frames that nobody may act on
+"$CTL" $BUSES --lcm-url "" --duration 3600 --boot-timeout 180 \
+    --lockstep-timeout 5 $CTL_EXTRA --summary "$OUT/ctl.json" > "$OUT/ctl.out" 2> "$OUT/ctl.err" &
+CTLPID=$!
+(   # a misbehaving node: once 20 periods ran (SYNC on both buses), frames that nobody may act on;
+    # then the run goes on for PERIODS more, and SIGTERM ends it (a safe stop, then the summary)
     n=0
     while [ "$(grep -c ' 080#' "$CAP")" -lt 40 ] && [ $n -lt 1500 ]; do
-        sleep 0.2; n=$((n + 1))
+        sleep 0.05; n=$((n + 1))
     done
     for f in $GARBAGE; do cansend "${f%%/*}" "${f#*/}" || echo "cansend $f failed" >> "$OUT/garbage.err"; done
     [ -f "$OUT/ctl.rc" ] || echo sent > "$OUT/garbage.done"
+    want=$(( $(grep -c ' 080#' "$CAP") + 2 * DURATION ))
+    while [ "$(grep -c ' 080#' "$CAP")" -lt $want ] && [ $n -lt 6000 ]; do
+        sleep 0.05; n=$((n + 1))
+    done
+    kill -TERM $CTLPID
 ) &
 INJ=$!
-"$CTL" $BUSES --lcm-url "" --duration "$DURATION" --boot-timeout 180 \
-    --lockstep-timeout 5 $CTL_EXTRA --summary "$OUT/ctl.json" > "$OUT/ctl.out" 2> "$OUT/ctl.err"
-echo $? > "$OUT/ctl.rc"
+wait $CTLPID; echo $? > "$OUT/ctl.rc"
 wait $SIM; echo $? > "$OUT/sim.rc"
 kill $INJ 2>/dev/null; wait $INJ 2>/dev/null
 sleep 0.5; kill $CD; wait $CD 2>/dev/null
@@ -130,9 +139,20 @@ def parse_capture(path: Path, with_iface: bool = False) -> list:
     return frames
 
 
+def _vm_or_skip() -> None:
+    from tools.vm.image import APT_HINT, VmError, ensure_image, missing_tools
+
+    missing = missing_tools()
+    if missing:
+        pytest.skip(f"no qemu VM here: missing {', '.join(missing)} ({APT_HINT})")
+    try:
+        ensure_image()
+    except VmError as exc:
+        pytest.skip(f"the qemu VM cannot be set up on this machine: {exc}")
+
+
 @pytest.fixture(scope="module")
 def vm_run(tmp_path_factory: pytest.TempPathFactory, build_dir: Path) -> dict:
-    from tools.vm.image import APT_HINT, VmError, ensure_image, missing_tools
     from tools.vm.run import run_in_vm
 
     exes = {name: build_dir / rel for name, rel in {
@@ -142,13 +162,7 @@ def vm_run(tmp_path_factory: pytest.TempPathFactory, build_dir: Path) -> dict:
     for exe in exes.values():
         if not exe.exists():
             pytest.skip(f"{exe} not built (run tools/armctl build --preset debug)")
-    missing = missing_tools()
-    if missing:
-        pytest.skip(f"no qemu VM here: missing {', '.join(missing)} ({APT_HINT})")
-    try:
-        ensure_image()
-    except VmError as exc:
-        pytest.skip(f"the qemu VM cannot be set up on this machine: {exc}")
+    _vm_or_skip()
 
     out = tmp_path_factory.mktemp("vcan_vm")
     script = out / "vm_script.sh"
@@ -159,7 +173,7 @@ def vm_run(tmp_path_factory: pytest.TempPathFactory, build_dir: Path) -> dict:
     log = io.BytesIO()
     res = run_in_vm(
         ["sh", str(script), str(out), str(exes["ctl"]), sys.executable, str(exes["unit"]),
-         str(exes["selftest"]), f"{PERIODS / 1000:g}", " ".join(g for g, _, _ in GARBAGE), ctl_extra, BUSES],
+         str(exes["selftest"]), str(PERIODS), " ".join(g for g, _, _ in GARBAGE), ctl_extra, BUSES],
         cwd=REPO, env=env_with_repo(), timeout=VM_TIMEOUT_S, stdout=log, stderr=log)
     console = "\n".join(res.console_tail)
     assert not res.timed_out, f"VM timed out after {VM_TIMEOUT_S:g} s; console:\n{console}"
@@ -191,12 +205,13 @@ def test_socketcan_transport_on_a_kernel_with_can(vm_run: dict) -> None:
 
 def test_hil_run_over_vcan_succeeds(vm_run: dict) -> None:
     read = vm_run["read"]
-    assert _rc(vm_run, "ctl") == 0, read("ctl.err") + read("ctl.out")
+    assert _rc(vm_run, "ctl") == 5, read("ctl.err") + read("ctl.out")  # interrupted: the script's SIGTERM
     assert _rc(vm_run, "sim") == 0, read("sim.err") + read("sim.out")
     ctl = json.loads(read("ctl.json"))
     sim = json.loads(read("sim.json"))
-    assert ctl["result"] == 0 and ctl["final_state"] == "running", ctl
-    assert ctl["steps_done"] == ctl["steps_requested"] >= PERIODS
+    # the script ends the run with SIGTERM once PERIODS periods ran after the garbage
+    assert ctl["result"] == 5 and ctl["final_state"] == "safe-stop" and "stopped by signal 15" in ctl["reason"], ctl
+    assert ctl["steps_done"] >= PERIODS
     assert ctl["frames"]["tx_dropped"] == 0 and ctl["frames"]["rx_wrong_counter"] == 0
     assert sim["result"] == "ok" and sim["drive_faults"] == [] and sim["commands_missed"] == 0, sim
     assert sim["periods"] >= PERIODS
@@ -235,8 +250,11 @@ def test_every_captured_frame_decodes_with_the_dbc(vm_run: dict) -> None:
     assert n_sync == sim["periods"] >= PERIODS
     for i in range(1, 7):
         assert counts[f"DRIVE_{i}_STATE"] == n_sync
-        assert counts[f"DRIVE_{i}_CMD"] == n_sync
+        assert counts[f"DRIVE_{i}_CMD"] == n_sync + 1  # and the safe stop's zero torque, shutdown
         assert counts[f"DRIVE_{i}_HEARTBEAT"] >= 3  # boot-up, operational, stopped
+    for i in range(1, 7):  # SIGTERM's safe stop: each drive's last command is zero torque with shutdown
+        last = db.decode_message(0x200 + i, [f for f in frames if f.can_id == 0x200 + i][-1].data)
+        assert last["controlword"] == 0x0006 and last["target_torque"] == 0, (i, last)
     assert counts.get("NMT", 0) >= 4  # start ... stop, on both buses
     assert not any(name.endswith("_EMCY") for name in counts), counts
     assert len(frames) + len(injected) > 13 * PERIODS
@@ -248,8 +266,8 @@ def test_garbage_frames_are_counted_and_ignored(vm_run: dict) -> None:
         "the garbage was not sent while the run was going: " + read("garbage.err"))
     ctl = json.loads(read("ctl.json"))["frames"]
     sim = json.loads(read("sim.json"))
-    want_ctl = {k: 0 for k in ("rx_unknown_id", "rx_bad_format", "rx_bad_length", "rx_own_echo", "rx_wrong_bus")}
-    want_sim = {k: 0 for k in ("rx_unknown_id", "rx_own_echo", "rx_bad_frame")}
+    want_ctl = {k: 0 for k in ("rx_unknown_id", "rx_bad_format", "rx_bad_length", "rx_foreign_master", "rx_wrong_bus")}
+    want_sim = {k: 0 for k in ("rx_unknown_id", "rx_foreign_drive", "rx_bad_frame")}
     for _, c, s in GARBAGE:
         want_ctl[c] += 1
         want_sim[s] += 1
@@ -258,18 +276,6 @@ def test_garbage_frames_are_counted_and_ignored(vm_run: dict) -> None:
     assert {k: sim[k] for k in want_sim} == want_sim
     # and changed nothing: every period's joint states arrived, no drive faulted
     assert ctl["rx_wrong_counter"] == 0 and sim["drive_faults"] == []
-
-
-def _vm_or_skip() -> None:
-    from tools.vm.image import APT_HINT, VmError, ensure_image, missing_tools
-
-    missing = missing_tools()
-    if missing:
-        pytest.skip(f"no qemu VM here: missing {', '.join(missing)} ({APT_HINT})")
-    try:
-        ensure_image()
-    except VmError as exc:
-        pytest.skip(f"the qemu VM cannot be set up on this machine: {exc}")
 
 
 ARMCTL = str(REPO / "tools" / "armctl")
@@ -294,11 +300,11 @@ def test_vcan_setup_run_and_up_in_the_vm() -> None:
     _vm_or_skip()
     r = subprocess.run([ARMCTL, "vcan", "setup"], cwd=REPO, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0 and "VM image ready" in r.stdout, r.stdout + r.stderr
-    script = ("set -e; cat <(echo procsub-ok); echo to-stderr >> /dev/stderr; echo to-stdout >> /dev/stdout; "
+    script = ("set -e; cat <(echo procsub-ok); echo to-stderr >> /dev/stderr; readlink /dev/stdout; "
               "test -L /dev/stdin; mountpoint -q /dev/shm; mountpoint -q /dev/pts; "
               "tools/armctl vcan up --iface vcan2; ip -details link show vcan2")
     r = subprocess.run([ARMCTL, "vcan", "run", "--", "bash", "-c", script], cwd=REPO, capture_output=True,
                        text=True, timeout=VM_TIMEOUT_S)
     assert r.returncode == 0, r.stdout + r.stderr
-    assert "procsub-ok" in r.stdout and "to-stdout" in r.stdout and "to-stderr" in r.stderr
+    assert "procsub-ok" in r.stdout and "/proc/self/fd/1" in r.stdout and "to-stderr" in r.stderr
     assert "vcan2 up (mtu 72 = CAN FD, txqueuelen 1000)" in r.stdout and "vcan" in r.stdout.split("vcan2:")[-1]

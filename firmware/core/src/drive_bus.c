@@ -2,34 +2,21 @@
 
 #include <string.h>
 
-#include "arm_drives.h" /* generated from firmware/protocol/arm_drives.dbc by cantools */
+#include "arm_drive_ids.h" /* every drive slot's frame ids, from the DBC (gen/drive_ids.py) */
+#include "arm_drives.h"    /* generated from firmware/protocol/arm_drives.dbc by cantools */
 
-#if ARM_N_JOINTS > 6
-#error "arm_drives.dbc defines 6 drives; add nodes to the DBC for a longer arm"
+#if ARM_N_JOINTS > ARM_DBC_MAX_DRIVES
+#error "the arm has more joints than arm_drives.dbc has drive slots: add slots to the DBC"
 #endif
 
-typedef int (*state_unpack_fn)(void *dst, const uint8_t *src, size_t size);
+/* Every drive's frames share one layout in the DBC (gen/drive_ids.py checks it), but the
+ * generated code has one struct per drive; the id tables keep the lookups data-driven. */
+#define k_state_id ARM_DRIVE_STATE_ID
+#define k_cmd_id ARM_DRIVE_CMD_ID
+#define k_hb_id ARM_DRIVE_HEARTBEAT_ID
+#define k_emcy_id ARM_DRIVE_EMCY_ID
 
-/* Every drive's frames share one layout in the DBC, but the generated code has one struct per
- * drive; the tables keep the lookups data-driven rather than switch-per-drive. */
-static const uint32_t k_state_id[6] = {
-    ARM_DRIVES_DRIVE_1_STATE_FRAME_ID, ARM_DRIVES_DRIVE_2_STATE_FRAME_ID,
-    ARM_DRIVES_DRIVE_3_STATE_FRAME_ID, ARM_DRIVES_DRIVE_4_STATE_FRAME_ID,
-    ARM_DRIVES_DRIVE_5_STATE_FRAME_ID, ARM_DRIVES_DRIVE_6_STATE_FRAME_ID};
-static const uint32_t k_cmd_id[6] = {
-    ARM_DRIVES_DRIVE_1_CMD_FRAME_ID, ARM_DRIVES_DRIVE_2_CMD_FRAME_ID,
-    ARM_DRIVES_DRIVE_3_CMD_FRAME_ID, ARM_DRIVES_DRIVE_4_CMD_FRAME_ID,
-    ARM_DRIVES_DRIVE_5_CMD_FRAME_ID, ARM_DRIVES_DRIVE_6_CMD_FRAME_ID};
-static const uint32_t k_hb_id[6] = {
-    ARM_DRIVES_DRIVE_1_HEARTBEAT_FRAME_ID, ARM_DRIVES_DRIVE_2_HEARTBEAT_FRAME_ID,
-    ARM_DRIVES_DRIVE_3_HEARTBEAT_FRAME_ID, ARM_DRIVES_DRIVE_4_HEARTBEAT_FRAME_ID,
-    ARM_DRIVES_DRIVE_5_HEARTBEAT_FRAME_ID, ARM_DRIVES_DRIVE_6_HEARTBEAT_FRAME_ID};
-static const uint32_t k_emcy_id[6] = {
-    ARM_DRIVES_DRIVE_1_EMCY_FRAME_ID, ARM_DRIVES_DRIVE_2_EMCY_FRAME_ID,
-    ARM_DRIVES_DRIVE_3_EMCY_FRAME_ID, ARM_DRIVES_DRIVE_4_EMCY_FRAME_ID,
-    ARM_DRIVES_DRIVE_5_EMCY_FRAME_ID, ARM_DRIVES_DRIVE_6_EMCY_FRAME_ID};
-
-static int index_of(const uint32_t table[6], uint32_t id)
+static int index_of(const uint32_t *table, uint32_t id)
 {
     for (int i = 0; i < ARM_N_JOINTS; ++i) {
         if (table[i] == id) {
@@ -161,8 +148,8 @@ arm_rx_kind_t arm_bus_handle_rx(arm_drive_bus_t *bus, const arm_can_frame_t *f)
     }
     if (f->id == ARM_DRIVES_SYNC_FRAME_ID || f->id == ARM_DRIVES_NMT_FRAME_ID ||
         index_of(k_cmd_id, f->id) >= 0) {
-        bus->rx.own_echo++;
-        return ARM_RX_OWN_ECHO;
+        bus->rx.foreign_master++;
+        return ARM_RX_FOREIGN_MASTER;
     }
     bus->rx.unknown_id++;
     return ARM_RX_UNKNOWN_ID;

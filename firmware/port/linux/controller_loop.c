@@ -12,6 +12,8 @@
 #include "arm/reference.h"
 
 #define ALL_JOINTS ((uint32_t)((1ull << ARM_N_JOINTS) - 1u))
+
+volatile sig_atomic_t controller_stop_signal = 0;
 #define ENABLE_TIMEOUT_PERIODS 100u /* CiA 402 enable sequence: 3 periods when all is well */
 
 static int64_t now_ns(void)
@@ -26,6 +28,7 @@ typedef struct {
     int bus_of[ARM_N_JOINTS]; /* index into buses of each drive's bus */
     arm_drive_bus_t drives;
     run_report_t *report;
+    int64_t spin_ns;
 } link_t;
 
 static int send_frame(link_t *l, unsigned bus, const arm_can_frame_t *f)
@@ -63,6 +66,8 @@ static int sender_joint(const arm_can_frame_t *f)
 static void pump(link_t *l, int64_t deadline_ns, uint32_t (*done)(const arm_drive_bus_t *))
 {
     for (;;) {
+        /* A stop signal is honoured at the next period boundary: the period's states come in
+         * (within the lockstep timeout at worst), so the drives' last period is a whole one. */
         if (done != NULL && done(&l->drives) == ALL_JOINTS) {
             return;
         }
@@ -72,7 +77,16 @@ static void pump(link_t *l, int64_t deadline_ns, uint32_t (*done)(const arm_driv
         }
         arm_can_frame_t f;
         unsigned bus = 0u;
-        const int rc = arm_can_bus_set_recv(&l->buses, &f, &bus, (int)(left / 1000 + 1));
+        /* Poll first, then sleep: in lockstep the answer comes within tens of microseconds,
+         * sooner than a sleeping thread is woken on a VM. */
+        int rc = 0;
+        const int64_t spin_end = now_ns() + l->spin_ns < deadline_ns ? now_ns() + l->spin_ns : deadline_ns;
+        while (rc == 0 && now_ns() < spin_end) {
+            rc = arm_can_bus_set_recv(&l->buses, &f, &bus, 0);
+        }
+        if (rc == 0) {
+            rc = arm_can_bus_set_recv(&l->buses, &f, &bus, (int)(left / 1000 + 1));
+        }
         if (rc == 1) {
             l->report->frames_rx++;
             const int j = sender_joint(&f);
@@ -121,7 +135,7 @@ static int boot(link_t *l, const options_t *opt, telemetry_t *telem)
     arm_can_frame_t nmt;
     arm_bus_make_nmt(ARM_NMT_START, 0u, &nmt);
     /* NMT start is repeated because the drives may join the bus after us. */
-    while (now_ns() < give_up) {
+    while (now_ns() < give_up && controller_stop_signal == 0) {
         send_all(l, &nmt);
         int64_t slice = now_ns() + 50000000LL;
         if (slice > give_up) slice = give_up;
@@ -141,14 +155,23 @@ static int boot(link_t *l, const options_t *opt, telemetry_t *telem)
     return -1;
 }
 
+/* Each bus's commands in one batch (one syscall on the UDP transport): the period's critical
+ * path in lockstep is mostly syscalls. */
 static void send_commands(link_t *l, const arm_ctl_output_t *out)
 {
     const int enabled = out->state == ARM_STATE_RUNNING || out->state == ARM_STATE_INIT;
+    arm_can_frame_t batch[ARM_CAN_BUS_SET_MAX][ARM_N_JOINTS];
+    unsigned count[ARM_CAN_BUS_SET_MAX] = {0};
     for (int j = 0; j < ARM_N_JOINTS; ++j) {
-        arm_can_frame_t f;
+        const unsigned b = (unsigned)l->bus_of[j];
         arm_bus_make_cmd(&l->drives, j, enabled ? ARM_CW_ENABLE_OPERATION : ARM_CW_SHUTDOWN,
-                         out->tau[j], &f);
-        send_frame(l, (unsigned)l->bus_of[j], &f);
+                         out->tau[j], &batch[b][count[b]++]);
+    }
+    for (unsigned b = 0; b < l->buses.n; ++b) {
+        if (count[b] == 0u) continue;
+        const unsigned sent = arm_can_bus_set_send_many(&l->buses, b, batch[b], count[b]);
+        l->report->frames_tx += sent;
+        l->report->tx_would_block += count[b] - sent; /* dropped and counted, as send_frame does */
     }
 }
 
@@ -159,6 +182,7 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
     memset(&l, 0, sizeof(l));
     memset(report, 0, sizeof(*report));
     l.report = report;
+    l.spin_ns = (int64_t)(opt->spin_us * 1e3);
     report->final_state = ARM_STATE_INIT;
 
     char err[200];
@@ -185,7 +209,15 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
     const int64_t t_start = now_ns();
     if (boot(&l, opt, telem) != 0) {
         report->result = RUN_BOOT_FAILED;
+        if (controller_stop_signal != 0) {
+            snprintf(report->reason, sizeof(report->reason), "stopped by signal %d while the drives booted",
+                     (int)controller_stop_signal);
+            report->result = RUN_INTERRUPTED;
+        }
         telemetry_event(telem, 0, "fault", report->reason);
+        arm_can_frame_t stop; /* the drives that did come up: back to stopped */
+        arm_bus_make_nmt(ARM_NMT_STOP, 0u, &stop);
+        send_all(&l, &stop);
         arm_can_bus_set_close(&l.buses);
         report->wall_s = (double)(now_ns() - t_start) * 1e-9;
         return;
@@ -207,6 +239,17 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
 
     /* k counts bus periods (SYNCs); the first few bring the drives to operation enabled. */
     for (uint32_t k = 0; k_run < opt->steps; ++k) {
+        if (controller_stop_signal != 0) {
+            snprintf(report->reason, sizeof(report->reason),
+                     "stopped by signal %d after %u periods: zero torque, drives shut down and stopped",
+                     (int)controller_stop_signal, k_run);
+            report->result = RUN_INTERRUPTED;
+            telemetry_event(telem, k_run, "fault", report->reason);
+            out.state = ARM_STATE_SAFE_STOP;
+            memset(out.tau, 0, sizeof(out.tau));
+            send_commands(&l, &out); /* controlword shutdown, zero torque, before the NMT stop */
+            break;
+        }
         int64_t wake_latency = 0;
         if (opt->mode == MODE_REALTIME) {
             const struct timespec dl = {.tv_sec = next_deadline / 1000000000LL,
@@ -348,6 +391,9 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
     report->final_state = out.state;
     report->final_fault = out.fault;
     report->rx = l.drives.rx;
+    for (unsigned b = 0; b < l.buses.n; ++b) {
+        if (l.buses.bus[b].kind == ARM_BUS_UDP) report->rx_undecodable += l.buses.bus[b].udp.rx_decode_errors;
+    }
     report->wall_s = (double)(now_ns() - t_start) * 1e-9;
     arm_can_bus_set_close(&l.buses);
 }

@@ -13,7 +13,12 @@ typedef enum {
     RUN_BUS_ERROR = 1,   /* could not open or use the bus */
     RUN_BOOT_FAILED = 3, /* a drive did not come up */
     RUN_FAULT = 4,       /* runtime fault: safe stop was commanded */
+    RUN_INTERRUPTED = 5, /* SIGTERM, SIGINT or SIGHUP: safe stop was commanded */
 } run_result_t;
+
+#include <signal.h>
+/* The signal that asked the loop to stop (0: none); set by main's handler. */
+extern volatile sig_atomic_t controller_stop_signal;
 
 typedef struct {
     run_result_t result;
@@ -23,6 +28,7 @@ typedef struct {
     uint64_t frames_rx;
     uint64_t tx_would_block;
     uint64_t rx_wrong_bus; /* a drive's frame (STATE/HEARTBEAT/EMCY) on a bus that is not its own */
+    uint64_t rx_undecodable; /* UDP datagrams that are not python-can frames (the transport's count) */
     uint64_t overruns;
     double wall_s;
     double boot_s;

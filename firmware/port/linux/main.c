@@ -1,5 +1,6 @@
 /* arm_controller: the Linux controller binary (bus master of the six joint drives). */
 #define _GNU_SOURCE
+#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -10,6 +11,11 @@
 #include "rt.h"
 #include "summary.h"
 #include "telemetry.h"
+
+static void on_stop_signal(int sig)
+{
+    controller_stop_signal = sig;
+}
 
 int main(int argc, char **argv)
 {
@@ -38,6 +44,14 @@ int main(int argc, char **argv)
     }
     fprintf(stderr, "arm_controller: rt: %s\n", rt.message);
     telemetry_event(telem, 0, rt.sched_fifo || opt.mode != MODE_REALTIME ? "info" : "warn", rt.message);
+    /* SIGTERM (a CI timeout, kill), SIGINT (Ctrl-C), SIGHUP (the terminal went): stop the way a
+     * fault does, zero torque, shutdown and NMT stop, then the summary. */
+    struct sigaction sa;
+    memset(&sa, 0, sizeof(sa));
+    sa.sa_handler = on_stop_signal;
+    sigaction(SIGTERM, &sa, NULL);
+    sigaction(SIGINT, &sa, NULL);
+    sigaction(SIGHUP, &sa, NULL);
     static run_report_t report;
     controller_run(&opt, &ARM_ROBOT_MODEL, telem, &report);
     telemetry_stop(telem);

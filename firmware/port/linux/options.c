@@ -1,6 +1,7 @@
 #include "options.h"
 
 #include "arm/can_bus.h"
+#include "arm/lcm_url.h"
 
 #include <errno.h>
 #include <math.h>
@@ -32,6 +33,8 @@ void options_usage(const char *prog)
            "  --safe-stop zero|damping[:GAIN]                         [zero]\n"
            "  --boot-timeout S        wait for the drives' heartbeats [20]\n"
            "  --lockstep-timeout S    lockstep: wall time to wait for a period's joint states [1]\n"
+           "  --spin-us US            poll the bus this long before sleeping on it: a wake-up from\n"
+           "                          sleep costs tens of us on a VM (lockstep speed)   [0]\n"
            "  --ref-amp A1,..,An --ref-freq F1,..,Fn  reference q_d = q0 + A (1 - cos 2 pi F t)\n"
            "                          per joint (both or neither)     [built-in]\n"
            "  --summary FILE          write a JSON summary of the run (atomically)\n",
@@ -87,12 +90,12 @@ static int parse_list(const char *name, const char *s, double lo, double hi, flo
 
 static int check_lcm_url(const char *url, char *err, unsigned long errcap)
 {
-    /* The multicast rule: telemetry must never leave this host. */
-    if (url[0] != '\0' && strncmp(url, "udpm://", 7) == 0 && strstr(url, "ttl=0") == NULL) {
-        snprintf(err, errcap, "--lcm-url: '%s' must set ttl=0 (telemetry stays on this host)", url);
+    /* The multicast rule: telemetry never leaves this host (TTL exactly 0, the group on lo). */
+    arm_lcm_url_t u;
+    if (arm_lcm_url_parse(url, "--lcm-url", &u, err, errcap) != 0) {
         return -1;
     }
-    return 0;
+    return arm_lcm_url_check_route(&u, "--lcm-url", err, errcap);
 }
 
 int options_parse(int argc, char **argv, const arm_robot_model_t *model, options_t *opt, char *err,
@@ -245,6 +248,8 @@ int options_parse(int argc, char **argv, const arm_robot_model_t *model, options
             ref_freq_given = 1;
         } else if (strcmp(a, "--boot-timeout") == 0) {
             rc = parse_double(a, v, 0.01, 3600.0, &opt->boot_timeout_s, err, errcap);
+        } else if (strcmp(a, "--spin-us") == 0) {
+            rc = parse_double(a, v, 0.0, 1e5, &opt->spin_us, err, errcap);
         } else if (strcmp(a, "--lockstep-timeout") == 0) {
             rc = parse_double(a, v, 0.001, 3600.0, &opt->lockstep_timeout_s, err, errcap);
         } else if (rt_option_known(a)) {

@@ -78,6 +78,7 @@ int arm_can_bus_open(arm_can_bus_t *bus, const char *spec, char *err, size_t err
     arm_can_bus_spec_t s;
     memset(bus, 0, sizeof(*bus));
     bus->udp.fd = -1;
+    bus->udp.tx_fd = -1;
     bus->socketcan.fd = -1;
     if (arm_can_bus_parse_spec(spec, &s, err, errcap) != 0) {
         return -1;
@@ -108,6 +109,18 @@ int arm_can_bus_send(arm_can_bus_t *bus, const arm_can_frame_t *f)
         return arm_can_socketcan_send(&bus->socketcan, f);
     }
     return arm_can_udp_send(&bus->udp, f, arm_can_udp_now());
+}
+
+unsigned arm_can_bus_send_many(arm_can_bus_t *bus, const arm_can_frame_t *frames, unsigned n)
+{
+    if (bus->kind == ARM_BUS_UDP) {
+        return arm_can_udp_send_many(&bus->udp, frames, n, arm_can_udp_now());
+    }
+    unsigned sent = 0;
+    for (unsigned i = 0; i < n; ++i) {
+        sent += arm_can_socketcan_send(&bus->socketcan, &frames[i]) == 0 ? 1u : 0u;
+    }
+    return sent;
 }
 
 int arm_can_bus_recv(arm_can_bus_t *bus, arm_can_frame_t *f, int timeout_us)
@@ -290,6 +303,13 @@ int arm_can_bus_set_send(arm_can_bus_set_t *set, unsigned index, const arm_can_f
 {
     if (index >= set->n) return ARM_BUS_E_INVALID;
     return arm_can_bus_send(&set->bus[index], f);
+}
+
+unsigned arm_can_bus_set_send_many(arm_can_bus_set_t *set, unsigned index, const arm_can_frame_t *frames,
+                                   unsigned n)
+{
+    if (index >= set->n) return 0u;
+    return arm_can_bus_send_many(&set->bus[index], frames, n);
 }
 
 static int bus_fd(const arm_can_bus_t *b)

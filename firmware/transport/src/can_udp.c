@@ -11,6 +11,7 @@
 #include "arm/can_udp.h"
 
 #include <arpa/inet.h>
+#include <linux/filter.h>
 #include <errno.h>
 #include <netinet/in.h>
 #include <poll.h>
@@ -23,8 +24,6 @@
 #include "arm/pycan_wire.h"
 #include "arm/fd_wait.h"
 
-/* Same as python-can's GeneralPurposeUdpMulticastBus.max_buffer: what it can read, we can. */
-#define RX_BUF_BYTES 4096u
 
 static int fail(arm_can_udp_t *bus, char *err, size_t errcap, const char *step)
 {
@@ -32,10 +31,7 @@ static int fail(arm_can_udp_t *bus, char *err, size_t errcap, const char *step)
     if (err != NULL && errcap > 0u) {
         snprintf(err, errcap, "can_udp open: %s: %s", step, e != 0 ? strerror(e) : "failed");
     }
-    if (bus->fd >= 0) {
-        close(bus->fd);
-        bus->fd = -1;
-    }
+    arm_can_udp_close(bus);
     errno = e;
     return -1;
 }
@@ -80,6 +76,7 @@ int arm_can_udp_open(arm_can_udp_t *bus, const char *group, uint16_t port, char 
     }
     memset(bus, 0, sizeof *bus);
     bus->fd = -1;
+    bus->tx_fd = -1;
     errno = 0;
 
     if (group == NULL || group[0] == '\0') {
@@ -138,6 +135,43 @@ int arm_can_udp_open(arm_can_udp_t *bus, const char *group, uint16_t port, char 
                     "(IP_MULTICAST_TTL, IP_MULTICAST_IF)");
     }
 
+    /* The sending socket: its own ephemeral port on 127.0.0.1, the same confinement. */
+    bus->tx_fd = socket(AF_INET, SOCK_DGRAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
+    if (bus->tx_fd < 0) {
+        return fail(bus, err, errcap, "socket(AF_INET, SOCK_DGRAM) for sending");
+    }
+    if (set_int(bus->tx_fd, IPPROTO_IP, IP_MULTICAST_TTL, 0) != 0 ||
+        setsockopt(bus->tx_fd, IPPROTO_IP, IP_MULTICAST_IF, &lo, (socklen_t)sizeof lo) != 0 ||
+        set_int(bus->tx_fd, IPPROTO_IP, IP_MULTICAST_LOOP, 1) != 0) {
+        return fail(bus, err, errcap, "setsockopt(IP_MULTICAST_TTL=0, IF=127.0.0.1, LOOP=1) for sending");
+    }
+    if (verify_loopback_only(bus->tx_fd) != 0) {
+        return fail(bus, err, errcap, "verify that the sending socket's multicast TTL is zero and its "
+                    "interface is loopback");
+    }
+    struct sockaddr_in local;
+    memset(&local, 0, sizeof local);
+    local.sin_family = AF_INET;
+    local.sin_addr = lo;
+    socklen_t llen = (socklen_t)sizeof local;
+    if (bind(bus->tx_fd, (const struct sockaddr *)&local, (socklen_t)sizeof local) != 0 ||
+        getsockname(bus->tx_fd, (struct sockaddr *)&local, &llen) != 0) {
+        return fail(bus, err, errcap, "bind(127.0.0.1:0) for sending");
+    }
+    bus->tx_port = ntohs(local.sin_port);
+    /* Our own datagrams come back through the loop: drop them in the kernel, before they are
+     * queued (a UDP socket filter sees the UDP header at offset 0: the source port first). */
+    struct sock_filter code[] = {
+        BPF_STMT(BPF_LD | BPF_H | BPF_ABS, 0),
+        BPF_JUMP(BPF_JMP | BPF_JEQ | BPF_K, bus->tx_port, 0, 1),
+        BPF_STMT(BPF_RET | BPF_K, 0),
+        BPF_STMT(BPF_RET | BPF_K, 0xFFFFFFFFu),
+    };
+    const struct sock_fprog prog = {.len = (unsigned short)(sizeof code / sizeof code[0]), .filter = code};
+    if (setsockopt(bus->fd, SOL_SOCKET, SO_ATTACH_FILTER, &prog, (socklen_t)sizeof prog) != 0) {
+        return fail(bus, err, errcap, "setsockopt(SO_ATTACH_FILTER): own-echo filter");
+    }
+
     /* Binding the group (not INADDR_ANY) keeps unicast to this port out. */
     struct sockaddr_in addr;
     memset(&addr, 0, sizeof addr);
@@ -157,6 +191,26 @@ int arm_can_udp_open(arm_can_udp_t *bus, const char *group, uint16_t port, char 
     return 0;
 }
 
+static void group_addr(const arm_can_udp_t *bus, struct sockaddr_in *dst)
+{
+    memset(dst, 0, sizeof *dst);
+    dst->sin_family = AF_INET;
+    dst->sin_port = htons(bus->port);
+    dst->sin_addr.s_addr = bus->group_be;
+}
+
+/* errno of a failed send -> the result code, counted. */
+static int send_failed(arm_can_udp_t *bus, unsigned frames)
+{
+    /* A real CAN controller drops on a full mailbox too; retrying here would stall the loop. */
+    if (errno == EAGAIN || errno == EWOULDBLOCK || errno == ENOBUFS || errno == EINTR) {
+        bus->tx_would_block += frames;
+        return ARM_CAN_UDP_E_WOULD_BLOCK;
+    }
+    bus->tx_errors += frames;
+    return ARM_CAN_UDP_E_IO;
+}
+
 int arm_can_udp_send(arm_can_udp_t *bus, const arm_can_frame_t *f, double timestamp)
 {
     if (bus == NULL || f == NULL) {
@@ -172,20 +226,12 @@ int arm_can_udp_send(arm_can_udp_t *bus, const arm_can_frame_t *f, double timest
         return ARM_CAN_UDP_E_INVALID;
     }
     struct sockaddr_in dst;
-    memset(&dst, 0, sizeof dst);
-    dst.sin_family = AF_INET;
-    dst.sin_port = htons(bus->port);
-    dst.sin_addr.s_addr = bus->group_be;
-    const ssize_t sent = sendto(bus->fd, buf, n, MSG_DONTWAIT | MSG_NOSIGNAL,
+    group_addr(bus, &dst);
+    bus->tx_syscalls++;
+    const ssize_t sent = sendto(bus->tx_fd, buf, n, MSG_DONTWAIT | MSG_NOSIGNAL,
                                 (const struct sockaddr *)&dst, (socklen_t)sizeof dst);
     if (sent < 0) {
-        /* A real CAN controller drops on a full mailbox too; retrying here would stall the loop. */
-        if (errno == EAGAIN || errno == EWOULDBLOCK || errno == ENOBUFS || errno == EINTR) {
-            bus->tx_would_block++;
-            return ARM_CAN_UDP_E_WOULD_BLOCK;
-        }
-        bus->tx_errors++;
-        return ARM_CAN_UDP_E_IO;
+        return send_failed(bus, 1u);
     }
     if ((size_t)sent != n) {
         bus->tx_errors++;
@@ -196,12 +242,65 @@ int arm_can_udp_send(arm_can_udp_t *bus, const arm_can_frame_t *f, double timest
     return ARM_CAN_UDP_OK;
 }
 
-/* One non-blocking read: 1 frame, 0 nothing queued, 2 skipped datagram, <0 error. */
-static int try_read_one(arm_can_udp_t *bus, arm_can_frame_t *f, double *timestamp)
+unsigned arm_can_udp_send_many(arm_can_udp_t *bus, const arm_can_frame_t *frames, unsigned n,
+                               double timestamp)
 {
-    uint8_t buf[RX_BUF_BYTES];
+    if (bus == NULL || frames == NULL || bus->fd < 0) {
+        return 0u;
+    }
+    if (n > ARM_CAN_UDP_TX_BATCH) {
+        n = ARM_CAN_UDP_TX_BATCH;
+    }
+    uint8_t buf[ARM_CAN_UDP_TX_BATCH][ARM_PYCAN_MAX_ENCODED];
+    struct iovec iov[ARM_CAN_UDP_TX_BATCH];
+    struct mmsghdr msgs[ARM_CAN_UDP_TX_BATCH];
+    struct sockaddr_in dst;
+    group_addr(bus, &dst);
+    memset(msgs, 0, sizeof msgs);
+    unsigned k = 0; /* encodable frames, in order */
+    for (unsigned i = 0; i < n; ++i) {
+        const size_t len = arm_pycan_encode(&frames[i], timestamp, buf[k], sizeof buf[k]);
+        if (len == 0u) {
+            bus->tx_invalid++;
+            continue;
+        }
+        iov[k].iov_base = buf[k];
+        iov[k].iov_len = len;
+        msgs[k].msg_hdr.msg_name = &dst;
+        msgs[k].msg_hdr.msg_namelen = (socklen_t)sizeof dst;
+        msgs[k].msg_hdr.msg_iov = &iov[k];
+        msgs[k].msg_hdr.msg_iovlen = 1;
+        ++k;
+    }
+    unsigned done = 0;
+    while (done < k) {
+        bus->tx_syscalls++;
+        const int sent = sendmmsg(bus->tx_fd, msgs + done, k - done, MSG_DONTWAIT | MSG_NOSIGNAL);
+        if (sent <= 0) {
+            (void)send_failed(bus, k - done);
+            break;
+        }
+        done += (unsigned)sent;
+    }
+    bus->tx_frames += done;
+    return done;
+}
+
+/* Takes what is queued on the socket, up to a batch, into the bus's receive buffers: the count,
+ * 0 when nothing is queued, <0 on an error. */
+static int fill_batch(arm_can_udp_t *bus)
+{
+    struct mmsghdr msgs[ARM_CAN_UDP_RX_BATCH];
+    struct iovec iov[ARM_CAN_UDP_RX_BATCH];
+    memset(msgs, 0, sizeof msgs);
+    for (unsigned i = 0; i < ARM_CAN_UDP_RX_BATCH; ++i) {
+        iov[i].iov_base = bus->rx_buf[i];
+        iov[i].iov_len = sizeof bus->rx_buf[i];
+        msgs[i].msg_hdr.msg_iov = &iov[i];
+        msgs[i].msg_hdr.msg_iovlen = 1;
+    }
     for (;;) { /* only EINTR repeats, and a signal storm is the caller's problem */
-        const ssize_t got = recv(bus->fd, buf, sizeof buf, MSG_DONTWAIT | MSG_TRUNC);
+        const int got = recvmmsg(bus->fd, msgs, ARM_CAN_UDP_RX_BATCH, MSG_DONTWAIT, NULL);
         if (got < 0) {
             if (errno == EINTR) {
                 continue;
@@ -212,20 +311,36 @@ static int try_read_one(arm_can_udp_t *bus, arm_can_frame_t *f, double *timestam
             bus->rx_errors++;
             return ARM_CAN_UDP_E_IO;
         }
-        int rc;
-        if ((size_t)got > sizeof buf) {
-            rc = ARM_PYCAN_E_TRUNCATED; /* MSG_TRUNC reported the real, larger size */
-        } else {
-            rc = arm_pycan_decode(buf, (size_t)got, f, timestamp);
+        for (int i = 0; i < got; ++i) {
+            bus->rx_len[i] = msgs[i].msg_len;
+            bus->rx_trunc[i] = (msgs[i].msg_hdr.msg_flags & MSG_TRUNC) != 0;
         }
-        if (rc != ARM_PYCAN_OK) {
-            bus->rx_decode_errors++;
-            bus->last_decode_error = rc;
-            return 2;
-        }
-        bus->rx_frames++;
-        return 1;
+        bus->rx_next = 0u;
+        bus->rx_count = (unsigned)got;
+        bus->rx_syscalls++;
+        return got;
     }
+}
+
+/* One non-blocking read: 1 frame, 0 nothing queued, 2 skipped datagram, <0 error. */
+static int try_read_one(arm_can_udp_t *bus, arm_can_frame_t *f, double *timestamp)
+{
+    if (bus->rx_next >= bus->rx_count) {
+        const int got = fill_batch(bus);
+        if (got <= 0) {
+            return got;
+        }
+    }
+    const unsigned i = bus->rx_next++;
+    const int rc = bus->rx_trunc[i] ? ARM_PYCAN_E_TRUNCATED /* longer than python-can reads */
+                                    : arm_pycan_decode(bus->rx_buf[i], bus->rx_len[i], f, timestamp);
+    if (rc != ARM_PYCAN_OK) {
+        bus->rx_decode_errors++;
+        bus->last_decode_error = rc;
+        return 2;
+    }
+    bus->rx_frames++;
+    return 1;
 }
 
 int arm_can_udp_recv(arm_can_udp_t *bus, arm_can_frame_t *f, double *timestamp, int timeout_us)
@@ -265,9 +380,16 @@ int arm_can_udp_recv(arm_can_udp_t *bus, arm_can_frame_t *f, double *timestamp, 
 
 void arm_can_udp_close(arm_can_udp_t *bus)
 {
-    if (bus != NULL && bus->fd >= 0) {
+    if (bus == NULL) {
+        return;
+    }
+    if (bus->fd >= 0) {
         close(bus->fd);
         bus->fd = -1;
+    }
+    if (bus->tx_fd >= 0) {
+        close(bus->tx_fd);
+        bus->tx_fd = -1;
     }
 }
 

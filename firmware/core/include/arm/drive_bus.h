@@ -36,7 +36,8 @@ typedef enum {
     ARM_RX_STATE = 0,      /* a joint state for the current period */
     ARM_RX_HEARTBEAT,
     ARM_RX_EMCY,
-    ARM_RX_OWN_ECHO,       /* a frame this node sends (UDP loopback echoes it back): ignored */
+    ARM_RX_FOREIGN_MASTER, /* SYNC, NMT or a command from another node: only the master sends
+                            * them, and no transport returns our own frames. Ignored */
     ARM_RX_UNKNOWN_ID,
     ARM_RX_BAD_LENGTH,
     ARM_RX_WRONG_COUNTER,  /* a state for another period (late or duplicated) */
@@ -47,7 +48,7 @@ typedef struct {
     uint32_t state;
     uint32_t heartbeat;
     uint32_t emcy;
-    uint32_t own_echo;
+    uint32_t foreign_master;
     uint32_t unknown_id;
     uint32_t bad_length;
     uint32_t wrong_counter;

@@ -43,6 +43,9 @@ int arm_can_bus_open(arm_can_bus_t *bus, const char *spec, char *err, size_t err
 /* Checks a spec without opening anything (for argument validation). */
 int arm_can_bus_spec_valid(const char *spec, char *err, size_t errcap);
 int arm_can_bus_send(arm_can_bus_t *bus, const arm_can_frame_t *f);
+/* n frames in order, in one syscall where the transport allows (UDP: sendmmsg, up to
+ * ARM_CAN_UDP_TX_BATCH); returns how many were sent, the rest dropped and counted. */
+unsigned arm_can_bus_send_many(arm_can_bus_t *bus, const arm_can_frame_t *frames, unsigned n);
 int arm_can_bus_recv(arm_can_bus_t *bus, arm_can_frame_t *f, int timeout_us);
 void arm_can_bus_close(arm_can_bus_t *bus);
 
@@ -82,6 +85,8 @@ typedef struct {
 int arm_can_bus_set_open(arm_can_bus_set_t *set, const arm_can_bus_set_config_t *cfg, char *err,
                          size_t errcap);
 int arm_can_bus_set_send(arm_can_bus_set_t *set, unsigned index, const arm_can_frame_t *f);
+unsigned arm_can_bus_set_send_many(arm_can_bus_set_t *set, unsigned index, const arm_can_frame_t *frames,
+                                   unsigned n);
 /* A frame from whichever bus has one (1, *index = that bus), 0 on timeout, <0 on error (*index =
  * the failing bus). Queued frames are drained first; waits in one ppoll over every bus.
  * timeout_us < 0: no limit. */

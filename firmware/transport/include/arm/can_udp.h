@@ -7,8 +7,12 @@
  * can join; nothing leaves the machine. Linux/POSIX only; the portable part is
  * arm/pycan_wire.h.
  *
- * A bus receives its own transmissions (loopback membership); callers filter
- * by id. Not thread-safe: one thread per arm_can_udp_t.
+ * A bus never returns its own transmissions, as a SocketCAN socket does not:
+ * it sends from a socket of its own (an ephemeral port, no membership) and a
+ * kernel socket filter on the receiving socket drops datagrams from that port,
+ * so a frame with an id this node sends is always another node's (a second
+ * master, or a spoofer), never an echo. Not thread-safe: one thread per
+ * arm_can_udp_t.
  */
 #ifndef ARM_CAN_UDP_H
 #define ARM_CAN_UDP_H
@@ -29,6 +33,15 @@
  */
 #define ARM_CAN_UDP_MAX_SKIP 64
 
+/*
+ * Datagrams one receive syscall (recvmmsg) takes off the socket at most. On loopback multicast
+ * every frame this bus sends comes back to it, so frames arrive in bursts: batching them costs
+ * one syscall per burst instead of one per frame (the lockstep loop's budget is syscalls).
+ */
+#define ARM_CAN_UDP_RX_BATCH 8u
+#define ARM_CAN_UDP_RX_BUF 4096u /* per datagram: python-can's own receive size */
+#define ARM_CAN_UDP_TX_BATCH 16u /* frames one sendmmsg carries at most */
+
 /* Result codes of send/recv (recv also returns 1 for "frame received"). */
 enum {
     ARM_CAN_UDP_OK = 0,
@@ -39,7 +52,9 @@ enum {
 };
 
 typedef struct {
-    int fd;               /* -1 when closed */
+    int fd;               /* receives: bound to group:port, member on lo; -1 when closed */
+    int tx_fd;            /* sends: 127.0.0.1:tx_port, TTL 0, IF lo; -1 when closed */
+    uint16_t tx_port;     /* datagrams from this source port are ours: filtered out */
     uint32_t group_be;    /* multicast group, network byte order */
     uint16_t port;        /* host byte order */
     int rcvbuf_bytes;     /* SO_RCVBUF the kernel granted (Linux reports 2x the request) */
@@ -51,6 +66,13 @@ typedef struct {
     uint64_t rx_frames;   /* valid frames returned */
     uint64_t rx_decode_errors; /* datagrams skipped: undecodable or oversized */
     uint64_t rx_errors;   /* socket/poll errors */
+    uint64_t rx_syscalls; /* recvmmsg calls that returned datagrams */
+    uint64_t tx_syscalls; /* sendto/sendmmsg calls */
+    /* Received, not yet returned: rx_len[i] bytes in rx_buf[i] for rx_next <= i < rx_count. */
+    unsigned rx_next, rx_count;
+    uint32_t rx_len[ARM_CAN_UDP_RX_BATCH];
+    uint8_t rx_trunc[ARM_CAN_UDP_RX_BATCH];
+    uint8_t rx_buf[ARM_CAN_UDP_RX_BATCH][ARM_CAN_UDP_RX_BUF];
 } arm_can_udp_t;
 
 /*
@@ -68,6 +90,14 @@ int arm_can_udp_open(arm_can_udp_t *bus, const char *group, uint16_t port, char 
  * Returns ARM_CAN_UDP_OK or a negative ARM_CAN_UDP_E_* code.
  */
 int arm_can_udp_send(arm_can_udp_t *bus, const arm_can_frame_t *f, double timestamp);
+
+/*
+ * Send n frames (n <= ARM_CAN_UDP_TX_BATCH) in one syscall, in order. Returns how many the kernel
+ * took; the rest were dropped and counted (tx_would_block, tx_invalid or tx_errors), as send()
+ * would have for each.
+ */
+unsigned arm_can_udp_send_many(arm_can_udp_t *bus, const arm_can_frame_t *frames, unsigned n,
+                               double timestamp);
 
 /*
  * Wait up to timeout_us (0: only what is already queued; negative: no limit)

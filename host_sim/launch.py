@@ -1,0 +1,84 @@
+"""The arm_sim command line (host_sim/native): what Python decides, turned into arguments.
+
+The simulator's per-period work is C (build/<preset>/host_sim/native/arm_sim). Python keeps what
+is configuration: the bus specs, the uncertainty (host_sim.uncertainty.UncertaintyConfig), and,
+for bus timing, each frame's worst-case length on each bus, computed once by tools/busload.py
+(the same bit counts `armctl busload` prints) and handed over as --frame-times.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from host_sim.uncertainty import UncertaintyConfig
+from tools import busload
+from tools.paths import build_dir
+
+TIMING_MODES = ("off", "virtual", "wallclock")
+
+
+def sim_binary(preset: str = "release") -> Path:
+    return build_dir(preset) / "host_sim" / "native" / "arm_sim"
+
+
+def parse_phy(text: str) -> tuple[bool, float, float | None]:
+    """"fd:1M/5M", "fd:1M" (no bit-rate switch) or "classic:1M" -> (fd, nominal, data)."""
+    kind, _, rates = text.partition(":")
+    if kind not in ("fd", "classic") or not rates:
+        raise busload.ConfigError(f"'{text}': expected fd:NOMINAL[/DATA] or classic:RATE (e.g. fd:1M/5M, classic:1M)")
+    nominal, _, data = rates.partition("/")
+    if kind == "classic" and data:
+        raise busload.ConfigError(f"'{text}': a classic bus has one bit rate")
+    return kind == "fd", busload.parse_rate(nominal), busload.parse_rate(data) if data else None
+
+
+def frame_times(bus: busload.Bus, proto: busload.Protocol) -> str:
+    """"ID:US,..." for every message of the DBC: its worst-case time on this bus (all its frames)."""
+    out = []
+    for msg in proto.db.messages:
+        frames, _, _, seconds = busload.frame_time(msg, bus)
+        out.append(f"{msg.frame_id}:{frames * seconds * 1e6:.6f}")
+    return ",".join(out)
+
+
+def uncertainty_args(unc: dict[str, Any] | UncertaintyConfig | None) -> list[str]:
+    """arm_sim's uncertainty options; validated first (the message names the field)."""
+    if unc is None:
+        return []
+    cfg = unc if isinstance(unc, UncertaintyConfig) else UncertaintyConfig.from_dict(unc)
+    args = ["--seed", str(cfg.seed), "--paper-ratio", repr(cfg.paper_ratio), "--paper-knot-s", repr(cfg.paper_knot_s),
+            "--mass-error", repr(cfg.mass_error), "--inertia-error", repr(cfg.inertia_error),
+            "--com-error-m", repr(cfg.com_error_m)]
+    if cfg.viscous:
+        args += ["--viscous", ",".join(repr(float(x)) for x in cfg.viscous)]
+    if cfg.coulomb:
+        args += ["--coulomb", ",".join(repr(float(x)) for x in cfg.coulomb)]
+    return args
+
+
+def timing_args(mode: str, phys: list[busload.Bus], controller_latency_us: float = 0.0) -> list[str]:
+    """Bus timing emulation of these buses (one per --bus, in order), or nothing when off."""
+    if mode not in TIMING_MODES:
+        raise busload.ConfigError(f"bus timing '{mode}': expected one of {', '.join(TIMING_MODES)}")
+    if mode == "off":
+        return []
+    proto = busload.default_protocol()
+    args = ["--bus-timing", mode, "--controller-latency-us", repr(float(controller_latency_us))]
+    for i, b in enumerate(phys):
+        args += ["--frame-times", f"{i}={frame_times(b, proto)}", "--bus-label", f"{i}={b.describe()}"]
+    return args
+
+
+def sim_argv(binary: Path, buses: list[str], *, lcm_url: str, summary: Path | None = None,
+             uncertainty: dict[str, Any] | None = None, timing: str = "off", phys: list[busload.Bus] | None = None,
+             controller_latency_us: float = 0.0, model: Path | None = None,
+             extra: list[str] | None = None) -> list[str]:
+    argv = [str(binary), *[a for spec in buses for a in ("--bus", spec)], "--lcm-url", lcm_url]
+    if summary is not None:
+        argv += ["--summary", str(summary)]
+    if model is not None:
+        argv += ["--model", str(model)]
+    argv += uncertainty_args(uncertainty)
+    argv += timing_args(timing, phys or [], controller_latency_us)
+    return argv + list(extra or [])

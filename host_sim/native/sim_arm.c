@@ -1,0 +1,196 @@
+#include "sim_arm.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+void sim_uncertainty_default(sim_uncertainty_t *u)
+{
+    memset(u, 0, sizeof(*u));
+    u->seed = 1u;
+    u->paper_knot_s = 0.05;
+}
+
+static void draw_knot(sim_arm_t *a, double *dst)
+{
+    const double r = a->unc.paper_ratio;
+    for (int i = 0; i < 2 * a->n; ++i) {
+        dst[i] = sim_rng_uniform(&a->rng, -r, r);
+    }
+}
+
+/* Parametric error: the simulated arm's links differ from the nominal ones. */
+static void perturb(sim_arm_t *a)
+{
+    mjModel *m = a->model;
+    const sim_uncertainty_t *u = &a->unc;
+    for (int b = 1; b < m->nbody; ++b) {
+        if (u->mass_error != 0.0) {
+            m->body_mass[b] *= 1.0 + sim_rng_uniform(&a->rng, -u->mass_error, u->mass_error);
+        }
+        if (u->inertia_error != 0.0) {
+            const double s = 1.0 + sim_rng_uniform(&a->rng, -u->inertia_error, u->inertia_error);
+            for (int k = 0; k < 3; ++k) {
+                m->body_inertia[3 * b + k] *= s;
+            }
+        }
+        if (u->com_error_m != 0.0) {
+            for (int k = 0; k < 3; ++k) {
+                m->body_ipos[3 * b + k] += sim_rng_uniform(&a->rng, -u->com_error_m, u->com_error_m);
+            }
+        }
+    }
+}
+
+int sim_arm_open(sim_arm_t *a, const char *path, const char *keyframe, const sim_uncertainty_t *u,
+                 char *err, size_t errcap)
+{
+    memset(a, 0, sizeof(*a));
+    char mjerr[500] = "";
+    a->model = mj_loadXML(path, NULL, mjerr, sizeof(mjerr));
+    a->nominal = a->model != NULL ? mj_loadXML(path, NULL, mjerr, sizeof(mjerr)) : NULL;
+    if (a->model == NULL || a->nominal == NULL) {
+        snprintf(err, errcap, "--model: cannot load '%s': %s", path, mjerr);
+        sim_arm_close(a);
+        return -1;
+    }
+    const long nu = (long)a->model->nu, nv = (long)a->model->nv;
+    if (nu < 1 || nu > SIM_MAX_JOINTS || nv != nu) {
+        snprintf(err, errcap, "--model: '%s' has %ld actuators and %ld degrees of freedom; the simulator "
+                 "drives 1..%d joints, one actuator each", path, nu, nv, SIM_MAX_JOINTS);
+        sim_arm_close(a);
+        return -1;
+    }
+    a->n = (int)nu;
+    a->unc = *u;
+    a->period = a->model->opt.timestep;
+    a->parametric = u->mass_error != 0.0 || u->inertia_error != 0.0 || u->com_error_m != 0.0;
+    for (int j = 0; j < a->n; ++j) {
+        a->friction |= u->viscous[j] != 0.0 || u->coulomb[j] != 0.0;
+        a->torque_limit[j] = a->model->actuator_ctrlrange[2 * j + 1];
+    }
+    /* The draws come in the order the Python simulator made them: the signal's first two knots,
+     * then the links' parametric errors (one seed, one arm). */
+    sim_rng_seed(&a->rng, u->seed);
+    if (u->paper_ratio != 0.0) {
+        draw_knot(a, a->knots[0]);
+        draw_knot(a, a->knots[1]);
+    }
+    perturb(a);
+    a->data = mj_makeData(a->model);
+    a->nominal_data = mj_makeData(a->nominal);
+    if (a->data == NULL || a->nominal_data == NULL) {
+        snprintf(err, errcap, "--model: '%s': MuJoCo could not allocate its data", path);
+        sim_arm_close(a);
+        return -1;
+    }
+    const int key = mj_name2id(a->model, mjOBJ_KEY, keyframe);
+    if (key < 0) {
+        snprintf(err, errcap, "--model: '%s' has no keyframe '%s'", path, keyframe);
+        sim_arm_close(a);
+        return -1;
+    }
+    mj_resetDataKeyframe(a->model, a->data, key);
+    mj_forward(a->model, a->data);
+    return 0;
+}
+
+/* d(t): 2n channels, linear between knots every knot_s seconds (time only moves forward). */
+static void signal_at(sim_arm_t *a, double t, double *out)
+{
+    const double knot_s = a->unc.paper_knot_s;
+    const double k = sim_py_floordiv(t, knot_s);
+    while ((double)a->knot_index < k) {
+        memcpy(a->knots[0], a->knots[1], sizeof(a->knots[0]));
+        draw_knot(a, a->knots[1]);
+        a->knot_index++;
+    }
+    const double frac = t / knot_s - k;
+    for (int i = 0; i < 2 * a->n; ++i) {
+        out[i] = (1.0 - frac) * a->knots[0][i] + frac * a->knots[1][i];
+    }
+}
+
+/* The generalized force that makes MuJoCo integrate the uncertain dynamics: with M, V of the
+ * (parametrically perturbed) arm, the true acceleration is qdd = (M + M~)^-1 (tau + tau_f - V - V~);
+ * returned is f with M qdd + V = tau + f. */
+static void extra_force(sim_arm_t *a, double t, const double *bias, const double *tau, const double *qd,
+                        double *f)
+{
+    const int n = a->n;
+    double tau_f[SIM_MAX_JOINTS] = {0};
+    if (a->friction) {
+        for (int j = 0; j < n; ++j) {
+            tau_f[j] = -a->unc.viscous[j] * qd[j] - a->unc.coulomb[j] * tanh(qd[j] / 0.01);
+        }
+    }
+    if (a->unc.paper_ratio == 0.0) {
+        memcpy(f, tau_f, (size_t)n * sizeof(double));
+        return;
+    }
+    double dd[2 * SIM_MAX_JOINTS];
+    signal_at(a, t, dd);
+    const double *d = dd;
+    const double *dv = dd + n;
+    double m_true[SIM_MAX_JOINTS * SIM_MAX_JOINTS];
+    double rhs[SIM_MAX_JOINTS];
+    double qdd[SIM_MAX_JOINTS];
+    for (int i = 0; i < n; ++i) {
+        for (int j = 0; j < n; ++j) {
+            const double mij = a->mass[i * n + j];
+            m_true[i * n + j] = mij + 0.5 * (d[i] * mij + mij * d[j]);
+        }
+        rhs[i] = tau[i] + tau_f[i] - bias[i] * (1.0 + dv[i]);
+    }
+    mju_cholFactor(m_true, n, 0.0);
+    mju_cholSolve(qdd, m_true, rhs, n);
+    for (int i = 0; i < n; ++i) {
+        double s = 0.0;
+        for (int j = 0; j < n; ++j) {
+            s += a->mass[i * n + j] * qdd[j];
+        }
+        f[i] = s + bias[i] - tau[i];
+    }
+}
+
+void sim_arm_step(sim_arm_t *a, const double *tau, const double *tau_commanded, double *w)
+{
+    const int n = a->n;
+    mjData *d = a->data;
+    mjData *nd = a->nominal_data;
+    memcpy(d->ctrl, tau, (size_t)n * sizeof(double));
+    memcpy(nd->qpos, d->qpos, (size_t)a->nominal->nq * sizeof(double));
+    memcpy(nd->qvel, d->qvel, (size_t)n * sizeof(double));
+    memcpy(nd->ctrl, tau_commanded != NULL ? tau_commanded : tau, (size_t)n * sizeof(double));
+    mj_forward(a->nominal, nd);
+    if (a->unc.paper_ratio != 0.0) {
+        /* M and V of the true arm at the step's start. Without parametric error the true arm's
+         * are the nominal one's, just computed: no second forward pass. */
+        const mjModel *sm = a->nominal;
+        const mjData *sd = nd;
+        if (a->parametric) {
+            mj_forward(a->model, d);
+            sm = a->model;
+            sd = d;
+        }
+        mj_fullM(sm, sd, a->mass);
+        extra_force(a, (double)a->step_count * a->period, sd->qfrc_bias, tau, d->qvel, d->qfrc_applied);
+    } else {
+        extra_force(a, 0.0, d->qfrc_bias, tau, d->qvel, d->qfrc_applied);
+    }
+    mj_step(a->model, d); /* qacc is the acceleration at the step's start */
+    a->step_count++;
+    for (int j = 0; j < n; ++j) {
+        w[j] = nd->qacc[j] - d->qacc[j];
+    }
+}
+
+void sim_arm_close(sim_arm_t *a)
+{
+    if (a->data != NULL) mj_deleteData(a->data);
+    if (a->nominal_data != NULL) mj_deleteData(a->nominal_data);
+    if (a->model != NULL) mj_deleteModel(a->model);
+    if (a->nominal != NULL) mj_deleteModel(a->nominal);
+    a->data = a->nominal_data = NULL;
+    a->model = a->nominal = NULL;
+}

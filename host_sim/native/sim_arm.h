@@ -1,0 +1,65 @@
+/* The simulated arm: MuJoCo integrates the true dynamics, which differ from the nominal model the
+ * firmware believes in by a seeded, configurable uncertainty:
+ *
+ * - paper-style (Kim & Kim 2024, Example 1): (M + M~(t)) q_ddot + V + V~(t) = tau, with
+ *   M~ = (D M + M D) / 2, D = diag(d_j(t)), V~_j = d'_j(t) V_j, every d(t) a random
+ *   piecewise-linear signal in [-r, r] with a new value every knot_s seconds; V is MuJoCo's bias
+ *   force (Coriolis, centrifugal, gravity);
+ * - parametric: link masses, inertias and centres of mass off from the nominal model (uniform in
+ *   +-error, per link, seeded);
+ * - joint friction the nominal model lacks: tau_f = -b qd - c tanh(qd / 0.01).
+ *
+ * Each step returns w, the total uncertainty of e_ddot = u + w as the controller sees it: the
+ * acceleration the nominal model predicts for the commanded torque minus the true one. */
+#ifndef ARM_SIM_ARM_H
+#define ARM_SIM_ARM_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include <mujoco/mujoco.h>
+
+#include "sim_rng.h"
+
+#define SIM_MAX_JOINTS 16
+
+typedef struct {
+    uint64_t seed;
+    double paper_ratio;  /* r; 0 disables the paper-style uncertainty */
+    double paper_knot_s;
+    double mass_error;   /* relative, per link */
+    double inertia_error;
+    double com_error_m;  /* metres, per link and axis */
+    double viscous[SIM_MAX_JOINTS]; /* Nm s/rad per joint */
+    double coulomb[SIM_MAX_JOINTS]; /* Nm per joint */
+} sim_uncertainty_t;
+
+typedef struct {
+    mjModel *model;   /* the true arm (perturbed) */
+    mjData *data;
+    mjModel *nominal; /* what the firmware's model was generated from */
+    mjData *nominal_data;
+    int n;
+    double period;
+    int64_t step_count;
+    sim_uncertainty_t unc;
+    int parametric;
+    int friction;
+    sim_rng_t rng;
+    double knots[2][2 * SIM_MAX_JOINTS]; /* the random signal d (first n) and d' (last n) */
+    int64_t knot_index;
+    double mass[SIM_MAX_JOINTS * SIM_MAX_JOINTS];
+    double torque_limit[SIM_MAX_JOINTS];
+} sim_arm_t;
+
+void sim_uncertainty_default(sim_uncertainty_t *u);
+/* Loads the model twice (true and nominal), draws the uncertainty, resets to the keyframe.
+ * Returns 0, or -1 with a message naming the file or element in err. */
+int sim_arm_open(sim_arm_t *a, const char *path, const char *keyframe, const sim_uncertainty_t *u,
+                 char *err, size_t errcap);
+/* One period under tau (the time average the joints feel); tau_commanded (may be NULL: tau) is
+ * what the controller commanded, when the bus delays a new command into the period. w: n values. */
+void sim_arm_step(sim_arm_t *a, const double *tau, const double *tau_commanded, double *w);
+void sim_arm_close(sim_arm_t *a);
+
+#endif

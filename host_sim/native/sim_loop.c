@@ -1,0 +1,628 @@
+#define _GNU_SOURCE
+#include "sim_loop.h"
+
+#include <errno.h>
+#include <stdio.h>
+#include <string.h>
+#include <time.h>
+
+#include "arm_drives.h"
+#include "sim_drive.h"
+#include "sim_frames.h"
+
+#define HEARTBEAT_PERIODS 100
+#define STOP_CHECK_S 0.1 /* a stop request is noticed within this */
+#define PENDING_MAX 256u
+
+volatile sig_atomic_t sim_stop_requested = 0;
+
+typedef struct {
+    unsigned bus;
+    arm_can_frame_t f;
+    int flag; /* 0 fresh, 1 other buses already drained for it, 2 that and never held back again */
+} queued_t;
+
+/* The whole working set: static, sized at compile time, nothing allocated per period. */
+typedef struct {
+    const sim_config_t *cfg;
+    sim_arm_t *arm;
+    sim_telemetry_t *tel;
+    sim_report_t *rep;
+    int n;
+    arm_can_bus_set_t set;
+    int bus_of[SIM_MAX_JOINTS];
+    sim_drive_t drives[SIM_MAX_JOINTS];
+    sim_timeline_t timing[ARM_CAN_BUS_SET_MAX]; /* when cfg->timing != off */
+    int counter;     /* SYNC counter of the period being served, -1: none */
+    uint32_t synced; /* bit b: this period's SYNC arrived on bus b */
+    uint32_t got_cmd;
+    uint16_t cmd_cw[SIM_MAX_JOINTS];
+    double cmd_tau[SIM_MAX_JOINTS];
+    double last_w[SIM_MAX_JOINTS];
+    double last_tau[SIM_MAX_JOINTS];
+    int64_t period_wall_ns; /* wallclock timing: when the period's first SYNC arrived */
+    double states_end;      /* bus timing: when the last state frame of the period ended */
+    queued_t pending[PENDING_MAX]; /* ring: frames read but not handled yet */
+    unsigned pend_head, pend_len;
+    queued_t deferred[ARM_CAN_BUS_SET_MAX];
+    unsigned n_deferred;
+    int64_t first_sync_ns;
+    int64_t last_period_ns;
+    int64_t cpu_mark_ns; /* thread CPU time at the end of the previous period */
+    int truth_pending;   /* the last period's ARM_SIM message is still to be published */
+    int32_t truth_faults;
+} sim_t;
+
+static int64_t mono_ns(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (int64_t)ts.tv_sec * 1000000000LL + ts.tv_nsec;
+}
+
+static int64_t cpu_ns(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return (int64_t)ts.tv_sec * 1000000000LL + ts.tv_nsec;
+}
+
+static uint32_t all_joints(const sim_t *s)
+{
+    return (uint32_t)((1ull << s->n) - 1u);
+}
+
+/* ---- telemetry ---------------------------------------------------------------------------- */
+static void event(sim_t *s, const char *source, const char *level, const char *text)
+{
+    const int64_t c0 = s->cfg->profile ? cpu_ns() : 0;
+    sim_telemetry_event(s->tel, s->arm->step_count, source, level, text);
+    if (s->cfg->profile) s->rep->prof_telemetry_ns += (uint64_t)(cpu_ns() - c0);
+}
+
+static int32_t fault_bits(const sim_t *s)
+{
+    int32_t m = 0;
+    for (int j = 0; j < s->n; ++j) {
+        if (s->drives[j].error_code != 0u) m |= (int32_t)(1u << j);
+    }
+    return m;
+}
+
+/* ---- bus ---------------------------------------------------------------------------------- */
+static void send(sim_t *s, unsigned bus, const arm_can_frame_t *f)
+{
+    const int64_t c0 = s->cfg->profile ? cpu_ns() : 0;
+    if (arm_can_bus_set_send(&s->set, bus, f) == 0) {
+        s->rep->frames_tx++;
+    } else {
+        s->rep->tx_dropped++;
+    }
+    if (s->cfg->profile) s->rep->prof_bus_tx_ns += (uint64_t)(cpu_ns() - c0);
+}
+
+static void send_batch(sim_t *s, unsigned bus, const arm_can_frame_t *frames, unsigned n)
+{
+    if (n == 0u) return;
+    const int64_t c0 = s->cfg->profile ? cpu_ns() : 0;
+    const unsigned sent = arm_can_bus_set_send_many(&s->set, bus, frames, n);
+    s->rep->frames_tx += sent;
+    s->rep->tx_dropped += n - sent;
+    if (s->cfg->profile) s->rep->prof_bus_tx_ns += (uint64_t)(cpu_ns() - c0);
+}
+
+/* Heartbeats and EMCY are sent after a period's step: they delay the next SYNC if the bus is
+ * still busy with them. */
+static void occupy_at_period_end(sim_t *s, int j, uint32_t id)
+{
+    if (s->cfg->timing != SIM_TIMING_OFF && s->rep->periods > 0u) {
+        double end;
+        sim_timeline_transmit(&s->timing[s->bus_of[j]], s->arm->period, &id, 1u, &end);
+    }
+}
+
+static void send_heartbeat(sim_t *s, int j, int state)
+{
+    arm_can_frame_t f;
+    sim_make_heartbeat(j, (uint8_t)(state < 0 ? s->drives[j].nmt_state : state), &f);
+    send(s, (unsigned)s->bus_of[j], &f);
+    occupy_at_period_end(s, j, f.id);
+}
+
+static void send_emcys(sim_t *s, int j)
+{
+    sim_drive_t *d = &s->drives[j];
+    for (unsigned k = 0; k < d->n_emcy_pending; ++k) {
+        arm_can_frame_t f;
+        sim_make_emcy(j, d->emcy_pending[k], 0x01u, &f);
+        send(s, (unsigned)s->bus_of[j], &f);
+        occupy_at_period_end(s, j, f.id);
+        char src[24], text[96];
+        snprintf(src, sizeof(src), "drive%d", j + 1);
+        snprintf(text, sizeof(text), "EMCY 0x%04x: drive %d fault, torque off", d->emcy_pending[k], j + 1);
+        event(s, src, "fault", text);
+    }
+    d->n_emcy_pending = 0u;
+}
+
+/* A frame from any bus, drives' own frames (our echoes on UDP, or another node's) counted and
+ * dropped. 1 with a frame, 0 on timeout, <0 on a bus error. */
+static int recv_frame(sim_t *s, arm_can_frame_t *f, unsigned *bus, double timeout_s)
+{
+    const int64_t end = mono_ns() + (int64_t)(timeout_s * 1e9);
+    /* Poll first, then sleep: in lockstep the controller answers within tens of microseconds,
+     * sooner than a sleeping process is woken on a VM. */
+    const int64_t spin_ns = (int64_t)(s->cfg->spin_us * 1e3);
+    const int64_t spin_end = mono_ns() + (spin_ns < (int64_t)(timeout_s * 1e9) ? spin_ns : (int64_t)(timeout_s * 1e9));
+    const int64_t c_spin = s->cfg->profile ? cpu_ns() : 0;
+    int rc = 0;
+    while (rc == 0 && spin_ns > 0 && mono_ns() < spin_end) {
+        rc = arm_can_bus_set_recv(&s->set, f, bus, 0);
+        if (rc == 1 && sim_is_drive_id(f->id)) {
+            s->rep->rx_foreign_drive++;
+            rc = 0;
+        }
+    }
+    if (s->cfg->profile) s->rep->prof_bus_rx_ns += (uint64_t)(cpu_ns() - c_spin);
+    if (rc != 0) return rc;
+    for (;;) {
+        if (sim_stop_requested) return 0;
+        int64_t left = end - mono_ns();
+        if (left < 0) left = 0;
+        const int64_t slice = left < (int64_t)(STOP_CHECK_S * 1e9) ? left : (int64_t)(STOP_CHECK_S * 1e9);
+        const int64_t c0 = s->cfg->profile ? cpu_ns() : 0;
+        rc = arm_can_bus_set_recv(&s->set, f, bus, (int)(slice / 1000));
+        if (s->cfg->profile) s->rep->prof_bus_rx_ns += (uint64_t)(cpu_ns() - c0);
+        if (rc < 0) return rc;
+        if (rc == 0) {
+            if (mono_ns() >= end) return 0;
+            continue;
+        }
+        if (sim_is_drive_id(f->id)) {
+            s->rep->rx_foreign_drive++;
+            continue;
+        }
+        return 1;
+    }
+}
+
+/* One bus's queued frames, now (0 when none is queued). */
+static int poll_bus(sim_t *s, unsigned bus, arm_can_frame_t *f)
+{
+    for (;;) {
+        const int rc = arm_can_bus_recv(&s->set.bus[bus], f, 0);
+        if (rc != 1) return 0;
+        if (sim_is_drive_id(f->id)) {
+            s->rep->rx_foreign_drive++;
+            continue;
+        }
+        return 1;
+    }
+}
+
+static void push_front(sim_t *s, unsigned bus, const arm_can_frame_t *f, int flag)
+{
+    if (s->pend_len == PENDING_MAX) return; /* bounded: a flood waits in the socket instead */
+    s->pend_head = (s->pend_head + PENDING_MAX - 1u) % PENDING_MAX;
+    s->pending[s->pend_head] = (queued_t){.bus = bus, .f = *f, .flag = flag};
+    s->pend_len++;
+}
+
+static void requeue_deferred(sim_t *s)
+{
+    for (unsigned k = s->n_deferred; k-- > 0u;) {
+        push_front(s, s->deferred[k].bus, &s->deferred[k].f, 2);
+    }
+    s->n_deferred = 0u;
+}
+
+/* ---- bus timing ----------------------------------------------------------------------------- */
+/* Puts this period's commands on their buses; per joint, the fraction of the period before its
+ * new command took effect, or -1 if it ended after the period. */
+static void emulate_commands(sim_t *s, double *effect)
+{
+    const double period = s->arm->period;
+    const double queued = s->states_end + s->cfg->controller_latency_s;
+    for (int j = 0; j < s->n; ++j) effect[j] = 0.0;
+    for (unsigned b = 0; b < s->set.n; ++b) {
+        uint32_t ids[SIM_MAX_JOINTS];
+        int joints[SIM_MAX_JOINTS];
+        unsigned k = 0;
+        for (int j = 0; j < s->n; ++j) {
+            if (s->bus_of[j] == (int)b && (s->got_cmd & (1u << j)) != 0u) {
+                joints[k] = j;
+                ids[k++] = sim_cmd_id(j);
+            }
+        }
+        if (k == 0u) continue;
+        sim_timeline_t *tl = &s->timing[b];
+        double ends[SIM_MAX_JOINTS];
+        sim_timeline_transmit(tl, queued, ids, k, ends);
+        double last = 0.0;
+        for (unsigned i = 0; i < k; ++i) last = ends[i] > last ? ends[i] : last;
+        tl->stats.periods++;
+        tl->stats.sync_to_last_cmd_sum_s += last;
+        if (last > tl->stats.sync_to_last_cmd_max_s) tl->stats.sync_to_last_cmd_max_s = last;
+        for (unsigned i = 0; i < k; ++i) {
+            const int j = joints[i];
+            if (ends[i] > period) {
+                effect[j] = -1.0;
+                if (++tl->stats.commands_late == 1u) { /* the first one says so; the count says the rest */
+                    char src[24], text[200];
+                    snprintf(src, sizeof(src), "bus%u", b);
+                    snprintf(text, sizeof(text), "bus timing: drive %d's command ended %.3f ms after its SYNC, "
+                             "after its %g ms period: not applied (bus overloaded?)", j + 1, ends[i] * 1e3,
+                             period * 1e3);
+                    event(s, src, "warning", text);
+                }
+            } else {
+                effect[j] = ends[i] / period;
+            }
+        }
+    }
+}
+
+/* ---- one period --------------------------------------------------------------------------- */
+static void record_cost(sim_t *s)
+{
+    const int64_t now = cpu_ns();
+    if (s->rep->periods > 1u) { /* the first period also carries the boot */
+        const uint64_t c = (uint64_t)(now - s->cpu_mark_ns);
+        const uint64_t us = c / 1000u;
+        s->rep->cost_hist[us < SIM_COST_BINS ? us : SIM_COST_BINS]++;
+        if (c > s->rep->cost_max_ns) s->rep->cost_max_ns = c;
+        s->rep->cost_sum_ns += c;
+        s->rep->cost_n++;
+    }
+    s->cpu_mark_ns = now;
+}
+
+/* Apply the period's commands and advance the arm by one step. */
+static void finish_period(sim_t *s)
+{
+    const int n = s->n;
+    double effect[SIM_MAX_JOINTS];
+    const int timed = s->cfg->timing != SIM_TIMING_OFF;
+    if (timed) emulate_commands(s, effect);
+    double tau[SIM_MAX_JOINTS], tau_cmd[SIM_MAX_JOINTS];
+    for (int j = 0; j < n; ++j) {
+        sim_drive_t *d = &s->drives[j];
+        const double before = sim_drive_applied_torque(d);
+        double held_for = 0.0; /* fraction of the period the previous torque still acts (bus timing) */
+        int got = (s->got_cmd & (1u << j)) != 0u;
+        if (got && timed) {
+            if (effect[j] < 0.0) {
+                got = 0; /* its frame ended after the period: too late for it */
+                s->rep->commands_late++;
+            } else {
+                held_for = effect[j];
+            }
+        }
+        if (got) sim_drive_on_command(d, s->cmd_cw[j], s->cmd_tau[j]);
+        const uint8_t was_fault = d->error_code;
+        sim_drive_on_period_end(d, got);
+        if (d->n_emcy_pending > 0u) send_emcys(s, j);
+        if (!got && was_fault == 0u) s->rep->commands_missed++;
+        /* One physics step per period: a torque that changes inside it acts as its time average. */
+        tau_cmd[j] = sim_drive_applied_torque(d);
+        tau[j] = held_for * before + (1.0 - held_for) * tau_cmd[j];
+    }
+    memcpy(s->last_tau, tau, (size_t)n * sizeof(double));
+    const int64_t c0 = s->cfg->profile ? cpu_ns() : 0;
+    sim_arm_step(s->arm, tau, timed ? tau_cmd : NULL, s->last_w);
+    if (s->cfg->profile) s->rep->prof_physics_ns += (uint64_t)(cpu_ns() - c0);
+    s->rep->periods++;
+    s->truth_pending = 1; /* published once the next period's states are out (publish_truth) */
+    s->truth_faults = fault_bits(s);
+    if (s->arm->step_count % HEARTBEAT_PERIODS == 0) {
+        for (int j = 0; j < n; ++j) send_heartbeat(s, j, -1);
+    }
+    s->counter = -1;
+    s->last_period_ns = mono_ns();
+    record_cost(s);
+}
+
+/* The truth of the period just simulated (q, qd after the step, the torque applied, w). Published
+ * after the next period's states have gone out, so the controller never waits for it; the
+ * state it reports does not change in between (the arm moves only in finish_period). */
+static void publish_truth(sim_t *s)
+{
+    if (!s->truth_pending) return;
+    s->truth_pending = 0;
+    const int64_t t1 = s->cfg->profile ? cpu_ns() : 0;
+    sim_telemetry_truth(s->tel, s->arm->step_count - 1, s->arm->period, s->n, s->arm->data->qpos,
+                        s->arm->data->qvel, s->last_tau, s->last_w, s->truth_faults);
+    if (s->cfg->profile) s->rep->prof_telemetry_ns += (uint64_t)(cpu_ns() - t1);
+}
+
+static void sleep_until(int64_t t_ns)
+{
+    const struct timespec ts = {.tv_sec = t_ns / 1000000000LL, .tv_nsec = t_ns % 1000000000LL};
+    while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, NULL) == EINTR && !sim_stop_requested) {
+    }
+}
+
+/* SYNC goes on every bus; the drives on `bus` answer on it. A period starts with its first SYNC;
+ * the same counter on another bus joins it. */
+static void on_sync(sim_t *s, int counter, unsigned bus)
+{
+    if (s->counter >= 0 && (counter != s->counter || (s->synced & (1u << bus)) != 0u)) {
+        finish_period(s); /* commands missing: the drives count it, the arm still moves */
+    }
+    if (s->counter < 0) {
+        s->counter = counter;
+        s->got_cmd = 0u;
+        s->synced = 0u;
+        if (s->cfg->timing != SIM_TIMING_OFF) {
+            s->period_wall_ns = mono_ns();
+            s->states_end = 0.0;
+            for (unsigned b = 0; b < s->set.n; ++b) sim_timeline_new_period(&s->timing[b], s->arm->period);
+        }
+    }
+    s->synced |= 1u << bus;
+    double send_at[SIM_MAX_JOINTS] = {0};
+    if (s->cfg->timing != SIM_TIMING_OFF) { /* SYNC, then the drives' states in id order once it has ended */
+        sim_timeline_t *tl = &s->timing[bus];
+        const uint32_t sync_id = ARM_DRIVES_SYNC_FRAME_ID;
+        double sync_end;
+        sim_timeline_transmit(tl, 0.0, &sync_id, 1u, &sync_end);
+        uint32_t ids[SIM_MAX_JOINTS];
+        int joints[SIM_MAX_JOINTS];
+        unsigned k = 0;
+        for (int j = 0; j < s->n; ++j) {
+            if (s->bus_of[j] == (int)bus) {
+                joints[k] = j;
+                ids[k++] = sim_state_id(j);
+            }
+        }
+        double ends[SIM_MAX_JOINTS];
+        sim_timeline_transmit(tl, sync_end, ids, k, ends);
+        for (unsigned i = 0; i < k; ++i) {
+            send_at[joints[i]] = ends[i];
+            if (ends[i] > s->states_end) s->states_end = ends[i];
+        }
+    }
+    const double *q = s->arm->data->qpos;
+    const double *qd = s->arm->data->qvel;
+    arm_can_frame_t batch[SIM_MAX_JOINTS];
+    unsigned k = 0;
+    for (int j = 0; j < s->n; ++j) {
+        if (s->bus_of[j] != (int)bus) continue;
+        const sim_drive_t *d = &s->drives[j];
+        arm_can_frame_t *f = &batch[k++];
+        sim_make_state(j, q[j], qd[j], sim_drive_applied_torque(d), (uint16_t)d->power, (uint8_t)counter,
+                       d->error_code, f);
+        if (s->cfg->timing == SIM_TIMING_WALLCLOCK) { /* not before the frame would have ended on the bus */
+            sleep_until(s->period_wall_ns + (int64_t)(send_at[j] * 1e9));
+            send(s, bus, f);
+            k = 0;
+        }
+    }
+    send_batch(s, bus, batch, k); /* the bus's states in one go (one syscall on UDP) */
+    publish_truth(s); /* the last period's truth, while the controller computes this one */
+}
+
+/* A SYNC on `bus` for the next period while this period's commands for drives on other buses
+ * are still missing, and the drives on `bus` have theirs. Such commands may still be on their
+ * way: a socket per bus (and, on vcan, a per-CPU receive backlog) does not keep the order between
+ * buses, so the next SYNC on one bus can overtake the commands on another. Commands missing on
+ * `bus` itself are really missing (one bus keeps its order). */
+static int holds_back(const sim_t *s, unsigned bus, const arm_can_frame_t *f)
+{
+    if (s->set.n < 2u || s->counter < 0 || f->len != 1u) return 0;
+    if (f->data[0] == s->counter && (s->synced & (1u << bus)) == 0u) return 0; /* this period's SYNC elsewhere */
+    int mine = 1, others = 1;
+    for (int j = 0; j < s->n; ++j) {
+        const int got = (s->got_cmd & (1u << j)) != 0u;
+        if (s->bus_of[j] == (int)bus) mine &= got;
+        else others &= got;
+    }
+    return mine && !others;
+}
+
+static void on_command(sim_t *s, int j, const arm_can_frame_t *f, unsigned bus)
+{
+    if (s->bus_of[j] != (int)bus) {
+        s->rep->rx_wrong_bus++; /* not this drive's bus: a real drive never sees it */
+        return;
+    }
+    uint16_t cw;
+    double tau;
+    uint8_t counter;
+    if (sim_decode_cmd(f, &cw, &tau, &counter) != 0) {
+        s->rep->rx_bad_frame++;
+        return;
+    }
+    if (s->counter < 0 || counter != s->counter) {
+        return; /* a command for another period: a real drive ignores it too */
+    }
+    s->cmd_cw[j] = cw;
+    s->cmd_tau[j] = tau;
+    s->got_cmd |= 1u << j;
+    if (s->got_cmd == all_joints(s)) finish_period(s);
+}
+
+/* NMT goes on every bus and reaches the drives on it. Returns 0 when the controller stopped the
+ * node set (the end of the run). */
+static int on_nmt(sim_t *s, const arm_can_frame_t *f, unsigned bus)
+{
+    if (f->len != 2u) {
+        s->rep->rx_bad_frame++;
+        return 1;
+    }
+    const uint8_t command = f->data[0], node = f->data[1];
+    int all_stopped = 1;
+    for (int j = 0; j < s->n; ++j) {
+        sim_drive_t *d = &s->drives[j];
+        if (s->bus_of[j] == (int)bus && (node == 0u || node == d->node_id) && sim_drive_on_nmt(d, command)) {
+            send_heartbeat(s, j, -1);
+        }
+        all_stopped &= d->nmt_state == SIM_NMT_STATE_STOPPED;
+    }
+    return !all_stopped;
+}
+
+/* ---- main loop ---------------------------------------------------------------------------- */
+static void controller_lost(sim_t *s, int booted, double timeout)
+{
+    snprintf(s->rep->result, sizeof(s->rep->result), "controller-lost");
+    snprintf(s->rep->reason, sizeof(s->rep->reason), "%s for %g s: drives faulted, torque off",
+             booted ? "controller silent" : "no controller on the bus", timeout);
+    for (int j = 0; j < s->n; ++j) {
+        sim_drive_fault(&s->drives[j], SIM_ERR_CONTROLLER_LOST, SIM_EMCY_HEARTBEAT);
+        send_emcys(s, j);
+    }
+}
+
+static int run_loop(sim_t *s)
+{
+    const sim_config_t *cfg = s->cfg;
+    sim_report_t *rep = s->rep;
+    const int64_t t0 = mono_ns();
+    for (int j = 0; j < s->n; ++j) send_heartbeat(s, j, SIM_NMT_STATE_BOOT); /* CANopen boot-up */
+    char text[700];
+    snprintf(text, sizeof(text), "%d drives up on bus %s", s->n, cfg->bus_text);
+    event(s, "sim", "info", text);
+    int booted = 0;
+    const uint32_t sync_id = ARM_DRIVES_SYNC_FRAME_ID, nmt_id = ARM_DRIVES_NMT_FRAME_ID;
+    for (;;) {
+        const double timeout = booted ? cfg->idle_timeout_s : cfg->boot_timeout_s;
+        if (s->n_deferred > 0u && (s->counter < 0 || s->n_deferred >= s->set.n)) requeue_deferred(s);
+        int flag = 0, have = 0;
+        unsigned bus = 0;
+        arm_can_frame_t f;
+        if (s->pend_len > 0u) {
+            const queued_t *q = &s->pending[s->pend_head];
+            bus = q->bus;
+            f = q->f;
+            flag = q->flag;
+            s->pend_head = (s->pend_head + 1u) % PENDING_MAX;
+            s->pend_len--;
+            have = 1;
+        } else {
+            const double defer_s = cfg->reorder_wait_s;
+            const int rc = recv_frame(s, &f, &bus, s->n_deferred > 0u && defer_s < timeout ? defer_s : timeout);
+            if (rc < 0) {
+                snprintf(rep->result, sizeof(rep->result), "bus-error");
+                snprintf(rep->reason, sizeof(rep->reason), "receiving on bus %u failed: %s", bus, strerror(errno));
+                break;
+            }
+            if (sim_stop_requested) {
+                snprintf(rep->result, sizeof(rep->result), "interrupted");
+                snprintf(rep->reason, sizeof(rep->reason), "stopped by a signal after %llu periods",
+                         (unsigned long long)rep->periods);
+                break;
+            }
+            if (rc == 0 && s->n_deferred > 0u) { /* the missing commands never came */
+                requeue_deferred(s);
+                continue;
+            }
+            have = rc == 1;
+        }
+        if (have && s->set.n > 1u && flag == 0 && (f.id == sync_id || f.id == nmt_id)) {
+            /* SYNC and NMT go on every bus. Order between buses is lost in the sockets: what is
+             * already queued on the other buses was sent before this frame (e.g. the previous
+             * period's commands), so it is handled first. */
+            queued_t earlier[PENDING_MAX];
+            unsigned k = 0;
+            for (unsigned i = 0; i < s->set.n && k < PENDING_MAX; ++i) {
+                if (i == bus) continue;
+                while (k < PENDING_MAX && poll_bus(s, i, &earlier[k].f)) {
+                    earlier[k].bus = i;
+                    earlier[k++].flag = 1;
+                }
+            }
+            if (k > 0u) {
+                push_front(s, bus, &f, 1);
+                for (unsigned i = k; i-- > 0u;) push_front(s, earlier[i].bus, &earlier[i].f, 1);
+                continue;
+            }
+        }
+        if (have && flag != 2 && f.id == sync_id && holds_back(s, bus, &f)) {
+            int already = 0;
+            for (unsigned i = 0; i < s->n_deferred; ++i) already |= s->deferred[i].bus == bus;
+            if (!already) {
+                s->deferred[s->n_deferred++] = (queued_t){.bus = bus, .f = f, .flag = 1};
+                continue;
+            }
+        }
+        if (!have) {
+            controller_lost(s, booted, timeout);
+            break;
+        }
+        rep->frames_rx++;
+        const int j = sim_cmd_joint(f.id, s->n);
+        if ((f.flags & (ARM_CAN_FLAG_RTR | ARM_CAN_FLAG_ERR | ARM_CAN_FLAG_EXT)) != 0u) {
+            rep->rx_bad_frame++;
+        } else if (f.id == sync_id) {
+            if (s->first_sync_ns == 0) s->first_sync_ns = mono_ns();
+            booted = 1;
+            if (f.len != 1u) {
+                rep->rx_bad_frame++;
+            } else {
+                on_sync(s, f.data[0], bus);
+            }
+        } else if (j >= 0) {
+            on_command(s, j, &f, bus);
+        } else if (f.id == nmt_id) {
+            booted = 1;
+            if (!on_nmt(s, &f, bus)) break;
+        } else {
+            rep->rx_unknown_id++;
+        }
+    }
+    publish_truth(s);
+    const int64_t t_end = mono_ns();
+    rep->wall_s = (double)(t_end - t0) * 1e-9;
+    if (s->first_sync_ns > 0) {
+        rep->boot_s = (double)(s->first_sync_ns - t0) * 1e-9;
+        rep->run_wall_s = (double)(s->last_period_ns - s->first_sync_ns) * 1e-9;
+    }
+    for (int k = 0; k < s->n; ++k) {
+        rep->commands_missed_per_drive[k] = s->drives[k].commands_missed;
+        if (s->drives[k].error_code != 0u) rep->drive_fault_mask |= 1u << k;
+    }
+    for (unsigned b = 0; b < s->set.n; ++b) {
+        rep->rx_undecodable += s->set.bus[b].kind == ARM_BUS_UDP ? s->set.bus[b].udp.rx_decode_errors : 0u;
+    }
+    if (rep->reason[0] != '\0') {
+        event(s, "sim", "fault", rep->reason);
+    } else {
+        snprintf(text, sizeof(text), "stopped by the controller after %llu periods", (unsigned long long)rep->periods);
+        event(s, "sim", "info", text);
+    }
+    return 0;
+}
+
+int sim_run(const sim_config_t *cfg, sim_arm_t *arm, sim_telemetry_t *tel, sim_report_t *rep, char *err,
+            unsigned long errcap)
+{
+    static sim_t s;
+    memset(&s, 0, sizeof(s));
+    memset(rep, 0, sizeof(*rep));
+    snprintf(rep->result, sizeof(rep->result), "ok");
+    s.cfg = cfg;
+    s.arm = arm;
+    s.tel = tel;
+    s.rep = rep;
+    s.n = arm->n;
+    s.counter = -1;
+    for (int j = 0; j < s.n; ++j) {
+        s.bus_of[j] = arm_can_bus_set_bus_of(&cfg->buses, (unsigned)j);
+        if (s.bus_of[j] < 0) {
+            snprintf(err, errcap, "--bus: drive %d is on no bus", j + 1);
+            return -1;
+        }
+        sim_drive_init(&s.drives[j], (uint8_t)(j + 1), arm->torque_limit[j], cfg->command_timeout_periods);
+    }
+    memcpy(s.timing, cfg->timelines, sizeof(s.timing));
+    if (arm_can_bus_set_open(&s.set, &cfg->buses, err, errcap) != 0) {
+        return -1;
+    }
+    s.cpu_mark_ns = cpu_ns();
+    run_loop(&s);
+    rep->n_buses = s.set.n;
+    for (unsigned b = 0; b < s.set.n; ++b) rep->bus_stats[b] = s.timing[b].stats;
+    arm_can_bus_set_close(&s.set);
+    return 0;
+}

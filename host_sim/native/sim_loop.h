@@ -1,0 +1,76 @@
+/* The simulator's run: n emulated drives on the CAN bus(es), the arm advancing one period per
+ * controller SYNC once every drive's command for it is in (lockstep), or as the commands come
+ * (realtime: the controller's clock sets the pace). Ends when the controller stops every drive
+ * (NMT stop), or faults the drives when the controller falls silent. */
+#ifndef ARM_SIM_LOOP_H
+#define ARM_SIM_LOOP_H
+
+#include <signal.h>
+#include <stdint.h>
+
+#include "arm/can_bus.h"
+#include "sim_arm.h"
+#include "sim_bus_timing.h"
+#include "sim_telemetry.h"
+
+typedef enum { SIM_TIMING_OFF = 0, SIM_TIMING_VIRTUAL, SIM_TIMING_WALLCLOCK } sim_timing_mode_t;
+
+typedef struct {
+    arm_can_bus_set_config_t buses;
+    char bus_text[600];          /* the --bus arguments as given, for messages */
+    double boot_timeout_s;       /* wait this long for the controller's first frame */
+    double idle_timeout_s;       /* then this long of silence faults the drives */
+    uint32_t command_timeout_periods;
+    sim_timing_mode_t timing;
+    double controller_latency_s; /* bus timing: last state frame in -> commands queued */
+    sim_timeline_t timelines[ARM_CAN_BUS_SET_MAX]; /* bus timing: one per bus, frame times set */
+    int profile;                 /* break each period's CPU time down by activity */
+    double spin_us;              /* poll the bus this long before sleeping on it */
+    /* Longest a next-period SYNC on one bus is held back while this period's commands for drives on
+     * another bus are missing (they may still be on their way: sockets per bus keep no order
+     * between buses). Long in lockstep (nothing is timed); a fraction of a period in realtime,
+     * where holding a SYNC back is what makes the controller's states late. */
+    double reorder_wait_s;
+} sim_config_t;
+
+#define SIM_COST_BINS 5000u /* per-period CPU cost histogram, 1 us bins */
+
+typedef struct {
+    char result[32]; /* "ok", "controller-lost", "bus-error", "interrupted" */
+    char reason[400];
+    uint64_t periods;
+    uint64_t frames_tx;
+    uint64_t frames_rx;
+    uint64_t tx_dropped;
+    uint64_t rx_foreign_drive; /* a frame only drives send (STATE, HEARTBEAT, EMCY), from another node */
+    uint64_t rx_unknown_id;
+    uint64_t rx_bad_frame;
+    uint64_t rx_undecodable; /* UDP datagrams that are not python-can frames */
+    uint64_t rx_wrong_bus;   /* a command for a drive that is not on the bus it arrived on */
+    uint64_t commands_missed;
+    uint64_t commands_late;  /* bus timing: the command's frame ended after its period */
+    uint64_t commands_missed_per_drive[SIM_MAX_JOINTS];
+    uint32_t drive_fault_mask;
+    unsigned n_buses;
+    sim_bus_stats_t bus_stats[ARM_CAN_BUS_SET_MAX]; /* bus timing, per bus */
+    double wall_s;
+    double boot_s;           /* start -> the controller's first SYNC */
+    double run_wall_s;       /* first SYNC -> last period */
+    uint64_t cost_hist[SIM_COST_BINS + 1u]; /* per-period thread CPU time, us; last bin: more */
+    uint64_t cost_max_ns;
+    uint64_t cost_sum_ns;
+    uint64_t cost_n;
+    /* --profile: thread CPU time per activity, summed over the periods measured */
+    uint64_t prof_physics_ns, prof_bus_tx_ns, prof_bus_rx_ns, prof_telemetry_ns;
+} sim_report_t;
+
+/* Set from a signal handler: the loop stops at its next frame or within 100 ms. */
+extern volatile sig_atomic_t sim_stop_requested;
+
+/* Runs until the controller stops the drives, falls silent, or a stop is requested. Returns 0
+ * when the run could start (the report says how it ended), -1 with err if the buses could not be
+ * opened. */
+int sim_run(const sim_config_t *cfg, sim_arm_t *arm, sim_telemetry_t *tel, sim_report_t *rep, char *err,
+            unsigned long errcap);
+
+#endif

@@ -1,0 +1,271 @@
+#include "sim_options.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "arm/lcm_url.h"
+
+#ifndef ARM_SIM_DEFAULT_MODEL
+#define ARM_SIM_DEFAULT_MODEL "host_sim/models/ur5e_arm.xml"
+#endif
+
+static void usage(const char *prog)
+{
+    printf("usage: %s [options]\n"
+           "The simulated arm and its emulated CiA 402 drives on the CAN bus (tools/armctl hil starts it).\n"
+           "  --bus SPEC[@DRIVES]       udp | udp:GROUP:PORT | socketcan:IFACE, repeatable (up to %u\n"
+           "                            buses), every drive on exactly one bus [udp, all drives]\n"
+           "  --model FILE              the arm (MJCF or URDF)   [%s]\n"
+           "  --keyframe NAME           start pose               [home]\n"
+           "  --lcm-url URL             telemetry, ttl=0; '' for none [udpm://239.255.76.67:7667?ttl=0]\n"
+           "  --boot-timeout S          wait for the controller [60]\n"
+           "  --idle-timeout S          silence that faults the drives [5]\n"
+           "  --command-timeout-periods N  periods without a command before a drive faults [3]\n"
+           "  --summary FILE            JSON summary of the run (written atomically)\n"
+           "uncertainty (host_sim.uncertainty.UncertaintyConfig; default none):\n"
+           "  --seed N --paper-ratio R --paper-knot-s S --mass-error X --inertia-error X\n"
+           "  --com-error-m X --viscous B1,..,Bn --coulomb C1,..,Cn\n"
+           "bus timing (vcan and UDP have none):\n"
+           "  --bus-timing off|virtual|wallclock  [off]\n"
+           "  --frame-times I=ID:US,ID:US,..  worst-case length of each frame on bus I (tools/busload)\n"
+           "  --bus-label I=TEXT         bus I's physical layer, for the summary\n"
+           "  --controller-latency-us X  last state frame in -> commands queued [0]\n"
+           "measurement:\n"
+           "  --reorder-wait-us US       longest a next-period SYNC waits for this period's commands\n"
+           "                             on another bus (lockstep: long; realtime: < a period) [200000]\n"
+           "  --spin-us US               poll the bus this long before sleeping on it: a wake-up from\n"
+           "                             sleep costs tens of us on a VM (lockstep speed)   [0]\n"
+           "  --profile                  break each period's CPU time down (physics, bus, telemetry)\n"
+           "  --bench-mj-step N          time N bare mj_step calls on the model, print ns/step, exit\n",
+           prog, ARM_CAN_BUS_SET_MAX, ARM_SIM_DEFAULT_MODEL);
+}
+
+static int parse_double(const char *name, const char *s, double lo, double hi, int lo_open, double *out,
+                        char *err, unsigned long errcap)
+{
+    char *end = NULL;
+    errno = 0;
+    const double v = strtod(s, &end);
+    if (errno != 0 || end == s || *end != '\0' || !isfinite(v) || v < lo || v > hi || (lo_open && v <= lo)) {
+        snprintf(err, errcap, "%s: '%s' is not a number in %s%g, %g]", name, s, lo_open ? "(" : "[", lo, hi);
+        return -1;
+    }
+    *out = v;
+    return 0;
+}
+
+static int copy_str(const char *name, const char *s, char *dst, size_t cap, char *err, unsigned long errcap)
+{
+    if (strlen(s) >= cap) {
+        snprintf(err, errcap, "%s: value longer than %zu characters", name, cap - 1u);
+        return -1;
+    }
+    strcpy(dst, s);
+    return 0;
+}
+
+static int parse_list(const char *name, const char *s, double *out, int *count, char *err, unsigned long errcap)
+{
+    const char *p = s;
+    int k = 0;
+    for (;;) {
+        char *end = NULL;
+        errno = 0;
+        const double v = strtod(p, &end);
+        if (errno != 0 || end == p || !isfinite(v) || v < 0.0 || v > 1e6 || k >= SIM_MAX_JOINTS ||
+            (*end != ',' && *end != '\0')) {
+            snprintf(err, errcap, "%s: '%s' is not a list of up to %d numbers >= 0", name, s, SIM_MAX_JOINTS);
+            return -1;
+        }
+        out[k++] = v;
+        if (*end == '\0') break;
+        p = end + 1;
+    }
+    *count = k;
+    return 0;
+}
+
+/* "I=REST": bus index I (0-based, below the bus limit) and the rest. */
+static int bus_indexed(const char *name, const char *v, unsigned *index, const char **rest, char *err,
+                       unsigned long errcap)
+{
+    char *end = NULL;
+    const unsigned long i = strtoul(v, &end, 10);
+    if (end == v || *end != '=' || i >= ARM_CAN_BUS_SET_MAX) {
+        snprintf(err, errcap, "%s: '%s' is not I=VALUE with a bus index I in 0..%u", name, v,
+                 ARM_CAN_BUS_SET_MAX - 1u);
+        return -1;
+    }
+    *index = (unsigned)i;
+    *rest = end + 1;
+    return 0;
+}
+
+int sim_options_parse(int argc, char **argv, sim_options_t *o, char *err, unsigned long errcap)
+{
+    memset(o, 0, sizeof(*o));
+    snprintf(o->model, sizeof(o->model), "%s", ARM_SIM_DEFAULT_MODEL);
+    snprintf(o->keyframe, sizeof(o->keyframe), "home");
+    snprintf(o->lcm_url, sizeof(o->lcm_url), "udpm://239.255.76.67:7667?ttl=0");
+    sim_uncertainty_default(&o->unc);
+    sim_config_t *c = &o->cfg;
+    c->boot_timeout_s = 60.0;
+    c->idle_timeout_s = 5.0;
+    c->command_timeout_periods = 3u;
+    c->reorder_wait_s = 0.2;
+    for (unsigned b = 0; b < ARM_CAN_BUS_SET_MAX; ++b) sim_timeline_init(&c->timelines[b]);
+    unsigned frames_given = 0u;
+    for (int i = 1; i < argc; ++i) {
+        const char *a = argv[i];
+        if (strcmp(a, "--help") == 0 || strcmp(a, "-h") == 0) {
+            usage(argv[0]);
+            return 1;
+        }
+        if (strcmp(a, "--profile") == 0) {
+            c->profile = 1;
+            continue;
+        }
+        if (strncmp(a, "--", 2) != 0) {
+            snprintf(err, errcap, "unexpected argument '%s' (options start with --)", a);
+            return -1;
+        }
+        if (i + 1 >= argc) {
+            snprintf(err, errcap, "%s: missing value", a);
+            return -1;
+        }
+        const char *v = argv[++i];
+        double d = 0.0;
+        int rc = 0;
+        if (strcmp(a, "--bus") == 0) {
+            if (o->n_bus_args == ARM_CAN_BUS_SET_MAX) {
+                snprintf(err, errcap, "--bus: at most %u buses", ARM_CAN_BUS_SET_MAX);
+                return -1;
+            }
+            rc = copy_str(a, v, o->bus_args[o->n_bus_args++], ARM_CAN_BUS_SPEC_MAX, err, errcap);
+        } else if (strcmp(a, "--model") == 0) {
+            rc = copy_str(a, v, o->model, sizeof(o->model), err, errcap);
+        } else if (strcmp(a, "--keyframe") == 0) {
+            rc = copy_str(a, v, o->keyframe, sizeof(o->keyframe), err, errcap);
+        } else if (strcmp(a, "--lcm-url") == 0) {
+            arm_lcm_url_t u;
+            rc = copy_str(a, v, o->lcm_url, sizeof(o->lcm_url), err, errcap);
+            if (rc == 0) rc = arm_lcm_url_parse(v, a, &u, err, errcap);
+            if (rc == 0) rc = arm_lcm_url_check_route(&u, a, err, errcap);
+        } else if (strcmp(a, "--summary") == 0) {
+            rc = copy_str(a, v, o->summary, sizeof(o->summary), err, errcap);
+        } else if (strcmp(a, "--boot-timeout") == 0) {
+            rc = parse_double(a, v, 0.0, 86400.0, 1, &c->boot_timeout_s, err, errcap);
+        } else if (strcmp(a, "--idle-timeout") == 0) {
+            rc = parse_double(a, v, 0.0, 86400.0, 1, &c->idle_timeout_s, err, errcap);
+        } else if (strcmp(a, "--command-timeout-periods") == 0) {
+            rc = parse_double(a, v, 1.0, 1e6, 0, &d, err, errcap);
+            if (rc == 0 && d != floor(d)) {
+                snprintf(err, errcap, "%s: '%s' is not a whole number", a, v);
+                rc = -1;
+            }
+            c->command_timeout_periods = (uint32_t)d;
+        } else if (strcmp(a, "--seed") == 0) {
+            char *end = NULL;
+            errno = 0;
+            const unsigned long long s = strtoull(v, &end, 10);
+            if (errno != 0 || end == v || *end != '\0' || v[0] == '-') {
+                snprintf(err, errcap, "--seed: '%s' is not a whole number in 0..2^64-1", v);
+                rc = -1;
+            }
+            o->unc.seed = (uint64_t)s;
+        } else if (strcmp(a, "--paper-ratio") == 0) {
+            rc = parse_double(a, v, 0.0, 0.999999, 0, &o->unc.paper_ratio, err, errcap);
+        } else if (strcmp(a, "--paper-knot-s") == 0) {
+            rc = parse_double(a, v, 1e-4, 3600.0, 0, &o->unc.paper_knot_s, err, errcap);
+        } else if (strcmp(a, "--mass-error") == 0) {
+            rc = parse_double(a, v, 0.0, 0.999999, 0, &o->unc.mass_error, err, errcap);
+        } else if (strcmp(a, "--inertia-error") == 0) {
+            rc = parse_double(a, v, 0.0, 0.999999, 0, &o->unc.inertia_error, err, errcap);
+        } else if (strcmp(a, "--com-error-m") == 0) {
+            rc = parse_double(a, v, 0.0, 0.999999, 0, &o->unc.com_error_m, err, errcap);
+        } else if (strcmp(a, "--viscous") == 0) {
+            rc = parse_list(a, v, o->unc.viscous, &o->n_viscous, err, errcap);
+        } else if (strcmp(a, "--coulomb") == 0) {
+            rc = parse_list(a, v, o->unc.coulomb, &o->n_coulomb, err, errcap);
+        } else if (strcmp(a, "--bus-timing") == 0) {
+            if (strcmp(v, "off") == 0) c->timing = SIM_TIMING_OFF;
+            else if (strcmp(v, "virtual") == 0) c->timing = SIM_TIMING_VIRTUAL;
+            else if (strcmp(v, "wallclock") == 0) c->timing = SIM_TIMING_WALLCLOCK;
+            else {
+                snprintf(err, errcap, "--bus-timing: '%s' is not off, virtual or wallclock", v);
+                rc = -1;
+            }
+        } else if (strcmp(a, "--frame-times") == 0) {
+            unsigned b = 0;
+            const char *rest = NULL;
+            rc = bus_indexed(a, v, &b, &rest, err, errcap);
+            if (rc == 0 && sim_timeline_parse_frames(&c->timelines[b], rest) != 0) {
+                snprintf(err, errcap, "%s: '%s' is not I=ID:US,ID:US,... (11-bit ids, 0..1e6 us)", a, v);
+                rc = -1;
+            }
+            frames_given |= 1u << b;
+        } else if (strcmp(a, "--bus-label") == 0) {
+            unsigned b = 0;
+            const char *rest = NULL;
+            rc = bus_indexed(a, v, &b, &rest, err, errcap);
+            if (rc == 0) rc = copy_str(a, rest, c->timelines[b].label, sizeof(c->timelines[b].label), err, errcap);
+        } else if (strcmp(a, "--controller-latency-us") == 0) {
+            rc = parse_double(a, v, 0.0, 1e6, 0, &d, err, errcap);
+            c->controller_latency_s = d * 1e-6;
+        } else if (strcmp(a, "--reorder-wait-us") == 0) {
+            rc = parse_double(a, v, 0.0, 1e7, 0, &d, err, errcap);
+            c->reorder_wait_s = d * 1e-6;
+        } else if (strcmp(a, "--spin-us") == 0) {
+            rc = parse_double(a, v, 0.0, 1e5, 0, &c->spin_us, err, errcap);
+        } else if (strcmp(a, "--bench-mj-step") == 0) {
+            rc = parse_double(a, v, 1.0, 1e9, 0, &d, err, errcap);
+            o->bench_mj_steps = (long)d;
+        } else {
+            snprintf(err, errcap, "unknown option '%s' (see --help)", a);
+            rc = -1;
+        }
+        if (rc != 0) return -1;
+    }
+    if (o->n_bus_args == 0u) {
+        snprintf(o->bus_args[0], ARM_CAN_BUS_SPEC_MAX, "udp");
+        o->n_bus_args = 1u;
+    }
+    const unsigned want = (1u << o->n_bus_args) - 1u;
+    if (c->timing != SIM_TIMING_OFF && (frames_given & want) != want) {
+        snprintf(err, errcap, "--bus-timing %s: give --frame-times for every --bus (%u buses)",
+                 c->timing == SIM_TIMING_VIRTUAL ? "virtual" : "wallclock", o->n_bus_args);
+        return -1;
+    }
+    if (c->timing == SIM_TIMING_OFF && frames_given != 0u) {
+        snprintf(err, errcap, "--frame-times: only with --bus-timing virtual|wallclock");
+        return -1;
+    }
+    size_t len = 0;
+    for (unsigned b = 0; b < o->n_bus_args; ++b) {
+        len += (size_t)snprintf(c->bus_text + len, sizeof(c->bus_text) - len, "%s%s", b ? " " : "", o->bus_args[b]);
+        if (len >= sizeof(c->bus_text)) break;
+    }
+    return 0;
+}
+
+int sim_options_finish(sim_options_t *o, int n_joints, char *err, unsigned long errcap)
+{
+    arm_can_bus_set_config_init(&o->cfg.buses);
+    for (unsigned b = 0; b < o->n_bus_args; ++b) {
+        if (arm_can_bus_set_add(&o->cfg.buses, o->bus_args[b], (unsigned)n_joints, "--bus", err, errcap) != 0) {
+            return -1;
+        }
+    }
+    if (arm_can_bus_set_check(&o->cfg.buses, (unsigned)n_joints, "--bus", err, errcap) != 0) {
+        return -1;
+    }
+    if ((o->n_viscous != 0 && o->n_viscous != n_joints) || (o->n_coulomb != 0 && o->n_coulomb != n_joints)) {
+        snprintf(err, errcap, "--viscous/--coulomb: need %d values each (one per joint of the model), got %d and %d",
+                 n_joints, o->n_viscous, o->n_coulomb);
+        return -1;
+    }
+    return 0;
+}

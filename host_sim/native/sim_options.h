@@ -1,0 +1,26 @@
+/* arm_sim's command line. */
+#ifndef ARM_SIM_OPTIONS_H
+#define ARM_SIM_OPTIONS_H
+
+#include "sim_arm.h"
+#include "sim_loop.h"
+
+typedef struct {
+    char model[1024];
+    char keyframe[64];
+    char lcm_url[512];
+    char summary[1024];
+    char bus_args[ARM_CAN_BUS_SET_MAX][ARM_CAN_BUS_SPEC_MAX];
+    unsigned n_bus_args;
+    int n_viscous, n_coulomb; /* values given (must equal the arm's joints) */
+    sim_uncertainty_t unc;
+    sim_config_t cfg;
+    long bench_mj_steps; /* > 0: time bare mj_step on the model and exit */
+} sim_options_t;
+
+/* 0: run; 1: --help printed; -1: bad argument, message (naming the option) in err. */
+int sim_options_parse(int argc, char **argv, sim_options_t *o, char *err, unsigned long errcap);
+/* What depends on the model (joint count): the bus assignment, the friction lists. */
+int sim_options_finish(sim_options_t *o, int n_joints, char *err, unsigned long errcap);
+
+#endif

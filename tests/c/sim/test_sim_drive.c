@@ -1,0 +1,88 @@
+/* The emulated drive behaves like a CiA 402 drive: state machine, limit, command timeout. */
+#include "check.h"
+#include "sim_drive.h"
+
+static sim_drive_t enabled_drive(void)
+{
+    sim_drive_t d;
+    sim_drive_init(&d, 1, 28.0, 3);
+    sim_drive_on_nmt(&d, SIM_NMT_START);
+    sim_drive_on_command(&d, 0x06, 0.0);
+    sim_drive_on_command(&d, 0x07, 0.0);
+    sim_drive_on_command(&d, 0x0F, 0.0);
+    return d;
+}
+
+static void enable_sequence_reaches_operation_enabled(void)
+{
+    sim_power_t s = SIM_PS_SWITCH_ON_DISABLED;
+    CHECK(sim_cia402_next(s, 0x0F, 0) == s); /* enable operation from disabled is not a transition */
+    s = sim_cia402_next(s, 0x06, 0);
+    CHECK(s == SIM_PS_READY_TO_SWITCH_ON);
+    s = sim_cia402_next(s, 0x07, 0x06);
+    CHECK(s == SIM_PS_SWITCHED_ON);
+    s = sim_cia402_next(s, 0x0F, 0x07);
+    CHECK(s == SIM_PS_OPERATION_ENABLED);
+    CHECK(((unsigned)s & 0x006Fu) == 0x0027u);
+}
+
+static void torque_only_in_operation_enabled_and_limited(void)
+{
+    sim_drive_t d;
+    sim_drive_init(&d, 2, 28.0, 3);
+    sim_drive_on_command(&d, 0x0F, 10.0);
+    CHECK(sim_drive_applied_torque(&d) == 0.0); /* NMT pre-operational: PDOs ignored */
+    d = enabled_drive();
+    sim_drive_on_command(&d, 0x0F, 100.0);
+    CHECK(sim_drive_applied_torque(&d) == 28.0);
+    sim_drive_on_command(&d, 0x0F, -100.0);
+    CHECK(sim_drive_applied_torque(&d) == -28.0);
+    sim_drive_on_command(&d, 0x06, 5.0); /* shutdown */
+    CHECK(d.power == SIM_PS_READY_TO_SWITCH_ON && sim_drive_applied_torque(&d) == 0.0);
+}
+
+static void missing_commands_fault_the_drive_with_emcy(void)
+{
+    sim_drive_t d = enabled_drive();
+    sim_drive_on_command(&d, 0x0F, 3.0);
+    sim_drive_on_period_end(&d, 1);
+    for (int i = 0; i < 2; ++i) {
+        sim_drive_on_period_end(&d, 0);
+        CHECK(d.power == SIM_PS_OPERATION_ENABLED);
+    }
+    sim_drive_on_period_end(&d, 0);
+    CHECK(d.power == SIM_PS_FAULT && sim_drive_applied_torque(&d) == 0.0);
+    CHECK(d.n_emcy_pending == 1u && d.emcy_pending[0] == SIM_EMCY_RPDO_TIMEOUT);
+    CHECK(d.commands_missed == 3u && d.error_code == SIM_ERR_COMMAND_TIMEOUT);
+    sim_drive_fault(&d, 9, 0x1234); /* already in fault: no second EMCY */
+    CHECK(d.n_emcy_pending == 1u && d.error_code == SIM_ERR_COMMAND_TIMEOUT);
+}
+
+static void fault_reset_needs_a_rising_edge(void)
+{
+    CHECK(sim_cia402_next(SIM_PS_FAULT, 0x80, 0x80) == SIM_PS_FAULT);
+    CHECK(sim_cia402_next(SIM_PS_FAULT, 0x80, 0x00) == SIM_PS_SWITCH_ON_DISABLED);
+    CHECK(sim_cia402_next(SIM_PS_FAULT, 0x0F, 0x00) == SIM_PS_FAULT);
+}
+
+static void nmt_stop_removes_torque(void)
+{
+    sim_drive_t d = enabled_drive();
+    sim_drive_on_command(&d, 0x0F, 3.0);
+    CHECK(sim_drive_applied_torque(&d) == 3.0);
+    CHECK(sim_drive_on_nmt(&d, SIM_NMT_STOP) == 1);
+    CHECK(d.nmt_state == SIM_NMT_STATE_STOPPED && sim_drive_applied_torque(&d) == 0.0);
+    CHECK(sim_drive_on_nmt(&d, SIM_NMT_STOP) == 0); /* no change, no heartbeat */
+    sim_drive_on_command(&d, 0x0F, 3.0);              /* stopped: PDOs ignored */
+    CHECK(sim_drive_applied_torque(&d) == 0.0);
+}
+
+int main(void)
+{
+    enable_sequence_reaches_operation_enabled();
+    torque_only_in_operation_enabled_and_limited();
+    missing_commands_fault_the_drive_with_emcy();
+    fault_reset_needs_a_rising_edge();
+    nmt_stop_removes_torque();
+    TEST_MAIN_END();
+}
