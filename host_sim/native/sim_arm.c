@@ -153,8 +153,9 @@ static void extra_force(sim_arm_t *a, double t, const double *bias, const double
     }
 }
 
-void sim_arm_step(sim_arm_t *a, const double *tau, const double *tau_commanded, double *w)
+int sim_arm_step(sim_arm_t *a, const double *tau, const double *tau_commanded, double *w)
 {
+    const int bad_before = a->data->warning[mjWARN_BADQACC].number;
     const int n = a->n;
     mjData *d = a->data;
     mjData *nd = a->nominal_data;
@@ -183,6 +184,7 @@ void sim_arm_step(sim_arm_t *a, const double *tau, const double *tau_commanded, 
     for (int j = 0; j < n; ++j) {
         w[j] = nd->qacc[j] - d->qacc[j];
     }
+    return d->warning[mjWARN_BADQACC].number != bad_before ? d->warning[mjWARN_BADQACC].lastinfo + 1 : 0;
 }
 
 void sim_arm_close(sim_arm_t *a)

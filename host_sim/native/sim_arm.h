@@ -58,8 +58,10 @@ void sim_uncertainty_default(sim_uncertainty_t *u);
 int sim_arm_open(sim_arm_t *a, const char *path, const char *keyframe, const sim_uncertainty_t *u,
                  char *err, size_t errcap);
 /* One period under tau (the time average the joints feel); tau_commanded (may be NULL: tau) is
- * what the controller commanded, when the bus delays a new command into the period. w: n values. */
-void sim_arm_step(sim_arm_t *a, const double *tau, const double *tau_commanded, double *w);
+ * what the controller commanded, when the bus delays a new command into the period. w: n values.
+ * Returns 0, or the 1-based DOF whose acceleration MuJoCo found NaN, infinite or huge: the
+ * simulation diverged, and MuJoCo has reset the arm to its initial state. */
+int sim_arm_step(sim_arm_t *a, const double *tau, const double *tau_commanded, double *w);
 void sim_arm_close(sim_arm_t *a);
 
 #endif

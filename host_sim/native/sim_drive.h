@@ -27,6 +27,8 @@ typedef enum {
 #define SIM_ERR_NONE 0u
 #define SIM_ERR_COMMAND_TIMEOUT 1u
 #define SIM_ERR_CONTROLLER_LOST 1u
+#define SIM_ERR_DIVERGED 2u
+#define SIM_EMCY_DIVERGED 0xFF00u /* CiA 301: manufacturer specific (the simulated arm blew up) */
 #define SIM_EMCY_QUEUE 4u
 
 typedef struct {

@@ -277,6 +277,34 @@ static void record_cost(sim_t *s)
     s->cpu_mark_ns = now;
 }
 
+/* The first thing that went wrong is the run's result; later ones do not overwrite it. */
+static void set_result(sim_t *s, const char *result, const char *reason)
+{
+    if (strcmp(s->rep->result, "ok") == 0) {
+        snprintf(s->rep->result, sizeof(s->rep->result), "%s", result);
+        snprintf(s->rep->reason, sizeof(s->rep->reason), "%s", reason);
+    }
+}
+
+/* The physics blew up (MuJoCo reset the arm to its initial state): the run's result says so,
+ * once, and every drive faults with its torque off, as a drive does on a sensor fault. */
+static void diverged(sim_t *s, int dof)
+{
+    if (strcmp(s->rep->result, "diverged") != 0) {
+        char why[300];
+        snprintf(why, sizeof(why),
+                 "the simulation diverged at t = %.3f s (period %llu): MuJoCo found a NaN, infinite or huge "
+                 "acceleration at joint %d and reset the arm; drives faulted, torque off",
+                 (double)s->arm->step_count * s->arm->period, (unsigned long long)s->rep->periods, dof);
+        set_result(s, "diverged", why);
+        event(s, "sim", "fault", why);
+    }
+    for (int j = 0; j < s->n; ++j) {
+        sim_drive_fault(&s->drives[j], SIM_ERR_DIVERGED, SIM_EMCY_DIVERGED);
+        send_emcys(s, j);
+    }
+}
+
 /* Apply the period's commands and advance the arm by one step. */
 static void finish_period(sim_t *s)
 {
@@ -309,8 +337,11 @@ static void finish_period(sim_t *s)
     }
     memcpy(s->last_tau, tau, (size_t)n * sizeof(double));
     const int64_t c0 = s->cfg->profile ? cpu_ns() : 0;
-    sim_arm_step(s->arm, tau, timed ? tau_cmd : NULL, s->last_w);
+    const int bad_dof = sim_arm_step(s->arm, tau, timed ? tau_cmd : NULL, s->last_w);
     if (s->cfg->profile) s->rep->prof_physics_ns += (uint64_t)(cpu_ns() - c0);
+    if (bad_dof != 0) {
+        diverged(s, bad_dof);
+    }
     s->rep->periods++;
     s->truth_pending = 1; /* published once the next period's states are out (publish_truth) */
     s->truth_faults = fault_bits(s);
@@ -465,9 +496,10 @@ static int on_nmt(sim_t *s, const arm_can_frame_t *f, unsigned bus)
 /* ---- main loop ---------------------------------------------------------------------------- */
 static void controller_lost(sim_t *s, int booted, double timeout)
 {
-    snprintf(s->rep->result, sizeof(s->rep->result), "controller-lost");
-    snprintf(s->rep->reason, sizeof(s->rep->reason), "%s for %g s: drives faulted, torque off",
+    char why[160];
+    snprintf(why, sizeof(why), "%s for %g s: drives faulted, torque off",
              booted ? "controller silent" : "no controller on the bus", timeout);
+    set_result(s, "controller-lost", why);
     for (int j = 0; j < s->n; ++j) {
         sim_drive_fault(&s->drives[j], SIM_ERR_CONTROLLER_LOST, SIM_EMCY_HEARTBEAT);
         send_emcys(s, j);
@@ -503,14 +535,13 @@ static int run_loop(sim_t *s)
             const double defer_s = cfg->reorder_wait_s;
             const int rc = recv_frame(s, &f, &bus, s->n_deferred > 0u && defer_s < timeout ? defer_s : timeout);
             if (rc < 0) {
-                snprintf(rep->result, sizeof(rep->result), "bus-error");
-                snprintf(rep->reason, sizeof(rep->reason), "receiving on bus %u failed: %s", bus, strerror(errno));
+                snprintf(text, sizeof(text), "receiving on bus %u failed: %s", bus, strerror(errno));
+                set_result(s, "bus-error", text);
                 break;
             }
             if (sim_stop_requested) {
-                snprintf(rep->result, sizeof(rep->result), "interrupted");
-                snprintf(rep->reason, sizeof(rep->reason), "stopped by a signal after %llu periods",
-                         (unsigned long long)rep->periods);
+                snprintf(text, sizeof(text), "stopped by a signal after %llu periods", (unsigned long long)rep->periods);
+                set_result(s, "interrupted", text);
                 break;
             }
             if (rc == 0 && s->n_deferred > 0u) { /* the missing commands never came */

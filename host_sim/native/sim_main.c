@@ -3,7 +3,8 @@
  * configures and starts it; see host_sim/README.md.
  *
  * Exit codes: 0 the controller stopped the drives (a normal end); 1 bus or telemetry error;
- * 2 bad argument or model; 3 the controller was lost (drives faulted); 4 interrupted. */
+ * 2 bad argument or model; 3 the controller was lost (drives faulted); 4 interrupted; 5 the
+ * simulation diverged (drives faulted). */
 #define _GNU_SOURCE
 #include <errno.h>
 #include <signal.h>
@@ -22,6 +23,12 @@ static void on_signal(int sig)
 {
     (void)sig;
     sim_stop_requested = 1;
+}
+
+/* MuJoCo's warnings go to stderr (simulator.log), not to a MUJOCO_LOG.TXT in the current folder. */
+static void on_mujoco_warning(const char *msg)
+{
+    fprintf(stderr, "arm_sim: MuJoCo: %s\n", msg);
 }
 
 /* The p-th percentile (0..100) of the per-period cost histogram, in us (bin upper edges). */
@@ -156,6 +163,7 @@ int main(int argc, char **argv)
         fprintf(stderr, "arm_sim: %s\n", err);
         return 2;
     }
+    mju_user_warning = on_mujoco_warning;
     static sim_arm_t arm;
     if (sim_arm_open(&arm, o.model, o.keyframe, &o.unc, err, sizeof(err)) != 0) {
         fprintf(stderr, "arm_sim: %s\n", err);
@@ -197,6 +205,8 @@ int main(int argc, char **argv)
         exit_code = 3;
     } else if (strcmp(rep.result, "interrupted") == 0) {
         exit_code = 4;
+    } else if (strcmp(rep.result, "diverged") == 0) {
+        exit_code = 5;
     } else if (strcmp(rep.result, "ok") != 0) {
         exit_code = 1;
     }
