@@ -282,7 +282,7 @@ static void set_result(sim_t *s, const char *result, const char *reason)
 {
     if (strcmp(s->rep->result, "ok") == 0) {
         snprintf(s->rep->result, sizeof(s->rep->result), "%s", result);
-        snprintf(s->rep->reason, sizeof(s->rep->reason), "%s", reason);
+        snprintf(s->rep->reason, sizeof(s->rep->reason), "%.390s", reason);
     }
 }
 
