@@ -1,9 +1,11 @@
-"""Extract the nominal rigid-body model of the arm from its MJCF and emit it as C headers.
+"""Extract the nominal rigid-body model of the arm from its prepared MJCF (gen/arm.py) and emit it
+as C headers.
 
-The firmware's recursive Newton-Euler needs, per joint: the fixed transform from the parent body,
-the joint axis, and the link's mass, centre of mass and inertia, all in the body frame. MuJoCo
-compiles the MJCF into exactly these (body_pos, body_quat, jnt_axis, body_ipos, body_iquat,
-body_inertia), so we read them from the compiled model rather than parsing XML ourselves.
+The firmware's recursive Newton-Euler needs, per joint: the fixed transform from the parent link,
+the joint axis, the link's mass, centre of mass and inertia, and the joint's armature and damping.
+MuJoCo compiles the MJCF into exactly these (body_pos, body_quat, jnt_pos, jnt_axis, body_ipos,
+body_iquat, body_inertia, dof_armature, dof_damping), so we read them from the compiled model
+rather than parsing XML ourselves.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from gen.arm import fnv1a64
 from gen.atomic_output import write_files_atomically
 
 REPO = Path(__file__).resolve().parent.parent
@@ -30,13 +33,15 @@ class ModelError(ValueError):
 @dataclass(frozen=True)
 class Link:
     name: str
-    pos: np.ndarray  # parent -> body translation, parent frame (3,)
-    rot: np.ndarray  # parent -> body rotation (3, 3)
-    axis: np.ndarray  # joint axis, body frame (3,)
+    pos: np.ndarray  # parent link frame -> this link frame's origin (the joint's point), parent frame (3,)
+    rot: np.ndarray  # parent -> link rotation at q = 0 (3, 3)
+    axis: np.ndarray  # joint axis, link frame (3,)
     mass: float
-    com: np.ndarray  # centre of mass, body frame (3,)
-    inertia: np.ndarray  # about the COM, body frame (3, 3)
+    com: np.ndarray  # centre of mass, link frame (3,)
+    inertia: np.ndarray  # about the COM, link frame (3, 3)
     torque_limit: float
+    armature: float  # rotor inertia reflected to the joint, kg m^2 (adds armature * qdd)
+    damping: float  # viscous joint damping, N m s/rad (adds damping * qd)
 
 
 @dataclass(frozen=True)
@@ -51,39 +56,56 @@ def _quat_to_mat(q: np.ndarray) -> np.ndarray:
     return out.reshape(3, 3)
 
 
+def nominal_for_inverse(m: mujoco.MjModel) -> mujoco.MjModel:
+    """The firmware's nominal model as MuJoCo sees it: rigid bodies, armature and joint damping; no
+    constraints (joint limits, frictionloss, contacts) and no springs, which the firmware leaves to
+    the estimator (gen/arm.py says which). mj_inverse on it is the RNEA's oracle."""
+    m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT) | int(mujoco.mjtDisableBit.mjDSBL_SPRING)
+    return m
+
+
 def extract(mjcf: Path, mass_scale: float = 1.0, inertia_scale: float = 1.0) -> RobotModel:
-    """Read the serial chain; the scales give a nominal model deliberately off from the truth."""
+    """The serial chain of a prepared arm model (gen/arm.py: one hinge per body, fused, one motor per
+    joint); the scales give a nominal model deliberately off from the truth. Each link frame sits
+    at its joint's point with its body's orientation."""
     if mass_scale <= 0 or inertia_scale <= 0:
         raise ModelError(f"mass_scale and inertia_scale must be > 0, got {mass_scale}, {inertia_scale}")
     m = mujoco.MjModel.from_xml_path(str(mjcf))
-    if m.nv != m.njnt or m.nq != m.njnt:
-        raise ModelError(f"{mjcf}: expected only hinge joints (nq == nv == njnt), got nq={m.nq} nv={m.nv}")
+    if m.nv != m.njnt or m.nq != m.njnt or m.nu != m.njnt:
+        raise ModelError(f"{mjcf}: expected a prepared arm (gen/arm.py): only hinge joints, one motor each "
+                         f"(nq == nv == nu == njnt), got nq={m.nq} nv={m.nv} nu={m.nu} njnt={m.njnt}")
     links: list[Link] = []
     for j in range(m.njnt):
         name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j) or f"joint{j}"
         if m.jnt_type[j] != mujoco.mjtJoint.mjJNT_HINGE:
             raise ModelError(f"{mjcf}: joint '{name}' is not a hinge")
         b = int(m.jnt_bodyid[j])
-        if np.any(m.jnt_pos[j] != 0):
-            raise ModelError(f"{mjcf}: joint '{name}' must sit at its body's origin (pos 0 0 0)")
         parent = int(m.body_parentid[b])
         expected_parent = 0 if j == 0 else int(m.jnt_bodyid[j - 1])
         if parent != expected_parent or m.body_jntnum[b] != 1:
-            raise ModelError(f"{mjcf}: joint '{name}' breaks the serial chain (one hinge per body, in order)")
-        limit = float(m.jnt_actfrcrange[j][1]) if m.jnt_actfrclimited[j] else 0.0
+            raise ModelError(f"{mjcf}: joint '{name}' breaks the serial chain (one hinge per body, in order): "
+                             "prepare the model with gen/arm.py")
+        a = int(np.flatnonzero((m.actuator_trntype == mujoco.mjtTrn.mjTRN_JOINT) & (m.actuator_trnid[:, 0] == j))[0]) \
+            if m.nu else -1
+        limit = float(m.actuator_ctrlrange[a][1]) if a >= 0 and m.actuator_ctrllimited[a] else 0.0
         if limit <= 0:
-            raise ModelError(f"{mjcf}: joint '{name}' has no actuatorfrcrange (the torque limit)")
+            raise ModelError(f"{mjcf}: joint '{name}' has no motor with a ctrlrange (the torque limit)")
+        rot = _quat_to_mat(m.body_quat[b])
+        c = m.jnt_pos[j]
+        c_parent = m.jnt_pos[j - 1] if j > 0 else np.zeros(3)
         r_i = _quat_to_mat(m.body_iquat[b])
         links.append(
             Link(
                 name=name,
-                pos=m.body_pos[b].copy(),
-                rot=_quat_to_mat(m.body_quat[b]),
+                pos=m.body_pos[b] + rot @ c - c_parent,
+                rot=rot,
                 axis=m.jnt_axis[j].copy(),
                 mass=float(m.body_mass[b]) * mass_scale,
-                com=m.body_ipos[b].copy(),
+                com=m.body_ipos[b] - c,
                 inertia=r_i @ np.diag(m.body_inertia[b]) @ r_i.T * inertia_scale,
                 torque_limit=limit,
+                armature=float(m.dof_armature[j]),
+                damping=float(m.dof_damping[j]),
             )
         )
     return RobotModel(links=links, gravity=m.opt.gravity.copy())
@@ -112,7 +134,7 @@ def dims_header(model: RobotModel) -> str:
     )
 
 
-def model_header(model: RobotModel, source: str) -> str:
+def model_header(model: RobotModel, source: str, model_hash: int = 0) -> str:
     body = []
     for ln in model.links:
         body.append(
@@ -124,6 +146,8 @@ def model_header(model: RobotModel, source: str) -> str:
             f"            .com = {_vec(ln.com)},\n"
             f"            .inertia = {_mat(ln.inertia)},\n"
             f"            .torque_limit = {_c(ln.torque_limit)},\n"
+            f"            .armature = {_c(ln.armature)},\n"
+            f"            .damping = {_c(ln.damping)},\n"
             "        },"
         )
     text = "\n".join(body)
@@ -131,24 +155,29 @@ def model_header(model: RobotModel, source: str) -> str:
     names = ", ".join(f'"{ln.name}"' for ln in model.links)
     return (
         f"/* Generated by gen/robot_model.py from {source}. Do not edit.\n"
-        " * Nominal rigid-body model: per link, the parent->body transform (pos, rot), the joint axis,\n"
-        " * mass, centre of mass and inertia about it, all in the body frame; SI units. */\n"
+        " * Nominal model: per link, the parent->link transform (pos, rot), the joint axis, mass,\n"
+        " * centre of mass and inertia about it, all in the link frame, the joint's armature and\n"
+        " * damping; SI units. */\n"
         "#ifndef ARM_ROBOT_MODEL_H\n#define ARM_ROBOT_MODEL_H\n\n"
         '#include "arm/robot_model.h"\n\n'
-        f'#define ARM_ROBOT_MODEL_HASH "{digest}"\n\n'
+        f'#define ARM_ROBOT_MODEL_HASH "{digest}"\n'
+        "/* FNV-1a 64 of the prepared model file: the simulator announces the same at boot\n"
+        " * (SIM_IDENTITY), and a controller built for another arm refuses to start. */\n"
+        f"#define ARM_MODEL_HASH64 0x{model_hash:016x}ull\n\n"
         f"static const char *const ARM_JOINT_NAMES[ARM_N_JOINTS] = {{{names}}};\n\n"
         "static const arm_robot_model_t ARM_ROBOT_MODEL = {\n"
         f"    .gravity = {_vec(model.gravity)},\n"
         "    .link = {\n"
         f"{text}\n"
         "    },\n"
+        "    .model_hash = ARM_MODEL_HASH64,\n"
         "};\n\n#endif\n"
     )
 
 
 def rnea_golden_header(mjcf: Path, count: int, seed: int) -> str:
     """Random states and MuJoCo's own inverse dynamics for them: the firmware RNEA's test oracle."""
-    m = mujoco.MjModel.from_xml_path(str(mjcf))
+    m = nominal_for_inverse(mujoco.MjModel.from_xml_path(str(mjcf)))
     d = mujoco.MjData(m)
     rng = np.random.default_rng(seed)
     rows: list[tuple[np.ndarray, ...]] = []
@@ -192,7 +221,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     files = {
         "arm_robot_dims.h": dims_header(model),
-        "arm_robot_model_data.h": model_header(model, ns.mjcf.name),
+        "arm_robot_model_data.h": model_header(model, ns.mjcf.name, fnv1a64(ns.mjcf.read_bytes())),
     }
     if ns.golden > 0:
         files["rnea_golden.h"] = rnea_golden_header(ns.mjcf, ns.golden, ns.seed)

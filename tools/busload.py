@@ -246,6 +246,35 @@ def load_topology(path: Path = DEFAULT_TOPOLOGY, n_drives: int = 6) -> list[Bus]
     return buses
 
 
+def topology_drives(path: Path) -> int:
+    """The number of drives a topology file wires (its highest drive number; 0 if unreadable:
+    load_topology then says what is wrong)."""
+    import tomllib
+
+    try:
+        tables = tomllib.loads(Path(path).read_text()).get("bus", [])
+        return max((d for t in tables if isinstance(t, dict) for d in t.get("drives", []) if isinstance(d, int)),
+                   default=0)
+    except (OSError, tomllib.TOMLDecodeError, TypeError, AttributeError):
+        return 0
+
+
+def default_wiring(n_drives: int, rate_hz: float = 1000.0, budget: float = 0.70,
+                   template: Bus | None = None) -> list[Bus]:
+    """The fewest buses of the template's kind (CAN FD 1/5 Mbit/s) that carry drives 1..n within
+    the budget at the loop rate, drives split evenly in order; at most 4 buses (the controller's
+    limit). ConfigError if even 4 do not fit."""
+    template = template or Bus("can0", True, 1e6, 5e6, [])
+    proto = default_protocol()
+    for k in range(1, min(4, n_drives) + 1):
+        split = even_split(template, n_drives, k)
+        if all(bl.load <= budget for bl in compute(split, rate_hz, 100.0, proto, n_drives)):
+            return split
+    raise ConfigError(f"{n_drives} drives at {rate_hz:g} Hz do not fit {min(4, n_drives)} "
+                      f"{template.describe()} buses within {budget * 100:g}%: give the arm file a wiring "
+                      "(buses = ...) or a lower loop rate")
+
+
 @functools.cache
 def default_protocol() -> "Protocol":
     """The project's DBC, parsed once per process (a study asks for it in every run)."""
@@ -298,16 +327,23 @@ def frame_time(msg, bus: Bus) -> tuple[int, int, int, float]:  # noqa: ANN001
     return frames, bits, 0, bits / bus.nominal_bps
 
 
-def compute(buses: list[Bus], rate_hz: float, heartbeat_ms: float, proto: Protocol) -> list[BusLoad]:
+def compute(buses: list[Bus], rate_hz: float, heartbeat_ms: float, proto: Protocol,
+            n_drives: int | None = None) -> list[BusLoad]:
+    """The load of each bus; drives 1..n_drives (default: the highest drive the buses name) must
+    each be on exactly one bus, within the DBC's drive slots."""
+    n = n_drives if n_drives is not None else max((d for b in buses for d in b.drives), default=0)
+    if not 1 <= n <= proto.n_drives:
+        raise ConfigError(f"{n} drives: the DBC has drive slots 1..{proto.n_drives}")
     seen: dict[int, str] = {}
     for b in buses:
         for d in b.drives:
-            if not 1 <= d <= proto.n_drives:
-                raise ConfigError(f"bus {b.name}: drive {d} does not exist (the DBC has drives 1..{proto.n_drives})")
+            if not 1 <= d <= n:
+                raise ConfigError(f"bus {b.name}: drive {d} does not exist (drives 1..{n}; the DBC has slots "
+                                  f"1..{proto.n_drives})")
             if d in seen:
                 raise ConfigError(f"drive {d} is on two buses ({seen[d]} and {b.name})")
             seen[d] = b.name
-    missing = [d for d in range(1, proto.n_drives + 1) if d not in seen]
+    missing = [d for d in range(1, n + 1) if d not in seen]
     if missing:
         raise ConfigError(f"drives {', '.join(map(str, missing))} are on no bus")
     out = []
@@ -364,6 +400,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rate", type=float, default=1000.0, help="control loop rate, Hz [1000]")
     p.add_argument("--budget", type=float, default=70.0, help="highest acceptable bus load, %% [70]")
     p.add_argument("--heartbeat-ms", type=float, default=100.0, help="drive heartbeat period [100]")
+    p.add_argument("--drives", type=int, default=None,
+                   help="the arm's drives, 1..N [the highest drive the buses name]")
     p.add_argument("--dbc", type=Path, default=DEFAULT_DBC)
     p.add_argument("--json", action="store_true", help="print the result as JSON")
 
@@ -375,11 +413,14 @@ def run(ns: argparse.Namespace) -> int:
         if not ns.rate > 0 or not ns.heartbeat_ms > 0:
             raise ConfigError("--rate and --heartbeat-ms must be > 0")
         proto = Protocol(ns.dbc)
+        if ns.drives is not None and not 1 <= ns.drives <= proto.n_drives:
+            raise ConfigError(f"--drives {ns.drives}: the DBC has drive slots 1..{proto.n_drives}")
         if ns.bus:
             buses = [parse_bus(s, i) for i, s in enumerate(ns.bus)]
         else:
-            buses = load_topology(ns.topology, proto.n_drives)
-        loads = compute(buses, ns.rate, ns.heartbeat_ms, proto)
+            buses = load_topology(ns.topology, ns.drives or topology_drives(ns.topology))
+        n_drives = ns.drives or max(d for b in buses for d in b.drives)
+        loads = compute(buses, ns.rate, ns.heartbeat_ms, proto, n_drives)
     except ConfigError as exc:
         print(f"armctl busload: {exc}", file=sys.stderr)
         return 2
@@ -403,10 +444,10 @@ def run(ns: argparse.Namespace) -> int:
     msg = (f"armctl busload: bus {worst.bus.name} ({worst.bus.describe()}) is at {worst.load * 100:.1f}% "
            f"at {ns.rate:g} Hz, above the {ns.budget:g}% budget; the highest loop rate that fits is "
            f"{max_rate} Hz")
-    if len(buses) == 1 and proto.n_drives > 1:
-        for k in range(2, proto.n_drives + 1):
-            split = even_split(buses[0], proto.n_drives, k)
-            if all(bl.load <= budget for bl in compute(split, ns.rate, ns.heartbeat_ms, proto)):
+    if len(buses) == 1 and n_drives > 1:
+        for k in range(2, n_drives + 1):
+            split = even_split(buses[0], n_drives, k)
+            if all(bl.load <= budget for bl in compute(split, ns.rate, ns.heartbeat_ms, proto, n_drives)):
                 msg += (f"; {k} such buses fit at {ns.rate:g} Hz ("
                         + " ".join(f"--bus {'fd' if b.fd else 'classic'}:{_rate_arg(b)}:{_drives_arg(b)}"
                                    for b in split) + ")")

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import shutil
 import subprocess
 import sys
 from pathlib import Path
 
+from tools.arm import add_arm_arguments
 from tools.build import PRESETS, TARGETS, BuildError, build
 from tools.paths import REPO, build_dir, env_with_repo
 
@@ -22,7 +24,27 @@ def cmd_setup(ns: argparse.Namespace) -> int:
 
 
 def cmd_build(ns: argparse.Namespace) -> int:
-    build(TARGETS[ns.target] if ns.target else ns.preset, quiet=False)
+    from tools.arm import ArmChoiceError, arm_from_args, arm_info, build_arm
+
+    try:
+        arm = arm_from_args(ns)
+    except ArmChoiceError as exc:
+        print(f"armctl build: {exc}", file=sys.stderr)
+        return 2
+    bdir = build_arm(TARGETS[ns.target] if ns.target else ns.preset, arm, quiet=False)
+    info = arm_info(bdir)
+    print(f"arm: {info['name']}, {info['n_joints']} joints ({', '.join(j['name'] for j in info['joints'])}), "
+          f"model hash {info['model_hash']} -> {bdir}")
+    for w in info["warnings"]:
+        print(f"armctl build: {info['name']}: {w}")
+    check = bdir / "firmware" / "arm_rnea_check"
+    if check.exists():  # host builds: the firmware's inverse dynamics against MuJoCo's on this arm
+        r = subprocess.run([str(check)], capture_output=True, text=True)
+        print(f"arm: {(r.stdout.strip().splitlines() or ['?'])[0]}")
+        if r.returncode != 0:
+            print(f"armctl build: the firmware's RNEA disagrees with MuJoCo on this arm:\n{r.stderr[-2000:]}",
+                  file=sys.stderr)
+            return 1
     return 0
 
 
@@ -32,18 +54,51 @@ def _print_run(run: dict) -> None:
     print(table(run))
 
 
-def cmd_hil(ns: argparse.Namespace) -> int:
-    from tools.hil import HilError, HilOptions, run_hil
+def _float_list(text: str) -> list[float]:
+    try:
+        vals = [float(x) for x in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a comma-separated list of numbers") from None
+    if not all(math.isfinite(v) for v in vals):
+        raise argparse.ArgumentTypeError(f"'{text}': every value must be finite")
+    return vals
 
-    if not ns.duration > 0:
-        print(f"armctl hil: --duration: must be > 0, got {ns.duration}", file=sys.stderr)
+
+def cmd_hil(ns: argparse.Namespace) -> int:
+    from tools.arm import ArmChoiceError, arm_from_args, arm_info, build_arm, reference_for
+    from tools.hil import HilError, HilOptions, run_hil
+    from tools.verdict import Bounds
+
+    if not (math.isfinite(ns.duration) and 0.001 <= ns.duration <= 86400):
+        print(f"armctl hil: --duration: must be in [0.001, 86400] s, got {ns.duration}", file=sys.stderr)
+        return 2
+    if not (0 <= ns.ref_hold <= 3600):
+        print(f"armctl hil: --ref-hold: must be in [0, 3600] s, got {ns.ref_hold}", file=sys.stderr)
+        return 2
+    if (ns.ref_amp is None) != (ns.ref_freq is None):
+        print("armctl hil: --ref-amp and --ref-freq go together", file=sys.stderr)
+        return 2
+    try:
+        arm = arm_from_args(ns)
+    except ArmChoiceError as exc:
+        print(f"armctl hil: {exc}", file=sys.stderr)
         return 2
     if ns.bus == "vm":
         return _hil_in_vm(ns)
-    build("release")
     try:
-        run = run_hil(HilOptions(out=ns.out, duration_s=ns.duration, method=ns.method, mode=ns.mode,
-                                 bus=ns.bus, topology=ns.topology, bus_timing=ns.bus_timing))
+        bdir = build_arm("release", arm)
+        amp, freq, warnings = reference_for(arm_info(bdir), ns.ref_amp, ns.ref_freq)
+    except ArmChoiceError as exc:
+        print(f"armctl hil: {exc}", file=sys.stderr)
+        return 2
+    for w in warnings:
+        print(f"armctl hil: {w}", file=sys.stderr)
+    ref = ("--ref-amp", ",".join(f"{a:g}" for a in amp), "--ref-freq", ",".join(f"{f:g}" for f in freq),
+           "--ref-hold", f"{ns.ref_hold:g}")
+    try:
+        run = run_hil(HilOptions(out=ns.out, duration_s=ns.duration, method=ns.method, mode=ns.mode, arm=arm,
+                                 bus=ns.bus, topology=ns.topology, bus_timing=ns.bus_timing, controller_args=ref,
+                                 bounds=Bounds(ns.max_error_deg, ns.max_saturated_fraction)))
         print(f"bus: {run['environment']['bus_choice']}")
         for name, pct in run["environment"]["bus_load_pct"].items():
             if pct > 100.0:
@@ -59,15 +114,22 @@ def cmd_hil(ns: argparse.Namespace) -> int:
 
 
 def _hil_in_vm(ns: argparse.Namespace) -> int:
-    """The same HIL run inside the qemu VM whose kernel has vcan0 and vcan1 (tools/vm)."""
+    """The same HIL run inside the qemu VM whose kernel has vcan0..vcan3 (tools/vm)."""
+    from tools.arm import arm_from_args, build_arm
     from tools.vm.image import VmError
     from tools.vm.run import run_in_vm
 
-    build("release")
+    build_arm("release", arm_from_args(ns))
     inner = ["tools/armctl", "hil", "--bus", "vcan", "--duration", f"{ns.duration:g}", "--method", ns.method,
-             "--mode", ns.mode, "--out", str(ns.out.resolve()),
-             *(["--topology", str(ns.topology.resolve())] if ns.topology else []),
-             *(["--bus-timing"] if ns.bus_timing else [])]
+             "--mode", ns.mode, "--out", str(ns.out.resolve()), "--ref-hold", f"{ns.ref_hold:g}",
+             "--max-error-deg", f"{ns.max_error_deg:g}", "--max-saturated-fraction", f"{ns.max_saturated_fraction:g}"]
+    for opt, val in (("--topology", ns.topology), ("--model", ns.model), ("--arm", ns.arm), ("--design", ns.design)):
+        if val is not None:
+            inner += [opt, str(val.resolve())]
+    if ns.ref_amp is not None:
+        inner += ["--ref-amp", ",".join(map(repr, ns.ref_amp)), "--ref-freq", ",".join(map(repr, ns.ref_freq))]
+    if ns.bus_timing:
+        inner.append("--bus-timing")
     print("armctl hil: running inside the qemu VM (software emulation: minutes, not seconds)")
     try:
         return run_in_vm(inner, timeout=3600.0 + 600.0 * ns.duration, keep=False).returncode
@@ -79,7 +141,8 @@ def _hil_in_vm(ns: argparse.Namespace) -> int:
 def cmd_demo(ns: argparse.Namespace) -> int:
     from tools import study
 
-    print(f"armctl demo: a short study, every method {ns.duration:g} s in lockstep HIL on the default arm "
+    arm = "the default arm" if ns.model is None and ns.arm is None else (ns.arm or ns.model)
+    print(f"armctl demo: a short study, every method {ns.duration:g} s in lockstep HIL on {arm} "
           f"with the paper's 5 % uncertainty -> {ns.out}")
     ns.config, ns.methods = study.DEFAULT_CONFIG, None
     return study.cmd_study(ns)
@@ -108,9 +171,38 @@ def cmd_test(ns: argparse.Namespace) -> int:
 
 
 def cmd_synth(ns: argparse.Namespace) -> int:
-    from gen.synth import cli as synth_cli
+    """The design config as given, or (with --model/--arm) for that arm's joint count; says how the
+    firmware gets this design (a design in DIR alone is only for looking at)."""
+    import tempfile
 
-    return synth_cli.run(ns)
+    from gen.synth import cli as synth_cli
+    from tools.arm import ArmChoiceError, arm_from_args
+
+    try:
+        arm = arm_from_args(ns)
+    except ArmChoiceError as exc:
+        print(f"armctl synth: {exc}", file=sys.stderr)
+        return 2
+    arm_opts = (f" --arm {arm.arm_file}" if arm.arm_file else f" --model {arm.model}" if arm.model else "")
+    if arm.model is None and arm.arm_file is None:
+        rc = synth_cli.run(ns)
+    else:
+        from gen.arm import ArmError, load_arm_file, prepare
+
+        try:
+            prep = prepare(load_arm_file(arm.arm_file, arm.model), ns.config)
+        except ArmError as exc:
+            print(f"armctl synth: {exc}", file=sys.stderr)
+            return 2
+        with tempfile.TemporaryDirectory() as tmp:
+            cfg = Path(tmp) / "design.toml"
+            cfg.write_text(prep.design_text)
+            ns_arm = argparse.Namespace(**{**vars(ns), "config": cfg})
+            rc = synth_cli.run(ns_arm)
+    if rc == 0 and not ns.quiet:
+        print(f"  the firmware builds with this design: tools/armctl build --design {ns.config}{arm_opts} "
+              "(hil, study, tune and demo take the same options)")
+    return rc
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -123,6 +215,7 @@ def main(argv: list[str] | None = None) -> int:
     b.add_argument("--preset", choices=PRESETS, default="release")
     b.add_argument("--target", choices=tuple(TARGETS),
                    help="cross target (host = release; aarch64; cortex-m4/m7/m3 images); overrides --preset")
+    add_arm_arguments(b)
     b.set_defaults(fn=cmd_build)
 
     from tools import timing
@@ -145,11 +238,22 @@ def main(argv: list[str] | None = None) -> int:
                    help="emulate the buses' bit timing in the simulator (frame lengths, arbitration by id): "
                         "commands act when their frames would end on the bus")
     h.add_argument("--out", type=Path, default=REPO / "runs" / "hil")
+    h.add_argument("--ref-amp", type=_float_list, default=None, metavar="A1,..,An",
+                   help="reference amplitudes, rad, one per joint (q_d = home + A (1 - cos 2 pi F t)); clipped "
+                        "to the joint ranges with a warning [the arm's default]")
+    h.add_argument("--ref-freq", type=_float_list, default=None, metavar="F1,..,Fn", help="reference frequencies, Hz")
+    h.add_argument("--ref-hold", type=float, default=0.5, help="hold the home pose this long first, s [0.5]")
+    h.add_argument("--max-error-deg", type=float, default=30.0,
+                   help="bound: any joint's L-infinity tracking error, deg [30]")
+    h.add_argument("--max-saturated-fraction", type=float, default=0.05,
+                   help="bound: time at the torque limit, per joint, fraction [0.05]")
+    add_arm_arguments(h)
     h.set_defaults(fn=cmd_hil)
 
     d = sub.add_parser("demo", help="the main job: set-up if needed, a short study of every method, the table")
     d.add_argument("--out", type=Path, default=REPO / "runs" / "demo")
     d.add_argument("--duration", type=float, default=3.0, help="trajectory seconds per method")
+    add_arm_arguments(d)
     d.set_defaults(fn=cmd_demo)
 
     t = sub.add_parser("test", help="every test: ctest (ASan/UBSan build) and pytest")
@@ -160,6 +264,8 @@ def main(argv: list[str] | None = None) -> int:
 
     s = sub.add_parser("synth", help="LMI synthesis of the estimator and controller, emitted as C")
     synth_cli.add_arguments(s)
+    s.add_argument("--model", type=Path, default=None, metavar="FILE", help="design for this arm's joint count")
+    s.add_argument("--arm", type=Path, default=None, metavar="FILE", help="design for this arm file's arm")
     s.set_defaults(fn=cmd_synth)
 
     from tools import busload, vcan

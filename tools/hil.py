@@ -14,12 +14,14 @@ from pathlib import Path
 from typing import Any
 
 
-from host_sim.launch import sim_argv, sim_binary
+from host_sim.launch import sim_argv
 from tools import busload
+from tools.arm import DEFAULT_ARM, ArmChoiceError, ArmRef, arm_build_dir, arm_info, prepared_model
 from tools.paths import REPO, controller_binary, logger_binary
 from tools.run_analysis import analyse
+from tools.verdict import Bounds
 
-JOINT_NAMES = ["shoulder_pan", "shoulder_lift", "elbow", "wrist_1", "wrist_2", "wrist_3"]
+CONTROLLER_DEFAULT_HOLD_S = 0.5  # arm_controller --ref-hold's default
 
 
 @dataclass
@@ -31,10 +33,12 @@ class HilOptions:
     preset: str = "release"
     bus: str = "udp"  # udp | vcan | auto (vcan if this kernel has SocketCAN and vcan0.., else udp)
     can_port: int | None = None  # None: pick one, so concurrent runs do not share a bus; bus i: port + i
-    # Which drive is on which bus (firmware/protocol/buses.toml; None: that default file).
+    # The arm (tools/arm.py: --model / --arm); its build folder holds the binaries and arm.json.
+    arm: ArmRef = DEFAULT_ARM
+    # Which drive is on which bus (a topology file; None: the arm's wiring, arm.json).
     topology: Path | None = None
     lcm_port: int | None = None
-    # Another controller binary (default: controller_binary(preset)), a command it runs under
+    # Another controller binary (default: the arm build folder's), a command it runs under
     # (e.g. ("qemu-aarch64-static",) for a cross-compiled one) and extra controller arguments.
     controller: Path | None = None
     controller_cmd_prefix: tuple[str, ...] = ()
@@ -49,6 +53,8 @@ class HilOptions:
     # Emulate each bus's bit timing in the simulator (host_sim/bus_timing.py) with the topology's
     # physical layers: virtual in lockstep, wallclock in realtime.
     bus_timing: bool = False
+    # What the run must meet to be "ok" (tools/verdict.py).
+    bounds: Bounds = field(default_factory=Bounds)
 
 
 class HilError(RuntimeError):
@@ -148,6 +154,7 @@ def _load_json(path: Path) -> dict[str, Any]:
 
 
 def write_json_atomic(path: Path, data: dict[str, Any]) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp.{os.getpid()}")
     tmp.write_text(json.dumps(data, indent=2) + "\n")
     os.replace(tmp, path)
@@ -162,12 +169,27 @@ def check_loopback_route(group: str) -> None:
                        f"run as root: ip route replace {net} dev lo (tools/armctl does this when run as root)")
 
 
-def load_topology(path: Path | None = None) -> list[busload.Bus]:
-    """The buses of the topology file (name, kind, rates, drives)."""
+def load_topology(path: Path | None, info: dict[str, Any]) -> list[busload.Bus]:
+    """The buses: the topology file's, else the arm's wiring (arm.json), for the arm's drives."""
+    if path is None:
+        return [busload.Bus(b["name"], b["kind"] == "fd", b["nominal"], b["data"], list(b["drives"]))
+                for b in info["buses"]]
     try:
-        return busload.load_topology(path or busload.DEFAULT_TOPOLOGY, len(JOINT_NAMES))
+        return busload.load_topology(path, info["n_joints"])
     except busload.ConfigError as exc:
         raise HilError(f"bus topology: {exc}") from exc
+
+
+def reference_args(info: dict[str, Any], controller_args: tuple[str, ...]) -> list[str]:
+    """The arm's default reference (arm.json: inside the joint ranges), unless the run gives one."""
+    if "--ref-amp" in controller_args:
+        return []
+    ref = info["reference"]
+    return ["--ref-amp", ",".join(f"{a:g}" for a in ref["amp"]), "--ref-freq", ",".join(f"{f:g}" for f in ref["freq_hz"])]
+
+
+def _arg_value(args: tuple[str, ...], name: str, default: float) -> float:
+    return float(args[args.index(name) + 1]) if name in args else default
 
 
 def vcan_names(n: int) -> list[str]:
@@ -185,7 +207,8 @@ def bus_args(kind: str, can_port: int, topology: list[busload.Bus]) -> list[str]
 
 def topology_load_pct(topology: list[busload.Bus], rate_hz: float = 1000.0) -> dict[str, float]:
     """Worst-case load of each bus of the topology at the loop rate (tools/armctl busload)."""
-    loads = busload.compute(topology, rate_hz, 100.0, busload.default_protocol())
+    loads = busload.compute(topology, rate_hz, 100.0, busload.default_protocol(),
+                            max(d for b in topology for d in b.drives))
     return {bl.bus.name: round(bl.load * 100.0, 2) for bl in loads}
 
 
@@ -221,11 +244,16 @@ def resolve_bus(choice: str, n_buses: int = 1) -> tuple[str, str]:
 def run_hil(opt: HilOptions) -> dict[str, Any]:
     for group in ("239.255.76.67", "239.74.163.2"):
         check_loopback_route(group)
-    topology = load_topology(opt.topology)
+    bdir = arm_build_dir(opt.preset, opt.arm)
+    try:
+        info = arm_info(bdir)
+    except ArmChoiceError as exc:
+        raise HilError(str(exc)) from exc
+    topology = load_topology(opt.topology, info)
     bus_kind, bus_why = resolve_bus(opt.bus, len(topology))
-    binary = opt.controller or controller_binary(opt.preset)
-    logger_exe = logger_binary(opt.preset)
-    sim_exe = sim_binary(opt.preset)
+    binary = opt.controller or controller_binary(bdir)
+    logger_exe = logger_binary(bdir)
+    sim_exe = bdir / "host_sim" / "native" / "arm_sim"
     for exe in (binary, logger_exe, sim_exe):
         if not exe.exists():
             raise HilError(f"{exe} is missing: run tools/armctl build")
@@ -253,7 +281,8 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
         sim = subprocess.Popen(
             sim_argv(sim_exe, buses, lcm_url=url, summary=opt.out / "sim_summary.json", uncertainty=opt.uncertainty,
                      timing=bus_timing_mode(opt.mode) if opt.bus_timing else "off", phys=topology,
-                     extra=[*sim_mode_args(opt.mode), *opt.sim_args]),
+                     model=prepared_model(bdir),
+                     extra=["--substeps", str(info["substeps"]), *sim_mode_args(opt.mode), *opt.sim_args]),
             cwd=REPO, stdout=logs["simulator"], stderr=subprocess.STDOUT,
             preexec_fn=_simulator_realtime(realtime_cpu(opt)) if opt.mode == "realtime" else None)
         procs.append(sim)
@@ -262,7 +291,8 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
             [*opt.controller_cmd_prefix, str(binary), *bus_argv, "--lcm-url", url,
              "--duration", f"{opt.duration_s:g}", "--method", opt.method, "--mode", opt.mode,
              "--summary", str(opt.out / "controller_summary.json"), *spin_args(opt.mode),
-             *(["--cpu", str(realtime_cpu(opt))] if opt.mode == "realtime" else []), *opt.controller_args],
+             *(["--cpu", str(realtime_cpu(opt))] if opt.mode == "realtime" else []),
+             *reference_args(info, opt.controller_args), *opt.controller_args],
             stdout=logs["controller"], stderr=subprocess.STDOUT)
         procs.append(ctl)
         # Generous: the run is deterministic, not timed; this only bounds a hung process.
@@ -297,20 +327,30 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
     simulator = _load_json(opt.out / "sim_summary.json") or {
         "result": "died", "reason": f"simulator died (exit code {sim.returncode}); see simulator.log"}
     config = {"method": opt.method, "mode": opt.mode, "duration_s": opt.duration_s,
-              "joint_names": JOINT_NAMES, "controller_args": list(opt.controller_args),
+              "joint_names": [j["name"] for j in info["joints"]],
+              "arm": {"name": info["name"], "model": info["model"], "arm_file": info["arm_file"],
+                      "model_hash": info["model_hash"], "n_joints": info["n_joints"], "warnings": info["warnings"]},
+              "ref_hold_s": _arg_value(opt.controller_args, "--ref-hold", CONTROLLER_DEFAULT_HOLD_S),
+              "rate_hz": _arg_value(opt.controller_args, "--rate", info["loop_rate_hz"]),
+              "controller_args": list(opt.controller_args),
               "uncertainty": opt.uncertainty,
               "bus_timing": bus_timing_mode(opt.mode) if opt.bus_timing else "off", **opt.labels}
     run = analyse(opt.out, controller, simulator, config, {
         "bus": " ".join(buses), "bus_choice": f"{opt.bus} -> {bus_kind} ({bus_why})",
-        "topology": {"file": str(opt.topology or busload.DEFAULT_TOPOLOGY),
+        "topology": {"file": str(opt.topology) if opt.topology else "the arm's wiring (arm.json)",
                      "buses": [{"name": b.name, "spec": spec.rpartition("@")[0], "kind": b.describe(),
                                 "drives": b.drives} for b, spec in zip(topology, buses)]},
-        "bus_load_pct": topology_load_pct(topology),
+        "bus_load_pct": topology_load_pct(topology, info["loop_rate_hz"]),
         "lcm_url": url, "wall_s": wall, "simulator_scheduling": sim_scheduling,
         # the simulator's speed: simulated seconds per wall second after boot, and its CPU time
         # per period (arm_sim measures both)
         "realtime_factor": simulator.get("realtime_factor"),
         "simulator_period_cost_us": simulator.get("period_cost_us"),
-        "exit_codes": {"controller": ctl.returncode, "simulator": sim.returncode, "logger": logger.returncode}})
+        "build": str(bdir),
+        # the firmware's model (built in) and the one the simulator loaded: the controller refuses
+        # to boot unless they agree (SIM_IDENTITY frame)
+        "model_hash": {"firmware": info["model_hash"], "simulator": simulator.get("model_hash")},
+        "exit_codes": {"controller": ctl.returncode, "simulator": sim.returncode, "logger": logger.returncode}},
+        opt.bounds)
     write_json_atomic(opt.out / "run.json", run)
     return run

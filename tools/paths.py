@@ -13,13 +13,14 @@ def build_dir(preset: str) -> Path:
     return BUILD / preset
 
 
-def controller_binary(preset: str = "release") -> Path:
-    return build_dir(preset) / "firmware" / "arm_controller"
+def controller_binary(bdir: Path) -> Path:
+    """The controller in a build folder (build/<preset>, or an arm's: tools/arm.py)."""
+    return bdir / "firmware" / "arm_controller"
 
 
-def logger_binary(preset: str = "release") -> Path:
-    """The HIL run's telemetry logger (tools/lcm_logger)."""
-    return build_dir(preset) / "tools" / "lcm_logger" / "arm_lcm_logger"
+def logger_binary(bdir: Path) -> Path:
+    """The HIL run's telemetry logger (tools/lcm_logger) in a build folder."""
+    return bdir / "tools" / "lcm_logger" / "arm_lcm_logger"
 
 
 def env_with_repo() -> dict[str, str]:

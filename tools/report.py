@@ -78,7 +78,7 @@ def _figures(out: Path, study: dict[str, Any]) -> list[str]:
     methods = list(study["runs"])
     series = {m: _series(out, m, hold) for m in methods if (out / m / "telemetry.lcmlog").exists()}
     made = []
-    n = 6
+    n = study["arm"]["n_joints"]
     if "pm" in series:
         fig, axes = plt.subplots(n, 1, figsize=(9, 11), sharex=True)
         s = series["pm"]
@@ -125,61 +125,78 @@ def _figures(out: Path, study: dict[str, Any]) -> list[str]:
 
 def summary_table(study: dict[str, Any]) -> str:
     runs = study["runs"]
-    lines = [f"{'method':<10}{'result':<8}{'Linf e (deg), joints 1-6':<44}{'RMS w-w_hat (mean)':>19}{'power W':>9}"]
+    n = study["arm"]["n_joints"]
+    width = 7 * n + 2
+    lines = [f"{'method':<10}{'result':<9}{f'Linf e (deg), joints 1-{n}':<{width}}{'RMS w-w_hat (mean)':>19}{'power W':>9}"]
     for m, r in runs.items():
         linf = " ".join(f"{v:6.3f}" for v in r.get("tracking_max_abs_deg", []))
         est = r.get("estimation_error_rms")
         est_s = f"{np.mean(est):.4f}" if est and m in ESTIMATING else "-"
         power = f"{r['torque_power_w']:.2f}" if "torque_power_w" in r else "-"
-        lines.append(f"{m:<10}{r['result']:<8}{linf:<44}{est_s:>19}{power:>9}")
+        lines.append(f"{m:<10}{r['result'][:8]:<9}{linf:<{width}}{est_s:>19}{power:>9}")
     return "\n".join(lines)
 
 
 def write_report(out: Path, study: dict[str, Any]) -> None:
     runs = study["runs"]
-    n = 6
+    arm = study["arm"]
+    n = arm["n_joints"]
+    # The paper's numbers are for its six-joint arm: beside ours only on the bundled arm.
+    paper = arm["is_default"] and n == 6
+    # The paper numbers its joints; another arm's rows carry the model's joint names.
+    labels = [f"joint {j + 1}" if paper else f"{j + 1} {arm['joint_names'][j]}" for j in range(n)]
     figs = _figures(out, study)
+    wiring = ", ".join(f"{b['name']}: drives {','.join(map(str, b['drives']))}" for b in arm["buses"])
     md = [f"# Study: {study['description']}", "",
+          f"Arm `{arm['name']}` ({n} joints: {', '.join(arm['joint_names'])}; model `{arm['model']}`, hash "
+          f"{arm['model_hash']}).", "",
           f"Config `{study['config']}`, seed {study['seed']}, trajectory {study['duration_s']:g} s after a "
           f"{study['hold_s']:g} s hold on the start pose (metrics cover the trajectory only), lockstep HIL "
-          "at 1 kHz over the default two CAN buses (firmware/protocol/buses.toml; python-can udp_multicast "
-          "wire format), bus bit timing "
-          + ("emulated: each command acts from the end of its frame on the bus (host_sim/bus_timing.py)."
+          f"at 1 kHz over the arm's CAN buses ({wiring}; python-can udp_multicast wire format), bus bit timing "
+          + ("emulated: each command acts from the end of its frame on the bus (host_sim/native/sim_bus_timing.c)."
              if study.get("bus_timing") else "not emulated: each command acts from the start of its period."), "",
           f"Uncertainty: `{study['uncertainty']}`.", "",
-          "## Baseline gains", "", study["tuning"].get("procedure", ""), ""]
+          *(["Notes:", "", *[f"- {x}" for x in study.get("notes", [])], ""] if study.get("notes") else []),
+          "## Baseline gains", "", study["tuning"].get("procedure", ""), "",
+          f"Source: {study['tuning'].get('source', '')}.", ""]
     md.append(_md_table(["method", "gains"], [[m, f"`{g}`"] for m, g in study["tuning"].get("methods", {}).items()]))
     md += ["", "pm, pm-paper, gh2: the LMI design of `gen/configs/paper.toml` (see the design's manifest).", ""]
 
     md += ["## Table 1: RMS of the estimation error w - w_hat per joint (rad/s^2)", "",
            "pd and gh2 estimate nothing (w_hat = 0): their column is the RMS of w itself. "
            "The paper's column is its simulation, in its own units and uncertainty.", ""]
-    hdr = ["joint", *runs.keys(), "paper PM", "paper TDE", "paper EUSDE-SMC"]
+    hdr = ["joint", *runs.keys(), *(["paper PM", "paper TDE", "paper EUSDE-SMC"] if paper else [])]
     rows = []
     for j in range(n):
-        row = [f"joint {j + 1}"]
+        row = [labels[j]]
         for m, r in runs.items():
             v = r.get("estimation_error_rms")
             row.append(_fmt(v[j]) if v else "-")
-        row += [_fmt(PAPER_TABLE1["pm"][j]), _fmt(PAPER_TABLE1["tde"][j]), _fmt(PAPER_TABLE1["usde-smc"][j])]
+        if paper:
+            row += [_fmt(PAPER_TABLE1["pm"][j]), _fmt(PAPER_TABLE1["tde"][j]), _fmt(PAPER_TABLE1["usde-smc"][j])]
         rows.append(row)
-    md += [_md_table(hdr, rows), "", "Ratios PM / baseline (below 1: PM better), ours and the paper's:", ""]
-    md += [_md_table(["joint", "PM/TDE ours", "PM/TDE paper", "PM/USDE-SMC ours", "PM/EUSDE-SMC paper"],
-                     _ratio_rows(runs, "estimation_error_rms", PAPER_TABLE1, n)), ""]
+    md += [_md_table(hdr, rows), ""]
+    if paper:
+        md += ["Ratios PM / baseline (below 1: PM better), ours and the paper's:", "",
+               _md_table(["joint", "PM/TDE ours", "PM/TDE paper", "PM/USDE-SMC ours", "PM/EUSDE-SMC paper"],
+                         _ratio_rows(runs, "estimation_error_rms", PAPER_TABLE1, n)), ""]
     md += _verdicts(runs, "estimation_error_rms", n, "Estimation error") + [""]
 
     md += ["## Table 2: L-infinity norm of the tracking error per joint (rad)", "",
            "The paper's Table 2 is from its hardware experiment; ours is the simulation.", ""]
-    hdr = ["joint", *runs.keys(), "paper PM", "paper TDE", "paper EUSDE-SMC"]
+    hdr = ["joint", *runs.keys(), *(["paper PM", "paper TDE", "paper EUSDE-SMC"] if paper else [])]
     rows = []
     for j in range(n):
-        row = [f"joint {j + 1}"] + [_fmt(r["tracking_max_abs_rad"][j]) if "tracking_max_abs_rad" in r else "-"
+        row = [labels[j]] + [_fmt(r["tracking_max_abs_rad"][j]) if "tracking_max_abs_rad" in r else "-"
                                     for r in runs.values()]
-        row += [_fmt(PAPER_TABLE2["pm"][j]), _fmt(PAPER_TABLE2["tde"][j]), _fmt(PAPER_TABLE2["usde-smc"][j])]
+        if paper:
+            row += [_fmt(PAPER_TABLE2["pm"][j]), _fmt(PAPER_TABLE2["tde"][j]), _fmt(PAPER_TABLE2["usde-smc"][j])]
         rows.append(row)
-    md += [_md_table(hdr, rows), "", "Ratios PM / baseline, ours and the paper's:", ""]
-    md += [_md_table(["joint", "PM/TDE ours", "PM/TDE paper", "PM/USDE-SMC ours", "PM/EUSDE-SMC paper"],
-                     _ratio_rows(runs, "tracking_max_abs_rad", PAPER_TABLE2, n)), ""]
+    md += [_md_table(hdr, rows), ""]
+    if paper:
+        md += ["Ratios PM / baseline, ours and the paper's:", "",
+               _md_table(["joint", "PM/TDE ours", "PM/TDE paper", "PM/USDE-SMC ours", "PM/EUSDE-SMC paper"],
+                         _ratio_rows(runs, "tracking_max_abs_rad", PAPER_TABLE2, n)), ""]
     md += _verdicts(runs, "tracking_max_abs_rad", n, "Tracking error") + [""]
 
     md += ["## Table 3: torque power and the safety picture", "",
@@ -192,10 +209,14 @@ def write_report(out: Path, study: dict[str, Any]) -> None:
         rows.append([m, _fmt(r.get("torque_power_w", float("nan"))),
                      " ".join(f"{v:.1f}" for v in r.get("max_abs_torque_nm", [])),
                      " ".join(f"{100 * v:.1f}" for v in r.get("saturated_fraction", [])),
-                     str(r.get("commands_missed", 0)), str(tr["telemetry_lost_total"]), str(tr["overruns"]),
+                     str(r.get("commands_missed")), str(tr["telemetry_lost_total"]), str(tr["overruns"]),
                      r["final_state"], r["result"]])
     md += [_md_table(["method", "power (W)", "max |tau| per joint (Nm)", "time limited per joint (%)",
                       "CAN commands missed", "telemetry lost", "overruns", "final state", "result"], rows), ""]
+    failed = {m: r.get("verdict_reasons") or [] for m, r in runs.items() if r["result"] != "ok"}
+    if failed:
+        md += [f"Runs that are not `ok` (bounds: `{next(iter(runs.values())).get('bounds')}`):", ""]
+        md += [f"- {m}: {'; '.join(why) or runs[m]['result']}" for m, why in failed.items()] + [""]
 
     if "gh2" in runs:
         r = runs["gh2"]

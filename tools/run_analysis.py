@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from tools.telemetry_log import ChannelLog, read_log
+from tools.verdict import Bounds, judge
 
 STATE_NAMES = {0: "init", 1: "running", 2: "fault", 3: "safe-stop"}
 STATE_RUNNING = 1
@@ -22,9 +23,10 @@ def _rms(x: np.ndarray) -> list[float]:
     return np.sqrt((x**2).mean(axis=0)).tolist() if len(x) else []
 
 
-def control_metrics(ctl: ChannelLog, sim: ChannelLog, hold_s: float) -> dict[str, Any]:
-    """Over the trajectory: running periods after the start-pose hold."""
-    running = [m for m in ctl.messages if m.state == STATE_RUNNING and m.t >= hold_s - 1e-9]
+def control_metrics(ctl: ChannelLog, sim: ChannelLog, hold_s: float, rate_hz: float) -> dict[str, Any]:
+    """Over the trajectory: running periods after the start-pose hold (t is the period's time as
+    the controller logged it, float32: compared within half a period)."""
+    running = [m for m in ctl.messages if m.state == STATE_RUNNING and m.t >= hold_s - 0.5 / rate_hz]
     if not running:
         return {"periods_running": 0}
     e = np.array([m.e for m in running], dtype=float)
@@ -72,60 +74,74 @@ def final_state(log: dict[str, ChannelLog], controller: dict[str, Any]) -> str:
 
 
 def analyse(out_dir: Path, controller: dict[str, Any], sim: dict[str, Any], config: dict[str, Any],
-            environment: dict[str, Any]) -> dict[str, Any]:
+            environment: dict[str, Any], bounds: Bounds | None = None) -> dict[str, Any]:
+    """run.json. config: the run's settings, with ref_hold_s and rate_hz the controller was given
+    (a controller that died wrote no summary: these still say what the run was asked for)."""
+    bounds = bounds or Bounds()
     log = read_log(out_dir / "telemetry.lcmlog")
     sent = dict(controller.get("telemetry", {}).get("sent", {}))
     sent.update(sim.get("telemetry_sent", {}))
-    tele = telemetry_accounting(log, sent)
-    ok = controller.get("result") == 0 and sim.get("result") == "ok"
+    tele = telemetry_accounting(log, sent) if sent else {}
     problems = [s for s in (controller.get("reason"), sim.get("reason")) if s]
-    return {
-        "results": {
-            **config,
-            "result": "ok" if ok else "failed",
-            "problems": problems,
-            "final_state": final_state(log, controller),
-            "final_fault": controller.get("final_fault", "unknown"),
-            "steps": controller.get("steps_done", 0),
-            "simulated_periods": sim.get("periods", 0),
-            "commands_missed": sim.get("commands_missed", 0),
-            "commands_late": sim.get("commands_late", 0),
-            "drive_faults": sim.get("drive_faults", []),
-            "ref_hold_s": controller.get("ref_hold_s", 0.0),
-            "design_hash": controller.get("design_hash", ""),
-            **control_metrics(log["ARM_CTL"], log["ARM_SIM"], float(controller.get("ref_hold_s", 0.0))),
-        },
-        "transport": {
-            "controller_frames": controller.get("frames", {}),
-            "simulator_frames": {k: sim.get(k) for k in ("frames_tx", "frames_rx", "tx_dropped", "rx_foreign_drive",
-                                                         "rx_unknown_id", "rx_bad_frame", "rx_undecodable",
-                                                         "rx_wrong_bus")},
-            "overruns": controller.get("overruns", 0),
-            "bus_timing": sim.get("bus_timing", []),
-            "telemetry": tele,
-            "telemetry_lost_total": int(sum(v["lost"] for v in tele.values())),
-            "telemetry_gaps_total": int(sum(v["sequence_gaps"] for v in tele.values())),
-        },
-        "environment": environment,
+    hold = float(controller.get("ref_hold_s", config.get("ref_hold_s", 0.0)))
+    rate = float(controller.get("rate_hz", config.get("rate_hz", 1000.0)))
+    requested = controller.get("steps_requested", round((config["duration_s"] + hold) * rate))
+    results = {
+        **config,
+        "problems": problems,
+        "final_state": final_state(log, controller),
+        "final_fault": controller.get("final_fault", "unknown"),
+        # None where the process that knows died without saying: unknown, not zero
+        "steps": controller.get("steps_done"),
+        "steps_requested": requested,
+        "trajectory_periods": requested - round(hold * rate),
+        "simulated_periods": sim.get("periods"),
+        "commands_missed": sim.get("commands_missed"),
+        "commands_late": sim.get("commands_late"),
+        "drive_faults": sim.get("drive_faults"),
+        "ref_hold_s": hold,
+        "design_hash": controller.get("design_hash", ""),
+        **control_metrics(log["ARM_CTL"], log["ARM_SIM"], hold, rate),
     }
+    transport = {
+        "controller_frames": controller.get("frames", {}),
+        "simulator_frames": {k: sim.get(k) for k in ("frames_tx", "frames_rx", "tx_dropped", "rx_foreign_drive",
+                                                     "rx_unknown_id", "rx_bad_frame", "rx_undecodable",
+                                                     "rx_wrong_bus")},
+        "overruns": controller.get("overruns"),
+        "bus_timing": sim.get("bus_timing", []),
+        "telemetry": tele,
+        "telemetry_lost_total": int(sum(v["lost"] for v in tele.values())) if tele else None,
+        "telemetry_gaps_total": int(sum(v["sequence_gaps"] for v in tele.values())) if tele else None,
+    }
+    verdict, reasons = judge(results, transport, controller, sim, environment.get("exit_codes", {}), bounds)
+    results["result"] = verdict
+    results["verdict_reasons"] = reasons
+    results["bounds"] = bounds.as_dict()
+    return {"results": results, "transport": transport, "environment": environment}
 
 
 def table(run: dict[str, Any]) -> str:
     r, t, env = run["results"], run["transport"], run["environment"]
-    names = r.get("joint_names", [f"joint{i + 1}" for i in range(6)])
+    names = r.get("joint_names") or [f"joint{i + 1}" for i in range(len(r.get("tracking_max_abs_deg", [])))]
     lines = [f"{'joint':<14}{'max |e| (deg)':>15}{'RMS e (deg)':>14}{'RMS w-w_hat':>14}"]
     for i, name in enumerate(names[: len(r.get("tracking_max_abs_deg", []))]):
         est = r.get("estimation_error_rms")
         est_s = f"{est[i]:>14.4f}" if est else f"{'-':>14}"
         lines.append(f"{name:<14}{r['tracking_max_abs_deg'][i]:>15.4f}{r['tracking_rms_deg'][i]:>14.4f}{est_s}")
-    lines.append(f"result {r['result']}: method {r['method']}, controller {r['final_state']} after {r['steps']} periods"
-                 + (f" ({'; '.join(r['problems'])})" if r["problems"] else ""))
+    lines.append(f"result {r['result']}: method {r['method']}, controller {r['final_state']} after {r['steps']} of "
+                 f"{r['steps_requested']} periods")
+    for why in r.get("verdict_reasons", []):
+        lines.append(f"  {why}")
     cf, sf = t["controller_frames"], t["simulator_frames"]
-    lines.append(f"frames: controller sent {cf.get('tx', 0)} / received {cf.get('rx', 0)}, "
+    lines.append(f"frames: controller sent {cf.get('tx', '?')} / received {cf.get('rx', '?')}, "
                  f"simulator sent {sf['frames_tx']} / received {sf['frames_rx']}")
-    sent = sum(v["sent"] for v in t["telemetry"].values())
-    logged = sum(v["logged"] for v in t["telemetry"].values())
-    lines.append(f"telemetry: {sent} messages sent, {logged} logged, {t['telemetry_lost_total']} lost")
+    if t["telemetry"]:
+        sent = sum(v["sent"] for v in t["telemetry"].values())
+        logged = sum(v["logged"] for v in t["telemetry"].values())
+        lines.append(f"telemetry: {sent} messages sent, {logged} logged, {t['telemetry_lost_total']} lost")
+    else:
+        lines.append("telemetry: unknown (no process said what it sent)")
     for b in t.get("bus_timing", []):
         lines.append(f"bus timing ({r.get('bus_timing', '?')}), bus {b['bus']} ({b['phy']}, drives "
                      f"{','.join(map(str, b['drives']))}): SYNC -> last command {b['sync_to_last_cmd_mean_us']:.1f} us "

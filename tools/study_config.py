@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import itertools
-import json
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -13,7 +12,7 @@ from host_sim.uncertainty import UncertaintyConfig
 
 METHODS = ("pm", "pm-paper", "pd", "gh2", "tde", "usde-smc")
 TUNED = ("pd", "tde", "usde-smc")  # pm, pm-paper and gh2 take their gains from the LMI design
-N_JOINTS = 6
+MAX_JOINTS = 16
 
 
 class StudyConfigError(ValueError):
@@ -69,9 +68,13 @@ def _positive(v: float, name: str) -> float:
 def _trajectory(d: dict[str, Any], where: str) -> Trajectory:
     amp = _get(d, "amp", where, list)
     freq = _get(d, "freq_hz", where, list)
-    for name, vals, hi in (("amp", amp, 3.2), ("freq_hz", freq, 50.0)):
-        if len(vals) != N_JOINTS or not all(isinstance(x, (int, float)) and 0 <= x <= hi for x in vals):
-            raise StudyConfigError(f"{where}.{name}: need {N_JOINTS} numbers in [0, {hi}], got {vals!r}")
+    for name, vals, lo, hi in (("amp", amp, -3.2, 3.2), ("freq_hz", freq, 0.0, 50.0)):
+        if not 1 <= len(vals) <= MAX_JOINTS or not all(
+                isinstance(x, (int, float)) and not isinstance(x, bool) and lo <= x <= hi for x in vals):
+            raise StudyConfigError(f"{where}.{name}: need one number per joint, each in [{lo:g}, {hi:g}], "
+                                   f"got {vals!r}")
+    if len(amp) != len(freq):
+        raise StudyConfigError(f"{where}.amp: {len(amp)} values, but freq_hz has {len(freq)} (one of each per joint)")
     return Trajectory([float(a) for a in amp], [float(f) for f in freq])
 
 
@@ -139,9 +142,3 @@ def gain_args(method: str, gains: dict[str, float]) -> list[str]:
 def grid_points(grid: dict[str, list[float]]) -> list[dict[str, float]]:
     keys = sorted(grid)
     return [dict(zip(keys, combo)) for combo in itertools.product(*(grid[k] for k in keys))]
-
-
-def load_gains(cfg: StudyConfig) -> dict[str, Any]:
-    if not cfg.gains_file.exists():
-        raise StudyConfigError(f"{cfg.gains_file}: missing; run tools/armctl tune --config {cfg.path}")
-    return json.loads(cfg.gains_file.read_text())

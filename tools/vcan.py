@@ -124,7 +124,7 @@ def cmd_status(ns: argparse.Namespace) -> int:
     else:
         print("VM image: not built yet (first `vcan run`/`vcan setup` downloads the Debian kernel, ~70 MB)")
     print("usable buses: udp" + (", socketcan:IFACE (native)" if ok and ifs else "")
-          + (", socketcan:vcan0 and socketcan:vcan1 inside `tools/armctl vcan run`" if not missing else ""))
+          + (", socketcan:vcan0..vcan3 inside `tools/armctl vcan run`" if not missing else ""))
     return 0
 
 
@@ -173,7 +173,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     st = sub.add_parser("setup", help="download the Debian kernel and build the VM image now")
     st.add_argument("--refresh", action="store_true", help="fetch the kernel apt names today, rebuild")
     st.set_defaults(vcan_fn=cmd_setup)
-    r = sub.add_parser("run", help="run a command inside the qemu VM, where vcan0 and vcan1 (CAN FD) exist")
+    r = sub.add_parser("run", help="run a command inside the qemu VM, where vcan0..vcan3 (CAN FD) exist")
     r.add_argument("--timeout", type=float, default=1800.0, help="s before the VM is killed (exit 124)")
     r.add_argument("--keep", action="store_true", help="keep the run folder under .cache/vm/runs")
     r.add_argument("-v", "--verbose", action="store_true", help="print boot and run times")

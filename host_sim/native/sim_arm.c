@@ -42,7 +42,20 @@ static void perturb(sim_arm_t *a)
     }
 }
 
-int sim_arm_open(sim_arm_t *a, const char *path, const char *keyframe, const sim_uncertainty_t *u,
+unsigned long long sim_file_hash(const char *path)
+{
+    FILE *f = fopen(path, "rb");
+    if (f == NULL) return 0;
+    unsigned long long h = 0xCBF29CE484222325ull;
+    int c;
+    while ((c = fgetc(f)) != EOF) {
+        h = (h ^ (unsigned char)c) * 0x100000001B3ull;
+    }
+    fclose(f);
+    return h;
+}
+
+int sim_arm_open(sim_arm_t *a, const char *path, const char *keyframe, int substeps, const sim_uncertainty_t *u,
                  char *err, size_t errcap)
 {
     memset(a, 0, sizeof(*a));
@@ -63,7 +76,11 @@ int sim_arm_open(sim_arm_t *a, const char *path, const char *keyframe, const sim
     }
     a->n = (int)nu;
     a->unc = *u;
-    a->period = a->model->opt.timestep;
+    a->substeps = substeps;
+    a->period = a->model->opt.timestep * substeps;
+    a->model_hash = sim_file_hash(path);
+    /* The firmware's nominal model: no constraints (limits, frictionloss, contacts), no springs. */
+    a->nominal->opt.disableflags |= mjDSBL_CONSTRAINT | mjDSBL_SPRING;
     a->parametric = u->mass_error != 0.0 || u->inertia_error != 0.0 || u->com_error_m != 0.0;
     for (int j = 0; j < a->n; ++j) {
         a->friction |= u->viscous[j] != 0.0 || u->coulomb[j] != 0.0;
@@ -180,10 +197,15 @@ int sim_arm_step(sim_arm_t *a, const double *tau, const double *tau_commanded, d
         extra_force(a, 0.0, d->qfrc_bias, tau, d->qvel, d->qfrc_applied);
     }
     mj_step(a->model, d); /* qacc is the acceleration at the step's start */
-    a->step_count++;
     for (int j = 0; j < n; ++j) {
         w[j] = nd->qacc[j] - d->qacc[j];
     }
+    for (int k = 1; k < a->substeps; ++k) { /* the rest of the period: the same torque, the force anew */
+        extra_force(a, ((double)a->step_count + (double)k / a->substeps) * a->period, d->qfrc_bias, tau, d->qvel,
+                    d->qfrc_applied);
+        mj_step(a->model, d);
+    }
+    a->step_count++;
     return d->warning[mjWARN_BADQACC].number != bad_before ? d->warning[mjWARN_BADQACC].lastinfo + 1 : 0;
 }
 

@@ -10,7 +10,9 @@
  * - joint friction the nominal model lacks: tau_f = -b qd - c tanh(qd / 0.01).
  *
  * Each step returns w, the total uncertainty of e_ddot = u + w as the controller sees it: the
- * acceleration the nominal model predicts for the commanded torque minus the true one. */
+ * acceleration the firmware's nominal model predicts for the commanded torque minus the true one.
+ * The nominal model is the same file with constraints (joint limits, frictionloss, contacts) and
+ * springs off: rigid bodies, armature and damping, exactly what the firmware's RNEA has. */
 #ifndef ARM_SIM_ARM_H
 #define ARM_SIM_ARM_H
 
@@ -50,13 +52,17 @@ typedef struct {
     int64_t knot_index;
     double mass[SIM_MAX_JOINTS * SIM_MAX_JOINTS];
     double torque_limit[SIM_MAX_JOINTS];
+    int substeps;             /* MuJoCo steps per period (the model's timestep x substeps = period) */
+    unsigned long long model_hash; /* FNV-1a 64 of the model file: announced at boot (SIM_IDENTITY) */
 } sim_arm_t;
 
 void sim_uncertainty_default(sim_uncertainty_t *u);
 /* Loads the model twice (true and nominal), draws the uncertainty, resets to the keyframe.
  * Returns 0, or -1 with a message naming the file or element in err. */
-int sim_arm_open(sim_arm_t *a, const char *path, const char *keyframe, const sim_uncertainty_t *u,
+int sim_arm_open(sim_arm_t *a, const char *path, const char *keyframe, int substeps, const sim_uncertainty_t *u,
                  char *err, size_t errcap);
+/* FNV-1a 64 of a file's bytes (gen/arm.py's fnv1a64), or 0 if it cannot be read. */
+unsigned long long sim_file_hash(const char *path);
 /* One period under tau (the time average the joints feel); tau_commanded (may be NULL: tau) is
  * what the controller commanded, when the bus delays a new command into the period. w: n values.
  * Returns 0, or the 1-based DOF whose acceleration MuJoCo found NaN, infinite or huge: the

@@ -84,6 +84,18 @@ void sim_make_emcy(int joint, uint16_t error_code, uint8_t error_register, arm_c
     out->len = (uint8_t)arm_drives_drive_1_emcy_pack(out->data, &m, sizeof(out->data));
 }
 
+void sim_make_identity(unsigned long long model_hash, int n_joints, arm_can_frame_t *out)
+{
+    struct arm_drives_sim_identity_t m;
+    arm_drives_sim_identity_init(&m);
+    m.model_hash = (uint32_t)model_hash;
+    m.n_joints = (uint8_t)n_joints;
+    m.protocol_version = 1u;
+    memset(out, 0, sizeof(*out));
+    out->id = ARM_DRIVES_SIM_IDENTITY_FRAME_ID;
+    out->len = (uint8_t)arm_drives_sim_identity_pack(out->data, &m, sizeof(out->data));
+}
+
 int sim_decode_cmd(const arm_can_frame_t *f, uint16_t *controlword, double *torque, uint8_t *counter)
 {
     struct arm_drives_drive_1_cmd_t m;

@@ -16,6 +16,8 @@ void sim_make_state(int joint, double q, double qd, double tau, uint16_t statusw
                     uint8_t error_code, arm_can_frame_t *out);
 void sim_make_heartbeat(int joint, uint8_t nmt_state, arm_can_frame_t *out);
 void sim_make_emcy(int joint, uint16_t error_code, uint8_t error_register, arm_can_frame_t *out);
+/* SIM_IDENTITY: the arm this simulator runs (its model hash, low 32 bits, and joint count). */
+void sim_make_identity(unsigned long long model_hash, int n_joints, arm_can_frame_t *out);
 /* 0 and the fields, or -1 for a frame that is not a well-formed command (wrong length). */
 int sim_decode_cmd(const arm_can_frame_t *f, uint16_t *controlword, double *torque, uint8_t *counter);
 uint32_t sim_state_id(int joint);

@@ -129,6 +129,15 @@ static void send_heartbeat(sim_t *s, int j, int state)
     occupy_at_period_end(s, j, f.id);
 }
 
+/* The arm this simulator runs, on one bus (with the boot-up and operational heartbeats): a
+ * controller built for another arm refuses to start. */
+static void send_identity(sim_t *s, unsigned bus)
+{
+    arm_can_frame_t f;
+    sim_make_identity(s->arm->model_hash, s->n, &f);
+    send(s, bus, &f);
+}
+
 static void send_emcys(sim_t *s, int j)
 {
     sim_drive_t *d = &s->drives[j];
@@ -482,13 +491,17 @@ static int on_nmt(sim_t *s, const arm_can_frame_t *f, unsigned bus)
         return 1;
     }
     const uint8_t command = f->data[0], node = f->data[1];
-    int all_stopped = 1;
+    int all_stopped = 1, changed = 0;
     for (int j = 0; j < s->n; ++j) {
         sim_drive_t *d = &s->drives[j];
         if (s->bus_of[j] == (int)bus && (node == 0u || node == d->node_id) && sim_drive_on_nmt(d, command)) {
             send_heartbeat(s, j, -1);
+            changed = 1;
         }
         all_stopped &= d->nmt_state == SIM_NMT_STATE_STOPPED;
+    }
+    if (changed && command == SIM_NMT_START) {
+        send_identity(s, bus);
     }
     return !all_stopped;
 }
@@ -512,6 +525,7 @@ static int run_loop(sim_t *s)
     sim_report_t *rep = s->rep;
     const int64_t t0 = mono_ns();
     for (int j = 0; j < s->n; ++j) send_heartbeat(s, j, SIM_NMT_STATE_BOOT); /* CANopen boot-up */
+    for (unsigned b = 0; b < s->set.n; ++b) send_identity(s, b);
     char text[700];
     snprintf(text, sizeof(text), "%d drives up on bus %s", s->n, cfg->bus_text);
     event(s, "sim", "info", text);

@@ -59,6 +59,9 @@ static int write_summary(const char *path, const sim_options_t *o, const sim_arm
     json_string(f, r->reason);
     fprintf(f, ",\n  \"model\": ");
     json_string(f, o->model);
+    fprintf(f, ",\n  \"model_hash\": \"%016llx\",\n  \"substeps\": %d", arm->model_hash, arm->substeps);
+    /* MuJoCo's own clock: substeps x timestep per period, checked against the periods run */
+    fprintf(f, ",\n  \"mujoco_time_s\": %.6f", arm->data->time);
     fprintf(f, ",\n  \"n_drives\": %d,\n  \"periods\": %llu,\n  \"simulated_s\": %.6f,\n", arm->n,
             (unsigned long long)r->periods, simulated);
     fprintf(f, "  \"frames_tx\": %llu,\n  \"frames_rx\": %llu,\n  \"tx_dropped\": %llu,\n",
@@ -165,7 +168,7 @@ int main(int argc, char **argv)
     }
     mju_user_warning = on_mujoco_warning;
     static sim_arm_t arm;
-    if (sim_arm_open(&arm, o.model, o.keyframe, &o.unc, err, sizeof(err)) != 0) {
+    if (sim_arm_open(&arm, o.model, o.keyframe, o.substeps, &o.unc, err, sizeof(err)) != 0) {
         fprintf(stderr, "arm_sim: %s\n", err);
         return 2;
     }

@@ -20,6 +20,8 @@ static void usage(const char *prog)
            "                            buses), every drive on exactly one bus [udp, all drives]\n"
            "  --model FILE              the arm (MJCF or URDF)   [%s]\n"
            "  --keyframe NAME           start pose               [home]\n"
+           "  --substeps K              MuJoCo steps per period: the period is the model's timestep\n"
+           "                            times K (gen/arm.py's arm.json says which)   [1]\n"
            "  --lcm-url URL             telemetry, ttl=0; '' for none [udpm://239.255.76.67:7667?ttl=0]\n"
            "  --boot-timeout S          wait for the controller [60]\n"
            "  --idle-timeout S          silence that faults the drives [5]\n"
@@ -111,6 +113,7 @@ int sim_options_parse(int argc, char **argv, sim_options_t *o, char *err, unsign
     snprintf(o->keyframe, sizeof(o->keyframe), "home");
     snprintf(o->lcm_url, sizeof(o->lcm_url), "udpm://239.255.76.67:7667?ttl=0");
     sim_uncertainty_default(&o->unc);
+    o->substeps = 1;
     sim_config_t *c = &o->cfg;
     c->boot_timeout_s = 60.0;
     c->idle_timeout_s = 5.0;
@@ -147,6 +150,13 @@ int sim_options_parse(int argc, char **argv, sim_options_t *o, char *err, unsign
             rc = copy_str(a, v, o->bus_args[o->n_bus_args++], ARM_CAN_BUS_SPEC_MAX, err, errcap);
         } else if (strcmp(a, "--model") == 0) {
             rc = copy_str(a, v, o->model, sizeof(o->model), err, errcap);
+        } else if (strcmp(a, "--substeps") == 0) {
+            rc = parse_double(a, v, 1.0, 1000.0, 0, &d, err, errcap);
+            if (rc == 0 && d != floor(d)) {
+                snprintf(err, errcap, "%s: '%s' is not a whole number", a, v);
+                rc = -1;
+            }
+            o->substeps = (int)d;
         } else if (strcmp(a, "--keyframe") == 0) {
             rc = copy_str(a, v, o->keyframe, sizeof(o->keyframe), err, errcap);
         } else if (strcmp(a, "--lcm-url") == 0) {

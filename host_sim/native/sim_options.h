@@ -16,6 +16,7 @@ typedef struct {
     sim_uncertainty_t unc;
     sim_config_t cfg;
     long bench_mj_steps; /* > 0: time bare mj_step on the model and exit */
+    int substeps;        /* MuJoCo steps per period */
 } sim_options_t;
 
 /* 0: run; 1: --help printed; -1: bad argument, message (naming the option) in err. */

@@ -65,5 +65,19 @@ int main(void)
     hb.data[0] = ARM_NMT_STATE_OPERATIONAL;
     CHECK(arm_bus_handle_rx(&bus, &hb) == ARM_RX_HEARTBEAT);
     CHECK(bus.heartbeat_mask == (1u << 5) && bus.nmt_state[5] == ARM_NMT_STATE_OPERATIONAL);
+
+    /* HIL: the simulator's SIM_IDENTITY (0x7F0) is read, and a malformed one is not believed. */
+    arm_can_frame_t id;
+    memset(&id, 0, sizeof(id));
+    id.id = 0x7F0u;
+    id.len = 7u;
+    CHECK(arm_bus_handle_rx(&bus, &id) == ARM_RX_BAD_LENGTH && !bus.sim_identity_seen);
+    id.len = 8u;
+    const uint32_t hash = 0x93ddabb3u;
+    memcpy(id.data, &hash, 4);
+    id.data[4] = 7u;
+    id.data[5] = 1u;
+    CHECK(arm_bus_handle_rx(&bus, &id) == ARM_RX_SIM_IDENTITY);
+    CHECK(bus.sim_identity_seen && bus.sim_model_hash32 == hash && bus.sim_n_joints == 7u && bus.rx.sim_identity == 1u);
     TEST_MAIN_END();
 }

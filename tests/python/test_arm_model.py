@@ -70,11 +70,11 @@ def test_nominal_parameter_error_scales_the_model() -> None:
     assert np.allclose(off.links[1].inertia, 0.9 * true.links[1].inertia)
 
 
-def test_bad_model_is_refused_with_the_joint_named(tmp_path: Path) -> None:
+def test_unprepared_model_is_refused_with_what_to_do(tmp_path: Path) -> None:
+    """gen.robot_model reads prepared arms only (gen/arm.py makes them); anything else is named."""
     bad = tmp_path / "bad.xml"
-    bad.write_text(DEFAULT_MJCF.read_text().replace('actuatorfrcrange="-28 28"/>\n                <geom type="capsule" fromto="0 0 0 0 0 0.0996"',
-                                                    '/>\n                <geom type="capsule" fromto="0 0 0 0 0 0.0996"'))
-    with pytest.raises(robot_model.ModelError, match="wrist_3"):
+    bad.write_text(DEFAULT_MJCF.read_text().replace("</actuator>", '<motor joint="wrist_3" ctrlrange="-1 1"/></actuator>'))
+    with pytest.raises(robot_model.ModelError, match="prepare|expected a prepared arm"):
         robot_model.extract(bad)
     out = tmp_path / "out"
     assert robot_model.main(["--mjcf", str(bad), "--out", str(out)]) == 2

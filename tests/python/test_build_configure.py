@@ -26,8 +26,8 @@ def test_junk_failed_and_foreign_configures_are_redone(tmp_path: Path, capsys: p
 
     # a configure that fails: CMake's own message is shown, and no record of success is left
     with pytest.raises(ConfigureFailed, match="configure failed"):
-        build("cortex-m3", bdir=bdir, cache={"ARM_MJCF": str(tmp_path / "no-such-arm.xml")})
-    assert "ARM_MJCF" in capsys.readouterr().err and not (bdir / STAMP).exists()
+        build("cortex-m3", bdir=bdir, cache={"ARM_MODEL": str(tmp_path / "no-such-arm.xml")})
+    assert "ARM_MODEL" in capsys.readouterr().err and not (bdir / STAMP).exists()
     build("cortex-m3", bdir=bdir)  # the fix: just run again
     assert (bdir / STAMP).exists()
     capsys.readouterr()

@@ -171,6 +171,11 @@ def test_a_fitting_config_exits_0(capsys: pytest.CaptureFixture[str]) -> None:
     assert rc == 0 and "left:" in out and "right:" in out and "fits" in out
     rc, out, _ = _run(capsys, "--bus", "classic:1M:1-6", "--rate", "250")
     assert rc == 0
+    # a 7-DOF arm: three CAN FD buses (drive slots 7 and 8 are in the DBC)
+    rc, out, _ = _run(capsys, "--bus", "fd:1M/5M:1-3", "--bus", "fd:1M/5M:4-5", "--bus", "fd:1M/5M:6-7")
+    assert rc == 0 and "fits" in out
+    rc, _, err = _run(capsys, "--bus", "fd:1M/5M:1-7")
+    assert rc != 0 and "3 such buses fit" in err
 
 
 def test_json_output(capsys: pytest.CaptureFixture[str]) -> None:
@@ -181,9 +186,12 @@ def test_json_output(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 @pytest.mark.parametrize(("argv", "needle"), [
-    (["--bus", "fd:1M/5M:1-3"], "drives 4, 5, 6 are on no bus"),
+    (["--bus", "fd:1M/5M:1-3", "--drives", "6"], "drives 4, 5, 6 are on no bus"),
+    (["--bus", "fd:1M/5M:1-3", "--bus", "fd:1M/5M:5-6"], "drives 4 are on no bus"),
     (["--bus", "fd:1M/5M:1-4", "--bus", "fd:1M/5M:4-6"], "drive 4 is on two buses"),
-    (["--bus", "fd:1M/5M:1-7"], "drive 7 does not exist"),
+    (["--bus", "fd:1M/5M:1-7", "--drives", "6"], "drive 7 does not exist"),
+    (["--bus", "fd:1M/5M:1-9"], "9 drives: the DBC has drive slots 1..8"),
+    (["--drives", "9"], "--drives 9: the DBC has drive slots 1..8"),
     (["--bus", "classic:1M/5M:1-6"], "one bit rate"),
     (["--bus", "fd:fast:1-6"], "bit rate 'fast'"),
     (["--bus", "can:1M:1-6"], "expected classic:RATE:DRIVES"),
@@ -230,5 +238,5 @@ def test_topology_file_drives_the_default(capsys: pytest.CaptureFixture[str], tm
     rc, _, err = _run(capsys, "--topology", str(p))
     assert rc == 2 and "131.4%" in err
     bad = _topology(tmp_path, _bus())
-    rc, _, err = _run(capsys, "--topology", str(bad))
+    rc, _, err = _run(capsys, "--topology", str(bad), "--drives", "6")
     assert rc == 2 and "are on no bus" in err

@@ -37,6 +37,12 @@ EXERCISED: dict[str, str] = {
     "vcan up": "test_documented_commands.py::test_vcan_status_and_up",
     "vcan setup": "test_vcan_vm.py::test_vcan_setup_run_and_up_in_the_vm",
     "vcan run": "test_vcan_vm.py::test_vcan_setup_run_and_up_in_the_vm",
+    "hil --model|--arm": "test_arm_hil.py::test_lockstep_hil_run_is_ok_within_stated_bounds",
+    "build --model|--arm": "test_arm_hil.py::built_arm",
+    "synth --model|--arm": "test_arm_hil.py::built_arm",
+    "study --model|--arm": "test_documented_commands.py::test_tune_and_study_on_another_arm",
+    "tune --model|--arm": "test_documented_commands.py::test_tune_and_study_on_another_arm",
+    "demo --model|--arm": "test_documented_commands.py::test_demo_on_another_arm",
 }
 
 
@@ -55,6 +61,8 @@ def documented_commands() -> set[str]:
             out.add(sub)
         if sub == "hil" and "vm" in cell:
             out.add("hil --bus vm")
+        if "--model FILE" in cell or "--arm FILE" in cell:  # one code path for both (tools/arm.py)
+            out.add(f"{sub} --model|--arm")
     return out
 
 
@@ -117,6 +125,38 @@ def test_tune(tmp_path: Path) -> None:
     gains = json.loads((tmp_path / cfg["tuning"]["gains_file"]).read_text())
     assert set(gains["methods"]) == {"pd", "tde", "usde-smc"}
     assert len(gains["all_scores"]["pd"]) == 2
+
+
+def test_tune_and_study_on_another_arm(tmp_path: Path) -> None:
+    """tune on a 7-DOF arm keeps its gains in the arm's build folder; the study then uses them."""
+    text = (REPO / "tools" / "studies" / "paper.toml").read_text()
+    text = re.sub(r"(\[tuning\][^\[]*?)duration_s = [0-9.]+", r"\1duration_s = 0.2", text, flags=re.S)
+    text = text.split("[tuning.grid.pd]")[0] + (
+        "[tuning.grid.pd]\nwn = [20.0]\n[tuning.grid.tde]\nwn = [20.0]\ncutoff_hz = [50.0]\n"
+        "[tuning.grid.usde-smc]\nk = [0.01]\nlambda = [20.0]\n")
+    cfg = tmp_path / "tune7.toml"
+    cfg.write_text(text)
+    model = str(REPO / "tests" / "arms" / "robosuite" / "iiwa.xml")
+    r = armctl("tune", "--model", model, "--config", str(cfg), "--out", str(tmp_path / "runs"))
+    assert r.returncode == 0, r.stdout + r.stderr
+    gains_path = Path(r.stdout.strip().splitlines()[-1].removeprefix("gains: "))
+    assert gains_path.is_relative_to(REPO / "build" / "arms") and gains_path.name == "tune7.tuned_gains.json"
+    assert not (tmp_path / "tuned_gains.json").exists()  # never next to the config: that is the bundled arm's
+    r = armctl("study", "--model", model, "--config", str(cfg), "--duration", "0.2", "--methods", "pm,tde",
+               "--out", str(tmp_path / "study"))
+    assert r.returncode == 0, r.stdout + r.stderr
+    study = json.loads((tmp_path / "study" / "study.json").read_text())
+    assert study["tuning"]["source"] == f"tuned on this arm ({gains_path})"
+    assert len(study["runs"]["tde"]["tracking_max_abs_deg"]) == 7
+
+
+def test_demo_on_another_arm(tmp_path: Path) -> None:
+    r = armctl("demo", "--arm", str(REPO / "tests" / "arms" / "panda.toml"), "--duration", "0.2",
+               "--out", str(tmp_path))
+    assert r.returncode == 0, r.stdout + r.stderr
+    study = json.loads((tmp_path / "study.json").read_text())
+    assert study["arm"]["name"] == "panda" and study["arm"]["n_joints"] == 7
+    assert all(res["result"] == "ok" for res in study["runs"].values())
 
 
 def test_synth(tmp_path: Path) -> None:

@@ -136,6 +136,21 @@ def test_controller_boot_names_the_missing_drives(controller_bin: Path, bus_spec
     assert "drive(s) 1,2,3,4,5,6 not operational" in err
 
 
+def test_controller_refuses_a_simulator_running_another_arm(controller_bin: Path, bus_spec: str,
+                                                            tmp_path: Path) -> None:
+    """The model hash exchanged at boot (SIM_IDENTITY): the same arm with one byte changed in
+    its file is another arm as far as the run's evidence goes."""
+    prepared = controller_bin.parent.parent / "generated" / "arm" / "arm.xml"
+    other = tmp_path / "arm.xml"
+    other.write_text(prepared.read_text() + "<!-- edited -->\n")
+    sim = start_sim(bus_spec, "--model", str(other), "--boot-timeout", "10")
+    ctl = start_controller(controller_bin, bus_spec, "--boot-timeout", "5")
+    code, _, err = wait_exit(ctl, timeout=30)
+    wait_exit(sim, timeout=30)
+    assert code == 3, err
+    assert "the simulator runs another arm" in err and "6 joints" in err
+
+
 @pytest.mark.parametrize(("args", "named"), [
     (["--duration", "-1"], "--duration"),
     (["--duration", "abc"], "--duration"),

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from tools.hil import HilOptions, run_hil
+from tools.paths import REPO
 from tools.study import DEFAULT_CONFIG, run_method, run_study
 from tools.study_config import METHODS, StudyConfigError, load
 from tools.telemetry_log import read_log
@@ -128,3 +129,43 @@ def test_the_bus_timing_study_differs_from_the_default_only_in_timing_and_gains(
     for name in ("duration_s", "hold_s", "seed", "methods", "uncertainty", "trajectory", "tuning_seed",
                  "tuning_trajectory", "grid"):
         assert getattr(timed, name) == getattr(default, name), name
+
+
+def test_study_on_another_arm_tunes_its_own_gains_and_says_so(tmp_path: Path) -> None:
+    """A 7-DOF URDF arm: the bundled arm's gains are never reused for it; the study tunes on this
+    arm (and says so), keeps them in the arm's build folder, and reuses them next time."""
+    text = DEFAULT_CONFIG.read_text()
+    text = re.sub(r"(?ms)^\[tuning\.grid\.pd\].*", '[tuning.grid.pd]\nwn = [20.0, 40.0]\n\n[tuning.grid.tde]\n'
+                  'wn = [40.0]\ncutoff_hz = [100.0]\n\n[tuning.grid.usde-smc]\nk = [0.005]\nlambda = [40.0]\n', text)
+    text = text.replace("duration_s = 4.0", "duration_s = 1.0")
+    cfg = tmp_path / "small_grid.toml"
+    cfg.write_text(text)
+    # the bundled arm's gains file, where the config looks first: tuned on another arm
+    (tmp_path / "tuned_gains.json").write_text((DEFAULT_CONFIG.parent / "tuned_gains.json").read_text())
+    armctl = [str(REPO / "tools" / "armctl"), "study", "--arm", str(REPO / "tests" / "arms" / "panda.toml"),
+              "--config", str(cfg), "--duration", "1", "--methods", "pm,pd,tde"]
+
+    def run(out: Path) -> tuple[subprocess.CompletedProcess[str], dict]:
+        r = subprocess.run([*armctl, "--out", str(out)], cwd=REPO, capture_output=True, text=True, timeout=900)
+        return r, json.loads((out / "study.json").read_text())
+
+    import argparse
+
+    from tools.arm import arm_from_args
+    from tools.study import gains_file_for
+
+    arm = arm_from_args(argparse.Namespace(model=None, arm=REPO / "tests" / "arms" / "panda.toml", design=None))
+    gains_file_for(load(cfg), arm).unlink(missing_ok=True)  # kept by an earlier session of this test
+    r, s = run(tmp_path / "first")
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert "gains tuned on another arm are not reused" in r.stderr and "tuning them now" in r.stderr
+    assert s["tuning"]["source"].startswith("tuned in this study")
+    assert s["tuning"]["arm"]["model_hash"] == s["arm"]["model_hash"] and s["arm"]["n_joints"] == 7
+    for m, res in s["runs"].items():
+        assert res["result"] == "ok" and len(res["tracking_max_abs_deg"]) == 7, (m, res["verdict_reasons"])
+    report = (tmp_path / "first" / "report.md").read_text()
+    assert "panda_joint7" in report and "paper PM" not in report  # the paper's numbers are its arm's
+    r, s2 = run(tmp_path / "second")
+    assert r.returncode == 0 and "tuning them now" not in r.stderr
+    assert s2["tuning"]["source"].startswith("tuned on this arm") and "tuned_gains" in s2["tuning"]["source"]
+    assert s2["tuning"]["methods"] == s["tuning"]["methods"]

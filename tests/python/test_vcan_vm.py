@@ -283,15 +283,18 @@ ARMCTL = str(REPO / "tools" / "armctl")
 
 def test_hil_in_the_vm_through_the_cli(tmp_path: Path) -> None:
     """The README's way to run HIL over real SocketCAN, as a user types it: armctl (bash, its
-    bootstrap and the CLI) boots the VM and runs itself there with --bus vcan."""
+    bootstrap and the CLI) boots the VM and runs itself there with --bus vcan; here with a 7-DOF
+    arm from an arm file, whose wiring takes three buses (the default arm's two run in vm_run)."""
     _vm_or_skip()
-    r = subprocess.run([ARMCTL, "hil", "--bus", "vm", "--duration", "0.3", "--out", str(tmp_path)], cwd=REPO,
-                       capture_output=True, text=True, timeout=VM_TIMEOUT_S)
+    r = subprocess.run([ARMCTL, "hil", "--bus", "vm", "--arm", "tests/arms/panda.toml", "--duration", "0.3",
+                        "--out", str(tmp_path)], cwd=REPO, capture_output=True, text=True, timeout=VM_TIMEOUT_S)
     assert r.returncode == 0, r.stdout + r.stderr
     run = json.loads((tmp_path / "run.json").read_text())
     assert run["results"]["result"] == "ok", run["results"]
-    assert run["environment"]["bus"].split() == ["socketcan:vcan0@1,2,3", "socketcan:vcan1@4,5,6"]
+    assert run["environment"]["bus"].split() == ["socketcan:vcan0@1,2,3", "socketcan:vcan1@4,5",
+                                                 "socketcan:vcan2@6,7"]
     assert run["environment"]["bus_choice"].startswith("vcan -> vcan")
+    assert len(run["results"]["tracking_max_abs_deg"]) == 7
 
 
 def test_vcan_setup_run_and_up_in_the_vm() -> None:
@@ -302,9 +305,9 @@ def test_vcan_setup_run_and_up_in_the_vm() -> None:
     assert r.returncode == 0 and "VM image ready" in r.stdout, r.stdout + r.stderr
     script = ("set -e; cat <(echo procsub-ok); echo to-stderr >> /dev/stderr; readlink /dev/stdout; "
               "test -L /dev/stdin; mountpoint -q /dev/shm; mountpoint -q /dev/pts; "
-              "tools/armctl vcan up --iface vcan2; ip -details link show vcan2")
+              "tools/armctl vcan up --iface vcan5; ip -details link show vcan5")
     r = subprocess.run([ARMCTL, "vcan", "run", "--", "bash", "-c", script], cwd=REPO, capture_output=True,
                        text=True, timeout=VM_TIMEOUT_S)
     assert r.returncode == 0, r.stdout + r.stderr
     assert "procsub-ok" in r.stdout and "/proc/self/fd/1" in r.stdout and "to-stderr" in r.stderr
-    assert "vcan2 up (mtu 72 = CAN FD, txqueuelen 1000)" in r.stdout and "vcan" in r.stdout.split("vcan2:")[-1]
+    assert "vcan5 up (mtu 72 = CAN FD, txqueuelen 1000)" in r.stdout and "vcan" in r.stdout.split("vcan5:")[-1]

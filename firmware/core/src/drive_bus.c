@@ -146,6 +146,18 @@ arm_rx_kind_t arm_bus_handle_rx(arm_drive_bus_t *bus, const arm_can_frame_t *f)
         bus->rx.emcy++;
         return ARM_RX_EMCY;
     }
+    if (f->id == ARM_DRIVES_SIM_IDENTITY_FRAME_ID) {
+        struct arm_drives_sim_identity_t id;
+        if (f->len != ARM_DRIVES_SIM_IDENTITY_LENGTH || arm_drives_sim_identity_unpack(&id, f->data, f->len) != 0) {
+            bus->rx.bad_length++;
+            return ARM_RX_BAD_LENGTH;
+        }
+        bus->sim_identity_seen = 1;
+        bus->sim_model_hash32 = id.model_hash;
+        bus->sim_n_joints = id.n_joints;
+        bus->rx.sim_identity++;
+        return ARM_RX_SIM_IDENTITY;
+    }
     if (f->id == ARM_DRIVES_SYNC_FRAME_ID || f->id == ARM_DRIVES_NMT_FRAME_ID ||
         index_of(k_cmd_id, f->id) >= 0) {
         bus->rx.foreign_master++;

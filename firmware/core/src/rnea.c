@@ -103,6 +103,6 @@ void arm_rnea(const arm_robot_model_t *model, const float q[ARM_N_JOINTS],
             f[k] = force[i][k] + f_child[k];
             n[k] = moment[i][k] + cxf[k] + n_child[k];
         }
-        tau[i] = arm_v3_dot(l->axis, n);
+        tau[i] = arm_v3_dot(l->axis, n) + l->armature * qdd[i] + l->damping * qd[i];
     }
 }

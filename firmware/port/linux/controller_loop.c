@@ -128,7 +128,15 @@ static void list_joints(uint32_t mask, char *out, size_t cap)
     }
 }
 
-static int boot(link_t *l, const options_t *opt, telemetry_t *telem)
+/* HIL: a simulator that runs another arm than this controller was built for is refused at boot
+ * (the simulator announces its model with SIM_IDENTITY; real drives never do). */
+static int sim_identity_mismatch(const link_t *l, const arm_robot_model_t *model)
+{
+    return l->drives.sim_identity_seen &&
+           (l->drives.sim_model_hash32 != (uint32_t)model->model_hash || l->drives.sim_n_joints != ARM_N_JOINTS);
+}
+
+static int boot(link_t *l, const options_t *opt, const arm_robot_model_t *model, telemetry_t *telem)
 {
     const int64_t start = now_ns();
     const int64_t give_up = start + (int64_t)(opt->boot_timeout_s * 1e9);
@@ -140,6 +148,15 @@ static int boot(link_t *l, const options_t *opt, telemetry_t *telem)
         int64_t slice = now_ns() + 50000000LL;
         if (slice > give_up) slice = give_up;
         pump(l, slice, drives_operational);
+        if (sim_identity_mismatch(l, model)) {
+            snprintf(l->report->reason, sizeof(l->report->reason),
+                     "boot: the simulator runs another arm (model hash %08x, %u joints) than this controller was "
+                     "built for (%08x, %d joints): build the controller for the simulator's model, or start the "
+                     "simulator with this controller's (tools/armctl does both from one --model/--arm)",
+                     (unsigned)l->drives.sim_model_hash32, (unsigned)l->drives.sim_n_joints,
+                     (unsigned)(uint32_t)model->model_hash, ARM_N_JOINTS);
+            return -1;
+        }
         if (drives_operational(&l->drives) == ALL_JOINTS) {
             l->report->boot_s = (double)(now_ns() - start) * 1e-9;
             telemetry_event(telem, 0, "info", "all drives operational");
@@ -207,7 +224,7 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
     }
 
     const int64_t t_start = now_ns();
-    if (boot(&l, opt, telem) != 0) {
+    if (boot(&l, opt, model, telem) != 0) {
         report->result = RUN_BOOT_FAILED;
         if (controller_stop_signal != 0) {
             snprintf(report->reason, sizeof(report->reason), "stopped by signal %d while the drives booted",

@@ -36,7 +36,7 @@ void options_usage(const char *prog)
            "  --spin-us US            poll the bus this long before sleeping on it: a wake-up from\n"
            "                          sleep costs tens of us on a VM (lockstep speed)   [0]\n"
            "  --ref-amp A1,..,An --ref-freq F1,..,Fn  reference q_d = q0 + A (1 - cos 2 pi F t)\n"
-           "                          per joint (both or neither)     [built-in]\n"
+           "                          per joint, A may be negative (both or neither) [built-in]\n"
            "  --summary FILE          write a JSON summary of the run (atomically)\n",
            prog);
     rt_usage();
@@ -241,7 +241,7 @@ int options_parse(int argc, char **argv, const arm_robot_model_t *model, options
         } else if (strcmp(a, "--ref-hold") == 0) {
             rc = parse_double(a, v, 0.0, 3600.0, &opt->ref_hold_s, err, errcap);
         } else if (strcmp(a, "--ref-amp") == 0) {
-            rc = parse_list(a, v, 0.0, 3.2, opt->ref_amp, err, errcap);
+            rc = parse_list(a, v, -3.2, 3.2, opt->ref_amp, err, errcap); /* the sign: which way it moves */
             ref_amp_given = 1;
         } else if (strcmp(a, "--ref-freq") == 0) {
             rc = parse_list(a, v, 0.0, 50.0, opt->ref_freq_hz, err, errcap);

@@ -69,7 +69,7 @@ VecN inverse_dynamics(const arm_robot_model_t &model, const VecN &q, const VecN 
         f = F[i] + f_child;
         n = Nm[i] + n_child + (c[i] - p[i]).cross(F[i]);
         if (i + 1 < N) n += (p[i + 1] - p[i]).cross(f_child);
-        tau[i] = z[i].dot(n);
+        tau[i] = z[i].dot(n) + model.link[i].armature * qdd[i] + model.link[i].damping * qd[i];
     }
     return tau;
 }

@@ -42,6 +42,7 @@ typedef enum {
     ARM_RX_BAD_LENGTH,
     ARM_RX_WRONG_COUNTER,  /* a state for another period (late or duplicated) */
     ARM_RX_BAD_FORMAT,     /* FD/classic or RTR/ERR flags do not match the definition */
+    ARM_RX_SIM_IDENTITY,   /* HIL: the arm the simulator runs (its model hash and joint count) */
 } arm_rx_kind_t;
 
 typedef struct {
@@ -53,6 +54,7 @@ typedef struct {
     uint32_t bad_length;
     uint32_t wrong_counter;
     uint32_t bad_format;
+    uint32_t sim_identity;
 } arm_rx_counters_t;
 
 typedef struct {
@@ -66,6 +68,10 @@ typedef struct {
     uint8_t nmt_state[ARM_N_JOINTS];
     uint32_t heartbeat_mask; /* bit i: drive i has sent a heartbeat since boot */
     uint16_t last_emcy_code[ARM_N_JOINTS];
+    /* HIL: the simulator's SIM_IDENTITY, if one came (real drives never send it) */
+    int sim_identity_seen;
+    uint32_t sim_model_hash32;
+    uint8_t sim_n_joints;
     arm_rx_counters_t rx;
 } arm_drive_bus_t;
 

@@ -1,4 +1,5 @@
-/* Nominal rigid-body model of a serial arm of revolute joints (filled by a generated header). */
+/* Nominal model of a serial arm of revolute joints (filled by a generated header): rigid links,
+ * each joint's armature and viscous damping. */
 #ifndef ARM_ROBOT_MODEL_TYPES_H
 #define ARM_ROBOT_MODEL_TYPES_H
 
@@ -16,11 +17,14 @@ typedef struct {
     float com[3];         /* centre of mass, body frame */
     float inertia[3][3];  /* about the centre of mass, body frame */
     float torque_limit;   /* Nm, the drive's limit */
+    float armature;       /* kg m^2, rotor inertia reflected to the joint: adds armature * qdd */
+    float damping;        /* N m s/rad, viscous joint damping: adds damping * qd */
 } arm_link_t;
 
 typedef struct {
     float gravity[3]; /* world frame, m/s^2 (base frame = world frame) */
     arm_link_t link[ARM_N_JOINTS];
+    unsigned long long model_hash; /* FNV-1a 64 of the prepared model file (gen/arm.py) */
 } arm_robot_model_t;
 
 #endif

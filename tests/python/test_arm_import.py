@@ -1,0 +1,299 @@
+"""gen/arm.py on what real arm models contain: the public arms vendored in tests/arms, and small
+models that each carry one thing the importer must take or refuse by name."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+
+from gen import arm as gen_arm
+from gen.arm import ArmError, clip_amplitude, load_arm_file, prepare
+from gen.robot_model import extract, nominal_for_inverse
+from tools.arm import ArmChoiceError, reference_for
+
+from arm_models import ARMATURE, UR5E, armature_variant
+
+REPO = Path(__file__).resolve().parents[2]
+ARMS = REPO / "tests" / "arms"
+DESIGN = REPO / "gen" / "configs" / "paper.toml"
+IIWA = ARMS / "robosuite" / "iiwa.xml"
+PANDA_URDF = ARMS / "example-robot-data" / "panda.urdf"
+UR5_URDF = ARMS / "example-robot-data" / "ur5_robot.urdf"
+
+
+def prep(model: Path, **arm_file: object) -> gen_arm.Prepared:
+    af = gen_arm.ArmFile(None, None, model)
+    for k, v in arm_file.items():
+        setattr(af, k, v)
+    return prepare(af, DESIGN)
+
+
+def chain_mjcf(n: int = 3, *, body_extra: str = "", joint_attrs: list[str] | None = None, tip_mass: float = 1.0,
+               actuators: bool = True, extra: str = "", base_fixed_body: bool = True) -> str:
+    """A serial chain of n hinge links, each with an explicit inertial (and optionally a fixed
+    body in between): the smallest model of the shape real arms have."""
+    attrs = joint_attrs or [""] * n
+    body = body_extra
+    for i in reversed(range(n)):
+        mass = tip_mass if i == n - 1 else 1.0
+        inertia = max(mass * 0.01, 1e-12)
+        axis = "0 0 1" if i % 2 == 0 else "0 1 0"
+        body = (f'<body name="l{i}" pos="0 0 0.2"><joint name="j{i}" axis="{axis}" range="-2 2" {attrs[i]}/>'
+                f'<inertial pos="0 0 0.1" mass="{mass}" diaginertia="{inertia} {inertia} {inertia}"/>{body}</body>')
+    if base_fixed_body:
+        body = f'<body name="mount" pos="0 0 0.1" quat="0.924 0 0 0.383"><inertial pos="0 0 0" mass="2" ' \
+               f'diaginertia="0.1 0.1 0.1"/>{body}</body>'
+    acts = "".join(f'<motor joint="j{i}" ctrlrange="-50 50"/>' for i in range(n)) if actuators else ""
+    return (f'<mujoco model="chain"><compiler angle="radian"/><worldbody>{body}</worldbody><actuator>{acts}</actuator>{extra}</mujoco>')
+
+
+def write(tmp_path: Path, text: str, name: str = "arm.xml") -> Path:
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+# ---- the public arms ------------------------------------------------------------------------
+@pytest.mark.parametrize("model,n,limits", [
+    (UR5E, 6, [150, 150, 150, 28, 28, 28]),
+    (IIWA, 7, [176, 176, 110, 110, 110, 40, 40]),
+    (PANDA_URDF, 7, [87, 87, 87, 87, 12, 12, 12]),
+    (UR5_URDF, 6, [150, 150, 150, 28, 28, 28]),
+])
+def test_public_arms_are_prepared(model: Path, n: int, limits: list[float]) -> None:
+    p = prep(model)
+    info = p.info
+    assert info["n_joints"] == n
+    assert [j["torque_limit"] for j in info["joints"]] == limits
+    assert info["timestep_s"] == pytest.approx(0.001) and info["substeps"] == 1
+    assert any("timestep" in w for w in info["warnings"])  # the model's 2 ms is replaced, and it says so
+    assert any("mesh" in w for w in info["warnings"])  # meshes are not vendored: dropped with a warning
+    m = mujoco.MjModel.from_xml_string(p.xml)
+    assert m.nq == m.nv == m.nu == n and m.opt.timestep == pytest.approx(0.001)
+    assert m.ngeom == 0 and m.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_CONTACT
+    assert list(m.actuator_ctrlrange[:, 1]) == limits
+    assert mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, "home") >= 0
+    assert sum(len(b["drives"]) for b in info["buses"]) == n
+    assert info["written_inverse_dynamics_error"] < 1e-4
+    assert int(info["model_hash"], 16) == gen_arm.fnv1a64(p.xml.encode())
+
+
+def test_robosuite_ur5e_fixed_base_bodies_are_fused_and_the_dynamics_kept() -> None:
+    """robosuite's UR5e hangs the chain under two fixed bodies (base, and a rotated link): the
+    prepared model has one body per joint, and its inverse dynamics equal the original's."""
+    raw = mujoco.MjSpec.from_file(str(UR5E))
+    gen_arm._strip_meshes(raw)
+    m0 = raw.compile()
+    assert m0.nbody > 7  # world, fixed bodies, six links, the hand's bodies
+    p = prep(UR5E)
+    m = mujoco.MjModel.from_xml_string(p.xml)
+    assert m.nbody == 7
+    rng = np.random.default_rng(3)
+    for m_ in (m0, m):
+        nominal_for_inverse(m_)
+    for _ in range(20):
+        q, qd, qdd = rng.uniform(-2, 2, 6), rng.uniform(-1, 1, 6), rng.uniform(-3, 3, 6)
+        out = []
+        for m_ in (m0, m):
+            d = mujoco.MjData(m_)
+            d.qpos[:], d.qvel[:], d.qacc[:] = q, qd, qdd
+            mujoco.mj_inverse(m_, d)
+            out.append(d.qfrc_inverse.copy())
+        assert np.allclose(out[0], out[1], rtol=1e-4, atol=1e-4 * np.max(np.abs(out[0])))
+
+
+def test_urdf_gripper_is_locked_and_its_mass_carried_by_the_last_link() -> None:
+    p = prep(PANDA_URDF)
+    assert [x["name"] for x in p.info["locked"]] == ["panda_finger_joint1", "panda_finger_joint2"]
+    m = mujoco.MjModel.from_xml_string(p.xml)
+    raw = mujoco.MjSpec.from_file(str(PANDA_URDF))
+    gen_arm._strip_meshes(raw)
+    m0 = raw.compile()
+    assert sum(m.body_mass) == pytest.approx(sum(m0.body_mass), rel=1e-6)  # fingers fused, not dropped
+
+
+def test_armature_damping_and_gear_are_read_from_a_modified_public_arm(tmp_path: Path) -> None:
+    model = armature_variant(tmp_path)
+    p = prep(model)
+    j = p.info["joints"]
+    assert [x["armature"] for x in j] == ARMATURE
+    assert all(x["damping"] == 1.0 and x["frictionloss"] == 2.0 for x in j)
+    # ctrlrange 1.2 x gear 100 = 120 N m is tighter than forcerange 1.65 x 100 for the big joints
+    assert [x["torque_limit"] for x in j] == pytest.approx([120, 120, 120, 30.8, 30.8, 30.8])
+    assert "ctrlrange x gear" in j[0]["torque_limit_from"] and "forcerange x gear" in j[3]["torque_limit_from"]
+    assert "armature" in p.info["nominal_model"] and "frictionloss" in p.info["nominal_model"]
+    robot = extract_from_xml(tmp_path, p.xml)
+    assert [ln.armature for ln in robot.links] == ARMATURE
+    assert [ln.damping for ln in robot.links] == [1.0] * 6
+
+
+def extract_from_xml(tmp_path: Path, xml: str):  # noqa: ANN201 - gen.robot_model.RobotModel
+    p = tmp_path / "prepared.xml"
+    p.write_text(xml)
+    return extract(p)
+
+
+# ---- the home pose and the reference -------------------------------------------------------
+def test_home_from_keyframe_arm_file_or_mid_range(tmp_path: Path) -> None:
+    bare = write(tmp_path, chain_mjcf())
+    p = prep(bare)
+    assert [j["home"] for j in p.info["joints"]] == [0, 0, 0]
+    assert "mid-range" in p.info["home_from"] and any("home pose" in w for w in p.info["warnings"])
+    keyed = write(tmp_path, chain_mjcf(extra='<keyframe><key name="home" qpos="0.1 0.2 0.3"/></keyframe>'), "k.xml")
+    assert [j["home"] for j in prep(keyed).info["joints"]] == [0.1, 0.2, 0.3]
+    assert [j["home"] for j in prep(keyed, home={"j0": 1, "j1": -1, "j2": 0.5}).info["joints"]] == [1, -1, 0.5]
+    with pytest.raises(ArmError, match="joint 'j1' at 1.98 rad is not inside its range"):
+        prep(keyed, home=[0, 1.98, 0])
+
+
+def test_reference_stays_inside_the_ranges_with_a_warning_when_clipped() -> None:
+    assert clip_amplitude(0.3, 0.0, [-2, 2]) == 0.3
+    assert clip_amplitude(0.3, 1.8, [-2, 2]) == -0.3  # no room above: it moves down
+    assert clip_amplitude(0.3, 1.8, [-1.9, 2]) == pytest.approx(-0.3)
+    assert clip_amplitude(2.0, 0.0, [-2, 2]) == pytest.approx((2 - 0.05) / 2)
+    assert clip_amplitude(5.0, 0.0, None) == 5.0
+    info = prep(UR5E).info
+    amp, freq, warnings = reference_for(info, [0.1, 0.1, 4.0, 0.1, 0.1, 0.1], None)
+    assert amp[2] < 4.0 and len(warnings) == 1 and "elbow_joint" in warnings[0] and "clipped" in warnings[0]
+    home, r = info["joints"][2]["home"], info["joints"][2]["range"]
+    assert r[0] + 0.05 <= home + 2 * amp[2] <= r[1] - 0.05
+    assert freq == info["reference"]["freq_hz"]
+    for j, a in zip(info["joints"], info["reference"]["amp"]):  # the default reference is inside too
+        assert j["range"][0] + 0.05 - 1e-12 <= j["home"] + 2 * a <= j["range"][1] - 0.05 + 1e-12
+    with pytest.raises(ArmChoiceError, match="--ref-amp: 2 values for the arm's 6 joints"):
+        reference_for(info, [0.1, 0.1], None)
+
+
+# ---- what it refuses, by name ---------------------------------------------------------------
+@pytest.mark.parametrize("text,match", [
+    (chain_mjcf().replace('<body name="mount"', '<body name="mount"><freejoint name="float"/><body name="m2"')
+     .replace("</worldbody>", "</body></worldbody>"), "joint 'float' is a free joint"),
+    (chain_mjcf().replace('<joint name="j1" axis="0 1 0" range="-2 2" ', '<joint name="j1" type="ball" '),
+     r"joint 'j1' \(ball\) sits inside the arm.*locked = \{ j1 = value \}"),
+    (chain_mjcf().replace('<joint name="j1" axis="0 1 0"', '<joint name="j1" type="slide" axis="0 1 0"'),
+     r"joint 'j1' \(slide \(prismatic\)\) sits inside the arm"),
+    (chain_mjcf(tip_mass=1e-9), "joint 'j2' moves almost no inertia"),
+    (chain_mjcf().replace('<inertial pos="0 0 0.1" mass="1.0" diaginertia="0.01 0.01 0.01"/></body></body></body>',
+                          "</body></body></body>"), "mass and inertia"),
+    (chain_mjcf(actuators=False), "joint 'j0' has no torque limit"),
+    (chain_mjcf(extra='<equality><connect body1="l2" body2="world" anchor="0 0 0"/></equality>'),
+     "closes a loop through the arm"),
+    (chain_mjcf(extra='<equality><joint joint1="j0" joint2="j1"/></equality>'), "couples controlled joint"),
+    (chain_mjcf(n=9), "9 controlled joints; the firmware takes at most 16 and the protocol.*defines 8 drive slots"),
+])
+def test_what_the_controller_cannot_use_is_refused_by_name(tmp_path: Path, text: str, match: str) -> None:
+    model = write(tmp_path, text)
+    with pytest.raises(ArmError, match=match):
+        prep(model)
+    out = tmp_path / "out"
+    assert gen_arm.main(["--model", str(model), "--out", str(out)]) == 2
+    assert not out.exists()  # nothing half-written
+
+
+def test_a_branch_ends_the_default_chain_and_a_wrong_joint_list_is_named(tmp_path: Path) -> None:
+    # two fingers on the last link: the chain stops before them and both are locked
+    fingers = ''.join(f'<body name="f{k}" pos="0 0 0.1"><joint name="finger{k}" type="slide" axis="1 0 0" '
+                      f'range="0 0.04"/><inertial pos="0 0 0" mass="0.1" diaginertia="1e-4 1e-4 1e-4"/></body>'
+                      for k in (1, 2))
+    model = write(tmp_path, chain_mjcf(body_extra=fingers))
+    p = prep(model)
+    assert [j["name"] for j in p.info["joints"]] == ["j0", "j1", "j2"]
+    assert {x["name"] for x in p.info["locked"]} == {"finger1", "finger2"}
+    with pytest.raises(ArmError, match="joint 'j0' is not below joint 'j2'"):
+        prep(model, joints=["j2", "j0"])
+    with pytest.raises(ArmError, match="no joint 'wrist'"):
+        prep(model, joints=["j0", "wrist"])
+    with pytest.raises(ArmError, match=r"joint 'finger1' is a slide \(prismatic\) joint"):
+        prep(model, joints=["j0", "j1", "j2", "finger1"])
+
+
+def test_locked_joints_take_the_arm_files_value_and_move_the_links(tmp_path: Path) -> None:
+    """Locking j1 at 0.7 rad must put everything beyond it where the joint would have put it."""
+    model = write(tmp_path, chain_mjcf())
+    p = prep(model, joints=["j0", "j2"], locked={"j1": 0.7})
+    m = mujoco.MjModel.from_xml_string(p.xml)
+    d = mujoco.MjData(m)
+    mujoco.mj_kinematics(m, d)
+    m0 = mujoco.MjModel.from_xml_path(str(model))
+    d0 = mujoco.MjData(m0)
+    d0.qpos[1] = 0.7
+    mujoco.mj_kinematics(m0, d0)
+    tip, tip0 = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "l2"), mujoco.mj_name2id(m0, mujoco.mjtObj.mjOBJ_BODY, "l2")
+    assert np.allclose(d.xpos[tip], d0.xpos[tip0], atol=1e-5)
+    assert np.allclose(d.xmat[tip], d0.xmat[tip0], atol=1e-5)
+
+
+def test_timestep_is_the_loop_period_or_an_integer_fraction(tmp_path: Path) -> None:
+    half = write(tmp_path, chain_mjcf(extra='<option timestep="0.0005"/>'))
+    p = prep(half, timestep="model")
+    assert p.info["substeps"] == 2 and p.info["timestep_s"] == 0.0005
+    assert mujoco.MjModel.from_xml_string(p.xml).opt.timestep == 0.0005
+    odd = write(tmp_path, chain_mjcf(extra='<option timestep="0.0007"/>'), "odd.xml")
+    with pytest.raises(ArmError, match="timestep 0.0007 s does not divide the loop period 0.001 s"):
+        prep(odd, timestep="model")
+    p = prep(odd)
+    assert p.info["substeps"] == 1 and p.info["timestep_s"] == 0.001
+    assert any("0.0007 s replaced by the loop period" in w for w in p.info["warnings"])
+
+
+@pytest.mark.parametrize("text,match", [
+    ('model = "x.xml"\nspeed = 3\n', "unknown field.*speed"),
+    ('model = "x.xml"\ntimestep = "fast"\n', "timestep: expected"),
+    ('model = "x.xml"\ntorque_limits = { j0 = -1 }\n', "torque_limits: must be > 0"),
+    ('model = "x.xml"\nhome = [0, "a"]\n', r"home\[1\]: expected a number"),
+    ('joints = ["j0"]\n', "model: missing"),
+    ('model = "x.xml"\nbuses = 3\n', "buses: expected"),
+    ('model = "x.xml"\n[locked\n', "not TOML"),
+])
+def test_arm_file_errors_name_the_field(tmp_path: Path, text: str, match: str) -> None:
+    f = write(tmp_path, text, "arm.toml")
+    with pytest.raises(ArmError, match=match):
+        load_arm_file(f)
+
+
+def test_arm_file_names_joints_torque_limits_and_wiring(tmp_path: Path) -> None:
+    model = write(tmp_path, chain_mjcf())
+    f = write(tmp_path, 'model = "arm.xml"\nname = "My Arm"\njoints = ["j0", "j1", "j2"]\n'
+                        'torque_limits = { j2 = 7.5 }\n'
+                        '[[buses]]\nname = "can0"\nkind = "fd"\nnominal = 1000000\ndata = 5000000\ndrives = [1, 2, 3]\n',
+              "arm.toml")
+    af = load_arm_file(f)
+    assert af.model == model.resolve()
+    p = prepare(af, DESIGN)
+    assert p.info["name"] == "my-arm"
+    assert [j["torque_limit"] for j in p.info["joints"]] == [50, 50, 7.5]
+    assert p.info["joints"][2]["torque_limit_from"] == "arm file"
+    assert p.info["buses"] == [{"name": "can0", "kind": "fd", "nominal": 1000000, "data": 5000000, "drives": [1, 2, 3]}]
+    assert "n_joints = 3" in p.design_text
+    bad = write(tmp_path, 'model = "arm.xml"\n[[buses]]\nname = "can0"\nkind = "classic"\nnominal = 250000\n'
+                          'drives = [1, 2, 3]\n', "bad.toml")
+    with pytest.raises(ArmError, match="bus wiring"):
+        prepare(load_arm_file(bad), DESIGN)
+
+
+def test_cli_writes_the_three_files_and_a_depfile(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    dep = tmp_path / "arm.d"
+    assert gen_arm.main(["--model", str(UR5E), "--out", str(out), "--depfile", str(dep)]) == 0
+    assert sorted(x.name for x in out.iterdir()) == ["arm.json", "arm.xml", "design.toml"]
+    info = json.loads((out / "arm.json").read_text())
+    assert info["model_hash"] == f"{gen_arm.fnv1a64((out / 'arm.xml').read_bytes()):016x}"
+    assert str(UR5E.resolve()) in dep.read_text() and str(DESIGN.resolve()) in dep.read_text()
+    assert math.isfinite(info["written_inverse_dynamics_error"])
+
+
+def test_contacts_are_off_unless_the_arm_file_keeps_them() -> None:
+    bundled = REPO / "host_sim" / "models" / "ur5e_arm.xml"
+    m = mujoco.MjModel.from_xml_string(prep(bundled).xml)
+    assert m.ngeom == 0 and m.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_CONTACT
+    p = prep(bundled, contacts=True)
+    m = mujoco.MjModel.from_xml_string(p.xml)
+    assert m.ngeom > 0 and not m.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_CONTACT
+    assert "contacts" in p.info["nominal_model"] and p.info["contacts"] is True
+    with pytest.raises(ArmError, match="contacts = true needs the collision meshes"):
+        prep(UR5E, contacts=True)

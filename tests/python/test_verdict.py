@@ -1,0 +1,100 @@
+"""Verdicts are promises: "ok" only for a run that met its stated bounds with every process well
+and every metric covering the whole run; anything else is named and exits non-zero."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from tools.hil import HilOptions, run_hil
+from tools.paths import REPO
+from tools.verdict import Bounds, judge
+
+GOOD_RESULTS = {"joint_names": ["a", "b"], "tracking_max_abs_deg": [0.5, 1.0], "saturated_fraction": [0.0, 0.01],
+                "commands_missed": 0, "commands_late": 0, "trajectory_periods": 1000, "periods_running": 1000,
+                "estimation_periods": 1000}
+GOOD_TRANSPORT = {"telemetry_lost_total": 0}
+GOOD_CONTROLLER = {"result": 0, "steps_requested": 1500, "steps_done": 1500}
+GOOD_SIM = {"result": "ok"}
+GOOD_EXITS = {"controller": 0, "simulator": 0, "logger": 0}
+
+
+def verdict(results: dict | None = None, transport: dict | None = None, controller: dict | None = None,
+            sim: dict | None = None, exits: dict | None = None, bounds: Bounds = Bounds()) -> tuple[str, list[str]]:
+    return judge({**GOOD_RESULTS, **(results or {})}, {**GOOD_TRANSPORT, **(transport or {})},
+                 {**GOOD_CONTROLLER, **(controller or {})}, {**GOOD_SIM, **(sim or {})},
+                 {**GOOD_EXITS, **(exits or {})}, bounds)
+
+
+def test_a_good_run_is_ok() -> None:
+    assert verdict() == ("ok", [])
+
+
+@pytest.mark.parametrize("change,expected,named", [
+    ({"sim": {"result": "diverged", "reason": "MuJoCo reset the arm"}}, "diverged", "MuJoCo reset"),
+    ({"results": {"tracking_max_abs_deg": [0.5, math.nan]}}, "diverged", "on b"),
+    ({"results": {"tracking_max_abs_deg": [0.5, 1225.0]}}, "diverged", "beyond 180 deg on b"),
+    ({"controller": {"result": 5, "reason": "SIGTERM"}}, "interrupted", "SIGTERM"),
+    ({"controller": {"result": 3, "reason": "runtime fault"}}, "failed", "runtime fault"),
+    ({"sim": {"result": "lost", "reason": "controller went silent"}}, "failed", "went silent"),
+    ({"controller": {"steps_done": 556}}, "incomplete", "556 of 1500 periods"),
+    ({"controller": {"steps_done": None}}, "incomplete", "unknown number"),
+    ({"transport": {"telemetry_lost_total": 3}}, "incomplete", "telemetry lost: 3"),
+    ({"transport": {"telemetry_lost_total": None}}, "incomplete", "telemetry lost: unknown"),
+    ({"exits": {"logger": 1}}, "incomplete", "logger failed"),
+    ({"results": {"periods_running": 999}}, "incomplete", "cover 999 of the trajectory's 1000"),
+    ({"results": {"estimation_periods": 10}}, "incomplete", "estimation error covers 10"),
+    ({"results": {"tracking_max_abs_deg": [0.5, 31.0]}}, "tracking-bound-exceeded", "b: max |e| 31 deg > 30"),
+    ({"results": {"saturated_fraction": [0.2, 0.0]}}, "torque-limited", "a: at its torque limit 20.0 %"),
+    ({"results": {"commands_missed": 2}}, "commands-missed", "missed 2"),
+    ({"results": {"commands_missed": None}}, "commands-missed", "missed None"),
+    ({"results": {"commands_late": 1}}, "commands-missed", "1 late"),
+])
+def test_every_failure_is_named(change: dict, expected: str, named: str) -> None:
+    result, reasons = verdict(**change)
+    assert result == expected
+    assert any(named in r for r in reasons), reasons
+
+
+def test_diverged_wins_over_everything_it_causes() -> None:
+    """A diverged arm faults the drives, stops the controller and shortens the run: the verdict
+    is the cause, and every consequence is still listed."""
+    result, reasons = verdict(sim={"result": "diverged", "reason": "reset"}, controller={"result": 3, "steps_done": 7},
+                              results={"periods_running": 0})
+    assert result == "diverged"
+    assert {r.split(":")[0] for r in reasons} == {"diverged", "failed", "incomplete"}
+
+
+def test_bounds_are_the_ones_asked_for() -> None:
+    assert verdict(results={"tracking_max_abs_deg": [0.5, 3.0]}, bounds=Bounds(max_error_deg=2.0))[0] == \
+        "tracking-bound-exceeded"
+    assert verdict(results={"commands_missed": 2}, bounds=Bounds(max_commands_missed=5))[0] == "ok"
+    assert verdict(exits={"logger": None})[0] == "ok"  # no logger asked for: nothing to fail
+
+
+def test_a_diverging_simulation_is_reported_diverged_never_ok(tmp_path: Path, controller_bin: Path) -> None:
+    """Explicit viscous friction far beyond what the wrist's inertia takes at a 1 ms step: the
+    simulation blows up; MuJoCo would reset the arm and carry on."""
+    run = run_hil(HilOptions(out=tmp_path, duration_s=1.0, preset=controller_bin.parent.parent.name,
+                             uncertainty={"viscous": [0, 0, 0, 0, 0, 10.0]}))
+    r = run["results"]
+    assert r["result"] == "diverged", r["verdict_reasons"]
+    assert "MuJoCo" in r["verdict_reasons"][0] and "joint 6" in r["verdict_reasons"][0]
+    assert run["environment"]["exit_codes"]["simulator"] == 5
+    sim = json.loads((tmp_path / "sim_summary.json").read_text())
+    assert sim["result"] == "diverged"
+
+
+def test_hil_exits_non_zero_and_states_the_bounds_it_missed(tmp_path: Path) -> None:
+    r = subprocess.run([str(REPO / "tools" / "armctl"), "hil", "--duration", "1", "--out", str(tmp_path),
+                        "--max-error-deg", "0.001"], cwd=REPO, capture_output=True, text=True, timeout=600)
+    run = json.loads((tmp_path / "run.json").read_text())
+    res = run["results"]
+    assert r.returncode == 1
+    assert res["result"] == "tracking-bound-exceeded" and "tracking-bound-exceeded" in r.stdout
+    assert res["bounds"]["max_error_deg"] == 0.001 and res["bounds"]["max_commands_missed"] == 0
+    assert all(x.startswith("tracking-bound-exceeded") for x in res["verdict_reasons"])

@@ -1,0 +1,163 @@
+"""Which arm a command works on (--model / --arm), and where its build lives.
+
+Every command that builds or runs takes the same arm options. The arm is prepared at build time
+(gen/arm.py, a CMake step), so one build folder holds everything of one arm: the prepared model,
+arm.json, the design, the firmware, the simulator. The bundled arm builds in build/<preset>; any
+other in build/arms/<name>-<key>/<preset>, side by side, so switching arms rebuilds nothing that
+did not change.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from tools.build import build
+from tools.paths import BUILD, build_dir
+
+MODEL_SUFFIXES = (".xml", ".urdf", ".mjcf")
+
+
+class ArmChoiceError(ValueError):
+    """--model / --arm / --design cannot be used as given; the message says which and why."""
+
+
+@dataclass(frozen=True)
+class ArmRef:
+    model: Path | None = None  # an MJCF or URDF
+    arm_file: Path | None = None  # an arm file (TOML), which names its model
+    design: Path | None = None  # the design config when the arm file names none
+
+    @property
+    def is_default(self) -> bool:
+        return self.model is None and self.arm_file is None and self.design is None
+
+    def label(self) -> str:
+        return str(self.arm_file or self.model or "the bundled arm")
+
+    def key(self) -> str:
+        """The build folder's name: readable, and unique to the files that define the arm."""
+        what = self.arm_file or self.model
+        stem = re.sub(r"[^A-Za-z0-9_-]+", "-", what.stem if what else "default").strip("-").lower()[:32] or "arm"
+        if what is not None and stem in ("robot", "model", "arm"):  # robot.xml: the folder says more
+            stem = re.sub(r"[^A-Za-z0-9_-]+", "-", what.parent.name).lower()[:32] or stem
+        digest = hashlib.sha256("\0".join(str(p) for p in (self.model, self.arm_file, self.design)).encode())
+        return f"{stem}-{digest.hexdigest()[:8]}"
+
+    def cache(self) -> dict[str, str]:
+        out: dict[str, str] = {}
+        if self.model is not None:
+            out["ARM_MODEL"] = str(self.model)
+        out["ARM_FILE"] = str(self.arm_file) if self.arm_file is not None else ""
+        if self.design is not None:
+            out["ARM_DESIGN_CONFIG"] = str(self.design)
+        return out
+
+
+DEFAULT_ARM = ArmRef()
+
+
+def add_arm_arguments(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("the arm (README: Your own arm)")
+    g.add_argument("--model", type=Path, default=None, metavar="FILE",
+                   help="the arm's MJCF (.xml) or URDF (.urdf) [the bundled UR5e-proportioned arm]")
+    g.add_argument("--arm", type=Path, default=None, metavar="FILE",
+                   help="an arm file (TOML): its model, the controlled joints, home pose, torque limits, "
+                        "bus wiring and design config")
+    g.add_argument("--design", type=Path, default=None, metavar="FILE",
+                   help="design config when the arm file names none [gen/configs/paper.toml]")
+
+
+def arm_from_args(ns: argparse.Namespace) -> ArmRef:
+    """The arm options checked up front (before anything builds or starts)."""
+    model, arm_file, design = getattr(ns, "model", None), getattr(ns, "arm", None), getattr(ns, "design", None)
+    if model is not None and arm_file is not None:
+        raise ArmChoiceError("--model and --arm: give one (an arm file names its model)")
+    for opt, p, suffixes in (("--model", model, MODEL_SUFFIXES), ("--arm", arm_file, (".toml",)),
+                             ("--design", design, (".toml",))):
+        if p is None:
+            continue
+        if not p.is_file():
+            raise ArmChoiceError(f"{opt} {p}: no such file")
+        if p.suffix.lower() not in suffixes:
+            raise ArmChoiceError(f"{opt} {p}: expected a {' or '.join(suffixes)} file")
+    if arm_file is not None:
+        from gen.arm import ArmError, load_arm_file
+
+        try:
+            af = load_arm_file(arm_file.resolve())
+        except ArmError as exc:
+            raise ArmChoiceError(str(exc)) from exc
+        model = af.model
+        if not model.is_file():
+            raise ArmChoiceError(f"arm file {arm_file}: model {model}: no such file")
+    ref = ArmRef(model.resolve() if model else None, arm_file.resolve() if arm_file else None,
+                 design.resolve() if design else None)
+    if not ref.is_default:
+        _check_importable(ref)
+    return ref
+
+
+def _check_importable(arm: ArmRef) -> None:
+    """The importer's verdict before anything builds: its error (named element, what to change)
+    instead of a failed build step, and no build folder for an arm that cannot be used."""
+    from gen.arm import DEFAULT_DESIGN, ArmError, load_arm_file, prepare
+
+    try:
+        prepare(load_arm_file(arm.arm_file, None if arm.arm_file else arm.model), arm.design or DEFAULT_DESIGN)
+    except ArmError as exc:
+        raise ArmChoiceError(str(exc)) from exc
+
+
+def arm_build_dir(preset: str, arm: ArmRef = DEFAULT_ARM) -> Path:
+    return build_dir(preset) if arm.is_default else BUILD / "arms" / arm.key() / preset
+
+
+def build_arm(preset: str, arm: ArmRef = DEFAULT_ARM, quiet: bool = True) -> Path:
+    """Configure (when needed) and build the preset for the arm; its build folder."""
+    bdir = arm_build_dir(preset, arm)
+    build(preset, quiet=quiet, bdir=None if arm.is_default else bdir, cache=None if arm.is_default else arm.cache())
+    return bdir
+
+
+def arm_info(bdir: Path) -> dict[str, Any]:
+    """arm.json of the arm a build folder was built for (gen/arm.py)."""
+    path = bdir / "generated" / "arm" / "arm.json"
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise ArmChoiceError(f"{path}: the arm's description is missing or unreadable ({exc}): run tools/armctl "
+                             "build with the same --model/--arm") from exc
+
+
+def prepared_model(bdir: Path) -> Path:
+    return bdir / "generated" / "arm" / "arm.xml"
+
+
+def reference_for(info: dict[str, Any], amp: list[float] | None, freq: list[float] | None) -> tuple[
+        list[float], list[float], list[str]]:
+    """The reference for a run: the arm's default (arm.json), or the one asked for with every
+    amplitude clipped so the motion stays inside the joint ranges (gen/arm.py: RANGE_MARGIN); the
+    warnings say what was changed."""
+    from gen.arm import clip_amplitude
+
+    n = info["n_joints"]
+    want_amp = info["reference"]["amp"] if amp is None else amp
+    want_freq = info["reference"]["freq_hz"] if freq is None else freq
+    for name, vals in (("--ref-amp", want_amp), ("--ref-freq", want_freq)):
+        if len(vals) != n:
+            raise ArmChoiceError(f"{name}: {len(vals)} values for the arm's {n} joints "
+                                 f"({', '.join(j['name'] for j in info['joints'])})")
+    out, warnings = [], []
+    for j, a in zip(info["joints"], want_amp):
+        c = clip_amplitude(a, j["home"], j["range"])
+        if c != a:
+            warnings.append(f"reference: {j['name']}: amplitude {a:g} rad clipped to {c:g} rad (its range "
+                            f"[{j['range'][0]:g}, {j['range'][1]:g}] from home {j['home']:g})")
+        out.append(c)
+    return out, list(want_freq), warnings

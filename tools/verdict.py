@@ -1,0 +1,97 @@
+"""A run's verdict: "ok" only when it met its stated bounds with every process well and every
+metric covering the whole run; otherwise the first thing that went wrong, named.
+
+The verdicts, in the order they are checked (a run gets the first that applies; every reason found
+is listed in verdict_reasons):
+
+- interrupted: a signal stopped the controller or the simulator;
+- diverged: the simulation blew up (MuJoCo reset the arm), or a tracking error is not finite or
+  beyond DIVERGED_DEG;
+- failed: a process failed or died (boot failure, runtime fault, lost controller or simulator);
+- incomplete: fewer periods than asked for, telemetry lost, the logger failed, or the metrics do not
+  cover every period of the trajectory;
+- tracking-bound-exceeded: a joint's L-infinity tracking error above bounds.max_error_deg;
+- torque-limited: a joint at its torque limit longer than bounds.max_saturated_fraction of the time;
+- commands-missed: the drives missed more commands than bounds.max_commands_missed, or got any late.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from typing import Any
+
+DIVERGED_DEG = 180.0  # an error of half a turn: the arm is no longer where the controller thinks
+
+
+@dataclass(frozen=True)
+class Bounds:
+    max_error_deg: float = 30.0
+    max_saturated_fraction: float = 0.05
+    max_commands_missed: int = 0
+
+    def as_dict(self) -> dict[str, Any]:
+        return {**asdict(self), "diverged_beyond_deg": DIVERGED_DEG,
+                "also": "every period asked for ran, no telemetry lost, every process ended well"}
+
+
+def judge(results: dict[str, Any], transport: dict[str, Any], controller: dict[str, Any], sim: dict[str, Any],
+          exit_codes: dict[str, int | None], bounds: Bounds) -> tuple[str, list[str]]:
+    found: list[tuple[str, str]] = []
+
+    def add(kind: str, why: str) -> None:
+        found.append((kind, why))
+
+    ctl_result = controller.get("result")
+    if ctl_result == 5 or sim.get("result") == "interrupted":
+        add("interrupted", controller.get("reason") or sim.get("reason") or "stopped by a signal")
+    if sim.get("result") == "diverged":
+        add("diverged", sim.get("reason", "the simulation diverged"))
+    errs = results.get("tracking_max_abs_deg") or []
+    bad = [i for i, e in enumerate(errs) if not math.isfinite(e) or e > DIVERGED_DEG]
+    if bad:
+        names = results.get("joint_names") or []
+        add("diverged", "tracking error beyond %g deg on %s" % (
+            DIVERGED_DEG, ", ".join(names[i] if i < len(names) else f"joint {i + 1}" for i in bad)))
+    if ctl_result not in (0, 5):
+        add("failed", f"controller: {controller.get('reason') or f'exit {ctl_result}'}")
+    if sim.get("result") not in ("ok", "interrupted", "diverged"):
+        add("failed", f"simulator: {sim.get('reason') or sim.get('result')}")
+    requested, done = controller.get("steps_requested"), controller.get("steps_done")
+    if requested is None or done is None or done < requested:
+        add("incomplete", f"{done if done is not None else 'an unknown number of'} of "
+                          f"{requested if requested is not None else '?'} periods ran")
+    lost = transport.get("telemetry_lost_total")
+    if lost is None or lost > 0:
+        add("incomplete", f"telemetry lost: {lost if lost is not None else 'unknown'} messages")
+    if exit_codes.get("logger") not in (0, None) or "logger" not in exit_codes:
+        add("incomplete", f"the telemetry logger failed (exit {exit_codes.get('logger')}): the log may miss data")
+    want = results.get("trajectory_periods")
+    have = results.get("periods_running", 0)
+    if want is not None and have < want:
+        add("incomplete", f"the metrics cover {have} of the trajectory's {want} periods")
+    est = results.get("estimation_periods")
+    if want is not None and est is not None and est < have:
+        add("incomplete", f"the estimation error covers {est} of {have} periods (simulator truth missing)")
+    for i, e in enumerate(errs):
+        if math.isfinite(e) and bounds.max_error_deg < e <= DIVERGED_DEG:
+            add("tracking-bound-exceeded", f"{_joint(results, i)}: max |e| {e:.3g} deg > {bounds.max_error_deg:g} deg")
+    for i, f in enumerate(results.get("saturated_fraction") or []):
+        if f > bounds.max_saturated_fraction:
+            add("torque-limited", f"{_joint(results, i)}: at its torque limit {100 * f:.1f} % of the time "
+                                  f"(> {100 * bounds.max_saturated_fraction:g} %)")
+    missed, late = results.get("commands_missed"), results.get("commands_late")
+    if missed is None or missed > bounds.max_commands_missed or (late or 0) > 0:
+        add("commands-missed", f"the drives missed {missed} commands and got {late} late "
+                               f"(bound: {bounds.max_commands_missed} missed, 0 late)")
+    if not found:
+        return "ok", []
+    order = ["interrupted", "diverged", "failed", "incomplete", "tracking-bound-exceeded", "torque-limited",
+             "commands-missed"]
+    first = min(found, key=lambda kw: order.index(kw[0]))[0]
+    return first, [f"{k}: {w}" for k, w in found]
+
+
+def _joint(results: dict[str, Any], i: int) -> str:
+    names = results.get("joint_names") or []
+    return names[i] if i < len(names) else f"joint {i + 1}"
