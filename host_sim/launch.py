@@ -11,6 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from host_sim.drive_model import DriveModel
 from host_sim.uncertainty import UncertaintyConfig
 from tools import busload
 from tools.paths import build_dir
@@ -72,7 +73,7 @@ def timing_args(mode: str, phys: list[busload.Bus], controller_latency_us: float
 
 def sim_argv(binary: Path, buses: list[str], *, lcm_url: str, summary: Path | None = None,
              uncertainty: dict[str, Any] | None = None, timing: str = "off", phys: list[busload.Bus] | None = None,
-             controller_latency_us: float = 0.0, model: Path | None = None,
+             controller_latency_us: float = 0.0, model: Path | None = None, drives: DriveModel | None = None,
              extra: list[str] | None = None) -> list[str]:
     argv = [str(binary), *[a for spec in buses for a in ("--bus", spec)], "--lcm-url", lcm_url]
     if summary is not None:
@@ -80,5 +81,6 @@ def sim_argv(binary: Path, buses: list[str], *, lcm_url: str, summary: Path | No
     if model is not None:
         argv += ["--model", str(model)]
     argv += uncertainty_args(uncertainty)
+    argv += (drives or DriveModel()).args()
     argv += timing_args(timing, phys or [], controller_latency_us)
     return argv + list(extra or [])

@@ -8,7 +8,8 @@
   paper's Fig. 6). V is MuJoCo's bias force: Coriolis, centrifugal and gravity.
 - parametric: link masses, centres of mass and inertias of the simulated arm off from the
   nominal model (uniform in +-error, per link, seeded), plus joint friction the nominal model
-  lacks: tau_f = -b qd - c tanh(qd / 0.01).
+  lacks: viscous b and Coulomb c, added to the true model's joint damping and frictionloss
+  (MuJoCo integrates damping implicitly and makes frictionloss a constraint that sticks).
 
 One seed fixes everything: arm_sim draws from numpy's own generator (np.random.default_rng(seed),
 reproduced bit for bit in host_sim/native/sim_rng.c), in a fixed order.

@@ -118,10 +118,15 @@ def arm_build_dir(preset: str, arm: ArmRef = DEFAULT_ARM) -> Path:
     return build_dir(preset) if arm.is_default else BUILD / "arms" / arm.key() / preset
 
 
-def build_arm(preset: str, arm: ArmRef = DEFAULT_ARM, quiet: bool = True) -> Path:
-    """Configure (when needed) and build the preset for the arm; its build folder."""
+HIL_TARGETS = ["arm_controller", "arm_sim", "arm_lcm_logger"]  # what a HIL run needs
+
+
+def build_arm(preset: str, arm: ArmRef = DEFAULT_ARM, quiet: bool = True, targets: list[str] | None = None) -> Path:
+    """Configure (when needed) and build the preset for the arm (only `targets`, if given); its
+    build folder."""
     bdir = arm_build_dir(preset, arm)
-    build(preset, quiet=quiet, bdir=None if arm.is_default else bdir, cache=None if arm.is_default else arm.cache())
+    build(preset, quiet=quiet, bdir=None if arm.is_default else bdir, cache=None if arm.is_default else arm.cache(),
+          targets=targets)
     return bdir
 
 

@@ -151,12 +151,12 @@ def _write_json(out: Path, result: dict[str, Any]) -> None:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("what", choices=("step", "synth", "sim"))
+    p.add_argument("what", choices=("step", "synth", "sim", "study"))
     p.add_argument("--out", type=Path, default=None, help="results file (JSON)")
     p.add_argument("--quick", action="store_true",
                    help="a short form that checks the benchmark runs (step: pm only; synth: one repeat, "
-                        "no coupled solve, n = 1 comparison; sim: one 1 s run); its figures are not the "
-                        "documented ones")
+                        "no coupled solve, n = 1 comparison; sim: one 1 s run; study: 4 runs of 0.5 s); its "
+                        "figures are not the documented ones")
 
 
 def run(ns: argparse.Namespace) -> int:
@@ -164,6 +164,13 @@ def run(ns: argparse.Namespace) -> int:
         out = ns.out or REPO / "runs" / "bench" / "step_instructions.json"
         result = bench_step(out, ns.quick)
         print(table(result))
+        print(f"results: {out}")
+        return 0
+    if ns.what == "study":
+        from tools.bench_study import bench_study, table as study_table
+
+        out = ns.out or REPO / "runs" / "bench" / "study.json"
+        print(study_table(bench_study(out, ns.quick)))
         print(f"results: {out}")
         return 0
     if ns.what == "sim":

@@ -141,9 +141,10 @@ def ensure_configured(preset: str, bdir: Path, quiet: bool = True, cache: dict[s
 
 
 def build(preset: str = "release", quiet: bool = True, bdir: Path | None = None,
-          cache: dict[str, str] | None = None) -> None:
+          cache: dict[str, str] | None = None, targets: list[str] | None = None) -> None:
     """Configure (when needed) and build a preset, in build/<preset> unless bdir is given;
-    cache: CMake cache variables (-D) of this build, part of its configure fingerprint."""
+    cache: CMake cache variables (-D) of this build, part of its configure fingerprint;
+    targets: only these (and what they need), else everything."""
     if preset not in PRESETS + CROSS_PRESETS:
         raise ValueError(f"preset '{preset}': expected one of {', '.join(PRESETS + CROSS_PRESETS)}")
     missing = toolchain_missing(preset)
@@ -151,7 +152,8 @@ def build(preset: str = "release", quiet: bool = True, bdir: Path | None = None,
         raise ToolchainMissing(f"armctl: build ({preset}): {missing}")
     bdir = bdir or build_dir(preset)
     ensure_configured(preset, bdir, quiet, cache)
-    r = subprocess.run(["cmake", "--build", str(bdir)], cwd=REPO, stdout=subprocess.PIPE,
+    r = subprocess.run(["cmake", "--build", str(bdir), *(["--target", *targets] if targets else [])], cwd=REPO,
+                       stdout=subprocess.PIPE,
                        stderr=subprocess.STDOUT, text=True)
     if r.returncode != 0:
         print(r.stdout, file=sys.stderr)

@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 from tools.arm import add_arm_arguments
+from tools.outdir import OutDirError, check_out_dir
 from tools.build import PRESETS, TARGETS, BuildError, build
 from tools.paths import REPO, build_dir, env_with_repo
 
@@ -67,6 +68,7 @@ def _float_list(text: str) -> list[float]:
 def cmd_hil(ns: argparse.Namespace) -> int:
     from tools.arm import ArmChoiceError, arm_from_args, arm_info, build_arm, reference_for
     from tools.hil import HilError, HilOptions, run_hil
+    from tools.study_config import DRIVE_PRESETS
     from tools.verdict import Bounds
 
     if not (math.isfinite(ns.duration) and 0.001 <= ns.duration <= 86400):
@@ -80,8 +82,12 @@ def cmd_hil(ns: argparse.Namespace) -> int:
         return 2
     try:
         arm = arm_from_args(ns)
-    except ArmChoiceError as exc:
+        check_out_dir(ns.out)
+    except (ArmChoiceError, OutDirError) as exc:
         print(f"armctl hil: {exc}", file=sys.stderr)
+        return 2
+    if ns.can_port is not None and not 1024 <= ns.can_port <= 65532:
+        print(f"armctl hil: --can-port: must be in [1024, 65532], got {ns.can_port}", file=sys.stderr)
         return 2
     if ns.bus == "vm":
         return _hil_in_vm(ns)
@@ -98,7 +104,8 @@ def cmd_hil(ns: argparse.Namespace) -> int:
     try:
         run = run_hil(HilOptions(out=ns.out, duration_s=ns.duration, method=ns.method, mode=ns.mode, arm=arm,
                                  bus=ns.bus, topology=ns.topology, bus_timing=ns.bus_timing, controller_args=ref,
-                                 bounds=Bounds(ns.max_error_deg, ns.max_saturated_fraction)))
+                                 bounds=Bounds(ns.max_error_deg, ns.max_saturated_fraction),
+                                 drives=DRIVE_PRESETS[ns.drives], can_port=ns.can_port))
         print(f"bus: {run['environment']['bus_choice']}")
         for name, pct in run["environment"]["bus_load_pct"].items():
             if pct > 100.0:
@@ -110,6 +117,10 @@ def cmd_hil(ns: argparse.Namespace) -> int:
         return 1
     _print_run(run)
     print(f"results: {ns.out / 'run.json'}  log: {ns.out / 'telemetry.lcmlog'}")
+    from tools import procs
+
+    if procs.interrupted is not None:
+        return 128 + procs.interrupted
     return 0 if run["results"]["result"] == "ok" else 1
 
 
@@ -122,7 +133,8 @@ def _hil_in_vm(ns: argparse.Namespace) -> int:
     build_arm("release", arm_from_args(ns))
     inner = ["tools/armctl", "hil", "--bus", "vcan", "--duration", f"{ns.duration:g}", "--method", ns.method,
              "--mode", ns.mode, "--out", str(ns.out.resolve()), "--ref-hold", f"{ns.ref_hold:g}",
-             "--max-error-deg", f"{ns.max_error_deg:g}", "--max-saturated-fraction", f"{ns.max_saturated_fraction:g}"]
+             "--max-error-deg", f"{ns.max_error_deg:g}", "--max-saturated-fraction", f"{ns.max_saturated_fraction:g}",
+             "--drives", ns.drives]
     for opt, val in (("--topology", ns.topology), ("--model", ns.model), ("--arm", ns.arm), ("--design", ns.design)):
         if val is not None:
             inner += [opt, str(val.resolve())]
@@ -142,9 +154,9 @@ def cmd_demo(ns: argparse.Namespace) -> int:
     from tools import study
 
     arm = "the default arm" if ns.model is None and ns.arm is None else (ns.arm or ns.model)
-    print(f"armctl demo: a short study, every method {ns.duration:g} s in lockstep HIL on {arm} "
-          f"with the paper's 5 % uncertainty -> {ns.out}")
-    ns.config, ns.methods = study.DEFAULT_CONFIG, None
+    print(f"armctl demo: a short study on {arm}: every method, tuned alike, {ns.duration:g} s in lockstep HIL in "
+          f"each scenario of {study.DEFAULT_CONFIG.relative_to(REPO)}, one seed -> {ns.out}")
+    ns.config, ns.methods, ns.seeds, ns.retune, ns.cluster = study.DEFAULT_CONFIG, None, 1, False, None
     return study.cmd_study(ns)
 
 
@@ -247,12 +259,20 @@ def main(argv: list[str] | None = None) -> int:
                    help="bound: any joint's L-infinity tracking error, deg [30]")
     h.add_argument("--max-saturated-fraction", type=float, default=0.05,
                    help="bound: time at the torque limit, per joint, fraction [0.05]")
+    h.add_argument("--can-port", type=int, default=None, metavar="PORT",
+                   help="UDP bus: buses on PORT, PORT+1, .. (to watch them with python-can) [the run slot's]")
+    h.add_argument("--drives", choices=("ideal", "realistic"), default="ideal",
+                   help="the emulated drives' sensing and torque path (host_sim/README.md) [ideal]")
     add_arm_arguments(h)
     h.set_defaults(fn=cmd_hil)
 
     d = sub.add_parser("demo", help="the main job: set-up if needed, a short study of every method, the table")
     d.add_argument("--out", type=Path, default=REPO / "runs" / "demo")
     d.add_argument("--duration", type=float, default=3.0, help="trajectory seconds per method")
+    d.add_argument("--scenarios", default=None, help="comma-separated subset of the study's scenarios")
+    d.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="runs at once [cores]")
+    d.add_argument("--trials", type=int, default=None,
+                   help="tuning budget per method and scenario, for an arm without a kept tuning [the config's]")
     add_arm_arguments(d)
     d.set_defaults(fn=cmd_demo)
 
@@ -280,10 +300,10 @@ def main(argv: list[str] | None = None) -> int:
 
     from tools import study
 
-    st = sub.add_parser("study", help="every method on the same trajectory, uncertainty and seed; the report")
+    st = sub.add_parser("study", help="every method, tuned alike, in every scenario over seeds; the report")
     study.add_study_arguments(st)
     st.set_defaults(fn=study.cmd_study)
-    tu = sub.add_parser("tune", help="the baselines' gains: grid search on the tuning seed and trajectory")
+    tu = sub.add_parser("tune", help="tune every method alike (Optuna) per scenario; kept for the study")
     study.add_tune_arguments(tu)
     tu.set_defaults(fn=study.cmd_tune)
 
@@ -294,8 +314,14 @@ def main(argv: list[str] | None = None) -> int:
     bn.set_defaults(fn=bench.run)
 
     ns = p.parse_args(argv)
+    from tools import procs
+
+    procs.install()
     try:
         return int(ns.fn(ns))
+    except procs.Interrupted as exc:
+        print(f"armctl {ns.command}: interrupted ({exc}); no process of this command is left running", file=sys.stderr)
+        return 128 + exc.signum
     except BuildError as exc:
         print(exc, file=sys.stderr)
         return 1

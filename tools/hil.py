@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import os
-import random
 import select
 import signal
 import subprocess
@@ -14,11 +13,14 @@ from pathlib import Path
 from typing import Any
 
 
+from host_sim.drive_model import DriveModel
 from host_sim.launch import sim_argv
 from tools import busload
 from tools.arm import DEFAULT_ARM, ArmChoiceError, ArmRef, arm_build_dir, arm_info, prepared_model
 from tools.paths import REPO, controller_binary, logger_binary
+from tools import procs as procs_mod
 from tools.run_analysis import analyse
+from tools.slots import acquire_slot
 from tools.verdict import Bounds
 
 CONTROLLER_DEFAULT_HOLD_S = 0.5  # arm_controller --ref-hold's default
@@ -32,7 +34,7 @@ class HilOptions:
     mode: str = "lockstep"
     preset: str = "release"
     bus: str = "udp"  # udp | vcan | auto (vcan if this kernel has SocketCAN and vcan0.., else udp)
-    can_port: int | None = None  # None: pick one, so concurrent runs do not share a bus; bus i: port + i
+    can_port: int | None = None  # None: the run slot's (tools/slots.py): no concurrent run shares it; bus i: port + i
     # The arm (tools/arm.py: --model / --arm); its build folder holds the binaries and arm.json.
     arm: ArmRef = DEFAULT_ARM
     # Which drive is on which bus (a topology file; None: the arm's wiring, arm.json).
@@ -55,15 +57,12 @@ class HilOptions:
     bus_timing: bool = False
     # What the run must meet to be "ok" (tools/verdict.py).
     bounds: Bounds = field(default_factory=Bounds)
+    # The emulated drives' sensing and torque path (host_sim/drive_model.py; default: ideal).
+    drives: DriveModel = field(default_factory=DriveModel)
 
 
 class HilError(RuntimeError):
     pass
-
-
-def _ports(opt: HilOptions) -> tuple[int, int]:
-    rng = random.Random()
-    return opt.can_port or rng.randint(43200, 43990), opt.lcm_port or rng.randint(7700, 7999)
 
 
 # Lockstep: both sides poll the bus this long before they sleep on it. A period's answer comes
@@ -242,6 +241,50 @@ def resolve_bus(choice: str, n_buses: int = 1) -> tuple[str, str]:
 
 
 def run_hil(opt: HilOptions) -> dict[str, Any]:
+    """One HIL run in a run slot of its own (its bus and telemetry ports, unless given)."""
+    if opt.can_port is not None and opt.lcm_port is not None:
+        return _run_hil(opt, opt.can_port, opt.lcm_port)
+    with acquire_slot() as slot:
+        return _run_hil(opt, opt.can_port or slot.can_port, opt.lcm_port or slot.lcm_port)
+
+
+USAGE_ERROR = 2  # the controller's and the simulator's exit code for a bad argument
+
+
+def _last_line(path: Path) -> str:
+    try:
+        lines = [ln for ln in path.read_text(errors="replace").splitlines() if ln.strip()]
+    except OSError:
+        return ""
+    return lines[-1][:400] if lines else ""
+
+
+def _wait_run(opt: HilOptions, ctl: subprocess.Popen[bytes], sim: subprocess.Popen[bytes], logs: dict[str, Any]) -> None:
+    """Until the controller and then the simulator have ended. A child that refuses its
+    arguments (exit 2) ends the run at once, with its message. Generous bounds: the run is
+    deterministic, not timed; they only bound a hung process. The controller ends first (or, when
+    the simulator died, within its lockstep timeout); the simulator follows on the controller's
+    NMT stop or after its idle timeout."""
+    deadline = time.monotonic() + 120.0 + 60.0 * opt.duration_s
+    while ctl.poll() is None:
+        if sim.poll() == USAGE_ERROR:
+            logs["simulator"].flush()
+            raise HilError(f"the simulator refused its arguments: {_last_line(opt.out / 'simulator.log')}")
+        if time.monotonic() > deadline:
+            ctl.kill()
+            raise HilError(f"{ctl.args[0]} did not finish in time; killed")
+        time.sleep(0.01)
+    if ctl.returncode == USAGE_ERROR:
+        logs["controller"].flush()
+        raise HilError(f"the controller refused its arguments: {_last_line(opt.out / 'controller.log')}")
+    try:
+        sim.wait(timeout=max(1.0, deadline - time.monotonic()))
+    except subprocess.TimeoutExpired:
+        sim.kill()
+        raise HilError(f"{sim.args[0]} did not finish in time; killed") from None
+
+
+def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
     for group in ("239.255.76.67", "239.74.163.2"):
         check_loopback_route(group)
     bdir = arm_build_dir(opt.preset, opt.arm)
@@ -260,7 +303,6 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
     opt.out.mkdir(parents=True, exist_ok=True)
     for stale in ("telemetry.lcmlog", "controller_summary.json", "sim_summary.json", "run.json", "uncertainty.json"):
         (opt.out / stale).unlink(missing_ok=True)
-    can_port, lcm_port = _ports(opt)
     buses = bus_args(bus_kind, can_port, topology)
     bus_argv = [a for spec in buses for a in ("--bus", spec)]
     url = f"udpm://239.255.76.67:{lcm_port}?ttl=0&recv_buf_size=8388608"
@@ -269,25 +311,30 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
 
     # Not lcm-logger: its subscription queue of 30 messages drops telemetry whenever it falls
     # behind for a moment (tools/lcm_logger/arm_lcm_logger.c).
-    logger = subprocess.Popen([str(logger_exe), "--lcm-url", url, str(log_path)],
-                              stdout=subprocess.PIPE, stderr=logs["logger"],
-                              preexec_fn=_logger_priority if opt.mode == "realtime" else None)
+    try:
+        logger = procs_mod.spawn("logger", [str(logger_exe), "--lcm-url", url, str(log_path)],
+                                 stdout=subprocess.PIPE, stderr=logs["logger"],
+                                 preexec_fn=_logger_priority if opt.mode == "realtime" else None)
+    except InterruptedError as exc:
+        for f in logs.values():
+            f.close()
+        raise HilError(str(exc)) from None
     procs: list[subprocess.Popen[bytes]] = [logger]
     t0 = time.monotonic()
     try:
         _wait_for_logger(logger)
         if opt.uncertainty is not None:
             write_json_atomic(opt.out / "uncertainty.json", opt.uncertainty)  # the record of what ran
-        sim = subprocess.Popen(
+        sim = procs_mod.spawn("simulator",
             sim_argv(sim_exe, buses, lcm_url=url, summary=opt.out / "sim_summary.json", uncertainty=opt.uncertainty,
                      timing=bus_timing_mode(opt.mode) if opt.bus_timing else "off", phys=topology,
-                     model=prepared_model(bdir),
+                     model=prepared_model(bdir), drives=opt.drives,
                      extra=["--substeps", str(info["substeps"]), *sim_mode_args(opt.mode), *opt.sim_args]),
             cwd=REPO, stdout=logs["simulator"], stderr=subprocess.STDOUT,
             preexec_fn=_simulator_realtime(realtime_cpu(opt)) if opt.mode == "realtime" else None)
         procs.append(sim)
         sim_scheduling = _scheduling(sim.pid)
-        ctl = subprocess.Popen(
+        ctl = procs_mod.spawn("controller",
             [*opt.controller_cmd_prefix, str(binary), *bus_argv, "--lcm-url", url,
              "--duration", f"{opt.duration_s:g}", "--method", opt.method, "--mode", opt.mode,
              "--summary", str(opt.out / "controller_summary.json"), *spin_args(opt.mode),
@@ -295,18 +342,10 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
              *reference_args(info, opt.controller_args), *opt.controller_args],
             stdout=logs["controller"], stderr=subprocess.STDOUT)
         procs.append(ctl)
-        # Generous: the run is deterministic, not timed; this only bounds a hung process.
-        # Generous: the run is deterministic, not timed; this only bounds a hung process. The
-        # controller ends first (or, when the simulator died, within its lockstep timeout); the
-        # simulator follows on the controller's NMT stop or after its idle timeout.
-        deadline = time.monotonic() + 120.0 + 60.0 * opt.duration_s
-        for p in (ctl, sim):
-            try:
-                p.wait(timeout=max(1.0, deadline - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                p.kill()
-                raise HilError(f"{p.args[0]} did not finish in time; killed") from None
+        _wait_run(opt, ctl, sim, logs)
         wall = time.monotonic() - t0
+    except InterruptedError as exc:
+        raise HilError(str(exc)) from None
     finally:
         for p in reversed(procs):
             if p.poll() is None:
@@ -315,6 +354,8 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
                     p.wait(timeout=5)
                 except subprocess.TimeoutExpired:
                     p.kill()
+                    p.wait()
+            procs_mod.forget(p)
         for f in logs.values():
             f.close()
         if logger.stdout is not None:
@@ -333,7 +374,7 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
               "ref_hold_s": _arg_value(opt.controller_args, "--ref-hold", CONTROLLER_DEFAULT_HOLD_S),
               "rate_hz": _arg_value(opt.controller_args, "--rate", info["loop_rate_hz"]),
               "controller_args": list(opt.controller_args),
-              "uncertainty": opt.uncertainty,
+              "uncertainty": opt.uncertainty, "drives": opt.drives.to_dict(),
               "bus_timing": bus_timing_mode(opt.mode) if opt.bus_timing else "off", **opt.labels}
     run = analyse(opt.out, controller, simulator, config, {
         "bus": " ".join(buses), "bus_choice": f"{opt.bus} -> {bus_kind} ({bus_why})",

@@ -1,5 +1,7 @@
-"""The study's report: report.md (the paper's three tables, ours beside theirs), PNG figures like
-the paper's Figs. 6-8, and summary.txt (the comparison table the CLI prints)."""
+"""The study's report: report.md (per scenario: every method's mean and 95 % interval over the
+seeds, PM against every other method on the same seeds, a verdict in words, the paper's claims
+checked), PNG figures (distributions per method and joint; the paper's Figs. 6-8 for the first
+seed of the first scenario), and summary.txt (the table the CLI prints)."""
 
 from __future__ import annotations
 
@@ -23,11 +25,25 @@ PAPER_TABLE2 = {"usde-smc": [0.5956, 0.2118, 1.2881, 0.6978, 4.7868, 3.6274],
                 "tde": [0.6201, 0.4429, 0.7234, 1.5404, 3.8190, 4.6619],
                 "pm": [0.2163, 0.0883, 0.3618, 0.2889, 2.7415, 2.1596]}
 PAPER_TABLE3 = {"usde-smc": 14.9473, "tde": 15.6809, "pm": 14.4772}
-ESTIMATING = ("pm", "pm-paper", "tde", "usde-smc")
+ESTIMATING = ("pm", "pm-paper-weights", "pm-paper", "tde", "usde-smc")
+METRIC_TEXT = {"linf": "L-infinity tracking error (rad)", "rms": "RMS tracking error (rad)",
+               "est": "RMS estimation error w - w_hat (rad/s^2)", "power": "torque power (W)"}
+ALPHA = 0.05  # a paired difference counts as significant below this p (Wilcoxon where defined, else t)
 
 
-def _fmt(v: float) -> str:
+def _fmt(v: float | None) -> str:
+    if v is None or not np.isfinite(v):
+        return "-"
     return f"{v:.4f}" if abs(v) >= 1e-3 or v == 0 else f"{v:.2e}"
+
+
+def _ci(s: dict[str, Any]) -> str:
+    if s.get("mean") is None:
+        return "-"
+    if not s.get("ci95"):
+        return _fmt(s["mean"])
+    half = (s["ci95"][1] - s["ci95"][0]) / 2
+    return f"{_fmt(s['mean'])} ± {_fmt(half)}"
 
 
 def _md_table(header: list[str], rows: list[list[str]]) -> str:
@@ -36,35 +52,13 @@ def _md_table(header: list[str], rows: list[list[str]]) -> str:
     return "\n".join(out)
 
 
-def _ratio_rows(runs: dict[str, Any], key: str, paper: dict[str, list[float]], n: int) -> list[list[str]]:
-    rows = []
-    for j in range(n):
-        row = [f"joint {j + 1}"]
-        for base in ("tde", "usde-smc"):
-            if "pm" in runs and base in runs and key in runs["pm"] and key in runs[base]:
-                ours = runs["pm"][key][j] / runs[base][key][j]
-                row.append(f"{ours:.3f}")
-            else:
-                row.append("-")
-            row.append(f"{paper['pm'][j] / paper[base][j]:.3f}")
-        rows.append(row)
-    return rows
+def _p(c: dict[str, Any]) -> float | None:
+    """The paired t-test's p: with 5 seeds Wilcoxon's cannot go below 0.0625 (both are in study.json)."""
+    return c.get("t_test_p")
 
 
-def _verdicts(runs: dict[str, Any], key: str, n: int, what: str) -> list[str]:
-    lines = []
-    for base in ("tde", "usde-smc"):
-        if "pm" not in runs or base not in runs or key not in runs["pm"] or key not in runs[base]:
-            continue
-        better = [j + 1 for j in range(n) if runs["pm"][key][j] < runs[base][key][j]]
-        worse = [j + 1 for j in range(n) if j + 1 not in better]
-        lines.append(f"- {what}, PM vs {base}: PM lower on joint(s) {better or 'none'}; "
-                     f"not lower on joint(s) {worse or 'none'}.")
-    return lines
-
-
-def _series(out: Path, method: str, hold: float) -> dict[str, np.ndarray]:
-    log = read_log(out / method / "telemetry.lcmlog")
+def _series(run_dir: Path, hold: float) -> dict[str, np.ndarray]:
+    log = read_log(run_dir / "telemetry.lcmlog")
     ctl = [m for m in log["ARM_CTL"].messages if m.state == 1 and m.t >= hold - 1e-9]
     sim = {m.step: np.array(m.w_true) for m in log["ARM_SIM"].messages}
     t = np.array([m.t - hold for m in ctl])
@@ -73,40 +67,38 @@ def _series(out: Path, method: str, hold: float) -> dict[str, np.ndarray]:
     return {"t": t, "e": np.array([m.e for m in ctl]), "w": w, "w_hat": w_hat}
 
 
-def _figures(out: Path, study: dict[str, Any]) -> list[str]:
-    hold = study["hold_s"]
-    methods = list(study["runs"])
-    series = {m: _series(out, m, hold) for m in methods if (out / m / "telemetry.lcmlog").exists()}
-    made = []
+def _time_figures(out: Path, study: dict[str, Any], scenario: str) -> list[str]:
+    """The paper's Figs. 6-8 for the first seed of one scenario."""
+    hold, seed = study["hold_s"], study["seeds"][0]
     n = study["arm"]["n_joints"]
+    series = {}
+    for m in study["methods"]:
+        d = out / scenario / m / f"seed-{seed}"
+        if (d / "telemetry.lcmlog").exists():
+            series[m] = _series(d, hold)
+    made = []
+    if not series:
+        return made
     if "pm" in series:
         fig, axes = plt.subplots(n, 1, figsize=(9, 11), sharex=True)
-        s = series["pm"]
         for j in range(n):
-            axes[j].plot(s["t"], s["w"][:, j], lw=0.6)
+            axes[j].plot(series["pm"]["t"], series["pm"]["w"][:, j], lw=0.6)
             axes[j].set_ylabel(f"w{j + 1}")
-        axes[0].set_title("Total uncertainty w (rad/s^2) during the PM run (cf. the paper's Fig. 6)")
+        axes[0].set_title(f"Total uncertainty w (rad/s^2) during the PM run, {scenario} (cf. the paper's Fig. 6)")
         axes[-1].set_xlabel("t (s)")
-        fig.tight_layout()
-        fig.savefig(out / "fig_uncertainty.png", dpi=90)
-        plt.close(fig)
-        made.append("fig_uncertainty.png")
-    est = [m for m in ("pm", "tde", "usde-smc", "pm-paper") if m in series]
+        made.append(_save(fig, out / "fig_uncertainty.png"))
+    est = [m for m in ESTIMATING if m in series]
     if est:
         fig, axes = plt.subplots(n, 1, figsize=(9, 11), sharex=True)
         for m in est:
-            s = series[m]
             for j in range(n):
-                axes[j].plot(s["t"], s["w"][:, j] - s["w_hat"][:, j], lw=0.6, label=m)
+                axes[j].plot(series[m]["t"], series[m]["w"][:, j] - series[m]["w_hat"][:, j], lw=0.6, label=m)
         for j in range(n):
             axes[j].set_ylabel(f"joint {j + 1}")
         axes[0].legend(loc="upper right", fontsize=7, ncol=len(est))
-        axes[0].set_title("Estimation error w - w_hat (rad/s^2) (cf. the paper's Fig. 7)")
+        axes[0].set_title(f"Estimation error w - w_hat (rad/s^2), {scenario} (cf. the paper's Fig. 7)")
         axes[-1].set_xlabel("t (s)")
-        fig.tight_layout()
-        fig.savefig(out / "fig_estimation_error.png", dpi=90)
-        plt.close(fig)
-        made.append("fig_estimation_error.png")
+        made.append(_save(fig, out / "fig_estimation_error.png"))
     fig, axes = plt.subplots(n, 1, figsize=(9, 11), sharex=True)
     for m, s in series.items():
         for j in range(n):
@@ -114,125 +106,224 @@ def _figures(out: Path, study: dict[str, Any]) -> list[str]:
     for j in range(n):
         axes[j].set_ylabel(f"e{j + 1} (deg)")
     axes[0].legend(loc="upper right", fontsize=7, ncol=len(series))
-    axes[0].set_title("Tracking error (cf. the paper's Fig. 8)")
+    axes[0].set_title(f"Tracking error, {scenario} (cf. the paper's Fig. 8)")
     axes[-1].set_xlabel("t (s)")
-    fig.tight_layout()
-    fig.savefig(out / "fig_tracking_error.png", dpi=90)
-    plt.close(fig)
-    made.append("fig_tracking_error.png")
+    made.append(_save(fig, out / "fig_tracking_error.png"))
     return made
 
 
-def summary_table(study: dict[str, Any]) -> str:
-    runs = study["runs"]
-    n = study["arm"]["n_joints"]
-    width = 7 * n + 2
-    lines = [f"{'method':<10}{'result':<9}{f'Linf e (deg), joints 1-{n}':<{width}}{'RMS w-w_hat (mean)':>19}{'power W':>9}"]
-    for m, r in runs.items():
-        linf = " ".join(f"{v:6.3f}" for v in r.get("tracking_max_abs_deg", []))
-        est = r.get("estimation_error_rms")
-        est_s = f"{np.mean(est):.4f}" if est and m in ESTIMATING else "-"
-        power = f"{r['torque_power_w']:.2f}" if "torque_power_w" in r else "-"
-        lines.append(f"{m:<10}{r['result'][:8]:<9}{linf:<{width}}{est_s:>19}{power:>9}")
-    return "\n".join(lines)
+def _save(fig: Any, path: Path) -> str:
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path.name
+
+
+def _distribution_figure(out: Path, study: dict[str, Any], scenario: str, index: int) -> str:
+    """Per joint, each method's L-infinity error over the seeds (box with every seed's point)."""
+    sc = study["scenarios"][scenario]
+    n, methods = study["arm"]["n_joints"], study["methods"]
+    fig, axes = plt.subplots(1, n, figsize=(2.2 * n + 1, 4.2), sharey=False)
+    axes = np.atleast_1d(axes)
+    for j in range(n):
+        data = [np.degrees([v for v in sc["stats"][m]["linf"]["per_joint"][j]["values"] if np.isfinite(v)])
+                for m in methods]
+        ax = axes[j]
+        ax.boxplot(data, showfliers=False)
+        for i, d in enumerate(data):
+            ax.scatter(np.full(len(d), i + 1.0), d, s=8, color="k", zorder=3)
+        ax.set_yscale("log")
+        ax.set_xticks(range(1, len(methods) + 1), methods, rotation=70, fontsize=7)
+        ax.set_title(study["arm"]["joint_names"][j], fontsize=8)
+    axes[0].set_ylabel("L-inf tracking error (deg), one point per seed")
+    fig.suptitle(f"{scenario}: {len(study['seeds'])} seed(s)")
+    return _save(fig, out / f"fig_distribution_{index}.png")
+
+
+def _labels(study: dict[str, Any], paper: bool) -> list[str]:
+    names = study["arm"]["joint_names"]
+    return [f"joint {j + 1}" if paper else f"{j + 1} {names[j]}" for j in range(len(names))]
+
+
+def _stats_table(study: dict[str, Any], sc: dict[str, Any], metric: str, labels: list[str]) -> str:
+    methods = [m for m in study["methods"] if metric != "est" or m in ESTIMATING]
+    if metric == "power":
+        return _md_table(["method", "mean ± 95 % CI"], [[m, _ci(sc["stats"][m]["power"]["total"])] for m in methods])
+    rows = [[labels[j]] + [_ci(sc["stats"][m][metric]["per_joint"][j]) for m in methods] for j in range(len(labels))]
+    rows.append(["sum of joints"] + [_ci(sc["stats"][m][metric]["total"]) for m in methods])
+    return _md_table(["joint", *methods], rows)
+
+
+def _paired_table(study: dict[str, Any], sc: dict[str, Any], metric: str, labels: list[str]) -> str:
+    bases = [b for b in sc["pm_versus"] if metric != "est" or b in ESTIMATING]
+    n = len(study["seeds"])
+
+    def cell(c: dict[str, Any]) -> str:
+        p = _p(c)
+        ratio = c.get("ratio_of_means")
+        return (f"{ratio:.2f}x, {c['a_lower']}/{n}" if ratio is not None else f"-, {c['a_lower']}/{n}") + \
+               (f", p {p:.2g}" if p is not None else "")
+
+    if metric == "power":
+        return _md_table(["", *bases], [["total", *[cell(sc["pm_versus"][b]["power"]["total"]) for b in bases]]])
+    rows = [[labels[j], *[cell(sc["pm_versus"][b][metric]["per_joint"][j]) for b in bases]] for j in range(len(labels))]
+    rows.append(["sum of joints", *[cell(sc["pm_versus"][b][metric]["total"]) for b in bases]])
+    return _md_table(["PM vs", *bases], rows)
+
+
+def _verdict(study: dict[str, Any], sc: dict[str, Any], labels: list[str]) -> list[str]:
+    """Where PM wins and loses, and by how much, in words: per baseline and metric, the joints
+    where PM's mean is lower, and how many of those differences are significant."""
+    lines = []
+    for m, st in sc["stats"].items():  # runs that did not end ok weigh on the means: said first
+        bad = [(seed, r) for seed, r in zip(study["seeds"], st["results"]) if r != "ok"]
+        if bad:
+            kinds = sorted({r for _, r in bad}, key=str)
+            lines.append(f"- {m}: {len(bad)} of {len(st['results'])} runs did not end ok ("
+                         + "; ".join(f"{k} on seed(s) {', '.join(str(s) for s, r in bad if r == k)}" for k in kinds)
+                         + "); its means include them.")
+    for b in [x for x in ("tde", "usde-smc", "pd", "pm-paper-weights") if x in sc["pm_versus"]]:
+        for metric in ("linf", "est", "power"):
+            if metric == "est" and b not in ESTIMATING:
+                continue
+            comp = sc["pm_versus"][b][metric]
+            if metric == "power":
+                c = comp["total"]
+                if c.get("ratio_of_means") is None:
+                    continue
+                lines.append(f"- {METRIC_TEXT[metric]}, PM vs {b}: {c['ratio_of_means']:.3f}x "
+                             f"(PM lower on {c['a_lower']}/{c['n']} seeds).")
+                continue
+            wins = [labels[j] for j, c in enumerate(comp["per_joint"]) if (c.get("ratio_of_means") or np.inf) < 1]
+            sig_w = [labels[j] for j, c in enumerate(comp["per_joint"])
+                     if (c.get("ratio_of_means") or np.inf) < 1 and (_p(c) or 1) < ALPHA]
+            sig_l = [labels[j] for j, c in enumerate(comp["per_joint"])
+                     if (c.get("ratio_of_means") or 0) > 1 and (_p(c) or 1) < ALPHA]
+            ratios = [c.get("ratio_of_means") for c in comp["per_joint"] if c.get("ratio_of_means") is not None]
+            rng = f"{min(ratios):.2f}x-{max(ratios):.2f}x" if ratios else "-"
+            tot = comp["total"]
+            lines.append(f"- {METRIC_TEXT[metric]}, PM vs {b}: PM's mean lower on {len(wins)} of {len(labels)} joints "
+                         f"(ratios PM/{b} {rng}; sum of joints {tot.get('ratio_of_means') or float('nan'):.2f}x, "
+                         f"PM lower on {tot['a_lower']}/{tot['n']} seeds); significantly (p < {ALPHA}) lower on "
+                         f"{', '.join(sig_w) or 'none'}, significantly higher on {', '.join(sig_l) or 'none'}.")
+    return lines
+
+
+def _claims(sc: dict[str, Any]) -> list[str]:
+    """The paper's claims, checked with this scenario's evidence."""
+    out = []
+
+    def lower_everywhere(metric: str, b: str) -> tuple[int, int]:
+        comp = sc["pm_versus"][b][metric]["per_joint"]
+        return sum(1 for c in comp if (c.get("ratio_of_means") or np.inf) < 1), len(comp)
+
+    for table, metric, what in (("Table 1", "est", "estimation error"), ("Table 2", "linf", "L-infinity tracking error")):
+        counts = {b: lower_everywhere(metric, b) for b in ("tde", "usde-smc") if b in sc["pm_versus"]}
+        if counts:
+            holds = all(k == total for k, total in counts.values())
+            out.append(f"- {table} (PM's {what} below TDE's and EUSDE-SMC's on every joint): "
+                       f"{'holds' if holds else 'does not hold'} here: PM's mean is "
+                       + "; ".join(f"lower than {b}'s on {k}/{total} joints" for b, (k, total) in counts.items()) + ".")
+    pw = [(b, sc["pm_versus"][b]["power"]["total"].get("ratio_of_means")) for b in ("tde", "usde-smc")
+          if b in sc["pm_versus"]]
+    if pw and all(r is not None for _, r in pw):
+        holds = all(r < 1 for _, r in pw)
+        out.append(f"- Table 3 (PM needs the least torque power): {'holds' if holds else 'does not hold'} here: "
+                   + ", ".join(f"PM/{b} {r:.3f}" for b, r in pw) + ".")
+    if "gh2" in sc["stats"]:
+        res = sc["stats"]["gh2"]["results"]
+        unbounded = sum(1 for r in res if r in ("diverged", "tracking-bound-exceeded"))
+        out.append(f"- Example 1 (the generalized-H2 controller alone, no estimator, loses track under 5 % "
+                   f"uncertainty): {'holds' if unbounded == len(res) else 'does not hold'} here: {unbounded} of "
+                   f"{len(res)} gh2 runs diverged or left the tracking bound (results: {', '.join(sorted(set(res)))}).")
+    return out
 
 
 def write_report(out: Path, study: dict[str, Any]) -> None:
-    runs = study["runs"]
     arm = study["arm"]
     n = arm["n_joints"]
-    # The paper's numbers are for its six-joint arm: beside ours only on the bundled arm.
-    paper = arm["is_default"] and n == 6
-    # The paper numbers its joints; another arm's rows carry the model's joint names.
-    labels = [f"joint {j + 1}" if paper else f"{j + 1} {arm['joint_names'][j]}" for j in range(n)]
-    figs = _figures(out, study)
+    paper = arm["is_default"] and n == 6  # the paper's numbers are for its six-joint arm
+    labels = _labels(study, paper)
     wiring = ", ".join(f"{b['name']}: drives {','.join(map(str, b['drives']))}" for b in arm["buses"])
     md = [f"# Study: {study['description']}", "",
           f"Arm `{arm['name']}` ({n} joints: {', '.join(arm['joint_names'])}; model `{arm['model']}`, hash "
-          f"{arm['model_hash']}).", "",
-          f"Config `{study['config']}`, seed {study['seed']}, trajectory {study['duration_s']:g} s after a "
-          f"{study['hold_s']:g} s hold on the start pose (metrics cover the trajectory only), lockstep HIL "
-          f"at 1 kHz over the arm's CAN buses ({wiring}; python-can udp_multicast wire format), bus bit timing "
-          + ("emulated: each command acts from the end of its frame on the bus (host_sim/native/sim_bus_timing.c)."
-             if study.get("bus_timing") else "not emulated: each command acts from the start of its period."), "",
-          f"Uncertainty: `{study['uncertainty']}`.", "",
-          *(["Notes:", "", *[f"- {x}" for x in study.get("notes", [])], ""] if study.get("notes") else []),
-          "## Baseline gains", "", study["tuning"].get("procedure", ""), "",
-          f"Source: {study['tuning'].get('source', '')}.", ""]
-    md.append(_md_table(["method", "gains"], [[m, f"`{g}`"] for m, g in study["tuning"].get("methods", {}).items()]))
-    md += ["", "pm, pm-paper, gh2: the LMI design of `gen/configs/paper.toml` (see the design's manifest).", ""]
-
-    md += ["## Table 1: RMS of the estimation error w - w_hat per joint (rad/s^2)", "",
-           "pd and gh2 estimate nothing (w_hat = 0): their column is the RMS of w itself. "
-           "The paper's column is its simulation, in its own units and uncertainty.", ""]
-    hdr = ["joint", *runs.keys(), *(["paper PM", "paper TDE", "paper EUSDE-SMC"] if paper else [])]
-    rows = []
-    for j in range(n):
-        row = [labels[j]]
-        for m, r in runs.items():
-            v = r.get("estimation_error_rms")
-            row.append(_fmt(v[j]) if v else "-")
-        if paper:
-            row += [_fmt(PAPER_TABLE1["pm"][j]), _fmt(PAPER_TABLE1["tde"][j]), _fmt(PAPER_TABLE1["usde-smc"][j])]
-        rows.append(row)
-    md += [_md_table(hdr, rows), ""]
-    if paper:
-        md += ["Ratios PM / baseline (below 1: PM better), ours and the paper's:", "",
-               _md_table(["joint", "PM/TDE ours", "PM/TDE paper", "PM/USDE-SMC ours", "PM/EUSDE-SMC paper"],
-                         _ratio_rows(runs, "estimation_error_rms", PAPER_TABLE1, n)), ""]
-    md += _verdicts(runs, "estimation_error_rms", n, "Estimation error") + [""]
-
-    md += ["## Table 2: L-infinity norm of the tracking error per joint (rad)", "",
-           "The paper's Table 2 is from its hardware experiment; ours is the simulation.", ""]
-    hdr = ["joint", *runs.keys(), *(["paper PM", "paper TDE", "paper EUSDE-SMC"] if paper else [])]
-    rows = []
-    for j in range(n):
-        row = [labels[j]] + [_fmt(r["tracking_max_abs_rad"][j]) if "tracking_max_abs_rad" in r else "-"
-                                    for r in runs.values()]
-        if paper:
-            row += [_fmt(PAPER_TABLE2["pm"][j]), _fmt(PAPER_TABLE2["tde"][j]), _fmt(PAPER_TABLE2["usde-smc"][j])]
-        rows.append(row)
-    md += [_md_table(hdr, rows), ""]
-    if paper:
-        md += ["Ratios PM / baseline, ours and the paper's:", "",
-               _md_table(["joint", "PM/TDE ours", "PM/TDE paper", "PM/USDE-SMC ours", "PM/EUSDE-SMC paper"],
-                         _ratio_rows(runs, "tracking_max_abs_rad", PAPER_TABLE2, n)), ""]
-    md += _verdicts(runs, "tracking_max_abs_rad", n, "Tracking error") + [""]
-
-    md += ["## Table 3: torque power and the safety picture", "",
-           "Torque power: mean over the trajectory of sum_j |tau_j qd_j| (W). The paper gives "
-           f"PM {PAPER_TABLE3['pm']} W, TDE {PAPER_TABLE3['tde']} W, EUSDE-SMC {PAPER_TABLE3['usde-smc']} W "
-           "(its experiment).", ""]
-    rows = []
-    for m, r in runs.items():
-        tr = study["transport"][m]
-        rows.append([m, _fmt(r.get("torque_power_w", float("nan"))),
-                     " ".join(f"{v:.1f}" for v in r.get("max_abs_torque_nm", [])),
-                     " ".join(f"{100 * v:.1f}" for v in r.get("saturated_fraction", [])),
-                     str(r.get("commands_missed")), str(tr["telemetry_lost_total"]), str(tr["overruns"]),
-                     r["final_state"], r["result"]])
-    md += [_md_table(["method", "power (W)", "max |tau| per joint (Nm)", "time limited per joint (%)",
-                      "CAN commands missed", "telemetry lost", "overruns", "final state", "result"], rows), ""]
-    failed = {m: r.get("verdict_reasons") or [] for m, r in runs.items() if r["result"] != "ok"}
-    if failed:
-        md += [f"Runs that are not `ok` (bounds: `{next(iter(runs.values())).get('bounds')}`):", ""]
-        md += [f"- {m}: {'; '.join(why) or runs[m]['result']}" for m, why in failed.items()] + [""]
-
-    if "gh2" in runs:
-        r = runs["gh2"]
-        bounded = r["result"] == "ok" and max(r.get("tracking_max_abs_rad", [np.inf])) < 1.0
-        md += ["## The paper's Example 1 (generalized-H2 controller alone)", "",
-               "The paper reports unbounded tracking errors for the generalized-H2 controller without the "
-               "estimator under 5 % uncertainty (its Fig. 2). Here: "
-               + (f"the error stayed bounded (largest {max(r['tracking_max_abs_deg']):.3f} deg)."
-                  if bounded else f"the run ended `{r['result']}` / `{r['final_state']}`."), ""]
-    md += ["## Figures", ""] + [f"![{f}]({f})" for f in figs] + [""]
+          f"{arm['model_hash']}), its CAN buses {wiring}, lockstep HIL at 1 kHz. Config `{study['config']}`; "
+          f"seeds {study['seeds']}; trajectory {study['duration_s']:g} s after a {study['hold_s']:g} s hold on the "
+          "start pose (metrics cover the trajectory only). Intervals are 95 % confidence intervals of the mean over "
+          "the seeds (Student's t); PM against another method is paired on the same seeds: the ratio of the means, "
+          "on how many seeds PM was lower, and the p-value of the paired t-test (two-sided; study.json also has "
+          "Wilcoxon's signed-rank p, which with 5 seeds cannot go below 0.0625).",
+          "", f"Tuning: {study['tuning_procedure']}", "",
+          *(["Notes:", "", *[f"- {x}" for x in study.get("notes", [])], ""] if study.get("notes") else [])]
+    figs_time: list[str] = []
+    for i, (name, sc) in enumerate(study["scenarios"].items()):
+        d = sc["definition"]
+        md += [f"## Scenario `{name}`", "", d["description"], "",
+               f"Uncertainty `{d['uncertainty']}`; drives `{d['drives']}`; bus timing "
+               f"{'emulated' if d['bus_timing'] else 'not emulated'}.", "", "### Verdict", ""]
+        md += _verdict(study, sc, labels) + [""]
+        md += ["The paper's claims, with this scenario's evidence:", ""] + _claims(sc) + [""]
+        md += ["### Tuning", "", _md_table(
+            ["method", "knobs", "objective (sum L-inf, rad)", "trials", "source", "note"],
+            [[m, f"`{ {k: (round(v, 4) if isinstance(v, float) else v) for k, v in r['knobs'].items()} }`",
+              _fmt(r["objective"]), str(sum(len(x["trials"]) for x in r["rounds"])), r.get("source", ""),
+              r.get("edge_note") or ""] for m, r in sc["tuning"].items()]), "",
+            "pm-paper-weights: the paper's own weights (gen/configs/paper.toml), not tuned. Every trial is in "
+            "study.json.", ""]
+        for metric in ("linf", "rms", "est", "power"):
+            md += [f"### {METRIC_TEXT[metric]}", "", _stats_table(study, sc, metric, labels), "",
+                   f"PM against each method (ratio of means PM/other, seeds PM lower, p):", "",
+                   _paired_table(study, sc, metric, labels), ""]
+        if paper and name == next(iter(study["scenarios"])):
+            md += ["### Beside the paper's numbers", "",
+                   "The paper's Table 1 is its simulation (its units and uncertainty), Tables 2-3 its hardware "
+                   "experiment; ours are this scenario's means.", "",
+                   _md_table(["joint", "est PM", "est TDE", "est USDE-SMC", "paper PM", "paper TDE", "paper EUSDE-SMC"],
+                             [[labels[j], *[_fmt(sc["stats"][m]["est"]["per_joint"][j]["mean"]) if m in sc["stats"] else "-"
+                                            for m in ("pm", "tde", "usde-smc")],
+                               *[_fmt(PAPER_TABLE1[m][j]) for m in ("pm", "tde", "usde-smc")]] for j in range(n)]), "",
+                   _md_table(["joint", "L-inf PM", "L-inf TDE", "L-inf USDE-SMC", "paper PM", "paper TDE",
+                              "paper EUSDE-SMC"],
+                             [[labels[j], *[_fmt(sc["stats"][m]["linf"]["per_joint"][j]["mean"]) if m in sc["stats"] else "-"
+                                            for m in ("pm", "tde", "usde-smc")],
+                               *[_fmt(PAPER_TABLE2[m][j]) for m in ("pm", "tde", "usde-smc")]] for j in range(n)]), "",
+                   f"Torque power, the paper: PM {PAPER_TABLE3['pm']} W, TDE {PAPER_TABLE3['tde']} W, EUSDE-SMC "
+                   f"{PAPER_TABLE3['usde-smc']} W.", ""]
+        fig = _distribution_figure(out, study, name, i)
+        md += [f"![{fig}]({fig})", ""]
+        if i == 0:
+            figs_time = _time_figures(out, study, name)
+    md += [f"## Time series: the first seed of `{next(iter(study['scenarios']))}`", ""] + \
+          [f"![{f}]({f})" for f in figs_time] + [""]
     md += ["## Summary", "", "```", summary_table(study), "```", ""]
     _write(out / "report.md", "\n".join(md))
     _write(out / "summary.txt", summary_table(study) + "\n")
 
 
+def summary_table(study: dict[str, Any]) -> str:
+    """Per scenario and method: the mean L-infinity error per joint (deg), the mean estimation
+    error and power, and how the runs ended."""
+    n = study["arm"]["n_joints"]
+    width = 7 * n + 2
+    lines = []
+    for name, sc in study["scenarios"].items():
+        lines.append(f"{name} ({len(study['seeds'])} seed(s); means)")
+        lines.append(f"  {'method':<17}{f'Linf e (deg), joints 1-{n}':<{width}}{'RMS w-w_hat':>12}{'power W':>9}  runs")
+        for m in study["methods"]:
+            st = sc["stats"][m]
+            linf = " ".join(f"{np.degrees(s['mean']):6.3f}" if s["mean"] is not None and np.isfinite(s["mean"])
+                            else "     -" for s in st["linf"]["per_joint"])
+            est = st["est"]["total"]["mean"]
+            est_s = f"{est / n:.4f}" if m in ESTIMATING and est is not None and np.isfinite(est) else "-"
+            pw = st["power"]["total"]["mean"]
+            pw_s = f"{pw:.2f}" if pw is not None and np.isfinite(pw) else "-"
+            res = st["results"]
+            ends = ", ".join(f"{res.count(r)} {r}" for r in sorted(set(res), key=str))
+            lines.append(f"  {m:<17}{linf:<{width}}{est_s:>12}{pw_s:>9}  {ends}")
+    return "\n".join(lines)
+
+
 def _write(path: Path, text: str) -> None:
     tmp = path.with_name(f".{path.name}.tmp.{os.getpid()}")
     tmp.write_text(text)
-    tmp.replace(path)
+    os.replace(tmp, path)

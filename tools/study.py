@@ -1,32 +1,37 @@
-"""`armctl study`: every method on the same trajectory, uncertainty and seed, then the report.
-`armctl tune`: the baselines' gains, by a grid search on the tuning seed and trajectory."""
+"""`armctl study`: every method, tuned alike, in every scenario, on the same trajectory and seeds;
+statistics over the seeds, paired comparisons, the report.
+`armctl tune`: the tuning alone (tools/tuning.py), kept for later studies."""
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
+import os
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from tqdm import tqdm
 
+from gen.arm import DEFAULT_DESIGN
 from tools.arm import (DEFAULT_ARM, ArmChoiceError, ArmRef, add_arm_arguments, arm_build_dir, arm_from_args,
                        arm_info, build_arm, reference_for)
-from tools.hil import HilError, HilOptions, run_hil, write_json_atomic
+from tools import procs
+from tools.hil import HilError, write_json_atomic
+from tools.outdir import OutDirError, check_out_dir
 from tools.paths import REPO
-from tools.study_config import (TUNED, StudyConfig, StudyConfigError, Trajectory, gain_args, grid_points,
-                                load)
+from tools.runner import RunSpec, run_all
+from tools.stats import paired, summary
+from tools.study_config import METHODS, StudyConfig, StudyConfigError, Trajectory, load
+from tools.tuning import TuneSetup, trial_spec, tune_method
 
 DEFAULT_CONFIG = REPO / "tools" / "studies" / "paper.toml"
-
-
-def run_method(cfg: StudyConfig, method: str, out: Path, gains: dict[str, float], *, seed: int,
-               duration_s: float, trajectory_args: list[str], preset: str, arm: ArmRef = DEFAULT_ARM) -> dict[str, Any]:
-    args = [*gain_args(method, gains), *trajectory_args, "--ref-hold", f"{cfg.hold_s:g}"]
-    return run_hil(HilOptions(out=out, duration_s=duration_s, method=method, preset=preset, arm=arm,
-                              controller_args=tuple(args), uncertainty=cfg.uncertainty_for(seed),
-                              labels={"seed": seed, "gains": gains}, bus_timing=cfg.bus_timing))
+# metric -> the run.json results field (per joint, or one number for the arm)
+METRICS = {"linf": "tracking_max_abs_rad", "rms": "tracking_rms_rad", "est": "estimation_error_rms",
+           "power": "torque_power_w"}
+BASELINES = ("tde", "usde-smc", "pd", "pm-paper-weights", "pm-paper", "gh2")
 
 
 def trajectory_for(info: dict[str, Any], traj: Trajectory, what: str) -> tuple[list[str], dict[str, Any], list[str]]:
@@ -49,62 +54,142 @@ def trajectory_for(info: dict[str, Any], traj: Trajectory, what: str) -> tuple[l
     return used.args(), {"amp": amp_c, "freq_hz": freq_c}, notes
 
 
-def gains_for(cfg: StudyConfig, arm: ArmRef, info: dict[str, Any], out: Path, preset: str) -> tuple[
-        dict[str, Any], str]:
-    """The baselines' gains tuned on this very arm: the config's gains file when it was tuned on
-    it, else the arm's own gains file next to it, else a tuning run now (never another arm's)."""
-    for path in (cfg.gains_file, gains_file_for(cfg, arm, preset)):
-        if path.exists():
-            g = json.loads(path.read_text())
-            if g.get("arm", {}).get("model_hash") == info["model_hash"]:
-                return g, f"tuned on this arm ({path})"
-    why = (f"no baseline gains tuned on arm {info['name']} (model hash {info['model_hash']}) were found, and gains "
-           f"tuned on another arm are not reused")
-    print(f"armctl study: {why}: tuning them now (kept in {gains_file_for(cfg, arm, preset)} for the next study)",
-          file=sys.stderr)
-    tuned = tune(cfg, out / "tuning", preset, arm)
-    return tuned, f"tuned in this study: {why}"
+def _arm_args(arm: ArmRef) -> dict[str, str | None]:
+    return {"model": str(arm.model) if arm.model else None, "arm_file": str(arm.arm_file) if arm.arm_file else None,
+            "design": str(arm.design) if arm.design else None}
 
 
-def gains_file_for(cfg: StudyConfig, arm: ArmRef, preset: str = "release") -> Path:
-    """Where `armctl tune` keeps the gains: the config's gains file for the bundled arm, else
-    the arm's build folder (next to everything else built for that arm, never in the sources)."""
+def setup_for(cfg: StudyConfig, arm: ArmRef, out: Path, jobs: int, cluster: str | None,
+              preset: str = "release") -> tuple[TuneSetup, dict[str, Any], list[str]]:
+    bdir = arm_build_dir(preset, arm)
+    info = arm_info(bdir)
+    traj_args, _, notes = trajectory_for(info, cfg.tuning_trajectory, "tuning trajectory")
+    base = (bdir / "generated" / "arm" / "design.toml").read_text()
+    return TuneSetup(cfg, _arm_args(arm), base, traj_args, out, jobs, cluster), info, notes
+
+
+def tuning_file(cfg: StudyConfig, arm: ArmRef, preset: str = "release") -> Path:
+    """The tuning record: next to the config for the bundled arm, else in the arm's build folder
+    (next to everything else built for that arm, never in the sources)."""
     if arm.is_default:
-        return cfg.gains_file
-    return arm_build_dir(preset, arm) / "tuned_gains" / f"{cfg.path.stem}.{cfg.gains_file.name}"
+        return cfg.tuning_file
+    return arm_build_dir(preset, arm) / "tuning" / f"{cfg.path.stem}.{cfg.tuning_file.name}"
 
 
-def run_study(cfg: StudyConfig, out: Path, duration_s: float | None = None, preset: str = "release",
-              methods: list[str] | None = None, arm: ArmRef = DEFAULT_ARM) -> dict[str, Any]:
-    info = arm_info(arm_build_dir(preset, arm))
-    gains, gains_source = gains_for(cfg, arm, info, out, preset)
+def tuning_key(cfg: StudyConfig, info: dict[str, Any], setup: TuneSetup, scenario: str, method: str) -> str:
+    """What a tuning result depends on: the arm, its design, the scenario, the method's space,
+    the tuning seeds, trajectory, length and budget, the hold."""
+    t = {k: v for k, v in cfg.raw["tuning"].items() if k not in ("space", "file")}
+    doc = {"arm": info["model_hash"], "design": setup.base_design, "scenario": cfg.scenarios[scenario].as_dict(),
+           "space": cfg.spaces[method].as_dict(), "tuning": t, "trajectory": setup.trajectory_args,
+           "hold_s": cfg.hold_s}
+    return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def tuned(cfg: StudyConfig, arm: ArmRef, setup: TuneSetup, info: dict[str, Any], scenarios: list[str],
+          methods: list[str], *, retune: bool = False, trials: int | None = None) -> dict[str, dict[str, Any]]:
+    """The tuning of every tuned method in every scenario: the kept one when it was made for the
+    same arm, scenario and tuning settings, else tuned now (and kept, method by method, so an
+    interrupted tuning resumes)."""
+    path = tuning_file(cfg, arm)
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, ValueError):
+        doc = {}
+    doc.setdefault("scenarios", {})
+    out: dict[str, dict[str, Any]] = {s: {} for s in scenarios}
+    todo = []
+    for s in scenarios:
+        for m in methods:
+            if METHODS[m][1] is None:
+                continue
+            key = tuning_key(cfg, info, setup, s, m)
+            rec = doc["scenarios"].get(s, {}).get(m)
+            budget = trials or cfg.trials
+            if rec and rec.get("key") == key and rec.get("budget_per_round") == budget and not retune:
+                out[s][m] = {**rec, "source": f"tuned earlier, kept in {path}"}
+            else:
+                todo.append((s, m, key, "retune asked for" if retune and rec else
+                             "no tuning kept for this arm, scenario and settings" if not rec or rec.get("key") != key
+                             else f"the kept tuning had a budget of {rec.get('budget_per_round')} trials"))
+    if todo:
+        total = sum((trials or cfg.trials) * (cfg.widen + 1) for _ in todo)
+        print(f"armctl: tuning {len(todo)} method/scenario pairs ({', '.join(f'{m} in {s}' for s, m, _, _ in todo)}): "
+              f"{todo[0][3]}; at most {total} trials", file=sys.stderr)
+        bar = tqdm(total=sum((trials or cfg.trials) for _ in todo), desc="tune", unit="trial")
+        for s, m, key, _ in todo:
+            bar.set_postfix_str(f"{m} / {s}")
+            rec = tune_method(setup, cfg.scenarios[s], m, trials, progress=lambda: bar.update(1))
+            rec["key"] = key
+            doc["scenarios"].setdefault(s, {})[m] = rec
+            doc["arm"] = {"name": info["name"], "model_hash": info["model_hash"]}
+            doc["procedure"] = procedure(cfg, trials)
+            write_json_atomic(path, doc)
+            out[s][m] = {**rec, "source": f"tuned now, kept in {path}"}
+        bar.close()
+    return out
+
+
+def procedure(cfg: StudyConfig, trials: int | None = None) -> str:
+    return (f"Optuna TPE, the same budget of {trials or cfg.trials} trials per method and scenario (batches of {cfg.batch}), "
+            f"tuning seed(s) {cfg.tuning_seeds} and the tuning trajectory ({cfg.tuning_duration_s:g} s), never the "
+            f"study's; objective: {cfg.tuning_objective}; a run that failed, diverged or was torque-limited scores "
+            f"1000; a best value at the edge of its range widens that range tenfold and runs the budget again "
+            f"(at most {cfg.widen} times). pm, pm-paper and gh2 are tuned through their synthesis weights (each "
+            f"candidate synthesised and built); pm-paper-weights is the paper's own weights, not tuned.")
+
+
+def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration_s: float | None = None,
+              methods: list[str] | None = None, scenarios: list[str] | None = None, arm: ArmRef = DEFAULT_ARM,
+              jobs: int = 1, cluster: str | None = None, retune: bool = False,
+              trials: int | None = None) -> dict[str, Any]:
+    methods = methods or cfg.methods
+    scen_names = scenarios or list(cfg.scenarios)
+    seed_list = cfg.seed_list(seeds)
+    setup, info, notes = setup_for(cfg, arm, out / "tuning", jobs, cluster)
+    tuning = tuned(cfg, arm, setup, info, scen_names, methods, retune=retune, trials=trials)
     duration = duration_s or cfg.duration_s
-    traj_args, traj_used, notes = trajectory_for(info, cfg.trajectory, "trajectory")
+    traj_args, traj_used, traj_notes = trajectory_for(info, cfg.trajectory, "trajectory")
+    notes += traj_notes
     for n in notes:
         print(f"armctl study: {n}", file=sys.stderr)
-    runs: dict[str, Any] = {}
-    bar = tqdm(methods or cfg.methods, desc="study", unit="method")
-    for method in bar:
-        bar.set_postfix_str(method)
-        runs[method] = run_method(cfg, method, out / method, gains.get("methods", {}).get(method, {}),
-                                  seed=cfg.seed, duration_s=duration, trajectory_args=traj_args, preset=preset,
-                                  arm=arm)
+    paper_text = None if Path(info["design_config"]).resolve() == DEFAULT_DESIGN.resolve() else DEFAULT_DESIGN.read_text()
+    specs: list[RunSpec] = []
+    where: list[tuple[str, str, int]] = []
+    for s in scen_names:
+        scen = cfg.scenarios[s]
+        for m in methods:
+            knobs = tuning[s][m]["knobs"] if m in tuning[s] else {}
+            for i, seed in enumerate(seed_list):
+                spec = trial_spec(setup, m, scen, knobs, seed, out / s / m / f"seed-{seed}", duration, traj_args,
+                                  keep_log=i == 0)
+                if m == "pm-paper-weights" and paper_text is not None:
+                    spec = replace(spec, design_text=paper_text)
+                specs.append(spec)
+                where.append((s, m, seed))
+    bar = tqdm(total=len(specs), desc="study", unit="run")
+    runs = run_all(specs, jobs, cluster, progress=lambda spec, run: bar.update(1))
+    bar.close()
+    if procs.interrupted is not None:  # the finished runs are kept: the same command resumes
+        raise procs.Interrupted(procs.interrupted)
+    per: dict[str, dict[str, list[dict[str, Any]]]] = {s: {m: [] for m in methods} for s in scen_names}
+    for (s, m, _), run in zip(where, runs):
+        per[s][m].append({**run["results"], "transport_telemetry_lost": run.get("transport", {}).get("telemetry_lost_total")})
     study = {
         "config": str(cfg.path.relative_to(REPO) if cfg.path.is_relative_to(REPO) else cfg.path),
         "description": cfg.description,
         "arm": {"name": info["name"], "model": info["model"], "arm_file": info["arm_file"],
                 "n_joints": info["n_joints"], "joint_names": [j["name"] for j in info["joints"]],
                 "model_hash": info["model_hash"], "is_default": arm.is_default, "buses": info["buses"]},
-        "seed": cfg.seed,
+        "seeds": seed_list,
         "duration_s": duration,
         "hold_s": cfg.hold_s,
-        "bus_timing": cfg.bus_timing,
-        "uncertainty": cfg.uncertainty_for(cfg.seed),
         "trajectory": traj_used,
+        "methods": methods,
         "notes": notes,
-        "tuning": {**gains, "source": gains_source},
-        "runs": {m: r["results"] for m, r in runs.items()},
-        "transport": {m: r["transport"] for m, r in runs.items()},
+        "tuning_procedure": procedure(cfg, trials),
+        "scenarios": {s: scenario_result(cfg.scenarios[s].as_dict(), tuning[s], per[s], methods)
+                      for s in scen_names},
     }
     write_json_atomic(out / "study.json", study)
     from tools.report import write_report  # matplotlib: only when there is a report to draw
@@ -113,87 +198,144 @@ def run_study(cfg: StudyConfig, out: Path, duration_s: float | None = None, pres
     return study
 
 
-def tune(cfg: StudyConfig, out: Path, preset: str = "release", arm: ArmRef = DEFAULT_ARM) -> dict[str, Any]:
-    """Grid search per baseline on the tuning seed and trajectory (never the study's), on this arm;
-    the gains go to the config's gains file for the config's own arm, else to the arm's file."""
-    if cfg.tuning_seed == cfg.seed:
-        raise StudyConfigError("tuning.seed must differ from the study's seed")
-    info = arm_info(arm_build_dir(preset, arm))
-    traj_args, traj_used, notes = trajectory_for(info, cfg.tuning_trajectory, "tuning trajectory")
-    jobs = [(m, g) for m in TUNED for g in grid_points(cfg.grid.get(m, {}))]
-    scores: dict[str, list[dict[str, Any]]] = {m: [] for m in TUNED}
-    for i, (method, gains) in enumerate(tqdm(jobs, desc="tune", unit="run")):
-        run = run_method(cfg, method, out / f"{method}-{i}", gains, seed=cfg.tuning_seed,
-                         duration_s=cfg.tuning_duration_s, trajectory_args=traj_args, preset=preset, arm=arm)
-        r = run["results"]
-        ok = r["result"] == "ok" and r.get("periods_running", 0) > 0
-        score = sum(r["tracking_max_abs_rad"]) if ok else float("inf")
-        scores[method].append({"gains": gains, "objective": score, "result": r["result"]})
-    best = {m: min(s, key=lambda x: x["objective"]) for m, s in scores.items() if s}
-    result = {
-        "procedure": (f"grid search per baseline on seed {cfg.tuning_seed} and the tuning trajectory "
-                      f"({cfg.tuning_duration_s:g} s), objective: {cfg.tuning_objective}; "
-                      "pm, pm-paper and gh2 are not tuned: their gains come from the LMI design"),
-        "arm": {"name": info["name"], "model_hash": info["model_hash"], "model": info["model"]},
-        "tuning_seed": cfg.tuning_seed,
-        "tuning_trajectory": traj_used,
-        "notes": notes,
-        "methods": {m: b["gains"] for m, b in best.items()},
-        "objective": {m: b["objective"] for m, b in best.items()},
-        "all_scores": scores,
-    }
-    write_json_atomic(gains_file_for(cfg, arm, preset), result)
-    return result
+def _values(runs: list[dict[str, Any]], key: str, j: int | None) -> list[float]:
+    out = []
+    for r in runs:
+        v = r.get(key)
+        if v is None:
+            out.append(float("nan"))
+        elif j is None:
+            out.append(float(v) if not isinstance(v, list) else float(sum(v)))
+        else:
+            out.append(float(v[j]))
+    return out
+
+
+def scenario_result(definition: dict[str, Any], tuning: dict[str, Any], per: dict[str, list[dict[str, Any]]],
+                    methods: list[str]) -> dict[str, Any]:
+    """Per method: every run, the statistics of each metric per joint and in total; PM against
+    every other method on the same seeds."""
+    n = next((len(r["tracking_max_abs_rad"]) for runs in per.values() for r in runs if r.get("tracking_max_abs_rad")), 0)
+    stats: dict[str, Any] = {}
+    for m, runs in per.items():
+        stats[m] = {"results": [r.get("result") for r in runs]}
+        for name, key in METRICS.items():
+            if name == "power":
+                stats[m][name] = {"total": summary(_values(runs, key, None))}
+            else:
+                stats[m][name] = {"per_joint": [summary(_values(runs, key, j)) for j in range(n)],
+                                  "total": summary(_values(runs, key, None))}
+    comparisons: dict[str, Any] = {}
+    if "pm" in per:
+        for b in [x for x in methods if x != "pm"]:
+            comparisons[b] = {}
+            for name, key in METRICS.items():
+                joints = [] if name == "power" else [paired(_values(per["pm"], key, j), _values(per[b], key, j))
+                                                     for j in range(n)]
+                comparisons[b][name] = {"per_joint": joints,
+                                        "total": paired(_values(per["pm"], key, None), _values(per[b], key, None))}
+    return {"definition": definition, "tuning": tuning, "runs": per, "stats": stats, "pm_versus": comparisons}
+
+
+def add_common_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", type=Path, default=DEFAULT_CONFIG)
+    p.add_argument("--scenarios", default=None, help="comma-separated subset of the config's scenarios")
+    p.add_argument("--methods", default=None, help="comma-separated subset of the config's methods")
+    p.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="runs at once on this machine [cores]")
+    p.add_argument("--cluster", default=None, metavar="ADDRESS",
+                   help="a Dask scheduler (tcp://host:8786): each HIL run is a task on its workers")
+    p.add_argument("--trials", type=int, default=None, help="tuning budget per method and scenario [the config's]")
+    add_arm_arguments(p)
 
 
 def add_study_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--config", type=Path, default=DEFAULT_CONFIG)
+    add_common_arguments(p)
     p.add_argument("--out", type=Path, default=REPO / "runs" / "study")
+    p.add_argument("--seeds", type=int, default=None, help="seeds per method and scenario [the config's]")
     p.add_argument("--duration", type=float, default=None, help="override the config's trajectory length")
-    p.add_argument("--methods", default=None, help="comma-separated subset of the config's methods")
-    add_arm_arguments(p)
+    p.add_argument("--retune", action="store_true", help="tune again even when a tuning is kept")
 
 
 def add_tune_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--config", type=Path, default=DEFAULT_CONFIG)
+    add_common_arguments(p)
     p.add_argument("--out", type=Path, default=REPO / "runs" / "tune")
-    add_arm_arguments(p)
+
+
+def _subset(text: str | None, allowed: list[str], what: str) -> list[str] | None:
+    if text is None:
+        return None
+    items = [x for x in text.split(",") if x]
+    bad = [x for x in items if x not in allowed]
+    if bad or not items:
+        raise StudyConfigError(f"--{what}: {bad or text!r} not in the config's {what} ({', '.join(allowed)})")
+    return items
+
+
+def _common(ns: argparse.Namespace) -> tuple[StudyConfig, ArmRef, list[str] | None, list[str] | None]:
+    cfg = load(ns.config)
+    methods = _subset(ns.methods, cfg.methods, "methods")
+    scenarios = _subset(ns.scenarios, list(cfg.scenarios), "scenarios")
+    if not 1 <= ns.jobs <= 256:
+        raise StudyConfigError(f"--jobs: must be in [1, 256], got {ns.jobs}")
+    if ns.trials is not None and not 1 <= ns.trials <= 100000:
+        raise StudyConfigError(f"--trials: must be in [1, 100000], got {ns.trials}")
+    check_out_dir(ns.out)
+    arm = arm_from_args(ns)
+    build_arm("release", arm)
+    return cfg, arm, methods, scenarios
 
 
 def cmd_study(ns: argparse.Namespace) -> int:
     try:
-        cfg = load(ns.config)
-        methods = ns.methods.split(",") if ns.methods else None
-        if methods and any(m not in cfg.methods for m in methods):
-            raise StudyConfigError(f"--methods: {ns.methods!r} is not a subset of {cfg.methods}")
+        if ns.seeds is not None and not 1 <= ns.seeds <= 1000:
+            raise StudyConfigError(f"--seeds: must be in [1, 1000], got {ns.seeds}")
         if ns.duration is not None and not (0.001 <= ns.duration <= 86400):
             raise StudyConfigError(f"--duration: must be in [0.001, 86400] s, got {ns.duration}")
-        arm = arm_from_args(ns)
-        build_arm("release", arm)
-        study = run_study(cfg, ns.out, ns.duration, methods=methods, arm=arm)
-    except (StudyConfigError, ArmChoiceError) as exc:
+        cfg, arm, methods, scenarios = _common(ns)
+        study = run_study(cfg, ns.out, seeds=ns.seeds, duration_s=ns.duration, methods=methods, scenarios=scenarios,
+                          arm=arm, jobs=ns.jobs, cluster=ns.cluster, retune=ns.retune, trials=ns.trials)
+    except (StudyConfigError, ArmChoiceError, OutDirError) as exc:
         print(f"armctl study: {exc}", file=sys.stderr)
         return 2
-    except HilError as exc:
+    except (HilError, OSError) as exc:
         print(f"armctl study: {exc}", file=sys.stderr)
         return 1
     print((ns.out / "summary.txt").read_text())
     print(f"report: {ns.out / 'report.md'}")
-    return 0 if all(r["result"] == "ok" for r in study["runs"].values()) else 1
+    unmeasured = [f"{m} in {s} (seed {seed}): {r.get('result')}" for s, sc in study["scenarios"].items()
+                  for m, runs in sc["runs"].items() for seed, r in zip(study["seeds"], runs) if not measured(r)]
+    if unmeasured:
+        print(f"armctl study: incomplete: {len(unmeasured)} run(s) measured nothing trustworthy: "
+              + "; ".join(unmeasured[:8]) + (" ..." if len(unmeasured) > 8 else ""), file=sys.stderr)
+    return 0 if not unmeasured else 1
+
+
+# A method's own outcome, which the comparison reports: the run itself was complete.
+OUTCOMES = ("ok", "tracking-bound-exceeded", "torque-limited", "diverged", "commands-missed")
+
+
+def measured(r: dict[str, Any]) -> bool:
+    """The run measured the method: it ended with one of the method's outcomes, or the method
+    drove the arm into the safety layer's safe stop. A run that was interrupted, lost telemetry or
+    whose processes failed measured nothing, and makes the study incomplete."""
+    return r.get("result") in OUTCOMES or (r.get("result") == "failed" and r.get("final_state") in ("safe-stop", "fault"))
 
 
 def cmd_tune(ns: argparse.Namespace) -> int:
     try:
-        cfg = load(ns.config)
-        arm = arm_from_args(ns)
-        build_arm("release", arm)
-        result = tune(cfg, ns.out, arm=arm)
-    except (StudyConfigError, ArmChoiceError) as exc:
+        cfg, arm, methods, scenarios = _common(ns)
+        setup, info, _ = setup_for(cfg, arm, ns.out, ns.jobs, ns.cluster)
+        result = tuned(cfg, arm, setup, info, scenarios or list(cfg.scenarios), methods or cfg.methods,
+                       retune=True, trials=ns.trials)
+    except (StudyConfigError, ArmChoiceError, OutDirError) as exc:
         print(f"armctl tune: {exc}", file=sys.stderr)
         return 2
-    except HilError as exc:
+    except (HilError, OSError) as exc:
         print(f"armctl tune: {exc}", file=sys.stderr)
         return 1
-    print(json.dumps({"methods": result["methods"], "objective": result["objective"]}, indent=2))
-    print(f"gains: {gains_file_for(cfg, arm)}")
+    for s, recs in result.items():
+        for m, rec in recs.items():
+            print(f"{s:<40} {m:<10} objective {rec['objective']:.4g}  {json.dumps(rec['knobs'])}"
+                  + (f"  ({rec['edge_note']})" if rec["edge_note"] else ""))
+    print(f"tuning: {tuning_file(cfg, arm)}")
     return 0

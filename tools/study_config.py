@@ -1,18 +1,42 @@
-"""The study configuration (tools/studies/*.toml), validated field by field."""
+"""The study configuration (tools/studies/*.toml), validated field by field.
+
+A study runs every method in every scenario on the same trajectory and seeds. A scenario is
+what the arm and its drives are like: the model uncertainty (host_sim.uncertainty), the drives'
+sensing and torque path (host_sim.drive_model) and whether the buses' bit timing is emulated.
+Every method is tuned, per scenario, by the same optimiser with the same trial budget, tuning
+seeds and tuning trajectory ([tuning]); the search space of each is [tuning.space.METHOD].
+"""
 
 from __future__ import annotations
 
-import itertools
+import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from host_sim.drive_model import REALISTIC, DriveModel
 from host_sim.uncertainty import UncertaintyConfig
 
-METHODS = ("pm", "pm-paper", "pd", "gh2", "tde", "usde-smc")
-TUNED = ("pd", "tde", "usde-smc")  # pm, pm-paper and gh2 take their gains from the LMI design
+# method -> (the firmware's --method, how it is tuned: "design" = LMI synthesis weights,
+# "gains" = controller gains, None = not tuned)
+METHODS: dict[str, tuple[str, str | None]] = {
+    "pm": ("pm", "design"),
+    "pm-paper-weights": ("pm", None),  # the paper's own weights (gen/configs/paper.toml), as published
+    "pm-paper": ("pm-paper", "design"),
+    "gh2": ("gh2", "design"),
+    "pd": ("pd", "gains"),
+    "tde": ("tde", "gains"),
+    "usde-smc": ("usde-smc", "gains"),
+}
+TUNED = tuple(m for m, (_, how) in METHODS.items() if how is not None)
+# The synthesis knobs: the estimator's weight F(s) = f_bw / (s + f_bw) and H, the controller's
+# z_o = E1 e + E2 e_dot + D12 u_o ("single") or [E1 e + E2 e_dot; D12 u_o] ("split", which keeps
+# the generalized-H2 problem non-degenerate). gh2 has no estimator: only the controller's.
+DESIGN_KNOBS = ("E1", "E2", "D12", "H", "f_bw")
+GAIN_KNOBS = {"pd": ("wn",), "tde": ("wn", "cutoff_hz"), "usde-smc": ("k", "lambda")}
 MAX_JOINTS = 16
+DRIVE_PRESETS = {"ideal": DriveModel(), "realistic": REALISTIC}
 
 
 class StudyConfigError(ValueError):
@@ -29,40 +53,82 @@ class Trajectory:
 
 
 @dataclass
+class Scenario:
+    name: str
+    description: str
+    uncertainty: dict[str, Any]  # without the seed: each run adds its own
+    drives: DriveModel
+    bus_timing: bool
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "description": self.description, "uncertainty": self.uncertainty,
+                "drives": self.drives.to_dict(), "bus_timing": self.bus_timing}
+
+
+@dataclass
+class Space:
+    """One method's search space: log-uniform ranges, and categorical choices."""
+    ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
+    choices: dict[str, list[str]] = field(default_factory=dict)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {**{k: list(v) for k, v in self.ranges.items()}, **self.choices}
+
+
+@dataclass
 class StudyConfig:
     path: Path
     description: str
     duration_s: float
     hold_s: float
-    seed: int
+    seed: int                     # the first seed; --seeds N runs seed .. seed + N - 1
+    seeds: int
     methods: list[str]
-    uncertainty: dict[str, Any]
+    scenarios: dict[str, Scenario]
     trajectory: Trajectory
-    tuning_seed: int
+    tuning_seeds: list[int]
     tuning_duration_s: float
     tuning_trajectory: Trajectory
     tuning_objective: str
-    gains_file: Path
-    grid: dict[str, dict[str, list[float]]] = field(default_factory=dict)
-    bus_timing: bool = False  # emulate the buses' bit timing in every run (tools/hil.py)
+    trials: int                   # per method and scenario, the same for every method
+    batch: int                    # trials asked of the optimiser at once (results do not depend on --jobs)
+    widen: int                    # rounds of widening a range whose best value sits at its edge
+    spaces: dict[str, Space]
+    tuning_file: Path             # the tuning record (for the bundled arm; other arms: their build folder)
+    raw: dict[str, Any] = field(default_factory=dict)
 
-    def uncertainty_for(self, seed: int) -> dict[str, Any]:
-        return {**self.uncertainty, "seed": seed}
+    def seed_list(self, n: int | None = None) -> list[int]:
+        out = [self.seed + i for i in range(n or self.seeds)]
+        clash = sorted(set(out) & set(self.tuning_seeds))
+        if clash:
+            raise StudyConfigError(f"--seeds {len(out)}: seeds {out[0]}..{out[-1]} include the tuning seed(s) {clash}; "
+                                   "the study never runs on the seeds it was tuned on")
+        return out
 
 
-def _get(d: dict[str, Any], key: str, where: str, kind: type | tuple[type, ...]) -> Any:
+def _get(d: dict[str, Any], key: str, where: str, kind: type | tuple[type, ...], default: Any = ...) -> Any:
     if key not in d:
+        if default is not ...:
+            return default
         raise StudyConfigError(f"{where}.{key}: missing")
     v = d[key]
-    if not isinstance(v, kind) or isinstance(v, bool):
+    if not isinstance(v, kind) or isinstance(v, bool) and kind is not bool:
         raise StudyConfigError(f"{where}.{key}: expected {getattr(kind, '__name__', kind)}, got {v!r}")
     return v
 
 
-def _positive(v: float, name: str) -> float:
-    if not v > 0:
-        raise StudyConfigError(f"{name}: must be > 0, got {v}")
+def _number(d: dict[str, Any], key: str, where: str, lo: float, hi: float, default: Any = ...) -> float:
+    v = _get(d, key, where, (int, float), default)
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not lo <= v <= hi:
+        raise StudyConfigError(f"{where}.{key}: must be a number in [{lo:g}, {hi:g}], got {v!r}")
     return float(v)
+
+
+def _whole(d: dict[str, Any], key: str, where: str, lo: int, hi: int, default: Any = ...) -> int:
+    v = _get(d, key, where, int, default)
+    if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
+        raise StudyConfigError(f"{where}.{key}: must be a whole number in [{lo}, {hi}], got {v!r}")
+    return v
 
 
 def _trajectory(d: dict[str, Any], where: str) -> Trajectory:
@@ -78,54 +144,132 @@ def _trajectory(d: dict[str, Any], where: str) -> Trajectory:
     return Trajectory([float(a) for a in amp], [float(f) for f in freq])
 
 
+def _scenario(name: str, d: Any) -> Scenario:
+    where = f"scenario.{name}"
+    if not isinstance(d, dict):
+        raise StudyConfigError(f"{where}: expected a table")
+    unknown = set(d) - {"description", "uncertainty", "drives", "bus_timing"}
+    if unknown:
+        raise StudyConfigError(f"{where}: unknown field(s) {sorted(unknown)} (known: bus_timing, description, "
+                               "drives, uncertainty)")
+    unc = dict(_get(d, "uncertainty", where, dict, {}))
+    if "seed" in unc:
+        raise StudyConfigError(f"{where}.uncertainty.seed: the study's seeds set it")
+    try:
+        UncertaintyConfig.from_dict({**unc, "seed": 0}, f"{where}.uncertainty")
+    except (TypeError, ValueError) as exc:
+        raise StudyConfigError(str(exc)) from exc
+    drives_v = d.get("drives", "ideal")
+    if isinstance(drives_v, str):
+        if drives_v not in DRIVE_PRESETS:
+            raise StudyConfigError(f"{where}.drives: '{drives_v}' is not one of {', '.join(DRIVE_PRESETS)} "
+                                   "(or give a table of host_sim.drive_model.DriveModel fields)")
+        drives = DRIVE_PRESETS[drives_v]
+    else:
+        try:
+            drives = DriveModel.from_dict(drives_v, f"{where}.drives")
+        except ValueError as exc:
+            raise StudyConfigError(str(exc)) from exc
+    bus_timing = _get(d, "bus_timing", where, bool, False)
+    return Scenario(name, str(d.get("description", "")), unc, drives, bus_timing)
+
+
+def _space(method: str, d: Any) -> Space:
+    where = f"tuning.space.{method}"
+    if method not in TUNED:
+        raise StudyConfigError(f"{where}: {method} is not tuned (tuned: {', '.join(TUNED)})")
+    if not isinstance(d, dict):
+        raise StudyConfigError(f"{where}: expected a table of knob = [low, high]")
+    how = METHODS[method][1]
+    known = set(GAIN_KNOBS[method]) if how == "gains" else (
+        {"E1", "E2", "D12", "form"} if method == "gh2" else {*DESIGN_KNOBS, "form"})
+    unknown = set(d) - known
+    missing = known - set(d) - {"form"}
+    if unknown or missing:
+        raise StudyConfigError(f"{where}: " + (f"unknown knob(s) {sorted(unknown)}" if unknown else
+                                               f"missing knob(s) {sorted(missing)}") + f" (knobs: {', '.join(sorted(known))})")
+    sp = Space()
+    for k, v in d.items():
+        if k == "form":
+            if not isinstance(v, list) or not v or not set(v) <= {"single", "split"}:
+                raise StudyConfigError(f"{where}.form: a list of \"single\" and/or \"split\", got {v!r}")
+            sp.choices["form"] = list(v)
+            continue
+        if (not isinstance(v, list) or len(v) != 2 or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                                              and math.isfinite(x) and x > 0 for x in v) or not v[0] < v[1]):
+            raise StudyConfigError(f"{where}.{k}: expected [low, high] with 0 < low < high (searched on a log scale), "
+                                   f"got {v!r}")
+        sp.ranges[k] = (float(v[0]), float(v[1]))
+    if how == "design" and "form" not in sp.choices:
+        sp.choices["form"] = ["single"]
+    return sp
+
+
 def load(path: Path) -> StudyConfig:
     try:
         data = tomllib.loads(path.read_text())
-    except (OSError, tomllib.TOMLDecodeError) as exc:
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise StudyConfigError(f"{path}: {exc}") from exc
+    known = {"description", "duration_s", "hold_s", "seed", "seeds", "methods", "scenarios", "trajectory",
+             "scenario", "tuning"}
+    unknown = set(data) - known
+    if unknown:
+        raise StudyConfigError(f"study: unknown field(s) {sorted(unknown)} (known: {', '.join(sorted(known))})")
     methods = _get(data, "methods", "study", list)
     bad = [m for m in methods if m not in METHODS]
-    if bad or not methods:
-        raise StudyConfigError(f"study.methods: unknown {bad} (known: {', '.join(METHODS)})")
-    unc = dict(_get(data, "uncertainty", "study", dict))
-    try:
-        UncertaintyConfig(**{**unc, "seed": 0}).validate()
-    except TypeError as exc:
-        raise StudyConfigError(f"uncertainty: {exc}") from exc
-    except ValueError as exc:
-        raise StudyConfigError(str(exc)) from exc
-    bus_timing = data.get("bus_timing", False)
-    if not isinstance(bus_timing, bool):
-        raise StudyConfigError(f"study.bus_timing: expected true or false, got {bus_timing!r}")
+    if bad or not methods or len(set(methods)) != len(methods):
+        raise StudyConfigError(f"study.methods: unknown or repeated {bad or methods} (known: {', '.join(METHODS)})")
+    tables = _get(data, "scenario", "study", dict)
+    scenarios = {name: _scenario(name, d) for name, d in tables.items()}
+    chosen = _get(data, "scenarios", "study", list, list(scenarios))
+    missing = [s for s in chosen if s not in scenarios]
+    if missing or not chosen:
+        raise StudyConfigError(f"study.scenarios: {missing or 'none'} not defined (defined: {', '.join(scenarios)})")
     tuning = _get(data, "tuning", "study", dict)
-    grid = tuning.get("grid", {})
-    for m, g in grid.items():
-        if m not in TUNED:
-            raise StudyConfigError(f"tuning.grid.{m}: only {', '.join(TUNED)} are tuned")
-        for k, vals in g.items():
-            if not isinstance(vals, list) or not vals or not all(isinstance(x, (int, float)) and x > 0 for x in vals):
-                raise StudyConfigError(f"tuning.grid.{m}.{k}: need a list of positive numbers")
+    t_known = {"seeds", "duration_s", "amp", "freq_hz", "objective", "trials", "batch", "widen", "file", "space"}
+    t_unknown = set(tuning) - t_known
+    if t_unknown:
+        raise StudyConfigError(f"tuning: unknown field(s) {sorted(t_unknown)} (known: {', '.join(sorted(t_known))})")
+    tseeds = _get(tuning, "seeds", "tuning", list)
+    if not tseeds or not all(isinstance(s, int) and not isinstance(s, bool) and 0 <= s < 2**63 for s in tseeds):
+        raise StudyConfigError(f"tuning.seeds: a list of whole numbers >= 0, got {tseeds!r}")
+    seed = _whole(data, "seed", "study", 0, 2**62)
+    seeds = _whole(data, "seeds", "study", 1, 1000, 1)
+    if set(tseeds) & set(range(seed, seed + seeds)):
+        raise StudyConfigError(f"tuning.seeds {tseeds}: must differ from the study's seeds ({seed}..{seed + seeds - 1})")
+    spaces_t = _get(tuning, "space", "tuning", dict)
+    spaces = {m: _space(m, d) for m, d in spaces_t.items()}
+    untuned = [m for m in methods if METHODS[m][1] is not None and m not in spaces]
+    if untuned:
+        raise StudyConfigError(f"tuning.space: no search space for {untuned}: every tuned method needs one")
+    file_name = _get(tuning, "file", "tuning", str)
+    if "/" in file_name or not file_name.endswith(".json"):
+        raise StudyConfigError(f"tuning.file: a file name next to the config ending .json, got {file_name!r}")
     return StudyConfig(
         path=path,
         description=str(data.get("description", "")),
-        duration_s=_positive(_get(data, "duration_s", "study", (int, float)), "study.duration_s"),
-        hold_s=float(_get(data, "hold_s", "study", (int, float))),
-        seed=_get(data, "seed", "study", int),
+        duration_s=_number(data, "duration_s", "study", 0.001, 86400),
+        hold_s=_number(data, "hold_s", "study", 0.0, 3600),
+        seed=seed,
+        seeds=seeds,
         methods=list(methods),
-        uncertainty=unc,
+        scenarios={k: scenarios[k] for k in chosen},
         trajectory=_trajectory(_get(data, "trajectory", "study", dict), "trajectory"),
-        tuning_seed=_get(tuning, "seed", "tuning", int),
-        tuning_duration_s=_positive(_get(tuning, "duration_s", "tuning", (int, float)), "tuning.duration_s"),
+        tuning_seeds=list(tseeds),
+        tuning_duration_s=_number(tuning, "duration_s", "tuning", 0.001, 3600),
         tuning_trajectory=_trajectory(tuning, "tuning"),
         tuning_objective=str(tuning.get("objective", "")),
-        gains_file=path.parent / _get(tuning, "gains_file", "tuning", str),
-        grid=grid,
-        bus_timing=bus_timing,
+        trials=_whole(tuning, "trials", "tuning", 1, 100000),
+        batch=_whole(tuning, "batch", "tuning", 1, 64, 4),
+        widen=_whole(tuning, "widen", "tuning", 0, 10, 2),
+        spaces=spaces,
+        tuning_file=path.parent / file_name,
+        raw=data,
     )
 
 
 def gain_args(method: str, gains: dict[str, float]) -> list[str]:
-    """Controller arguments for one method's gains (the grid's parameter names)."""
+    """Controller arguments for one method's gains (the search space's knob names)."""
     if method in ("pd", "tde"):
         wn = gains["wn"]
         args = ["--kp", f"{wn * wn:g}", "--kd", f"{2 * wn:g}"]
@@ -137,8 +281,3 @@ def gain_args(method: str, gains: dict[str, float]) -> list[str]:
         return ["--usde-k", f"{gains['k']:g}", "--smc-lambda", f"{lam:g}", "--smc-ks", f"{lam:g}",
                 "--smc-eta", "1", "--smc-phi", "0.05"]
     return []
-
-
-def grid_points(grid: dict[str, list[float]]) -> list[dict[str, float]]:
-    keys = sorted(grid)
-    return [dict(zip(keys, combo)) for combo in itertools.product(*(grid[k] for k in keys))]

@@ -77,14 +77,20 @@ def run(ns: argparse.Namespace) -> int:
     from gen.synth.config import ConfigError
     from gen.synth.lmi import SynthesisError
 
+    from tools.outdir import OutDirError, check_out_dir
+
     try:
+        check_out_dir(ns.out)  # before the solve, not after it
         manifest = synth_to_dir(ns.config, ns.out)
-    except ConfigError as exc:
+    except (ConfigError, OutDirError) as exc:
         print(f"config error: {exc}", file=sys.stderr)
         return 2
     except SynthesisError as exc:
         print(f"synth refused: {exc}", file=sys.stderr)
         return 3
+    except OSError as exc:
+        print(f"synth: cannot write {ns.out}: {exc}", file=sys.stderr)
+        return 1
     if not getattr(ns, "quiet", False):
         print(_summary(manifest, ns.out))
     return 0

@@ -91,9 +91,15 @@ def _is_number(v: Any) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
+MAX_MAGNITUDE = 1e9  # weights and coefficients beyond this only make the LMIs ill-conditioned
+MAX_JOINTS = 16      # the firmware's bound (firmware/core/include/arm/robot_model.h)
+
+
 def _number(v: Any, field: str) -> float:
     if not _is_number(v) or not math.isfinite(float(v)):
         raise ConfigError(field, f"must be a finite number, got {v!r}")
+    if abs(float(v)) > MAX_MAGNITUDE:
+        raise ConfigError(field, f"must be within +-{MAX_MAGNITUDE:g} (scale the weights), got {v!r}")
     return float(v)
 
 
@@ -104,12 +110,12 @@ def _positive(v: Any, field: str) -> float:
     return x
 
 
-def _integer(v: Any, field: str, minimum: int) -> int:
-    if _is_number(v) and float(v).is_integer():
+def _integer(v: Any, field: str, minimum: int, maximum: int) -> int:
+    if _is_number(v) and math.isfinite(float(v)) and float(v).is_integer():
         i = int(v)
-        if i >= minimum:
+        if minimum <= i <= maximum:
             return i
-    raise ConfigError(field, f"must be an integer >= {minimum}, got {v!r}")
+    raise ConfigError(field, f"must be an integer in [{minimum}, {maximum}], got {v!r}")
 
 
 def _matrix(v: Any, field: str) -> np.ndarray:
@@ -123,8 +129,8 @@ def _matrix(v: Any, field: str) -> np.ndarray:
         raise ConfigError(field, "rows must be non-empty and of equal length")
     for r in v:
         for x in r:
-            if not _is_number(x) or not math.isfinite(float(x)):
-                raise ConfigError(field, f"entries must be finite numbers, got {x!r}")
+            if not _is_number(x) or not math.isfinite(float(x)) or abs(float(x)) > MAX_MAGNITUDE:
+                raise ConfigError(field, f"entries must be finite numbers within +-{MAX_MAGNITUDE:g}, got {x!r}")
     return np.array(v, dtype=float)
 
 
@@ -219,8 +225,8 @@ def parse_config(doc: dict[str, Any]) -> DesignConfig:
         raise ConfigError("description", "must be a string")
 
     arm = _table(doc, "arm", {"n_joints", "loop_rate_hz"})
-    n = _integer(_require(arm, "arm", "n_joints"), "arm.n_joints", 1)
-    rate = _integer(_require(arm, "arm", "loop_rate_hz"), "arm.loop_rate_hz", 1)
+    n = _integer(_require(arm, "arm", "n_joints"), "arm.n_joints", 1, MAX_JOINTS)
+    rate = _integer(_require(arm, "arm", "loop_rate_hz"), "arm.loop_rate_hz", 1, 100000)
 
     est = _table(doc, "estimator", {"F", "H", "allow_biproper_F"})
     allow_bp = est.get("allow_biproper_F", False)
@@ -260,12 +266,15 @@ def parse_config(doc: dict[str, Any]) -> DesignConfig:
     ladder = tuple(_positive(x, f"design.backoff_ladder[{i}]") for i, x in enumerate(ladder_raw))
     if any(b <= a for a, b in zip(ladder, ladder[1:])):
         raise ConfigError("design.backoff_ladder", "must be strictly increasing")
-    delay = _integer(des.get("delay_margin_samples", 1), "design.delay_margin_samples", 0)
+    delay = _integer(des.get("delay_margin_samples", 1), "design.delay_margin_samples", 0, 50)
     resid = _positive(des.get("residualise_above", 10.0), "design.residualise_above")
 
     rng = _table(doc, "ranges", {"e_max", "e_dot_max"})
     e_max = _positive(_require(rng, "ranges", "e_max"), "ranges.e_max")
     e_dot_max = _positive(_require(rng, "ranges", "e_dot_max"), "ranges.e_dot_max")
+    for name, v, hi in (("ranges.e_max", e_max, 100.0), ("ranges.e_dot_max", e_dot_max, 1e4)):
+        if v > hi:  # the fixed-point format of the inputs spends a bit per doubling of the range
+            raise ConfigError(name, f"must be <= {hi:g} (the fixed-point inputs would have no resolution left), got {v:g}")
 
     return DesignConfig(
         n_joints=n,
@@ -292,6 +301,10 @@ def load_config(path: Path) -> DesignConfig:
             doc = tomllib.load(fh)
     except FileNotFoundError:
         raise ConfigError("config", f"file not found: {path}") from None
-    except tomllib.TOMLDecodeError as exc:
+    except IsADirectoryError:
+        raise ConfigError("config", f"{path} is a directory: give the design config file (TOML)") from None
+    except OSError as exc:
+        raise ConfigError("config", f"{path}: cannot read it ({exc.strerror})") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError("config", f"{path}: not valid TOML ({exc})") from None
     return parse_config(doc)

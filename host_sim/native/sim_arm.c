@@ -83,8 +83,12 @@ int sim_arm_open(sim_arm_t *a, const char *path, const char *keyframe, int subst
     a->nominal->opt.disableflags |= mjDSBL_CONSTRAINT | mjDSBL_SPRING;
     a->parametric = u->mass_error != 0.0 || u->inertia_error != 0.0 || u->com_error_m != 0.0;
     for (int j = 0; j < a->n; ++j) {
-        a->friction |= u->viscous[j] != 0.0 || u->coulomb[j] != 0.0;
         a->torque_limit[j] = a->model->actuator_ctrlrange[2 * j + 1];
+        /* Joint friction the nominal model lacks, in MuJoCo's own terms: damping is integrated
+         * implicitly and frictionloss is a constraint (it sticks), both stable at a 1 ms step on
+         * a 1e-4 kg m^2 wrist, where an explicit -b qd - c tanh(qd / eps) blew up at b = 3. */
+        a->model->dof_damping[j] += u->viscous[j];
+        a->model->dof_frictionloss[j] += u->coulomb[j];
     }
     /* The draws come in the order the Python simulator made them: the signal's first two knots,
      * then the links' parametric errors (one seed, one arm). */
@@ -131,18 +135,11 @@ static void signal_at(sim_arm_t *a, double t, double *out)
 /* The generalized force that makes MuJoCo integrate the uncertain dynamics: with M, V of the
  * (parametrically perturbed) arm, the true acceleration is qdd = (M + M~)^-1 (tau + tau_f - V - V~);
  * returned is f with M qdd + V = tau + f. */
-static void extra_force(sim_arm_t *a, double t, const double *bias, const double *tau, const double *qd,
-                        double *f)
+static void extra_force(sim_arm_t *a, double t, const double *bias, const double *tau, double *f)
 {
     const int n = a->n;
-    double tau_f[SIM_MAX_JOINTS] = {0};
-    if (a->friction) {
-        for (int j = 0; j < n; ++j) {
-            tau_f[j] = -a->unc.viscous[j] * qd[j] - a->unc.coulomb[j] * tanh(qd[j] / 0.01);
-        }
-    }
     if (a->unc.paper_ratio == 0.0) {
-        memcpy(f, tau_f, (size_t)n * sizeof(double));
+        memset(f, 0, (size_t)n * sizeof(double));
         return;
     }
     double dd[2 * SIM_MAX_JOINTS];
@@ -157,7 +154,7 @@ static void extra_force(sim_arm_t *a, double t, const double *bias, const double
             const double mij = a->mass[i * n + j];
             m_true[i * n + j] = mij + 0.5 * (d[i] * mij + mij * d[j]);
         }
-        rhs[i] = tau[i] + tau_f[i] - bias[i] * (1.0 + dv[i]);
+        rhs[i] = tau[i] - bias[i] * (1.0 + dv[i]);
     }
     mju_cholFactor(m_true, n, 0.0);
     mju_cholSolve(qdd, m_true, rhs, n);
@@ -192,16 +189,16 @@ int sim_arm_step(sim_arm_t *a, const double *tau, const double *tau_commanded, d
             sd = d;
         }
         mj_fullM(sm, sd, a->mass);
-        extra_force(a, (double)a->step_count * a->period, sd->qfrc_bias, tau, d->qvel, d->qfrc_applied);
+        extra_force(a, (double)a->step_count * a->period, sd->qfrc_bias, tau, d->qfrc_applied);
     } else {
-        extra_force(a, 0.0, d->qfrc_bias, tau, d->qvel, d->qfrc_applied);
+        extra_force(a, 0.0, d->qfrc_bias, tau, d->qfrc_applied);
     }
     mj_step(a->model, d); /* qacc is the acceleration at the step's start */
     for (int j = 0; j < n; ++j) {
         w[j] = nd->qacc[j] - d->qacc[j];
     }
     for (int k = 1; k < a->substeps; ++k) { /* the rest of the period: the same torque, the force anew */
-        extra_force(a, ((double)a->step_count + (double)k / a->substeps) * a->period, d->qfrc_bias, tau, d->qvel,
+        extra_force(a, ((double)a->step_count + (double)k / a->substeps) * a->period, d->qfrc_bias, tau,
                     d->qfrc_applied);
         mj_step(a->model, d);
     }

@@ -7,7 +7,8 @@
  *   force (Coriolis, centrifugal, gravity);
  * - parametric: link masses, inertias and centres of mass off from the nominal model (uniform in
  *   +-error, per link, seeded);
- * - joint friction the nominal model lacks: tau_f = -b qd - c tanh(qd / 0.01).
+ * - joint friction the nominal model lacks: viscous b and Coulomb c added to the true model's
+ *   joint damping and frictionloss (MuJoCo integrates them stably, and frictionloss sticks).
  *
  * Each step returns w, the total uncertainty of e_ddot = u + w as the controller sees it: the
  * acceleration the firmware's nominal model predicts for the commanded torque minus the true one.
@@ -46,7 +47,6 @@ typedef struct {
     int64_t step_count;
     sim_uncertainty_t unc;
     int parametric;
-    int friction;
     sim_rng_t rng;
     double knots[2][2 * SIM_MAX_JOINTS]; /* the random signal d (first n) and d' (last n) */
     int64_t knot_index;

@@ -32,6 +32,9 @@ typedef struct {
     arm_can_bus_set_t set;
     int bus_of[SIM_MAX_JOINTS];
     sim_drive_t drives[SIM_MAX_JOINTS];
+    sim_servo_t servo[SIM_MAX_JOINTS]; /* each drive's sensing and torque path (cfg->servo) */
+    sim_rng_t noise[SIM_MAX_JOINTS];   /* each drive's measurement noise: a seeded stream per drive, so
+                                        * the order the buses are served in does not change a run */
     sim_timeline_t timing[ARM_CAN_BUS_SET_MAX]; /* when cfg->timing != off */
     int counter;     /* SYNC counter of the period being served, -1: none */
     uint32_t synced; /* bit b: this period's SYNC arrived on bus b */
@@ -322,6 +325,7 @@ static void finish_period(sim_t *s)
     const int timed = s->cfg->timing != SIM_TIMING_OFF;
     if (timed) emulate_commands(s, effect);
     double tau[SIM_MAX_JOINTS], tau_cmd[SIM_MAX_JOINTS];
+    const int ideal = sim_servo_is_ideal(&s->cfg->servo);
     for (int j = 0; j < n; ++j) {
         sim_drive_t *d = &s->drives[j];
         const double before = sim_drive_applied_torque(d);
@@ -340,9 +344,15 @@ static void finish_period(sim_t *s)
         sim_drive_on_period_end(d, got);
         if (d->n_emcy_pending > 0u) send_emcys(s, j);
         if (!got && was_fault == 0u) s->rep->commands_missed++;
-        /* One physics step per period: a torque that changes inside it acts as its time average. */
+        /* One physics step per period: a torque that changes inside it acts as its time average
+         * (through the drive's latency and current loop when they are emulated). */
         tau_cmd[j] = sim_drive_applied_torque(d);
-        tau[j] = held_for * before + (1.0 - held_for) * tau_cmd[j];
+        if (ideal) {
+            tau[j] = held_for * before + (1.0 - held_for) * tau_cmd[j];
+        } else {
+            tau[j] = sim_servo_period_torque(&s->cfg->servo, &s->servo[j], tau_cmd[j], held_for * s->arm->period,
+                                             s->arm->period, s->arm->data->qpos[j]);
+        }
     }
     memcpy(s->last_tau, tau, (size_t)n * sizeof(double));
     const int64_t c0 = s->cfg->profile ? cpu_ns() : 0;
@@ -430,8 +440,11 @@ static void on_sync(sim_t *s, int counter, unsigned bus)
         if (s->bus_of[j] != (int)bus) continue;
         const sim_drive_t *d = &s->drives[j];
         arm_can_frame_t *f = &batch[k++];
-        sim_make_state(j, q[j], qd[j], sim_drive_applied_torque(d), (uint16_t)d->power, (uint8_t)counter,
-                       d->error_code, f);
+        double qm = q[j], qdm = qd[j], taum = sim_drive_applied_torque(d);
+        if (!sim_servo_is_ideal(&s->cfg->servo)) { /* what a real drive would measure and report */
+            sim_servo_measure(&s->cfg->servo, &s->servo[j], &s->noise[j], q[j], qd[j], s->arm->period, &qm, &qdm, &taum);
+        }
+        sim_make_state(j, qm, qdm, taum, (uint16_t)d->power, (uint8_t)counter, d->error_code, f);
         if (s->cfg->timing == SIM_TIMING_WALLCLOCK) { /* not before the frame would have ended on the bus */
             sleep_until(s->period_wall_ns + (int64_t)(send_at[j] * 1e9));
             send(s, bus, f);
@@ -659,6 +672,9 @@ int sim_run(const sim_config_t *cfg, sim_arm_t *arm, sim_telemetry_t *tel, sim_r
             return -1;
         }
         sim_drive_init(&s.drives[j], (uint8_t)(j + 1), arm->torque_limit[j], cfg->command_timeout_periods);
+        sim_servo_init(&s.servo[j]);
+        /* not the uncertainty's stream, and one per drive */
+        sim_rng_seed(&s.noise[j], arm->unc.seed ^ (0x9E3779B97F4A7C15ull * ((uint64_t)j + 1u)));
     }
     memcpy(s.timing, cfg->timelines, sizeof(s.timing));
     if (arm_can_bus_set_open(&s.set, &cfg->buses, err, errcap) != 0) {

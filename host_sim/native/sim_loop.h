@@ -11,6 +11,7 @@
 #include "arm/can_bus.h"
 #include "sim_arm.h"
 #include "sim_bus_timing.h"
+#include "sim_servo.h"
 #include "sim_telemetry.h"
 
 typedef enum { SIM_TIMING_OFF = 0, SIM_TIMING_VIRTUAL, SIM_TIMING_WALLCLOCK } sim_timing_mode_t;
@@ -31,6 +32,7 @@ typedef struct {
      * between buses). Long in lockstep (nothing is timed); a fraction of a period in realtime,
      * where holding a SYNC back is what makes the controller's states late. */
     double reorder_wait_s;
+    sim_servo_config_t servo;    /* the drives' sensing and torque path (all zero: ideal drives) */
 } sim_config_t;
 
 #define SIM_COST_BINS 5000u /* per-period CPU cost histogram, 1 us bins */

@@ -30,6 +30,14 @@ static void usage(const char *prog)
            "uncertainty (host_sim.uncertainty.UncertaintyConfig; default none):\n"
            "  --seed N --paper-ratio R --paper-knot-s S --mass-error X --inertia-error X\n"
            "  --com-error-m X --viscous B1,..,Bn --coulomb C1,..,Cn\n"
+           "drives (host_sim/drive_model.py: DriveModel; default the ideal drive):\n"
+           "  --encoder-bits N           counts per joint turn 2^N (1..32); position quantised\n"
+           "  --position-noise-counts X  Gaussian position noise, sigma in counts (needs --encoder-bits)\n"
+           "  --velocity-filter-hz F     velocity from encoder differences, first-order low-pass F\n"
+           "  --torque-noise-nm X        Gaussian noise on the torque the drive reports, sigma\n"
+           "  --current-loop-hz F        torque follows the command through a first-order lag of F\n"
+           "  --torque-latency-us U      command arrival -> current loop input\n"
+           "  --ripple R --ripple-periods P  torque ripple: x (1 + R sin(P q)) [P 6]\n"
            "bus timing (vcan and UDP have none):\n"
            "  --bus-timing off|virtual|wallclock  [off]\n"
            "  --frame-times I=ID:US,ID:US,..  worst-case length of each frame on bus I (tools/busload)\n"
@@ -113,6 +121,7 @@ int sim_options_parse(int argc, char **argv, sim_options_t *o, char *err, unsign
     snprintf(o->keyframe, sizeof(o->keyframe), "home");
     snprintf(o->lcm_url, sizeof(o->lcm_url), "udpm://239.255.76.67:7667?ttl=0");
     sim_uncertainty_default(&o->unc);
+    sim_servo_config_default(&o->cfg.servo);
     o->substeps = 1;
     sim_config_t *c = &o->cfg;
     c->boot_timeout_s = 60.0;
@@ -200,6 +209,28 @@ int sim_options_parse(int argc, char **argv, sim_options_t *o, char *err, unsign
             rc = parse_list(a, v, o->unc.viscous, &o->n_viscous, err, errcap);
         } else if (strcmp(a, "--coulomb") == 0) {
             rc = parse_list(a, v, o->unc.coulomb, &o->n_coulomb, err, errcap);
+        } else if (strcmp(a, "--encoder-bits") == 0) {
+            rc = parse_double(a, v, 1.0, 32.0, 0, &d, err, errcap);
+            if (rc == 0 && d != floor(d)) {
+                snprintf(err, errcap, "%s: '%s' is not a whole number", a, v);
+                rc = -1;
+            }
+            c->servo.encoder_bits = (int)d;
+        } else if (strcmp(a, "--position-noise-counts") == 0) {
+            rc = parse_double(a, v, 0.0, 1e6, 0, &c->servo.position_noise_counts, err, errcap);
+        } else if (strcmp(a, "--velocity-filter-hz") == 0) {
+            rc = parse_double(a, v, 0.0, 1e6, 0, &c->servo.velocity_filter_hz, err, errcap);
+        } else if (strcmp(a, "--torque-noise-nm") == 0) {
+            rc = parse_double(a, v, 0.0, 1e4, 0, &c->servo.torque_noise_nm, err, errcap);
+        } else if (strcmp(a, "--current-loop-hz") == 0) {
+            rc = parse_double(a, v, 0.0, 1e7, 0, &c->servo.current_loop_hz, err, errcap);
+        } else if (strcmp(a, "--torque-latency-us") == 0) {
+            rc = parse_double(a, v, 0.0, 1e6, 0, &d, err, errcap);
+            c->servo.latency_s = d * 1e-6;
+        } else if (strcmp(a, "--ripple") == 0) {
+            rc = parse_double(a, v, 0.0, 1.0, 0, &c->servo.ripple, err, errcap);
+        } else if (strcmp(a, "--ripple-periods") == 0) {
+            rc = parse_double(a, v, 0.0, 1e4, 0, &c->servo.ripple_periods, err, errcap);
         } else if (strcmp(a, "--bus-timing") == 0) {
             if (strcmp(v, "off") == 0) c->timing = SIM_TIMING_OFF;
             else if (strcmp(v, "virtual") == 0) c->timing = SIM_TIMING_VIRTUAL;
@@ -247,6 +278,10 @@ int sim_options_parse(int argc, char **argv, sim_options_t *o, char *err, unsign
     if (c->timing != SIM_TIMING_OFF && (frames_given & want) != want) {
         snprintf(err, errcap, "--bus-timing %s: give --frame-times for every --bus (%u buses)",
                  c->timing == SIM_TIMING_VIRTUAL ? "virtual" : "wallclock", o->n_bus_args);
+        return -1;
+    }
+    if (c->servo.position_noise_counts > 0.0 && c->servo.encoder_bits == 0) {
+        snprintf(err, errcap, "--position-noise-counts: counts of what? give --encoder-bits too");
         return -1;
     }
     if (c->timing == SIM_TIMING_OFF && frames_given != 0u) {

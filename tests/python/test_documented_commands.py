@@ -31,6 +31,7 @@ EXERCISED: dict[str, str] = {
     "bench step": "test_documented_commands.py::test_bench",
     "bench synth": "test_documented_commands.py::test_bench",
     "bench sim": "test_documented_commands.py::test_bench",
+    "bench study": "test_documented_commands.py::test_bench",
     "timing": "test_timing.py::timing_run",
     "busload": "test_documented_commands.py::test_busload",
     "vcan status": "test_documented_commands.py::test_vcan_status_and_up",
@@ -92,7 +93,10 @@ def test_demo(tmp_path: Path) -> None:
     r = armctl("demo", "--duration", "0.2", "--out", str(tmp_path))
     assert r.returncode == 0, r.stdout + r.stderr
     study = json.loads((tmp_path / "study.json").read_text())
-    assert set(study["runs"]) == {"pm", "pm-paper", "pd", "gh2", "tde", "usde-smc"}
+    assert list(study["scenarios"]) == ["ideal", "realistic", "realistic+friction+parameter-error"]
+    for sc in study["scenarios"].values():
+        assert set(sc["runs"]) == {"pm", "pm-paper-weights", "pm-paper", "pd", "gh2", "tde", "usde-smc"}
+        assert all(rec["source"].startswith("tuned earlier") for rec in sc["tuning"].values())  # the kept tuning
     assert (tmp_path / "report.md").is_file()
 
 
@@ -102,61 +106,66 @@ def test_hil(tmp_path: Path) -> None:
     run = json.loads((tmp_path / "run.json").read_text())
     assert run["results"]["result"] == "ok" and run["results"]["method"] == "tde"
     assert "result ok" in r.stdout
+    r = armctl("hil", "--duration", "0.3", "--method", "tde", "--drives", "realistic", "--out", str(tmp_path / "real"))
+    run = json.loads((tmp_path / "real" / "run.json").read_text())
+    assert r.returncode in (0, 1) and run["results"]["drives"]["encoder_bits"] == 19, r.stderr
 
 
 def test_study(tmp_path: Path) -> None:
-    r = armctl("study", "--duration", "0.2", "--methods", "pm,tde", "--out", str(tmp_path))
+    r = armctl("study", "--duration", "0.2", "--methods", "pm,tde", "--scenarios", "ideal", "--seeds", "2",
+               "--jobs", "2", "--out", str(tmp_path))
     assert r.returncode == 0, r.stdout + r.stderr
-    assert set(json.loads((tmp_path / "study.json").read_text())["runs"]) == {"pm", "tde"}
+    study = json.loads((tmp_path / "study.json").read_text())
+    assert set(study["scenarios"]["ideal"]["runs"]) == {"pm", "tde"} and study["seeds"] == [1, 2]
+
+
+def small_tuning_config(dirpath: Path) -> Path:
+    """The default config with 0.2 s tuning runs (the budget comes from --trials)."""
+    text = (REPO / "tools" / "studies" / "paper.toml").read_text()
+    text = re.sub(r"(\[tuning\][^\[]*?)duration_s = [0-9.]+", r"\1duration_s = 0.2", text, flags=re.S)
+    text = re.sub(r"(?m)^batch = \d+$", "batch = 2", text)
+    cfg = dirpath / "tune7.toml"
+    cfg.write_text(text)
+    assert tomllib.loads(text)["tuning"]["duration_s"] == 0.2
+    return cfg
 
 
 def test_tune(tmp_path: Path) -> None:
-    """A two-point grid per baseline on a 0.2 s tuning run; the gains file lands next to the config."""
-    cfg = tomllib.loads((REPO / "tools" / "studies" / "paper.toml").read_text())
-    text = (REPO / "tools" / "studies" / "paper.toml").read_text()
-    text = re.sub(r"(\[tuning\][^\[]*?)duration_s = [0-9.]+", r"\1duration_s = 0.2", text, flags=re.S)
-    text = text.split("[tuning.grid.pd]")[0] + (
-        "[tuning.grid.pd]\nwn = [10.0, 20.0]\n[tuning.grid.tde]\nwn = [20.0]\ncutoff_hz = [50.0]\n"
-        "[tuning.grid.usde-smc]\nk = [0.01]\nlambda = [20.0]\n")
-    (tmp_path / "tune.toml").write_text(text)
-    assert tomllib.loads(text)["tuning"]["duration_s"] == 0.2 and cfg["tuning"]["seed"] != cfg["seed"]
-    r = armctl("tune", "--config", str(tmp_path / "tune.toml"), "--out", str(tmp_path / "runs"))
+    """Two trials per method on a 0.2 s tuning run; the tuning lands next to the config."""
+    cfg = small_tuning_config(tmp_path)
+    r = armctl("tune", "--config", str(cfg), "--scenarios", "realistic", "--methods", "pm,pd,tde", "--trials", "2",
+               "--out", str(tmp_path / "runs"))
     assert r.returncode == 0, r.stdout + r.stderr
-    gains = json.loads((tmp_path / cfg["tuning"]["gains_file"]).read_text())
-    assert set(gains["methods"]) == {"pd", "tde", "usde-smc"}
-    assert len(gains["all_scores"]["pd"]) == 2
+    tuning = json.loads((tmp_path / "paper.tuning.json").read_text())
+    recs = tuning["scenarios"]["realistic"]
+    assert set(recs) == {"pm", "pd", "tde"} and all(len(rec["rounds"][0]["trials"]) == 2 for rec in recs.values())
 
 
 def test_tune_and_study_on_another_arm(tmp_path: Path) -> None:
-    """tune on a 7-DOF arm keeps its gains in the arm's build folder; the study then uses them."""
-    text = (REPO / "tools" / "studies" / "paper.toml").read_text()
-    text = re.sub(r"(\[tuning\][^\[]*?)duration_s = [0-9.]+", r"\1duration_s = 0.2", text, flags=re.S)
-    text = text.split("[tuning.grid.pd]")[0] + (
-        "[tuning.grid.pd]\nwn = [20.0]\n[tuning.grid.tde]\nwn = [20.0]\ncutoff_hz = [50.0]\n"
-        "[tuning.grid.usde-smc]\nk = [0.01]\nlambda = [20.0]\n")
-    cfg = tmp_path / "tune7.toml"
-    cfg.write_text(text)
+    """tune on a 7-DOF arm keeps its tuning in the arm's build folder; the study then uses it."""
+    cfg = small_tuning_config(tmp_path)
     model = str(REPO / "tests" / "arms" / "robosuite" / "iiwa.xml")
-    r = armctl("tune", "--model", model, "--config", str(cfg), "--out", str(tmp_path / "runs"))
+    common = ["--model", model, "--config", str(cfg), "--scenarios", "ideal", "--methods", "pm,tde", "--trials", "2"]
+    r = armctl("tune", *common, "--out", str(tmp_path / "runs"))
     assert r.returncode == 0, r.stdout + r.stderr
-    gains_path = Path(r.stdout.strip().splitlines()[-1].removeprefix("gains: "))
-    assert gains_path.is_relative_to(REPO / "build" / "arms") and gains_path.name == "tune7.tuned_gains.json"
-    assert not (tmp_path / "tuned_gains.json").exists()  # never next to the config: that is the bundled arm's
-    r = armctl("study", "--model", model, "--config", str(cfg), "--duration", "0.2", "--methods", "pm,tde",
-               "--out", str(tmp_path / "study"))
+    kept = Path(r.stdout.strip().splitlines()[-1].removeprefix("tuning: "))
+    assert kept.is_relative_to(REPO / "build" / "arms") and kept.name == "tune7.paper.tuning.json"
+    assert not (tmp_path / "paper.tuning.json").exists()  # never next to the config: that is the bundled arm's
+    r = armctl("study", *common, "--duration", "0.2", "--out", str(tmp_path / "study"))
     assert r.returncode == 0, r.stdout + r.stderr
     study = json.loads((tmp_path / "study" / "study.json").read_text())
-    assert study["tuning"]["source"] == f"tuned on this arm ({gains_path})"
-    assert len(study["runs"]["tde"]["tracking_max_abs_deg"]) == 7
+    sc = study["scenarios"]["ideal"]
+    assert sc["tuning"]["pm"]["source"] == f"tuned earlier, kept in {kept}"
+    assert len(sc["runs"]["tde"][0]["tracking_max_abs_deg"]) == 7
 
 
 def test_demo_on_another_arm(tmp_path: Path) -> None:
     r = armctl("demo", "--arm", str(REPO / "tests" / "arms" / "panda.toml"), "--duration", "0.2",
-               "--out", str(tmp_path))
+               "--scenarios", "ideal", "--trials", "2", "--out", str(tmp_path))
     assert r.returncode == 0, r.stdout + r.stderr
     study = json.loads((tmp_path / "study.json").read_text())
     assert study["arm"]["name"] == "panda" and study["arm"]["n_joints"] == 7
-    assert all(res["result"] == "ok" for res in study["runs"].values())
+    assert all(len(runs[0]["tracking_max_abs_deg"]) == 7 for runs in study["scenarios"]["ideal"]["runs"].values())
 
 
 def test_synth(tmp_path: Path) -> None:
@@ -181,6 +190,10 @@ def test_bench(tmp_path: Path) -> None:
     r = armctl("bench", "synth", "--quick", "--out", str(tmp_path / "synth.json"))
     assert r.returncode == 0, r.stdout + r.stderr
     assert json.loads((tmp_path / "synth.json").read_text())["synth_n6"][0]["wall_time_median_s"] > 0
+    r = armctl("bench", "study", "--quick", "--out", str(tmp_path / "study.json"))
+    assert r.returncode == 0, r.stdout + r.stderr
+    study = json.loads((tmp_path / "study.json").read_text())
+    assert study["quick"] and study["jobs"]["1"]["runs_per_minute"] > 0 and study["jobs"]["2"]["simulated_s_per_wall_s"] > 0
     r = armctl("bench", "sim", "--quick", "--out", str(tmp_path / "sim.json"))
     assert r.returncode == 0, r.stdout + r.stderr
     sim = json.loads((tmp_path / "sim.json").read_text())

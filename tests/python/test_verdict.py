@@ -77,13 +77,13 @@ def test_bounds_are_the_ones_asked_for() -> None:
 
 
 def test_a_diverging_simulation_is_reported_diverged_never_ok(tmp_path: Path, controller_bin: Path) -> None:
-    """Explicit viscous friction far beyond what the wrist's inertia takes at a 1 ms step: the
+    """A true mass matrix that the paper-style uncertainty makes nearly singular (r = 0.999): the
     simulation blows up; MuJoCo would reset the arm and carry on."""
     run = run_hil(HilOptions(out=tmp_path, duration_s=1.0, preset=controller_bin.parent.parent.name,
-                             uncertainty={"viscous": [0, 0, 0, 0, 0, 10.0]}))
+                             uncertainty={"paper_ratio": 0.999, "paper_knot_s": 0.01}))
     r = run["results"]
     assert r["result"] == "diverged", r["verdict_reasons"]
-    assert "MuJoCo" in r["verdict_reasons"][0] and "joint 6" in r["verdict_reasons"][0]
+    assert "MuJoCo" in r["verdict_reasons"][0] and "huge acceleration" in r["verdict_reasons"][0]
     assert run["environment"]["exit_codes"]["simulator"] == 5
     sim = json.loads((tmp_path / "sim_summary.json").read_text())
     assert sim["result"] == "diverged"

@@ -1,0 +1,93 @@
+"""Many runs at once: each in a run slot of its own (its bus and telemetry ports, guaranteed), on
+threads of this process or as tasks on a Dask cluster, with the same results either way."""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import threading
+from dataclasses import asdict
+from pathlib import Path
+
+import pytest
+
+from tools.hil import HilOptions, run_hil
+from tools.paths import REPO
+from tools.runner import RunSpec, execute, run_all
+from tools.slots import CAN_BASE, LCM_BASE, _lock_dir, acquire_slot
+
+
+def test_a_taken_slot_is_skipped_and_released_on_exit() -> None:
+    with acquire_slot() as a:
+        with acquire_slot() as b:
+            assert a.index != b.index
+            assert {a.can_port, b.can_port} <= set(range(CAN_BASE, CAN_BASE + 8 * 64, 8))
+            assert abs(a.lcm_port - b.lcm_port) >= 1 and min(a.lcm_port, b.lcm_port) >= LCM_BASE
+        with acquire_slot() as c:
+            assert c.index == b.index  # b's slot is free again
+    # a slot held by another process (an flock on its file) is never handed out
+    path = _lock_dir() / f"slot-{a.index}.lock"
+    fd = os.open(path, os.O_RDWR | os.O_CREAT)
+    fcntl.flock(fd, fcntl.LOCK_EX)
+    try:
+        with acquire_slot() as d:
+            assert d.index != a.index
+    finally:
+        os.close(fd)
+
+
+def test_runs_side_by_side_never_hear_each_other(tmp_path: Path) -> None:
+    """Two runs at once: each controller hears exactly its own simulator's frames (no frame of
+    the other run is counted on either side), and both give the result they give alone."""
+    alone = run_hil(HilOptions(out=tmp_path / "alone", duration_s=1.0, method="tde"))
+    runs: dict[str, dict] = {}
+
+    def one(name: str) -> None:
+        runs[name] = run_hil(HilOptions(out=tmp_path / name, duration_s=1.0, method="tde"))
+
+    threads = [threading.Thread(target=one, args=(n,)) for n in ("a", "b")]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(300)
+    buses = {runs[n]["environment"]["bus"] for n in ("a", "b")}
+    assert len(buses) == 2  # distinct ports
+    solo = alone["transport"]["controller_frames"]
+    for n in ("a", "b"):
+        r = runs[n]
+        assert r["results"]["result"] == "ok"
+        assert r["results"]["tracking_max_abs_rad"] == alone["results"]["tracking_max_abs_rad"]
+        ctl, sim = r["transport"]["controller_frames"], r["transport"]["simulator_frames"]
+        # another run's frames would be states of other periods, a second SYNC/command source,
+        # or twice the states: none, and exactly the states the run alone got
+        assert ctl["rx_wrong_counter"] == ctl["rx_foreign_master"] == ctl["rx_unknown_id"] == 0, ctl
+        assert sim["rx_foreign_drive"] == sim["rx_unknown_id"] == 0, sim
+        assert ctl["rx_state"] == solo["rx_state"] and ctl["rx_heartbeat"] == solo["rx_heartbeat"]
+
+
+def _spec(out: Path, seed: int) -> RunSpec:
+    return RunSpec(out=str(out), method="pm", duration_s=0.3, controller_args=("--ref-hold", "0.2"),
+                   uncertainty={"paper_ratio": 0.05, "paper_knot_s": 0.05, "seed": seed})
+
+
+def test_a_run_with_its_spec_kept_is_not_run_again(tmp_path: Path) -> None:
+    spec = _spec(tmp_path / "r", 3)
+    first = execute(asdict(spec))
+    stamp = (tmp_path / "r" / "run.json").stat().st_mtime_ns
+    assert execute(asdict(spec)) == first and (tmp_path / "r" / "run.json").stat().st_mtime_ns == stamp
+    changed = _spec(tmp_path / "r", 4)  # another seed in the same folder: run again
+    assert execute(asdict(changed))["results"]["uncertainty"]["seed"] == 4
+
+
+def test_the_same_runs_on_a_dask_cluster(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A local Dask cluster of two worker processes: every run is a task, the results are the
+    ones the threads give."""
+    distributed = pytest.importorskip("distributed")
+    monkeypatch.setenv("PYTHONPATH", str(REPO))  # the workers import tools.runner from this checkout
+    specs_local = [_spec(tmp_path / "local" / str(s), s) for s in (1, 2, 3)]
+    specs_dask = [_spec(tmp_path / "dask" / str(s), s) for s in (1, 2, 3)]
+    local = run_all(specs_local, jobs=2)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cl:
+        remote = run_all(specs_dask, cluster=cl.scheduler_address)
+    assert [r["results"]["tracking_max_abs_rad"] for r in remote] == [r["results"]["tracking_max_abs_rad"] for r in local]
+    assert all((tmp_path / "dask" / str(s) / "run.json").exists() for s in (1, 2, 3))

@@ -1,0 +1,63 @@
+"""A signal to armctl mid-run (a CI timeout, kill, Ctrl-C): the children stop in order, the
+controller's safe-stop frames are on the bus, nothing is left running, and run.json says the run
+was interrupted."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+
+from hil_procs import BusRecorder
+from tools.paths import REPO
+
+ARMCTL = str(REPO / "tools" / "armctl")
+CMD_IDS = set(range(0x201, 0x207))
+
+
+def _children_of(out: Path) -> list[str]:
+    """Processes still running for this run (their command lines name its folder or its port)."""
+    r = subprocess.run(["pgrep", "-af", str(out)], capture_output=True, text=True)
+    return [ln for ln in r.stdout.splitlines() if "pgrep" not in ln]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT, signal.SIGHUP])
+def test_a_signal_to_armctl_stops_the_run_safely_and_leaves_nothing(tmp_path: Path, sig: signal.Signals) -> None:
+    port = 45300 + 10 * int(sig)
+    rec = BusRecorder(f"udp:239.74.163.2:{port}")  # the first bus (drives 1-3)
+    out = tmp_path / "run"
+    p = subprocess.Popen([ARMCTL, "hil", "--duration", "60", "--can-port", str(port), "--out", str(out)], cwd=REPO,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not any(f.arbitration_id in CMD_IDS for f in rec.frames[-50:]):
+        time.sleep(0.1)  # until the controller is commanding torques
+    time.sleep(1.0)
+    p.send_signal(sig)
+    _, err = p.communicate(timeout=60)
+    frames = rec.close()
+    assert p.returncode == 128 + int(sig), err
+    run = json.loads((out / "run.json").read_text())
+    assert run["results"]["result"] == "interrupted", run["results"]["verdict_reasons"]
+    assert not _children_of(out)
+    # after the last torque command: shutdown (controlword 0x06, zero torque) and NMT stop on the bus
+    cmds = [f for f in frames if f.arbitration_id in CMD_IDS]
+    last = cmds[-3:]
+    assert all(int.from_bytes(f.data[0:2], "little") == 0x06 and int.from_bytes(f.data[2:6], "little") == 0
+               for f in last), [bytes(f.data).hex() for f in last]
+    assert any(f.arbitration_id == 0x000 and f.data[0] == 0x02 for f in frames)
+    assert "interrupted" in run["results"]["verdict_reasons"][0]
+
+
+def test_ctrl_c_before_any_child_is_a_one_line_exit(tmp_path: Path) -> None:
+    """Interrupted while only Python works (a study's analysis, a synthesis): no traceback."""
+    p = subprocess.Popen([ARMCTL, "synth", "--config", str(REPO / "gen" / "configs" / "paper.toml"), "--out",
+                          str(tmp_path / "d")], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(1.5)  # into the imports or the solve
+    p.send_signal(signal.SIGTERM)
+    _, err = p.communicate(timeout=60)
+    assert p.returncode in (0, 128 + signal.SIGTERM), err  # 0: the synthesis was done before the signal
+    assert "Traceback" not in err

@@ -1,0 +1,63 @@
+"""A design config from synthesis knobs: what the tuner varies for pm, pm-paper and gh2.
+
+The knobs are the paper's weights in one joint's terms (gen/SYNTH.md): the estimator weight
+F(s) = f_bw / (s + f_bw) and H, and the controller penalty z_o = E1 e + E2 e_dot + D12 u_o
+("single": one row, a degenerate generalized-H2 problem whose optimum is the static gain
+-(E1 e + E2 e_dot) / D12) or z_o = [E1 e + E2 e_dot; D12 u_o] ("split": the tracking and the
+control penalty in separate rows, a non-degenerate problem with a dynamic controller). Everything
+else (the loop rate, the design rules, the fixed-point ranges) is the base config's.
+"""
+
+from __future__ import annotations
+
+import json
+import tomllib
+from typing import Any
+
+
+class KnobError(ValueError):
+    pass
+
+
+def design_doc(base_text: str, knobs: dict[str, Any], with_estimator: bool = True) -> dict[str, Any]:
+    doc = tomllib.loads(base_text)
+    form = knobs.get("form", "single")
+    e1, e2, d12 = float(knobs["E1"]), float(knobs["E2"]), float(knobs["D12"])
+    if form == "single":
+        doc["controller"] = {"E1": [[e1]], "E2": [[e2]], "D12": [[d12]]}
+    elif form == "split":
+        doc["controller"] = {"E1": [[e1], [0.0]], "E2": [[e2], [0.0]], "D12": [[0.0], [d12]]}
+    else:
+        raise KnobError(f"form: '{form}' is not single or split")
+    if with_estimator:
+        a = float(knobs["f_bw"])
+        doc["estimator"] = {"F": {"num": [a], "den": [1.0, a]}, "H": [[float(knobs["H"])]]}
+    doc["description"] = "tuned: " + ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
+                                               for k, v in sorted(knobs.items()))
+    return doc
+
+
+def design_text(base_text: str, knobs: dict[str, Any], with_estimator: bool = True) -> str:
+    return dumps(design_doc(base_text, knobs, with_estimator))
+
+
+def dumps(doc: dict[str, Any]) -> str:
+    """TOML for a design config: top-level keys, then one [table] per section (values are numbers,
+    strings, booleans, lists of them, or inline tables)."""
+    lines = [f"{k} = {_value(v)}" for k, v in doc.items() if not isinstance(v, dict)]
+    for section, table in doc.items():
+        if isinstance(table, dict):
+            lines += ["", f"[{section}]"] + [f"{k} = {_value(v)}" for k, v in table.items()]
+    return "\n".join(lines) + "\n"
+
+
+def _value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float, str)):
+        return json.dumps(v)
+    if isinstance(v, list):
+        return "[" + ", ".join(_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{ " + ", ".join(f"{k} = {_value(x)}" for k, x in v.items()) + " }"
+    raise KnobError(f"cannot write {v!r} as TOML")

@@ -1,0 +1,72 @@
+"""The processes armctl starts, and what a signal to armctl does to them.
+
+Every child runs in a process group of its own, so a Ctrl-C at the terminal reaches armctl alone,
+and armctl stops the children in order: the controller first (SIGTERM: it ends the period, sends
+zero torque with controlword shutdown and NMT stop, and writes its summary), then the simulator
+(which stops on that NMT stop) and the telemetry logger (which writes what it has queued). The
+run then ends as always, with a run.json whose verdict is `interrupted`; nothing is left running.
+A second signal kills what is still alive.
+"""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import threading
+from typing import Any
+
+_live: list[tuple[str, subprocess.Popen[Any]]] = []
+_lock = threading.Lock()
+interrupted: int | None = None  # the signal that stopped this armctl, if one did
+
+
+def spawn(role: str, args: list[str], **kw: Any) -> subprocess.Popen[Any]:
+    """Popen in a process group of its own, known to the signal handler until it has exited.
+    role: "controller", "simulator" or "logger"."""
+    if interrupted is not None:
+        raise InterruptedError(f"armctl was stopped by signal {interrupted}: not starting the {role}")
+    kw.setdefault("process_group", 0)
+    p = subprocess.Popen(args, **kw)
+    with _lock:
+        _live.append((role, p))
+    return p
+
+
+def forget(p: subprocess.Popen[Any]) -> None:
+    with _lock:
+        _live[:] = [(r, q) for r, q in _live if q is not p]
+
+
+def _stop(sig: int) -> None:
+    with _lock:
+        alive = [(r, p) for r, p in _live if p.poll() is None]
+    controllers = [p for r, p in alive if r == "controller"]
+    # The controller first: the simulator and the logger follow its NMT stop. Without a
+    # controller yet, there is no arm to stop safely: the others stop at once.
+    for p in controllers or [p for _, p in alive]:
+        p.send_signal(sig)
+
+
+class Interrupted(KeyboardInterrupt):
+    """A signal while no child was running: the command stops where it is (armctl exits 128 + N)."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(f"stopped by signal {signum}")
+        self.signum = signum
+
+
+def _on_signal(signum: int, frame: Any) -> None:
+    global interrupted
+    with _lock:
+        running = any(p.poll() is None for _, p in _live)
+    first = interrupted is None
+    interrupted = interrupted or signum
+    if not running:
+        raise Interrupted(signum)
+    _stop(signal.SIGTERM if first else signal.SIGKILL)
+
+
+def install() -> None:
+    """In the main thread: SIGINT, SIGTERM and SIGHUP stop the children in order."""
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, _on_signal)
