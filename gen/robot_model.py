@@ -24,6 +24,7 @@ from gen.atomic_output import write_files_atomically
 
 REPO = Path(__file__).resolve().parent.parent
 DEFAULT_MJCF = REPO / "host_sim" / "models" / "ur5e_arm.xml"
+UNLIMITED = 1e30  # firmware ARM_UNLIMITED: a joint without a range
 
 
 class ModelError(ValueError):
@@ -42,6 +43,8 @@ class Link:
     torque_limit: float
     armature: float  # rotor inertia reflected to the joint, kg m^2 (adds armature * qdd)
     damping: float  # viscous joint damping, N m s/rad (adds damping * qd)
+    q_min: float = -1e30  # the joint's range, rad (+-UNLIMITED: none)
+    q_max: float = 1e30
 
 
 @dataclass(frozen=True)
@@ -106,6 +109,8 @@ def extract(mjcf: Path, mass_scale: float = 1.0, inertia_scale: float = 1.0) -> 
                 torque_limit=limit,
                 armature=float(m.dof_armature[j]),
                 damping=float(m.dof_damping[j]),
+                q_min=float(m.jnt_range[j, 0]) if m.jnt_limited[j] else -UNLIMITED,
+                q_max=float(m.jnt_range[j, 1]) if m.jnt_limited[j] else UNLIMITED,
             )
         )
     return RobotModel(links=links, gravity=m.opt.gravity.copy())
@@ -148,6 +153,8 @@ def model_header(model: RobotModel, source: str, model_hash: int = 0) -> str:
             f"            .torque_limit = {_c(ln.torque_limit)},\n"
             f"            .armature = {_c(ln.armature)},\n"
             f"            .damping = {_c(ln.damping)},\n"
+            f"            .q_min = {_c(ln.q_min)},\n"
+            f"            .q_max = {_c(ln.q_max)},\n"
             "        },"
         )
     text = "\n".join(body)

@@ -67,7 +67,10 @@ class FastCodec:
         except struct.error:  # rare: clamp only when a value is out of range
             return self.fmt.pack(*(min(hi, max(lo, r)) for r, (lo, hi) in zip(raw, self.raw_limits)))
 
-    def decode(self, data: bytes) -> dict[str, float]:
+    def decode(self, data: bytes) -> dict[str, float] | None:
+        """The signals, or None for a payload of another length (the caller counts and drops it)."""
+        if not isinstance(data, (bytes, bytearray, memoryview)) or len(data) != self.fmt.size:
+            return None
         raw = self.fmt.unpack(data)
         return {n: r * s + o for n, r, s, o in zip(self.names, raw, self.scales, self.offsets)}
 

@@ -307,6 +307,18 @@ def main(argv: list[str] | None = None) -> int:
     study.add_tune_arguments(tu)
     tu.set_defaults(fn=study.cmd_tune)
 
+    from tools import faults
+
+    fl = sub.add_parser("faults", help="every fault against a short lockstep run: detected, safe state, verdict")
+    faults.add_arguments(fl)
+    fl.set_defaults(fn=faults.run)
+
+    from tools import fuzz
+
+    fz = sub.add_parser("fuzz", help="libFuzzer (ASan/UBSan) on every C decoder, regression seeds first")
+    fuzz.add_arguments(fz)
+    fz.set_defaults(fn=fuzz.run)
+
     from tools import bench
 
     bn = sub.add_parser("bench", help="benchmarks that write results files (instructions per step; synthesis time)")

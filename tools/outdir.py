@@ -13,10 +13,12 @@ class OutDirError(ValueError):
 
 
 def check_out_dir(path: Path, option: str = "--out") -> None:
-    """Creates `path` if needed and proves it writable (a probe file: as root, permission bits do
-    not say whether a read-only mount takes writes)."""
+    """Proves `path` can be a folder of results: a probe file written and removed in it (as
+    root, permission bits do not say whether a read-only mount takes writes). Folders it had to
+    create for the probe are removed again: a refused command leaves nothing behind."""
     if path.exists() and not path.is_dir():
         raise OutDirError(f"{option} {path}: is a file, not a folder")
+    created = [a for a in [path, *path.parents] if not a.exists()]
     try:
         path.mkdir(parents=True, exist_ok=True)
         fd, probe = tempfile.mkstemp(prefix=".armctl-probe-", dir=path)
@@ -24,6 +26,12 @@ def check_out_dir(path: Path, option: str = "--out") -> None:
         os.unlink(probe)
     except OSError as exc:
         raise OutDirError(f"{option} {path}: cannot write there ({exc.strerror or exc})") from None
+    finally:
+        for d in created:  # deepest first
+            try:
+                d.rmdir()
+            except OSError:
+                break
 
 
 def check_out_file(path: Path, option: str = "--out") -> None:

@@ -107,7 +107,7 @@ def analyse(out_dir: Path, controller: dict[str, Any], sim: dict[str, Any], conf
         "controller_frames": controller.get("frames", {}),
         "simulator_frames": {k: sim.get(k) for k in ("frames_tx", "frames_rx", "tx_dropped", "rx_foreign_drive",
                                                      "rx_unknown_id", "rx_bad_frame", "rx_undecodable",
-                                                     "rx_wrong_bus")},
+                                                     "rx_kernel_drops", "rx_wrong_bus", "rx_duplicate_command")},
         "overruns": controller.get("overruns"),
         "bus_timing": sim.get("bus_timing", []),
         "telemetry": tele,

@@ -46,7 +46,7 @@ def read_log(path: Path) -> dict[str, ChannelLog]:
                 continue
             try:
                 out[ev.channel].messages.append(getattr(types, name).decode(ev.data))
-            except ValueError:
+            except Exception:  # noqa: BLE001 - lcm-gen's decoders raise ValueError, struct.error, ...: count, drop
                 out[ev.channel].undecodable += 1
     finally:
         log.close()

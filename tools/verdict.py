@@ -8,8 +8,8 @@ is listed in verdict_reasons):
 - diverged: the simulation blew up (MuJoCo reset the arm), or a tracking error is not finite or
   beyond DIVERGED_DEG;
 - failed: a process failed or died (boot failure, runtime fault, lost controller or simulator);
-- incomplete: fewer periods than asked for, telemetry lost, the logger failed, or the metrics do not
-  cover every period of the trajectory;
+- incomplete: fewer periods than asked for, telemetry lost, frames the kernel dropped on a full
+  receive queue, the logger failed, or the metrics do not cover every period of the trajectory;
 - tracking-bound-exceeded: a joint's L-infinity tracking error above bounds.max_error_deg;
 - torque-limited: a joint at its torque limit longer than bounds.max_saturated_fraction of the time;
 - commands-missed: the drives missed more commands than bounds.max_commands_missed, or got any late.
@@ -61,6 +61,10 @@ def judge(results: dict[str, Any], transport: dict[str, Any], controller: dict[s
     if requested is None or done is None or done < requested:
         add("incomplete", f"{done if done is not None else 'an unknown number of'} of "
                           f"{requested if requested is not None else '?'} periods ran")
+    drops = [(who, (transport.get(f"{who}_frames") or {}).get("rx_kernel_drops")) for who in ("controller", "simulator")]
+    for who, n in drops:
+        if n:
+            add("incomplete", f"the kernel dropped {n} frames on the {who}'s full receive queue")
     lost = transport.get("telemetry_lost_total")
     if lost is None or lost > 0:
         add("incomplete", f"telemetry lost: {lost if lost is not None else 'unknown'} messages")

@@ -62,10 +62,18 @@ void sim_drive_on_command(sim_drive_t *d, uint16_t controlword, double torque)
     }
     d->power = sim_cia402_next(d->power, controlword, d->controlword);
     d->controlword = controlword;
-    d->target_torque = torque > d->torque_limit ? d->torque_limit
-                       : torque < -d->torque_limit ? -d->torque_limit : torque;
     d->periods_without_command = 0u;
     d->commands_received++;
+    /* A command above the limit is refused, not clamped: a controller that asks for more than
+     * the drive can give is wrong (or not the controller), and clamping would hide it. The
+     * tolerance covers the wire's 1 uNm rounding of a command exactly at the limit. */
+    if (torque > d->torque_limit + SIM_TORQUE_TOLERANCE || torque < -d->torque_limit - SIM_TORQUE_TOLERANCE) {
+        d->target_torque = 0.0;
+        sim_drive_fault(d, SIM_ERR_TORQUE_ABOVE_LIMIT, SIM_EMCY_TORQUE_LIMIT);
+        return;
+    }
+    d->target_torque = torque > d->torque_limit ? d->torque_limit
+                       : torque < -d->torque_limit ? -d->torque_limit : torque;
 }
 
 void sim_drive_on_period_end(sim_drive_t *d, int got_command)

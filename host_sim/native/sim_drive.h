@@ -1,5 +1,6 @@
 /* One emulated motor drive, as the bus sees it: a CANopen NMT node with a CiA 402 power state
- * machine, a torque limit and a command timeout. No I/O: the simulator loop feeds it the
+ * machine, a torque limit (a command above it faults the drive: refused, not clamped) and a
+ * command timeout. No I/O: the simulator loop feeds it the
  * controller's frames and sends what it asks for (heartbeats, EMCY). */
 #ifndef ARM_SIM_DRIVE_H
 #define ARM_SIM_DRIVE_H
@@ -29,6 +30,11 @@ typedef enum {
 #define SIM_ERR_CONTROLLER_LOST 1u
 #define SIM_ERR_DIVERGED 2u
 #define SIM_EMCY_DIVERGED 0xFF00u /* CiA 301: manufacturer specific (the simulated arm blew up) */
+#define SIM_ERR_TORQUE_ABOVE_LIMIT 3u
+#define SIM_EMCY_TORQUE_LIMIT 0x8300u /* CiA 402: torque control (a command above the drive's limit) */
+#define SIM_TORQUE_TOLERANCE 2e-6      /* Nm: the wire's 1 uNm resolution, rounded either way */
+#define SIM_ERR_TWO_MASTERS 4u
+#define SIM_EMCY_PROTOCOL 0x8200u     /* CiA 301: protocol error (two commands for one SYNC) */
 #define SIM_EMCY_QUEUE 4u
 
 typedef struct {

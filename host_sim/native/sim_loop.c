@@ -93,8 +93,18 @@ static int32_t fault_bits(const sim_t *s)
 }
 
 /* ---- bus ---------------------------------------------------------------------------------- */
+/* TEST HOOK (--debug-lose-bus I@PERIOD): the bus is lost from that period on (nothing sent). */
+static int bus_lost(const sim_t *s, unsigned bus)
+{
+    return s->cfg->lose_bus >= 0 && (unsigned)s->cfg->lose_bus == bus && s->rep->periods >= s->cfg->lose_bus_from;
+}
+
 static void send(sim_t *s, unsigned bus, const arm_can_frame_t *f)
 {
+    if (bus_lost(s, bus)) {
+        s->rep->tx_dropped++;
+        return;
+    }
     const int64_t c0 = s->cfg->profile ? cpu_ns() : 0;
     if (arm_can_bus_set_send(&s->set, bus, f) == 0) {
         s->rep->frames_tx++;
@@ -107,6 +117,10 @@ static void send(sim_t *s, unsigned bus, const arm_can_frame_t *f)
 static void send_batch(sim_t *s, unsigned bus, const arm_can_frame_t *frames, unsigned n)
 {
     if (n == 0u) return;
+    if (bus_lost(s, bus)) {
+        s->rep->tx_dropped += n;
+        return;
+    }
     const int64_t c0 = s->cfg->profile ? cpu_ns() : 0;
     const unsigned sent = arm_can_bus_set_send_many(&s->set, bus, frames, n);
     s->rep->frames_tx += sent;
@@ -489,6 +503,14 @@ static void on_command(sim_t *s, int j, const arm_can_frame_t *f, unsigned bus)
     if (s->counter < 0 || counter != s->counter) {
         return; /* a command for another period: a real drive ignores it too */
     }
+    if ((s->got_cmd & (1u << j)) != 0u) {
+        /* Two commands for one SYNC: a second master on the bus. The drive stops and says why
+         * rather than obey whichever came last. */
+        s->rep->rx_duplicate_command++;
+        sim_drive_fault(&s->drives[j], SIM_ERR_TWO_MASTERS, SIM_EMCY_PROTOCOL);
+        send_emcys(s, j);
+        return;
+    }
     s->cmd_cw[j] = cw;
     s->cmd_tau[j] = tau;
     s->got_cmd |= 1u << j;
@@ -641,7 +663,9 @@ static int run_loop(sim_t *s)
         if (s->drives[k].error_code != 0u) rep->drive_fault_mask |= 1u << k;
     }
     for (unsigned b = 0; b < s->set.n; ++b) {
-        rep->rx_undecodable += s->set.bus[b].kind == ARM_BUS_UDP ? s->set.bus[b].udp.rx_decode_errors : 0u;
+        const int udp = s->set.bus[b].kind == ARM_BUS_UDP;
+        rep->rx_undecodable += udp ? s->set.bus[b].udp.rx_decode_errors : s->set.bus[b].socketcan.rx_decode_errors;
+        rep->rx_kernel_drops += udp ? s->set.bus[b].udp.rx_kernel_drops : s->set.bus[b].socketcan.rx_kernel_drops;
     }
     if (rep->reason[0] != '\0') {
         event(s, "sim", "fault", rep->reason);

@@ -33,6 +33,8 @@ typedef struct {
      * where holding a SYNC back is what makes the controller's states late. */
     double reorder_wait_s;
     sim_servo_config_t servo;    /* the drives' sensing and torque path (all zero: ideal drives) */
+    int lose_bus;                /* TEST HOOK: this bus sends nothing from period lose_bus_from on; -1: off */
+    uint64_t lose_bus_from;
 } sim_config_t;
 
 #define SIM_COST_BINS 5000u /* per-period CPU cost histogram, 1 us bins */
@@ -47,8 +49,10 @@ typedef struct {
     uint64_t rx_foreign_drive; /* a frame only drives send (STATE, HEARTBEAT, EMCY), from another node */
     uint64_t rx_unknown_id;
     uint64_t rx_bad_frame;
-    uint64_t rx_undecodable; /* UDP datagrams that are not python-can frames */
+    uint64_t rx_undecodable; /* UDP datagrams that are not python-can frames, SocketCAN frames that do not decode */
+    uint64_t rx_kernel_drops; /* frames the kernel dropped on a full receive queue (SO_RXQ_OVFL) */
     uint64_t rx_wrong_bus;   /* a command for a drive that is not on the bus it arrived on */
+    uint64_t rx_duplicate_command; /* a second command for one drive and SYNC: the drive faults */
     uint64_t commands_missed;
     uint64_t commands_late;  /* bus timing: the command's frame ended after its period */
     uint64_t commands_missed_per_drive[SIM_MAX_JOINTS];

@@ -49,6 +49,7 @@ static void usage(const char *prog)
            "  --spin-us US               poll the bus this long before sleeping on it: a wake-up from\n"
            "                             sleep costs tens of us on a VM (lockstep speed)   [0]\n"
            "  --profile                  break each period's CPU time down (physics, bus, telemetry)\n"
+           "  --debug-lose-bus I@PERIOD  TEST HOOK: bus I sends nothing from that period on (a lost bus)\n"
            "  --bench-mj-step N          time N bare mj_step calls on the model, print ns/step, exit\n",
            prog, ARM_CAN_BUS_SET_MAX, ARM_SIM_DEFAULT_MODEL);
 }
@@ -122,6 +123,7 @@ int sim_options_parse(int argc, char **argv, sim_options_t *o, char *err, unsign
     snprintf(o->lcm_url, sizeof(o->lcm_url), "udpm://239.255.76.67:7667?ttl=0");
     sim_uncertainty_default(&o->unc);
     sim_servo_config_default(&o->cfg.servo);
+    o->cfg.lose_bus = -1;
     o->substeps = 1;
     sim_config_t *c = &o->cfg;
     c->boot_timeout_s = 60.0;
@@ -256,6 +258,16 @@ int sim_options_parse(int argc, char **argv, sim_options_t *o, char *err, unsign
         } else if (strcmp(a, "--controller-latency-us") == 0) {
             rc = parse_double(a, v, 0.0, 1e6, 0, &d, err, errcap);
             c->controller_latency_s = d * 1e-6;
+        } else if (strcmp(a, "--debug-lose-bus") == 0) {
+            unsigned b = 0;
+            unsigned long long from = 0;
+            char tail = 0;
+            if (sscanf(v, "%u@%llu%c", &b, &from, &tail) != 2 || b >= ARM_CAN_BUS_SET_MAX) {
+                snprintf(err, errcap, "--debug-lose-bus: '%s' is not BUS@PERIOD (bus 0..%u)", v, ARM_CAN_BUS_SET_MAX - 1u);
+                rc = -1;
+            }
+            c->lose_bus = (int)b;
+            c->lose_bus_from = from;
         } else if (strcmp(a, "--reorder-wait-us") == 0) {
             rc = parse_double(a, v, 0.0, 1e7, 0, &d, err, errcap);
             c->reorder_wait_s = d * 1e-6;

@@ -19,6 +19,13 @@ static void home_input(arm_ctl_input_t *in)
     in->fresh_mask = ALL;
 }
 
+/* One period with drives that do as told: they report the torque commanded last period. */
+static void step(arm_ctl_t *ctl, arm_ctl_input_t *in, arm_ctl_output_t *out)
+{
+    arm_ctl_step(ctl, in, out);
+    memcpy(in->tau_measured, out->tau, sizeof(in->tau_measured));
+}
+
 static void start(arm_ctl_t *ctl, arm_ctl_config_t *cfg)
 {
     arm_ctl_default_config(&ARM_ROBOT_MODEL, cfg);
@@ -34,11 +41,11 @@ static void test_starts_in_init_with_zero_torque(void)
     start(&ctl, &cfg);
     home_input(&in);
     in.fresh_mask = 0u;
-    arm_ctl_step(&ctl, &in, &out);
+    step(&ctl, &in, &out);
     CHECK(out.state == ARM_STATE_INIT);
     for (int j = 0; j < ARM_N_JOINTS; ++j) CHECK(out.tau[j] == 0.0f);
     in.fresh_mask = ALL;
-    arm_ctl_step(&ctl, &in, &out);
+    step(&ctl, &in, &out);
     CHECK(out.state == ARM_STATE_RUNNING);
 }
 
@@ -50,17 +57,17 @@ static void test_nan_input_gives_safe_stop_and_zero_torque(void)
     arm_ctl_output_t out;
     start(&ctl, &cfg);
     home_input(&in);
-    for (int k = 0; k < 50; ++k) arm_ctl_step(&ctl, &in, &out);
+    for (int k = 0; k < 50; ++k) step(&ctl, &in, &out);
     CHECK(out.state == ARM_STATE_RUNNING);
     CHECK(fabsf(out.tau[1]) > 1.0f); /* holding the shoulder against gravity */
     in.qd[2] = NAN;
-    arm_ctl_step(&ctl, &in, &out);
+    step(&ctl, &in, &out);
     CHECK(out.state == ARM_STATE_FAULT);
     CHECK(out.fault == ARM_FAULT_NONFINITE_INPUT);
     for (int j = 0; j < ARM_N_JOINTS; ++j) CHECK(out.tau[j] == 0.0f);
     /* Latched: good input afterwards does not restart the arm. */
     in.qd[2] = 0.0f;
-    arm_ctl_step(&ctl, &in, &out);
+    step(&ctl, &in, &out);
     CHECK(out.state == ARM_STATE_SAFE_STOP);
     CHECK(out.fault == ARM_FAULT_NONFINITE_INPUT);
     for (int j = 0; j < ARM_N_JOINTS; ++j) CHECK(out.tau[j] == 0.0f);
@@ -72,12 +79,14 @@ static void test_torque_and_rate_limits(void)
     arm_ctl_config_t cfg;
     arm_ctl_input_t in;
     arm_ctl_output_t out;
-    start(&ctl, &cfg);
+    arm_ctl_default_config(&ARM_ROBOT_MODEL, &cfg);
+    cfg.checks &= ~ARM_CHECK_FOLLOWING_ERROR; /* the huge error below is the point here */
+    CHECK(arm_ctl_init(&ctl, &ARM_ROBOT_MODEL, &cfg) == ARM_CTL_OK);
     home_input(&in);
     in.q_d[3] += 10.0f; /* a huge error demands far more than the wrist's 28 Nm */
     float prev[ARM_N_JOINTS] = {0};
     for (int k = 0; k < 100; ++k) {
-        arm_ctl_step(&ctl, &in, &out);
+        step(&ctl, &in, &out);
         for (int j = 0; j < ARM_N_JOINTS; ++j) {
             CHECK(fabsf(out.tau[j]) <= cfg.torque_limit[j]);
             CHECK(fabsf(out.tau[j] - prev[j]) <= cfg.torque_rate_limit[j] * (1.0f + 1e-6f));
@@ -102,13 +111,13 @@ static void test_watchdog_trips_after_configured_stale_periods(void)
     CHECK(arm_ctl_init(&ctl, &ARM_ROBOT_MODEL, &cfg) == ARM_CTL_OK);
     home_input(&in);
     in.qd[0] = 0.5f;
-    arm_ctl_step(&ctl, &in, &out);
+    step(&ctl, &in, &out);
     in.fresh_mask = ALL & ~(1u << 4); /* drive 5 goes quiet */
     for (uint32_t k = 0; k < cfg.watchdog_periods; ++k) {
-        arm_ctl_step(&ctl, &in, &out);
+        step(&ctl, &in, &out);
         CHECK(out.state == ARM_STATE_RUNNING); /* within the watchdog: last state is held */
     }
-    arm_ctl_step(&ctl, &in, &out);
+    step(&ctl, &in, &out);
     CHECK(out.state == ARM_STATE_FAULT);
     CHECK(out.fault == ARM_FAULT_STALE_INPUT);
     CHECK(fabsf(out.tau[0] - (-2.0f * 0.5f)) < 1e-6f); /* damping safe stop uses the last qd */
@@ -139,11 +148,78 @@ static void test_external_fault_latches(void)
     arm_ctl_output_t out;
     start(&ctl, &cfg);
     home_input(&in);
-    arm_ctl_step(&ctl, &in, &out);
+    step(&ctl, &in, &out);
     arm_ctl_external_fault(&ctl);
-    arm_ctl_step(&ctl, &in, &out);
+    step(&ctl, &in, &out);
     CHECK(out.state == ARM_STATE_FAULT && out.fault == ARM_FAULT_EXTERNAL);
     for (int j = 0; j < ARM_N_JOINTS; ++j) CHECK(out.tau[j] == 0.0f);
+}
+
+/* Runs the arm at its home pose for a while, then applies `spoil` to one period's input: the
+ * next output must be that fault, on that joint, with zero torque. */
+static void expect_fault(void (*spoil)(arm_ctl_input_t *), arm_fault_t fault, int joint, uint32_t periods)
+{
+    arm_ctl_t ctl;
+    arm_ctl_config_t cfg;
+    arm_ctl_input_t in;
+    arm_ctl_output_t out;
+    start(&ctl, &cfg);
+    home_input(&in);
+    for (int k = 0; k < 20; ++k) step(&ctl, &in, &out);
+    CHECK(out.state == ARM_STATE_RUNNING);
+    for (uint32_t k = 0; k < periods; ++k) {
+        spoil(&in);
+        step(&ctl, &in, &out);
+        if (k + 1u < periods) CHECK(out.state == ARM_STATE_RUNNING); /* tolerated so far */
+    }
+    CHECK_MSG(out.state == ARM_STATE_FAULT && out.fault == fault && out.fault_joint == joint,
+              "state %d fault %s joint %d", (int)out.state, arm_fault_str(out.fault), out.fault_joint);
+    for (int j = 0; j < ARM_N_JOINTS; ++j) CHECK(out.tau[j] == 0.0f);
+}
+
+static void spoof_position(arm_ctl_input_t *in) { in->q[2] = 2147.0f; }               /* INT32_MAX urad */
+static void spoof_velocity(arm_ctl_input_t *in) { in->qd[4] = 2147.0f; }
+static void jump_position(arm_ctl_input_t *in) { in->q[1] += 0.05f; }                 /* 50 mrad in 1 ms, qd 0 */
+static void run_away(arm_ctl_input_t *in) { in->q_d[5] = in->q[5] + 0.6f; }           /* 0.6 rad behind */
+static void drive_ignores(arm_ctl_input_t *in) { in->tau_measured[1] += 30.0f; }       /* not the commanded torque */
+
+static void test_plausibility_faults_name_the_joint(void)
+{
+    expect_fault(spoof_position, ARM_FAULT_POSITION_RANGE, 2, 1u);
+    expect_fault(spoof_velocity, ARM_FAULT_VELOCITY_LIMIT, 4, 1u);
+    expect_fault(jump_position, ARM_FAULT_POSITION_STEP, 1, 1u);
+    expect_fault(run_away, ARM_FAULT_FOLLOWING_ERROR, 5, 1u);
+    expect_fault(drive_ignores, ARM_FAULT_TORQUE_MISMATCH, 1, 3u); /* three periods in a row */
+}
+
+static void test_plausible_motion_and_disabled_checks_pass(void)
+{
+    arm_ctl_t ctl;
+    arm_ctl_config_t cfg;
+    arm_ctl_input_t in;
+    arm_ctl_output_t out;
+    start(&ctl, &cfg);
+    home_input(&in);
+    for (int k = 0; k < 1000; ++k) { /* 1 rad/s on every joint for 1 s, consistent steps, inside the ranges */
+        for (int j = 0; j < ARM_N_JOINTS; ++j) {
+            in.qd[j] = 1.0f;
+            in.q[j] += 0.001f;
+            in.q_d[j] = in.q[j] + 0.01f;
+        }
+        step(&ctl, &in, &out);
+    }
+    CHECK(out.state == ARM_STATE_RUNNING);
+    arm_ctl_default_config(&ARM_ROBOT_MODEL, &cfg);
+    cfg.checks = 0u;
+    CHECK(arm_ctl_init(&ctl, &ARM_ROBOT_MODEL, &cfg) == ARM_CTL_OK);
+    home_input(&in);
+    step(&ctl, &in, &out);
+    spoof_velocity(&in);
+    step(&ctl, &in, &out);
+    CHECK(out.state == ARM_STATE_RUNNING); /* off is off */
+    arm_ctl_default_config(&ARM_ROBOT_MODEL, &cfg);
+    cfg.following_error_limit[0] = 0.0f;
+    CHECK(arm_ctl_init(&ctl, &ARM_ROBOT_MODEL, &cfg) == ARM_CTL_BAD_LIMIT);
 }
 
 int main(void)
@@ -154,5 +230,7 @@ int main(void)
     test_watchdog_trips_after_configured_stale_periods();
     test_bad_config_refused();
     test_external_fault_latches();
+    test_plausibility_faults_name_the_joint();
+    test_plausible_motion_and_disabled_checks_pass();
     TEST_MAIN_END();
 }

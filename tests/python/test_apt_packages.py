@@ -77,6 +77,9 @@ REQUIRED: list[tuple[str, str]] = [
     ("armctl bench step: valgrind's callgrind", _program("valgrind")),
     ("armctl bench step: callgrind's tool", "/usr/libexec/valgrind/callgrind-amd64-linux"),
     ("test_study: pgrep, pkill", _program("pgrep")),
+    ("armctl fuzz: clang", _program("clang")),
+    ("armctl fuzz: libFuzzer's runtime", _print_file("clang", "libclang_rt.fuzzer-x86_64.a")),
+    ("armctl fuzz: ASan's runtime", _print_file("clang", "libclang_rt.asan-x86_64.a")),
     ("armctl's venv from Debian's Python: ensurepip", "/usr/lib/python3.11/ensurepip/__init__.py"),
 ]
 

@@ -38,6 +38,8 @@ EXERCISED: dict[str, str] = {
     "vcan up": "test_documented_commands.py::test_vcan_status_and_up",
     "vcan setup": "test_vcan_vm.py::test_vcan_setup_run_and_up_in_the_vm",
     "vcan run": "test_vcan_vm.py::test_vcan_setup_run_and_up_in_the_vm",
+    "fuzz": "test_fuzz.py::test_every_harness_runs_clean",
+    "faults": "test_faults.py::matrix",
     "hil --model|--arm": "test_arm_hil.py::test_lockstep_hil_run_is_ok_within_stated_bounds",
     "build --model|--arm": "test_arm_hil.py::built_arm",
     "synth --model|--arm": "test_arm_hil.py::built_arm",

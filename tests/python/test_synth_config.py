@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 import copy
+import subprocess
+import sys
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -13,6 +15,8 @@ import pytest
 
 from gen.synth.cli import DEFAULT_CONFIG, add_arguments, run
 from gen.synth.config import ConfigError, load_config, parse_config
+
+REPO = Path(__file__).resolve().parents[2]
 
 
 def paper_doc() -> dict[str, Any]:
@@ -64,10 +68,10 @@ BAD_FIELDS = [
     ("estimator.F", {"num": [1.0], "den": [0.0, 1.0]}, "estimator.F.den: leading coefficient must be nonzero"),
     ("estimator.F", [{"num": [1.0], "den": [1.0, 1.0]}] * 5, "estimator.F: must be one {num, den} table"),
     ("estimator.F", _DELETE, "estimator.F: is missing"),
-    ("arm.n_joints", 0, "arm.n_joints: must be an integer >= 1"),
-    ("arm.n_joints", 2.5, "arm.n_joints: must be an integer >= 1"),
-    ("arm.n_joints", True, "arm.n_joints: must be an integer >= 1"),
-    ("arm.loop_rate_hz", -1000, "arm.loop_rate_hz: must be an integer >= 1"),
+    ("arm.n_joints", 0, "arm.n_joints: must be an integer in [1, 16]"),
+    ("arm.n_joints", 2.5, "arm.n_joints: must be an integer in [1, 16]"),
+    ("arm.n_joints", True, "arm.n_joints: must be an integer in [1, 16]"),
+    ("arm.loop_rate_hz", -1000, "arm.loop_rate_hz: must be an integer in [1, 100000]"),
     ("controller.D12", [[0.0]], "controller.D12: must have full column rank"),
     ("controller.E1", [[1.0, 2.0]], "controller.E1: must have 1 column (one joint) or 6 columns"),
     ("controller.E2", [[1.0], [0.0]], "controller.E2: has 12 rows after expansion but controller.E1 has 6"),
@@ -75,7 +79,7 @@ BAD_FIELDS = [
     ("design.structure", "diagonal", "design.structure: must be one of auto, coupled"),
     ("design.backoff_ladder", [0.01, 0.001], "design.backoff_ladder: must be strictly increasing"),
     ("design.backoff_ladder", [-0.01], "design.backoff_ladder[0]: must be > 0"),
-    ("design.delay_margin_samples", -1, "design.delay_margin_samples: must be an integer >= 0"),
+    ("design.delay_margin_samples", -1, "design.delay_margin_samples: must be an integer in [0, 50]"),
     ("ranges.e_max", 0.0, "ranges.e_max: must be > 0"),
     ("ranges.e_dot_max", _DELETE, "ranges.e_dot_max: is missing"),
     ("estimator.Hh", 0.5, "estimator.Hh: unknown field"),
@@ -131,3 +135,29 @@ def test_default_config_path_is_repo_relative() -> None:
     add_arguments(parser)
     ns = parser.parse_args(["--out", "x"])
     assert ns.config == DEFAULT_CONFIG and ns.config.is_file()
+
+
+@pytest.mark.parametrize(("edit", "named"), [
+    (("n_joints = 6", "n_joints = 60"), "arm.n_joints: must be an integer in [1, 16]"),
+    (("n_joints = 6", "n_joints = 1e9"), "arm.n_joints"),
+    (("delay_margin_samples = 1", "delay_margin_samples = 100000000"), "design.delay_margin_samples"),
+    (("H = [[0.5]]", "H = [[1e308]]"), "estimator.H: entries must be finite numbers within"),
+    (("e_max = 3.2", "e_max = 1e308"), "ranges.e_max"),
+])
+def test_values_that_would_crash_the_solve_are_refused_by_name(tmp_path: Path, edit: tuple[str, str],
+                                                              named: str) -> None:
+    text = (REPO / "gen" / "configs" / "paper.toml").read_text()
+    assert edit[0] in text
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.replace(edit[0], edit[1], 1))
+    r = subprocess.run([sys.executable, "-m", "gen.synth", "--config", str(bad), "--out", str(tmp_path / "o")],
+                       cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and named in r.stderr and "Traceback" not in r.stderr, r.stderr
+
+
+def test_a_coupled_problem_too_big_for_the_memory_is_refused() -> None:
+    from gen.synth.pipeline import coupled_bytes
+
+    assert coupled_bytes(4) == pytest.approx(57e6)
+    assert 20e9 < coupled_bytes(60) < 30e9  # the size that once took the OOM killer
+    assert coupled_bytes(16) < 2e9  # the firmware's largest arm fits a small machine

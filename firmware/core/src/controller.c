@@ -34,6 +34,19 @@ void arm_ctl_default_config(const arm_robot_model_t *model, arm_ctl_config_t *cf
     cfg->watchdog_periods = 3u;
     cfg->safe_stop_mode = ARM_SAFE_STOP_ZERO_TORQUE;
     cfg->safe_stop_damping = 0.0f;
+    cfg->checks = ARM_CHECK_ALL;
+    /* A noisy encoder, a filtered velocity and a lagging current loop stay far inside these; a
+     * corrupted or spoofed state, a runaway joint or a drive that does not do as told do not. */
+    cfg->step_tolerance = 0.01f;
+    cfg->torque_mismatch_periods = 3u;
+    for (int i = 0; i < ARM_N_JOINTS; ++i) {
+        const arm_link_t *l = &model->link[i];
+        cfg->q_min[i] = l->q_min > -ARM_UNLIMITED ? l->q_min - 0.1f : -ARM_UNLIMITED;
+        cfg->q_max[i] = l->q_max < ARM_UNLIMITED ? l->q_max + 0.1f : ARM_UNLIMITED;
+        cfg->velocity_limit[i] = 6.2831853f;
+        cfg->following_error_limit[i] = 0.5f;
+        cfg->torque_mismatch_limit[i] = 0.1f * l->torque_limit;
+    }
 }
 
 arm_ctl_init_result_t arm_ctl_init(arm_ctl_t *ctl, const arm_robot_model_t *model,
@@ -68,12 +81,20 @@ arm_ctl_init_result_t arm_ctl_init(arm_ctl_t *ctl, const arm_robot_model_t *mode
               cfg->torque_rate_limit[i] > 0.0f && isfinite(cfg->torque_rate_limit[i]))) {
             return ARM_CTL_BAD_LIMIT;
         }
+        if (!(cfg->q_min[i] < cfg->q_max[i] && cfg->velocity_limit[i] > 0.0f &&
+              cfg->following_error_limit[i] > 0.0f && cfg->torque_mismatch_limit[i] > 0.0f)) {
+            return ARM_CTL_BAD_LIMIT;
+        }
+    }
+    if (!(cfg->step_tolerance > 0.0f) || cfg->torque_mismatch_periods < 1u) {
+        return ARM_CTL_BAD_LIMIT;
     }
     memset(ctl, 0, sizeof(*ctl));
     ctl->model = model;
     ctl->cfg = *cfg;
     ctl->state = ARM_STATE_INIT;
     ctl->fault = ARM_FAULT_NONE;
+    ctl->fault_joint = -1;
     switch (cfg->method) {
     case ARM_METHOD_PM: arm_pm_init(&ctl->m.pm, cfg->numeric, ARM_PM_DECOUPLED); break;
     case ARM_METHOD_PM_PAPER: arm_pm_init(&ctl->m.pm, cfg->numeric, ARM_PM_PAPER); break;
@@ -117,6 +138,53 @@ static void latch_fault(arm_ctl_t *ctl, arm_fault_t fault)
 void arm_ctl_external_fault(arm_ctl_t *ctl)
 {
     latch_fault(ctl, ARM_FAULT_EXTERNAL);
+}
+
+static void latch_joint_fault(arm_ctl_t *ctl, arm_fault_t fault, int joint, float value)
+{
+    if (ctl->state != ARM_STATE_SAFE_STOP && ctl->state != ARM_STATE_FAULT) {
+        ctl->fault_joint = joint; /* the first fault is the one reported */
+        ctl->fault_value = value;
+    }
+    latch_fault(ctl, fault);
+}
+
+/* The joint states of this period against the joint's range, its velocity limit and the last
+ * period's state (a step the velocities cannot explain), and the torque the drives report
+ * against the one commanded last period. Returns 0 when plausible, else latches the fault. */
+static int plausible(arm_ctl_t *ctl, const arm_ctl_input_t *in)
+{
+    const arm_ctl_config_t *c = &ctl->cfg;
+    for (int i = 0; i < ARM_N_JOINTS; ++i) {
+        const float q = in->q[i], qd = in->qd[i];
+        if ((c->checks & ARM_CHECK_POSITION_RANGE) && (q < c->q_min[i] || q > c->q_max[i])) {
+            latch_joint_fault(ctl, ARM_FAULT_POSITION_RANGE, i, q);
+            return 0;
+        }
+        if ((c->checks & ARM_CHECK_VELOCITY) && fabsf(qd) > c->velocity_limit[i]) {
+            latch_joint_fault(ctl, ARM_FAULT_VELOCITY_LIMIT, i, qd);
+            return 0;
+        }
+        if ((c->checks & ARM_CHECK_POSITION_STEP) && ctl->have_last) {
+            const float step = q - ctl->last_q[i];
+            const float explained = 0.5f * (qd + ctl->last_qd[i]) * c->period_s;
+            if (fabsf(step - explained) > c->step_tolerance) {
+                latch_joint_fault(ctl, ARM_FAULT_POSITION_STEP, i, step);
+                return 0;
+            }
+        }
+        if ((c->checks & ARM_CHECK_TORQUE) && ctl->state == ARM_STATE_RUNNING) {
+            if (fabsf(in->tau_measured[i] - ctl->tau_prev[i]) > c->torque_mismatch_limit[i]) {
+                if (++ctl->mismatch_periods[i] >= c->torque_mismatch_periods) {
+                    latch_joint_fault(ctl, ARM_FAULT_TORQUE_MISMATCH, i, in->tau_measured[i]);
+                    return 0;
+                }
+            } else {
+                ctl->mismatch_periods[i] = 0u;
+            }
+        }
+    }
+    return 1;
 }
 
 static float clampf(float x, float lo, float hi)
@@ -220,13 +288,18 @@ void arm_ctl_step(arm_ctl_t *ctl, const arm_ctl_input_t *in, arm_ctl_output_t *o
         if (!input_finite(in)) {
             latch_fault(ctl, ARM_FAULT_NONFINITE_INPUT);
         } else if (all_fresh) {
-            memcpy(ctl->last_q, in->q, sizeof(ctl->last_q));
-            memcpy(ctl->last_qd, in->qd, sizeof(ctl->last_qd));
-            ctl->stale_periods = 0u;
-            ctl->state = ARM_STATE_RUNNING;
-        } else if (ctl->state == ARM_STATE_RUNNING &&
-                   ++ctl->stale_periods > ctl->cfg.watchdog_periods) {
-            latch_fault(ctl, ARM_FAULT_STALE_INPUT);
+            if (plausible(ctl, in)) {
+                memcpy(ctl->last_q, in->q, sizeof(ctl->last_q));
+                memcpy(ctl->last_qd, in->qd, sizeof(ctl->last_qd));
+                ctl->have_last = 1;
+                ctl->stale_periods = 0u;
+                ctl->state = ARM_STATE_RUNNING;
+            }
+        } else {
+            ctl->have_last = 0; /* a missing period: no step to check against */
+            if (ctl->state == ARM_STATE_RUNNING && ++ctl->stale_periods > ctl->cfg.watchdog_periods) {
+                latch_fault(ctl, ARM_FAULT_STALE_INPUT);
+            }
         }
     }
 
@@ -234,8 +307,17 @@ void arm_ctl_step(arm_ctl_t *ctl, const arm_ctl_input_t *in, arm_ctl_output_t *o
         /* Stale periods within the watchdog reuse the last state: the hold is bounded. */
         float acc[ARM_N_JOINTS];
         run_method(ctl, in, out, acc);
+        int following = -1;
+        for (int i = 0; i < ARM_N_JOINTS && (ctl->cfg.checks & ARM_CHECK_FOLLOWING_ERROR); ++i) {
+            if (fabsf(out->e[i]) > ctl->cfg.following_error_limit[i]) {
+                following = i;
+                break;
+            }
+        }
         if (!all_finite(out->tau_method, ARM_N_JOINTS)) {
             latch_fault(ctl, ARM_FAULT_NONFINITE_OUTPUT);
+        } else if (following >= 0) {
+            latch_joint_fault(ctl, ARM_FAULT_FOLLOWING_ERROR, following, out->e[following]);
         } else {
             apply_limits(ctl, out);
             method_update(ctl, acc, out->saturated_mask);
@@ -250,6 +332,8 @@ void arm_ctl_step(arm_ctl_t *ctl, const arm_ctl_input_t *in, arm_ctl_output_t *o
     memcpy(ctl->tau_prev, out->tau, sizeof(ctl->tau_prev));
     out->state = ctl->state;
     out->fault = ctl->fault;
+    out->fault_joint = ctl->fault_joint;
+    out->fault_value = ctl->fault_value;
     if (ctl->state == ARM_STATE_FAULT) {
         ctl->state = ARM_STATE_SAFE_STOP; /* FAULT is reported for exactly one period */
     }
@@ -274,6 +358,11 @@ const char *arm_fault_str(arm_fault_t f)
     case ARM_FAULT_NONFINITE_OUTPUT: return "non-finite output";
     case ARM_FAULT_STALE_INPUT: return "stale joint state (watchdog)";
     case ARM_FAULT_EXTERNAL: return "external fault reported by the port";
+    case ARM_FAULT_POSITION_RANGE: return "joint position outside its range";
+    case ARM_FAULT_VELOCITY_LIMIT: return "joint velocity above its limit";
+    case ARM_FAULT_POSITION_STEP: return "joint position step the velocities do not explain";
+    case ARM_FAULT_FOLLOWING_ERROR: return "following error above its limit";
+    case ARM_FAULT_TORQUE_MISMATCH: return "drive reports another torque than commanded";
     }
     return "?";
 }

@@ -45,6 +45,7 @@ void arm_bus_begin_period(arm_drive_bus_t *bus, uint32_t step, arm_can_frame_t *
     struct arm_drives_sync_t msg;
     bus->counter = (uint8_t)(step & 0xFFu);
     bus->fresh_mask = 0u;
+    bus->duplicate_mask = 0u;
     memset(sync, 0, sizeof(*sync));
     arm_drives_sync_init(&msg);
     msg.counter = bus->counter;
@@ -105,6 +106,13 @@ static arm_rx_kind_t handle_state(arm_drive_bus_t *bus, int j, const arm_can_fra
         bus->rx.wrong_counter++;
         return ARM_RX_WRONG_COUNTER;
     }
+    if ((bus->fresh_mask & (1u << j)) != 0u) {
+        /* A drive answers a SYNC once: a second state is another node using its id. The first
+         * stands; the port decides (it stops the arm). */
+        bus->duplicate_mask |= 1u << j;
+        bus->rx.duplicate_state++;
+        return ARM_RX_DUPLICATE_STATE;
+    }
     bus->q[j] = (float)arm_drives_drive_1_state_position_decode(msg.position);
     bus->qd[j] = (float)arm_drives_drive_1_state_velocity_decode(msg.velocity);
     bus->tau_measured[j] = (float)arm_drives_drive_1_state_torque_decode(msg.torque);
@@ -143,6 +151,7 @@ arm_rx_kind_t arm_bus_handle_rx(arm_drive_bus_t *bus, const arm_can_frame_t *f)
             return ARM_RX_BAD_LENGTH;
         }
         bus->last_emcy_code[j] = (uint16_t)(f->data[0] | (uint16_t)(f->data[1] << 8));
+        bus->emcy_mask |= 1u << j;
         bus->rx.emcy++;
         return ARM_RX_EMCY;
     }

@@ -101,6 +101,7 @@ void cl_run(const arm_robot_model_t *model, const cl_case_t *c, cl_result_t *r)
         in.fresh_mask = (uint32_t)((1ull << ARM_N_JOINTS) - 1u);
         arm_reference_eval(&ref, t, in.q_d, in.qd_d, in.qdd_d);
         arm_ctl_step(&ctl, &in, &out);
+        memcpy(in.tau_measured, out.tau, sizeof(in.tau_measured)); /* the drives do as told */
         if (k % CL_RECORD_EVERY == 0u) {
             memcpy(r->tau[k / CL_RECORD_EVERY], out.tau, sizeof(out.tau));
         }

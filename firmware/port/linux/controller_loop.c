@@ -128,6 +128,19 @@ static void list_joints(uint32_t mask, char *out, size_t cap)
     }
 }
 
+/* What a plausibility fault's value is. */
+static const char *fault_quantity(arm_fault_t f)
+{
+    switch (f) {
+    case ARM_FAULT_POSITION_RANGE: return "position, rad";
+    case ARM_FAULT_VELOCITY_LIMIT: return "velocity, rad/s";
+    case ARM_FAULT_POSITION_STEP: return "step, rad";
+    case ARM_FAULT_FOLLOWING_ERROR: return "error, rad";
+    case ARM_FAULT_TORQUE_MISMATCH: return "reported torque, Nm";
+    default: return "value";
+    }
+}
+
 /* HIL: a simulator that runs another arm than this controller was built for is refused at boot
  * (the simulator announces its model with SIM_IDENTITY; real drives never do). */
 static int sim_identity_mismatch(const link_t *l, const arm_robot_model_t *model)
@@ -332,6 +345,19 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
                      k_run, missing, opt->lockstep_timeout_s);
             arm_ctl_external_fault(&ctl);
         }
+        if (l.drives.emcy_mask != 0u && ctl.state != ARM_STATE_SAFE_STOP) {
+            const int j = __builtin_ctz(l.drives.emcy_mask);
+            snprintf(report->reason, sizeof(report->reason), "period %u: drive %d reports a fault (EMCY 0x%04x)",
+                     k_run, j + 1, l.drives.last_emcy_code[j]);
+            arm_ctl_external_fault(&ctl);
+        }
+        l.drives.emcy_mask = 0u;
+        if (l.drives.duplicate_mask != 0u && ctl.state != ARM_STATE_SAFE_STOP) {
+            snprintf(report->reason, sizeof(report->reason),
+                     "period %u: drive %d's state came twice for one SYNC: another node on the bus uses its id",
+                     k_run, __builtin_ctz(l.drives.duplicate_mask) + 1);
+            arm_ctl_external_fault(&ctl);
+        }
         for (int j = 0; j < ARM_N_JOINTS; ++j) {
             if ((fresh & (1u << j)) != 0u && !arm_sw_operation_enabled(l.drives.statusword[j]) &&
                 ctl.state == ARM_STATE_RUNNING) {
@@ -344,6 +370,7 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
         memcpy(in.q, l.drives.q, sizeof(in.q));
         memcpy(in.qd, l.drives.qd, sizeof(in.qd));
         in.fresh_mask = fresh;
+        memcpy(in.tau_measured, l.drives.tau_measured, sizeof(in.tau_measured));
         arm_reference_eval(&ref, (float)k_run * period_s, in.q_d, in.qd_d, in.qdd_d);
 
         const int64_t c0 = now_ns();
@@ -391,7 +418,11 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
             last_state = out.state;
         }
         if (out.state == ARM_STATE_FAULT || out.state == ARM_STATE_SAFE_STOP) {
-            if (report->reason[0] == '\0') {
+            if (report->reason[0] == '\0' && out.fault_joint >= 0) {
+                snprintf(report->reason, sizeof(report->reason), "period %u: %s: joint %d (%s %.6g)", k_run,
+                         arm_fault_str(out.fault), out.fault_joint + 1, fault_quantity(out.fault),
+                         (double)out.fault_value);
+            } else if (report->reason[0] == '\0') {
                 snprintf(report->reason, sizeof(report->reason), "period %u: %s", k_run,
                          arm_fault_str(out.fault));
             }
@@ -409,7 +440,13 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
     report->final_fault = out.fault;
     report->rx = l.drives.rx;
     for (unsigned b = 0; b < l.buses.n; ++b) {
-        if (l.buses.bus[b].kind == ARM_BUS_UDP) report->rx_undecodable += l.buses.bus[b].udp.rx_decode_errors;
+        if (l.buses.bus[b].kind == ARM_BUS_UDP) {
+            report->rx_undecodable += l.buses.bus[b].udp.rx_decode_errors;
+            report->rx_kernel_drops += l.buses.bus[b].udp.rx_kernel_drops;
+        } else {
+            report->rx_undecodable += l.buses.bus[b].socketcan.rx_decode_errors;
+            report->rx_kernel_drops += l.buses.bus[b].socketcan.rx_kernel_drops;
+        }
     }
     report->wall_s = (double)(now_ns() - t_start) * 1e-9;
     arm_can_bus_set_close(&l.buses);

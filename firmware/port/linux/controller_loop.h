@@ -28,7 +28,8 @@ typedef struct {
     uint64_t frames_rx;
     uint64_t tx_would_block;
     uint64_t rx_wrong_bus; /* a drive's frame (STATE/HEARTBEAT/EMCY) on a bus that is not its own */
-    uint64_t rx_undecodable; /* UDP datagrams that are not python-can frames (the transport's count) */
+    uint64_t rx_undecodable; /* datagrams / frames the transport could not decode (its count) */
+    uint64_t rx_kernel_drops; /* frames the kernel dropped on a full receive queue (SO_RXQ_OVFL) */
     uint64_t overruns;
     double wall_s;
     double boot_s;

@@ -31,6 +31,13 @@ void options_usage(const char *prog)
            "  --torque-rate-limit X   Nm per period, all joints [each joint's limit / 10 ms]\n"
            "  --watchdog-periods N    stale periods before safe stop  [3]\n"
            "  --safe-stop zero|damping[:GAIN]                         [zero]\n"
+           "  plausibility (each violation a named fault and a safe stop):\n"
+           "  --checks all|none|LIST  range,velocity,step,following,torque  [all]\n"
+           "  --position-margin RAD   the joint ranges widened by this    [0.1]\n"
+           "  --max-velocity RAD_S    every joint                         [6.283]\n"
+           "  --max-following-error RAD  every joint                      [0.5]\n"
+           "  --step-tolerance RAD    position step the velocities must explain [0.01]\n"
+           "  --torque-mismatch F     reported vs commanded torque, fraction of the limit [0.1]\n"
            "  --boot-timeout S        wait for the drives' heartbeats [20]\n"
            "  --lockstep-timeout S    lockstep: wall time to wait for a period's joint states [1]\n"
            "  --spin-us US            poll the bus this long before sleeping on it: a wake-up from\n"
@@ -40,6 +47,40 @@ void options_usage(const char *prog)
            "  --summary FILE          write a JSON summary of the run (atomically)\n",
            prog);
     rt_usage();
+}
+
+/* "all", "none" or a comma-separated list of range, velocity, step, following, torque. */
+static int parse_checks(const char *v, uint32_t *out, char *err, unsigned long errcap)
+{
+    static const struct { const char *name; uint32_t bit; } k[] = {
+        {"range", ARM_CHECK_POSITION_RANGE}, {"velocity", ARM_CHECK_VELOCITY}, {"step", ARM_CHECK_POSITION_STEP},
+        {"following", ARM_CHECK_FOLLOWING_ERROR}, {"torque", ARM_CHECK_TORQUE}};
+    if (strcmp(v, "all") == 0) {
+        *out = ARM_CHECK_ALL;
+        return 0;
+    }
+    if (strcmp(v, "none") == 0) {
+        *out = 0u;
+        return 0;
+    }
+    uint32_t m = 0u;
+    const char *p = v;
+    while (*p != '\0') {
+        const char *end = strchr(p, ',');
+        const size_t len = end ? (size_t)(end - p) : strlen(p);
+        uint32_t bit = 0u;
+        for (size_t i = 0; i < sizeof(k) / sizeof(k[0]); ++i) {
+            if (strlen(k[i].name) == len && strncmp(p, k[i].name, len) == 0) bit = k[i].bit;
+        }
+        if (bit == 0u) {
+            snprintf(err, errcap, "--checks: '%s' is not all, none or a list of range, velocity, step, following, torque", v);
+            return -1;
+        }
+        m |= bit;
+        p = end ? end + 1 : p + len;
+    }
+    *out = m;
+    return 0;
 }
 
 static int parse_double(const char *name, const char *s, double lo, double hi, double *out,
@@ -221,6 +262,27 @@ int options_parse(int argc, char **argv, const arm_robot_model_t *model, options
                 rc = -1;
             }
             opt->ctl.watchdog_periods = (uint32_t)d;
+        } else if (strcmp(a, "--checks") == 0) {
+            rc = parse_checks(v, &opt->ctl.checks, err, errcap);
+        } else if (strcmp(a, "--position-margin") == 0) {
+            rc = parse_double(a, v, 0.0, 10.0, &d, err, errcap);
+            for (int j = 0; j < ARM_N_JOINTS; ++j) {
+                const arm_link_t *l = &model->link[j];
+                opt->ctl.q_min[j] = l->q_min > -ARM_UNLIMITED ? l->q_min - (float)d : -ARM_UNLIMITED;
+                opt->ctl.q_max[j] = l->q_max < ARM_UNLIMITED ? l->q_max + (float)d : ARM_UNLIMITED;
+            }
+        } else if (strcmp(a, "--max-velocity") == 0) {
+            rc = parse_double(a, v, 1e-3, 1e4, &d, err, errcap);
+            for (int j = 0; j < ARM_N_JOINTS; ++j) opt->ctl.velocity_limit[j] = (float)d;
+        } else if (strcmp(a, "--max-following-error") == 0) {
+            rc = parse_double(a, v, 1e-6, 1e3, &d, err, errcap);
+            for (int j = 0; j < ARM_N_JOINTS; ++j) opt->ctl.following_error_limit[j] = (float)d;
+        } else if (strcmp(a, "--step-tolerance") == 0) {
+            rc = parse_double(a, v, 1e-6, 1e3, &d, err, errcap);
+            opt->ctl.step_tolerance = (float)d;
+        } else if (strcmp(a, "--torque-mismatch") == 0) {
+            rc = parse_double(a, v, 1e-6, 100.0, &d, err, errcap);
+            for (int j = 0; j < ARM_N_JOINTS; ++j) opt->ctl.torque_mismatch_limit[j] = (float)d * model->link[j].torque_limit;
         } else if (strcmp(a, "--safe-stop") == 0) {
             if (strcmp(v, "zero") == 0) {
                 opt->ctl.safe_stop_mode = ARM_SAFE_STOP_ZERO_TORQUE;

@@ -34,11 +34,13 @@ int summary_write(const char *path, const options_t *opt, const run_report_t *r,
             "  \"frames\": {\"tx\": %llu, \"rx\": %llu, \"tx_dropped\": %llu, \"rx_state\": %u, "
             "\"rx_heartbeat\": %u, \"rx_emcy\": %u, \"rx_foreign_master\": %u, \"rx_unknown_id\": %u, "
             "\"rx_bad_length\": %u, \"rx_wrong_counter\": %u, \"rx_bad_format\": %u, "
-            "\"rx_wrong_bus\": %llu, \"rx_undecodable\": %llu, \"rx_sim_identity\": %u},\n",
+            "\"rx_wrong_bus\": %llu, \"rx_undecodable\": %llu, \"rx_kernel_drops\": %llu, \"rx_sim_identity\": %u, "
+            "\"rx_duplicate_state\": %u},\n",
             (unsigned long long)r->frames_tx, (unsigned long long)r->frames_rx,
             (unsigned long long)r->tx_would_block, r->rx.state, r->rx.heartbeat, r->rx.emcy,
             r->rx.foreign_master, r->rx.unknown_id, r->rx.bad_length, r->rx.wrong_counter,
-            r->rx.bad_format, (unsigned long long)r->rx_wrong_bus, (unsigned long long)r->rx_undecodable, r->rx.sim_identity);
+            r->rx.bad_format, (unsigned long long)r->rx_wrong_bus, (unsigned long long)r->rx_undecodable,
+            (unsigned long long)r->rx_kernel_drops, r->rx.sim_identity, r->rx.duplicate_state);
     static const char *const names[TELEM_KIND_COUNT] = {"ARM_CTL", "ARM_TIMING", "ARM_EVENT"};
     fprintf(f, "  \"telemetry\": {\"dropped\": %llu, \"sent\": {",
             (unsigned long long)telemetry_dropped(telem));

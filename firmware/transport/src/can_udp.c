@@ -172,6 +172,10 @@ int arm_can_udp_open(arm_can_udp_t *bus, const char *group, uint16_t port, char 
         return fail(bus, err, errcap, "setsockopt(SO_ATTACH_FILTER): own-echo filter");
     }
 
+    /* The kernel's count of datagrams dropped on our full receive queue, as ancillary data. */
+    const int one = 1;
+    (void)setsockopt(bus->fd, SOL_SOCKET, SO_RXQ_OVFL, &one, (socklen_t)sizeof one);
+
     /* Binding the group (not INADDR_ANY) keeps unicast to this port out. */
     struct sockaddr_in addr;
     memset(&addr, 0, sizeof addr);
@@ -292,12 +296,18 @@ static int fill_batch(arm_can_udp_t *bus)
 {
     struct mmsghdr msgs[ARM_CAN_UDP_RX_BATCH];
     struct iovec iov[ARM_CAN_UDP_RX_BATCH];
+    union {
+        char buf[CMSG_SPACE(sizeof(uint32_t))];
+        struct cmsghdr align;
+    } ctrl[ARM_CAN_UDP_RX_BATCH];
     memset(msgs, 0, sizeof msgs);
     for (unsigned i = 0; i < ARM_CAN_UDP_RX_BATCH; ++i) {
         iov[i].iov_base = bus->rx_buf[i];
         iov[i].iov_len = sizeof bus->rx_buf[i];
         msgs[i].msg_hdr.msg_iov = &iov[i];
         msgs[i].msg_hdr.msg_iovlen = 1;
+        msgs[i].msg_hdr.msg_control = ctrl[i].buf;
+        msgs[i].msg_hdr.msg_controllen = sizeof ctrl[i].buf;
     }
     for (;;) { /* only EINTR repeats, and a signal storm is the caller's problem */
         const int got = recvmmsg(bus->fd, msgs, ARM_CAN_UDP_RX_BATCH, MSG_DONTWAIT, NULL);
@@ -314,6 +324,17 @@ static int fill_batch(arm_can_udp_t *bus)
         for (int i = 0; i < got; ++i) {
             bus->rx_len[i] = msgs[i].msg_len;
             bus->rx_trunc[i] = (msgs[i].msg_hdr.msg_flags & MSG_TRUNC) != 0;
+            for (struct cmsghdr *c = CMSG_FIRSTHDR(&msgs[i].msg_hdr); c != NULL;
+                 c = CMSG_NXTHDR(&msgs[i].msg_hdr, c)) {
+                if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SO_RXQ_OVFL &&
+                    c->cmsg_len >= CMSG_LEN(sizeof(uint32_t))) {
+                    uint32_t drops = 0u;
+                    memcpy(&drops, CMSG_DATA(c), sizeof drops);
+                    /* The kernel's cumulative count also holds our own echoes, which the socket
+                     * filter drops: one per datagram we sent. What is beyond them overflowed. */
+                    bus->rx_kernel_drops = drops > bus->tx_frames ? drops - bus->tx_frames : 0u;
+                }
+            }
         }
         bus->rx_next = 0u;
         bus->rx_count = (unsigned)got;

@@ -2,6 +2,7 @@
 // double-precision Eigen model on 2,000 steps of random, smoothly varying inputs.
 #include <cmath>
 #include <cstdio>
+#include <algorithm>
 #include <random>
 
 #include "step_reference.hpp"
@@ -29,9 +30,11 @@ int main()
             freq[j] = 2.0 + uni(rng);
         }
         double worst_tau = 0.0, worst_w = 0.0;
+        float tau_applied[ref::N] = {};  // drives that do as told: they report last period's command
         for (int k = 0; k < 2000; ++k) {
             const double t = 1e-3 * k;
             arm_ctl_input_t in{};
+            std::copy(tau_applied, tau_applied + ref::N, in.tau_measured);
             ref::VecN q, qd, q_d, qd_d, qdd_d;
             for (int j = 0; j < ref::N; ++j) {
                 // float32 is what the firmware sees: give both models the same numbers.
@@ -49,6 +52,7 @@ int main()
             in.fresh_mask = (1u << ref::N) - 1u;
             arm_ctl_output_t out;
             arm_ctl_step(&ctl, &in, &out);
+            std::copy(out.tau, out.tau + ref::N, tau_applied);
             const ref::VecN tau = reference.step(q, qd, q_d, qd_d, qdd_d);
             double scale = 1.0;  // Nm: below that, compare absolutely
             for (int j = 0; j < ref::N; ++j) scale = std::max(scale, std::fabs(tau[j]));

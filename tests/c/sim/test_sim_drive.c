@@ -33,12 +33,24 @@ static void torque_only_in_operation_enabled_and_limited(void)
     sim_drive_on_command(&d, 0x0F, 10.0);
     CHECK(sim_drive_applied_torque(&d) == 0.0); /* NMT pre-operational: PDOs ignored */
     d = enabled_drive();
-    sim_drive_on_command(&d, 0x0F, 100.0);
+    sim_drive_on_command(&d, 0x0F, 28.000001); /* the limit, as the wire's 1 uNm rounds it */
     CHECK(sim_drive_applied_torque(&d) == 28.0);
-    sim_drive_on_command(&d, 0x0F, -100.0);
+    sim_drive_on_command(&d, 0x0F, -28.0);
     CHECK(sim_drive_applied_torque(&d) == -28.0);
     sim_drive_on_command(&d, 0x06, 5.0); /* shutdown */
     CHECK(d.power == SIM_PS_READY_TO_SWITCH_ON && sim_drive_applied_torque(&d) == 0.0);
+}
+
+static void a_command_above_the_limit_faults_the_drive(void)
+{
+    sim_drive_t d = enabled_drive();
+    sim_drive_on_command(&d, 0x0F, 100.0); /* refused, not clamped */
+    CHECK(d.power == SIM_PS_FAULT && sim_drive_applied_torque(&d) == 0.0);
+    CHECK(d.error_code == SIM_ERR_TORQUE_ABOVE_LIMIT && d.n_emcy_pending == 1u &&
+          d.emcy_pending[0] == SIM_EMCY_TORQUE_LIMIT);
+    d = enabled_drive();
+    sim_drive_on_command(&d, 0x0F, -28.01);
+    CHECK(d.power == SIM_PS_FAULT);
 }
 
 static void missing_commands_fault_the_drive_with_emcy(void)
@@ -81,6 +93,7 @@ int main(void)
 {
     enable_sequence_reaches_operation_enabled();
     torque_only_in_operation_enabled_and_limited();
+    a_command_above_the_limit_faults_the_drive();
     missing_commands_fault_the_drive_with_emcy();
     fault_reset_needs_a_rising_edge();
     nmt_stop_removes_torque();

@@ -32,7 +32,21 @@ typedef enum {
     ARM_FAULT_NONFINITE_OUTPUT, /* the method produced NaN/Inf */
     ARM_FAULT_STALE_INPUT,      /* joint state older than watchdog_periods */
     ARM_FAULT_EXTERNAL,         /* the port reported a fault (bus, drive, peer lost) */
+    /* Plausibility of the joint states, and of the drives' work (fault_joint names the joint): */
+    ARM_FAULT_POSITION_RANGE,   /* a position outside the joint's range plus the margin */
+    ARM_FAULT_VELOCITY_LIMIT,   /* a velocity above the joint's limit */
+    ARM_FAULT_POSITION_STEP,    /* a position step the reported velocities cannot explain */
+    ARM_FAULT_FOLLOWING_ERROR,  /* the tracking error above its limit */
+    ARM_FAULT_TORQUE_MISMATCH,  /* the drive reports another torque than commanded, period after period */
 } arm_fault_t;
+
+/* The plausibility checks (arm_ctl_config_t.checks), each on by default. */
+#define ARM_CHECK_POSITION_RANGE 0x01u
+#define ARM_CHECK_VELOCITY 0x02u
+#define ARM_CHECK_POSITION_STEP 0x04u
+#define ARM_CHECK_FOLLOWING_ERROR 0x08u
+#define ARM_CHECK_TORQUE 0x10u
+#define ARM_CHECK_ALL 0x1Fu
 
 typedef enum {
     ARM_SAFE_STOP_ZERO_TORQUE = 0,
@@ -51,6 +65,15 @@ typedef struct {
     float torque_limit[ARM_N_JOINTS];      /* Nm */
     float torque_rate_limit[ARM_N_JOINTS]; /* Nm per period */
     uint32_t watchdog_periods;             /* stale periods tolerated before safe stop */
+    /* Plausibility: a violation is a named fault (safe stop). Defaults from the model. */
+    uint32_t checks;                        /* ARM_CHECK_* bits */
+    float q_min[ARM_N_JOINTS];              /* rad: the joint's range widened by a margin */
+    float q_max[ARM_N_JOINTS];
+    float velocity_limit[ARM_N_JOINTS];     /* rad/s */
+    float step_tolerance;                   /* rad: |q - q_prev - (qd + qd_prev) T / 2| allowed */
+    float following_error_limit[ARM_N_JOINTS]; /* rad */
+    float torque_mismatch_limit[ARM_N_JOINTS]; /* Nm between reported and commanded torque */
+    uint32_t torque_mismatch_periods;       /* consecutive periods of mismatch that make a fault */
     arm_safe_stop_mode_t safe_stop_mode;
     float safe_stop_damping; /* Nm s/rad */
 } arm_ctl_config_t;
@@ -62,6 +85,7 @@ typedef struct {
     float qd_d[ARM_N_JOINTS];
     float qdd_d[ARM_N_JOINTS];
     uint32_t fresh_mask; /* bit i: joint i's state arrived this period */
+    float tau_measured[ARM_N_JOINTS]; /* the torque each drive reports it applies (end of last period) */
 } arm_ctl_input_t;
 
 typedef struct {
@@ -75,6 +99,8 @@ typedef struct {
     uint32_t saturated_mask;        /* bit i: joint i's torque or rate was limited */
     arm_state_t state;
     arm_fault_t fault;
+    int fault_joint;    /* 0-based joint of a plausibility fault, -1 otherwise */
+    float fault_value;  /* what was measured (rad, rad/s, Nm) */
 } arm_ctl_output_t;
 
 typedef struct {
@@ -91,6 +117,10 @@ typedef struct {
     float last_q[ARM_N_JOINTS];
     float last_qd[ARM_N_JOINTS];
     float tau_prev[ARM_N_JOINTS];
+    int have_last;                          /* last_q/last_qd hold a fresh sample of the last period */
+    uint32_t mismatch_periods[ARM_N_JOINTS];
+    int fault_joint;
+    float fault_value;
 } arm_ctl_t;
 
 typedef enum {
@@ -104,7 +134,10 @@ typedef enum {
 } arm_ctl_init_result_t;
 
 /* Fills cfg with the defaults for the model: PD at 20 rad/s, critically damped; the model's
- * torque limits; a rate limit of full scale per 10 ms; zero-torque safe stop after 3 stale periods. */
+ * torque limits; a rate limit of full scale per 10 ms; zero-torque safe stop after 3 stale periods;
+ * every plausibility check: the model's joint ranges + 0.1 rad, 2 pi rad/s, steps within 0.01 rad
+ * of what the velocities explain, 0.5 rad of following error, and the reported torque within 10 %
+ * of the torque limit of the commanded one for no more than 3 periods in a row. */
 void arm_ctl_default_config(const arm_robot_model_t *model, arm_ctl_config_t *cfg);
 arm_ctl_init_result_t arm_ctl_init(arm_ctl_t *ctl, const arm_robot_model_t *model,
                                    const arm_ctl_config_t *cfg);

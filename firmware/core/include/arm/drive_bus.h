@@ -43,6 +43,7 @@ typedef enum {
     ARM_RX_WRONG_COUNTER,  /* a state for another period (late or duplicated) */
     ARM_RX_BAD_FORMAT,     /* FD/classic or RTR/ERR flags do not match the definition */
     ARM_RX_SIM_IDENTITY,   /* HIL: the arm the simulator runs (its model hash and joint count) */
+    ARM_RX_DUPLICATE_STATE, /* a second state of one drive for one SYNC: another node uses its id */
 } arm_rx_kind_t;
 
 typedef struct {
@@ -55,6 +56,7 @@ typedef struct {
     uint32_t wrong_counter;
     uint32_t bad_format;
     uint32_t sim_identity;
+    uint32_t duplicate_state;
 } arm_rx_counters_t;
 
 typedef struct {
@@ -68,6 +70,8 @@ typedef struct {
     uint8_t nmt_state[ARM_N_JOINTS];
     uint32_t heartbeat_mask; /* bit i: drive i has sent a heartbeat since boot */
     uint16_t last_emcy_code[ARM_N_JOINTS];
+    uint32_t emcy_mask;      /* bit i: drive i sent an EMCY since the port last cleared it */
+    uint32_t duplicate_mask; /* bit i: drive i's state came twice this period */
     /* HIL: the simulator's SIM_IDENTITY, if one came (real drives never send it) */
     int sim_identity_seen;
     uint32_t sim_model_hash32;

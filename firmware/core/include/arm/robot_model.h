@@ -1,5 +1,5 @@
 /* Nominal model of a serial arm of revolute joints (filled by a generated header): rigid links,
- * each joint's armature and viscous damping. */
+ * each joint's armature, viscous damping and range. */
 #ifndef ARM_ROBOT_MODEL_TYPES_H
 #define ARM_ROBOT_MODEL_TYPES_H
 
@@ -19,7 +19,10 @@ typedef struct {
     float torque_limit;   /* Nm, the drive's limit */
     float armature;       /* kg m^2, rotor inertia reflected to the joint: adds armature * qdd */
     float damping;        /* N m s/rad, viscous joint damping: adds damping * qd */
+    float q_min, q_max;   /* rad, the joint's range (+-ARM_UNLIMITED when it has none) */
 } arm_link_t;
+
+#define ARM_UNLIMITED 1.0e30f /* a joint range without a limit */
 
 typedef struct {
     float gravity[3]; /* world frame, m/s^2 (base frame = world frame) */

@@ -66,6 +66,8 @@ typedef struct {
     uint64_t rx_frames;   /* valid frames returned */
     uint64_t rx_decode_errors; /* datagrams skipped: undecodable or oversized */
     uint64_t rx_errors;   /* socket/poll errors */
+    uint64_t rx_kernel_drops; /* datagrams the kernel dropped on our full receive queue (SO_RXQ_OVFL,
+                               * less our own echoes that the filter drops: a lower bound) */
     uint64_t rx_syscalls; /* recvmmsg calls that returned datagrams */
     uint64_t tx_syscalls; /* sendto/sendmmsg calls */
     /* Received, not yet returned: rx_len[i] bytes in rx_buf[i] for rx_next <= i < rx_count. */

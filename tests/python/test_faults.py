@@ -1,0 +1,59 @@
+"""The fault-injection matrix (tools/faults.py, `tools/armctl faults`): every fault that must stop
+the arm stopped it in a safe state under a named verdict, the others left it running with what
+they did counted; no fault left a process behind."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from tools.faults import FAULTS
+from tools.paths import REPO
+
+
+@pytest.fixture(scope="module")
+def matrix(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict]:
+    out = tmp_path_factory.mktemp("faults")
+    r = subprocess.run([str(REPO / "tools" / "armctl"), "faults", "--out", str(out)], cwd=REPO, capture_output=True,
+                       text=True, timeout=1200)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "fault" in r.stdout and "detected in" in r.stdout
+    return {x["fault"]: x for x in json.loads((out / "faults.json").read_text())["rows"]}
+
+
+def test_every_fault_has_its_row(matrix: dict[str, dict]) -> None:
+    assert list(matrix) == [f.name for f in FAULTS]
+
+
+@pytest.mark.parametrize("name", [f.name for f in FAULTS if f.expect_stop])
+def test_faults_that_must_stop_the_arm_stop_it_and_are_never_ok(matrix: dict[str, dict], name: str) -> None:
+    row = matrix[name]
+    assert row["safe_state"] and row["verdict"] not in ("ok", None), row
+    assert row["reasons"], row
+
+
+def test_what_the_arm_can_run_through_is_counted(matrix: dict[str, dict]) -> None:
+    garbage = matrix["garbage"]
+    assert garbage["verdict"] == "ok" and garbage["counters"]["controller"]["rx_undecodable"] > 0
+    assert garbage["counters"]["simulator"]["rx_undecodable"] > 0
+    flood = matrix["flood"]
+    ctl = flood["counters"]["controller"]
+    assert ctl["rx_unknown_id"] + ctl["rx_kernel_drops"] > 0 and flood["verdict"] is not None
+
+
+@pytest.mark.parametrize("name", ["kill-logger", "stalled-logger"])
+def test_a_logger_that_lost_telemetry_makes_the_run_incomplete(matrix: dict[str, dict], name: str) -> None:
+    row = matrix[name]
+    if row["telemetry_lost"]:
+        assert row["verdict"] == "incomplete" and any("telemetry" in r or "logger" in r for r in row["reasons"])
+    else:
+        assert row["verdict"] in ("ok", "incomplete")
+
+
+def test_no_process_is_left_behind(matrix: dict[str, dict]) -> None:
+    r = subprocess.run(["pgrep", "-af", "arm_controller|arm_sim|arm_lcm_logger"], capture_output=True, text=True)
+    leftovers = [ln for ln in r.stdout.splitlines() if "239.74.163.2:46" in ln or "239.255.76.67:78" in ln]
+    assert not leftovers, leftovers

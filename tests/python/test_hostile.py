@@ -1,0 +1,116 @@
+"""Hostile frames on a running bus (issue 15, each reproduced): spoofed joint states and spoofed
+torque commands end the run in a named fault and a safe stop, never `ok`; garbage is counted
+under a named reason on both sides and changes nothing."""
+
+from __future__ import annotations
+
+import json
+import socket
+import struct
+import threading
+import time
+from pathlib import Path
+
+import can
+import msgpack
+
+from host_sim.canbus import open_bus
+from tools.hil import HilOptions, run_hil
+
+SYNC = 0x080
+
+
+def _spoofer(spec: str, make: "callable", after_s: float, stop: threading.Event) -> threading.Thread:
+    """After `after_s`, answers every SYNC on the bus at once with make(counter) frames."""
+    def run() -> None:
+        bus = open_bus(spec)
+        t0 = time.monotonic()
+        try:
+            while not stop.is_set():
+                msg = bus.recv(0.05)
+                if msg is None or msg.arbitration_id != SYNC or time.monotonic() - t0 < after_s:
+                    continue
+                for m in make(msg.data[0]):
+                    bus.send(m)
+        finally:
+            bus.shutdown()
+
+    t = threading.Thread(target=run, daemon=True)
+    t.start()
+    return t
+
+
+def _hostile_run(tmp_path: Path, port: int, make: "callable") -> dict:
+    stop = threading.Event()
+    t = _spoofer(f"udp:239.74.163.2:{port}", make, 1.0, stop)
+    try:
+        return run_hil(HilOptions(out=tmp_path, duration_s=20.0, can_port=port))
+    finally:
+        stop.set()
+        t.join(5)
+
+
+def test_spoofed_joint_states_are_a_named_fault_not_ok(tmp_path: Path) -> None:
+    """DRIVE_1_STATE with INT32_MAX position, velocity and torque and the right SYNC counter."""
+    def state(counter: int) -> list[can.Message]:
+        data = struct.pack("<iiiHBB", 2**31 - 1, 2**31 - 1, 2**31 - 1, 0x0237, counter, 0)
+        return [can.Message(arbitration_id=0x181, data=data, is_extended_id=False, is_fd=True, bitrate_switch=True)]
+
+    run = _hostile_run(tmp_path, 45700, state)
+    r = run["results"]
+    assert r["result"] == "failed" and r["final_state"] in ("fault", "safe-stop"), r["verdict_reasons"]
+    reason = json.loads((tmp_path / "controller_summary.json").read_text())["reason"]
+    assert "joint 1" in reason and ("outside its range" in reason or "velocity above" in reason
+                                    or "position step" in reason), reason
+
+
+def test_spoofed_torque_commands_fault_the_drive_instead_of_being_clamped(tmp_path: Path) -> None:
+    """DRIVE_2_CMD of 2147 Nm (enable operation) with the right counter: the drive refuses it
+    with EMCY 0x8300 and the controller stops the arm."""
+    def command(counter: int) -> list[can.Message]:
+        data = struct.pack("<HiB", 0x000F, 2**31 - 1, counter) + b"\x00"
+        return [can.Message(arbitration_id=0x202, data=data, is_extended_id=False)]
+
+    run = _hostile_run(tmp_path, 45720, command)
+    r = run["results"]
+    assert r["result"] == "failed" and r["final_state"] in ("fault", "safe-stop"), r["verdict_reasons"]
+    sim = json.loads((tmp_path / "sim_summary.json").read_text())
+    assert 2 in r["drive_faults"] or sim["drive_fault_mask"] & 0b10, sim
+    ctl = json.loads((tmp_path / "controller_summary.json").read_text())
+    assert "drive 2" in ctl["reason"], ctl["reason"]
+
+
+def test_garbage_datagrams_are_counted_and_change_nothing(tmp_path: Path) -> None:
+    """Datagrams that are not python-can frames, and frames with fields of the wrong type (an
+    arbitration id that is a list killed the Python simulator once): counted, dropped."""
+    port = 45740
+    clean = run_hil(HilOptions(out=tmp_path / "clean", duration_s=1.0, can_port=port + 10))
+    stop = threading.Event()
+    sent = {"n": 0}
+
+    def spray() -> None:
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
+        s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
+        junk = [b"", b"\xff" * 7, msgpack.packb({"arbitration_id": [128], "data": b"\x01", "dlc": 1}),
+                msgpack.packb({"arbitration_id": "x"}), msgpack.packb([1, 2, 3]), b"\x81\xa1a" + b"\xc1" * 40]
+        while not stop.is_set():  # from before the run starts until it ends
+            for j in junk:
+                s.sendto(j, ("239.74.163.2", port))
+                sent["n"] += 1
+            time.sleep(0.002)
+        s.close()
+
+    t = threading.Thread(target=spray, daemon=True)
+    t.start()
+    time.sleep(0.2)
+    try:
+        run = run_hil(HilOptions(out=tmp_path / "hostile", duration_s=1.0, can_port=port))
+    finally:
+        stop.set()
+        t.join(5)
+    r = run["results"]
+    assert r["result"] == "ok", r["verdict_reasons"]
+    assert r["tracking_max_abs_rad"] == clean["results"]["tracking_max_abs_rad"]  # nothing changed
+    ctl, sim = run["transport"]["controller_frames"], run["transport"]["simulator_frames"]
+    assert ctl["rx_undecodable"] > 0 and sim["rx_undecodable"] > 0, (ctl, sim)

@@ -1,0 +1,266 @@
+"""`armctl faults`: every fault against a short lockstep run, as a table.
+
+For each fault a HIL run starts (pm, the default arm, its own run slot); once the controller is
+tracking, the fault is injected from outside: a signal to a process, frames on a bus (garbage,
+spoofed joint states or torque commands, a flood), a drive reporting a fault, a lost bus (the
+simulator's --debug-lose-bus test hook), a stalled logger. The table says, from the bus and the
+run's own records: after how many periods the arm was stopped (the first zero-torque shutdown
+command or NMT stop, or the drives faulting), whether a safe state was reached, the run's
+verdict, and whether the telemetry is complete. tests/python/test_faults.py holds every row.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import struct
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import can
+
+from host_sim.canbus import open_bus
+from tools.hil import HilOptions, run_hil
+from tools.paths import REPO
+from tools.slots import acquire_slot
+
+SYNC, NMT = 0x080, 0x000
+LOST_BUS_PERIOD = 1500
+GROUP = "239.74.163.2"
+
+
+@dataclass
+class Fault:
+    name: str
+    what: str                                  # what is done
+    inject: Callable[["Injector"], None]
+    expect_stop: bool                          # the arm must end stopped (a named fault, never ok)
+    sim_args: tuple[str, ...] = ()
+
+
+class Injector:
+    """Watches the run's first bus (SYNC counts, commands) and injects the fault once tracking."""
+
+    def __init__(self, can_port: int) -> None:
+        self.port = can_port
+        self.bus0 = open_bus(f"udp:{GROUP}:{can_port}")
+        self.bus1 = open_bus(f"udp:{GROUP}:{can_port + 1}")
+        self.syncs = 0
+        self.counter = 0
+        self.tracking_syncs: int | None = None
+        self.injected_at: int | None = None
+        self.stopped_at: int | None = None
+        self.stop_event = threading.Event()
+        self.frames_sent = 0
+        self.lcm_port = 0
+
+    def pids(self, exe: str) -> list[int]:
+        """The processes of this run (their command line names its bus port)."""
+        r = subprocess.run(["pgrep", "-f", f"{exe} .*{GROUP}:{self.port}@"], capture_output=True, text=True)
+        if exe == "arm_lcm_logger":
+            r = subprocess.run(["pgrep", "-f", f"arm_lcm_logger --lcm-url udpm://239.255.76.67:{self.lcm_port}"],
+                               capture_output=True, text=True)
+        return [int(x) for x in r.stdout.split()]
+
+    def signal(self, exe: str, sig: int, then: int | None = None, after_s: float = 0.0) -> None:
+        for pid in self.pids(exe):
+            os.kill(pid, sig)
+        if then is not None:
+            time.sleep(after_s)
+            for pid in self.pids(exe):
+                os.kill(pid, then)
+
+    def send(self, bus: can.BusABC, msgs: list[can.Message]) -> None:
+        for m in msgs:
+            bus.send(m)
+            self.frames_sent += 1
+
+    def on_each_sync(self, make: Callable[[int], list[can.Message]], bus: int = 0, periods: int = 200) -> None:
+        """Answers the next `periods` SYNCs (with their counter) with make(counter)."""
+        target = self.bus0 if bus == 0 else self.bus1
+        seen = self.syncs
+        while self.syncs < seen + periods and not self.stop_event.is_set():
+            if self.syncs > seen:
+                seen = self.syncs
+                self.send(target, make(self.counter))
+            time.sleep(0.0002)
+
+
+
+def _state(drive: int, counter: int, q: int = 2**31 - 1, statusword: int = 0x0237) -> can.Message:
+    data = struct.pack("<iiiHBB", q, q, q, statusword, counter, 0)
+    return can.Message(arbitration_id=0x180 + drive, data=data, is_extended_id=False, is_fd=True, bitrate_switch=True)
+
+
+FAULTS = [
+    Fault("kill-controller", "SIGKILL to the controller", lambda i: i.signal("arm_controller", signal.SIGKILL), True),
+    Fault("kill-simulator", "SIGKILL to the simulator", lambda i: i.signal("arm_sim", signal.SIGKILL), True),
+    Fault("kill-logger", "SIGKILL to the telemetry logger", lambda i: i.signal("arm_lcm_logger", signal.SIGKILL),
+          False),
+    Fault("stop-controller", "SIGSTOP to the controller for 2 s (lockstep: the simulator waits)",
+          lambda i: i.signal("arm_controller", signal.SIGSTOP, signal.SIGCONT, 2.0), False),
+    Fault("stop-simulator", "SIGSTOP to the simulator for 2 s",
+          lambda i: i.signal("arm_sim", signal.SIGSTOP, signal.SIGCONT, 2.0), True),
+    Fault("term-controller", "SIGTERM to the controller", lambda i: i.signal("arm_controller", signal.SIGTERM), True),
+    Fault("term-simulator", "SIGTERM to the simulator", lambda i: i.signal("arm_sim", signal.SIGTERM), True),
+    Fault("garbage", "undecodable datagrams and wrongly typed frames on bus 0",
+          lambda i: _garbage(i), False),
+    Fault("spoofed-states", "DRIVE_1_STATE with INT32_MAX values and the right SYNC counter",
+          lambda i: i.on_each_sync(lambda c: [_state(1, c)]), True),
+    Fault("spoofed-commands", "DRIVE_4_CMD of 2147 Nm (enable operation) with the right counter, bus 1",
+          lambda i: i.on_each_sync(lambda c: [can.Message(arbitration_id=0x204, is_extended_id=False,
+                                                          data=struct.pack("<HiBx", 0x000F, 2**31 - 1, c))], bus=1),
+          True),
+    Fault("flood", "10,000 frames of an unknown id on bus 0", lambda i: i.send(
+        i.bus0, [can.Message(arbitration_id=0x5AA, data=bytes(8), is_extended_id=False)] * 10000), False),
+    Fault("drive-fault", "drive 2 reports fault (statusword 0x0218) and EMCY 0x2310 (overcurrent)",
+          lambda i: i.on_each_sync(lambda c: [_state(2, c, q=0, statusword=0x0218),
+                                              can.Message(arbitration_id=0x082, is_extended_id=False,
+                                                          data=struct.pack("<HBi", 0x2310, 1, 0) + bytes(1))],
+                                   periods=3), True),
+    Fault("lost-bus", "bus 1 goes silent (the simulator's --debug-lose-bus test hook)", lambda i: None, True,
+          ("--debug-lose-bus", f"1@{LOST_BUS_PERIOD}")),
+    Fault("stalled-logger", "SIGSTOP to the telemetry logger for 0.5 s",
+          lambda i: i.signal("arm_lcm_logger", signal.SIGSTOP, signal.SIGCONT, 0.5), False),
+]
+
+
+def _garbage(i: Injector) -> None:
+    import socket
+
+    import msgpack
+
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
+    s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
+    junk = [b"", b"\xff" * 7, msgpack.packb({"arbitration_id": [128], "data": b"\x01", "dlc": 1}),
+            msgpack.packb({"arbitration_id": "x"}), msgpack.packb([1, 2, 3])]
+    for _ in range(200):
+        for j in junk:
+            s.sendto(j, (GROUP, i.port))
+            i.frames_sent += 1
+    s.close()
+
+
+def run_fault(f: Fault, out: Path) -> dict[str, Any]:
+    with acquire_slot() as slot:
+        inj = Injector(slot.can_port)
+        inj.lcm_port = slot.lcm_port
+
+        def watch() -> None:
+            while not inj.stop_event.is_set():
+                try:
+                    m = inj.bus0.recv(0.05)
+                except can.CanOperationError:  # python-can itself raises on undecodable datagrams
+                    continue
+                if m is None:
+                    continue
+                if m.arbitration_id == SYNC and m.dlc >= 1:
+                    inj.syncs += 1
+                    inj.counter = m.data[0]
+                elif inj.injected_at is not None and inj.stopped_at is None and (
+                        (m.arbitration_id == NMT and m.data[:1] == b"\x02") or
+                        (0x201 <= m.arbitration_id <= 0x210 and m.data[:2] == b"\x06\x00")):
+                    inj.stopped_at = inj.syncs
+                elif inj.tracking_syncs is None and 0x201 <= m.arbitration_id <= 0x210 and m.data[:2] == b"\x0f\x00":
+                    inj.tracking_syncs = inj.syncs
+
+        def injector() -> None:
+            deadline = time.monotonic() + 60
+            while (inj.tracking_syncs is None or inj.syncs < inj.tracking_syncs + 300) and time.monotonic() < deadline:
+                time.sleep(0.005)  # 0.3 s of tracking first
+            inj.injected_at = inj.syncs
+            try:
+                f.inject(inj)
+            except (OSError, can.CanError):
+                pass
+
+        threads = [threading.Thread(target=watch, daemon=True), threading.Thread(target=injector, daemon=True)]
+        for t in threads:
+            t.start()
+        try:
+            run = run_hil(HilOptions(out=out, duration_s=8.0, method="pm", can_port=slot.can_port,
+                                     lcm_port=slot.lcm_port, sim_args=f.sim_args))
+        finally:
+            inj.stop_event.set()
+            for t in threads:
+                t.join(5)
+            inj.bus0.shutdown()
+            inj.bus1.shutdown()
+    r = run["results"]
+    sim = _load(out / "sim_summary.json")
+    faulted = bool(sim.get("drive_fault_mask")) or bool(r.get("drive_faults"))
+    if f.name == "lost-bus":
+        inj.injected_at = LOST_BUS_PERIOD  # the simulator's period, counted like the SYNCs seen
+    stopped = r.get("final_state") in ("fault", "safe-stop") or faulted  # not the run's normal end
+    detected = (inj.stopped_at - inj.injected_at) if stopped and inj.stopped_at is not None \
+        and inj.injected_at is not None else None
+    safe = stopped
+    lost = run.get("transport", {}).get("telemetry_lost_total")
+    return {"fault": f.name, "what": f.what, "detected_after_periods": detected, "safe_state": safe,
+            "final_state": r.get("final_state"), "drives_faulted": faulted, "verdict": r.get("result"),
+            "reasons": r.get("verdict_reasons", []), "telemetry_lost": lost, "expect_stop": f.expect_stop,
+            "counters": {"controller": run.get("transport", {}).get("controller_frames", {}),
+                         "simulator": run.get("transport", {}).get("simulator_frames", {})}}
+
+
+def _load(path: Path) -> dict[str, Any]:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def table(rows: list[dict[str, Any]]) -> str:
+    lines = [f"{'fault':<18}{'detected in':>12}  {'safe state':<28}{'verdict':<26}{'telemetry':<12}",
+             f"{'':<18}{'(periods)':>12}"]
+    for x in rows:
+        det = "-" if x["detected_after_periods"] is None else str(x["detected_after_periods"])
+        safe = ("drives faulted, torque off" if x["drives_faulted"] else f"yes ({x['final_state']})") \
+            if x["safe_state"] else f"no stop needed ({x['final_state']})"
+        tel = "complete" if x["telemetry_lost"] == 0 else f"{x['telemetry_lost']} lost" \
+            if x["telemetry_lost"] is not None else "unknown"
+        lines.append(f"{x['fault']:<18}{det:>12}  {safe:<28}{str(x['verdict']):<26}{tel:<12}")
+    return "\n".join(lines)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--only", default=None, help="comma-separated faults [all: " + ", ".join(f.name for f in FAULTS) + "]")
+    p.add_argument("--out", type=Path, default=REPO / "runs" / "faults")
+
+
+def run(ns: argparse.Namespace) -> int:
+    from tools.arm import build_arm
+    from tools.outdir import OutDirError, check_out_dir
+
+    names = [f.name for f in FAULTS] if ns.only is None else ns.only.split(",")
+    bad = [n for n in names if n not in {f.name for f in FAULTS}]
+    try:
+        if bad:
+            raise OutDirError(f"--only: unknown fault(s) {', '.join(bad)}")
+        check_out_dir(ns.out)
+    except OutDirError as exc:
+        print(f"armctl faults: {exc}", file=sys.stderr)
+        return 2
+    build_arm("release")
+    rows = [run_fault(f, ns.out / f.name) for f in FAULTS if f.name in names]
+    doc = {"rows": rows}
+    tmp = ns.out / f".faults.json.tmp.{os.getpid()}"
+    tmp.write_text(json.dumps(doc, indent=2) + "\n")
+    tmp.replace(ns.out / "faults.json")
+    print(table(rows))
+    print(f"results: {ns.out / 'faults.json'}")
+    # The matrix's promise: every fault that must stop the arm stopped it, under a named verdict.
+    broken = [x["fault"] for x in rows if x["expect_stop"] and (not x["safe_state"] or x["verdict"] == "ok")]
+    if broken:
+        print(f"armctl faults: not stopped safely: {', '.join(broken)}", file=sys.stderr)
+    return 1 if broken else 0
+
