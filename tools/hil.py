@@ -187,6 +187,18 @@ def reference_args(info: dict[str, Any], controller_args: tuple[str, ...]) -> li
     return ["--ref-amp", ",".join(f"{a:g}" for a in ref["amp"]), "--ref-freq", ",".join(f"{f:g}" for f in ref["freq_hz"])]
 
 
+def sim_substeps(info: dict[str, Any], rate_hz: float) -> int:
+    """MuJoCo steps per control period at this rate: the simulated time of a period is the
+    controller's period (a controller run at 200 Hz on a 1 kHz arm gets 5 ms a period, not 1 ms)."""
+    dt = 1.0 / (info["loop_rate_hz"] * info["substeps"])
+    k = 1.0 / (rate_hz * dt)
+    if round(k) < 1 or abs(k - round(k)) > 1e-6 * k:
+        raise HilError(f"--rate {rate_hz:g}: the period {1e3 / rate_hz:g} ms is not a whole number of the "
+                       f"simulator's {dt * 1e3:g} ms steps (the arm's loop rate {info['loop_rate_hz']:g} Hz, "
+                       f"{info['substeps']} step(s) a period); use a rate that divides {1.0 / dt:g} Hz")
+    return int(round(k))
+
+
 def _arg_value(args: tuple[str, ...], name: str, default: float) -> float:
     return float(args[args.index(name) + 1]) if name in args else default
 
@@ -293,6 +305,7 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
     except ArmChoiceError as exc:
         raise HilError(str(exc)) from exc
     topology = load_topology(opt.topology, info)
+    substeps = sim_substeps(info, _arg_value(opt.controller_args, "--rate", info["loop_rate_hz"]))
     bus_kind, bus_why = resolve_bus(opt.bus, len(topology))
     binary = opt.controller or controller_binary(bdir)
     logger_exe = logger_binary(bdir)
@@ -329,7 +342,7 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
             sim_argv(sim_exe, buses, lcm_url=url, summary=opt.out / "sim_summary.json", uncertainty=opt.uncertainty,
                      timing=bus_timing_mode(opt.mode) if opt.bus_timing else "off", phys=topology,
                      model=prepared_model(bdir), drives=opt.drives,
-                     extra=["--substeps", str(info["substeps"]), *sim_mode_args(opt.mode), *opt.sim_args]),
+                     extra=["--substeps", str(substeps), *sim_mode_args(opt.mode), *opt.sim_args]),
             cwd=REPO, stdout=logs["simulator"], stderr=subprocess.STDOUT,
             preexec_fn=_simulator_realtime(realtime_cpu(opt)) if opt.mode == "realtime" else None)
         procs.append(sim)

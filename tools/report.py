@@ -75,7 +75,9 @@ def _time_figures(out: Path, study: dict[str, Any], scenario: str) -> list[str]:
     for m in study["methods"]:
         d = out / scenario / m / f"seed-{seed}"
         if (d / "telemetry.lcmlog").exists():
-            series[m] = _series(d, hold)
+            got = _series(d, hold)
+            if len(got["t"]) >= 2:  # a run stopped before its trajectory began has nothing to draw
+                series[m] = got
     made = []
     if not series:
         return made
@@ -267,7 +269,8 @@ def write_report(out: Path, study: dict[str, Any]) -> None:
             ["method", "knobs", "objective (sum L-inf, rad)", "trials", "source", "note"],
             [[m, f"`{ {k: (round(v, 4) if isinstance(v, float) else v) for k, v in r['knobs'].items()} }`",
               _fmt(r["objective"]), str(sum(len(x["trials"]) for x in r["rounds"])), r.get("source", ""),
-              r.get("edge_note") or ""] for m, r in sc["tuning"].items()]), "",
+              r.get("edge_note") or (f"no trial ended well; the best: {r['failed']}" if r.get("failed") else "")]
+             for m, r in sc["tuning"].items()]), "",
             "pm-paper-weights: the paper's own weights (gen/configs/paper.toml), not tuned. Every trial is in "
             "study.json.", ""]
         for metric in ("linf", "rms", "est", "power"):

@@ -45,6 +45,7 @@ class RunSpec:
     design_text: str | None = None     # a design built for this run alone (tuning, tuned designs)
     keep_log: bool = True              # tuning runs drop their telemetry log once analysed
     labels: dict[str, Any] = field(default_factory=dict)
+    code: str = ""                     # tools/code_identity.py: a kept run of other code is run again
 
     def key(self) -> dict[str, Any]:
         """What decides the result (not where it is written)."""

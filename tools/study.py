@@ -19,6 +19,7 @@ from gen.arm import DEFAULT_DESIGN
 from tools.arm import (DEFAULT_ARM, ArmChoiceError, ArmRef, add_arm_arguments, arm_build_dir, arm_from_args,
                        arm_info, build_arm, reference_for)
 from tools import procs
+from tools.code_identity import code_identity
 from tools.hil import HilError, write_json_atomic
 from tools.outdir import OutDirError, check_out_dir
 from tools.paths import REPO
@@ -121,6 +122,7 @@ def tuned(cfg: StudyConfig, arm: ArmRef, setup: TuneSetup, info: dict[str, Any],
             bar.set_postfix_str(f"{m} / {s}")
             rec = tune_method(setup, cfg.scenarios[s], m, trials, progress=lambda: bar.update(1))
             rec["key"] = key
+            rec["code"] = code_identity()
             doc["scenarios"].setdefault(s, {})[m] = rec
             doc["arm"] = {"name": info["name"], "model_hash": info["model_hash"]}
             doc["procedure"] = procedure(cfg, trials)
@@ -134,7 +136,8 @@ def procedure(cfg: StudyConfig, trials: int | None = None) -> str:
     return (f"Optuna TPE, the same budget of {trials or cfg.trials} trials per method and scenario (batches of {cfg.batch}), "
             f"tuning seed(s) {cfg.tuning_seeds} and the tuning trajectory ({cfg.tuning_duration_s:g} s), never the "
             f"study's; objective: {cfg.tuning_objective}; a run that failed, diverged or was torque-limited scores "
-            f"1000; a best value at the edge of its range widens that range tenfold and runs the budget again "
+            f"1000 to 2000 (more the earlier the safety layer stopped it; 2000 when the synthesis refused the "
+            f"weights); a best value at the edge of its range widens that range tenfold and runs the budget again "
             f"(at most {cfg.widen} times). pm, pm-paper and gh2 are tuned through their synthesis weights (each "
             f"candidate synthesised and built); pm-paper-weights is the paper's own weights, not tuned.")
 
@@ -151,6 +154,10 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
     duration = duration_s or cfg.duration_s
     traj_args, traj_used, traj_notes = trajectory_for(info, cfg.trajectory, "trajectory")
     notes += traj_notes
+    stale = sorted(f"{m} in {s}" for s in tuning for m, rec in tuning[s].items() if rec.get("code") != code_identity())
+    if stale:
+        notes.append(f"the kept tuning of {', '.join(stale)} was made with other firmware or simulator code "
+                     f"(tools/code_identity.py); `armctl study --retune` tunes again")
     for n in notes:
         print(f"armctl study: {n}", file=sys.stderr)
     paper_text = None if Path(info["design_config"]).resolve() == DEFAULT_DESIGN.resolve() else DEFAULT_DESIGN.read_text()

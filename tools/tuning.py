@@ -23,10 +23,11 @@ from typing import Any
 
 from tools import procs
 from tools.design_knobs import design_text
+from tools.code_identity import code_identity
 from tools.runner import RunSpec, run_all
 from tools.study_config import METHODS, Scenario, Space, StudyConfig, gain_args
 
-FAILED_SCORE = 1e3  # rad: what a run that failed, diverged or hit its torque limit scores
+FAILED_SCORE = 1e3  # rad: what a run that failed, diverged or hit its torque limit scores at least
 EDGE = 0.02         # a best value this close to a range's end (fraction of its log width) is at the edge
 SCORED = ("ok", "tracking-bound-exceeded")  # a run that ended well scores its tracking error
 
@@ -44,15 +45,26 @@ class TuneSetup:
 
 def objective(results: list[dict[str, Any]]) -> tuple[float, str]:
     """The mean over the tuning seeds of the sum over joints of the L-infinity tracking error
-    (rad), the paper's Table 2 measure; FAILED_SCORE when a run did not end well."""
+    (rad), the paper's Table 2 measure. A run that did not end well scores FAILED_SCORE or more:
+    up to twice that as the share of the trajectory it covered falls (a method the safety layer
+    stopped early is worse than one stopped late, so the search can still climb where every
+    trial fails; a synthesis refusal scores the most)."""
     total = 0.0
     for r in results:
         res = r.get("results", {})
         if res.get("result") not in SCORED or not res.get("tracking_max_abs_rad"):
             why = (res.get("verdict_reasons") or [res.get("result", "failed")])[0]
-            return FAILED_SCORE, str(why)
+            return FAILED_SCORE * (2.0 - min(_covered(x.get("results", {})) for x in results)), str(why)
         total += sum(res["tracking_max_abs_rad"])
     return total / len(results), ""
+
+
+def _covered(res: dict[str, Any]) -> float:
+    """The share of the trajectory a run's metrics cover, 0..1."""
+    want, have = res.get("trajectory_periods"), res.get("periods_running")
+    if not want or have is None:
+        return 0.0
+    return max(0.0, min(1.0, have / want))
 
 
 def design_check(text: str) -> str:
@@ -105,7 +117,7 @@ def trial_spec(setup: TuneSetup, method: str, scenario: Scenario, knobs: dict[st
                    uncertainty={**scenario.uncertainty, "seed": seed}, drives=scenario.drives.to_dict(),
                    bus_timing=scenario.bus_timing, design_text=text, keep_log=keep_log,
                    labels={"method": method, "scenario": scenario.name, "seed": seed, "knobs": knobs},
-                   **setup.arm_args)
+                   code=code_identity(), **setup.arm_args)
 
 
 def tune_method(setup: TuneSetup, scenario: Scenario, method: str, trials: int | None = None,
@@ -148,7 +160,7 @@ def tune_method(setup: TuneSetup, scenario: Scenario, method: str, trials: int |
             by_trial = iter(runs)
             for i, (t, knobs) in enumerate(zip(asked, knob_sets)):
                 if i in refused:
-                    score, why, per_seed = FAILED_SCORE, refused[i], []
+                    score, why, per_seed = 2.0 * FAILED_SCORE, refused[i], []
                 else:
                     per_seed = [next(by_trial) for _ in cfg.tuning_seeds]
                     score, why = objective(per_seed)

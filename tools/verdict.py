@@ -11,7 +11,8 @@ is listed in verdict_reasons):
 - incomplete: fewer periods than asked for, telemetry lost, frames the kernel dropped on a full
   receive queue, the logger failed, or the metrics do not cover every period of the trajectory;
 - tracking-bound-exceeded: a joint's L-infinity tracking error above bounds.max_error_deg;
-- torque-limited: a joint at its torque limit longer than bounds.max_saturated_fraction of the time;
+- torque-limited: a joint at its torque limit (or its torque-rate limit, the safety layer's slew
+  limit) longer than bounds.max_saturated_fraction of the time;
 - commands-missed: the drives missed more commands than bounds.max_commands_missed, or got any late.
 """
 
@@ -82,7 +83,7 @@ def judge(results: dict[str, Any], transport: dict[str, Any], controller: dict[s
             add("tracking-bound-exceeded", f"{_joint(results, i)}: max |e| {e:.3g} deg > {bounds.max_error_deg:g} deg")
     for i, f in enumerate(results.get("saturated_fraction") or []):
         if f > bounds.max_saturated_fraction:
-            add("torque-limited", f"{_joint(results, i)}: at its torque limit {100 * f:.1f} % of the time "
+            add("torque-limited", f"{_joint(results, i)}: at its torque or torque-rate limit {100 * f:.1f} % of the time "
                                   f"(> {100 * bounds.max_saturated_fraction:g} %)")
     missed, late = results.get("commands_missed"), results.get("commands_late")
     if missed is None or missed > bounds.max_commands_missed or (late or 0) > 0:

@@ -8,6 +8,7 @@ import ast
 import json
 import re
 import shutil
+import signal
 import subprocess
 import tomllib
 from pathlib import Path
@@ -70,7 +71,20 @@ def documented_commands() -> set[str]:
 
 
 def armctl(*args: str, timeout: float = 900.0) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([ARMCTL, *args], cwd=REPO, capture_output=True, text=True, timeout=timeout)
+    """armctl, stopped with SIGTERM on a timeout: it then stops its own children (tools/procs.py),
+    so a hung command fails this test and leaves no process behind to fail the others."""
+    p = subprocess.Popen([ARMCTL, *args], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        out, err = p.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        p.send_signal(signal.SIGTERM)
+        try:
+            out, err = p.communicate(timeout=60)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            out, err = p.communicate()
+        raise AssertionError(f"armctl {' '.join(args)}: no end after {timeout:g} s\n{out}\n{err[-3000:]}") from None
+    return subprocess.CompletedProcess(p.args, p.returncode, out, err)
 
 
 def test_every_documented_command_is_exercised() -> None:
@@ -124,8 +138,12 @@ def test_study(tmp_path: Path) -> None:
 def small_tuning_config(dirpath: Path) -> Path:
     """The default config with 0.2 s tuning runs (the budget comes from --trials)."""
     text = (REPO / "tools" / "studies" / "paper.toml").read_text()
-    text = re.sub(r"(\[tuning\][^\[]*?)duration_s = [0-9.]+", r"\1duration_s = 0.2", text, flags=re.S)
-    text = re.sub(r"(?m)^batch = \d+$", "batch = 2", text)
+    head, tuning = text.split("\n[tuning]", 1)
+    end = re.search(r"(?m)^\[", tuning)
+    assert end is not None
+    section = re.sub(r"(?m)^duration_s = [0-9.]+", "duration_s = 0.2", tuning[:end.start()])
+    section = re.sub(r"(?m)^batch = \d+", "batch = 2", section)
+    text = head + "\n[tuning]" + section + tuning[end.start():]
     cfg = dirpath / "tune7.toml"
     cfg.write_text(text)
     assert tomllib.loads(text)["tuning"]["duration_s"] == 0.2

@@ -100,3 +100,16 @@ def test_cyclictest_histogram_is_parsed() -> None:
     assert p["histogram_us"] == {5: 50, 10: 49, 300: 1}
     s = p["stats"]
     assert (s["n"], s["p50"], s["p99"], s["p99.9"], s["max"], s["min"]) == (100, 5.0, 10.0, 300.0, 300.0, 5.0)
+
+
+def test_a_slower_loop_gets_its_whole_period_simulated() -> None:
+    """At 200 Hz on a 1 kHz arm each period is 5 MuJoCo steps (it once was 1: the simulated arm ran
+    5x slow and the controller's step check caught the positions the velocities did not explain)."""
+    from tools.hil import HilError, sim_substeps
+
+    assert sim_substeps({"loop_rate_hz": 1000.0, "substeps": 1}, 200.0) == 5
+    assert sim_substeps({"loop_rate_hz": 1000.0, "substeps": 2}, 500.0) == 4
+    assert sim_substeps({"loop_rate_hz": 1000.0, "substeps": 1}, 1000.0) == 1
+    for bad in (300.0, 2000.0):
+        with pytest.raises(HilError, match="--rate"):
+            sim_substeps({"loop_rate_hz": 1000.0, "substeps": 1}, bad)

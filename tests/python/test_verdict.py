@@ -49,7 +49,7 @@ def test_a_good_run_is_ok() -> None:
     ({"results": {"periods_running": 999}}, "incomplete", "cover 999 of the trajectory's 1000"),
     ({"results": {"estimation_periods": 10}}, "incomplete", "estimation error covers 10"),
     ({"results": {"tracking_max_abs_deg": [0.5, 31.0]}}, "tracking-bound-exceeded", "b: max |e| 31 deg > 30"),
-    ({"results": {"saturated_fraction": [0.2, 0.0]}}, "torque-limited", "a: at its torque limit 20.0 %"),
+    ({"results": {"saturated_fraction": [0.2, 0.0]}}, "torque-limited", "a: at its torque or torque-rate limit 20.0 %"),
     ({"results": {"commands_missed": 2}}, "commands-missed", "missed 2"),
     ({"results": {"commands_missed": None}}, "commands-missed", "missed None"),
     ({"results": {"commands_late": 1}}, "commands-missed", "1 late"),

@@ -1,0 +1,34 @@
+"""The identity of the code that decides a HIL run's result: a hash over the firmware, the
+simulator, the synthesis and the run's own tooling. A kept run (tools/runner.py) is reused only
+when this is unchanged, so changing the controller or the simulator never leaves stale results in
+a resumed study or tuning."""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+from pathlib import Path
+
+from tools.paths import REPO
+
+# What a run's result depends on; reporting, statistics and the CLI are not in it.
+SOURCES = ("firmware", "host_sim", "gen", "tools/lcm_logger", "tools/hil.py", "tools/run_analysis.py",
+           "tools/verdict.py", "tools/telemetry_log.py", "tools/arm.py", "CMakeLists.txt", "CMakePresets.json")
+SKIP_PARTS = {"__pycache__", ".pytest_cache"}
+
+
+def _files(root: Path) -> list[Path]:
+    if root.is_file():
+        return [root]
+    return sorted(p for p in root.rglob("*") if p.is_file() and not SKIP_PARTS.intersection(p.parts)
+                  and p.suffix not in (".pyc",))
+
+
+@functools.cache
+def code_identity() -> str:
+    h = hashlib.sha256()
+    for name in SOURCES:
+        for p in _files(REPO / name):
+            h.update(str(p.relative_to(REPO)).encode() + b"\0")
+            h.update(hashlib.sha256(p.read_bytes()).digest())
+    return h.hexdigest()[:16]
