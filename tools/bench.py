@@ -2,7 +2,8 @@
 
 `armctl bench step`: instructions per control step (callgrind, which counts instructions, not
 seconds, so the figure repeats on a busy machine) for every method, float32 and fixed point,
-next to the dense double-precision Eigen reference of the same step.
+next to the dense double-precision Eigen reference of the same step (the mass-matrix
+formulation, a correctness model), and the inverse dynamics alone beside Pinocchio's RNEA.
 `armctl bench synth`: wall time of the synthesis (gen.synth.bench).
 `armctl bench sim`: the simulator's speed: the default 10 s lockstep HIL run five times (real-time
 factor after boot, wall time), one period's CPU broken down by activity, and MuJoCo's bare
@@ -31,22 +32,35 @@ STEPS = 2000
 WARMUP = 1000  # the measured count is (N2 - N1) / (STEPS2 - STEPS1): start-up cost cancels
 
 
-def _instructions(exe: Path, method: str, numeric: str, steps: int) -> int:
-    fn = "bench_eigen_step*" if numeric == "eigen" else "bench_firmware_step"
+def _callgrind(fn: str, argv: list[str]) -> int:
+    """Instructions callgrind counts inside fn (a --toggle-collect pattern) over the whole run."""
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "callgrind.out"
         subprocess.run(["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}", f"--toggle-collect={fn}",
-                        str(exe), method, numeric, str(steps)], check=True, capture_output=True)
+                        *argv], check=True, capture_output=True)
         m = re.search(r"^summary:\s+(\d+)", out.read_text(), re.M)
         if m is None:
-            raise RuntimeError(f"no callgrind summary for {method} {numeric}")
+            raise RuntimeError(f"no callgrind summary for {' '.join(argv[1:])}")
         return int(m.group(1))
 
 
 def per_step(exe: Path, method: str, numeric: str, steps: int = STEPS) -> float:
-    a = _instructions(exe, method, numeric, WARMUP)
-    b = _instructions(exe, method, numeric, WARMUP + steps)
+    fn = "bench_eigen_step*" if numeric == "eigen" else "bench_firmware_step"
+    a = _callgrind(fn, [str(exe), method, numeric, str(WARMUP)])
+    b = _callgrind(fn, [str(exe), method, numeric, str(WARMUP + steps)])
     return (b - a) / steps
+
+
+# bench_rnea's variants and the function each is counted in
+RNEA_VARIANTS = {"kernel": "bench_rnea_kernel", "ours": "bench_rnea_ours",
+                 "pinocchio-double": "*bench_rnea_pinocchio*", "pinocchio-float": "*bench_rnea_pinocchio*"}
+
+
+def per_rnea(exe: Path, variant: str, calls: int) -> float:
+    fn = RNEA_VARIANTS[variant]
+    a = _callgrind(fn, [str(exe), variant, str(WARMUP)])
+    b = _callgrind(fn, [str(exe), variant, str(WARMUP + calls)])
+    return (b - a) / calls
 
 
 def bench_step(out: Path, quick: bool = False) -> dict[str, Any]:
@@ -63,15 +77,61 @@ def bench_step(out: Path, quick: bool = False) -> dict[str, Any]:
     for method, r in rows.items():
         if "eigen" in r:
             r["eigen_over_float"] = r["eigen"] / r["float"]
+    rnea_exe = build_dir("release") / "tests" / "bench" / "bench_rnea"
+    check = subprocess.run([str(rnea_exe), "check"], capture_output=True, text=True)
+    if check.returncode != 0:
+        raise RuntimeError(f"bench_rnea check: {check.stdout}{check.stderr}")
+    rnea = {v: per_rnea(rnea_exe, v, steps) for v in tqdm(RNEA_VARIANTS, desc="callgrind rnea", unit="run")}
     result = {
         "what": "instructions per control step (callgrind Ir inside the step function), n = 6, release build",
         "compiler": subprocess.run(["cc", "--version"], capture_output=True, text=True).stdout.splitlines()[0],
         "steps_measured": steps,
         "quick": quick,
         "methods": rows,
+        "rnea": {
+            "what": ("instructions per inverse-dynamics call on the same arm and inputs: kernel = the arm's "
+                     "generated arm_rnea_kernel (what the controller runs for this arm), ours = the general "
+                     "arm_rnea (any other model), Pinocchio 4.1's rnea (the pin wheel's headers and "
+                     "libpinocchio_default) in double and in float"),
+            "instructions": rnea,
+            "check": check.stdout.strip(),
+            "pinocchio_double_over_kernel": rnea["pinocchio-double"] / rnea["kernel"],
+            "pm_step_over_pinocchio_double_rnea": rows["pm"]["float"] / rnea["pinocchio-double"],
+        },
     }
+    if not quick:
+        result["cortex_m"] = cortex_m_costs()
     _write_json(out, result)
     return result
+
+
+CORTEX_M = {"cortex-m4": "mps2-an386", "cortex-m7": "mps2-an500"}
+
+
+def cortex_m_costs() -> dict[str, Any]:
+    """Instructions per call on the M4 and M7 images under QEMU (-icount shift=0: QEMU counts
+    instructions; it does not model cycles, caches or the M7's dual issue). On silicon the same
+    image prints SysTick ticks, which are core cycles."""
+    from tools.build import toolchain_missing
+
+    out: dict[str, Any] = {"what": "instructions per call under QEMU -icount shift=0, SysTick calibrated by a loop "
+                                   "of known length (firmware/port/cortex_m/step_count.c); not cycles"}
+    for preset, machine in CORTEX_M.items():
+        missing = toolchain_missing(preset)
+        if missing:
+            out[preset] = {"skipped": missing}
+            continue
+        build(preset)
+        elf = build_dir(preset) / "firmware" / "port" / "cortex_m" / f"golden_{preset}.elf"
+        r = subprocess.run(["qemu-system-arm", "-M", machine, "-nographic", "-monitor", "none", "-serial", "none",
+                            "-icount", "shift=0", "-semihosting-config", "enable=on,target=native", "-kernel", str(elf)],
+                           capture_output=True, text=True, timeout=600)
+        text = r.stdout + r.stderr
+        rows = dict(re.findall(r"^step cost: (.+?): ticks per call \S+, instructions per call (\S+)$", text, re.M))
+        if r.returncode != 0 or len(rows) != 3:
+            raise RuntimeError(f"{preset} image: no step cost (exit {r.returncode}):\n{text}")
+        out[preset] = {k: float(v) for k, v in rows.items()}
+    return out
 
 
 def table(result: dict[str, Any]) -> str:
@@ -81,6 +141,14 @@ def table(result: dict[str, Any]) -> str:
         ratio = f"{r['eigen_over_float']:>10.1f}x" if "eigen_over_float" in r else f"{'-':>11}"
         eigen = f"{r['eigen']:>12.0f}" if "eigen" in r else f"{'-':>12}"
         lines.append(f"{m:<10}{f('float')}{f('fixed')}{eigen}{ratio}")
+    r = result["rnea"]
+    lines.append("inverse dynamics alone, instructions per call: " +
+                 ", ".join(f"{v} {n:.0f}" for v, n in r["instructions"].items()))
+    lines.append(f"Pinocchio (double) / our kernel: {r['pinocchio_double_over_kernel']:.1f}x; the whole pm step is "
+                 f"{r['pm_step_over_pinocchio_double_rnea']:.2f} of Pinocchio's RNEA alone")
+    for preset, c in result.get("cortex_m", {}).items():
+        if isinstance(c, dict) and "skipped" not in c:
+            lines.append(f"{preset} (QEMU -icount, instructions): " + ", ".join(f"{k} {v:.0f}" for k, v in c.items()))
     return "\n".join(lines)
 
 

@@ -41,7 +41,8 @@ def cmd_build(ns: argparse.Namespace) -> int:
     check = bdir / "firmware" / "arm_rnea_check"
     if check.exists():  # host builds: the firmware's inverse dynamics against MuJoCo's on this arm
         r = subprocess.run([str(check)], capture_output=True, text=True)
-        print(f"arm: {(r.stdout.strip().splitlines() or ['?'])[0]}")
+        for line in [ln for ln in r.stdout.splitlines() if "vs mj_inverse" in ln] or ["?"]:
+            print(f"arm: {line}")  # the general RNEA, then the arm's generated kernel
         if r.returncode != 0:
             print(f"armctl build: the firmware's RNEA disagrees with MuJoCo on this arm:\n{r.stderr[-2000:]}",
                   file=sys.stderr)

@@ -34,7 +34,8 @@ def image_run(request: pytest.FixtureRequest) -> tuple[str, dict, subprocess.Com
     report = json.loads((d / "memory_report.json").read_text())
     run = subprocess.run(
         ["qemu-system-arm", "-M", MACHINES[preset], "-nographic", "-monitor", "none", "-serial", "none",
-         "-semihosting-config", "enable=on,target=native", "-kernel", str(d / f"golden_{preset}.elf")],
+         "-icount", "shift=0", "-semihosting-config", "enable=on,target=native",
+         "-kernel", str(d / f"golden_{preset}.elf")],
         capture_output=True, text=True, timeout=600)
     return preset, report, run
 
@@ -46,6 +47,7 @@ def test_image_passes_its_golden_vectors(image_run) -> None:
     assert f"golden vectors on {preset}" in out
     assert "RESULT: PASS" in out
     assert re.search(r"rnea: 200 states vs mj_inverse, worst relative error \S+ ok", out), out
+    assert re.search(r"rnea kernel: 200 states vs mj_inverse, worst relative error \S+ ok", out), out
     loops = re.findall(r"^closed loop: (\S+) (float|fixed), .* ok$", out, re.M)
     assert len(loops) >= 6 and {"pd", "pm"} <= {m for m, _ in loops}, out
     assert "FAIL" not in out
@@ -61,3 +63,17 @@ def test_memory_fits_the_part_and_the_static_stack_bound_covers_the_measured_one
     measured = int(re.search(r"stack high-water mark \(measured\): (\d+) bytes", run.stdout + run.stderr).group(1))
     # The call-graph sum is an upper bound of what any run can use; the painted stack is one run.
     assert 0 < measured <= report["stack_worst_case_bytes"], (measured, report["stack_worst_case_bytes"])
+
+
+def test_step_cost_is_counted_in_instructions(image_run) -> None:
+    """Under -icount shift=0 a SysTick tick is a whole number of instructions (the calibration);
+    the step, the kernel and the general RNEA each cost what their parts say."""
+    _, _, run = image_run
+    out = run.stdout + run.stderr
+    per_tick = float(re.search(r"instructions per SysTick tick \(calibrated .*\) (\S+)", out).group(1))
+    assert per_tick >= 1 and abs(per_tick - round(per_tick)) < 0.05, out
+    cost = {name: float(n) for name, n in re.findall(r"^step cost: (.+?): ticks per call \S+, instructions per call (\S+)$",
+                                                       out, re.M)}
+    assert set(cost) == {"pm step (float)", "rnea kernel", "rnea general"}, out
+    assert 0 < cost["rnea kernel"] < cost["rnea general"], cost
+    assert cost["rnea kernel"] < cost["pm step (float)"], cost  # the step runs the kernel, and more

@@ -4,6 +4,7 @@
 #include <string.h>
 
 #include "arm/rnea.h"
+#include "arm_rnea_kernel.h"
 
 #define ARM_ALL_JOINTS_MASK ((uint32_t)((1ull << ARM_N_JOINTS) - 1u))
 
@@ -91,6 +92,7 @@ arm_ctl_init_result_t arm_ctl_init(arm_ctl_t *ctl, const arm_robot_model_t *mode
     }
     memset(ctl, 0, sizeof(*ctl));
     ctl->model = model;
+    ctl->rnea_kernel = arm_rnea_kernel_fits(model);
     ctl->cfg = *cfg;
     ctl->state = ARM_STATE_INIT;
     ctl->fault = ARM_FAULT_NONE;
@@ -260,7 +262,11 @@ static void run_method(arm_ctl_t *ctl, const arm_ctl_input_t *in, arm_ctl_output
         /* IDC: commanding q_ddot_d - u makes the nominal error dynamics e_ddot = u (+ w). */
         acc[i] = in->qdd_d[i] - (out->u_o[i] - out->w_hat[i]);
     }
-    arm_rnea(ctl->model, ctl->last_q, ctl->last_qd, acc, out->tau_method);
+    if (ctl->rnea_kernel) {
+        arm_rnea_kernel(ctl->last_q, ctl->last_qd, acc, out->tau_method);
+    } else {
+        arm_rnea(ctl->model, ctl->last_q, ctl->last_qd, acc, out->tau_method);
+    }
 }
 
 static void apply_limits(arm_ctl_t *ctl, arm_ctl_output_t *out)

@@ -105,6 +105,7 @@ typedef struct {
 
 typedef struct {
     const arm_robot_model_t *model;
+    int rnea_kernel;    /* the model is the generated kernel's (arm_rnea_kernel.h): use it */
     arm_ctl_config_t cfg;
     union {
         arm_pm_t pm;

@@ -1,0 +1,286 @@
+"""The arm's RNEA as straight-line C with its constants folded: `python -m gen.rnea_kernel --mjcf
+PREPARED --out DIR` writes arm_rnea_kernel.h and arm_rnea_kernel.c.
+
+It computes what firmware/core/src/rnea.c computes, in the same order of the same recursions,
+but the generator knows the arm: a joint axis along z turns the joint rotation into two
+products per entry instead of Rodrigues' formula and a 3x3 product; a zero in a link frame, a
+centre of mass or an inertia drops every product it would enter; a 1 drops a multiplication;
+the base at rest drops the first joint's velocity terms; each joint takes one sincosf. What
+remains is emitted as one C statement per vector component, named after the recursion's
+quantity (w2_x: the angular velocity of link 2, x component), so the code reads as the
+algorithm. Rotation entries within 1e-7 of 0 or +-1 are taken as exact (quaternions such as
+0.707106781 leave 1e-17 residues that would cost a multiplication each). The controller uses
+the kernel for the model it was generated from (ARM_RNEA_KERNEL_HASH == the model's hash) and
+rnea.c for any other; tests/c/test_rnea.c holds both to MuJoCo's mj_inverse.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from gen.atomic_output import write_files_atomically
+from gen.robot_model import ModelError, RobotModel, extract, fnv1a64
+
+SNAP = 1e-7
+
+
+@dataclass(frozen=True)
+class X:
+    """A scalar of the emitted code: a constant, or a C expression that is a single name."""
+    const: float | None = None
+    name: str | None = None
+
+    @property
+    def zero(self) -> bool:
+        return self.const == 0.0
+
+
+ZERO = X(const=0.0)
+
+
+def _lit(v: float) -> str:
+    s = f"{float(v):.9g}"
+    if not any(ch in s for ch in ".en"):
+        s += ".0"
+    return s + "f"
+
+
+class Emitter:
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+
+    def comment(self, text: str) -> None:
+        self.lines.append(f"    /* {text} */")
+
+    def sop(self, name: str, terms: list[tuple[float, X, X]]) -> X:
+        """sum of sign * a * b, folded: zeros dropped, constants multiplied out, +-1 dropped."""
+        const = 0.0
+        parts: list[str] = []
+        for sign, a, b in terms:
+            if a.zero or b.zero:
+                continue
+            if a.const is not None and b.const is not None:
+                const += sign * a.const * b.const
+                continue
+            if a.const is None and b.const is not None:
+                a, b = b, a
+            if a.const is not None:  # constant times a name
+                k = sign * a.const
+                if k == 1.0:
+                    parts.append(f"+ {b.name}")
+                elif k == -1.0:
+                    parts.append(f"- {b.name}")
+                else:
+                    parts.append(f"{'-' if k < 0 else '+'} {_lit(abs(k))} * {b.name}")
+            else:
+                parts.append(f"{'-' if sign < 0 else '+'} {a.name} * {b.name}")
+        if not parts:
+            return X(const=const)
+        if len(parts) == 1 and const == 0.0 and parts[0].startswith("+ ") and "*" not in parts[0]:
+            return X(name=parts[0][2:])  # a name as it is: no copy
+        expr = " ".join(parts)
+        expr = expr[2:] if expr.startswith("+ ") else "-" + expr[2:]
+        if const != 0.0:
+            expr += f" {'-' if const < 0 else '+'} {_lit(abs(const))}"
+        self.lines.append(f"    const float {name} = {expr};")
+        return X(name=name)
+
+    def lin(self, name: str, terms: list[tuple[float, X]]) -> X:
+        return self.sop(name, [(s, x, X(const=1.0)) for s, x in terms])
+
+
+def _c(v: float) -> X:
+    return X(const=float(v))
+
+
+def _snap(v: float) -> float:
+    for target in (0.0, 1.0, -1.0):
+        if abs(v - target) < SNAP:
+            return target
+    return float(v)
+
+
+AX = "xyz"
+
+
+def _cross(e: Emitter, name: str, a: list[X], b: list[X]) -> list[X]:
+    return [e.sop(f"{name}_{AX[k]}", [(1.0, a[(k + 1) % 3], b[(k + 2) % 3]), (-1.0, a[(k + 2) % 3], b[(k + 1) % 3])])
+            for k in range(3)]
+
+
+def _matvec(e: Emitter, name: str, m: list[list[X]], v: list[X], transpose: bool = False) -> list[X]:
+    return [e.sop(f"{name}_{AX[i]}", [(1.0, m[k][i] if transpose else m[i][k], v[k]) for k in range(3)])
+            for i in range(3)]
+
+
+def _add(e: Emitter, name: str, *vs: list[X]) -> list[X]:
+    return [e.lin(f"{name}_{AX[k]}", [(1.0, v[k]) for v in vs]) for k in range(3)]
+
+
+def _rotation(e: Emitter, i: int, rot: np.ndarray, axis: np.ndarray) -> list[list[X]]:
+    """The link's rotation at q: the fixed part times the joint's rotation about its axis."""
+    c, s = X(name=f"c{i}"), X(name=f"s{i}")
+    r = [[_c(_snap(rot[a][b])) for b in range(3)] for a in range(3)]
+    if np.allclose(axis, [0, 0, 1]):
+        # rot * Rz(q): two columns mix, the third is fixed
+        return [[e.sop(f"R{i}_{a}0", [(1.0, r[a][0], c), (1.0, r[a][1], s)]),
+                 e.sop(f"R{i}_{a}1", [(-1.0, r[a][0], s), (1.0, r[a][1], c)]),
+                 r[a][2]] for a in range(3)]
+    # any other axis: Rodrigues' formula, with its constants folded
+    ax = [_c(_snap(x)) for x in axis]
+    e.lines.append(f"    const float v{i} = 1.0f - c{i};")
+    v = X(name=f"v{i}")
+    aa = [[_c(_snap(axis[a] * axis[b])) for b in range(3)] for a in range(3)]
+    skew = [[ZERO, (-1.0, ax[2]), (1.0, ax[1])], [(1.0, ax[2]), ZERO, (-1.0, ax[0])], [(-1.0, ax[1]), (1.0, ax[0]), ZERO]]
+    rj = []
+    for a in range(3):
+        row = []
+        for b in range(3):
+            terms = [(1.0, aa[a][b], v)]
+            if a == b:
+                terms.append((1.0, X(const=1.0), c))
+            if skew[a][b] is not ZERO:
+                sign, k = skew[a][b]
+                terms.append((sign, k, s))
+            row.append(e.sop(f"J{i}_{a}{b}", terms))
+        rj.append(row)
+    return [[e.sop(f"R{i}_{a}{b}", [(1.0, r[a][k], rj[k][b]) for k in range(3)]) for b in range(3)] for a in range(3)]
+
+
+DEF = re.compile(r"^    const float (\w+) = (.*);$")
+
+
+def _live(lines: list[str]) -> list[str]:
+    """The lines without the quantities nothing uses (the recursion computes some that only a
+    parent would need, and the base has none: the first joint's force, a moment nobody reads)."""
+    while True:
+        used: dict[str, int] = {}
+        for ln in lines:
+            m = DEF.match(ln)
+            for name in re.findall(r"\b[A-Za-z_]\w*\b", m.group(2) if m else ln):
+                used[name] = used.get(name, 0) + 1
+        keep = [ln for ln in lines if not (m := DEF.match(ln)) or used.get(m.group(1), 0) > 0]
+        if len(keep) == len(lines):
+            return keep
+        lines = keep
+
+
+def kernel_source(model: RobotModel, model_hash: int) -> tuple[str, str]:
+    n = len(model.links)
+    e = Emitter()
+    w = [ZERO, ZERO, ZERO]
+    dw = [ZERO, ZERO, ZERO]
+    acc = [_c(-g) for g in model.gravity]
+    rots, force, moment = [], [], []
+    for i, ln in enumerate(model.links):
+        e.comment(f"link {i + 1} ({ln.name}): forward")
+        rot = _rotation(e, i, ln.rot, ln.axis)
+        rots.append(rot)
+        pos = [_c(_snap(x) if abs(x) < SNAP else x) for x in ln.pos]
+        t1 = _cross(e, f"dwp{i}", dw, pos)
+        t2 = _cross(e, f"wwp{i}", w, _cross(e, f"wp{i}", w, pos))
+        a_parent = _add(e, f"ap{i}", acc, t1, t2)
+        acc = _matvec(e, f"a{i}", rot, a_parent, transpose=True)
+        w_in = _matvec(e, f"wi{i}", rot, w, transpose=True)
+        dw_in = _matvec(e, f"dwi{i}", rot, dw, transpose=True)
+        axis = [_c(_snap(x)) for x in ln.axis]
+        qd, qdd = X(name=f"qd[{i}]"), X(name=f"qdd[{i}]")
+        wq = [e.sop(f"wq{i}_{AX[k]}", [(1.0, axis[k], qd)]) for k in range(3)]
+        cross_wq = _cross(e, f"wxq{i}", w_in, wq)
+        w = _add(e, f"w{i}", w_in, wq)
+        dw = [e.sop(f"dw{i}_{AX[k]}", [(1.0, dw_in[k], X(const=1.0)), (1.0, axis[k], qdd), (1.0, cross_wq[k], X(const=1.0))])
+              for k in range(3)]
+        com = [_c(_snap(x) if abs(x) < SNAP else x) for x in ln.com]
+        ac = _add(e, f"ac{i}", acc, _cross(e, f"dwc{i}", dw, com), _cross(e, f"wwc{i}", w, _cross(e, f"wc{i}", w, com)))
+        force.append([e.sop(f"F{i}_{AX[k]}", [(1.0, _c(ln.mass), ac[k])]) for k in range(3)])
+        inertia = [[_c(ln.inertia[a][b]) for b in range(3)] for a in range(3)]
+        iw = _matvec(e, f"Iw{i}", inertia, w)
+        moment.append(_add(e, f"N{i}", _matvec(e, f"Idw{i}", inertia, dw), _cross(e, f"wIw{i}", w, iw)))
+    f = [ZERO, ZERO, ZERO]
+    nm = [ZERO, ZERO, ZERO]
+    for i in reversed(range(n)):
+        ln = model.links[i]
+        e.comment(f"link {i + 1} ({ln.name}): backward")
+        if i + 1 < n:
+            rc = rots[i + 1]
+            pos_child = [_c(_snap(x) if abs(x) < SNAP else x) for x in model.links[i + 1].pos]
+            f_child = _matvec(e, f"fc{i}", rc, f)
+            n_rot = _matvec(e, f"nr{i}", rc, nm)
+            n_child = _add(e, f"nc{i}", n_rot, _cross(e, f"pxf{i}", pos_child, f_child))
+        else:
+            f_child, n_child = [ZERO] * 3, [ZERO] * 3
+        com = [_c(_snap(x) if abs(x) < SNAP else x) for x in ln.com]
+        cxf = _cross(e, f"cxf{i}", com, force[i])
+        f = _add(e, f"f{i}", force[i], f_child)
+        nm = _add(e, f"n{i}", moment[i], cxf, n_child)
+        axis = [_c(_snap(x)) for x in ln.axis]
+        tau = e.sop(f"tau{i}", [(1.0, axis[k], nm[k]) for k in range(3)]
+                    + [(1.0, _c(ln.armature), X(name=f"qdd[{i}]")), (1.0, _c(ln.damping), X(name=f"qd[{i}]"))])
+        e.lines.append(f"    tau[{i}] = {tau.name if tau.name else _lit(tau.const or 0.0)};")
+    # one sine and cosine per joint, only those used (the base at rest needs neither for the
+    # first joint's velocity terms): the compiler makes a pair one sincosf where the C library
+    # has it (glibc, newlib); C11 itself has no sincos
+    e.lines = _live(e.lines)
+    body = "\n".join(e.lines)
+    trig = []
+    for i in range(n):
+        used = [f"{f} = {fn}(q[{i}])" for f, fn in ((f"s{i}", "sinf"), (f"c{i}", "cosf"))
+                if re.search(rf"\b{f}\b", body)]
+        if used:
+            trig.append(f"    const float {', '.join(used)};")
+    e.lines[:0] = trig
+    header = (
+        "/* Generated by gen/rnea_kernel.py. Do not edit. The arm's RNEA with its constants folded\n"
+        " * (gen/rnea_kernel.py says how); arm/rnea.h's arm_rnea for any other model. */\n"
+        "#ifndef ARM_RNEA_KERNEL_H\n#define ARM_RNEA_KERNEL_H\n\n"
+        '#include "arm/robot_model.h"\n\n'
+        "/* The model the kernel was generated for (its FNV-1a 64 hash, arm_robot_model_t.model_hash). */\n"
+        f"#define ARM_RNEA_KERNEL_HASH 0x{model_hash:016x}ull\n\n"
+        "/* 1 when model is the one the kernel was generated from (same hash, links and gravity):\n"
+        " * the controller then uses the kernel, else arm_rnea. */\n"
+        "int arm_rnea_kernel_fits(const arm_robot_model_t *model);\n\n"
+        "/* tau = M(q) qdd + V(q, qd) + G(q) of that model, as arm_rnea computes it. */\n"
+        "void arm_rnea_kernel(const float q[ARM_N_JOINTS], const float qd[ARM_N_JOINTS],\n"
+        "                     const float qdd[ARM_N_JOINTS], float tau[ARM_N_JOINTS]);\n\n#endif\n"
+    )
+    source = (
+        "/* Generated by gen/rnea_kernel.py from the arm's prepared model. Do not edit.\n"
+        " * Names: R<i>: link i's rotation; w, dw: angular velocity and acceleration; a: linear\n"
+        " * acceleration of the link origin; ac: of its centre of mass; F, N: net force and moment;\n"
+        " * f, n: the wrench the parent exerts; _x/_y/_z: components in the link frame. */\n"
+        "#include <math.h>\n#include <string.h>\n\n"
+        '#include "arm_rnea_kernel.h"\n#include "arm_robot_model_data.h"\n\n'
+        "int arm_rnea_kernel_fits(const arm_robot_model_t *model)\n{\n"
+        "    return model->model_hash == ARM_RNEA_KERNEL_HASH &&\n"
+        "           memcmp(model->link, ARM_ROBOT_MODEL.link, sizeof(model->link)) == 0 &&\n"
+        "           memcmp(model->gravity, ARM_ROBOT_MODEL.gravity, sizeof(model->gravity)) == 0;\n}\n\n"
+        "void arm_rnea_kernel(const float q[ARM_N_JOINTS], const float qd[ARM_N_JOINTS],\n"
+        "                     const float qdd[ARM_N_JOINTS], float tau[ARM_N_JOINTS])\n{\n"
+        + "\n".join(e.lines) + "\n}\n"
+    )
+    return header, source
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m gen.rnea_kernel", description=__doc__.splitlines()[0])
+    p.add_argument("--mjcf", type=Path, required=True, help="the prepared arm (gen/arm.py)")
+    p.add_argument("--out", type=Path, required=True)
+    ns = p.parse_args(argv)
+    try:
+        model = extract(ns.mjcf)
+    except (ModelError, ValueError) as exc:
+        print(f"rnea kernel: {exc}", file=sys.stderr)
+        return 2
+    header, source = kernel_source(model, fnv1a64(ns.mjcf.read_bytes()))
+    write_files_atomically(ns.out, {"arm_rnea_kernel.h": header, "arm_rnea_kernel.c": source})
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
