@@ -5,13 +5,13 @@ It computes what firmware/core/src/rnea.c computes, in the same order of the sam
 but the generator knows the arm: a joint axis along z turns the joint rotation into two
 products per entry instead of Rodrigues' formula and a 3x3 product; a zero in a link frame, a
 centre of mass or an inertia drops every product it would enter; a 1 drops a multiplication;
-the base at rest drops the first joint's velocity terms; each joint takes one sincosf. What
-remains is emitted as one C statement per vector component, named after the recursion's
-quantity (w2_x: the angular velocity of link 2, x component), so the code reads as the
-algorithm. Rotation entries within 1e-7 of 0 or +-1 are taken as exact (quaternions such as
+the base at rest drops the first joint's velocity terms; quantities nothing reads are dropped;
+each joint takes one sinf/cosf pair (one sincosf once compiled). What remains is emitted as
+one C statement per vector component, named after the recursion's quantity (w2_x: the angular
+velocity of link 2, x component), so the code reads as the algorithm. Rotation entries within 1e-7 of 0 or +-1 are taken as exact (quaternions such as
 0.707106781 leave 1e-17 residues that would cost a multiplication each). The controller uses
-the kernel for the model it was generated from (ARM_RNEA_KERNEL_HASH == the model's hash) and
-rnea.c for any other; tests/c/test_rnea.c holds both to MuJoCo's mj_inverse.
+the kernel for the model it was generated from (arm_rnea_kernel_fits: the same hash, links and
+gravity) and rnea.c for any other; tests/c/test_rnea.c holds both to MuJoCo's mj_inverse.
 """
 
 from __future__ import annotations

@@ -14,6 +14,7 @@ from tools.arm import add_arm_arguments
 from tools.outdir import OutDirError, check_out_dir
 from tools.build import PRESETS, TARGETS, BuildError, build
 from tools.paths import REPO, build_dir, env_with_repo
+from tools.slots import default_jobs
 
 
 def cmd_setup(ns: argparse.Namespace) -> int:
@@ -271,7 +272,7 @@ def main(argv: list[str] | None = None) -> int:
     d.add_argument("--out", type=Path, default=REPO / "runs" / "demo")
     d.add_argument("--duration", type=float, default=3.0, help="trajectory seconds per method")
     d.add_argument("--scenarios", default=None, help="comma-separated subset of the study's scenarios")
-    d.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="runs at once [cores]")
+    d.add_argument("--jobs", type=int, default=default_jobs(), help="runs at once [half the cores]")
     d.add_argument("--trials", type=int, default=None,
                    help="tuning budget per method and scenario, for an arm without a kept tuning [the config's]")
     add_arm_arguments(d)

@@ -183,7 +183,10 @@ def _verdict(study: dict[str, Any], sc: dict[str, Any], labels: list[str]) -> li
             kinds = sorted({r for _, r in bad}, key=str)
             lines.append(f"- {m}: {len(bad)} of {len(st['results'])} runs did not end ok ("
                          + "; ".join(f"{k} on seed(s) {', '.join(str(s) for s, r in bad if r == k)}" for k in kinds)
-                         + "); its means include them.")
+                         + ("); its runs stopped before the trajectory ended have no metrics: means and "
+                            "comparisons cover the runs that have them, and the comparisons say on how many seeds."
+                            if any(not r.get("tracking_max_abs_rad") for r in sc["runs"][m]) else
+                            "); its means include them (a run the safety layer stopped counts the part it ran)."))
     for b in [x for x in ("tde", "usde-smc", "pd", "pm-paper-weights") if x in sc["pm_versus"]]:
         for metric in ("linf", "est", "power"):
             if metric == "est" and b not in ESTIMATING:
@@ -204,11 +207,17 @@ def _verdict(study: dict[str, Any], sc: dict[str, Any], labels: list[str]) -> li
             ratios = [c.get("ratio_of_means") for c in comp["per_joint"] if c.get("ratio_of_means") is not None]
             rng = f"{min(ratios):.2f}x-{max(ratios):.2f}x" if ratios else "-"
             tot = comp["total"]
+            if not tot["n"]:
+                lines.append(f"- {METRIC_TEXT[metric]}, PM vs {b}: no comparison: no seed where both have metrics.")
+                continue
             lines.append(f"- {METRIC_TEXT[metric]}, PM vs {b}: PM's mean lower on {len(wins)} of {len(labels)} joints "
                          f"(ratios PM/{b} {rng}; sum of joints {tot.get('ratio_of_means') or float('nan'):.2f}x, "
                          f"PM lower on {tot['a_lower']}/{tot['n']} seeds); significantly (p < {ALPHA}) lower on "
                          f"{', '.join(sig_w) or 'none'}, significantly higher on {', '.join(sig_l) or 'none'}.")
     return lines
+
+
+POWER_TIE = 0.005  # torque power ratios this close to 1 are a tie, not a win
 
 
 def _claims(sc: dict[str, Any]) -> list[str]:
@@ -219,19 +228,27 @@ def _claims(sc: dict[str, Any]) -> list[str]:
         comp = sc["pm_versus"][b][metric]["per_joint"]
         return sum(1 for c in comp if (c.get("ratio_of_means") or np.inf) < 1), len(comp)
 
+    def seeds_note(metric: str, b: str) -> str:
+        tot = sc["pm_versus"][b][metric]["total"]
+        return f" (over the {tot['n']} seed(s) where both have metrics)" if tot.get("excluded") else ""
+
     for table, metric, what in (("Table 1", "est", "estimation error"), ("Table 2", "linf", "L-infinity tracking error")):
         counts = {b: lower_everywhere(metric, b) for b in ("tde", "usde-smc") if b in sc["pm_versus"]}
         if counts:
             holds = all(k == total for k, total in counts.values())
             out.append(f"- {table} (PM's {what} below TDE's and EUSDE-SMC's on every joint): "
                        f"{'holds' if holds else 'does not hold'} here: PM's mean is "
-                       + "; ".join(f"lower than {b}'s on {k}/{total} joints" for b, (k, total) in counts.items()) + ".")
+                       + "; ".join(f"lower than {b}'s on {k}/{total} joints{seeds_note(metric, b)}"
+                                   for b, (k, total) in counts.items()) + ".")
     pw = [(b, sc["pm_versus"][b]["power"]["total"].get("ratio_of_means")) for b in ("tde", "usde-smc")
           if b in sc["pm_versus"]]
     if pw and all(r is not None for _, r in pw):
+        tie = all(abs(1.0 - r) < POWER_TIE for _, r in pw)
         holds = all(r < 1 for _, r in pw)
-        out.append(f"- Table 3 (PM needs the least torque power): {'holds' if holds else 'does not hold'} here: "
-                   + ", ".join(f"PM/{b} {r:.3f}" for b, r in pw) + ".")
+        verdict = (f"a tie here (within {100 * POWER_TIE:g} %)" if tie else
+                   f"{'holds' if holds else 'does not hold'} here")
+        out.append(f"- Table 3 (PM needs the least torque power): {verdict}: "
+                   + ", ".join(f"PM/{b} {r:.4f}" for b, r in pw) + ".")
     if "gh2" in sc["stats"]:
         res = sc["stats"]["gh2"]["results"]
         unbounded = sum(1 for r in res if r in ("diverged", "tracking-bound-exceeded"))

@@ -24,6 +24,7 @@ from tools.hil import HilError, write_json_atomic
 from tools.outdir import OutDirError, check_out_dir
 from tools.paths import REPO
 from tools.runner import RunSpec, run_all
+from tools.slots import default_jobs
 from tools.stats import paired, summary
 from tools.study_config import METHODS, StudyConfig, StudyConfigError, Trajectory, load
 from tools.tuning import TuneSetup, trial_spec, tune_method
@@ -248,7 +249,8 @@ def add_common_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", type=Path, default=DEFAULT_CONFIG)
     p.add_argument("--scenarios", default=None, help="comma-separated subset of the config's scenarios")
     p.add_argument("--methods", default=None, help="comma-separated subset of the config's methods")
-    p.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="runs at once on this machine [cores]")
+    p.add_argument("--jobs", type=int, default=default_jobs(),
+                   help="runs at once on this machine [half the cores: a lockstep run keeps two busy]")
     p.add_argument("--cluster", default=None, metavar="ADDRESS",
                    help="a Dask scheduler (tcp://host:8786): each HIL run is a task on its workers")
     p.add_argument("--trials", type=int, default=None, help="tuning budget per method and scenario [the config's]")
