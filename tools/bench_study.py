@@ -2,9 +2,9 @@
 and how many simulated seconds per wall second that is (runs/bench/study.json).
 
 The runs are a study's: pd and tde (gains, so no design is built inside the timing; both run the
-whole trajectory), the realistic scenario (drives and bus
-timing emulated), distinct seeds, each in its own run slot, through tools/runner.py exactly as `armctl study` runs
-them; the wall time covers them all, start-up and analysis included.
+whole trajectory), the realistic scenario (drives and bus timing emulated), distinct seeds, each
+in its own run slot, through tools/runner.py exactly as `armctl study` runs them; the wall time
+covers them all, start-up and analysis included.
 """
 
 from __future__ import annotations

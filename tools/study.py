@@ -9,6 +9,7 @@ import hashlib
 import json
 import os
 import sys
+import tomllib
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -82,9 +83,10 @@ def tuning_key(cfg: StudyConfig, info: dict[str, Any], setup: TuneSetup, scenari
     """What a tuning result depends on: the arm, its design, the scenario, the method's space,
     the tuning seeds, trajectory, length and budget, the hold."""
     t = {k: v for k, v in cfg.raw["tuning"].items() if k not in ("space", "file")}
-    doc = {"arm": info["model_hash"], "design": setup.base_design, "scenario": cfg.scenarios[scenario].as_dict(),
-           "space": cfg.spaces[method].as_dict(), "tuning": t, "trajectory": setup.trajectory_args,
-           "hold_s": cfg.hold_s}
+    # the design's values, not its text: its header comment names the checkout's path
+    doc = {"arm": info["model_hash"], "design": tomllib.loads(setup.base_design),
+           "scenario": cfg.scenarios[scenario].as_dict(), "space": cfg.spaces[method].as_dict(), "tuning": t,
+           "trajectory": setup.trajectory_args, "hold_s": cfg.hold_s}
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:16]
 
 

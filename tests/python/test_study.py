@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from tools.hil import HilOptions, run_hil
+from tools.paths import REPO
 from tools.study import DEFAULT_CONFIG, run_study
 from tools.study_config import METHODS, StudyConfigError, load
 from tools.telemetry_log import read_log
@@ -235,3 +236,26 @@ def test_default_config_tunes_every_method_but_the_papers_weights() -> None:
     assert cfg.scenarios["ideal"].drives.ideal and not cfg.scenarios["realistic"].drives.ideal
     with pytest.raises(StudyConfigError, match="tuning seed"):
         cfg.seed_list(2000)
+
+
+def test_the_kept_tuning_serves_this_checkout(tmp_path: Path) -> None:
+    """The committed tuning is reused by `armctl demo` and `study` on any clone, wherever it lies
+    (its key once held the checkout's path, and a fresh clone retuned for 20 minutes)."""
+    from tools.arm import DEFAULT_ARM, build_arm
+    from tools.study import setup_for, tuning_file, tuning_key
+
+    build_arm("release", DEFAULT_ARM)
+    cfg = load(DEFAULT_CONFIG)
+    setup, info, _ = setup_for(cfg, DEFAULT_ARM, tmp_path, 1, None)
+    kept = json.loads(tuning_file(cfg, DEFAULT_ARM).read_text())["scenarios"]
+    for s in cfg.scenarios:
+        for m in cfg.methods:
+            if METHODS[m][1] is None:
+                continue
+            assert kept[s][m]["key"] == tuning_key(cfg, info, setup, s, m), \
+                f"the kept tuning of {m} in {s} does not match this checkout: run tools/armctl tune"
+            assert kept[s][m]["budget_per_round"] == cfg.trials
+    moved = setup.base_design.replace(str(REPO), "/elsewhere/checkout")
+    assert moved != setup.base_design  # the design's header comment names the checkout's path ...
+    setup.base_design = moved
+    assert tuning_key(cfg, info, setup, "ideal", "pm") == kept["ideal"]["pm"]["key"]  # ... and the key ignores it
