@@ -128,8 +128,8 @@ def _distribution_figure(out: Path, study: dict[str, Any], scenario: str, index:
     fig, axes = plt.subplots(1, n, figsize=(2.2 * n + 1, 4.2), sharey=False)
     axes = np.atleast_1d(axes)
     for j in range(n):
-        data = [np.degrees([v for v in sc["stats"][m]["linf"]["per_joint"][j]["values"] if np.isfinite(v)])
-                for m in methods]
+        data = [np.degrees([v for v in sc["stats"][m]["linf"]["per_joint"][j]["values"]
+                            if v is not None and np.isfinite(v)]) for m in methods]
         ax = axes[j]
         ax.boxplot(data, showfliers=False)
         for i, d in enumerate(data):

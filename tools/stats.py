@@ -13,21 +13,23 @@ import numpy as np
 
 def summary(values: list[float]) -> dict[str, Any]:
     """mean, ci95 [low, high] (None for a single value), sd, n, and the values themselves, over
-    the values there are: a NaN (a run stopped before it measured) is counted in `missing`."""
+    the values there are: a NaN (a run stopped before it measured) is counted in `missing` and
+    listed as None."""
     every = np.asarray(values, dtype=float)
     x = every[np.isfinite(every)]
     n, missing = int(x.size), int(every.size - x.size)
+    listed = [float(v) if math.isfinite(v) else None for v in every]
     if n == 0:
-        return {"n": 0, "missing": missing, "mean": None, "ci95": None, "sd": None, "values": every.tolist()}
+        return {"n": 0, "missing": missing, "mean": None, "ci95": None, "sd": None, "values": listed}
     mean = float(x.mean())
     if n < 2:
-        return {"n": n, "missing": missing, "mean": mean, "ci95": None, "sd": None, "values": every.tolist()}
+        return {"n": n, "missing": missing, "mean": mean, "ci95": None, "sd": None, "values": listed}
     from scipy import stats
 
     sd = float(x.std(ddof=1))
     half = float(stats.t.ppf(0.975, n - 1)) * sd / math.sqrt(n)
     return {"n": n, "missing": missing, "mean": mean, "ci95": [mean - half, mean + half], "sd": sd,
-            "values": every.tolist()}
+            "values": listed}
 
 
 def paired(a: list[float], b: list[float]) -> dict[str, Any]:

@@ -10,6 +10,7 @@ from tools.stats import paired, summary
 def test_summary_covers_the_values_there_are_and_counts_the_missing() -> None:
     s = summary([1.0, float("nan"), 3.0])
     assert s["n"] == 2 and s["missing"] == 1 and s["mean"] == 2.0 and s["ci95"] is not None
+    assert s["values"] == [1.0, None, 3.0]  # JSON null, and equal to itself (NaN is not)
     assert summary([float("nan")])["mean"] is None
 
 
