@@ -22,8 +22,8 @@ from pathlib import Path
 from typing import Any
 
 from tools import procs
-from tools.design_knobs import design_text
 from tools.code_identity import code_identity
+from tools.design_knobs import design_text
 from tools.runner import RunSpec, run_all
 from tools.study_config import METHODS, Scenario, Space, StudyConfig, gain_args
 

@@ -265,3 +265,19 @@ def test_the_kept_tuning_serves_this_checkout(tmp_path: Path) -> None:
     assert moved != setup.base_design  # the design's header comment names the checkout's path ...
     setup.base_design = moved
     assert tuning_key(cfg, info, setup, "ideal", "pm") == kept["ideal"]["pm"]["key"]  # ... and the key ignores it
+
+
+def test_a_failed_trial_scores_by_how_much_it_ran() -> None:
+    """Failed trials still rank (later stop, lower score), always behind any trial that ended well."""
+    from tools.tuning import FAILED_SCORE, objective
+
+    def run(result: str, ran: int, err: float = 0.01) -> dict:
+        return {"results": {"result": result, "tracking_max_abs_rad": [err] * 6, "trajectory_periods": 4000,
+                            "periods_running": ran, "verdict_reasons": [f"{result}: why"]}}
+
+    good, _ = objective([run("ok", 4000), run("tracking-bound-exceeded", 4000, 0.6)])
+    assert good == pytest.approx((0.06 + 3.6) / 2)
+    late, why = objective([run("ok", 4000), run("failed", 3000)])
+    early, _ = objective([run("failed", 1000), run("ok", 4000)])
+    assert FAILED_SCORE <= late < early <= 2 * FAILED_SCORE and good < FAILED_SCORE and why == "failed: why"
+    assert objective([run("torque-limited", 4000), run("ok", 4000)])[0] == FAILED_SCORE
