@@ -106,6 +106,16 @@ def _snap(v: float) -> float:
     return float(v)
 
 
+def _offset(v: list[float]) -> list[X]:
+    """A translation or centre of mass: only residues near 0 are snapped (a length near 1 m is a length)."""
+    return [_c(0.0 if abs(x) < SNAP else x) for x in v]
+
+
+def _unit(v: list[float]) -> list[X]:
+    """A joint axis: entries near 0 or +-1 are exact."""
+    return [_c(_snap(x)) for x in v]
+
+
 AX = "xyz"
 
 
@@ -133,7 +143,7 @@ def _rotation(e: Emitter, i: int, rot: np.ndarray, axis: np.ndarray) -> list[lis
                  e.sop(f"R{i}_{a}1", [(-1.0, r[a][0], s), (1.0, r[a][1], c)]),
                  r[a][2]] for a in range(3)]
     # any other axis: Rodrigues' formula, with its constants folded
-    ax = [_c(_snap(x)) for x in axis]
+    ax = _unit(axis)
     e.lines.append(f"    const float v{i} = 1.0f - c{i};")
     v = X(name=f"v{i}")
     aa = [[_c(_snap(axis[a] * axis[b])) for b in range(3)] for a in range(3)]
@@ -178,26 +188,27 @@ def kernel_source(model: RobotModel, model_hash: int) -> tuple[str, str]:
     dw = [ZERO, ZERO, ZERO]
     acc = [_c(-g) for g in model.gravity]
     rots, force, moment = [], [], []
+    pos = [_offset(ln.pos) for ln in model.links]
+    axis = [_unit(ln.axis) for ln in model.links]
+    com = [_offset(ln.com) for ln in model.links]
     for i, ln in enumerate(model.links):
         e.comment(f"link {i + 1} ({ln.name}): forward")
         rot = _rotation(e, i, ln.rot, ln.axis)
         rots.append(rot)
-        pos = [_c(_snap(x) if abs(x) < SNAP else x) for x in ln.pos]
-        t1 = _cross(e, f"dwp{i}", dw, pos)
-        t2 = _cross(e, f"wwp{i}", w, _cross(e, f"wp{i}", w, pos))
+        t1 = _cross(e, f"dwp{i}", dw, pos[i])
+        t2 = _cross(e, f"wwp{i}", w, _cross(e, f"wp{i}", w, pos[i]))
         a_parent = _add(e, f"ap{i}", acc, t1, t2)
         acc = _matvec(e, f"a{i}", rot, a_parent, transpose=True)
         w_in = _matvec(e, f"wi{i}", rot, w, transpose=True)
         dw_in = _matvec(e, f"dwi{i}", rot, dw, transpose=True)
-        axis = [_c(_snap(x)) for x in ln.axis]
         qd, qdd = X(name=f"qd[{i}]"), X(name=f"qdd[{i}]")
-        wq = [e.sop(f"wq{i}_{AX[k]}", [(1.0, axis[k], qd)]) for k in range(3)]
+        wq = [e.sop(f"wq{i}_{AX[k]}", [(1.0, axis[i][k], qd)]) for k in range(3)]
         cross_wq = _cross(e, f"wxq{i}", w_in, wq)
         w = _add(e, f"w{i}", w_in, wq)
-        dw = [e.sop(f"dw{i}_{AX[k]}", [(1.0, dw_in[k], X(const=1.0)), (1.0, axis[k], qdd), (1.0, cross_wq[k], X(const=1.0))])
+        dw = [e.sop(f"dw{i}_{AX[k]}", [(1.0, dw_in[k], X(const=1.0)), (1.0, axis[i][k], qdd), (1.0, cross_wq[k], X(const=1.0))])
               for k in range(3)]
-        com = [_c(_snap(x) if abs(x) < SNAP else x) for x in ln.com]
-        ac = _add(e, f"ac{i}", acc, _cross(e, f"dwc{i}", dw, com), _cross(e, f"wwc{i}", w, _cross(e, f"wc{i}", w, com)))
+        ac = _add(e, f"ac{i}", acc, _cross(e, f"dwc{i}", dw, com[i]),
+                  _cross(e, f"wwc{i}", w, _cross(e, f"wc{i}", w, com[i])))
         force.append([e.sop(f"F{i}_{AX[k]}", [(1.0, _c(ln.mass), ac[k])]) for k in range(3)])
         inertia = [[_c(ln.inertia[a][b]) for b in range(3)] for a in range(3)]
         iw = _matvec(e, f"Iw{i}", inertia, w)
@@ -209,18 +220,15 @@ def kernel_source(model: RobotModel, model_hash: int) -> tuple[str, str]:
         e.comment(f"link {i + 1} ({ln.name}): backward")
         if i + 1 < n:
             rc = rots[i + 1]
-            pos_child = [_c(_snap(x) if abs(x) < SNAP else x) for x in model.links[i + 1].pos]
             f_child = _matvec(e, f"fc{i}", rc, f)
             n_rot = _matvec(e, f"nr{i}", rc, nm)
-            n_child = _add(e, f"nc{i}", n_rot, _cross(e, f"pxf{i}", pos_child, f_child))
+            n_child = _add(e, f"nc{i}", n_rot, _cross(e, f"pxf{i}", pos[i + 1], f_child))
         else:
             f_child, n_child = [ZERO] * 3, [ZERO] * 3
-        com = [_c(_snap(x) if abs(x) < SNAP else x) for x in ln.com]
-        cxf = _cross(e, f"cxf{i}", com, force[i])
+        cxf = _cross(e, f"cxf{i}", com[i], force[i])
         f = _add(e, f"f{i}", force[i], f_child)
         nm = _add(e, f"n{i}", moment[i], cxf, n_child)
-        axis = [_c(_snap(x)) for x in ln.axis]
-        tau = e.sop(f"tau{i}", [(1.0, axis[k], nm[k]) for k in range(3)]
+        tau = e.sop(f"tau{i}", [(1.0, axis[i][k], nm[k]) for k in range(3)]
                     + [(1.0, _c(ln.armature), X(name=f"qdd[{i}]")), (1.0, _c(ln.damping), X(name=f"qd[{i}]"))])
         e.lines.append(f"    tau[{i}] = {tau.name if tau.name else _lit(tau.const or 0.0)};")
     # one sine and cosine per joint, only those used (the base at rest needs neither for the
