@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 
+from study_configs import with_tuning
 from tools.paths import REPO
 
 ARMCTL = str(REPO / "tools" / "armctl")
@@ -137,13 +138,7 @@ def test_study(tmp_path: Path) -> None:
 
 def small_tuning_config(dirpath: Path) -> Path:
     """The default config with 0.2 s tuning runs (the budget comes from --trials)."""
-    text = (REPO / "tools" / "studies" / "paper.toml").read_text()
-    head, tuning = text.split("\n[tuning]", 1)
-    end = re.search(r"(?m)^\[", tuning)
-    assert end is not None
-    section = re.sub(r"(?m)^duration_s = [0-9.]+", "duration_s = 0.2", tuning[:end.start()])
-    section = re.sub(r"(?m)^batch = \d+", "batch = 2", section)
-    text = head + "\n[tuning]" + section + tuning[end.start():]
+    text = with_tuning((REPO / "tools" / "studies" / "paper.toml").read_text(), duration_s=0.2, batch=2)
     cfg = dirpath / "tune7.toml"
     cfg.write_text(text)
     assert tomllib.loads(text)["tuning"]["duration_s"] == 0.2

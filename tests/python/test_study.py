@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from study_configs import with_tuning
 from tools.hil import HilOptions, run_hil
 from tools.paths import REPO
 from tools.study import DEFAULT_CONFIG, run_study
@@ -33,8 +34,7 @@ def small_config(dirpath: Path, seeds: int = 2) -> Path:
     text = re.sub(r"(?m)^trials = \d+$", "trials = 2", text)
     text = re.sub(r"(?m)^batch = \d+$", "batch = 2", text)
     text = re.sub(r"(?m)^widen = \d+$", "widen = 0", text)
-    head, tuning = text.split("\n[tuning]", 1)  # the tuning runs' length, not the study's
-    text = head + "\n[tuning]" + re.sub(r"(?m)^duration_s = [0-9.]+", "duration_s = 0.5", tuning, count=1)
+    text = with_tuning(text, duration_s=0.5)  # the tuning runs' length, not the study's
     dirpath.mkdir(parents=True, exist_ok=True)
     cfg = dirpath / "small.toml"
     cfg.write_text(text)
