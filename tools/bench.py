@@ -105,32 +105,26 @@ def bench_step(out: Path, quick: bool = False) -> dict[str, Any]:
     return result
 
 
-CORTEX_M = {"cortex-m4": "mps2-an386", "cortex-m7": "mps2-an500"}
-
-
 def cortex_m_costs() -> dict[str, Any]:
     """Instructions per call on the M4 and M7 images under QEMU (-icount shift=0: QEMU counts
     instructions; it does not model cycles, caches or the M7's dual issue). On silicon the same
     image prints SysTick ticks, which are core cycles."""
     from tools.build import toolchain_missing
+    from tools.cortex_m import run_image, step_costs
 
     out: dict[str, Any] = {"what": "instructions per call under QEMU -icount shift=0, SysTick calibrated by a loop "
                                    "of known length (firmware/port/cortex_m/step_count.c); not cycles"}
-    for preset, machine in CORTEX_M.items():
+    for preset in ("cortex-m4", "cortex-m7"):
         missing = toolchain_missing(preset)
         if missing:
             out[preset] = {"skipped": missing}
             continue
         build(preset)
-        elf = build_dir(preset) / "firmware" / "port" / "cortex_m" / f"golden_{preset}.elf"
-        r = subprocess.run(["qemu-system-arm", "-M", machine, "-nographic", "-monitor", "none", "-serial", "none",
-                            "-icount", "shift=0", "-semihosting-config", "enable=on,target=native", "-kernel", str(elf)],
-                           capture_output=True, text=True, timeout=600)
-        text = r.stdout + r.stderr
-        rows = dict(re.findall(r"^step cost: (.+?): ticks per call \S+, instructions per call (\S+)$", text, re.M))
-        if r.returncode != 0 or len(rows) != 3:
-            raise RuntimeError(f"{preset} image: no step cost (exit {r.returncode}):\n{text}")
-        out[preset] = {k: float(v) for k, v in rows.items()}
+        r = run_image(preset)
+        costs = step_costs(r.stdout + r.stderr)
+        if r.returncode != 0 or len(costs) != 3:
+            raise RuntimeError(f"{preset} image: no step cost (exit {r.returncode}):\n{r.stdout}{r.stderr}")
+        out[preset] = costs
     return out
 
 

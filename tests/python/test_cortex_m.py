@@ -12,9 +12,8 @@ import subprocess
 import pytest
 
 from tools.build import build, toolchain_missing
+from tools.cortex_m import MACHINES, run_image, step_costs
 from tools.paths import build_dir
-
-MACHINES = {"cortex-m4": "mps2-an386", "cortex-m7": "mps2-an500", "cortex-m3": "mps2-an385"}
 
 
 def _image(preset: str):
@@ -32,12 +31,7 @@ def image_run(request: pytest.FixtureRequest) -> tuple[str, dict, subprocess.Com
     preset = request.param
     d = _image(preset)
     report = json.loads((d / "memory_report.json").read_text())
-    run = subprocess.run(
-        ["qemu-system-arm", "-M", MACHINES[preset], "-nographic", "-monitor", "none", "-serial", "none",
-         "-icount", "shift=0", "-semihosting-config", "enable=on,target=native",
-         "-kernel", str(d / f"golden_{preset}.elf")],
-        capture_output=True, text=True, timeout=600)
-    return preset, report, run
+    return preset, report, run_image(preset)
 
 
 def test_image_passes_its_golden_vectors(image_run) -> None:
@@ -72,8 +66,7 @@ def test_step_cost_is_counted_in_instructions(image_run) -> None:
     out = run.stdout + run.stderr
     per_tick = float(re.search(r"instructions per SysTick tick \(calibrated .*\) (\S+)", out).group(1))
     assert per_tick >= 1 and abs(per_tick - round(per_tick)) < 0.05, out
-    cost = {name: float(n) for name, n in re.findall(r"^step cost: (.+?): ticks per call \S+, instructions per call (\S+)$",
-                                                       out, re.M)}
+    cost = step_costs(out)
     assert set(cost) == {"pm step (float)", "rnea kernel", "rnea general"}, out
     assert 0 < cost["rnea kernel"] < cost["rnea general"], cost
     assert cost["rnea kernel"] < cost["pm step (float)"], cost  # the step runs the kernel, and more

@@ -1,0 +1,28 @@
+"""The bare-metal Cortex-M images (firmware/port/cortex_m): the QEMU board of each preset, one
+run of an image, and the step's cost it prints."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+
+from tools.paths import build_dir
+
+MACHINES = {"cortex-m4": "mps2-an386", "cortex-m7": "mps2-an500", "cortex-m3": "mps2-an385"}
+
+
+def run_image(preset: str, timeout: float = 600) -> subprocess.CompletedProcess[str]:
+    """The preset's golden image under qemu-system-arm with semihosting (exit code = verdict),
+    with -icount shift=0: one instruction per virtual nanosecond, so its SysTick counts
+    instructions (step_count.c)."""
+    elf = build_dir(preset) / "firmware" / "port" / "cortex_m" / f"golden_{preset}.elf"
+    return subprocess.run(["qemu-system-arm", "-M", MACHINES[preset], "-nographic", "-monitor", "none",
+                           "-serial", "none", "-icount", "shift=0", "-semihosting-config",
+                           "enable=on,target=native", "-kernel", str(elf)],
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def step_costs(output: str) -> dict[str, float]:
+    """Instructions per call the image printed, by what was called."""
+    return {name: float(n) for name, n in
+            re.findall(r"^step cost: (.+?): ticks per call \S+, instructions per call (\S+)$", output, re.M)}
