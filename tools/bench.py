@@ -77,32 +77,38 @@ def bench_step(out: Path, quick: bool = False) -> dict[str, Any]:
     for method, r in rows.items():
         if "eigen" in r:
             r["eigen_over_float"] = r["eigen"] / r["float"]
-    rnea_exe = build_dir("release") / "tests" / "bench" / "bench_rnea"
-    check = subprocess.run([str(rnea_exe), "check"], capture_output=True, text=True)
-    if check.returncode != 0:
-        raise RuntimeError(f"bench_rnea check: {check.stdout}{check.stderr}")
-    rnea = {v: per_rnea(rnea_exe, v, steps) for v in tqdm(RNEA_VARIANTS, desc="callgrind rnea", unit="run")}
     result = {
         "what": "instructions per control step (callgrind Ir inside the step function), n = 6, release build",
         "compiler": subprocess.run(["cc", "--version"], capture_output=True, text=True).stdout.splitlines()[0],
         "steps_measured": steps,
         "quick": quick,
         "methods": rows,
-        "rnea": {
-            "what": ("instructions per inverse-dynamics call on the same arm and inputs: kernel = the arm's "
-                     "generated arm_rnea_kernel (what the controller runs for this arm), ours = the general "
-                     "arm_rnea (any other model), Pinocchio 4.1's rnea (the pin wheel's headers and "
-                     "libpinocchio_default) in double and in float"),
-            "instructions": rnea,
-            "check": check.stdout.strip(),
-            "pinocchio_double_over_kernel": rnea["pinocchio-double"] / rnea["kernel"],
-            "pm_step_over_pinocchio_double_rnea": rows["pm"]["float"] / rnea["pinocchio-double"],
-        },
     }
-    if not quick:
+    if not quick:  # quick: no Pinocchio comparison (compiling it alone takes about 2 minutes)
+        result["rnea"] = rnea_costs(rows["pm"]["float"], steps)
         result["cortex_m"] = cortex_m_costs()
     _write_json(out, result)
     return result
+
+
+def rnea_costs(pm_step: float, calls: int) -> dict[str, Any]:
+    """Our inverse dynamics against Pinocchio's on the same arm and inputs, once their torques agree."""
+    build("release", targets=["bench_rnea"])  # not in `all` (tests/bench/CMakeLists.txt)
+    rnea_exe = build_dir("release") / "tests" / "bench" / "bench_rnea"
+    check = subprocess.run([str(rnea_exe), "check"], capture_output=True, text=True)
+    if check.returncode != 0:
+        raise RuntimeError(f"bench_rnea check: {check.stdout}{check.stderr}")
+    rnea = {v: per_rnea(rnea_exe, v, calls) for v in tqdm(RNEA_VARIANTS, desc="callgrind rnea", unit="run")}
+    return {
+        "what": ("instructions per inverse-dynamics call on the same arm and inputs: kernel = the arm's "
+                 "generated arm_rnea_kernel (what the controller runs for this arm), ours = the general "
+                 "arm_rnea (any other model), Pinocchio 4.1's rnea (the pin wheel's headers and "
+                 "libpinocchio_default) in double and in float"),
+        "instructions": rnea,
+        "check": check.stdout.strip(),
+        "pinocchio_double_over_kernel": rnea["pinocchio-double"] / rnea["kernel"],
+        "pm_step_over_pinocchio_double_rnea": pm_step / rnea["pinocchio-double"],
+    }
 
 
 def cortex_m_costs() -> dict[str, Any]:
@@ -135,7 +141,9 @@ def table(result: dict[str, Any]) -> str:
         ratio = f"{r['eigen_over_float']:>10.1f}x" if "eigen_over_float" in r else f"{'-':>11}"
         eigen = f"{r['eigen']:>12.0f}" if "eigen" in r else f"{'-':>12}"
         lines.append(f"{m:<10}{f('float')}{f('fixed')}{eigen}{ratio}")
-    r = result["rnea"]
+    r = result.get("rnea")
+    if r is None:
+        return "\n".join(lines)
     lines.append("inverse dynamics alone, instructions per call: " +
                  ", ".join(f"{v} {n:.0f}" for v, n in r["instructions"].items()))
     lines.append(f"Pinocchio (double) / our kernel: {r['pinocchio_double_over_kernel']:.1f}x; the whole pm step is "
