@@ -242,7 +242,7 @@ def main(argv: list[str] | None = None) -> int:
     h.add_argument("--duration", type=float, default=5.0, help="simulated seconds")
     h.add_argument("--method", default="pm", choices=("pm", "pm-paper", "gh2", "pd", "tde", "usde-smc"))
     h.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
-    h.add_argument("--bus", choices=("auto", "udp", "vcan", "vm"), default="auto",
+    h.add_argument("--bus", choices=("auto", "udp", "vcan", "vm", "sil"), default="auto",
                    help="auto: vcan if this kernel has SocketCAN and vcan0, vcan1 (one per bus of "
                         "firmware/protocol/buses.toml), else udp (one port per bus; says which); "
                         "vm: the whole run inside the qemu VM that has vcan0, vcan1")

@@ -1,4 +1,6 @@
-"""One hardware-in-the-loop run: logger, simulator and controller as separate processes."""
+"""One run of the controller against the simulated arm: hardware in the loop (logger, simulator and
+controller as separate processes on a CAN bus), or software in the loop (--bus sil: arm_sil, the
+same controller and drive code in one process, frames in memory, telemetry straight to the log)."""
 
 from __future__ import annotations
 
@@ -33,7 +35,8 @@ class HilOptions:
     method: str = "pd"
     mode: str = "lockstep"
     preset: str = "release"
-    bus: str = "udp"  # udp | vcan | auto (vcan if this kernel has SocketCAN and vcan0.., else udp)
+    # udp | vcan | auto (vcan if this kernel has SocketCAN and vcan0.., else udp) | sil (one process)
+    bus: str = "udp"
     can_port: int | None = None  # None: the run slot's (tools/slots.py): no concurrent run shares it; bus i: port + i
     # The arm (tools/arm.py: --model / --arm); its build folder holds the binaries and arm.json.
     arm: ArmRef = DEFAULT_ARM
@@ -207,11 +210,15 @@ def vcan_names(n: int) -> list[str]:
     return [f"vcan{i}" for i in range(n)]
 
 
+SIL = "sil"  # --bus: software in the loop
+
+
 def bus_args(kind: str, can_port: int, topology: list[busload.Bus]) -> list[str]:
-    """SPEC@DRIVES per bus of the topology: udp on port can_port + i, or vcan0, vcan1, ..."""
+    """SPEC@DRIVES per bus of the topology: udp on port can_port + i, vcan0, vcan1, ..., or the
+    in-process bus's lines mem:0, mem:1, ... (software in the loop)."""
     out = []
     for i, b in enumerate(topology):
-        spec = f"udp:239.74.163.2:{can_port + i}" if kind == "udp" else f"socketcan:vcan{i}"
+        spec = {"udp": f"udp:239.74.163.2:{can_port + i}", SIL: f"mem:{i}"}.get(kind, f"socketcan:vcan{i}")
         out.append(f"{spec}@{','.join(map(str, b.drives))}")
     return out
 
@@ -232,8 +239,8 @@ def resolve_bus(choice: str, n_buses: int = 1) -> tuple[str, str]:
     """(udp|vcan, why): auto takes vcan when the kernel has SocketCAN and vcan0..vcan<n-1> are up."""
     from tools.vcan import can_interfaces, kernel_has_can
 
-    if choice == "udp":
-        return "udp", "asked for"
+    if choice in ("udp", SIL):
+        return choice, "asked for" if choice == "udp" else "one process: the controller and the drives, frames in memory"
     ok, why = kernel_has_can()
     names = vcan_names(n_buses)
     present = {i.get("name") for i in can_interfaces()} if ok else set()
@@ -246,14 +253,17 @@ def resolve_bus(choice: str, n_buses: int = 1) -> tuple[str, str]:
                            "to run inside the VM that has them)")
         return "vcan", "asked for"
     if choice != "auto":
-        raise HilError(f"--bus: unknown bus '{choice}' (auto, udp, vcan, vm)")
+        raise HilError(f"--bus: unknown bus '{choice}' (auto, udp, vcan, vm, sil)")
     if has_vcan:
         return "vcan", f"this kernel has SocketCAN and {', '.join(names)}"
     return "udp", why or f"no {', '.join(missing)} interface"
 
 
 def run_hil(opt: HilOptions) -> dict[str, Any]:
-    """One HIL run in a run slot of its own (its bus and telemetry ports, unless given)."""
+    """One HIL run in a run slot of its own (its bus and telemetry ports, unless given); a
+    software-in-the-loop run needs no ports."""
+    if opt.bus == SIL:
+        return _run_hil(opt, 0, 0)
     if opt.can_port is not None and opt.lcm_port is not None:
         return _run_hil(opt, opt.can_port, opt.lcm_port)
     with acquire_slot() as slot:
@@ -296,30 +306,30 @@ def _wait_run(opt: HilOptions, ctl: subprocess.Popen[bytes], sim: subprocess.Pop
         raise HilError(f"{sim.args[0]} did not finish in time; killed") from None
 
 
-def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
-    for group in ("239.255.76.67", "239.74.163.2"):
-        check_loopback_route(group)
-    bdir = arm_build_dir(opt.preset, opt.arm)
-    try:
-        info = arm_info(bdir)
-    except ArmChoiceError as exc:
-        raise HilError(str(exc)) from exc
-    topology = load_topology(opt.topology, info)
-    substeps = sim_substeps(info, _arg_value(opt.controller_args, "--rate", info["loop_rate_hz"]))
-    bus_kind, bus_why = resolve_bus(opt.bus, len(topology))
-    binary = opt.controller or controller_binary(bdir)
-    logger_exe = logger_binary(bdir)
-    sim_exe = bdir / "host_sim" / "native" / "arm_sim"
-    for exe in (binary, logger_exe, sim_exe):
-        if not exe.exists():
-            raise HilError(f"{exe} is missing: run tools/armctl build")
-    opt.out.mkdir(parents=True, exist_ok=True)
-    for stale in ("telemetry.lcmlog", "controller_summary.json", "sim_summary.json", "run.json", "uncertainty.json"):
-        (opt.out / stale).unlink(missing_ok=True)
-    buses = bus_args(bus_kind, can_port, topology)
-    bus_argv = [a for spec in buses for a in ("--bus", spec)]
-    url = f"udpm://239.255.76.67:{lcm_port}?ttl=0&recv_buf_size=8388608"
-    log_path = opt.out / "telemetry.lcmlog"
+def _run_sil(opt: HilOptions, exe: Path, ctl_args: list[str], sim_args: list[str],
+             log_path: Path) -> tuple[dict[str, int | None], float, str]:
+    """arm_sil: the controller and the simulator in one process, one thread."""
+    t0 = time.monotonic()
+    with open(opt.out / "sil.log", "w") as log:
+        try:
+            p = procs_mod.spawn("controller", [str(exe), "--telemetry-log", str(log_path), "--controller", *ctl_args,
+                                               "--simulator", *sim_args],
+                                cwd=REPO, stdout=log, stderr=subprocess.STDOUT)
+        except InterruptedError as exc:
+            raise HilError(str(exc)) from None
+        try:
+            _wait_sil(opt, p, log)
+        finally:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+            procs_mod.forget(p)
+    return {"sil": p.returncode}, time.monotonic() - t0, "one thread with the controller (software in the loop)"
+
+
+def _run_processes(opt: HilOptions, logger_exe: Path, url: str, log_path: Path, sim_args: list[str],
+                   ctl_args: list[str]) -> tuple[dict[str, int | None], float, str]:
+    """The logger, the simulator and the controller as processes on the bus."""
     logs = {name: open(opt.out / f"{name}.log", "w") for name in ("controller", "simulator", "logger")}
 
     # Not lcm-logger: its subscription queue of 30 messages drops telemetry whenever it falls
@@ -336,24 +346,11 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
     t0 = time.monotonic()
     try:
         _wait_for_logger(logger)
-        if opt.uncertainty is not None:
-            write_json_atomic(opt.out / "uncertainty.json", opt.uncertainty)  # the record of what ran
-        sim = procs_mod.spawn("simulator",
-            sim_argv(sim_exe, buses, lcm_url=url, summary=opt.out / "sim_summary.json", uncertainty=opt.uncertainty,
-                     timing=bus_timing_mode(opt.mode) if opt.bus_timing else "off", phys=topology,
-                     model=prepared_model(bdir), drives=opt.drives,
-                     extra=["--substeps", str(substeps), *sim_mode_args(opt.mode), *opt.sim_args]),
-            cwd=REPO, stdout=logs["simulator"], stderr=subprocess.STDOUT,
+        sim = procs_mod.spawn("simulator", sim_args, cwd=REPO, stdout=logs["simulator"], stderr=subprocess.STDOUT,
             preexec_fn=_simulator_realtime(realtime_cpu(opt)) if opt.mode == "realtime" else None)
         procs.append(sim)
         sim_scheduling = _scheduling(sim.pid)
-        ctl = procs_mod.spawn("controller",
-            [*opt.controller_cmd_prefix, str(binary), *bus_argv, "--lcm-url", url,
-             "--duration", f"{opt.duration_s:g}", "--method", opt.method, "--mode", opt.mode,
-             "--summary", str(opt.out / "controller_summary.json"), *spin_args(opt.mode),
-             *(["--cpu", str(realtime_cpu(opt))] if opt.mode == "realtime" else []),
-             *reference_args(info, opt.controller_args), *opt.controller_args],
-            stdout=logs["controller"], stderr=subprocess.STDOUT)
+        ctl = procs_mod.spawn("controller", ctl_args, stdout=logs["controller"], stderr=subprocess.STDOUT)
         procs.append(ctl)
         _wait_run(opt, ctl, sim, logs)
         wall = time.monotonic() - t0
@@ -373,13 +370,74 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
             f.close()
         if logger.stdout is not None:
             logger.stdout.close()
+    return ({"controller": ctl.returncode, "simulator": sim.returncode, "logger": logger.returncode}, wall,
+            sim_scheduling)
+
+
+def _wait_sil(opt: HilOptions, sil: subprocess.Popen[bytes], log: Any) -> None:
+    """Until arm_sil has ended; a refused argument ends the run with its message."""
+    try:
+        sil.wait(timeout=120.0 + 60.0 * opt.duration_s)
+    except subprocess.TimeoutExpired:
+        sil.kill()
+        raise HilError(f"{sil.args[0]} did not finish in time; killed") from None
+    if sil.returncode == USAGE_ERROR:
+        log.flush()
+        raise HilError(f"arm_sil refused its arguments: {_last_line(opt.out / 'sil.log')}")
+
+
+def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
+    sil = opt.bus == SIL
+    if sil and (opt.mode != "lockstep" or opt.controller_cmd_prefix or opt.controller is not None):
+        raise HilError("--bus sil: software in the loop runs the arm's own controller build, in lockstep only")
+    for group in () if sil else ("239.255.76.67", "239.74.163.2"):
+        check_loopback_route(group)
+    bdir = arm_build_dir(opt.preset, opt.arm)
+    try:
+        info = arm_info(bdir)
+    except ArmChoiceError as exc:
+        raise HilError(str(exc)) from exc
+    topology = load_topology(opt.topology, info)
+    substeps = sim_substeps(info, _arg_value(opt.controller_args, "--rate", info["loop_rate_hz"]))
+    bus_kind, bus_why = resolve_bus(opt.bus, len(topology))
+    binary = opt.controller or controller_binary(bdir)
+    logger_exe = logger_binary(bdir)
+    sim_exe = bdir / "host_sim" / "native" / "arm_sim"
+    sil_exe = bdir / "host_sim" / "native" / "arm_sil"
+    for exe in (sil_exe,) if sil else (binary, logger_exe, sim_exe):
+        if not exe.exists():
+            raise HilError(f"{exe} is missing: run tools/armctl build")
+    opt.out.mkdir(parents=True, exist_ok=True)
+    for stale in ("telemetry.lcmlog", "controller_summary.json", "sim_summary.json", "run.json", "uncertainty.json"):
+        (opt.out / stale).unlink(missing_ok=True)
+    buses = bus_args(bus_kind, can_port, topology)
+    bus_argv = [a for spec in buses for a in ("--bus", spec)]
+    url = "" if sil else f"udpm://239.255.76.67:{lcm_port}?ttl=0&recv_buf_size=8388608"
+    log_path = opt.out / "telemetry.lcmlog"
+    if opt.uncertainty is not None:
+        write_json_atomic(opt.out / "uncertainty.json", opt.uncertainty)  # the record of what ran
+    sim_args = sim_argv(sim_exe, buses, lcm_url=url, summary=opt.out / "sim_summary.json",
+                        uncertainty=opt.uncertainty, timing=bus_timing_mode(opt.mode) if opt.bus_timing else "off",
+                        phys=topology, model=prepared_model(bdir), drives=opt.drives,
+                        extra=["--substeps", str(substeps), *([] if sil else sim_mode_args(opt.mode)), *opt.sim_args])
+    ctl_args = [*opt.controller_cmd_prefix, str(binary), *bus_argv, "--lcm-url", url,
+                "--duration", f"{opt.duration_s:g}", "--method", opt.method, "--mode", opt.mode,
+                "--summary", str(opt.out / "controller_summary.json"), *([] if sil else spin_args(opt.mode)),
+                *(["--cpu", str(realtime_cpu(opt))] if opt.mode == "realtime" else []),
+                *reference_args(info, opt.controller_args), *opt.controller_args]
+    if sil:
+        exit_codes, wall, sim_scheduling = _run_sil(opt, sil_exe, ctl_args[1:], sim_args[1:], log_path)
+    else:
+        exit_codes, wall, sim_scheduling = _run_processes(opt, logger_exe, url, log_path, sim_args, ctl_args)
 
     # A process that died wrote no summary: the run still ends in a defined, named state and
     # the partial log is analysed.
+    ctl_code = exit_codes.get("controller", exit_codes.get("sil"))
+    sim_code = exit_codes.get("simulator", exit_codes.get("sil"))
     controller = _load_json(opt.out / "controller_summary.json") or {
-        "result": ctl.returncode, "reason": f"controller died (exit code {ctl.returncode}); see controller.log"}
+        "result": ctl_code, "reason": f"controller died (exit code {ctl_code}); see {'sil' if sil else 'controller'}.log"}
     simulator = _load_json(opt.out / "sim_summary.json") or {
-        "result": "died", "reason": f"simulator died (exit code {sim.returncode}); see simulator.log"}
+        "result": "died", "reason": f"simulator died (exit code {sim_code}); see {'sil' if sil else 'simulator'}.log"}
     config = {"method": opt.method, "mode": opt.mode, "duration_s": opt.duration_s,
               "joint_names": [j["name"] for j in info["joints"]],
               "arm": {"name": info["name"], "model": info["model"], "arm_file": info["arm_file"],
@@ -404,7 +462,7 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
         # the firmware's model (built in) and the one the simulator loaded: the controller refuses
         # to boot unless they agree (SIM_IDENTITY frame)
         "model_hash": {"firmware": info["model_hash"], "simulator": simulator.get("model_hash")},
-        "exit_codes": {"controller": ctl.returncode, "simulator": sim.returncode, "logger": logger.returncode}},
+        "exit_codes": exit_codes},
         opt.bounds)
     write_json_atomic(opt.out / "run.json", run)
     return run

@@ -23,7 +23,7 @@ typedef struct {
 } queued_t;
 
 /* The whole working set: static, sized at compile time, nothing allocated per period. */
-typedef struct {
+struct sim {
     const sim_config_t *cfg;
     sim_arm_t *arm;
     sim_telemetry_t *tel;
@@ -54,7 +54,10 @@ typedef struct {
     int64_t cpu_mark_ns; /* thread CPU time at the end of the previous period */
     int truth_pending;   /* the last period's ARM_SIM message is still to be published */
     int32_t truth_faults;
-} sim_t;
+    int64_t t0_ns;       /* when the drives booted */
+    int booted;          /* the controller has spoken (NMT or SYNC) */
+    int ended;           /* the controller stopped every drive */
+};
 
 static int64_t mono_ns(void)
 {
@@ -554,20 +557,53 @@ static void controller_lost(sim_t *s, int booted, double timeout)
     }
 }
 
-static int run_loop(sim_t *s)
+/* CANopen boot-up: every drive's boot-up heartbeat, and the arm this simulator runs. */
+static void boot_drives(sim_t *s)
 {
-    const sim_config_t *cfg = s->cfg;
-    sim_report_t *rep = s->rep;
-    const int64_t t0 = mono_ns();
-    for (int j = 0; j < s->n; ++j) send_heartbeat(s, j, SIM_NMT_STATE_BOOT); /* CANopen boot-up */
+    for (int j = 0; j < s->n; ++j) send_heartbeat(s, j, SIM_NMT_STATE_BOOT);
     for (unsigned b = 0; b < s->set.n; ++b) send_identity(s, b);
     char text[700];
-    snprintf(text, sizeof(text), "%d drives up on bus %s", s->n, cfg->bus_text);
+    snprintf(text, sizeof(text), "%d drives up on bus %s", s->n, s->cfg->bus_text);
     event(s, "sim", "info", text);
-    int booted = 0;
+}
+
+/* One frame from the controller's side of the bus. 0 once the controller stopped every drive
+ * (the end of the run). */
+static int on_frame(sim_t *s, const arm_can_frame_t *f, unsigned bus)
+{
+    sim_report_t *rep = s->rep;
+    rep->frames_rx++;
+    const int j = sim_cmd_joint(f->id, s->n);
+    if ((f->flags & (ARM_CAN_FLAG_RTR | ARM_CAN_FLAG_ERR | ARM_CAN_FLAG_EXT)) != 0u) {
+        rep->rx_bad_frame++;
+    } else if (f->id == ARM_DRIVES_SYNC_FRAME_ID) {
+        if (s->first_sync_ns == 0) s->first_sync_ns = mono_ns();
+        s->booted = 1;
+        if (f->len != 1u) {
+            rep->rx_bad_frame++;
+        } else {
+            on_sync(s, f->data[0], bus);
+        }
+    } else if (j >= 0) {
+        on_command(s, j, f, bus);
+    } else if (f->id == ARM_DRIVES_NMT_FRAME_ID) {
+        s->booted = 1;
+        return on_nmt(s, f, bus);
+    } else {
+        rep->rx_unknown_id++;
+    }
+    return 1;
+}
+
+/* The sockets' loop: frames as they come, put back in the order they were sent (sockets keep no
+ * order between buses), until the controller stops the drives or falls silent. */
+static void run_loop(sim_t *s)
+{
+    const sim_config_t *cfg = s->cfg;
+    char text[700];
     const uint32_t sync_id = ARM_DRIVES_SYNC_FRAME_ID, nmt_id = ARM_DRIVES_NMT_FRAME_ID;
     for (;;) {
-        const double timeout = booted ? cfg->idle_timeout_s : cfg->boot_timeout_s;
+        const double timeout = s->booted ? cfg->idle_timeout_s : cfg->boot_timeout_s;
         if (s->n_deferred > 0u && (s->counter < 0 || s->n_deferred >= s->set.n)) requeue_deferred(s);
         int flag = 0, have = 0;
         unsigned bus = 0;
@@ -589,7 +625,7 @@ static int run_loop(sim_t *s)
                 break;
             }
             if (sim_stop_requested) {
-                snprintf(text, sizeof(text), "stopped by a signal after %llu periods", (unsigned long long)rep->periods);
+                snprintf(text, sizeof(text), "stopped by a signal after %llu periods", (unsigned long long)s->rep->periods);
                 set_result(s, "interrupted", text);
                 break;
             }
@@ -627,35 +663,22 @@ static int run_loop(sim_t *s)
             }
         }
         if (!have) {
-            controller_lost(s, booted, timeout);
+            controller_lost(s, s->booted, timeout);
             break;
         }
-        rep->frames_rx++;
-        const int j = sim_cmd_joint(f.id, s->n);
-        if ((f.flags & (ARM_CAN_FLAG_RTR | ARM_CAN_FLAG_ERR | ARM_CAN_FLAG_EXT)) != 0u) {
-            rep->rx_bad_frame++;
-        } else if (f.id == sync_id) {
-            if (s->first_sync_ns == 0) s->first_sync_ns = mono_ns();
-            booted = 1;
-            if (f.len != 1u) {
-                rep->rx_bad_frame++;
-            } else {
-                on_sync(s, f.data[0], bus);
-            }
-        } else if (j >= 0) {
-            on_command(s, j, &f, bus);
-        } else if (f.id == nmt_id) {
-            booted = 1;
-            if (!on_nmt(s, &f, bus)) break;
-        } else {
-            rep->rx_unknown_id++;
-        }
+        if (!on_frame(s, &f, bus)) break;
     }
+}
+
+/* The end of the run: the last truth, the report's totals, and why it ended. */
+static void wrap_up(sim_t *s)
+{
+    sim_report_t *rep = s->rep;
     publish_truth(s);
     const int64_t t_end = mono_ns();
-    rep->wall_s = (double)(t_end - t0) * 1e-9;
+    rep->wall_s = (double)(t_end - s->t0_ns) * 1e-9;
     if (s->first_sync_ns > 0) {
-        rep->boot_s = (double)(s->first_sync_ns - t0) * 1e-9;
+        rep->boot_s = (double)(s->first_sync_ns - s->t0_ns) * 1e-9;
         rep->run_wall_s = (double)(s->last_period_ns - s->first_sync_ns) * 1e-9;
     }
     for (int k = 0; k < s->n; ++k) {
@@ -663,21 +686,23 @@ static int run_loop(sim_t *s)
         if (s->drives[k].error_code != 0u) rep->drive_fault_mask |= 1u << k;
     }
     for (unsigned b = 0; b < s->set.n; ++b) {
-        const int udp = s->set.bus[b].kind == ARM_BUS_UDP;
-        rep->rx_undecodable += udp ? s->set.bus[b].udp.rx_decode_errors : s->set.bus[b].socketcan.rx_decode_errors;
-        rep->rx_kernel_drops += udp ? s->set.bus[b].udp.rx_kernel_drops : s->set.bus[b].socketcan.rx_kernel_drops;
+        rep->rx_undecodable += arm_can_bus_rx_undecodable(&s->set.bus[b]);
+        rep->rx_kernel_drops += arm_can_bus_rx_kernel_drops(&s->set.bus[b]);
     }
+    char text[700];
     if (rep->reason[0] != '\0') {
         event(s, "sim", "fault", rep->reason);
     } else {
         snprintf(text, sizeof(text), "stopped by the controller after %llu periods", (unsigned long long)rep->periods);
         event(s, "sim", "info", text);
     }
-    return 0;
+    rep->n_buses = s->set.n;
+    for (unsigned b = 0; b < s->set.n; ++b) rep->bus_stats[b] = s->timing[b].stats;
+    arm_can_bus_set_close(&s->set);
 }
 
-int sim_run(const sim_config_t *cfg, sim_arm_t *arm, sim_telemetry_t *tel, sim_report_t *rep, char *err,
-            unsigned long errcap)
+sim_t *sim_begin(const sim_config_t *cfg, sim_arm_t *arm, sim_telemetry_t *tel, sim_report_t *rep, char *err,
+                 unsigned long errcap)
 {
     static sim_t s;
     memset(&s, 0, sizeof(s));
@@ -693,7 +718,7 @@ int sim_run(const sim_config_t *cfg, sim_arm_t *arm, sim_telemetry_t *tel, sim_r
         s.bus_of[j] = arm_can_bus_set_bus_of(&cfg->buses, (unsigned)j);
         if (s.bus_of[j] < 0) {
             snprintf(err, errcap, "--bus: drive %d is on no bus", j + 1);
-            return -1;
+            return NULL;
         }
         sim_drive_init(&s.drives[j], (uint8_t)(j + 1), arm->torque_limit[j], cfg->command_timeout_periods);
         sim_servo_init(&s.servo[j]);
@@ -702,12 +727,41 @@ int sim_run(const sim_config_t *cfg, sim_arm_t *arm, sim_telemetry_t *tel, sim_r
     }
     memcpy(s.timing, cfg->timelines, sizeof(s.timing));
     if (arm_can_bus_set_open(&s.set, &cfg->buses, err, errcap) != 0) {
-        return -1;
+        return NULL;
     }
     s.cpu_mark_ns = cpu_ns();
-    run_loop(&s);
-    rep->n_buses = s.set.n;
-    for (unsigned b = 0; b < s.set.n; ++b) rep->bus_stats[b] = s.timing[b].stats;
-    arm_can_bus_set_close(&s.set);
+    s.t0_ns = mono_ns();
+    boot_drives(&s);
+    return &s;
+}
+
+int sim_service(sim_t *s)
+{
+    arm_can_frame_t f;
+    unsigned bus = 0;
+    while (!s->ended && arm_can_bus_set_recv(&s->set, &f, &bus, 0) == 1) {
+        if (sim_is_drive_id(f.id)) {
+            s->rep->rx_foreign_drive++; /* another node's frame: not for the drives */
+            continue;
+        }
+        s->ended = !on_frame(s, &f, bus);
+    }
+    return !s->ended;
+}
+
+void sim_end(sim_t *s)
+{
+    wrap_up(s);
+}
+
+int sim_run(const sim_config_t *cfg, sim_arm_t *arm, sim_telemetry_t *tel, sim_report_t *rep, char *err,
+            unsigned long errcap)
+{
+    sim_t *s = sim_begin(cfg, arm, tel, rep, err, errcap);
+    if (s == NULL) {
+        return -1;
+    }
+    run_loop(s);
+    wrap_up(s);
     return 0;
 }

@@ -73,10 +73,22 @@ typedef struct {
 /* Set from a signal handler: the loop stops at its next frame or within 100 ms. */
 extern volatile sig_atomic_t sim_stop_requested;
 
+typedef struct sim sim_t;
+
 /* Runs until the controller stops the drives, falls silent, or a stop is requested. Returns 0
  * when the run could start (the report says how it ended), -1 with err if the buses could not be
  * opened. */
 int sim_run(const sim_config_t *cfg, sim_arm_t *arm, sim_telemetry_t *tel, sim_report_t *rep, char *err,
             unsigned long errcap);
+
+/* The same run as steps, for a software-in-the-loop runner that calls the controller and the
+ * drives in turn in one thread (the buses in-process, mem:K): sim_begin opens the buses and boots
+ * the drives (NULL with err if the buses could not be opened); sim_service handles every frame
+ * queued for the drives, never waiting, and returns 0 once the controller stopped them; sim_end
+ * writes the report's totals and closes the buses. */
+sim_t *sim_begin(const sim_config_t *cfg, sim_arm_t *arm, sim_telemetry_t *tel, sim_report_t *rep, char *err,
+                 unsigned long errcap);
+int sim_service(sim_t *s);
+void sim_end(sim_t *s);
 
 #endif

@@ -6,10 +6,14 @@
 
 #include <stdint.h>
 
+#include "lcm_sink.h"
+
 typedef struct sim_telemetry sim_telemetry_t;
 
 /* url "" : no telemetry (counts stay 0). NULL with a message in err on failure. */
 sim_telemetry_t *sim_telemetry_open(const char *url, char *err, unsigned long errcap);
+/* Software in the loop: into sink (shared with the controller, not closed here). */
+sim_telemetry_t *sim_telemetry_open_sink(lcm_sink_t *sink, char *err, unsigned long errcap);
 void sim_telemetry_truth(sim_telemetry_t *t, int64_t step, double period_s, int n, const double *q,
                          const double *qd, const double *tau, const double *w, int32_t drive_faults);
 void sim_telemetry_event(sim_telemetry_t *t, int64_t step, const char *source, const char *level,

@@ -440,13 +440,8 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
     report->final_fault = out.fault;
     report->rx = l.drives.rx;
     for (unsigned b = 0; b < l.buses.n; ++b) {
-        if (l.buses.bus[b].kind == ARM_BUS_UDP) {
-            report->rx_undecodable += l.buses.bus[b].udp.rx_decode_errors;
-            report->rx_kernel_drops += l.buses.bus[b].udp.rx_kernel_drops;
-        } else {
-            report->rx_undecodable += l.buses.bus[b].socketcan.rx_decode_errors;
-            report->rx_kernel_drops += l.buses.bus[b].socketcan.rx_kernel_drops;
-        }
+        report->rx_undecodable += arm_can_bus_rx_undecodable(&l.buses.bus[b]);
+        report->rx_kernel_drops += arm_can_bus_rx_kernel_drops(&l.buses.bus[b]);
     }
     report->wall_s = (double)(now_ns() - t_start) * 1e-9;
     arm_can_bus_set_close(&l.buses);

@@ -1,7 +1,6 @@
 #define _GNU_SOURCE
 #include "telemetry.h"
 
-#include <lcm/lcm.h>
 #include <pthread.h>
 #include <stdatomic.h>
 #include <stdbool.h>
@@ -13,6 +12,7 @@
 #include "armlcm_controller_t.h"
 #include "armlcm_event_t.h"
 #include "armlcm_timing_t.h"
+#include "lcm_sink.h"
 
 #define RING_SIZE 4096u /* power of two; ~4 s of 1 kHz data if the publisher stalls */
 
@@ -27,7 +27,9 @@ typedef struct {
 } telem_slot_t;
 
 struct telemetry {
-    lcm_t *lcm;
+    lcm_sink_t *sink; /* NULL: counted and discarded */
+    int owns_sink;
+    int inline_publish; /* one thread (software in the loop): publish at once, no publisher thread */
     pthread_t thread;
     atomic_bool running;
     atomic_uint_fast64_t head; /* written by the loop */
@@ -54,9 +56,15 @@ static telem_slot_t *claim(telemetry_t *t, telem_kind_t kind)
     return s;
 }
 
+static void publish(telemetry_t *t, const telem_slot_t *s);
+
 static void commit(telemetry_t *t)
 {
-    atomic_fetch_add_explicit(&t->head, 1u, memory_order_release);
+    const uint64_t head = atomic_fetch_add_explicit(&t->head, 1u, memory_order_release);
+    if (t->inline_publish) {
+        publish(t, &t->ring[head & (RING_SIZE - 1u)]);
+        atomic_store_explicit(&t->tail, head + 1u, memory_order_release);
+    }
 }
 
 void telemetry_controller(telemetry_t *t, const telem_controller_t *m)
@@ -141,7 +149,7 @@ static void publish(telemetry_t *t, const telem_slot_t *s)
         channel = "ARM_EVENT";
         len = armlcm_event_t_encode(t->buf, 0, (int)sizeof(t->buf), &m);
     }
-    if (len > 0 && t->lcm != NULL && lcm_publish(t->lcm, channel, t->buf, (unsigned)len) == 0) {
+    if (len > 0 && t->sink != NULL && lcm_sink_publish(t->sink, channel, t->buf, (unsigned)len) == 0) {
         atomic_fetch_add(&t->published[s->kind], 1u);
     }
 }
@@ -174,22 +182,32 @@ telemetry_t *telemetry_start(const char *url, char *err, unsigned long errcap)
         return NULL;
     }
     if (url != NULL && url[0] != '\0') {
-        t->lcm = lcm_create(url);
-        if (t->lcm == NULL) {
-            snprintf(err, errcap, "telemetry: cannot open LCM at '%s'", url);
+        t->sink = lcm_sink_open_url(url, err, errcap);
+        if (t->sink == NULL) {
             free(t);
             return NULL;
         }
+        t->owns_sink = 1;
     }
     atomic_store(&t->running, true);
     if (pthread_create(&t->thread, NULL, publisher, t) != 0) {
         snprintf(err, errcap, "telemetry: cannot start the publisher thread");
-        if (t->lcm != NULL) {
-            lcm_destroy(t->lcm);
-        }
+        lcm_sink_close(t->sink);
         free(t);
         return NULL;
     }
+    return t;
+}
+
+telemetry_t *telemetry_start_inline(lcm_sink_t *sink, char *err, unsigned long errcap)
+{
+    telemetry_t *t = calloc(1, sizeof(*t));
+    if (t == NULL) {
+        snprintf(err, errcap, "telemetry: out of memory");
+        return NULL;
+    }
+    t->sink = sink;
+    t->inline_publish = 1;
     return t;
 }
 
@@ -198,10 +216,12 @@ void telemetry_stop(telemetry_t *t)
     if (t == NULL) {
         return;
     }
-    atomic_store(&t->running, false);
-    pthread_join(t->thread, NULL);
-    if (t->lcm != NULL) {
-        lcm_destroy(t->lcm);
+    if (!t->inline_publish) {
+        atomic_store(&t->running, false);
+        pthread_join(t->thread, NULL);
+    }
+    if (t->owns_sink) {
+        lcm_sink_close(t->sink);
     }
     /* Counters stay readable: the caller frees with free() after reading them. */
 }

@@ -6,6 +6,7 @@
 #include <stdint.h>
 
 #include "arm/controller.h"
+#include "lcm_sink.h"
 
 typedef enum { TELEM_CONTROLLER = 0, TELEM_TIMING, TELEM_EVENT, TELEM_KIND_COUNT } telem_kind_t;
 
@@ -45,6 +46,9 @@ telemetry_t *telemetry_start(const char *url, char *err, unsigned long errcap);
 void telemetry_controller(telemetry_t *t, const telem_controller_t *m);
 void telemetry_timing(telemetry_t *t, const telem_timing_t *m);
 void telemetry_event(telemetry_t *t, int64_t step, const char *level, const char *text);
+/* Software in the loop: no thread; every message goes to sink (shared, not closed here) as it is
+ * made, in the loop's own thread. */
+telemetry_t *telemetry_start_inline(lcm_sink_t *sink, char *err, unsigned long errcap);
 /* Publishes what is queued, stops the thread. */
 void telemetry_stop(telemetry_t *t);
 

@@ -10,6 +10,7 @@
 #include <time.h>
 
 #define SOCKETCAN_PREFIX "socketcan:"
+#define MEM_PREFIX "mem:"
 
 static int parse_udp(const char *spec, char *group, size_t cap, uint16_t *port)
 {
@@ -55,11 +56,21 @@ int arm_can_bus_parse_spec(const char *spec, arm_can_bus_spec_t *out, char *err,
         }
         s.kind = ARM_BUS_SOCKETCAN;
         snprintf(s.ifname, sizeof s.ifname, "%s", ifname);
+    } else if (strncmp(spec, MEM_PREFIX, strlen(MEM_PREFIX)) == 0) {
+        const char *k = spec + strlen(MEM_PREFIX);
+        char *end = NULL;
+        const long line = strtol(k, &end, 10);
+        if (end == k || *end != '\0' || line < 0 || line >= (long)ARM_CAN_MEM_LINES) {
+            snprintf(err, errcap, "--bus: '%s': the in-process bus is mem:0 .. mem:%u", spec, ARM_CAN_MEM_LINES - 1u);
+            return -1;
+        }
+        s.kind = ARM_BUS_MEM;
+        s.line = (unsigned)line;
     } else if (parse_udp(spec, s.group, sizeof(s.group), &s.port) == 0) {
         s.kind = ARM_BUS_UDP;
     } else {
         snprintf(err, errcap,
-                 "--bus: unknown bus '%s' (expected udp, udp:GROUP:PORT or socketcan:IFACE)", spec);
+                 "--bus: unknown bus '%s' (expected udp, udp:GROUP:PORT, socketcan:IFACE or mem:K)", spec);
         return -1;
     }
     if (out != NULL) {
@@ -84,6 +95,9 @@ int arm_can_bus_open(arm_can_bus_t *bus, const char *spec, char *err, size_t err
         return -1;
     }
     bus->kind = s.kind;
+    if (s.kind == ARM_BUS_MEM) {
+        return arm_can_mem_open(&bus->mem, s.line, err, errcap);
+    }
     if (s.kind == ARM_BUS_SOCKETCAN) {
         if (arm_can_socketcan_open(&bus->socketcan, s.ifname, err, errcap) != 0) {
             return -1;
@@ -105,6 +119,9 @@ int arm_can_bus_open(arm_can_bus_t *bus, const char *spec, char *err, size_t err
 
 int arm_can_bus_send(arm_can_bus_t *bus, const arm_can_frame_t *f)
 {
+    if (bus->kind == ARM_BUS_MEM) {
+        return arm_can_mem_send(&bus->mem, f);
+    }
     if (bus->kind == ARM_BUS_SOCKETCAN) {
         return arm_can_socketcan_send(&bus->socketcan, f);
     }
@@ -118,13 +135,19 @@ unsigned arm_can_bus_send_many(arm_can_bus_t *bus, const arm_can_frame_t *frames
     }
     unsigned sent = 0;
     for (unsigned i = 0; i < n; ++i) {
-        sent += arm_can_socketcan_send(&bus->socketcan, &frames[i]) == 0 ? 1u : 0u;
+        sent += arm_can_bus_send(bus, &frames[i]) == 0 ? 1u : 0u;
     }
     return sent;
 }
 
 int arm_can_bus_recv(arm_can_bus_t *bus, arm_can_frame_t *f, int timeout_us)
 {
+    if (bus->kind == ARM_BUS_MEM) {
+        if (timeout_us != 0 && arm_can_mem_head(&bus->mem) == ARM_CAN_MEM_EMPTY) {
+            arm_can_mem_idle(&bus->mem);
+        }
+        return arm_can_mem_recv(&bus->mem, f);
+    }
     if (bus->kind == ARM_BUS_SOCKETCAN) {
         return arm_can_socketcan_recv(&bus->socketcan, f, timeout_us);
     }
@@ -134,11 +157,33 @@ int arm_can_bus_recv(arm_can_bus_t *bus, arm_can_frame_t *f, int timeout_us)
 
 void arm_can_bus_close(arm_can_bus_t *bus)
 {
+    if (bus->kind == ARM_BUS_MEM) {
+        arm_can_mem_close(&bus->mem);
+        return;
+    }
     if (bus->kind == ARM_BUS_SOCKETCAN) {
         arm_can_socketcan_close(&bus->socketcan);
         return;
     }
     arm_can_udp_close(&bus->udp);
+}
+
+uint64_t arm_can_bus_rx_undecodable(const arm_can_bus_t *bus)
+{
+    switch (bus->kind) {
+    case ARM_BUS_UDP: return bus->udp.rx_decode_errors;
+    case ARM_BUS_SOCKETCAN: return bus->socketcan.rx_decode_errors;
+    default: return 0u;
+    }
+}
+
+uint64_t arm_can_bus_rx_kernel_drops(const arm_can_bus_t *bus)
+{
+    switch (bus->kind) {
+    case ARM_BUS_UDP: return bus->udp.rx_kernel_drops;
+    case ARM_BUS_SOCKETCAN: return bus->socketcan.rx_kernel_drops;
+    default: return 0u;
+    }
 }
 
 /* ---- bus set ---------------------------------------------------------------------------------- */
@@ -179,6 +224,7 @@ static int same_spec(const arm_can_bus_spec_t *a, const arm_can_bus_spec_t *b)
 {
     if (a->kind != b->kind) return 0;
     if (a->kind == ARM_BUS_SOCKETCAN) return strcmp(a->ifname, b->ifname) == 0;
+    if (a->kind == ARM_BUS_MEM) return a->line == b->line;
     return a->port == b->port && strcmp(a->group, b->group) == 0;
 }
 
@@ -289,6 +335,12 @@ int arm_can_bus_set_open(arm_can_bus_set_t *set, const arm_can_bus_set_config_t 
                          size_t errcap)
 {
     memset(set, 0, sizeof(*set));
+    unsigned mem = 0;
+    for (unsigned i = 0; i < cfg->n && i < ARM_CAN_BUS_SET_MAX; ++i) mem += cfg->parsed[i].kind == ARM_BUS_MEM;
+    if (mem != 0u && mem != cfg->n) {
+        snprintf(err, errcap, "--bus: in-process buses (mem:K) cannot be mixed with other buses in one set");
+        return -1;
+    }
     for (unsigned i = 0; i < cfg->n && i < ARM_CAN_BUS_SET_MAX; ++i) {
         if (arm_can_bus_open(&set->bus[i], cfg->spec[i], err, errcap) != 0) {
             arm_can_bus_set_close(set);
@@ -312,6 +364,32 @@ unsigned arm_can_bus_set_send_many(arm_can_bus_set_t *set, unsigned index, const
     return arm_can_bus_send_many(&set->bus[index], frames, n);
 }
 
+/* In-process buses: the oldest frame sent on any of them (one order across the set). */
+static int mem_set_recv(arm_can_bus_set_t *set, arm_can_frame_t *f, unsigned *index, int timeout_us)
+{
+    for (int pass = 0; pass < 2; ++pass) {
+        uint64_t oldest = ARM_CAN_MEM_EMPTY;
+        unsigned at = 0u;
+        for (unsigned i = 0; i < set->n; ++i) {
+            const uint64_t h = arm_can_mem_head(&set->bus[i].mem);
+            if (h < oldest) {
+                oldest = h;
+                at = i;
+            }
+        }
+        if (oldest != ARM_CAN_MEM_EMPTY) {
+            *index = at;
+            return arm_can_mem_recv(&set->bus[at].mem, f);
+        }
+        if (pass == 0 && timeout_us != 0) {
+            arm_can_mem_idle(&set->bus[0].mem); /* the peer's turn; then whatever it sent */
+        } else {
+            break;
+        }
+    }
+    return 0;
+}
+
 static int bus_fd(const arm_can_bus_t *b)
 {
     return b->kind == ARM_BUS_SOCKETCAN ? b->socketcan.fd : b->udp.fd;
@@ -320,6 +398,7 @@ static int bus_fd(const arm_can_bus_t *b)
 int arm_can_bus_set_recv(arm_can_bus_set_t *set, arm_can_frame_t *f, unsigned *index, int timeout_us)
 {
     if (set->n == 0u) return ARM_BUS_E_CLOSED;
+    if (set->bus[0].kind == ARM_BUS_MEM) return mem_set_recv(set, f, index, timeout_us);
     if (set->n == 1u) { /* one bus: exactly the single-bus behaviour */
         *index = 0u;
         return arm_can_bus_recv(&set->bus[0], f, timeout_us);

@@ -1,6 +1,7 @@
 /* The Linux port's CAN bus, whatever carries it: one interface for the controller loop.
  * Spec strings: "udp" | "udp:GROUP:PORT" (python-can udp_multicast wire format on loopback)
- *             | "socketcan:IFACE" (Linux SocketCAN, e.g. socketcan:can0 or socketcan:vcan0). */
+ *             | "socketcan:IFACE" (Linux SocketCAN, e.g. socketcan:can0 or socketcan:vcan0)
+ *             | "mem:K" (the in-process bus of software-in-the-loop runs, arm/can_mem.h). */
 #ifndef ARM_CAN_BUS_H
 #define ARM_CAN_BUS_H
 
@@ -8,10 +9,11 @@
 #include <stdint.h>
 
 #include "arm/can_frame.h"
+#include "arm/can_mem.h"
 #include "arm/can_socketcan.h"
 #include "arm/can_udp.h"
 
-typedef enum { ARM_BUS_UDP = 0, ARM_BUS_SOCKETCAN = 1 } arm_bus_kind_t;
+typedef enum { ARM_BUS_UDP = 0, ARM_BUS_SOCKETCAN = 1, ARM_BUS_MEM = 2 } arm_bus_kind_t;
 
 /* Result codes shared by every transport (recv also returns 1 for "frame received"). */
 enum {
@@ -26,6 +28,7 @@ typedef struct {
     arm_bus_kind_t kind;
     arm_can_udp_t udp;             /* kind == ARM_BUS_UDP */
     arm_can_socketcan_t socketcan; /* kind == ARM_BUS_SOCKETCAN */
+    arm_can_mem_t mem;             /* kind == ARM_BUS_MEM */
 } arm_can_bus_t;
 
 /* A parsed spec (arm_can_bus_parse_spec). */
@@ -34,6 +37,7 @@ typedef struct {
     char group[64];                                /* udp: multicast group literal */
     uint16_t port;                                 /* udp: port */
     char ifname[ARM_CAN_SOCKETCAN_IFNAME_MAX + 1u]; /* socketcan: interface name */
+    unsigned line;                                 /* mem: line */
 } arm_can_bus_spec_t;
 
 /* Parses spec without opening anything; 0, or -1 with a message naming the spec in err. */
@@ -48,6 +52,10 @@ int arm_can_bus_send(arm_can_bus_t *bus, const arm_can_frame_t *f);
 unsigned arm_can_bus_send_many(arm_can_bus_t *bus, const arm_can_frame_t *frames, unsigned n);
 int arm_can_bus_recv(arm_can_bus_t *bus, arm_can_frame_t *f, int timeout_us);
 void arm_can_bus_close(arm_can_bus_t *bus);
+/* The transport's own counts: frames it could not decode, frames the kernel dropped on a full
+ * receive queue (an in-process bus has neither). */
+uint64_t arm_can_bus_rx_undecodable(const arm_can_bus_t *bus);
+uint64_t arm_can_bus_rx_kernel_drops(const arm_can_bus_t *bus);
 
 /* ---- bus set: several buses, drives assigned to buses -------------------------------------
  * Command-line form (controller and host_sim --bus, repeatable): SPEC[@DRIVES], DRIVES a list of
@@ -81,7 +89,8 @@ typedef struct {
     unsigned next; /* round-robin start of the next drain, so no bus starves another */
 } arm_can_bus_set_t;
 
-/* Opens every bus of cfg; on failure closes the ones opened and returns -1 (err names the spec). */
+/* Opens every bus of cfg; on failure closes the ones opened and returns -1 (err names the spec).
+ * In-process buses (mem:K) are all or none of a set: they keep one order across the set. */
 int arm_can_bus_set_open(arm_can_bus_set_t *set, const arm_can_bus_set_config_t *cfg, char *err,
                          size_t errcap);
 int arm_can_bus_set_send(arm_can_bus_set_t *set, unsigned index, const arm_can_frame_t *f);
@@ -89,7 +98,8 @@ unsigned arm_can_bus_set_send_many(arm_can_bus_set_t *set, unsigned index, const
                                    unsigned n);
 /* A frame from whichever bus has one (1, *index = that bus), 0 on timeout, <0 on error (*index =
  * the failing bus). Queued frames are drained first; waits in one ppoll over every bus.
- * timeout_us < 0: no limit. */
+ * timeout_us < 0: no limit. In-process buses never wait: the oldest frame sent on any of them, or
+ * 0 after the idle hook had its turn (arm/can_mem.h). */
 int arm_can_bus_set_recv(arm_can_bus_set_t *set, arm_can_frame_t *f, unsigned *index, int timeout_us);
 void arm_can_bus_set_close(arm_can_bus_set_t *set);
 
