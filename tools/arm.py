@@ -118,7 +118,7 @@ def arm_build_dir(preset: str, arm: ArmRef = DEFAULT_ARM) -> Path:
     return build_dir(preset) if arm.is_default else BUILD / "arms" / arm.key() / preset
 
 
-HIL_TARGETS = ["arm_controller", "arm_sim", "arm_lcm_logger"]  # what a HIL run needs
+HIL_TARGETS = ["arm_controller", "arm_sim", "arm_lcm_logger", "arm_sil"]  # what a run needs (HIL or SIL)
 
 
 def build_arm(preset: str, arm: ArmRef = DEFAULT_ARM, quiet: bool = True, targets: list[str] | None = None) -> Path:

@@ -14,7 +14,6 @@ from tools.arm import add_arm_arguments
 from tools.outdir import OutDirError, check_out_dir
 from tools.build import PRESETS, TARGETS, BuildError, build
 from tools.paths import REPO, build_dir, env_with_repo
-from tools.slots import default_jobs
 
 
 def cmd_setup(ns: argparse.Namespace) -> int:
@@ -156,7 +155,8 @@ def cmd_demo(ns: argparse.Namespace) -> int:
     from tools import study
 
     arm = "the default arm" if ns.model is None and ns.arm is None else (ns.arm or ns.model)
-    print(f"armctl demo: a short study on {arm}: every method, tuned alike, {ns.duration:g} s in lockstep HIL in "
+    how = "in software in the loop" if ns.bus == "sil" else f"in lockstep HIL over {ns.bus}"
+    print(f"armctl demo: a short study on {arm}: every method, tuned alike, {ns.duration:g} s {how} in "
           f"each scenario of {study.DEFAULT_CONFIG.relative_to(REPO)}, one seed -> {ns.out}")
     ns.config, ns.methods, ns.seeds, ns.retune, ns.cluster = study.DEFAULT_CONFIG, None, 1, False, None
     return study.cmd_study(ns)
@@ -268,11 +268,18 @@ def main(argv: list[str] | None = None) -> int:
     add_arm_arguments(h)
     h.set_defaults(fn=cmd_hil)
 
+    from tools.study import BUSES as SIL_OR_BUS, DEFAULT_CONFIRM
+
     d = sub.add_parser("demo", help="the main job: set-up if needed, a short study of every method, the table")
     d.add_argument("--out", type=Path, default=REPO / "runs" / "demo")
     d.add_argument("--duration", type=float, default=3.0, help="trajectory seconds per method")
     d.add_argument("--scenarios", default=None, help="comma-separated subset of the study's scenarios")
-    d.add_argument("--jobs", type=int, default=default_jobs(), help="runs at once [half the cores]")
+    d.add_argument("--bus", choices=SIL_OR_BUS, default="sil",
+                   help="sil: software in the loop, a sample confirmed over the CAN bus; udp, vcan, auto: lockstep "
+                        "HIL [sil]")
+    d.add_argument("--jobs", type=int, default=None, help="runs at once [sil: every core; a CAN bus: half the cores]")
+    d.add_argument("--confirm", type=int, default=DEFAULT_CONFIRM,
+                   help="with --bus sil: runs repeated over the CAN bus, checked bit for bit")
     d.add_argument("--trials", type=int, default=None,
                    help="tuning budget per method and scenario, for an arm without a kept tuning [the config's]")
     add_arm_arguments(d)

@@ -258,6 +258,27 @@ def _claims(sc: dict[str, Any]) -> list[str]:
     return out
 
 
+def _how_run(study: dict[str, Any]) -> str:
+    bus = study.get("bus", "udp")
+    return ("software in the loop (arm_sil: the controller and the drives in one process, frames in memory)"
+            if bus == "sil" else f"lockstep HIL over the CAN bus ({bus})")
+
+
+def _confirmation(study: dict[str, Any]) -> list[str]:
+    """What the software-in-the-loop runs were checked against."""
+    conf = study.get("confirmation")
+    if not conf:
+        return []
+    rows = conf["runs"]
+    ok = sum(r["match"] for r in rows)
+    head = (f"Confirmed over the CAN bus: {ok} of {len(rows)} runs repeated in lockstep HIL "
+            f"({rows[0]['bus'] if rows else '-'}) gave the same results bit for bit"
+            if conf["all_match"] else
+            f"**Software in the loop and lockstep HIL disagree**: {len(rows) - ok} of {len(rows)} repeated runs differ")
+    return [head + ":", "", *[f"- {r['method']} in `{r['scenario']}`, seed {r['seed']}: "
+                              + ("same" if r["match"] else "differs in " + ", ".join(r["differences"])) for r in rows], ""]
+
+
 def write_report(out: Path, study: dict[str, Any]) -> None:
     arm = study["arm"]
     n = arm["n_joints"]
@@ -266,13 +287,13 @@ def write_report(out: Path, study: dict[str, Any]) -> None:
     wiring = ", ".join(f"{b['name']}: drives {','.join(map(str, b['drives']))}" for b in arm["buses"])
     md = [f"# Study: {study['description']}", "",
           f"Arm `{arm['name']}` ({n} joints: {', '.join(arm['joint_names'])}; model `{arm['model']}`, hash "
-          f"{arm['model_hash']}), its CAN buses {wiring}, lockstep HIL at 1 kHz. Config `{study['config']}`; "
+          f"{arm['model_hash']}), its CAN buses {wiring}, {_how_run(study)} at 1 kHz. Config `{study['config']}`; "
           f"seeds {study['seeds']}; trajectory {study['duration_s']:g} s after a {study['hold_s']:g} s hold on the "
           "start pose (metrics cover the trajectory only). Intervals are 95 % confidence intervals of the mean over "
           "the seeds (Student's t); PM against another method is paired on the same seeds: the ratio of the means, "
           "on how many seeds PM was lower, and the p-value of the paired t-test (two-sided; study.json also has "
           "Wilcoxon's signed-rank p, which with 5 seeds cannot go below 0.0625).",
-          "", f"Tuning: {study['tuning_procedure']}", "",
+          "", f"Tuning: {study['tuning_procedure']}", "", *_confirmation(study),
           *(["Notes:", "", *[f"- {x}" for x in study.get("notes", [])], ""] if study.get("notes") else [])]
     figs_time: list[str] = []
     for i, (name, sc) in enumerate(study["scenarios"].items()):

@@ -46,11 +46,13 @@ class RunSpec:
     keep_log: bool = True              # tuning runs drop their telemetry log once analysed
     labels: dict[str, Any] = field(default_factory=dict)
     code: str = ""                     # tools/code_identity.py: a kept run of other code is run again
+    bus: str = "udp"                   # tools/hil.py's --bus: sil (one process) or a CAN bus
 
     def key(self) -> dict[str, Any]:
-        """What decides the result (not where it is written)."""
+        """What decides the result (not where it is written, nor the bus it ran on: software in the
+        loop and lockstep HIL give the same results, tests/python/test_sil.py)."""
         d = asdict(self)
-        for k in ("out", "keep_log", "labels"):
+        for k in ("out", "keep_log", "labels", "bus"):
             d.pop(k)
         return d
 
@@ -147,7 +149,7 @@ def _run(spec: RunSpec, arm: ArmRef, slot: Slot, out: Path) -> dict[str, Any]:
                               controller_args=spec.controller_args, uncertainty=spec.uncertainty,
                               drives=DriveModel(**spec.drives) if spec.drives else DriveModel(),
                               bus_timing=spec.bus_timing, can_port=slot.can_port, lcm_port=slot.lcm_port,
-                              labels=dict(spec.labels)))
+                              labels=dict(spec.labels), bus=spec.bus))
 
 
 def spec_digest(spec: RunSpec) -> str:

@@ -67,8 +67,10 @@ def acquire_slot(timeout_s: float = 600.0) -> Iterator[Slot]:
         time.sleep(0.05)
 
 
-def default_jobs() -> int:
-    """Half the cores: the controller and the simulator of a lockstep run each poll the bus before
-    they sleep, so one run keeps two cores busy (armctl bench study: --jobs 2 gives 0.95x the
-    runs per minute of --jobs 1 on two cores)."""
-    return max(1, (os.cpu_count() or 1) // 2)
+def default_jobs(bus: str = "udp") -> int:
+    """Software in the loop: every core (a run is one thread that never waits on a socket). Over a
+    bus, half the cores: the controller and the simulator of a lockstep run each poll the bus before
+    they sleep, so one run keeps two cores busy (armctl bench study: --jobs 2 gave 0.95x the runs
+    per minute of --jobs 1 on two cores)."""
+    cores = os.cpu_count() or 1
+    return cores if bus == "sil" else max(1, cores // 2)

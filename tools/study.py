@@ -21,7 +21,7 @@ from tools.arm import (DEFAULT_ARM, ArmChoiceError, ArmRef, add_arm_arguments, a
                        arm_info, build_arm, reference_for)
 from tools import procs
 from tools.code_identity import code_identity
-from tools.hil import HilError, write_json_atomic
+from tools.hil import SIL, HilError, write_json_atomic
 from tools.outdir import OutDirError, check_out_dir
 from tools.paths import REPO
 from tools.runner import RunSpec, run_all
@@ -35,6 +35,45 @@ DEFAULT_CONFIG = REPO / "tools" / "studies" / "paper.toml"
 METRICS = {"linf": "tracking_max_abs_rad", "rms": "tracking_rms_rad", "est": "estimation_error_rms",
            "power": "torque_power_w"}
 BASELINES = ("tde", "usde-smc", "pd", "pm-paper-weights", "pm-paper", "gh2")
+BUSES = (SIL, "udp", "vcan", "auto")  # a study's runs: software in the loop, or lockstep HIL on a CAN bus
+CONFIRM_BUS = "auto"  # a software-in-the-loop study's sample, repeated over vcan where this kernel has it, else UDP
+DEFAULT_CONFIRM = 3
+
+
+def confirmation_sample(where: list[tuple[str, str, int]], count: int) -> list[int]:
+    """Which runs a software-in-the-loop study repeats over the CAN bus: spread over the scenarios
+    and the methods (scenario i, method i + k), each on its first seed."""
+    scenarios = list(dict.fromkeys(s for s, _, _ in where))
+    methods = list(dict.fromkeys(m for _, m, _ in where))
+    first = {}
+    for i, (s, m, _) in enumerate(where):
+        first.setdefault((s, m), i)
+    picks: list[int] = []
+    for k in range(min(count, len(first))):
+        s = scenarios[k % len(scenarios)]
+        m = methods[(k + k // len(scenarios)) % len(methods)]
+        if (s, m) in first and first[(s, m)] not in picks:
+            picks.append(first[(s, m)])
+    return picks
+
+
+def confirm_over_bus(specs: list[RunSpec], runs: list[dict[str, Any]], where: list[tuple[str, str, int]],
+                     picks: list[int], out: Path) -> dict[str, Any]:
+    """The picked runs again in lockstep HIL over a CAN bus; their results must equal the software-in-
+    the-loop runs' exactly."""
+    again = [replace(specs[i], out=str(out / "confirm" / where[i][0] / where[i][1] / f"seed-{where[i][2]}"),
+                     bus=CONFIRM_BUS, keep_log=False) for i in picks]
+    bar = tqdm(total=len(again), desc="confirm over the bus", unit="run")
+    hil = run_all(again, default_jobs("udp"), None, progress=lambda spec, run: bar.update(1))
+    bar.close()
+    rows = []
+    for i, run in zip(picks, hil):
+        a, b = runs[i]["results"], run["results"]
+        differ = sorted(k for k in set(a) | set(b) if a.get(k) != b.get(k))
+        rows.append({"scenario": where[i][0], "method": where[i][1], "seed": where[i][2],
+                     "bus": run.get("environment", {}).get("bus_choice", "?"), "match": not differ,
+                     "differences": differ})
+    return {"runs": rows, "all_match": all(r["match"] for r in rows)}
 
 
 def trajectory_for(info: dict[str, Any], traj: Trajectory, what: str) -> tuple[list[str], dict[str, Any], list[str]]:
@@ -62,13 +101,13 @@ def _arm_args(arm: ArmRef) -> dict[str, str | None]:
             "design": str(arm.design) if arm.design else None}
 
 
-def setup_for(cfg: StudyConfig, arm: ArmRef, out: Path, jobs: int, cluster: str | None,
+def setup_for(cfg: StudyConfig, arm: ArmRef, out: Path, jobs: int, cluster: str | None, bus: str = SIL,
               preset: str = "release") -> tuple[TuneSetup, dict[str, Any], list[str]]:
     bdir = arm_build_dir(preset, arm)
     info = arm_info(bdir)
     traj_args, _, notes = trajectory_for(info, cfg.tuning_trajectory, "tuning trajectory")
     base = (bdir / "generated" / "arm" / "design.toml").read_text()
-    return TuneSetup(cfg, _arm_args(arm), base, traj_args, out, jobs, cluster), info, notes
+    return TuneSetup(cfg, _arm_args(arm), base, traj_args, out, jobs, cluster, bus), info, notes
 
 
 def tuning_file(cfg: StudyConfig, arm: ArmRef, preset: str = "release") -> Path:
@@ -148,11 +187,11 @@ def procedure(cfg: StudyConfig, trials: int | None = None) -> str:
 def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration_s: float | None = None,
               methods: list[str] | None = None, scenarios: list[str] | None = None, arm: ArmRef = DEFAULT_ARM,
               jobs: int = 1, cluster: str | None = None, retune: bool = False,
-              trials: int | None = None) -> dict[str, Any]:
+              trials: int | None = None, bus: str = SIL, confirm: int = DEFAULT_CONFIRM) -> dict[str, Any]:
     methods = methods or cfg.methods
     scen_names = scenarios or list(cfg.scenarios)
     seed_list = cfg.seed_list(seeds)
-    setup, info, notes = setup_for(cfg, arm, out / "tuning", jobs, cluster)
+    setup, info, notes = setup_for(cfg, arm, out / "tuning", jobs, cluster, bus)
     tuning = tuned(cfg, arm, setup, info, scen_names, methods, retune=retune, trials=trials)
     duration = duration_s or cfg.duration_s
     traj_args, traj_used, traj_notes = trajectory_for(info, cfg.trajectory, "trajectory")
@@ -182,6 +221,10 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
     bar.close()
     if procs.interrupted is not None:  # the finished runs are kept: the same command resumes
         raise procs.Interrupted(procs.interrupted)
+    confirmation = (confirm_over_bus(specs, runs, where, confirmation_sample(where, confirm), out)
+                    if bus == SIL and confirm > 0 else None)
+    if procs.interrupted is not None:
+        raise procs.Interrupted(procs.interrupted)
     per: dict[str, dict[str, list[dict[str, Any]]]] = {s: {m: [] for m in methods} for s in scen_names}
     for (s, m, _), run in zip(where, runs):
         per[s][m].append({**run["results"], "transport_telemetry_lost": run.get("transport", {}).get("telemetry_lost_total")})
@@ -198,6 +241,8 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
         "methods": methods,
         "notes": notes,
         "tuning_procedure": procedure(cfg, trials),
+        "bus": bus,
+        "confirmation": confirmation,
         "scenarios": {s: scenario_result(cfg.scenarios[s].as_dict(), tuning[s], per[s], methods)
                       for s in scen_names},
     }
@@ -251,8 +296,12 @@ def add_common_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", type=Path, default=DEFAULT_CONFIG)
     p.add_argument("--scenarios", default=None, help="comma-separated subset of the config's scenarios")
     p.add_argument("--methods", default=None, help="comma-separated subset of the config's methods")
-    p.add_argument("--jobs", type=int, default=default_jobs(),
-                   help="runs at once on this machine [half the cores: a lockstep run keeps two busy]")
+    p.add_argument("--bus", choices=BUSES, default=SIL,
+                   help="sil: every run in software in the loop (one process, the same code, the same results); "
+                        "udp, vcan, auto: lockstep HIL over that CAN bus [sil]")
+    p.add_argument("--jobs", type=int, default=None,
+                   help="runs at once on this machine [sil: every core; a CAN bus: half the cores, since a lockstep "
+                        "run keeps two busy]")
     p.add_argument("--cluster", default=None, metavar="ADDRESS",
                    help="a Dask scheduler (tcp://host:8786): each HIL run is a task on its workers")
     p.add_argument("--trials", type=int, default=None, help="tuning budget per method and scenario [the config's]")
@@ -265,6 +314,9 @@ def add_study_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seeds", type=int, default=None, help="seeds per method and scenario [the config's]")
     p.add_argument("--duration", type=float, default=None, help="override the config's trajectory length")
     p.add_argument("--retune", action="store_true", help="tune again even when a tuning is kept")
+    p.add_argument("--confirm", type=int, default=DEFAULT_CONFIRM,
+                   help=f"with --bus sil: repeat this many runs in lockstep HIL over the CAN bus and check that "
+                        f"their results match bit for bit [{DEFAULT_CONFIRM}]")
 
 
 def add_tune_arguments(p: argparse.ArgumentParser) -> None:
@@ -286,6 +338,8 @@ def _common(ns: argparse.Namespace) -> tuple[StudyConfig, ArmRef, list[str] | No
     cfg = load(ns.config)
     methods = _subset(ns.methods, cfg.methods, "methods")
     scenarios = _subset(ns.scenarios, list(cfg.scenarios), "scenarios")
+    if ns.jobs is None:
+        ns.jobs = default_jobs(ns.bus)
     if not 1 <= ns.jobs <= 256:
         raise StudyConfigError(f"--jobs: must be in [1, 256], got {ns.jobs}")
     if ns.trials is not None and not 1 <= ns.trials <= 100000:
@@ -302,9 +356,12 @@ def cmd_study(ns: argparse.Namespace) -> int:
             raise StudyConfigError(f"--seeds: must be in [1, 1000], got {ns.seeds}")
         if ns.duration is not None and not (0.001 <= ns.duration <= 86400):
             raise StudyConfigError(f"--duration: must be in [0.001, 86400] s, got {ns.duration}")
+        if not 0 <= ns.confirm <= 1000:
+            raise StudyConfigError(f"--confirm: must be in [0, 1000], got {ns.confirm}")
         cfg, arm, methods, scenarios = _common(ns)
         study = run_study(cfg, ns.out, seeds=ns.seeds, duration_s=ns.duration, methods=methods, scenarios=scenarios,
-                          arm=arm, jobs=ns.jobs, cluster=ns.cluster, retune=ns.retune, trials=ns.trials)
+                          arm=arm, jobs=ns.jobs, cluster=ns.cluster, retune=ns.retune, trials=ns.trials, bus=ns.bus,
+                          confirm=ns.confirm)
     except (StudyConfigError, ArmChoiceError, OutDirError) as exc:
         print(f"armctl study: {exc}", file=sys.stderr)
         return 2
@@ -315,6 +372,13 @@ def cmd_study(ns: argparse.Namespace) -> int:
     print(f"report: {ns.out / 'report.md'}")
     unmeasured = [f"{m} in {s} (seed {seed}): {r.get('result')}" for s, sc in study["scenarios"].items()
                   for m, runs in sc["runs"].items() for seed, r in zip(study["seeds"], runs) if not measured(r)]
+    conf = study.get("confirmation")
+    if conf is not None and not conf["all_match"]:
+        bad = [f"{r['method']} in {r['scenario']} (seed {r['seed']}): {', '.join(r['differences'][:6])}"
+               for r in conf["runs"] if not r["match"]]
+        print(f"armctl study: software in the loop and lockstep HIL disagree on {len(bad)} run(s): "
+              + "; ".join(bad), file=sys.stderr)
+        return 1
     if unmeasured:
         print(f"armctl study: incomplete: {len(unmeasured)} run(s) measured nothing trustworthy: "
               + "; ".join(unmeasured[:8]) + (" ..." if len(unmeasured) > 8 else ""), file=sys.stderr)
@@ -335,7 +399,7 @@ def measured(r: dict[str, Any]) -> bool:
 def cmd_tune(ns: argparse.Namespace) -> int:
     try:
         cfg, arm, methods, scenarios = _common(ns)
-        setup, info, _ = setup_for(cfg, arm, ns.out, ns.jobs, ns.cluster)
+        setup, info, _ = setup_for(cfg, arm, ns.out, ns.jobs, ns.cluster, ns.bus)
         result = tuned(cfg, arm, setup, info, scenarios or list(cfg.scenarios), methods or cfg.methods,
                        retune=True, trials=ns.trials)
     except (StudyConfigError, ArmChoiceError, OutDirError) as exc:

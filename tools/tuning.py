@@ -41,6 +41,7 @@ class TuneSetup:
     out: Path
     jobs: int = 1
     cluster: str | None = None
+    bus: str = "sil"                  # every run's bus (tools/hil.py --bus)
 
 
 def objective(results: list[dict[str, Any]]) -> tuple[float, str]:
@@ -117,7 +118,7 @@ def trial_spec(setup: TuneSetup, method: str, scenario: Scenario, knobs: dict[st
                    uncertainty={**scenario.uncertainty, "seed": seed}, drives=scenario.drives.to_dict(),
                    bus_timing=scenario.bus_timing, design_text=text, keep_log=keep_log,
                    labels={"method": method, "scenario": scenario.name, "seed": seed, "knobs": knobs},
-                   code=code_identity(), **setup.arm_args)
+                   code=code_identity(), bus=setup.bus, **setup.arm_args)
 
 
 def tune_method(setup: TuneSetup, scenario: Scenario, method: str, trials: int | None = None,
