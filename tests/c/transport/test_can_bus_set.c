@@ -139,11 +139,81 @@ static void test_live_two_udp_buses(void)
     CHECK(tx.n == 0u && rx.n == 0u);
 }
 
+static int idle_calls;
+static arm_can_bus_set_t *idle_peer;
+
+/* The drives' turn: answer each frame with one frame on the same line. */
+static void answer_all(void *ctx)
+{
+    (void)ctx;
+    idle_calls++;
+    arm_can_frame_t f;
+    unsigned bus = 0;
+    while (arm_can_bus_set_recv(idle_peer, &f, &bus, 0) == 1) {
+        f.id += 0x100u;
+        CHECK(arm_can_bus_set_send(idle_peer, bus, &f) == 0);
+    }
+}
+
+/* The in-process bus: one send order across lines, the idle hook on the master's receive, drops
+ * when a queue is full, and no mixing with sockets. */
+static void test_in_process_bus(void)
+{
+    char err[300];
+    arm_can_bus_set_config_t c;
+    arm_can_bus_set_config_init(&c);
+    CHECK(add(&c, "mem:0@1-3", err, sizeof err) == 0);
+    CHECK(add(&c, "mem:1@4-6", err, sizeof err) == 0);
+    CHECK(add(&c, "mem:1@4-6", err, sizeof err) != 0 && strstr(err, "twice") != NULL);
+    arm_can_mem_reset();
+    static arm_can_bus_set_t master, drives;
+    arm_can_mem_set_opening_side(ARM_CAN_MEM_DRIVES);
+    CHECK(arm_can_bus_set_open(&drives, &c, err, sizeof err) == 0);
+    arm_can_mem_set_opening_side(ARM_CAN_MEM_MASTER);
+    CHECK(arm_can_bus_set_open(&master, &c, err, sizeof err) == 0);
+    idle_peer = &drives;
+    arm_can_mem_set_idle_hook(answer_all, NULL);
+    const uint32_t ids[] = {0x80u, 0x81u, 0x82u, 0x83u};
+    const unsigned lines[] = {1u, 0u, 1u, 0u};
+    for (unsigned i = 0; i < 4u; ++i) {
+        arm_can_frame_t f = {.id = ids[i], .len = 1u};
+        CHECK(arm_can_bus_set_send(&master, lines[i], &f) == 0);
+    }
+    for (unsigned i = 0; i < 4u; ++i) { /* the answers, in the order the master sent: across lines */
+        arm_can_frame_t f;
+        unsigned bus = 9u;
+        CHECK(arm_can_bus_set_recv(&master, &f, &bus, 1000) == 1);
+        CHECK(f.id == ids[i] + 0x100u && bus == lines[i]);
+    }
+    CHECK(idle_calls == 1);
+    arm_can_frame_t f;
+    unsigned bus = 0;
+    CHECK(arm_can_bus_set_recv(&master, &f, &bus, 1000) == 0 && idle_calls == 2); /* never waits */
+    arm_can_mem_set_idle_hook(NULL, NULL);
+    unsigned sent = 0;
+    for (unsigned i = 0; i < ARM_CAN_MEM_QUEUE + 5u; ++i) {
+        arm_can_frame_t g = {.id = 0x80u, .len = 1u};
+        sent += arm_can_bus_set_send(&master, 0u, &g) == 0;
+    }
+    CHECK(sent == ARM_CAN_MEM_QUEUE); /* a full queue drops, as a full transmit queue does */
+    arm_can_bus_set_close(&master);
+    arm_can_bus_set_close(&drives);
+
+    arm_can_bus_set_config_t mixed;
+    arm_can_bus_set_config_init(&mixed);
+    CHECK(add(&mixed, "mem:0@1-3", err, sizeof err) == 0);
+    CHECK(add(&mixed, "udp:239.74.163.2:43119@4-6", err, sizeof err) == 0);
+    static arm_can_bus_set_t m;
+    CHECK(arm_can_bus_set_open(&m, &mixed, err, sizeof err) != 0 && strstr(err, "mixed") != NULL);
+    CHECK(add(&mixed, "mem:4", err, sizeof err) != 0 && strstr(err, "mem:0 .. mem:3") != NULL);
+}
+
 int main(void)
 {
     test_two_buses();
     test_without_drives_is_all();
     test_errors();
     test_live_two_udp_buses();
+    test_in_process_bus();
     TEST_MAIN_END();
 }
