@@ -105,6 +105,7 @@ def cmd_hil(ns: argparse.Namespace) -> int:
     try:
         run = run_hil(HilOptions(out=ns.out, duration_s=ns.duration, method=ns.method, mode=ns.mode, arm=arm,
                                  bus=ns.bus, topology=ns.topology, bus_timing=ns.bus_timing, controller_args=ref,
+                                 capture=ns.capture,
                                  bounds=Bounds(ns.max_error_deg, ns.max_saturated_fraction),
                                  drives=DRIVE_PRESETS[ns.drives], can_port=ns.can_port))
         print(f"bus: {run['environment']['bus_choice']}")
@@ -263,6 +264,9 @@ def main(argv: list[str] | None = None) -> int:
                    help="bound: time at the torque limit, per joint, fraction [0.05]")
     h.add_argument("--can-port", type=int, default=None, metavar="PORT",
                    help="UDP bus: buses on PORT, PORT+1, .. (to watch them with python-can) [the run slot's]")
+    h.add_argument("--capture", action="store_true",
+                   help="write every frame on the buses to DIR/bus.log, from the simulator's side, in candump's "
+                        "log format (canplayer, python-can's LogReader, cantools decode)")
     h.add_argument("--drives", choices=("ideal", "realistic"), default="ideal",
                    help="the emulated drives' sensing and torque path (host_sim/README.md) [ideal]")
     add_arm_arguments(h)

@@ -62,6 +62,10 @@ class HilOptions:
     bounds: Bounds = field(default_factory=Bounds)
     # The emulated drives' sensing and torque path (host_sim/drive_model.py; default: ideal).
     drives: DriveModel = field(default_factory=DriveModel)
+    # Every frame on the buses, from the simulator's side, in candump's log format: DIR/bus.log
+    # (CAPTURE_FILE), or DIR/bus.log.gz once the run is over when compress is asked for.
+    capture: bool = False
+    compress_capture: bool = False
 
 
 class HilError(RuntimeError):
@@ -211,6 +215,7 @@ def vcan_names(n: int) -> list[str]:
 
 
 SIL = "sil"  # --bus: software in the loop
+CAPTURE_FILE = "bus.log"  # a run's capture of its buses (candump -l format)
 
 
 def bus_args(kind: str, can_port: int, topology: list[busload.Bus]) -> list[str]:
@@ -374,6 +379,24 @@ def _run_processes(opt: HilOptions, logger_exe: Path, url: str, log_path: Path, 
             sim_scheduling)
 
 
+def capture_args(opt: HilOptions) -> list[str]:
+    if not opt.capture:
+        return []
+    return ["--capture", str(opt.out / CAPTURE_FILE), *(["--capture-clock", "wall"] if opt.mode == "realtime" else [])]
+
+
+def _compress(path: Path) -> Path:
+    """path.gz (python-can's LogReader reads it as it is; zcat it for canplayer and cantools)."""
+    import gzip
+    import shutil
+
+    gz = path.with_name(path.name + ".gz")
+    with open(path, "rb") as src, gzip.open(gz, "wb", compresslevel=6) as dst:
+        shutil.copyfileobj(src, dst, 1 << 20)
+    path.unlink()
+    return gz
+
+
 def _wait_sil(opt: HilOptions, sil: subprocess.Popen[bytes], log: Any) -> None:
     """Until arm_sil has ended; a refused argument ends the run with its message."""
     try:
@@ -408,7 +431,8 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
         if not exe.exists():
             raise HilError(f"{exe} is missing: run tools/armctl build")
     opt.out.mkdir(parents=True, exist_ok=True)
-    for stale in ("telemetry.lcmlog", "controller_summary.json", "sim_summary.json", "run.json", "uncertainty.json"):
+    for stale in ("telemetry.lcmlog", "controller_summary.json", "sim_summary.json", "run.json", "uncertainty.json",
+                  CAPTURE_FILE, CAPTURE_FILE + ".gz"):
         (opt.out / stale).unlink(missing_ok=True)
     buses = bus_args(bus_kind, can_port, topology)
     bus_argv = [a for spec in buses for a in ("--bus", spec)]
@@ -419,7 +443,8 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
     sim_args = sim_argv(sim_exe, buses, lcm_url=url, summary=opt.out / "sim_summary.json",
                         uncertainty=opt.uncertainty, timing=bus_timing_mode(opt.mode) if opt.bus_timing else "off",
                         phys=topology, model=prepared_model(bdir), drives=opt.drives,
-                        extra=["--substeps", str(substeps), *([] if sil else sim_mode_args(opt.mode)), *opt.sim_args])
+                        extra=["--substeps", str(substeps), *([] if sil else sim_mode_args(opt.mode)),
+                               *capture_args(opt), *opt.sim_args])
     ctl_args = [*opt.controller_cmd_prefix, str(binary), *bus_argv, "--lcm-url", url,
                 "--duration", f"{opt.duration_s:g}", "--method", opt.method, "--mode", opt.mode,
                 "--summary", str(opt.out / "controller_summary.json"), *([] if sil else spin_args(opt.mode)),
@@ -462,7 +487,9 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
         # the firmware's model (built in) and the one the simulator loaded: the controller refuses
         # to boot unless they agree (SIM_IDENTITY frame)
         "model_hash": {"firmware": info["model_hash"], "simulator": simulator.get("model_hash")},
-        "exit_codes": exit_codes},
+        "exit_codes": exit_codes,
+        "capture": str(_compress(opt.out / CAPTURE_FILE) if opt.compress_capture else opt.out / CAPTURE_FILE)
+                   if opt.capture and (opt.out / CAPTURE_FILE).exists() else None},
         opt.bounds)
     write_json_atomic(opt.out / "run.json", run)
     return run

@@ -149,7 +149,9 @@ def _run(spec: RunSpec, arm: ArmRef, slot: Slot, out: Path) -> dict[str, Any]:
                               controller_args=spec.controller_args, uncertainty=spec.uncertainty,
                               drives=DriveModel(**spec.drives) if spec.drives else DriveModel(),
                               bus_timing=spec.bus_timing, can_port=slot.can_port, lcm_port=slot.lcm_port,
-                              labels=dict(spec.labels), bus=spec.bus))
+                              labels=dict(spec.labels), bus=spec.bus,
+                              # the runs that keep their telemetry keep their bus too (gzip: 0.6 MB a 10 s run)
+                              capture=spec.keep_log, compress_capture=True))
 
 
 def spec_digest(spec: RunSpec) -> str:

@@ -133,6 +133,12 @@ int main(int argc, char **argv)
     sigaction(SIGINT, &sa, NULL);
     sigaction(SIGHUP, &sa, NULL);
 
+    static sim_capture_t capture;
+    if (sim_capture_open(&capture, so.capture, 0, err, sizeof(err)) != 0) {
+        fprintf(stderr, "arm_sil: simulator: %s\n", err);
+        return 1;
+    }
+    so.cfg.capture = &capture;
     arm_can_mem_reset();
     arm_can_mem_set_opening_side(ARM_CAN_MEM_DRIVES);
     static sim_report_t srep;
@@ -152,6 +158,10 @@ int main(int argc, char **argv)
 
     int rc = (int)report.result;
     const int sim_rc = sim_exit_code(&srep);
+    if (sim_capture_close(&capture, so.capture, err, sizeof(err)) != 0) {
+        fprintf(stderr, "arm_sil: %s\n", err);
+        rc = rc ? rc : 1;
+    }
     if (opt.summary_path[0] != '\0' && summary_write(opt.summary_path, &opt, &report, telem, err, sizeof(err)) != 0) {
         fprintf(stderr, "arm_sil: %s\n", err);
         rc = rc ? rc : 1;

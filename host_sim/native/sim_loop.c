@@ -96,6 +96,20 @@ static int32_t fault_bits(const sim_t *s)
 }
 
 /* ---- bus ---------------------------------------------------------------------------------- */
+static void captured(const sim_t *s, unsigned bus, const arm_can_frame_t *f)
+{
+    if (s->cfg->capture != NULL) {
+        sim_capture_frame(s->cfg->capture, (double)s->arm->step_count * s->arm->period, bus, f);
+    }
+}
+
+/* A frame only drives send, from another node on the bus: on the wire, not for the drives. */
+static void foreign(sim_t *s, unsigned bus, const arm_can_frame_t *f)
+{
+    s->rep->rx_foreign_drive++;
+    captured(s, bus, f);
+}
+
 /* TEST HOOK (--debug-lose-bus I@PERIOD): the bus is lost from that period on (nothing sent). */
 static int bus_lost(const sim_t *s, unsigned bus)
 {
@@ -111,6 +125,7 @@ static void send(sim_t *s, unsigned bus, const arm_can_frame_t *f)
     const int64_t c0 = s->cfg->profile ? cpu_ns() : 0;
     if (arm_can_bus_set_send(&s->set, bus, f) == 0) {
         s->rep->frames_tx++;
+        captured(s, bus, f);
     } else {
         s->rep->tx_dropped++;
     }
@@ -126,6 +141,7 @@ static void send_batch(sim_t *s, unsigned bus, const arm_can_frame_t *frames, un
     }
     const int64_t c0 = s->cfg->profile ? cpu_ns() : 0;
     const unsigned sent = arm_can_bus_set_send_many(&s->set, bus, frames, n);
+    for (unsigned i = 0; i < sent; ++i) captured(s, bus, &frames[i]);
     s->rep->frames_tx += sent;
     s->rep->tx_dropped += n - sent;
     if (s->cfg->profile) s->rep->prof_bus_tx_ns += (uint64_t)(cpu_ns() - c0);
@@ -188,7 +204,7 @@ static int recv_frame(sim_t *s, arm_can_frame_t *f, unsigned *bus, double timeou
     while (rc == 0 && spin_ns > 0 && mono_ns() < spin_end) {
         rc = arm_can_bus_set_recv(&s->set, f, bus, 0);
         if (rc == 1 && sim_is_drive_id(f->id)) {
-            s->rep->rx_foreign_drive++;
+            foreign(s, *bus, f);
             rc = 0;
         }
     }
@@ -208,7 +224,7 @@ static int recv_frame(sim_t *s, arm_can_frame_t *f, unsigned *bus, double timeou
             continue;
         }
         if (sim_is_drive_id(f->id)) {
-            s->rep->rx_foreign_drive++;
+            foreign(s, *bus, f);
             continue;
         }
         return 1;
@@ -222,7 +238,7 @@ static int poll_bus(sim_t *s, unsigned bus, arm_can_frame_t *f)
         const int rc = arm_can_bus_recv(&s->set.bus[bus], f, 0);
         if (rc != 1) return 0;
         if (sim_is_drive_id(f->id)) {
-            s->rep->rx_foreign_drive++;
+            foreign(s, bus, f);
             continue;
         }
         return 1;
@@ -573,6 +589,7 @@ static int on_frame(sim_t *s, const arm_can_frame_t *f, unsigned bus)
 {
     sim_report_t *rep = s->rep;
     rep->frames_rx++;
+    captured(s, bus, f);
     const int j = sim_cmd_joint(f->id, s->n);
     if ((f->flags & (ARM_CAN_FLAG_RTR | ARM_CAN_FLAG_ERR | ARM_CAN_FLAG_EXT)) != 0u) {
         rep->rx_bad_frame++;
@@ -741,7 +758,7 @@ int sim_service(sim_t *s)
     unsigned bus = 0;
     while (!s->ended && arm_can_bus_set_recv(&s->set, &f, &bus, 0) == 1) {
         if (sim_is_drive_id(f.id)) {
-            s->rep->rx_foreign_drive++; /* another node's frame: not for the drives */
+            foreign(s, bus, &f);
             continue;
         }
         s->ended = !on_frame(s, &f, bus);

@@ -11,6 +11,7 @@
 #include "arm/can_bus.h"
 #include "sim_arm.h"
 #include "sim_bus_timing.h"
+#include "sim_capture.h"
 #include "sim_servo.h"
 #include "sim_telemetry.h"
 
@@ -33,6 +34,7 @@ typedef struct {
      * where holding a SYNC back is what makes the controller's states late. */
     double reorder_wait_s;
     sim_servo_config_t servo;    /* the drives' sensing and torque path (all zero: ideal drives) */
+    sim_capture_t *capture;      /* every frame received or sent, candump's log format (NULL: none) */
     int lose_bus;                /* TEST HOOK: this bus sends nothing from period lose_bus_from on; -1: off */
     uint64_t lose_bus_from;
 } sim_config_t;

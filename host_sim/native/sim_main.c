@@ -96,6 +96,14 @@ int main(int argc, char **argv)
     sigaction(SIGINT, &sa, NULL);
     sigaction(SIGTERM, &sa, NULL);
     sigaction(SIGHUP, &sa, NULL);
+    static sim_capture_t capture;
+    if (sim_capture_open(&capture, o.capture, o.capture_wall, err, sizeof(err)) != 0) {
+        fprintf(stderr, "arm_sim: %s\n", err);
+        sim_telemetry_close(tel);
+        sim_arm_close(&arm);
+        return 1;
+    }
+    o.cfg.capture = &capture;
     static sim_report_t rep;
     int exit_code = 0;
     if (sim_run(&o.cfg, &arm, tel, &rep, err, sizeof(err)) != 0) {
@@ -104,6 +112,10 @@ int main(int argc, char **argv)
         snprintf(rep.reason, sizeof(rep.reason), "%.390s", err);
     }
     exit_code = sim_exit_code(&rep);
+    if (sim_capture_close(&capture, o.capture, err, sizeof(err)) != 0) {
+        fprintf(stderr, "arm_sim: %s\n", err);
+        exit_code = exit_code ? exit_code : 1;
+    }
     if (o.summary[0] != '\0' && sim_write_summary(o.summary, &o, &arm, &rep, tel, locked, err, sizeof(err)) != 0) {
         fprintf(stderr, "arm_sim: %s\n", err);
         exit_code = exit_code ? exit_code : 1;

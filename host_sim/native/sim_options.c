@@ -27,6 +27,9 @@ static void usage(const char *prog)
            "  --idle-timeout S          silence that faults the drives [5]\n"
            "  --command-timeout-periods N  periods without a command before a drive faults [3]\n"
            "  --summary FILE            JSON summary of the run (written atomically)\n"
+           "  --capture FILE            every frame on the buses, candump's log format (canplayer,\n"
+           "                            python-can's LogReader, cantools decode read it)\n"
+           "  --capture-clock sim|wall  its timestamps: simulated time, or the wall clock [sim]\n"
            "uncertainty (host_sim.uncertainty.UncertaintyConfig; default none):\n"
            "  --seed N --paper-ratio R --paper-knot-s S --mass-error X --inertia-error X\n"
            "  --com-error-m X --viscous B1,..,Bn --coulomb C1,..,Cn\n"
@@ -177,6 +180,14 @@ int sim_options_parse(int argc, char **argv, sim_options_t *o, char *err, unsign
             if (rc == 0) rc = arm_lcm_url_check_route(&u, a, err, errcap);
         } else if (strcmp(a, "--summary") == 0) {
             rc = copy_str(a, v, o->summary, sizeof(o->summary), err, errcap);
+        } else if (strcmp(a, "--capture") == 0) {
+            rc = copy_str(a, v, o->capture, sizeof(o->capture), err, errcap);
+        } else if (strcmp(a, "--capture-clock") == 0) {
+            if (strcmp(v, "sim") != 0 && strcmp(v, "wall") != 0) {
+                snprintf(err, errcap, "--capture-clock: '%s': expected sim or wall", v);
+                rc = -1;
+            }
+            o->capture_wall = strcmp(v, "wall") == 0;
         } else if (strcmp(a, "--boot-timeout") == 0) {
             rc = parse_double(a, v, 0.0, 86400.0, 1, &c->boot_timeout_s, err, errcap);
         } else if (strcmp(a, "--idle-timeout") == 0) {

@@ -10,6 +10,8 @@ typedef struct {
     char keyframe[64];
     char lcm_url[512];
     char summary[1024];
+    char capture[1024];  /* candump log of every frame ("": none) */
+    int capture_wall;    /* its timestamps: the wall clock (realtime runs), else simulated time */
     char bus_args[ARM_CAN_BUS_SET_MAX][ARM_CAN_BUS_SPEC_MAX];
     unsigned n_bus_args;
     int n_viscous, n_coulomb; /* values given (must equal the arm's joints) */
