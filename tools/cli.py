@@ -10,6 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+from gen.atomic_output import OutputError
 from tools.arm import add_arm_arguments
 from tools.outdir import OutDirError, check_out_dir
 from tools.build import PRESETS, TARGETS, BuildError, build
@@ -338,6 +339,9 @@ def main(argv: list[str] | None = None) -> int:
         return 128 + exc.signum
     except BuildError as exc:
         print(exc, file=sys.stderr)
+        return 1
+    except OutputError as exc:  # a full disk or a read-only mount under a command's own output
+        print(f"armctl {ns.command}: {exc}", file=sys.stderr)
         return 1
 
 

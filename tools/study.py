@@ -21,7 +21,8 @@ from tools.arm import (DEFAULT_ARM, ArmChoiceError, ArmRef, add_arm_arguments, a
                        arm_info, build_arm, reference_for)
 from tools import procs
 from tools.code_identity import code_identity
-from tools.hil import HilError, write_json_atomic
+from gen.atomic_output import write_json_atomic
+from tools.hil import HilError
 from tools.outdir import OutDirError, check_out_dir
 from tools.paths import REPO
 from tools.runner import RunSpec, run_all
