@@ -32,6 +32,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from gen import toml_input
 from gen.atomic_output import write_files_atomically
 
 REPO = Path(__file__).resolve().parent.parent
@@ -104,7 +105,7 @@ def load_arm_file(path: Path | None, model: Path | None = None) -> ArmFile:
     if path is None:
         return ArmFile(None, None, model or DEFAULT_MODEL)
     try:
-        doc = tomllib.loads(path.read_text())
+        doc = toml_input.loads(path.read_text())
     except (OSError, UnicodeDecodeError) as exc:
         raise ArmError(f"arm file {path}: cannot read it: {exc}") from exc
     except tomllib.TOMLDecodeError as exc:
@@ -646,7 +647,7 @@ def clip_amplitude(a: float, home: float, r: list[float] | None) -> float:
 def _design(path: Path) -> tuple[dict[str, Any], str, float]:
     try:
         text = path.read_text()
-        doc = tomllib.loads(text)
+        doc = toml_input.loads(text)
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise ArmError(f"design config {path}: {exc}") from exc
     rate = doc.get("arm", {}).get("loop_rate_hz") if isinstance(doc.get("arm"), dict) else None

@@ -89,6 +89,14 @@ def cmd_hil(ns: argparse.Namespace) -> int:
     except (ArmChoiceError, OutDirError) as exc:
         print(f"armctl hil: {exc}", file=sys.stderr)
         return 2
+    if ns.topology is not None:  # the file itself, before the build; its drives against the arm's after it
+        from tools import busload
+
+        try:
+            busload.load_topology(ns.topology, busload.topology_drives(ns.topology))
+        except busload.ConfigError as exc:
+            print(f"armctl hil: --topology: {exc}", file=sys.stderr)
+            return 2
     if ns.can_port is not None and not 1024 <= ns.can_port <= 65532:
         print(f"armctl hil: --can-port: must be in [1024, 65532], got {ns.can_port}", file=sys.stderr)
         return 2

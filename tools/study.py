@@ -9,13 +9,13 @@ import hashlib
 import json
 import os
 import sys
-import tomllib
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from tqdm import tqdm
 
+from gen import toml_input
 from gen.arm import DEFAULT_DESIGN
 from tools.arm import (DEFAULT_ARM, ArmChoiceError, ArmRef, add_arm_arguments, arm_build_dir, arm_from_args,
                        arm_info, build_arm, reference_for)
@@ -85,7 +85,7 @@ def tuning_key(cfg: StudyConfig, info: dict[str, Any], setup: TuneSetup, scenari
     the tuning seeds, trajectory, length and budget, the hold."""
     t = {k: v for k, v in cfg.raw["tuning"].items() if k not in ("space", "file")}
     # the design's values, not its text: its header comment names the checkout's path
-    doc = {"arm": info["model_hash"], "design": tomllib.loads(setup.base_design),
+    doc = {"arm": info["model_hash"], "design": toml_input.loads(setup.base_design),
            "scenario": cfg.scenarios[scenario].as_dict(), "space": cfg.spaces[method].as_dict(), "tuning": t,
            "trajectory": setup.trajectory_args, "hold_s": cfg.hold_s}
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:16]

@@ -116,3 +116,32 @@ def test_a_read_only_out_is_refused_before_any_work(read_only_disk: Path) -> Non
         r = armctl(*cmd, "--out", str(read_only_disk / "o"))
         one_line_error(r, 2, "--out", "Read-only file system")
     assert sorted(p.name for p in read_only_disk.iterdir()) == ["old.json"]
+
+
+# ---- TOML nested without end ----------------------------------------------------------------
+def test_toml_nesting_is_bounded_at_the_stated_limit() -> None:
+    from gen.toml_input import MAX_NESTING, TomlNestingError, loads
+
+    assert loads("x = " + "[" * MAX_NESTING + "]" * MAX_NESTING)["x"] is not None
+    for text in ("x = " + "[" * (MAX_NESTING + 1) + "]" * (MAX_NESTING + 1),  # parses, but too deep
+                 "x = " + "[" * 3000 + "]" * 3000,  # RecursionError inside tomllib
+                 "a" + ".a" * (MAX_NESTING + 1) + " = 1",  # dotted keys: tables without recursion
+                 "x = " + "{a = " * 3000 + "1" + "}" * 3000):
+        with pytest.raises(TomlNestingError, match=f"nested deeper than {MAX_NESTING} levels"):
+            loads(text)
+
+
+DEEP = "x = " + "[" * 3000 + "]" * 3000 + "\n"
+
+
+@pytest.mark.parametrize("args", [
+    ["hil", "--arm", "{f}"], ["hil", "--design", "{f}"], ["hil", "--topology", "{f}"],
+    ["study", "--config", "{f}"], ["synth", "--config", "{f}", "--out", "{d}/o"],
+    ["busload", "--topology", "{f}"],
+])
+def test_a_3000_deep_toml_is_one_line_naming_the_file(tmp_path: Path, args: list[str]) -> None:
+    f = tmp_path / "deep.toml"
+    f.write_text(('model = "arm.xml"\n' if "--arm" in args else "") + DEEP)
+    r = armctl(*[a.format(f=f, d=tmp_path) for a in args])
+    one_line_error(r, 2, str(f), "nested deeper than 32 levels")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["deep.toml"]
