@@ -145,3 +145,90 @@ def test_a_3000_deep_toml_is_one_line_naming_the_file(tmp_path: Path, args: list
     r = armctl(*[a.format(f=f, d=tmp_path) for a in args])
     one_line_error(r, 2, str(f), "nested deeper than 32 levels")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["deep.toml"]
+
+
+# ---- hostile arm models ---------------------------------------------------------------------
+def _chain(n: int = 3, inner: str = "", joint0: str = 'range="-2 2"', l1_pos: str = "0 0 0.2", model: str = "chain",
+           assets: str = "") -> str:
+    """A serial chain of hinge links with masses and motors (tests/python/test_arm_import.py's
+    shape), with one thing swapped in by each case."""
+    body = inner
+    for i in reversed(range(n)):
+        rng = joint0 if i == 0 else 'range="-2 2"'
+        pos = l1_pos if i == 1 else "0 0 0.2"
+        body = (f'<body name="l{i}" pos="{pos}"><joint name="j{i}" axis="0 0 1" {rng}/>'
+                f'<inertial pos="0 0 0.1" mass="1" diaginertia="0.01 0.01 0.01"/>{body}</body>')
+    acts = "".join(f'<motor joint="j{i}" ctrlrange="-50 50"/>' for i in range(n))
+    return (f'<mujoco model="{model}"><compiler angle="radian" autolimits="true"/>{assets}<worldbody>{body}'
+            f'</worldbody><actuator>{acts}</actuator></mujoco>')
+
+
+def _stl(faces: int) -> bytes:
+    return bytes(80) + faces.to_bytes(4, "little") + (bytes(12) + bytes.fromhex("0000803f" "00" * 8) * 3
+                                                      + bytes(2)) * faces
+
+
+FIXED_484 = "".join(f'<body name="f{i}"><inertial pos="0 0 0" mass="0.1" diaginertia="0.01 0.01 0.01"/>'
+                    for i in range(484)) + "</body>" * 484
+
+HOSTILE_MODELS = {
+    "swapped-range": (lambda d: _chain(joint0='range="3.1416 -3.1416"'),
+                      ["joint 'j0': range [3.1416, -3.1416]", "range[0] < range[1]"]),
+    "unbounded-range": (lambda d: _chain(joint0='range="1e308 -1e308"'), ["joint 'j0': range [1e+308, -1e+308]"]),
+    "nan-body-pos": (lambda d: _chain(l1_pos="nan 0 0.2"), ["body 'l1': pos=\"nan 0 0.2\" is not finite"]),
+    "mass-over-float32": (lambda d: _chain().replace('mass="1"', 'mass="1e39"', 1),
+                          ["body 'l0': mass: 1e+39 is not a finite float32"]),
+    "non-utf8-joint-name": (lambda d: _chain().replace('name="j1"', 'name="j\xe9"').encode("latin-1"),
+                            ['<joint name="j\\xe9', "not UTF-8"]),
+    "non-utf8-model-name": (lambda d: _chain(model="ch\xe9in").encode("latin-1"), ['model="ch\\xe9', "not UTF-8"]),
+    "484-fixed-bodies": (lambda d: _chain(6, inner=FIXED_484), ["nested 257 elements deep, more than 256"]),
+    "mesh-over-face-limit": (lambda d: (d / "hull.stl").write_bytes(_stl(200_001)) and _chain(
+        inner='<geom type="mesh" mesh="hull"/>', assets='<asset><mesh name="hull" file="hull.stl"/></asset>'),
+        ["MuJoCo cannot take", "number of faces should be between 1 and 200000", "'hull'"]),
+}
+
+
+@pytest.mark.parametrize("case", sorted(HOSTILE_MODELS))
+def test_a_hostile_model_is_one_line_naming_the_element_and_nothing_is_built(tmp_path: Path, case: str) -> None:
+    from tools.arm import ArmRef
+    from tools.paths import BUILD
+
+    make, named = HOSTILE_MODELS[case]
+    text = make(tmp_path)
+    model = tmp_path / "arm.xml"
+    model.write_bytes(text if isinstance(text, bytes) else text.encode())
+    r = armctl("hil", "--model", str(model), "--duration", "0.3", "--out", str(tmp_path / "out"))
+    one_line_error(r, 2, str(model), *named)
+    assert not (BUILD / "arms" / ArmRef(model.resolve()).key()).exists()
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_torque_limit_beyond_float32_in_the_arm_file_is_refused_up_front(tmp_path: Path) -> None:
+    (tmp_path / "arm.xml").write_text(_chain())
+    arm = tmp_path / "arm.toml"
+    arm.write_text('model = "arm.xml"\ntorque_limits = { j1 = 1e308 }\n')
+    r = armctl("build", "--arm", str(arm))
+    one_line_error(r, 2, f"arm file {arm}: torque_limits.j1: 1e+308 is not a finite float32")
+
+
+def test_fixed_body_chains_are_walked_without_recursion() -> None:
+    """240 fixed bodies below six hinges: inside the limit, and the chain is found by a loop
+    (the old recursive walk hit Python's recursion limit at a few hundred)."""
+    import sys
+
+    from gen.arm import ArmFile, DEFAULT_DESIGN, prepare
+
+    inner = "".join(f'<body name="f{i}"><inertial pos="0 0 0" mass="0.1" diaginertia="0.01 0.01 0.01"/>'
+                    for i in range(240)) + "</body>" * 240
+    old = sys.getrecursionlimit()
+    sys.setrecursionlimit(300)  # below the chain's depth: any recursion over the bodies would fail
+    try:
+        import tempfile
+
+        with tempfile.TemporaryDirectory() as d:
+            model = Path(d) / "arm.xml"
+            model.write_text(_chain(6, inner=inner))
+            info = prepare(ArmFile(None, None, model), DEFAULT_DESIGN).info
+    finally:
+        sys.setrecursionlimit(old)
+    assert info["n_joints"] == 6
