@@ -34,7 +34,7 @@ import mujoco
 import numpy as np
 
 from gen import toml_input
-from gen.atomic_output import write_files_atomically
+from gen.atomic_output import OutputError, write_files_atomically
 
 REPO = Path(__file__).resolve().parent.parent
 DEFAULT_MODEL = REPO / "host_sim" / "models" / "ur5e_arm.xml"
@@ -863,7 +863,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"gen.arm: {exc}", file=sys.stderr)
         return 2
     files = {"arm.xml": prep.xml, "arm.json": json.dumps(prep.info, indent=1) + "\n", "design.toml": prep.design_text}
-    write_files_atomically(ns.out, files)
+    try:
+        write_files_atomically(ns.out, files)
+    except OutputError as exc:
+        print(f"gen.arm: {exc}", file=sys.stderr)
+        return 1
     if ns.depfile is not None:
         deps = [str(af.model.resolve()), str((af.design or ns.design).resolve())]
         if af.path:
