@@ -16,15 +16,16 @@ from typing import Any
 class OutputError(OSError):
     """An output could not be written; str() is one line naming the path and the reason.
 
-    An OSError, so the commands that already turn an OSError into a one-line error keep doing so."""
-
-    def __init__(self, path: Path, exc: OSError) -> None:
-        reason = exc.strerror or str(exc) or type(exc).__name__
-        super().__init__(exc.errno, f"cannot write {path}: {reason}")
-        self.path = path
+    An OSError, so the commands that already turn an OSError into a one-line error keep doing so;
+    built from (errno, message, path) only, so it pickles (a study's runs may be on workers)."""
 
     def __str__(self) -> str:
         return str(self.strerror)
+
+
+def _failed(path: Path, exc: OSError) -> OutputError:
+    reason = exc.strerror or str(exc) or type(exc).__name__
+    return OutputError(exc.errno, f"cannot write {path}: {reason}", str(path))
 
 
 def _write_synced(path: Path, data: bytes) -> None:
@@ -47,7 +48,7 @@ def write_bytes_atomic(path: Path, data: bytes) -> None:
     except OSError as exc:
         if tmp is not None:
             tmp.unlink(missing_ok=True)
-        raise OutputError(path, exc) from None
+        raise _failed(path, exc) from None
 
 
 def write_text_atomic(path: Path, text: str) -> None:
@@ -87,7 +88,7 @@ def write_files_atomically(out_dir: Path, files: dict[str, str]) -> None:
                 d.rmdir()
             except OSError:
                 break
-        raise OutputError(failed, exc) from None
+        raise _failed(failed, exc) from None
     finally:
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)

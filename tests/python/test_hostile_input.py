@@ -5,6 +5,7 @@ build folder."""
 
 from __future__ import annotations
 
+import pickle
 import subprocess
 from collections.abc import Iterator
 from pathlib import Path
@@ -81,6 +82,7 @@ def test_the_writer_on_a_full_disk_names_the_path_and_leaves_no_temporary_file(f
     with pytest.raises(OutputError) as e:
         write_json_atomic(full_disk / "run.json", {"x": "y" * 100_000})
     assert str(e.value) == f"cannot write {full_disk / 'run.json'}: No space left on device"
+    assert str(pickle.loads(pickle.dumps(e.value))) == str(e.value)  # it crosses to and from a study's workers
     with pytest.raises(OutputError) as e:
         write_files_atomically(full_disk / "gen", {"a.h": "int x;\n" * 10_000, "manifest.json": "{}\n"})
     assert str(e.value) == f"cannot write {full_disk / 'gen' / 'a.h'}: No space left on device"
