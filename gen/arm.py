@@ -25,6 +25,7 @@ import math
 import re
 import sys
 import tomllib
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -32,7 +33,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from gen.atomic_output import write_files_atomically
+from gen import toml_input
+from gen.atomic_output import OutputError, write_files_atomically
 
 REPO = Path(__file__).resolve().parent.parent
 DEFAULT_MODEL = REPO / "host_sim" / "models" / "ur5e_arm.xml"
@@ -44,6 +46,8 @@ LIGHT_LINK_KG = 1e-6       # a link lighter than this (its children may still be
 RANGE_MARGIN = 0.05        # rad: the reference and the home pose stay this far inside joint ranges
 BUS_BUDGET = 0.70          # the highest bus load the wiring may reach (armctl busload's default)
 MAX_JOINTS = 16            # the firmware's bound (arm/robot_model.h); the DBC's drive slots bound it too
+MAX_NESTING = 256          # XML elements, and bodies below the world: deeper is no arm, and walks would recurse
+FLOAT32_MAX = float(np.finfo(np.float32).max)  # the firmware computes in float32: every number it takes fits
 
 ARM_FILE_FIELDS = {"name", "model", "joints", "locked", "home", "keyframe", "torque_limits", "buses",
                    "topology", "design", "contacts", "timestep"}
@@ -82,7 +86,14 @@ def fnv1a64(data: bytes) -> int:
 def _number(v: Any, where: str) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
         raise ArmError(f"{where}: expected a number, got {v!r}")
+    _float32(float(v), where)
     return float(v)
+
+
+def _float32(v: float, where: str) -> None:
+    if not (math.isfinite(v) and abs(v) <= FLOAT32_MAX):
+        raise ArmError(f"{where}: {v:g} is not a finite float32 (|x| <= {FLOAT32_MAX:.3g}), which the firmware "
+                       "computes in")
 
 
 def _names(v: Any, where: str) -> list[str]:
@@ -104,7 +115,7 @@ def load_arm_file(path: Path | None, model: Path | None = None) -> ArmFile:
     if path is None:
         return ArmFile(None, None, model or DEFAULT_MODEL)
     try:
-        doc = tomllib.loads(path.read_text())
+        doc = toml_input.loads(path.read_text())
     except (OSError, UnicodeDecodeError) as exc:
         raise ArmError(f"arm file {path}: cannot read it: {exc}") from exc
     except tomllib.TOMLDecodeError as exc:
@@ -179,10 +190,121 @@ def _load_spec(path: Path) -> mujoco.MjSpec:
         raise ArmError(f"model {path}: no such file")
     if path.suffix.lower() not in (".xml", ".urdf", ".mjcf"):
         raise ArmError(f"model {path}: expected an MJCF (.xml) or URDF (.urdf) file")
+    _check_raw(path, path, set())
     try:
-        return mujoco.MjSpec.from_file(str(path))
+        spec = mujoco.MjSpec.from_file(str(path))
     except Exception as exc:  # noqa: BLE001 - MuJoCo's parser raises ValueError with its message
-        raise ArmError(f"model {path}: MuJoCo cannot read it: {exc}") from exc
+        raise ArmError(f"model {path}: MuJoCo cannot read it: {_one_line(exc)}") from exc
+    _check_ranges(spec, path)
+    return spec
+
+
+def _one_line(exc: BaseException) -> str:
+    return "; ".join(ln.strip() for ln in str(exc).splitlines() if ln.strip())
+
+
+# Attributes that hold names or files, never numbers (a joint may be called "inf").
+_TEXT_ATTRS = {"name", "class", "childclass", "file", "filename", "prefix", "model", "joint", "joint1", "joint2",
+               "body", "body1", "body2", "site", "site1", "site2", "tendon", "tendon1", "tendon2", "actuator",
+               "target", "mesh", "material", "texture", "hfield", "geom", "geom1", "geom2", "objname", "refname",
+               "link", "plugin", "instance", "key", "meshdir", "texturedir", "assetdir"}
+
+
+def _check_raw(path: Path, top: Path, seen: set[Path]) -> None:
+    """What MuJoCo would take without a word, checked in the file itself (and its includes):
+    bytes that are not UTF-8 (MuJoCo hands them on as names, and reading one back fails), NaN
+    and infinite numbers (MuJoCo puts a default in their place), elements nested without end."""
+    seen.add(path)
+    data = path.read_bytes()
+    try:
+        data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        start = max(data.rfind(b"<", 0, exc.start), data.rfind(b"\n", 0, exc.start) + 1)
+        snippet = data[start:exc.start + 1].decode("utf-8", "backslashreplace")[:80]
+        raise ArmError(f"model {path}: line {line}: byte 0x{data[exc.start]:02x} in {snippet} is not UTF-8: "
+                       "MuJoCo reads names as UTF-8; save the file as UTF-8") from None
+    where: list[str] = []  # the element path: the nearest named element names what is wrong
+    try:
+        for event, el in ET.iterparse(str(path), events=("start", "end")):
+            if event == "end":
+                where.pop()
+                el.clear()
+                continue
+            label = f"{el.tag} '{el.get('name')}'" if el.get("name") else f"<{el.tag}>"
+            named = next((w for w in reversed(where) if not w.startswith("<")), "")
+            what = label if not label.startswith("<") or not named else f"{named} {label}"
+            where.append(label)
+            if len(where) > MAX_NESTING:
+                raise ArmError(f"model {path}: {what} is nested {len(where)} elements deep, more than "
+                               f"{MAX_NESTING}: no arm needs that many levels")
+            for attr, value in el.attrib.items():
+                if attr in _TEXT_ATTRS:
+                    continue
+                try:
+                    nums = [float(t) for t in value.split()]
+                except ValueError:
+                    continue
+                if not all(math.isfinite(x) for x in nums):
+                    raise ArmError(f"model {path}: {what}: {attr}=\"{value}\" is not finite: MuJoCo would put a "
+                                   "default in its place; give a number")
+            if el.tag == "include" and el.get("file"):
+                inc = (top.parent / el.get("file", "")).resolve()
+                if inc.is_file() and inc not in seen:
+                    _check_raw(inc, top, seen)
+    except ET.ParseError:
+        return  # not XML: MuJoCo's own parser names the error
+
+
+def _check_ranges(spec: mujoco.MjSpec, path: Path) -> None:
+    """A range given upside down or unbounded is a typo, not a choice: with autolimits MuJoCo
+    makes such a joint unlimited without a word."""
+    for i, j in enumerate(spec.joints):
+        lo, hi = (float(x) for x in j.range)
+        if lo == 0.0 and hi == 0.0:
+            continue  # no range given
+        name = j.name or f"joint {i}"
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            raise ArmError(f"model {path}: joint '{name}': range [{lo:g}, {hi:g}] is not a finite interval with "
+                           "range[0] < range[1] (swapped?): give the lower limit first")
+
+
+def _missing_asset_files(spec: mujoco.MjSpec, path: Path) -> list[str]:
+    out = []
+    for assets, sub in ((spec.meshes, spec.meshdir), (spec.textures, spec.texturedir), (spec.hfields, "")):
+        for a in assets:
+            if a.file and not (path.parent / (sub or "") / a.file).is_file():
+                out.append(a.file)
+    return out
+
+
+def _check_depth(m: mujoco.MjModel, path: Path) -> None:
+    depth = [0] * m.nbody
+    for b in range(1, m.nbody):  # a parent's id is below its children's: one pass, no recursion
+        depth[b] = depth[int(m.body_parentid[b])] + 1
+        if depth[b] > MAX_NESTING:
+            name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, b) or f"body{b}"
+            raise ArmError(f"model {path}: body '{name}' hangs {depth[b]} bodies below the world, more than "
+                           f"{MAX_NESTING}: no arm needs that many levels")
+
+
+def _check_float32(m: mujoco.MjModel, path: Path, names: list[str], limits: list[tuple[float, str]],
+                   home: list[float]) -> None:
+    """Every number the firmware's model takes (gen/robot_model.py) fits in float32."""
+    for b in range(1, m.nbody):
+        body = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, b) or f"body{b}"
+        for field_, vals in (("pos", m.body_pos[b]), ("quat", m.body_quat[b]), ("mass", [m.body_mass[b]]),
+                             ("inertia", m.body_inertia[b]), ("ipos", m.body_ipos[b]), ("iquat", m.body_iquat[b])):
+            for v in vals:
+                _float32(float(v), f"model {path}: body '{body}': {field_}")
+    for i, name in enumerate(names):
+        where = f"model {path}: joint '{name}'"
+        for field_, vals in (("pos", m.jnt_pos[i]), ("axis", m.jnt_axis[i]), ("armature", [m.dof_armature[i]]),
+                             ("damping", [m.dof_damping[i]]), ("frictionloss", [m.dof_frictionloss[i]]),
+                             ("range", m.jnt_range[i] if m.jnt_limited[i] else []), ("home", [home[i]])):
+            for v in vals:
+                _float32(float(v), f"{where}: {field_}")
+        _float32(limits[i][0], f"{where}: torque limit (from {limits[i][1]})")
 
 
 def _compile(spec: mujoco.MjSpec, path: Path, what: str) -> mujoco.MjModel:
@@ -194,7 +316,7 @@ def _compile(spec: mujoco.MjSpec, path: Path, what: str) -> mujoco.MjModel:
         if "mass and inertia" in msg:
             hint = (": a moving body needs mass and inertia (give it an <inertial> or, in URDF, an "
                     "<inertial> element)")
-        raise ArmError(f"model {path}: {what}: {msg.strip()}{hint}") from exc
+        raise ArmError(f"model {path}: {what}: {_one_line(exc)}{hint}") from exc
 
 
 def _strip_meshes(spec: mujoco.MjSpec) -> int:
@@ -235,13 +357,15 @@ def _chain_default(m: mujoco.MjModel) -> list[int]:
     for b in range(1, m.nbody):
         children.setdefault(int(m.body_parentid[b]), []).append(b)
 
-    def hinges_below(b: int) -> bool:
-        return b in hinge_bodies or any(hinges_below(c) for c in children.get(b, []))
+    has_hinge = [b in hinge_bodies for b in range(m.nbody)]  # in its subtree
+    for b in range(m.nbody - 1, 0, -1):  # children come after their parent: no recursion
+        if has_hinge[b]:
+            has_hinge[int(m.body_parentid[b])] = True
 
     chain: list[int] = []
     b = 0
     while True:
-        nxt = [c for c in children.get(b, []) if hinges_below(c)]
+        nxt = [c for c in children.get(b, []) if has_hinge[c]]
         if len(nxt) != 1:
             return chain
         b = nxt[0]
@@ -322,17 +446,22 @@ def prepare(af: ArmFile, design: Path) -> Prepared:  # noqa: C901 - one pass ove
     try:
         spec.compile()
     except Exception as exc:  # noqa: BLE001
-        if "file" not in str(exc).lower() and "mesh" not in str(exc).lower():
-            raise ArmError(f"model {path}: MuJoCo cannot compile it: {str(exc).strip()}") from exc
+        msg = _one_line(exc)
+        if "file" not in msg.lower() and "mesh" not in msg.lower():
+            raise ArmError(f"model {path}: MuJoCo cannot compile it: {msg}") from exc
+        missing = _missing_asset_files(spec, path)
+        if not missing:  # the files are there: MuJoCo refuses one of them, and says which and why
+            raise ArmError(f"model {path}: an asset MuJoCo cannot take (over its limits, or malformed): {msg}") from exc
         if af.contacts:
-            raise ArmError(f"model {path}: {str(exc).strip()}; contacts = true needs the collision meshes") from exc
+            raise ArmError(f"model {path}: {msg}; contacts = true needs the collision meshes") from exc
         n = _strip_meshes(spec)
-        warnings.append(f"mesh files not found ({str(exc).strip()[:120]}): {n} mesh geoms dropped; the dynamics "
+        warnings.append(f"mesh files not found ({msg[:120]}): {n} mesh geoms dropped; the dynamics "
                         "come from the bodies' inertials")
     for i, b in enumerate(spec.bodies):
         if i > 0 and not b.name:
             b.name = f"body{i}"
     m0 = _compile(spec, path, "compiling it")
+    _check_depth(m0, path)
 
     # ---- which joints ----
     free = [_joint_name(m0, j) for j in range(m0.njnt) if m0.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
@@ -530,6 +659,7 @@ def prepare(af: ArmFile, design: Path) -> Prepared:  # noqa: C901 - one pass ove
     spec.compiler.fusestatic = True
     spec.modelname = arm_name
     m1 = _compile(spec, path, "preparing it")
+    _check_float32(m1, path, names, limits, home)
     spec.add_key(name="home", qpos=home, ctrl=[0.0] * n)
     xml = spec.to_xml()
     try:
@@ -646,7 +776,7 @@ def clip_amplitude(a: float, home: float, r: list[float] | None) -> float:
 def _design(path: Path) -> tuple[dict[str, Any], str, float]:
     try:
         text = path.read_text()
-        doc = tomllib.loads(text)
+        doc = toml_input.loads(text)
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise ArmError(f"design config {path}: {exc}") from exc
     rate = doc.get("arm", {}).get("loop_rate_hz") if isinstance(doc.get("arm"), dict) else None
@@ -733,7 +863,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"gen.arm: {exc}", file=sys.stderr)
         return 2
     files = {"arm.xml": prep.xml, "arm.json": json.dumps(prep.info, indent=1) + "\n", "design.toml": prep.design_text}
-    write_files_atomically(ns.out, files)
+    try:
+        write_files_atomically(ns.out, files)
+    except OutputError as exc:
+        print(f"gen.arm: {exc}", file=sys.stderr)
+        return 1
     if ns.depfile is not None:
         deps = [str(af.model.resolve()), str((af.design or ns.design).resolve())]
         if af.path:

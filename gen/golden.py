@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gen.atomic_output import write_files_atomically
+from gen.atomic_output import write_bytes_atomic, write_files_atomically
 from gen.design_headers import parse
 
 STRUCTURES = ("decoupled", "paper", "none")
@@ -141,10 +141,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--steps", type=int, default=10_000)
     ns = p.parse_args(argv)
     data = golden(ns.design, ns.steps)
-    ns.out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = ns.out.with_suffix(".tmp")
-    tmp.write_bytes(data)
-    tmp.replace(ns.out)
+    write_bytes_atomic(ns.out, data)
     return 0
 
 

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import re
 import subprocess
 import sys
@@ -24,6 +23,7 @@ from typing import Any
 
 from tqdm import tqdm
 
+from gen.atomic_output import write_json_atomic
 from tools.build import build
 from tools.paths import REPO, build_dir
 
@@ -214,10 +214,7 @@ def sim_table(r: dict[str, Any]) -> str:
 
 
 def _write_json(out: Path, result: dict[str, Any]) -> None:
-    tmp = out.with_name(f".{out.name}.tmp.{os.getpid()}")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp.write_text(json.dumps(result, indent=2) + "\n")
-    tmp.replace(out)
+    write_json_atomic(out, result)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -16,6 +16,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+from gen.atomic_output import write_json_atomic
 from tools.paths import REPO, build_dir
 
 PRESETS = ("debug", "release")
@@ -135,9 +136,7 @@ def ensure_configured(preset: str, bdir: Path, quiet: bool = True, cache: dict[s
     if not quiet:
         tail = [ln for ln in r.stdout.splitlines() if ln.startswith("-- Build files")]
         print("\n".join(tail))
-    tmp = stamp.with_name(f"{STAMP}.tmp.{os.getpid()}")
-    tmp.write_text(json.dumps(want, indent=2) + "\n")
-    os.replace(tmp, stamp)
+    write_json_atomic(stamp, want)
 
 
 def build(preset: str = "release", quiet: bool = True, bdir: Path | None = None,

@@ -184,8 +184,10 @@ def load_topology(path: Path = DEFAULT_TOPOLOGY, n_drives: int = 6) -> list[Bus]
     Errors name the file, the bus and the field."""
     import tomllib
 
+    from gen import toml_input
+
     try:
-        doc = tomllib.loads(Path(path).read_text())
+        doc = toml_input.loads(Path(path).read_text())
     except (OSError, tomllib.TOMLDecodeError) as exc:
         raise ConfigError(f"{path}: {exc}") from exc
     unknown = set(doc) - {"bus"}
@@ -251,8 +253,10 @@ def topology_drives(path: Path) -> int:
     load_topology then says what is wrong)."""
     import tomllib
 
+    from gen import toml_input
+
     try:
-        tables = tomllib.loads(Path(path).read_text()).get("bus", [])
+        tables = toml_input.loads(Path(path).read_text()).get("bus", [])
         return max((d for t in tables if isinstance(t, dict) for d in t.get("drives", []) if isinstance(d, int)),
                    default=0)
     except (OSError, tomllib.TOMLDecodeError, TypeError, AttributeError):

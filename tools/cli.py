@@ -10,6 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+from gen.atomic_output import OutputError
 from tools.arm import add_arm_arguments
 from tools.outdir import OutDirError, check_out_dir
 from tools.build import PRESETS, TARGETS, BuildError, build
@@ -87,6 +88,14 @@ def cmd_hil(ns: argparse.Namespace) -> int:
     except (ArmChoiceError, OutDirError) as exc:
         print(f"armctl hil: {exc}", file=sys.stderr)
         return 2
+    if ns.topology is not None:  # the file itself, before the build; its drives against the arm's after it
+        from tools import busload
+
+        try:
+            busload.load_topology(ns.topology, busload.topology_drives(ns.topology))
+        except busload.ConfigError as exc:
+            print(f"armctl hil: --topology: {exc}", file=sys.stderr)
+            return 2
     if ns.can_port is not None and not 1024 <= ns.can_port <= 65532:
         print(f"armctl hil: --can-port: must be in [1024, 65532], got {ns.can_port}", file=sys.stderr)
         return 2
@@ -349,6 +358,9 @@ def main(argv: list[str] | None = None) -> int:
         return 128 + exc.signum
     except BuildError as exc:
         print(exc, file=sys.stderr)
+        return 1
+    except OutputError as exc:  # a full disk or a read-only mount under a command's own output
+        print(f"armctl {ns.command}: {exc}", file=sys.stderr)
         return 1
 
 

@@ -11,8 +11,9 @@ else (the loop rate, the design rules, the fixed-point ranges) is the base confi
 from __future__ import annotations
 
 import json
-import tomllib
 from typing import Any
+
+from gen import toml_input
 
 
 class KnobError(ValueError):
@@ -20,7 +21,7 @@ class KnobError(ValueError):
 
 
 def design_doc(base_text: str, knobs: dict[str, Any], with_estimator: bool = True) -> dict[str, Any]:
-    doc = tomllib.loads(base_text)
+    doc = toml_input.loads(base_text)
     form = knobs.get("form", "single")
     e1, e2, d12 = float(knobs["E1"]), float(knobs["E2"]), float(knobs["D12"])
     if form == "single":

@@ -27,6 +27,7 @@ from typing import Any
 
 import can
 
+from gen.atomic_output import write_json_atomic
 from host_sim.canbus import open_bus
 from tools.hil import HilOptions, run_hil
 from tools.paths import REPO
@@ -280,9 +281,7 @@ def run(ns: argparse.Namespace) -> int:
             row["retried_after"] = first
         rows.append(row)
     doc = {"rows": rows}
-    tmp = ns.out / f".faults.json.tmp.{os.getpid()}"
-    tmp.write_text(json.dumps(doc, indent=2) + "\n")
-    tmp.replace(ns.out / "faults.json")
+    write_json_atomic(ns.out / "faults.json", doc)
     print(table(rows))
     print(f"results: {ns.out / 'faults.json'}")
     # The matrix's promise: every fault that must stop the arm stopped it, under a named verdict.

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 
+from gen.atomic_output import OutputError, write_json_atomic
 from host_sim.drive_model import DriveModel
 from host_sim.launch import sim_argv
 from tools import busload
@@ -157,13 +158,6 @@ def _load_json(path: Path) -> dict[str, Any]:
         return json.loads(path.read_text())
     except (OSError, ValueError):
         return {}
-
-
-def write_json_atomic(path: Path, data: dict[str, Any]) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp.{os.getpid()}")
-    tmp.write_text(json.dumps(data, indent=2) + "\n")
-    os.replace(tmp, path)
 
 
 def check_loopback_route(group: str) -> None:
@@ -439,7 +433,10 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
     url = "" if sil else f"udpm://239.255.76.67:{lcm_port}?ttl=0&recv_buf_size=8388608"
     log_path = opt.out / "telemetry.lcmlog"
     if opt.uncertainty is not None:
-        write_json_atomic(opt.out / "uncertainty.json", opt.uncertainty)  # the record of what ran
+        try:
+            write_json_atomic(opt.out / "uncertainty.json", opt.uncertainty)  # the record of what ran
+        except OutputError as exc:
+            raise HilError(str(exc)) from None
     sim_args = sim_argv(sim_exe, buses, lcm_url=url, summary=opt.out / "sim_summary.json",
                         uncertainty=opt.uncertainty, timing=bus_timing_mode(opt.mode) if opt.bus_timing else "off",
                         phys=topology, model=prepared_model(bdir), drives=opt.drives,
@@ -491,5 +488,8 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
         "capture": str(_compress(opt.out / CAPTURE_FILE) if opt.compress_capture else opt.out / CAPTURE_FILE)
                    if opt.capture and (opt.out / CAPTURE_FILE).exists() else None},
         opt.bounds)
-    write_json_atomic(opt.out / "run.json", run)
+    try:
+        write_json_atomic(opt.out / "run.json", run)
+    except OutputError as exc:
+        raise HilError(str(exc)) from None
     return run

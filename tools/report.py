@@ -5,7 +5,6 @@ seed of the first scenario), and summary.txt (the table the CLI prints)."""
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Any
 
@@ -15,6 +14,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from gen.atomic_output import write_text_atomic  # noqa: E402
 from tools.telemetry_log import read_log  # noqa: E402
 
 # Kim & Kim 2024, Tables 1-3 (Table 1 from their simulation, Tables 2-3 from their experiment).
@@ -337,8 +337,8 @@ def write_report(out: Path, study: dict[str, Any]) -> None:
     md += [f"## Time series: the first seed of `{next(iter(study['scenarios']))}`", ""] + \
           [f"![{f}]({f})" for f in figs_time] + [""]
     md += ["## Summary", "", "```", summary_table(study), "```", ""]
-    _write(out / "report.md", "\n".join(md))
-    _write(out / "summary.txt", summary_table(study) + "\n")
+    write_text_atomic(out / "report.md", "\n".join(md))
+    write_text_atomic(out / "summary.txt", summary_table(study) + "\n")
 
 
 def summary_table(study: dict[str, Any]) -> str:
@@ -364,7 +364,4 @@ def summary_table(study: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def _write(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp.{os.getpid()}")
-    tmp.write_text(text)
-    os.replace(tmp, path)
+

@@ -26,7 +26,8 @@ from host_sim.drive_model import DriveModel
 from tools import procs
 from tools.arm import HIL_TARGETS, ArmRef, arm_build_dir, build_arm
 from tools.paths import BUILD
-from tools.hil import HilError, HilOptions, run_hil, write_json_atomic
+from gen.atomic_output import write_json_atomic, write_text_atomic
+from tools.hil import HilError, HilOptions, run_hil
 from tools.slots import Slot, acquire_slot
 
 
@@ -86,9 +87,7 @@ def slot_arm(base: ArmRef, slot: int, design_text: str) -> ArmRef:
     path = BUILD / "slot-designs" / arm_key / f"slot-{slot}.toml"
     path.parent.mkdir(parents=True, exist_ok=True)
     if not path.exists() or path.read_text() != design_text:
-        tmp = path.with_name(f".{path.name}.tmp.{os.getpid()}")
-        tmp.write_text(design_text)
-        os.replace(tmp, path)
+        write_text_atomic(path, design_text)
     return ArmRef(base.model, base.arm_file, path)
 
 

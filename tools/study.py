@@ -9,19 +9,20 @@ import hashlib
 import json
 import os
 import sys
-import tomllib
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from tqdm import tqdm
 
+from gen import toml_input
 from gen.arm import DEFAULT_DESIGN
 from tools.arm import (DEFAULT_ARM, ArmChoiceError, ArmRef, add_arm_arguments, arm_build_dir, arm_from_args,
                        arm_info, build_arm, reference_for)
 from tools import procs
 from tools.code_identity import code_identity
-from tools.hil import SIL, HilError, write_json_atomic
+from gen.atomic_output import write_json_atomic
+from tools.hil import SIL, HilError
 from tools.outdir import OutDirError, check_out_dir
 from tools.paths import REPO
 from tools.runner import RunSpec, run_all
@@ -123,7 +124,7 @@ def tuning_key(cfg: StudyConfig, info: dict[str, Any], setup: TuneSetup, scenari
     the tuning seeds, trajectory, length and budget, the hold."""
     t = {k: v for k, v in cfg.raw["tuning"].items() if k not in ("space", "file")}
     # the design's values, not its text: its header comment names the checkout's path
-    doc = {"arm": info["model_hash"], "design": tomllib.loads(setup.base_design),
+    doc = {"arm": info["model_hash"], "design": toml_input.loads(setup.base_design),
            "scenario": cfg.scenarios[scenario].as_dict(), "space": cfg.spaces[method].as_dict(), "tuning": t,
            "trajectory": setup.trajectory_args, "hold_s": cfg.hold_s}
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:16]

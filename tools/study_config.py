@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from gen import toml_input
 from host_sim.drive_model import REALISTIC, DriveModel
 from host_sim.uncertainty import UncertaintyConfig
 
@@ -207,7 +208,7 @@ def _space(method: str, d: Any) -> Space:
 
 def load(path: Path) -> StudyConfig:
     try:
-        data = tomllib.loads(path.read_text())
+        data = toml_input.loads(path.read_text())
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise StudyConfigError(f"{path}: {exc}") from exc
     known = {"description", "duration_s", "hold_s", "seed", "seeds", "methods", "scenarios", "trajectory",

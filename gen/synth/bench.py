@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from gen.atomic_output import write_text_atomic
 from gen.synth.cli import DEFAULT_CONFIG
 from gen.synth.config import DesignConfig, load_config
 from gen.synth.hinf import hinf_synthesis
@@ -143,10 +144,7 @@ def main(argv: list[str] | None = None) -> int:
         "wall times are in-process (imports excluded; importing cvxpy costs ~1.2-1.5 s per process). "
         "hinfsyn cannot solve the paper's plant itself; see the module docstring."
     )
-    ns.out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = ns.out.with_name(f".{ns.out.name}.tmp")
-    tmp.write_text(json.dumps(results, indent=1) + "\n")
-    tmp.replace(ns.out)
+    write_text_atomic(ns.out, json.dumps(results, indent=1) + "\n")
 
     print("synth, paper config, n = 6 (design + verification + emission, in-process):")
     for s in synth:

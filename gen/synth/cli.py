@@ -34,7 +34,7 @@ def synth_to_dir(config: Path, out: Path) -> dict[str, Any]:
     """Load, design, verify, emit. Raises ConfigError / SynthesisError before writing anything."""
     t0 = time.perf_counter()
     # Imported here, not at module level: armctl builds its parser without paying for cvxpy.
-    from gen.synth.atomic import write_atomically
+    from gen.atomic_output import write_files_atomically
     from gen.synth.config import load_config
     from gen.synth.emit import fixed_header, float_header
     from gen.synth.manifest import FIXED_HEADER, FLOAT_HEADER, build
@@ -53,7 +53,7 @@ def synth_to_dir(config: Path, out: Path) -> dict[str, Any]:
     files = {FLOAT_HEADER: float_header(manifest), FIXED_HEADER: fixed_header(manifest)}
     manifest["run"]["timings_s"]["total_in_process_s"] = time.perf_counter() - t0
     files["manifest.json"] = json.dumps(manifest, indent=1, allow_nan=False) + "\n"
-    write_atomically(out, files)
+    write_files_atomically(out, files)
     return manifest
 
 
@@ -74,6 +74,7 @@ def _summary(m: dict[str, Any], out: Path) -> str:
 
 
 def run(ns: argparse.Namespace) -> int:
+    from gen.atomic_output import OutputError
     from gen.synth.config import ConfigError
     from gen.synth.lmi import SynthesisError
 
@@ -88,6 +89,9 @@ def run(ns: argparse.Namespace) -> int:
     except SynthesisError as exc:
         print(f"synth refused: {exc}", file=sys.stderr)
         return 3
+    except OutputError as exc:
+        print(f"synth: {exc}", file=sys.stderr)
+        return 1
     except OSError as exc:
         print(f"synth: cannot write {ns.out}: {exc}", file=sys.stderr)
         return 1

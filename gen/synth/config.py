@@ -15,6 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from gen import toml_input
+
 STRUCTURES = ("auto", "coupled")
 DEFAULT_LADDER = (1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2, 2e-2, 5e-2, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0)
 _COND_MAX = 1e12  # beyond this a weight is singular for every practical purpose
@@ -297,8 +299,7 @@ def parse_config(doc: dict[str, Any]) -> DesignConfig:
 
 def load_config(path: Path) -> DesignConfig:
     try:
-        with open(path, "rb") as fh:
-            doc = tomllib.load(fh)
+        doc = toml_input.loads(path.read_bytes().decode("utf-8"))
     except FileNotFoundError:
         raise ConfigError("config", f"file not found: {path}") from None
     except IsADirectoryError:

@@ -25,6 +25,7 @@ from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from gen.atomic_output import write_bytes_atomic
 from tools.paths import REPO
 from tools.vm.kmod import ModuleError, load_order
 
@@ -268,9 +269,7 @@ def build_initrd(kdir: Path) -> tuple[Path, list[str]]:
         ("modules.list", 0o100644, "".join(n + "\n" for n in names).encode(), (0, 0)),
     ]
     entries += [(f"lib/modules/{k.name}", 0o100644, k.read_bytes(), (0, 0)) for k in kos]
-    tmp = out.with_suffix(f".tmp{os.getpid()}")
-    tmp.write_bytes(gzip.compress(_cpio_newc(entries), compresslevel=6))
-    os.replace(tmp, out)
+    write_bytes_atomic(out, gzip.compress(_cpio_newc(entries), compresslevel=6))
     for old in CACHE.glob(f"initrd-{version}-*.gz"):
         if old != out:
             old.unlink(missing_ok=True)
