@@ -10,6 +10,7 @@ import json
 import os
 import sys
 import tomllib
+from contextlib import ExitStack
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -22,18 +23,16 @@ from tools.arm import (DEFAULT_ARM, ArmChoiceError, ArmRef, add_arm_arguments, a
 from tools import procs
 from tools.code_identity import code_identity
 from tools.hil import HilError, write_json_atomic
+from tools.locks import LockHeld, flocked
 from tools.outdir import OutDirError, check_out_dir
 from tools.paths import REPO
-from tools.runner import RunSpec, run_all
+from tools.runner import METRICS, RunSpec, run_all
 from tools.slots import default_jobs
 from tools.stats import paired, summary
 from tools.study_config import METHODS, StudyConfig, StudyConfigError, Trajectory, load
 from tools.tuning import TuneSetup, trial_spec, tune_method
 
 DEFAULT_CONFIG = REPO / "tools" / "studies" / "paper.toml"
-# metric -> the run.json results field (per joint, or one number for the arm)
-METRICS = {"linf": "tracking_max_abs_rad", "rms": "tracking_rms_rad", "est": "estimation_error_rms",
-           "power": "torque_power_w"}
 BASELINES = ("tde", "usde-smc", "pd", "pm-paper-weights", "pm-paper", "gh2")
 
 
@@ -90,17 +89,35 @@ def tuning_key(cfg: StudyConfig, info: dict[str, Any], setup: TuneSetup, scenari
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:16]
 
 
+def _read_tuning(path: Path) -> dict[str, Any]:
+    """The kept tuning file; an absent or unreadable one is empty (everything is tuned again)."""
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, ValueError):
+        doc = {}
+    if not isinstance(doc, dict) or not isinstance(doc.get("scenarios"), dict):
+        doc = {**(doc if isinstance(doc, dict) else {}), "scenarios": {}}
+    return doc
+
+
+def keep_tuning(path: Path, scenario: str, method: str, rec: dict[str, Any], common: dict[str, Any]) -> None:
+    """One method's tuning in one scenario into the kept tuning file, merged under a lock with what
+    other commands kept meanwhile: two `armctl tune` of different methods at once keep both."""
+    with flocked(path.with_name(f".{path.name}.lock")):
+        doc = _read_tuning(path)  # read again under the lock: another tune may have written since
+        scen = doc["scenarios"].get(scenario)
+        doc["scenarios"][scenario] = {**(scen if isinstance(scen, dict) else {}), method: rec}
+        doc.update(common)
+        write_json_atomic(path, doc)
+
+
 def tuned(cfg: StudyConfig, arm: ArmRef, setup: TuneSetup, info: dict[str, Any], scenarios: list[str],
           methods: list[str], *, retune: bool = False, trials: int | None = None) -> dict[str, dict[str, Any]]:
     """The tuning of every tuned method in every scenario: the kept one when it was made for the
     same arm, scenario and tuning settings, else tuned now (and kept, method by method, so an
     interrupted tuning resumes)."""
     path = tuning_file(cfg, arm)
-    try:
-        doc = json.loads(path.read_text())
-    except (OSError, ValueError):
-        doc = {}
-    doc.setdefault("scenarios", {})
+    doc = _read_tuning(path)
     out: dict[str, dict[str, Any]] = {s: {} for s in scenarios}
     todo = []
     for s in scenarios:
@@ -108,7 +125,9 @@ def tuned(cfg: StudyConfig, arm: ArmRef, setup: TuneSetup, info: dict[str, Any],
             if METHODS[m][1] is None:
                 continue
             key = tuning_key(cfg, info, setup, s, m)
-            rec = doc["scenarios"].get(s, {}).get(m)
+            scen = doc["scenarios"].get(s)
+            rec = scen.get(m) if isinstance(scen, dict) else None
+            rec = rec if isinstance(rec, dict) else None
             budget = trials or cfg.trials
             if rec and rec.get("key") == key and rec.get("budget_per_round") == budget and not retune:
                 out[s][m] = {**rec, "source": f"tuned earlier, kept in {path}"}
@@ -126,10 +145,8 @@ def tuned(cfg: StudyConfig, arm: ArmRef, setup: TuneSetup, info: dict[str, Any],
             rec = tune_method(setup, cfg.scenarios[s], m, trials, progress=lambda: bar.update(1))
             rec["key"] = key
             rec["code"] = code_identity()
-            doc["scenarios"].setdefault(s, {})[m] = rec
-            doc["arm"] = {"name": info["name"], "model_hash": info["model_hash"]}
-            doc["procedure"] = procedure(cfg, trials)
-            write_json_atomic(path, doc)
+            keep_tuning(path, s, m, rec, {"arm": {"name": info["name"], "model_hash": info["model_hash"]},
+                                          "procedure": procedure(cfg, trials)})
             out[s][m] = {**rec, "source": f"tuned now, kept in {path}"}
         bar.close()
     return out
@@ -296,6 +313,19 @@ def _common(ns: argparse.Namespace) -> tuple[StudyConfig, ArmRef, list[str] | No
     return cfg, arm, methods, scenarios
 
 
+OUT_LOCK = ".armctl-out.lock"  # in a study's or tuning's --out: held while the command writes there
+
+
+def _hold_out(stack: ExitStack, out: Path) -> None:
+    """--out for this command alone, until it ends: a second study there would delete and rewrite
+    the first's run folders under it."""
+    try:
+        stack.enter_context(flocked(out / OUT_LOCK, wait=False))
+    except LockHeld:
+        raise OutDirError(f"--out {out}: another study or tune holds this folder (lock {out / OUT_LOCK}); "
+                          "wait for it to end or give another --out") from None
+
+
 def cmd_study(ns: argparse.Namespace) -> int:
     try:
         if ns.seeds is not None and not 1 <= ns.seeds <= 1000:
@@ -303,8 +333,11 @@ def cmd_study(ns: argparse.Namespace) -> int:
         if ns.duration is not None and not (0.001 <= ns.duration <= 86400):
             raise StudyConfigError(f"--duration: must be in [0.001, 86400] s, got {ns.duration}")
         cfg, arm, methods, scenarios = _common(ns)
-        study = run_study(cfg, ns.out, seeds=ns.seeds, duration_s=ns.duration, methods=methods, scenarios=scenarios,
-                          arm=arm, jobs=ns.jobs, cluster=ns.cluster, retune=ns.retune, trials=ns.trials)
+        with ExitStack() as stack:
+            _hold_out(stack, ns.out)
+            study = run_study(cfg, ns.out, seeds=ns.seeds, duration_s=ns.duration, methods=methods,
+                              scenarios=scenarios, arm=arm, jobs=ns.jobs, cluster=ns.cluster, retune=ns.retune,
+                              trials=ns.trials)
     except (StudyConfigError, ArmChoiceError, OutDirError) as exc:
         print(f"armctl study: {exc}", file=sys.stderr)
         return 2
@@ -335,9 +368,11 @@ def measured(r: dict[str, Any]) -> bool:
 def cmd_tune(ns: argparse.Namespace) -> int:
     try:
         cfg, arm, methods, scenarios = _common(ns)
-        setup, info, _ = setup_for(cfg, arm, ns.out, ns.jobs, ns.cluster)
-        result = tuned(cfg, arm, setup, info, scenarios or list(cfg.scenarios), methods or cfg.methods,
-                       retune=True, trials=ns.trials)
+        with ExitStack() as stack:
+            _hold_out(stack, ns.out)
+            setup, info, _ = setup_for(cfg, arm, ns.out, ns.jobs, ns.cluster)
+            result = tuned(cfg, arm, setup, info, scenarios or list(cfg.scenarios), methods or cfg.methods,
+                           retune=True, trials=ns.trials)
     except (StudyConfigError, ArmChoiceError, OutDirError) as exc:
         print(f"armctl tune: {exc}", file=sys.stderr)
         return 2

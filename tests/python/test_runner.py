@@ -4,9 +4,12 @@ threads of this process or as tasks on a Dask cluster, with the same results eit
 from __future__ import annotations
 
 import fcntl
+import hashlib
+import json
 import os
+import shutil
 import threading
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import pytest
@@ -77,6 +80,46 @@ def test_a_run_with_its_spec_kept_is_not_run_again(tmp_path: Path) -> None:
     assert execute(asdict(spec)) == first and (tmp_path / "r" / "run.json").stat().st_mtime_ns == stamp
     changed = _spec(tmp_path / "r", 4)  # another seed in the same folder: run again
     assert execute(asdict(changed))["results"]["uncertainty"]["seed"] == 4
+
+
+def _edit_run(folder: Path, edit, rechecksum: bool = False) -> None:  # noqa: ANN001 - edit(results) in place
+    run = json.loads((folder / "run.json").read_text())
+    edit(run["results"])
+    (folder / "run.json").write_text(json.dumps(run, indent=2) + "\n")
+    if rechecksum:  # as if spec.json had been forged to match: the run.json's own content must still hold
+        done = json.loads((folder / "spec.json").read_text())
+        done["run_json_sha256"] = hashlib.sha256((folder / "run.json").read_bytes()).hexdigest()
+        (folder / "spec.json").write_text(json.dumps(done))
+
+
+def test_a_kept_run_is_reused_only_if_it_is_the_run_its_spec_made(tmp_path: Path,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """An edited metric, a run.json of another method, a string metric, an interrupted run, a run
+    without spec.json: each is run again, with one line saying why; the rerun gives the original."""
+    pm = _spec(tmp_path / "pm", 3)
+    pd = replace(_spec(tmp_path / "pd", 3), method="pd", labels={"method": "pd"})
+    first = {s.method: execute(asdict(s)) for s in (pm, pd)}
+    capsys.readouterr()
+    linf = first["pm"]["results"]["tracking_max_abs_rad"]
+
+    def again(spec: RunSpec, why: str) -> None:
+        run = execute(asdict(spec))
+        err = capsys.readouterr().err
+        lines = [ln for ln in err.splitlines() if "running it again" in ln]
+        assert len(lines) == 1 and why in lines[0] and spec.out in lines[0], err
+        assert run["results"]["tracking_max_abs_rad"] == first[spec.method]["results"]["tracking_max_abs_rad"]
+        assert execute(asdict(spec)) == run and "running it again" not in capsys.readouterr().err  # now kept
+
+    _edit_run(tmp_path / "pm", lambda r: r.update(tracking_max_abs_rad=[100 * x for x in linf]))
+    again(pm, "checksum")
+    shutil.copy(tmp_path / "pd" / "run.json", tmp_path / "pm" / "run.json")  # pd's run in pm's folder
+    again(pm, "its method differ")
+    _edit_run(tmp_path / "pm", lambda r: r.update(torque_power_w="1.5"), rechecksum=True)
+    again(pm, "torque_power_w not numbers")
+    _edit_run(tmp_path / "pm", lambda r: r.update(result="interrupted"), rechecksum=True)
+    again(pm, "ended interrupted")
+    (tmp_path / "pm" / "spec.json").unlink()
+    again(pm, "did not finish")
 
 
 def test_the_same_runs_on_a_dask_cluster(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
