@@ -146,6 +146,8 @@ def ensure_configured(preset: str, bdir: Path, quiet: bool = True, cache: dict[s
 
 LOCK = ".armctl-build.lock"  # in the build folder: flocked for a configure and build
 _held = threading.local()     # the build folders this thread holds (a lock taken again is held)
+_in_process: dict[Path, threading.Lock] = {}  # threads of this process queue here, silently
+_in_process_lock = threading.Lock()
 
 
 @contextmanager
@@ -157,7 +159,9 @@ def build_lock(bdir: Path) -> Iterator[None]:
     if key in held:
         yield
         return
-    with flocked(bdir / LOCK, waiting=f"armctl: build: waiting for another build in {bdir}"):
+    with _in_process_lock:
+        mine = _in_process.setdefault(key, threading.Lock())
+    with mine, flocked(bdir / LOCK, waiting=f"armctl: build: waiting for another build in {bdir}"):
         held.add(key)
         try:
             yield

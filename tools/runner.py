@@ -30,6 +30,7 @@ from host_sim.drive_model import DriveModel
 from tools import procs
 from tools.arm import HIL_TARGETS, ArmChoiceError, ArmRef, arm_build_dir, arm_info, build_arm
 from tools.build import build_lock
+from tools.cluster import Cluster
 from tools.paths import BUILD
 from tools.hil import HilError, HilOptions, run_hil, write_json_atomic
 from tools.slots import Slot, acquire_slot
@@ -218,10 +219,10 @@ def spec_digest(spec: RunSpec) -> str:
     return hashlib.sha256(json.dumps(spec.key(), sort_keys=True).encode()).hexdigest()[:12]
 
 
-def run_all(specs: list[RunSpec], jobs: int = 1, cluster: str | None = None,
+def run_all(specs: list[RunSpec], jobs: int = 1, cluster: Cluster | None = None,
             progress: Callable[[RunSpec, dict[str, Any]], None] | None = None) -> list[dict[str, Any]]:
     """Every spec's run.json, in the specs' order. Local: `jobs` threads, each run in a run slot.
-    cluster: a Dask scheduler's address; each run is one task on a worker (the workers see this
+    cluster: a Dask scheduler (tools/cluster.py); each run is one task on a worker (the workers see this
     checkout at the same path, and the out folders on a shared file system)."""
     if not specs:
         return []
@@ -232,7 +233,7 @@ def run_all(specs: list[RunSpec], jobs: int = 1, cluster: str | None = None,
     if cluster is not None:
         from distributed import Client, as_completed as dask_completed
 
-        with Client(cluster) as client:
+        with Client(cluster.address, security=cluster.security()) as client:
             futures = {client.submit(execute, asdict(s), pure=False, key=f"hil-{spec_digest(s)}-{i}"): i
                        for i, s in enumerate(specs)}
             for fut in dask_completed(futures):

@@ -21,6 +21,7 @@ from gen.arm import DEFAULT_DESIGN
 from tools.arm import (DEFAULT_ARM, ArmChoiceError, ArmRef, add_arm_arguments, arm_build_dir, arm_from_args,
                        arm_info, build_arm, reference_for)
 from tools import procs
+from tools.cluster import Cluster, ClusterError, add_cluster_arguments, cluster_from_args
 from tools.code_identity import code_identity
 from tools.hil import HilError, write_json_atomic
 from tools.locks import LockHeld, flocked
@@ -61,7 +62,7 @@ def _arm_args(arm: ArmRef) -> dict[str, str | None]:
             "design": str(arm.design) if arm.design else None}
 
 
-def setup_for(cfg: StudyConfig, arm: ArmRef, out: Path, jobs: int, cluster: str | None,
+def setup_for(cfg: StudyConfig, arm: ArmRef, out: Path, jobs: int, cluster: Cluster | None,
               preset: str = "release") -> tuple[TuneSetup, dict[str, Any], list[str]]:
     bdir = arm_build_dir(preset, arm)
     info = arm_info(bdir)
@@ -164,7 +165,7 @@ def procedure(cfg: StudyConfig, trials: int | None = None) -> str:
 
 def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration_s: float | None = None,
               methods: list[str] | None = None, scenarios: list[str] | None = None, arm: ArmRef = DEFAULT_ARM,
-              jobs: int = 1, cluster: str | None = None, retune: bool = False,
+              jobs: int = 1, cluster: Cluster | None = None, retune: bool = False,
               trials: int | None = None) -> dict[str, Any]:
     methods = methods or cfg.methods
     scen_names = scenarios or list(cfg.scenarios)
@@ -270,9 +271,8 @@ def add_common_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--methods", default=None, help="comma-separated subset of the config's methods")
     p.add_argument("--jobs", type=int, default=default_jobs(),
                    help="runs at once on this machine [half the cores: a lockstep run keeps two busy]")
-    p.add_argument("--cluster", default=None, metavar="ADDRESS",
-                   help="a Dask scheduler (tcp://host:8786): each HIL run is a task on its workers")
     p.add_argument("--trials", type=int, default=None, help="tuning budget per method and scenario [the config's]")
+    add_cluster_arguments(p)
     add_arm_arguments(p)
 
 
@@ -299,7 +299,8 @@ def _subset(text: str | None, allowed: list[str], what: str) -> list[str] | None
     return items
 
 
-def _common(ns: argparse.Namespace) -> tuple[StudyConfig, ArmRef, list[str] | None, list[str] | None]:
+def _common(ns: argparse.Namespace) -> tuple[StudyConfig, ArmRef, list[str] | None, list[str] | None,
+                                          Cluster | None]:
     cfg = load(ns.config)
     methods = _subset(ns.methods, cfg.methods, "methods")
     scenarios = _subset(ns.scenarios, list(cfg.scenarios), "scenarios")
@@ -307,10 +308,11 @@ def _common(ns: argparse.Namespace) -> tuple[StudyConfig, ArmRef, list[str] | No
         raise StudyConfigError(f"--jobs: must be in [1, 256], got {ns.jobs}")
     if ns.trials is not None and not 1 <= ns.trials <= 100000:
         raise StudyConfigError(f"--trials: must be in [1, 100000], got {ns.trials}")
+    cluster = cluster_from_args(ns)
     check_out_dir(ns.out)
     arm = arm_from_args(ns)
     build_arm("release", arm)
-    return cfg, arm, methods, scenarios
+    return cfg, arm, methods, scenarios, cluster
 
 
 OUT_LOCK = ".armctl-out.lock"  # in a study's or tuning's --out: held while the command writes there
@@ -332,13 +334,13 @@ def cmd_study(ns: argparse.Namespace) -> int:
             raise StudyConfigError(f"--seeds: must be in [1, 1000], got {ns.seeds}")
         if ns.duration is not None and not (0.001 <= ns.duration <= 86400):
             raise StudyConfigError(f"--duration: must be in [0.001, 86400] s, got {ns.duration}")
-        cfg, arm, methods, scenarios = _common(ns)
+        cfg, arm, methods, scenarios, cluster = _common(ns)
         with ExitStack() as stack:
             _hold_out(stack, ns.out)
             study = run_study(cfg, ns.out, seeds=ns.seeds, duration_s=ns.duration, methods=methods,
-                              scenarios=scenarios, arm=arm, jobs=ns.jobs, cluster=ns.cluster, retune=ns.retune,
+                              scenarios=scenarios, arm=arm, jobs=ns.jobs, cluster=cluster, retune=ns.retune,
                               trials=ns.trials)
-    except (StudyConfigError, ArmChoiceError, OutDirError) as exc:
+    except (StudyConfigError, ArmChoiceError, OutDirError, ClusterError) as exc:
         print(f"armctl study: {exc}", file=sys.stderr)
         return 2
     except (HilError, OSError) as exc:
@@ -367,13 +369,13 @@ def measured(r: dict[str, Any]) -> bool:
 
 def cmd_tune(ns: argparse.Namespace) -> int:
     try:
-        cfg, arm, methods, scenarios = _common(ns)
+        cfg, arm, methods, scenarios, cluster = _common(ns)
         with ExitStack() as stack:
             _hold_out(stack, ns.out)
-            setup, info, _ = setup_for(cfg, arm, ns.out, ns.jobs, ns.cluster)
+            setup, info, _ = setup_for(cfg, arm, ns.out, ns.jobs, cluster)
             result = tuned(cfg, arm, setup, info, scenarios or list(cfg.scenarios), methods or cfg.methods,
                            retune=True, trials=ns.trials)
-    except (StudyConfigError, ArmChoiceError, OutDirError) as exc:
+    except (StudyConfigError, ArmChoiceError, OutDirError, ClusterError) as exc:
         print(f"armctl tune: {exc}", file=sys.stderr)
         return 2
     except (HilError, OSError) as exc:
