@@ -191,3 +191,25 @@ def test_armctl_refuses_a_plain_tcp_cluster_in_one_line(tmp_path: Path) -> None:
         assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
         assert "tcp://10.1.2.3:8786" in r.stderr and "--insecure-cluster" in r.stderr
         assert not (tmp_path / cmd).exists()
+
+
+def test_cluster_certs_make_a_ca_and_refuse_to_overwrite(tmp_path: Path) -> None:
+    """`armctl cluster-certs`: every certificate verifies against the CA, keys are private, and a
+    second run into the same folder changes nothing and says which file is in the way."""
+    import subprocess
+
+    out = tmp_path / "tls"
+    r = subprocess.run([str(REPO / "tools" / "armctl"), "cluster-certs", "--out", str(out)], cwd=REPO,
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert sorted(p.name for p in out.iterdir()) == sorted(p.name for p in cert_files(out))
+    for party in ("scheduler", "worker", "client"):
+        v = subprocess.run(["openssl", "verify", "-CAfile", str(out / "ca.pem"), str(out / f"{party}.pem")],
+                           capture_output=True, text=True)
+        assert v.returncode == 0, v.stdout + v.stderr
+        assert (out / f"{party}.key").stat().st_mode & 0o077 == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    r = subprocess.run([str(REPO / "tools" / "armctl"), "cluster-certs", "--out", str(out)], cwd=REPO,
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "ca.pem exists" in r.stderr
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
