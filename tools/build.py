@@ -14,9 +14,13 @@ import platform
 import shutil
 import subprocess
 import sys
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from gen.atomic_output import write_json_atomic
+from tools.locks import flocked
 from tools.paths import REPO, build_dir
 
 PRESETS = ("debug", "release")
@@ -139,6 +143,31 @@ def ensure_configured(preset: str, bdir: Path, quiet: bool = True, cache: dict[s
     write_json_atomic(stamp, want)
 
 
+LOCK = ".armctl-build.lock"  # in the build folder: flocked for a configure and build
+_held = threading.local()     # the build folders this thread holds (a lock taken again is held)
+_in_process: dict[Path, threading.Lock] = {}  # threads of this process queue here, silently
+_in_process_lock = threading.Lock()
+
+
+@contextmanager
+def build_lock(bdir: Path) -> Iterator[None]:
+    """One builder per build folder, across processes and threads: two ninjas or two configures
+    in one folder corrupt it ("file truncated" at the link). Re-entrant within a thread."""
+    held: set[Path] = _held.__dict__.setdefault("paths", set())
+    key = bdir.resolve()
+    if key in held:
+        yield
+        return
+    with _in_process_lock:
+        mine = _in_process.setdefault(key, threading.Lock())
+    with mine, flocked(bdir / LOCK, waiting=f"armctl: build: waiting for another build in {bdir}"):
+        held.add(key)
+        try:
+            yield
+        finally:
+            held.discard(key)
+
+
 def build(preset: str = "release", quiet: bool = True, bdir: Path | None = None,
           cache: dict[str, str] | None = None, targets: list[str] | None = None) -> None:
     """Configure (when needed) and build a preset, in build/<preset> unless bdir is given;
@@ -150,10 +179,10 @@ def build(preset: str = "release", quiet: bool = True, bdir: Path | None = None,
     if missing:
         raise ToolchainMissing(f"armctl: build ({preset}): {missing}")
     bdir = bdir or build_dir(preset)
-    ensure_configured(preset, bdir, quiet, cache)
-    r = subprocess.run(["cmake", "--build", str(bdir), *(["--target", *targets] if targets else [])], cwd=REPO,
-                       stdout=subprocess.PIPE,
-                       stderr=subprocess.STDOUT, text=True)
+    with build_lock(bdir):
+        ensure_configured(preset, bdir, quiet, cache)
+        r = subprocess.run(["cmake", "--build", str(bdir), *(["--target", *targets] if targets else [])], cwd=REPO,
+                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     if r.returncode != 0:
         print(r.stdout, file=sys.stderr)
         raise BuildError(f"armctl: build ({preset}) failed (the compiler's output above)")

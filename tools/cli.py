@@ -242,6 +242,12 @@ def main(argv: list[str] | None = None) -> int:
     add_arm_arguments(b)
     b.set_defaults(fn=cmd_build)
 
+    from tools import cluster
+
+    cc = sub.add_parser("cluster-certs", help="a CA and TLS certificates for a Dask cluster (study/tune --cluster tls://)")
+    cc.add_argument("--out", type=Path, required=True, help="an empty folder for ca.pem and scheduler/worker/client .pem/.key")
+    cc.set_defaults(fn=cluster.cmd_cluster_certs)
+
     from tools import timing
 
     tm = sub.add_parser("timing", help="real-time loop latency vs cyclictest in the same run")

@@ -6,14 +6,24 @@ zero torque with controlword shutdown and NMT stop, and writes its summary), the
 (which stops on that NMT stop) and the telemetry logger (which writes what it has queued). The
 run then ends as always, with a run.json whose verdict is `interrupted`; nothing is left running.
 A second signal kills what is still alive.
+
+A SIGKILL of armctl cannot be caught, so each child also asks the kernel for a SIGTERM when
+armctl goes (PR_SET_PDEATHSIG): the controller then stops the arm as above and the others
+follow, instead of running on and taking the run slot's ports from a resumed study.
 """
 
 from __future__ import annotations
 
+import ctypes
+import os
 import signal
 import subprocess
 import threading
+from collections.abc import Callable
 from typing import Any
+
+PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
+_libc = ctypes.CDLL(None, use_errno=True)
 
 _live: list[tuple[str, subprocess.Popen[Any]]] = []
 _lock = threading.Lock()
@@ -26,10 +36,23 @@ def spawn(role: str, args: list[str], **kw: Any) -> subprocess.Popen[Any]:
     if interrupted is not None:
         raise InterruptedError(f"armctl was stopped by signal {interrupted}: not starting the {role}")
     kw.setdefault("process_group", 0)
+    kw["preexec_fn"] = _dies_with_parent(os.getpid(), kw.get("preexec_fn"))
     p = subprocess.Popen(args, **kw)
     with _lock:
         _live.append((role, p))
     return p
+
+
+def _dies_with_parent(parent: int, then: Callable[[], None] | None) -> Callable[[], None]:
+    """A preexec_fn: SIGTERM to the child when armctl dies. The kernel sends it when the thread
+    that forked the child ends, which is the thread that waits for it here (run_hil), so it comes
+    no earlier than armctl's own end of the run. A parent already gone before the prctl: exit."""
+    def setup() -> None:
+        if _libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0) != 0 or os.getppid() != parent:
+            os._exit(1)
+        if then is not None:
+            then()
+    return setup
 
 
 def forget(p: subprocess.Popen[Any]) -> None:

@@ -4,31 +4,42 @@ A run is a RunSpec: everything that decides its result (the arm, the design when
 arm's own, the method and its arguments, the scenario, the seed). The same spec gives the same
 run.json in lockstep, whichever worker runs it and whatever else runs beside it: each run holds a
 run slot (tools/slots.py) for its own bus and telemetry ports, and a design other than the arm's
-is built in a build folder of that slot. A run whose folder already holds its spec and its
-run.json is not run again: an interrupted study resumes where it stopped.
+is built in a build folder of that slot.
+
+A finished run's folder holds its run.json and, written last, spec.json: the spec and the
+checksum of that run.json. A resumed study reuses it only when both are there, the spec is this
+one, the checksum holds, run.json itself says it ran this spec (method, seed, scenario, arm, ...)
+and its metrics are numbers; anything else is run again, and the log says why. A run that armctl
+stopped (a signal) gets no spec.json, so it is never taken for done.
 """
 
 from __future__ import annotations
 
-import fcntl
 import hashlib
 import json
 import os
 import shutil
-from collections.abc import Callable, Iterator
+import sys
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor, as_completed
-from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 from host_sim.drive_model import DriveModel
 from tools import procs
-from tools.arm import HIL_TARGETS, ArmRef, arm_build_dir, build_arm
+from tools.arm import HIL_TARGETS, ArmChoiceError, ArmRef, arm_build_dir, arm_info, build_arm
+from tools.build import build_lock
+from tools.cluster import Cluster
 from tools.paths import BUILD
 from gen.atomic_output import write_json_atomic, write_text_atomic
 from tools.hil import HilError, HilOptions, run_hil
 from tools.slots import Slot, acquire_slot
+
+# metric -> the run.json results field a study computes with (per joint, or one number for the arm)
+METRICS = {"linf": "tracking_max_abs_rad", "rms": "tracking_rms_rad", "est": "estimation_error_rms",
+           "power": "torque_power_w"}
+DONE = "spec.json"  # written last in a run's folder: the run is done
 
 
 @dataclass(frozen=True)
@@ -66,19 +77,6 @@ def spec_from_dict(d: dict[str, Any]) -> RunSpec:
     return RunSpec(**{**d, "controller_args": tuple(d["controller_args"])})
 
 
-@contextmanager
-def _dir_lock(path: Path) -> Iterator[None]:
-    """One builder per build folder (two ninjas in one folder corrupt it)."""
-    path.mkdir(parents=True, exist_ok=True)
-    fd = os.open(path / ".armctl-build.lock", os.O_RDWR | os.O_CREAT, 0o666)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
-        yield
-    finally:
-        fcntl.flock(fd, fcntl.LOCK_UN)
-        os.close(fd)
-
-
 def slot_arm(base: ArmRef, slot: int, design_text: str) -> ArmRef:
     """The arm with this design, in the slot's own build folder: one design file per slot and
     arm, rewritten only when the design changes, so a slot rebuilds only what a new design
@@ -92,21 +90,80 @@ def slot_arm(base: ArmRef, slot: int, design_text: str) -> ArmRef:
 
 
 def prepare_build(arm: ArmRef) -> Path:
-    bdir = arm_build_dir("release", arm)
-    with _dir_lock(bdir):
-        build_arm("release", arm, targets=HIL_TARGETS)
-    return bdir
+    return build_arm("release", arm, targets=HIL_TARGETS)
 
 
-def _cached(out: Path, key: dict[str, Any]) -> dict[str, Any] | None:
+def _json(x: Any) -> Any:
+    return json.loads(json.dumps(x))  # as JSON keeps it: tuples are lists
+
+
+def _number_or_numbers(v: Any) -> bool:
+    def num(x: Any) -> bool:
+        return isinstance(x, (int, float)) and not isinstance(x, bool)
+    return v is None or num(v) or (isinstance(v, list) and all(num(x) for x in v))
+
+
+def _identity(spec: RunSpec) -> dict[str, Any]:
+    """What a run.json's results record of the spec they ran (tools/hil.py: its config, labels)."""
+    drives = (DriveModel(**spec.drives) if spec.drives else DriveModel()).to_dict()
+    return {"method": spec.method, "duration_s": spec.duration_s, "controller_args": list(spec.controller_args),
+            "uncertainty": spec.uncertainty, "drives": drives, **spec.labels}
+
+
+def _disagreement(spec: RunSpec, res: dict[str, Any]) -> list[str]:
+    """The fields where a run.json's own record of what ran differs from the spec."""
+    bad = [k for k, v in _identity(spec).items() if _json(res.get(k)) != _json(v)]
+    if (res.get("bus_timing", "off") != "off") != spec.bus_timing:
+        bad.append("bus_timing")
+    return bad
+
+
+def _arm_hash(spec: RunSpec) -> str | None:
+    """The model hash of the spec's arm as built now (building it when it is not)."""
+    arm = spec.arm()
     try:
-        if json.loads((out / "spec.json").read_text()) == json.loads(json.dumps(key)):  # tuples are lists in JSON
-            run = json.loads((out / "run.json").read_text())
-            if run.get("results", {}).get("result") is not None:
-                return run
-    except (OSError, ValueError):
-        pass
-    return None
+        return arm_info(arm_build_dir("release", arm))["model_hash"]
+    except ArmChoiceError:
+        prepare_build(arm)
+        return arm_info(arm_build_dir("release", arm))["model_hash"]
+
+
+def kept_run(out: Path, spec: RunSpec) -> tuple[dict[str, Any] | None, str]:
+    """(run.json, "") when `out` holds this spec's finished run, unchanged; else (None, why it is
+    run again; "" when there is nothing there)."""
+    if not out.exists():
+        return None, ""
+    try:
+        done = json.loads((out / DONE).read_text())
+    except FileNotFoundError:
+        return None, f"no {DONE}: the run did not finish (interrupted or killed)"
+    except (OSError, ValueError) as exc:
+        return None, f"{DONE} unreadable ({exc})"
+    if not isinstance(done, dict) or not isinstance(done.get("spec"), dict) or "run_json_sha256" not in done:
+        return None, f"{DONE} has no checksum of run.json (written by an older armctl)"
+    want = _json(spec.key())
+    if done["spec"] != want:
+        diff = sorted(k for k in set(want) | set(done["spec"]) if done["spec"].get(k) != want.get(k))
+        return None, f"kept for another spec (differs in {', '.join(diff)})"
+    try:
+        raw = (out / "run.json").read_bytes()
+        res = json.loads(raw)["results"]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        return None, f"run.json missing or unreadable ({exc})"
+    if not isinstance(res, dict):
+        return None, "run.json has no results"
+    if bad := _disagreement(spec, res):
+        return None, f"run.json was not made by this spec (its {', '.join(bad)} differ)"
+    if hashlib.sha256(raw).hexdigest() != done["run_json_sha256"]:
+        return None, "run.json was changed after the run (its checksum in spec.json does not match)"
+    if res.get("result") in (None, "interrupted"):
+        return None, f"the run ended {res.get('result') or 'without a verdict'}"
+    if bad := [f for f in METRICS.values() if not _number_or_numbers(res.get(f))]:
+        return None, f"run.json: {', '.join(bad)} not numbers"
+    arm = res.get("arm")
+    if isinstance(arm, dict) and arm.get("model_hash") != _arm_hash(spec):
+        return None, "run.json is of another build of the arm (its model hash differs)"
+    return json.loads(raw), ""
 
 
 def execute(spec_d: dict[str, Any]) -> dict[str, Any]:
@@ -114,12 +171,14 @@ def execute(spec_d: dict[str, Any]) -> dict[str, Any]:
     spec = spec_from_dict(spec_d)
     out = Path(spec.out)
     key = spec.key()
-    cached = _cached(out, key)
-    if cached is not None:
-        return cached
+    kept, why = kept_run(out, spec)
+    if kept is not None:
+        return kept
     if procs.interrupted is not None:  # armctl is stopping: not run (a resumed study runs it)
         return {"results": {"result": "interrupted", "verdict_reasons": [f"interrupted: signal {procs.interrupted}"]},
                 "transport": {}, "environment": {}}
+    if why:
+        print(f"armctl: {out}: running it again: {why}", file=sys.stderr)
     if out.exists():
         shutil.rmtree(out)
     out.mkdir(parents=True)
@@ -128,19 +187,25 @@ def execute(spec_d: dict[str, Any]) -> dict[str, Any]:
         try:
             if spec.design_text is not None:
                 arm = slot_arm(arm, slot.index, spec.design_text)
-                with _dir_lock(arm_build_dir("release", arm)):
+                # held through the run: its binaries are this build's (a checkout shared between
+                # hosts has slot i of each host in the same folder)
+                with build_lock(arm_build_dir("release", arm)):
                     build_arm("release", arm, targets=HIL_TARGETS)
                     run = _run(spec, arm, slot, out)
             else:
                 prepare_build(arm)  # a no-op when built (a Dask worker on another machine may not be)
                 run = _run(spec, arm, slot, out)
         except HilError as exc:
-            write_json_atomic(out / "run.json", {"results": {"result": "failed", "verdict_reasons": [f"failed: {exc}"]},
+            write_json_atomic(out / "run.json", {"results": {**_identity(spec), "bus_timing": "on" if spec.bus_timing
+                                                             else "off", "result": "failed",
+                                                             "verdict_reasons": [f"failed: {exc}"]},
                                                  "transport": {}, "environment": {}})
     if not spec.keep_log:
         (out / "telemetry.lcmlog").unlink(missing_ok=True)
-    write_json_atomic(out / "spec.json", key)  # last: a spec beside a run.json marks the run done
-    return json.loads((out / "run.json").read_text())  # what a resumed study reads back, exactly
+    raw = (out / "run.json").read_bytes()
+    if procs.interrupted is None:  # a run armctl stopped is not done: a resumed study runs it again
+        write_json_atomic(out / DONE, {"spec": key, "run_json_sha256": hashlib.sha256(raw).hexdigest()})
+    return json.loads(raw)  # what a resumed study reads back, exactly
 
 
 def _run(spec: RunSpec, arm: ArmRef, slot: Slot, out: Path) -> dict[str, Any]:
@@ -157,10 +222,10 @@ def spec_digest(spec: RunSpec) -> str:
     return hashlib.sha256(json.dumps(spec.key(), sort_keys=True).encode()).hexdigest()[:12]
 
 
-def run_all(specs: list[RunSpec], jobs: int = 1, cluster: str | None = None,
+def run_all(specs: list[RunSpec], jobs: int = 1, cluster: Cluster | None = None,
             progress: Callable[[RunSpec, dict[str, Any]], None] | None = None) -> list[dict[str, Any]]:
     """Every spec's run.json, in the specs' order. Local: `jobs` threads, each run in a run slot.
-    cluster: a Dask scheduler's address; each run is one task on a worker (the workers see this
+    cluster: a Dask scheduler (tools/cluster.py); each run is one task on a worker (the workers see this
     checkout at the same path, and the out folders on a shared file system)."""
     if not specs:
         return []
@@ -171,7 +236,7 @@ def run_all(specs: list[RunSpec], jobs: int = 1, cluster: str | None = None,
     if cluster is not None:
         from distributed import Client, as_completed as dask_completed
 
-        with Client(cluster) as client:
+        with Client(cluster.address, security=cluster.security()) as client:
             futures = {client.submit(execute, asdict(s), pure=False, key=f"hil-{spec_digest(s)}-{i}"): i
                        for i, s in enumerate(specs)}
             for fut in dask_completed(futures):

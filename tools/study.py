@@ -9,6 +9,7 @@ import hashlib
 import json
 import os
 import sys
+from contextlib import ExitStack
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -20,21 +21,20 @@ from gen.arm import DEFAULT_DESIGN
 from tools.arm import (DEFAULT_ARM, ArmChoiceError, ArmRef, add_arm_arguments, arm_build_dir, arm_from_args,
                        arm_info, build_arm, reference_for)
 from tools import procs
+from tools.cluster import Cluster, ClusterError, add_cluster_arguments, cluster_from_args
 from tools.code_identity import code_identity
 from gen.atomic_output import write_json_atomic
 from tools.hil import SIL, HilError
+from tools.locks import LockHeld, flocked
 from tools.outdir import OutDirError, check_out_dir
 from tools.paths import REPO
-from tools.runner import RunSpec, run_all
+from tools.runner import METRICS, RunSpec, run_all
 from tools.slots import default_jobs
 from tools.stats import paired, summary
 from tools.study_config import METHODS, StudyConfig, StudyConfigError, Trajectory, load
 from tools.tuning import TuneSetup, trial_spec, tune_method
 
 DEFAULT_CONFIG = REPO / "tools" / "studies" / "paper.toml"
-# metric -> the run.json results field (per joint, or one number for the arm)
-METRICS = {"linf": "tracking_max_abs_rad", "rms": "tracking_rms_rad", "est": "estimation_error_rms",
-           "power": "torque_power_w"}
 BASELINES = ("tde", "usde-smc", "pd", "pm-paper-weights", "pm-paper", "gh2")
 BUSES = (SIL, "udp", "vcan", "auto")  # a study's runs: software in the loop, or lockstep HIL on a CAN bus
 CONFIRM_BUS = "auto"  # a software-in-the-loop study's sample, repeated over vcan where this kernel has it, else UDP
@@ -102,7 +102,7 @@ def _arm_args(arm: ArmRef) -> dict[str, str | None]:
             "design": str(arm.design) if arm.design else None}
 
 
-def setup_for(cfg: StudyConfig, arm: ArmRef, out: Path, jobs: int, cluster: str | None, bus: str = SIL,
+def setup_for(cfg: StudyConfig, arm: ArmRef, out: Path, jobs: int, cluster: Cluster | None, bus: str = SIL,
               preset: str = "release") -> tuple[TuneSetup, dict[str, Any], list[str]]:
     bdir = arm_build_dir(preset, arm)
     info = arm_info(bdir)
@@ -130,17 +130,35 @@ def tuning_key(cfg: StudyConfig, info: dict[str, Any], setup: TuneSetup, scenari
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:16]
 
 
+def _read_tuning(path: Path) -> dict[str, Any]:
+    """The kept tuning file; an absent or unreadable one is empty (everything is tuned again)."""
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, ValueError):
+        doc = {}
+    if not isinstance(doc, dict) or not isinstance(doc.get("scenarios"), dict):
+        doc = {**(doc if isinstance(doc, dict) else {}), "scenarios": {}}
+    return doc
+
+
+def keep_tuning(path: Path, scenario: str, method: str, rec: dict[str, Any], common: dict[str, Any]) -> None:
+    """One method's tuning in one scenario into the kept tuning file, merged under a lock with what
+    other commands kept meanwhile: two `armctl tune` of different methods at once keep both."""
+    with flocked(path.with_name(f".{path.name}.lock")):
+        doc = _read_tuning(path)  # read again under the lock: another tune may have written since
+        scen = doc["scenarios"].get(scenario)
+        doc["scenarios"][scenario] = {**(scen if isinstance(scen, dict) else {}), method: rec}
+        doc.update(common)
+        write_json_atomic(path, doc)
+
+
 def tuned(cfg: StudyConfig, arm: ArmRef, setup: TuneSetup, info: dict[str, Any], scenarios: list[str],
           methods: list[str], *, retune: bool = False, trials: int | None = None) -> dict[str, dict[str, Any]]:
     """The tuning of every tuned method in every scenario: the kept one when it was made for the
     same arm, scenario and tuning settings, else tuned now (and kept, method by method, so an
     interrupted tuning resumes)."""
     path = tuning_file(cfg, arm)
-    try:
-        doc = json.loads(path.read_text())
-    except (OSError, ValueError):
-        doc = {}
-    doc.setdefault("scenarios", {})
+    doc = _read_tuning(path)
     out: dict[str, dict[str, Any]] = {s: {} for s in scenarios}
     todo = []
     for s in scenarios:
@@ -148,7 +166,9 @@ def tuned(cfg: StudyConfig, arm: ArmRef, setup: TuneSetup, info: dict[str, Any],
             if METHODS[m][1] is None:
                 continue
             key = tuning_key(cfg, info, setup, s, m)
-            rec = doc["scenarios"].get(s, {}).get(m)
+            scen = doc["scenarios"].get(s)
+            rec = scen.get(m) if isinstance(scen, dict) else None
+            rec = rec if isinstance(rec, dict) else None
             budget = trials or cfg.trials
             if rec and rec.get("key") == key and rec.get("budget_per_round") == budget and not retune:
                 out[s][m] = {**rec, "source": f"tuned earlier, kept in {path}"}
@@ -166,10 +186,8 @@ def tuned(cfg: StudyConfig, arm: ArmRef, setup: TuneSetup, info: dict[str, Any],
             rec = tune_method(setup, cfg.scenarios[s], m, trials, progress=lambda: bar.update(1))
             rec["key"] = key
             rec["code"] = code_identity()
-            doc["scenarios"].setdefault(s, {})[m] = rec
-            doc["arm"] = {"name": info["name"], "model_hash": info["model_hash"]}
-            doc["procedure"] = procedure(cfg, trials)
-            write_json_atomic(path, doc)
+            keep_tuning(path, s, m, rec, {"arm": {"name": info["name"], "model_hash": info["model_hash"]},
+                                          "procedure": procedure(cfg, trials)})
             out[s][m] = {**rec, "source": f"tuned now, kept in {path}"}
         bar.close()
     return out
@@ -187,7 +205,7 @@ def procedure(cfg: StudyConfig, trials: int | None = None) -> str:
 
 def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration_s: float | None = None,
               methods: list[str] | None = None, scenarios: list[str] | None = None, arm: ArmRef = DEFAULT_ARM,
-              jobs: int = 1, cluster: str | None = None, retune: bool = False,
+              jobs: int = 1, cluster: Cluster | None = None, retune: bool = False,
               trials: int | None = None, bus: str = SIL, confirm: int = DEFAULT_CONFIRM) -> dict[str, Any]:
     methods = methods or cfg.methods
     scen_names = scenarios or list(cfg.scenarios)
@@ -303,9 +321,8 @@ def add_common_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--jobs", type=int, default=None,
                    help="runs at once on this machine [sil: every core; a CAN bus: half the cores, since a lockstep "
                         "run keeps two busy]")
-    p.add_argument("--cluster", default=None, metavar="ADDRESS",
-                   help="a Dask scheduler (tcp://host:8786): each HIL run is a task on its workers")
     p.add_argument("--trials", type=int, default=None, help="tuning budget per method and scenario [the config's]")
+    add_cluster_arguments(p)
     add_arm_arguments(p)
 
 
@@ -335,7 +352,8 @@ def _subset(text: str | None, allowed: list[str], what: str) -> list[str] | None
     return items
 
 
-def _common(ns: argparse.Namespace) -> tuple[StudyConfig, ArmRef, list[str] | None, list[str] | None]:
+def _common(ns: argparse.Namespace) -> tuple[StudyConfig, ArmRef, list[str] | None, list[str] | None,
+                                          Cluster | None]:
     cfg = load(ns.config)
     methods = _subset(ns.methods, cfg.methods, "methods")
     scenarios = _subset(ns.scenarios, list(cfg.scenarios), "scenarios")
@@ -345,10 +363,24 @@ def _common(ns: argparse.Namespace) -> tuple[StudyConfig, ArmRef, list[str] | No
         raise StudyConfigError(f"--jobs: must be in [1, 256], got {ns.jobs}")
     if ns.trials is not None and not 1 <= ns.trials <= 100000:
         raise StudyConfigError(f"--trials: must be in [1, 100000], got {ns.trials}")
+    cluster = cluster_from_args(ns)
     check_out_dir(ns.out)
     arm = arm_from_args(ns)
     build_arm("release", arm)
-    return cfg, arm, methods, scenarios
+    return cfg, arm, methods, scenarios, cluster
+
+
+OUT_LOCK = ".armctl-out.lock"  # in a study's or tuning's --out: held while the command writes there
+
+
+def _hold_out(stack: ExitStack, out: Path) -> None:
+    """--out for this command alone, until it ends: a second study there would delete and rewrite
+    the first's run folders under it."""
+    try:
+        stack.enter_context(flocked(out / OUT_LOCK, wait=False))
+    except LockHeld:
+        raise OutDirError(f"--out {out}: another study or tune holds this folder (lock {out / OUT_LOCK}); "
+                          "wait for it to end or give another --out") from None
 
 
 def cmd_study(ns: argparse.Namespace) -> int:
@@ -359,11 +391,13 @@ def cmd_study(ns: argparse.Namespace) -> int:
             raise StudyConfigError(f"--duration: must be in [0.001, 86400] s, got {ns.duration}")
         if not 0 <= ns.confirm <= 1000:
             raise StudyConfigError(f"--confirm: must be in [0, 1000], got {ns.confirm}")
-        cfg, arm, methods, scenarios = _common(ns)
-        study = run_study(cfg, ns.out, seeds=ns.seeds, duration_s=ns.duration, methods=methods, scenarios=scenarios,
-                          arm=arm, jobs=ns.jobs, cluster=ns.cluster, retune=ns.retune, trials=ns.trials, bus=ns.bus,
-                          confirm=ns.confirm)
-    except (StudyConfigError, ArmChoiceError, OutDirError) as exc:
+        cfg, arm, methods, scenarios, cluster = _common(ns)
+        with ExitStack() as stack:
+            _hold_out(stack, ns.out)
+            study = run_study(cfg, ns.out, seeds=ns.seeds, duration_s=ns.duration, methods=methods,
+                              scenarios=scenarios, arm=arm, jobs=ns.jobs, cluster=cluster, retune=ns.retune,
+                              trials=ns.trials, bus=ns.bus, confirm=ns.confirm)
+    except (StudyConfigError, ArmChoiceError, OutDirError, ClusterError) as exc:
         print(f"armctl study: {exc}", file=sys.stderr)
         return 2
     except (HilError, OSError) as exc:
@@ -399,11 +433,13 @@ def measured(r: dict[str, Any]) -> bool:
 
 def cmd_tune(ns: argparse.Namespace) -> int:
     try:
-        cfg, arm, methods, scenarios = _common(ns)
-        setup, info, _ = setup_for(cfg, arm, ns.out, ns.jobs, ns.cluster, ns.bus)
-        result = tuned(cfg, arm, setup, info, scenarios or list(cfg.scenarios), methods or cfg.methods,
-                       retune=True, trials=ns.trials)
-    except (StudyConfigError, ArmChoiceError, OutDirError) as exc:
+        cfg, arm, methods, scenarios, cluster = _common(ns)
+        with ExitStack() as stack:
+            _hold_out(stack, ns.out)
+            setup, info, _ = setup_for(cfg, arm, ns.out, ns.jobs, cluster, ns.bus)
+            result = tuned(cfg, arm, setup, info, scenarios or list(cfg.scenarios), methods or cfg.methods,
+                           retune=True, trials=ns.trials)
+    except (StudyConfigError, ArmChoiceError, OutDirError, ClusterError) as exc:
         print(f"armctl tune: {exc}", file=sys.stderr)
         return 2
     except (HilError, OSError) as exc:

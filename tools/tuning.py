@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from tools import procs
+from tools.cluster import Cluster
 from tools.code_identity import code_identity
 from tools.design_knobs import design_text
 from tools.runner import RunSpec, run_all
@@ -40,7 +41,7 @@ class TuneSetup:
     trajectory_args: list[str]
     out: Path
     jobs: int = 1
-    cluster: str | None = None
+    cluster: Cluster | None = None
     bus: str = "sil"                  # every run's bus (tools/hil.py --bus)
 
 

@@ -42,3 +42,23 @@ def test_junk_failed_and_foreign_configures_are_redone(tmp_path: Path, capsys: p
         build("cortex-m3", bdir=bdir)
         assert f"configured with a different {field}" in capsys.readouterr().err
         assert json.loads((bdir / STAMP).read_text())[field] != value
+
+
+def test_a_second_build_of_the_same_folder_waits_for_the_first() -> None:
+    """Two builders in one build folder corrupt it (two `armctl build --model X` at once: "file
+    truncated" at the link). This process holds the folder's build lock as a first build would;
+    `armctl build` in another process waits, saying so, and builds once it is released."""
+    import subprocess
+    import time
+
+    from tools.build import build_lock
+    from tools.paths import REPO, build_dir
+
+    with build_lock(build_dir("release")):
+        p = subprocess.Popen([str(REPO / "tools" / "armctl"), "build", "--preset", "release"], cwd=REPO,
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        time.sleep(4.0)  # a no-op build takes about 1 s
+        assert p.poll() is None, p.communicate()
+    out, err = p.communicate(timeout=300)
+    assert p.returncode == 0, err
+    assert f"waiting for another build in {build_dir('release')}" in err

@@ -42,6 +42,7 @@ EXERCISED: dict[str, str] = {
     "vcan run": "test_vcan_vm.py::test_vcan_setup_run_and_up_in_the_vm",
     "fuzz": "test_fuzz.py::test_every_harness_runs_clean",
     "faults": "test_faults.py::matrix",
+    "cluster-certs": "test_runner.py::test_cluster_certs_make_a_ca_and_refuse_to_overwrite",
     "hil --model|--arm": "test_arm_hil.py::test_lockstep_hil_run_is_ok_within_stated_bounds",
     "build --model|--arm": "test_arm_hil.py::built_arm",
     "synth --model|--arm": "test_arm_hil.py::built_arm",

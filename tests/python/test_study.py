@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import re
 import shutil
+import signal
 import subprocess
 import threading
 import time
@@ -25,11 +26,12 @@ from tools.telemetry_log import read_log
 SMALL = {"methods": '["pm", "pm-paper-weights", "tde"]', "scenarios": '["ideal", "realistic"]'}
 
 
-def small_config(dirpath: Path, seeds: int = 2) -> Path:
+def small_config(dirpath: Path, seeds: int = 2, methods: str = SMALL["methods"],
+                 scenarios: str = SMALL["scenarios"]) -> Path:
     """The default study made small: three methods, two scenarios, two trials each, short runs."""
     text = DEFAULT_CONFIG.read_text()
-    text = re.sub(r"(?m)^methods = .*$", f"methods = {SMALL['methods']}", text)
-    text = re.sub(r"(?m)^scenarios = .*$", f"scenarios = {SMALL['scenarios']}", text)
+    text = re.sub(r"(?m)^methods = .*$", f"methods = {methods}", text)
+    text = re.sub(r"(?m)^scenarios = .*$", f"scenarios = {scenarios}", text)
     text = re.sub(r"(?m)^seeds = 5 .*$", f"seeds = {seeds}", text)
     text = re.sub(r"(?m)^trials = \d+$", "trials = 2", text)
     text = re.sub(r"(?m)^batch = \d+$", "batch = 2", text)
@@ -144,6 +146,67 @@ def test_an_interrupted_study_resumes_and_redoes_only_what_is_missing(study: tup
     assert kept.stat().st_mtime_ns == before  # not run again
     assert (lost / "run.json").exists()
     assert again["scenarios"]["realistic"]["stats"] == s["scenarios"]["realistic"]["stats"]
+
+
+ARMCTL = str(REPO / "tools" / "armctl")
+
+
+def _study_cmd(cfg: Path, out: Path) -> list[str]:
+    # 15 s runs: about 1 s each in lockstep, long enough to be stopped in the middle of one
+    return [ARMCTL, "study", "--config", str(cfg), "--duration", "15", "--jobs", "1", "--out", str(out)]
+
+
+def _left_running(out: Path) -> list[str]:
+    """This study's processes still alive (their command lines name its folder)."""
+    r = subprocess.run(["pgrep", "-af", str(out)], capture_output=True, text=True)
+    return [ln for ln in r.stdout.splitlines() if "pgrep" not in ln]
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, subprocess.CompletedProcess[str], dict]:
+    """2 methods, 1 scenario, 2 seeds, run through once (and tuned: the tuning is kept for the rest)."""
+    base = tmp_path_factory.mktemp("resume")
+    cfg = small_config(base / "cfg", methods='["pm", "pd"]', scenarios='["ideal"]')
+    r = subprocess.run(_study_cmd(cfg, base / "whole"), cwd=REPO, capture_output=True, text=True, timeout=900)
+    assert r.returncode in (0, 1) and (base / "whole" / "study.json").exists(), r.stderr[-3000:]
+    return cfg, r, json.loads((base / "whole" / "study.json").read_text())
+
+
+@pytest.mark.parametrize(("sig", "nth"), [(signal.SIGINT, 2), (signal.SIGKILL, 3)], ids=["SIGINT", "SIGKILL"])
+def test_a_study_stopped_by_a_signal_resumes_to_the_same_numbers(uninterrupted, tmp_path: Path,  # noqa: ANN001
+                                                                 sig: signal.Signals, nth: int) -> None:
+    """Stopped in the middle of its nth run, then run again: the stopped run is not kept, is run
+    again, and study.json has the numbers of the study run through once; after SIGKILL, which
+    armctl cannot catch, its controller, simulator and logger end too (PR_SET_PDEATHSIG)."""
+    cfg, whole, ref = uninterrupted
+    out = tmp_path / "study"
+    p = subprocess.Popen(_study_cmd(cfg, out), cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 300
+    stopped: Path | None = None
+    while time.monotonic() < deadline and p.poll() is None and stopped is None:
+        runs = sorted(out.glob("*/*/seed-*"), key=lambda d: d.stat().st_mtime_ns)
+        if len(runs) >= nth and not (runs[nth - 1] / "spec.json").exists() and (runs[nth - 1] / "controller.log").exists():
+            stopped = runs[nth - 1]
+        else:
+            time.sleep(0.01)
+    assert stopped is not None, "the study never reached its run in flight"
+    time.sleep(0.3)  # into the run
+    p.send_signal(sig)
+    _, err = p.communicate(timeout=120)
+    assert p.returncode == (128 + sig if sig != signal.SIGKILL else -sig), err
+    assert "Traceback" not in err
+    deadline = time.monotonic() + 5  # they stop in about 1 s (the controller waits for the dead simulator)
+    while _left_running(out) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not _left_running(out)
+    assert not (stopped / "spec.json").exists()  # never taken for done
+    r = subprocess.run(_study_cmd(cfg, out), cwd=REPO, capture_output=True, text=True, timeout=900)
+    assert r.returncode == whole.returncode, r.stderr[-3000:]
+    assert f"{stopped}: running it again" in r.stderr
+    again = json.loads((out / "study.json").read_text())
+    for name, sc in ref["scenarios"].items():
+        for part in ("runs", "stats", "pm_versus"):
+            assert again["scenarios"][name][part] == sc[part], (name, part)
 
 
 def test_tuning_widens_a_range_whose_best_is_at_its_edge(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -281,3 +344,47 @@ def test_a_failed_trial_scores_by_how_much_it_ran() -> None:
     early, _ = objective([run("failed", 1000), run("ok", 4000)])
     assert FAILED_SCORE <= late < early <= 2 * FAILED_SCORE and good < FAILED_SCORE and why == "failed: why"
     assert objective([run("torque-limited", 4000), run("ok", 4000)])[0] == FAILED_SCORE
+
+
+def _keep_many(path: str, method: str, n: int) -> None:
+    from tools.study import keep_tuning
+
+    for i in range(n):
+        keep_tuning(Path(path), f"scenario-{i}", method, {"knobs": {"k": i}, "pad": "x" * 20000}, {"procedure": method})
+
+
+def test_two_tunings_at_once_keep_both(tmp_path: Path) -> None:
+    """Two `armctl tune` of different methods at once, at the level where they share the file:
+    each keeps its method in every scenario, merged under the lock, and neither loses the other's."""
+    import multiprocessing
+
+    path = tmp_path / "paper.tuning.json"
+    ctx = multiprocessing.get_context("spawn")
+    procs = [ctx.Process(target=_keep_many, args=(str(path), m, 40)) for m in ("pd", "tde")]
+    for p in procs:
+        p.start()
+    for p in procs:
+        p.join(120)
+        assert p.exitcode == 0
+    doc = json.loads(path.read_text())
+    assert sorted(doc["scenarios"]) == sorted(f"scenario-{i}" for i in range(40))
+    assert all(set(s) == {"pd", "tde"} and s["pd"]["knobs"] == s["tde"]["knobs"] for s in doc["scenarios"].values())
+    assert not list(tmp_path.glob(".*.tmp.*"))
+
+
+def test_a_second_study_on_the_same_out_is_refused_in_one_line(tmp_path: Path) -> None:
+    """Another study holds --out (its lock, taken here as that study would): this one exits at
+    once with one line naming the folder, and leaves the other's files alone."""
+    from tools.locks import flocked
+    from tools.study import OUT_LOCK
+
+    out = tmp_path / "out"
+    cfg = small_config(tmp_path / "cfg", methods='["pd"]', scenarios='["ideal"]')
+    (out / "ideal").mkdir(parents=True)
+    with flocked(out / OUT_LOCK):
+        r = subprocess.run([ARMCTL, "study", "--config", str(cfg), "--out", str(out), "--duration", "0.5"], cwd=REPO,
+                           capture_output=True, text=True, timeout=300)
+    assert r.returncode != 0
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and str(out) in lines[0] and "another study" in lines[0], r.stderr
+    assert sorted(p.name for p in out.iterdir()) == [OUT_LOCK, "ideal"]

@@ -1,0 +1,38 @@
+"""Locks where two armctl commands share a file: an flock on a lock file, held for the block and
+released when it ends or its process dies (so a killed command never leaves a stale lock).
+
+Used for a build folder (tools/build.py), the kept tuning (tools/study.py) and a study's --out.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+
+class LockHeld(RuntimeError):
+    """The lock is taken by another process (or thread) and the caller did not wait."""
+
+
+@contextmanager
+def flocked(path: Path, *, wait: bool = True, waiting: str | None = None) -> Iterator[None]:
+    """An exclusive lock on `path` (created if need be) for the block. Taken: wait (printing
+    `waiting` once, if given) or, with wait=False, raise LockHeld."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            if not wait:
+                raise LockHeld(str(path)) from None
+            if waiting:
+                print(waiting, file=sys.stderr)
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)  # releases the flock
