@@ -154,62 +154,89 @@ def table(result: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _sim_runs(bus: str, repeats: int, duration: float, tmp: Path) -> tuple[list[dict[str, Any]], dict[str, float]]:
+    """The default run on this bus, repeated; one more with --profile (where a period's time goes)."""
+    from tools.hil import HilOptions, run_hil
+
+    runs, breakdown = [], {}
+    for i in tqdm(range(repeats + 1), desc=bus, unit="run"):
+        profile = i == repeats  # the last run measures where the time goes (costs a little)
+        d = tmp / f"{bus}-{i}"
+        run = run_hil(HilOptions(out=d, duration_s=duration, method="pm", bus=bus,
+                                 sim_args=("--profile",) if profile else ()))
+        if run["results"]["result"] != "ok":
+            raise RuntimeError(f"bench run {i} ({bus}) failed: {run['results']['problems']}")
+        sim = json.loads((d / "sim_summary.json").read_text())
+        entry = {"realtime_factor": sim["realtime_factor"], "wall_s": run["environment"]["wall_s"],
+                 "boot_s": sim["boot_s"], "period_cost_us": sim["period_cost_us"]}
+        if profile:
+            breakdown = sim["profile_us_per_period"]
+        else:
+            runs.append(entry)
+    return runs, breakdown
+
+
 def bench_sim(out: Path, quick: bool = False) -> dict[str, Any]:
-    """The default lockstep run, repeated; the per-period breakdown; the bare-MuJoCo limit."""
+    """The default run in software in the loop and in lockstep HIL, repeated; the per-period
+    breakdown of each; the bare-MuJoCo limit of a period."""
     import statistics
 
     from host_sim.launch import sim_binary
-    from tools.hil import HilOptions, run_hil
 
     build("release")
     repeats, duration = (1, 1.0) if quick else (5, 10.0)
-    runs = []
-    with tempfile.TemporaryDirectory() as tmp:
-        for i in tqdm(range(repeats + 1), desc="hil", unit="run"):
-            profile = i == repeats  # the last run measures where the time goes (costs a little)
-            run = run_hil(HilOptions(out=Path(tmp) / str(i), duration_s=duration, method="pm",
-                                     sim_args=("--profile",) if profile else ()))
-            if run["results"]["result"] != "ok":
-                raise RuntimeError(f"bench run {i} failed: {run['results']['problems']}")
-            sim = json.loads((Path(tmp) / str(i) / "sim_summary.json").read_text())
-            entry = {"realtime_factor": sim["realtime_factor"], "wall_s": run["environment"]["wall_s"],
-                     "boot_s": sim["boot_s"], "period_cost_us": sim["period_cost_us"]}
-            if profile:
-                breakdown = sim["profile_us_per_period"]
-            else:
-                runs.append(entry)
     r = subprocess.run([str(sim_binary("release")), "--bench-mj-step", "20000"], capture_output=True, text=True,
                        check=True)
     mj_step_us = json.loads(r.stdout)["mj_step_ns"] / 1e3
-    other = breakdown["total"] - sum(breakdown[k] for k in ("physics", "bus_tx", "bus_rx", "telemetry"))
-    factors = [x["realtime_factor"] for x in runs]
-    cost_mean = statistics.median(x["period_cost_us"]["mean"] for x in runs)
+    modes: dict[str, Any] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for bus in ("sil", "udp"):
+            runs, b = _sim_runs(bus, repeats, duration, Path(tmp))
+            sim_side = sum(b[k] for k in ("physics", "bus_tx", "bus_rx", "telemetry"))
+            cost = statistics.median(x["period_cost_us"]["mean"] for x in runs)
+            factors = [x["realtime_factor"] for x in runs]
+            # In SIL the thread is the whole loop: what the simulator's own parts leave is the
+            # controller's step and the hand-offs between the two. Over the bus it is the drives'
+            # state machines and the rest of the simulator (the controller is another process).
+            rest = "controller_and_handoffs" if bus == "sil" else "drives_and_rest"
+            breakdown = {**{k: b[k] for k in ("physics", "bus_tx", "bus_rx", "telemetry")},
+                         rest: b["total"] - sim_side, "total": b["total"]}
+            modes[bus] = {
+                "runs": runs,
+                "realtime_factor_median": statistics.median(factors),
+                "realtime_factor_min": min(factors),
+                "period_cost_us_mean_median": cost,
+                "breakdown_us_per_period": breakdown,
+                "breakdown_over_bare_mj_step": {k: v / mj_step_us for k, v in breakdown.items()},
+                "period_cost_over_bare_mj_step": cost / mj_step_us,
+            }
     result = {
-        "what": (f"the default lockstep HIL run (pm, {duration:g} s after the 0.5 s hold), {repeats} time(s): "
-                 "arm_sim's real-time factor after boot and its CPU time per period; one more run with "
-                 "--profile breaks a period down by activity (thread CPU time); bare mj_step: MuJoCo alone "
-                 "on the same model, the limit of a period"),
+        "what": (f"the default run (pm, {duration:g} s after the 0.5 s hold), {repeats} time(s), in software in the "
+                 "loop (arm_sil: one thread, telemetry written to the log) and in lockstep HIL over UDP (arm_sim, "
+                 "arm_controller and the logger): the real-time factor after boot and the CPU time per period "
+                 "(in SIL the whole loop, over UDP the simulator's); one more run each with --profile breaks a "
+                 "period down (thread CPU time); bare mj_step: MuJoCo alone on the same model, the limit of a "
+                 "period"),
         "quick": quick,
-        "runs": runs,
-        "realtime_factor_median": statistics.median(factors),
-        "realtime_factor_min": min(factors),
-        "period_cost_us_mean_median": cost_mean,
-        "breakdown_us_per_period": {**{k: breakdown[k] for k in ("physics", "bus_tx", "bus_rx", "telemetry")},
-                                    "drives_and_rest": other, "total": breakdown["total"]},
         "bare_mj_step_us": mj_step_us,
-        "period_cost_over_bare_mj_step": cost_mean / mj_step_us,
+        "sil": modes["sil"],
+        "lockstep_udp": modes["udp"],
+        "sil_over_lockstep": modes["sil"]["realtime_factor_median"] / modes["udp"]["realtime_factor_median"],
     }
     _write_json(out, result)
     return result
 
 
 def sim_table(r: dict[str, Any]) -> str:
-    b = r["breakdown_us_per_period"]
-    lines = [f"real-time factor after boot: median {r['realtime_factor_median']:.1f}x "
-             f"(min {r['realtime_factor_min']:.1f}x) over {len(r['runs'])} run(s)",
-             "one period's simulator CPU (us, --profile run): " + ", ".join(f"{k} {v:.1f}" for k, v in b.items()),
-             f"bare mj_step on the same model: {r['bare_mj_step_us']:.2f} us; a whole period costs "
-             f"{r['period_cost_over_bare_mj_step']:.1f}x that"]
+    lines = [f"bare mj_step on the same model: {r['bare_mj_step_us']:.2f} us (the limit of a period)"]
+    for key, name in (("sil", "software in the loop"), ("lockstep_udp", "lockstep HIL over UDP")):
+        m = r[key]
+        lines.append(f"{name}: {m['realtime_factor_median']:.1f}x real time (median, min {m['realtime_factor_min']:.1f}x, "
+                     f"{len(m['runs'])} run(s)); a period {m['period_cost_us_mean_median']:.2f} us = "
+                     f"{m['period_cost_over_bare_mj_step']:.1f}x mj_step")
+        lines.append("  per period (us, x mj_step): " + ", ".join(
+            f"{k} {v:.2f} ({m['breakdown_over_bare_mj_step'][k]:.1f}x)" for k, v in m["breakdown_us_per_period"].items()))
+    lines.append(f"software in the loop / lockstep HIL: {r['sil_over_lockstep']:.1f}x")
     return "\n".join(lines)
 
 

@@ -213,9 +213,12 @@ def test_bench(tmp_path: Path) -> None:
     r = armctl("bench", "sim", "--quick", "--out", str(tmp_path / "sim.json"))
     assert r.returncode == 0, r.stdout + r.stderr
     sim = json.loads((tmp_path / "sim.json").read_text())
-    assert sim["quick"] and sim["realtime_factor_median"] > 0 and sim["bare_mj_step_us"] > 0
-    assert set(sim["breakdown_us_per_period"]) == {"physics", "bus_tx", "bus_rx", "telemetry", "drives_and_rest",
-                                                   "total"}
+    assert sim["quick"] and sim["bare_mj_step_us"] > 0
+    assert sim["sil"]["realtime_factor_median"] > 0 and sim["lockstep_udp"]["realtime_factor_median"] > 0
+    assert set(sim["sil"]["breakdown_us_per_period"]) == {"physics", "bus_tx", "bus_rx", "telemetry",
+                                                          "controller_and_handoffs", "total"}
+    assert set(sim["lockstep_udp"]["breakdown_us_per_period"]) == {"physics", "bus_tx", "bus_rx", "telemetry",
+                                                                   "drives_and_rest", "total"}
 
 
 def test_busload() -> None:
