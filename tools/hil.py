@@ -29,6 +29,12 @@ from tools.verdict import Bounds
 CONTROLLER_DEFAULT_HOLD_S = 0.5  # arm_controller --ref-hold's default
 
 
+# Lockstep: both sides poll the bus this long before they sleep on it. A period's answer comes
+# within tens of microseconds, sooner than a sleeping process is woken on a VM: measured on this
+# 2-core machine, 10-11x real time without, 11-14x with (host_sim/README.md).
+LOCKSTEP_SPIN_US = 50
+
+
 @dataclass
 class HilOptions:
     out: Path
@@ -67,20 +73,24 @@ class HilOptions:
     # (CAPTURE_FILE), or DIR/bus.log.gz once the run is over when compress is asked for.
     capture: bool = False
     compress_capture: bool = False
+    # Lockstep over a bus: each side polls this long before it sleeps (lockstep_spin_us).
+    spin_us: float = LOCKSTEP_SPIN_US
 
 
 class HilError(RuntimeError):
     pass
 
 
-# Lockstep: both sides poll the bus this long before they sleep on it. A period's answer comes
-# within tens of microseconds, sooner than a sleeping process is woken on a VM: measured on this
-# 2-core machine, 10-11x real time without, 11-14x with (host_sim/README.md).
-LOCKSTEP_SPIN_US = 50
 
 
-def spin_args(mode: str) -> list[str]:
-    return ["--spin-us", str(LOCKSTEP_SPIN_US)] if mode == "lockstep" else []
+def spin_args(mode: str, spin_us: float = LOCKSTEP_SPIN_US) -> list[str]:
+    return ["--spin-us", f"{spin_us:g}"] if mode == "lockstep" else []
+
+
+def lockstep_spin_us(jobs: int) -> float:
+    """A lockstep run spins only while it has the cores to itself: two runs that both spin on two
+    cores slow each other (armctl bench study: --jobs 2 gave 0.95x --jobs 1 with spinning)."""
+    return LOCKSTEP_SPIN_US if 2 * jobs <= (os.cpu_count() or 1) else 0.0
 
 
 # Realtime: a next-period SYNC that overtook this period's commands on another bus is held back
@@ -91,8 +101,8 @@ def spin_args(mode: str) -> list[str]:
 REALTIME_REORDER_WAIT_US = 200
 
 
-def sim_mode_args(mode: str) -> list[str]:
-    return spin_args(mode) + (["--reorder-wait-us", str(REALTIME_REORDER_WAIT_US)] if mode == "realtime" else [])
+def sim_mode_args(mode: str, spin_us: float = LOCKSTEP_SPIN_US) -> list[str]:
+    return spin_args(mode, spin_us) + (["--reorder-wait-us", str(REALTIME_REORDER_WAIT_US)] if mode == "realtime" else [])
 
 
 def _logger_priority() -> None:
@@ -440,11 +450,11 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
     sim_args = sim_argv(sim_exe, buses, lcm_url=url, summary=opt.out / "sim_summary.json",
                         uncertainty=opt.uncertainty, timing=bus_timing_mode(opt.mode) if opt.bus_timing else "off",
                         phys=topology, model=prepared_model(bdir), drives=opt.drives,
-                        extra=["--substeps", str(substeps), *([] if sil else sim_mode_args(opt.mode)),
+                        extra=["--substeps", str(substeps), *([] if sil else sim_mode_args(opt.mode, opt.spin_us)),
                                *capture_args(opt), *opt.sim_args])
     ctl_args = [*opt.controller_cmd_prefix, str(binary), *bus_argv, "--lcm-url", url,
                 "--duration", f"{opt.duration_s:g}", "--method", opt.method, "--mode", opt.mode,
-                "--summary", str(opt.out / "controller_summary.json"), *([] if sil else spin_args(opt.mode)),
+                "--summary", str(opt.out / "controller_summary.json"), *([] if sil else spin_args(opt.mode, opt.spin_us)),
                 *(["--cpu", str(realtime_cpu(opt))] if opt.mode == "realtime" else []),
                 *reference_args(info, opt.controller_args), *opt.controller_args]
     if sil:

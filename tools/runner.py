@@ -33,7 +33,7 @@ from tools.build import build_lock
 from tools.cluster import Cluster
 from tools.paths import BUILD
 from gen.atomic_output import write_json_atomic, write_text_atomic
-from tools.hil import HilError, HilOptions, run_hil
+from tools.hil import LOCKSTEP_SPIN_US, HilError, HilOptions, lockstep_spin_us, run_hil
 from tools.slots import Slot, acquire_slot
 
 # metric -> the run.json results field a study computes with (per joint, or one number for the arm)
@@ -166,8 +166,9 @@ def kept_run(out: Path, spec: RunSpec) -> tuple[dict[str, Any] | None, str]:
     return json.loads(raw), ""
 
 
-def execute(spec_d: dict[str, Any]) -> dict[str, Any]:
-    """One run (in this process: a thread of `armctl study`, or a Dask worker). Returns run.json."""
+def execute(spec_d: dict[str, Any], spin_us: float = LOCKSTEP_SPIN_US) -> dict[str, Any]:
+    """One run (in this process: a thread of `armctl study`, or a Dask worker). Returns run.json.
+    spin_us: a lockstep run's polling (tools/hil.py lockstep_spin_us), which never changes a result."""
     spec = spec_from_dict(spec_d)
     out = Path(spec.out)
     key = spec.key()
@@ -191,10 +192,10 @@ def execute(spec_d: dict[str, Any]) -> dict[str, Any]:
                 # hosts has slot i of each host in the same folder)
                 with build_lock(arm_build_dir("release", arm)):
                     build_arm("release", arm, targets=HIL_TARGETS)
-                    run = _run(spec, arm, slot, out)
+                    run = _run(spec, arm, slot, out, spin_us)
             else:
                 prepare_build(arm)  # a no-op when built (a Dask worker on another machine may not be)
-                run = _run(spec, arm, slot, out)
+                run = _run(spec, arm, slot, out, spin_us)
         except HilError as exc:
             write_json_atomic(out / "run.json", {"results": {**_identity(spec), "bus_timing": "on" if spec.bus_timing
                                                              else "off", "result": "failed",
@@ -208,14 +209,14 @@ def execute(spec_d: dict[str, Any]) -> dict[str, Any]:
     return json.loads(raw)  # what a resumed study reads back, exactly
 
 
-def _run(spec: RunSpec, arm: ArmRef, slot: Slot, out: Path) -> dict[str, Any]:
+def _run(spec: RunSpec, arm: ArmRef, slot: Slot, out: Path, spin_us: float) -> dict[str, Any]:
     return run_hil(HilOptions(out=out, duration_s=spec.duration_s, method=spec.method, arm=arm,
                               controller_args=spec.controller_args, uncertainty=spec.uncertainty,
                               drives=DriveModel(**spec.drives) if spec.drives else DriveModel(),
                               bus_timing=spec.bus_timing, can_port=slot.can_port, lcm_port=slot.lcm_port,
                               labels=dict(spec.labels), bus=spec.bus,
                               # the runs that keep their telemetry keep their bus too (gzip: 0.6 MB a 10 s run)
-                              capture=spec.keep_log, compress_capture=True))
+                              capture=spec.keep_log, compress_capture=True, spin_us=spin_us))
 
 
 def spec_digest(spec: RunSpec) -> str:
@@ -246,7 +247,8 @@ def run_all(specs: list[RunSpec], jobs: int = 1, cluster: Cluster | None = None,
                     progress(specs[i], results[i])
     else:
         with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
-            futs = {pool.submit(execute, asdict(s)): i for i, s in enumerate(specs)}
+            spin = lockstep_spin_us(jobs)
+            futs = {pool.submit(execute, asdict(s), spin): i for i, s in enumerate(specs)}
             for fut in as_completed(futs):
                 i = futs[fut]
                 results[i] = fut.result()
