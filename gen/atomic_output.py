@@ -64,8 +64,9 @@ def write_files_atomically(out_dir: Path, files: dict[str, str]) -> None:
 
     Inside, not beside: out_dir may be a mount point, and a rename cannot cross filesystems. Any
     failure before the moves leaves out_dir as it was (removed again if this call made it);
-    other files already in out_dir are never touched. JSON files move last: a reader that sees
-    the new manifest also sees the files it describes."""
+    other files already in out_dir are never touched, nor is a file whose content is already the
+    same (its time stays: the build's restat then rebuilds nothing downstream of it). JSON files
+    move last: a reader that sees the new manifest also sees the files it describes."""
     out_dir = out_dir.resolve()
     made = [d for d in (out_dir, *out_dir.parents) if not d.exists()]
     tmp: Path | None = None
@@ -73,10 +74,18 @@ def write_files_atomically(out_dir: Path, files: dict[str, str]) -> None:
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
         tmp = Path(tempfile.mkdtemp(prefix=".tmp-", dir=out_dir))
+        changed = {}
         for name, text in files.items():
             failed = out_dir / name
-            _write_synced(tmp / name, text.encode("utf-8"))
-        for name in sorted(files, key=lambda n: n.endswith(".json")):
+            data = text.encode("utf-8")
+            try:
+                if (out_dir / name).read_bytes() == data:
+                    continue
+            except OSError:
+                pass
+            _write_synced(tmp / name, data)
+            changed[name] = text
+        for name in sorted(changed, key=lambda n: n.endswith(".json")):
             failed = out_dir / name
             os.replace(tmp / name, out_dir / name)
     except OSError as exc:

@@ -1,4 +1,5 @@
-"""`armctl faults`: every fault against a short lockstep run, as a table.
+"""`armctl faults`: every fault against a short lockstep run (realtime where the fault is about
+the wall clock: a second master between the controller's periods), as a table.
 
 For each fault a HIL run starts (pm, the default arm, its own run slot); once the controller is
 tracking, the fault is injected from outside: a signal to a process, frames on a bus (garbage,
@@ -45,6 +46,7 @@ class Fault:
     inject: Callable[["Injector"], None]
     expect_stop: bool                          # the arm must end stopped (a named fault, never ok)
     sim_args: tuple[str, ...] = ()
+    mode: str = "lockstep"                     # the run's mode (tools/hil.py)
 
 
 class Injector:
@@ -132,7 +134,20 @@ FAULTS = [
           ("--debug-lose-bus", f"1@{LOST_BUS_PERIOD}")),
     Fault("stalled-logger", "SIGSTOP to the telemetry logger for 0.5 s",
           lambda i: i.signal("arm_lcm_logger", signal.SIGSTOP, signal.SIGCONT, 0.5), False),
+    Fault("second-master", "realtime: a second master sends its own SYNC periods on bus 1, each with a "
+          "DRIVE_6_CMD of 0.2 N m, three times", lambda i: _second_master(i), True, mode="realtime"),
 ]
+
+
+def _second_master(i: Injector) -> None:
+    """Another master between the controller's periods: its own SYNC counter, and a command for it
+    (a drive that followed it would apply the foreign torque)."""
+    for burst in range(3):
+        c = (i.counter + 128) & 0xFF
+        i.send(i.bus1, [can.Message(arbitration_id=SYNC, data=bytes([c]), is_extended_id=False),
+                        can.Message(arbitration_id=0x206, is_extended_id=False,
+                                    data=struct.pack("<HiBx", 0x000F, 200_000, c))])
+        time.sleep(0.05)
 
 
 def _drive_fault(i: Injector) -> None:
@@ -204,7 +219,7 @@ def run_fault(f: Fault, out: Path) -> dict[str, Any]:
             t.start()
         try:
             run = run_hil(HilOptions(out=out, duration_s=8.0, method="pm", can_port=slot.can_port,
-                                     lcm_port=slot.lcm_port, sim_args=f.sim_args))
+                                     lcm_port=slot.lcm_port, sim_args=f.sim_args, mode=f.mode))
         finally:
             inj.stop_event.set()
             for t in threads:

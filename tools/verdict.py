@@ -7,7 +7,8 @@ is listed in verdict_reasons):
 - interrupted: a signal stopped the controller or the simulator;
 - diverged: the simulation blew up (MuJoCo reset the arm), or a tracking error is not finite or
   beyond DIVERGED_DEG;
-- failed: a process failed or died (boot failure, runtime fault, lost controller or simulator);
+- failed: a process failed or died (boot failure, runtime fault, lost controller or simulator), or
+  the drives simulated another number of periods than the controller ran (another master);
 - incomplete: fewer periods than asked for, telemetry lost, frames the kernel dropped on a full
   receive queue, the logger failed, or the metrics do not cover every period of the trajectory;
 - tracking-bound-exceeded: a joint's L-infinity tracking error above bounds.max_error_deg;
@@ -58,6 +59,10 @@ def judge(results: dict[str, Any], transport: dict[str, Any], controller: dict[s
         add("failed", f"controller: {controller.get('reason') or f'exit {ctl_result}'}")
     if sim.get("result") not in ("ok", "interrupted", "diverged"):
         add("failed", f"simulator: {sim.get('reason') or sim.get('result')}")
+    simulated, sent = results.get("simulated_periods"), results.get("controller_bus_periods")
+    if simulated is not None and sent is not None and simulated != sent:
+        add("failed", f"the drives simulated {simulated} periods, the controller ran {sent}: the arm followed "
+                      "someone else's SYNCs")
     requested, done = controller.get("steps_requested"), controller.get("steps_done")
     if requested is None or done is None or done < requested:
         add("incomplete", f"{done if done is not None else 'an unknown number of'} of "

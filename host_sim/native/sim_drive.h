@@ -27,7 +27,7 @@ typedef enum {
 #define SIM_EMCY_HEARTBEAT 0x8130u    /* CiA 301: life guard / heartbeat error */
 #define SIM_ERR_NONE 0u
 #define SIM_ERR_COMMAND_TIMEOUT 1u
-#define SIM_ERR_CONTROLLER_LOST 1u
+#define SIM_ERR_CONTROLLER_LOST 5u
 #define SIM_ERR_DIVERGED 2u
 #define SIM_EMCY_DIVERGED 0xFF00u /* CiA 301: manufacturer specific (the simulated arm blew up) */
 #define SIM_ERR_TORQUE_ABOVE_LIMIT 3u
@@ -35,6 +35,7 @@ typedef enum {
 #define SIM_TORQUE_TOLERANCE 2e-6      /* Nm: the wire's 1 uNm resolution, rounded either way */
 #define SIM_ERR_TWO_MASTERS 4u
 #define SIM_EMCY_PROTOCOL 0x8200u     /* CiA 301: protocol error (two commands for one SYNC) */
+#define SIM_ERR_SYNC_SEQUENCE 6u      /* a SYNC that does not continue its master's sequence: another master */
 #define SIM_EMCY_QUEUE 4u
 
 typedef struct {

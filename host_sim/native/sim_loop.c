@@ -37,6 +37,7 @@ struct sim {
                                         * the order the buses are served in does not change a run */
     sim_timeline_t timing[ARM_CAN_BUS_SET_MAX]; /* when cfg->timing != off */
     int counter;     /* SYNC counter of the period being served, -1: none */
+    int last_sync[ARM_CAN_BUS_SET_MAX]; /* each bus's last SYNC counter, -1: none yet */
     uint32_t synced; /* bit b: this period's SYNC arrived on bus b */
     uint32_t got_cmd;
     uint16_t cmd_cw[SIM_MAX_JOINTS];
@@ -425,10 +426,32 @@ static void sleep_until(int64_t t_ns)
     }
 }
 
+/* CANopen has one SYNC producer: on each bus the counter continues its sequence (mod 256). A SYNC
+ * that does not is another master's (or a replay): every drive on that bus stops with an EMCY
+ * rather than follow two masters; they still answer the period (faulted), so the controller hears why. */
+static void check_sync_sequence(sim_t *s, int counter, unsigned bus)
+{
+    const int last = s->last_sync[bus];
+    s->last_sync[bus] = counter;
+    if (last < 0 || counter == ((last + 1) & 0xFF)) return;
+    s->rep->rx_sync_out_of_sequence++;
+    char text[160];
+    snprintf(text, sizeof(text), "bus %u: SYNC counter %d after %d: a second SYNC producer (another master); the drives "
+             "on this bus stop", bus, counter, last);
+    event(s, "sim", "fault", text);
+    for (int j = 0; j < s->n; ++j) {
+        if (s->bus_of[j] == (int)bus && s->drives[j].error_code == 0u) {
+            sim_drive_fault(&s->drives[j], SIM_ERR_SYNC_SEQUENCE, SIM_EMCY_PROTOCOL);
+            send_emcys(s, j);
+        }
+    }
+}
+
 /* SYNC goes on every bus; the drives on `bus` answer on it. A period starts with its first SYNC;
  * the same counter on another bus joins it. */
 static void on_sync(sim_t *s, int counter, unsigned bus)
 {
+    check_sync_sequence(s, counter, bus);
     if (s->counter >= 0 && (counter != s->counter || (s->synced & (1u << bus)) != 0u)) {
         finish_period(s); /* commands missing: the drives count it, the arm still moves */
     }
@@ -731,6 +754,7 @@ sim_t *sim_begin(const sim_config_t *cfg, sim_arm_t *arm, sim_telemetry_t *tel, 
     s.rep = rep;
     s.n = arm->n;
     s.counter = -1;
+    for (unsigned b = 0; b < ARM_CAN_BUS_SET_MAX; ++b) s.last_sync[b] = -1;
     for (int j = 0; j < s.n; ++j) {
         s.bus_of[j] = arm_can_bus_set_bus_of(&cfg->buses, (unsigned)j);
         if (s.bus_of[j] < 0) {

@@ -55,6 +55,7 @@ typedef struct {
     uint64_t rx_kernel_drops; /* frames the kernel dropped on a full receive queue (SO_RXQ_OVFL) */
     uint64_t rx_wrong_bus;   /* a command for a drive that is not on the bus it arrived on */
     uint64_t rx_duplicate_command; /* a second command for one drive and SYNC: the drive faults */
+    uint64_t rx_sync_out_of_sequence; /* a SYNC counter that does not continue its bus's sequence */
     uint64_t commands_missed;
     uint64_t commands_late;  /* bus timing: the command's frame ended after its period */
     uint64_t commands_missed_per_drive[SIM_MAX_JOINTS];

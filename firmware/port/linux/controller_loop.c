@@ -266,8 +266,10 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
     report->result = RUN_OK;
     int enabling = 1;
     uint32_t k_run = 0;
+    uint32_t foreign_seen = 0; /* SYNC or command frames from another master, as of the last period */
 
     /* k counts bus periods (SYNCs); the first few bring the drives to operation enabled. */
+    uint32_t bus_periods = 0; /* SYNCs sent: the periods the drives should have simulated */
     for (uint32_t k = 0; k_run < opt->steps; ++k) {
         if (controller_stop_signal != 0) {
             snprintf(report->reason, sizeof(report->reason),
@@ -292,6 +294,7 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
         arm_can_frame_t sync;
         arm_bus_begin_period(&l.drives, k, &sync);
         send_all(&l, &sync);
+        bus_periods = k + 1u;
         const int64_t wait_until = opt->mode == MODE_REALTIME
                                        ? next_deadline + period_ns * 8 / 10
                                        : cycle_start + (int64_t)(opt->lockstep_timeout_s * 1e9);
@@ -318,6 +321,13 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
                 }
                 arm_reference_set_hold(&ref, (float)opt->ref_hold_s);
                 telemetry_event(telem, 0, "info", "all drives operation enabled; tracking starts");
+            } else if (l.drives.rx.foreign_master != 0u) {
+                snprintf(report->reason, sizeof(report->reason),
+                         "boot: another master on the bus (%u SYNC or command frame(s) this controller did not send)",
+                         l.drives.rx.foreign_master);
+                report->result = RUN_BOOT_FAILED;
+                telemetry_event(telem, 0, "fault", report->reason);
+                break;
             } else if (k >= ENABLE_TIMEOUT_PERIODS) {
                 char missing[64];
                 list_joints(ALL_JOINTS & ~enabled, missing, sizeof(missing));
@@ -358,6 +368,13 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
                      k_run, __builtin_ctz(l.drives.duplicate_mask) + 1);
             arm_ctl_external_fault(&ctl);
         }
+        if (l.drives.rx.foreign_master != foreign_seen && ctl.state != ARM_STATE_SAFE_STOP) {
+            snprintf(report->reason, sizeof(report->reason),
+                     "period %u: another master on the bus: %u SYNC or command frame(s) this controller did not send",
+                     k_run, l.drives.rx.foreign_master - foreign_seen);
+            arm_ctl_external_fault(&ctl);
+        }
+        foreign_seen = l.drives.rx.foreign_master;
         for (int j = 0; j < ARM_N_JOINTS; ++j) {
             if ((fresh & (1u << j)) != 0u && !arm_sw_operation_enabled(l.drives.statusword[j]) &&
                 ctl.state == ARM_STATE_RUNNING) {
@@ -438,6 +455,7 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
     send_all(&l, &stop);
     report->final_state = out.state;
     report->final_fault = out.fault;
+    report->bus_periods = bus_periods;
     report->rx = l.drives.rx;
     for (unsigned b = 0; b < l.buses.n; ++b) {
         report->rx_undecodable += arm_can_bus_rx_undecodable(&l.buses.bus[b]);

@@ -24,6 +24,7 @@ typedef struct {
     run_result_t result;
     char reason[512];
     uint32_t steps_done;
+    uint32_t bus_periods; /* SYNCs sent (boot and enable periods included) */
     uint64_t frames_tx;
     uint64_t frames_rx;
     uint64_t tx_would_block;

@@ -22,8 +22,8 @@ int summary_write(const char *path, const options_t *opt, const run_report_t *r,
     json_string(f, r->reason);
     fprintf(f, ",\n  \"method\": \"%s\",\n  \"mode\": \"%s\",\n", arm_method_str(opt->ctl.method),
             opt->mode == MODE_LOCKSTEP ? "lockstep" : "realtime");
-    fprintf(f, "  \"rate_hz\": %.17g,\n  \"steps_requested\": %u,\n  \"steps_done\": %u,\n",
-            opt->rate_hz, opt->steps, r->steps_done);
+    fprintf(f, "  \"rate_hz\": %.17g,\n  \"steps_requested\": %u,\n  \"steps_done\": %u,\n  \"bus_periods\": %u,\n",
+            opt->rate_hz, opt->steps, r->steps_done, r->bus_periods);
     fprintf(f, "  \"ref_hold_s\": %.17g,\n  \"design_hash\": \"%s\",\n", opt->ref_hold_s,
             arm_pm_design_hash());
     fprintf(f, "  \"final_state\": \"%s\",\n  \"final_fault\": \"%s\",\n",

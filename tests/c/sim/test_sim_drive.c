@@ -89,8 +89,22 @@ static void nmt_stop_removes_torque(void)
     CHECK(sim_drive_applied_torque(&d) == 0.0);
 }
 
+/* A drive's error code says why it stopped: no two reasons may share a code. */
+static void every_error_code_is_its_own(void)
+{
+    const unsigned codes[] = {SIM_ERR_NONE, SIM_ERR_COMMAND_TIMEOUT, SIM_ERR_CONTROLLER_LOST, SIM_ERR_DIVERGED,
+                              SIM_ERR_TORQUE_ABOVE_LIMIT, SIM_ERR_TWO_MASTERS, SIM_ERR_SYNC_SEQUENCE};
+    const unsigned n = sizeof(codes) / sizeof(codes[0]);
+    for (unsigned i = 0; i < n; ++i) {
+        for (unsigned j = i + 1u; j < n; ++j) {
+            CHECK(codes[i] != codes[j]);
+        }
+    }
+}
+
 int main(void)
 {
+    every_error_code_is_its_own();
     enable_sequence_reaches_operation_enabled();
     torque_only_in_operation_enabled_and_limited();
     a_command_above_the_limit_faults_the_drive();
