@@ -121,6 +121,12 @@ def arm_build_dir(preset: str, arm: ArmRef = DEFAULT_ARM) -> Path:
 HIL_TARGETS = ["arm_controller", "arm_sim", "arm_lcm_logger", "arm_sil"]  # what a run needs (HIL or SIL)
 
 
+def targets_for(bus: str) -> list[str]:
+    """What a run on this bus needs built: software in the loop needs arm_sil alone (a tuning
+    trial's design is built in about half the time)."""
+    return ["arm_sil"] if bus == "sil" else HIL_TARGETS
+
+
 def build_arm(preset: str, arm: ArmRef = DEFAULT_ARM, quiet: bool = True, targets: list[str] | None = None) -> Path:
     """Configure (when needed) and build the preset for the arm (only `targets`, if given); its
     build folder."""

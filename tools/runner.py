@@ -28,7 +28,7 @@ from typing import Any
 
 from host_sim.drive_model import DriveModel
 from tools import procs
-from tools.arm import HIL_TARGETS, ArmChoiceError, ArmRef, arm_build_dir, arm_info, build_arm
+from tools.arm import HIL_TARGETS, ArmChoiceError, targets_for, ArmRef, arm_build_dir, arm_info, build_arm
 from tools.build import build_lock
 from tools.cluster import Cluster
 from tools.paths import BUILD
@@ -77,12 +77,24 @@ def spec_from_dict(d: dict[str, Any]) -> RunSpec:
     return RunSpec(**{**d, "controller_args": tuple(d["controller_args"])})
 
 
+def _slot_design_path(base: ArmRef, slot: int) -> Path:
+    arm_key = base.key() if not base.is_default else "default"
+    return BUILD / "slot-designs" / arm_key / f"slot-{slot}.toml"
+
+
+def slot_has_design(base: ArmRef, slot: int, design_text: str) -> bool:
+    """Slot `slot`'s build folder was last built with this design (a run there rebuilds nothing)."""
+    try:
+        return _slot_design_path(base, slot).read_text() == design_text
+    except OSError:
+        return False
+
+
 def slot_arm(base: ArmRef, slot: int, design_text: str) -> ArmRef:
     """The arm with this design, in the slot's own build folder: one design file per slot and
     arm, rewritten only when the design changes, so a slot rebuilds only what a new design
     changes (the synthesis and the controller, about 2 s)."""
-    arm_key = base.key() if not base.is_default else "default"
-    path = BUILD / "slot-designs" / arm_key / f"slot-{slot}.toml"
+    path = _slot_design_path(base, slot)
     path.parent.mkdir(parents=True, exist_ok=True)
     if not path.exists() or path.read_text() != design_text:
         write_text_atomic(path, design_text)
@@ -183,7 +195,8 @@ def execute(spec_d: dict[str, Any], spin_us: float = LOCKSTEP_SPIN_US) -> dict[s
     if out.exists():
         shutil.rmtree(out)
     out.mkdir(parents=True)
-    with acquire_slot() as slot:
+    prefer = (lambda i: slot_has_design(spec.arm(), i, spec.design_text)) if spec.design_text is not None else None
+    with acquire_slot(prefer=prefer) as slot:
         arm = spec.arm()
         try:
             if spec.design_text is not None:
@@ -191,7 +204,7 @@ def execute(spec_d: dict[str, Any], spin_us: float = LOCKSTEP_SPIN_US) -> dict[s
                 # held through the run: its binaries are this build's (a checkout shared between
                 # hosts has slot i of each host in the same folder)
                 with build_lock(arm_build_dir("release", arm)):
-                    build_arm("release", arm, targets=HIL_TARGETS)
+                    build_arm("release", arm, targets=targets_for(spec.bus))
                     run = _run(spec, arm, slot, out, spin_us)
             else:
                 prepare_build(arm)  # a no-op when built (a Dask worker on another machine may not be)

@@ -12,7 +12,7 @@ import fcntl
 import os
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,13 +43,15 @@ class Slot:
 
 
 @contextmanager
-def acquire_slot(timeout_s: float = 600.0) -> Iterator[Slot]:
-    """The lowest free slot, held until the block ends; waits while all are taken."""
+def acquire_slot(timeout_s: float = 600.0, prefer: Callable[[int], bool] | None = None) -> Iterator[Slot]:
+    """The lowest free slot (one that `prefer` likes first: e.g. the slot that already has this run's
+    design built), held until the block ends; waits while all are taken."""
     d = _lock_dir()
     d.mkdir(parents=True, exist_ok=True)
     deadline = time.monotonic() + timeout_s
     while True:
-        for i in range(MAX_SLOTS):
+        order = sorted(range(MAX_SLOTS), key=lambda i: not prefer(i)) if prefer else range(MAX_SLOTS)
+        for i in order:
             fd = os.open(d / f"slot-{i}.lock", os.O_RDWR | os.O_CREAT, 0o666)
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
