@@ -26,6 +26,7 @@ EXERCISED: dict[str, str] = {
     "test": "CI",  # .ci/run is exactly `tools/armctl test`
     "hil": "test_documented_commands.py::test_hil",
     "hil --bus vm": "test_vcan_vm.py::test_hil_in_the_vm_through_the_cli",
+    "hil --bus sil": "test_documented_commands.py::test_hil",
     "study": "test_documented_commands.py::test_study",
     "tune": "test_documented_commands.py::test_tune",
     "synth": "test_documented_commands.py::test_synth",
@@ -67,6 +68,8 @@ def documented_commands() -> set[str]:
             out.add(sub)
         if sub == "hil" and "vm" in cell:
             out.add("hil --bus vm")
+        if sub == "hil" and "sil" in cell:
+            out.add("hil --bus sil")
         if "--model FILE" in cell or "--arm FILE" in cell:  # one code path for both (tools/arm.py)
             out.add(f"{sub} --model|--arm")
     return out
@@ -127,6 +130,11 @@ def test_hil(tmp_path: Path) -> None:
     r = armctl("hil", "--duration", "0.3", "--method", "tde", "--drives", "realistic", "--out", str(tmp_path / "real"))
     run = json.loads((tmp_path / "real" / "run.json").read_text())
     assert r.returncode in (0, 1) and run["results"]["drives"]["encoder_bits"] == 19, r.stderr
+    r = armctl("hil", "--bus", "sil", "--capture", "--duration", "0.3", "--method", "tde", "--out", str(tmp_path / "sil"))
+    assert r.returncode == 0 and "bus: sil" in r.stdout, r.stdout + r.stderr
+    sil = json.loads((tmp_path / "sil" / "run.json").read_text())
+    assert sil["results"] == json.loads((tmp_path / "run.json").read_text())["results"]  # the same run over UDP
+    assert (tmp_path / "sil" / "bus.log").stat().st_size > 0
 
 
 def test_study(tmp_path: Path) -> None:
