@@ -1,15 +1,14 @@
 #include "arm/controller.h"
 
 #include <math.h>
+#include <stddef.h>
 #include <string.h>
 
+#include "arm/methods.h"
 #include "arm/rnea.h"
 #include "arm_rnea_kernel.h"
 
 #define ARM_ALL_JOINTS_MASK ((uint32_t)((1ull << ARM_N_JOINTS) - 1u))
-
-static const char *const k_method_names[ARM_METHOD_COUNT] = {"pd",  "pm",  "pm-paper",
-                                                              "gh2", "tde", "usde-smc"};
 
 void arm_ctl_default_config(const arm_robot_model_t *model, arm_ctl_config_t *cfg)
 {
@@ -53,7 +52,8 @@ void arm_ctl_default_config(const arm_robot_model_t *model, arm_ctl_config_t *cf
 arm_ctl_init_result_t arm_ctl_init(arm_ctl_t *ctl, const arm_robot_model_t *model,
                                    const arm_ctl_config_t *cfg)
 {
-    if ((unsigned)cfg->method >= (unsigned)ARM_METHOD_COUNT) {
+    const arm_method_ops_t *ops = arm_method_ops(cfg->method);
+    if (ops == NULL) {
         return ARM_CTL_BAD_METHOD;
     }
     if (!(cfg->period_s > 0.0f && cfg->period_s < 1.0f)) {
@@ -72,9 +72,7 @@ arm_ctl_init_result_t arm_ctl_init(arm_ctl_t *ctl, const arm_robot_model_t *mode
           isfinite(cfg->smc_eta) && isfinite(cfg->smc_phi) && isfinite(cfg->smc_ks))) {
         return ARM_CTL_BAD_GAIN;
     }
-    const int uses_design = cfg->method == ARM_METHOD_PM || cfg->method == ARM_METHOD_PM_PAPER ||
-                            cfg->method == ARM_METHOD_GH2;
-    if (uses_design && arm_pm_check_design(1.0f / cfg->period_s) != 0) {
+    if (ops->uses_design && arm_pm_check_design(1.0f / cfg->period_s) != 0) {
         return ARM_CTL_BAD_DESIGN_RATE;
     }
     for (int i = 0; i < ARM_N_JOINTS; ++i) {
@@ -97,18 +95,7 @@ arm_ctl_init_result_t arm_ctl_init(arm_ctl_t *ctl, const arm_robot_model_t *mode
     ctl->state = ARM_STATE_INIT;
     ctl->fault = ARM_FAULT_NONE;
     ctl->fault_joint = -1;
-    switch (cfg->method) {
-    case ARM_METHOD_PM: arm_pm_init(&ctl->m.pm, cfg->numeric, ARM_PM_DECOUPLED); break;
-    case ARM_METHOD_PM_PAPER: arm_pm_init(&ctl->m.pm, cfg->numeric, ARM_PM_PAPER); break;
-    case ARM_METHOD_GH2: arm_pm_init(&ctl->m.pm, cfg->numeric, ARM_PM_NO_ESTIMATOR); break;
-    case ARM_METHOD_TDE: arm_tde_init(&ctl->m.tde, cfg->period_s, cfg->tde_cutoff_hz); break;
-    case ARM_METHOD_USDE_SMC:
-        arm_usde_smc_init(&ctl->m.usde_smc, cfg->period_s, cfg->usde_k, cfg->smc_lambda,
-                          cfg->smc_eta, cfg->smc_phi, cfg->smc_ks);
-        break;
-    case ARM_METHOD_PD:
-    case ARM_METHOD_COUNT: break;
-    }
+    ops->init(ctl);
     return ARM_CTL_OK;
 }
 
@@ -206,50 +193,6 @@ static void safe_stop_output(const arm_ctl_t *ctl, arm_ctl_output_t *out)
     }
 }
 
-/* This period's u_o and w_hat from the method's current state. */
-static void method_output(arm_ctl_t *ctl, arm_ctl_output_t *out)
-{
-    const arm_ctl_config_t *c = &ctl->cfg;
-    switch (c->method) {
-    case ARM_METHOD_PM:
-    case ARM_METHOD_PM_PAPER:
-    case ARM_METHOD_GH2:
-        arm_pm_output(&ctl->m.pm, out->e, out->e_dot, out->u_o, out->w_hat);
-        break;
-    case ARM_METHOD_USDE_SMC:
-        arm_usde_smc_output(&ctl->m.usde_smc, out->e, out->e_dot, ctl->last_qd, out->u_o,
-                            out->w_hat);
-        break;
-    case ARM_METHOD_TDE:
-    case ARM_METHOD_PD:
-    case ARM_METHOD_COUNT:
-        for (int i = 0; i < ARM_N_JOINTS; ++i) {
-            out->u_o[i] = -c->kp * out->e[i] - c->kd * out->e_dot[i];
-            out->w_hat[i] = 0.0f;
-        }
-        if (c->method == ARM_METHOD_TDE) {
-            arm_tde_output(&ctl->m.tde, ctl->last_qd, out->w_hat);
-        }
-        break;
-    }
-}
-
-/* Advance the method's states; hold_mask: joints whose torque the safety layer limited. */
-static void method_update(arm_ctl_t *ctl, const float acc[ARM_N_JOINTS], uint32_t hold_mask)
-{
-    switch (ctl->cfg.method) {
-    case ARM_METHOD_PM:
-    case ARM_METHOD_PM_PAPER:
-    case ARM_METHOD_GH2: arm_pm_update(&ctl->m.pm, hold_mask); break;
-    case ARM_METHOD_TDE: arm_tde_update(&ctl->m.tde, ctl->last_qd, acc, hold_mask); break;
-    case ARM_METHOD_USDE_SMC:
-        arm_usde_smc_update(&ctl->m.usde_smc, ctl->last_qd, acc, hold_mask);
-        break;
-    case ARM_METHOD_PD:
-    case ARM_METHOD_COUNT: break;
-    }
-}
-
 static void run_method(arm_ctl_t *ctl, const arm_ctl_input_t *in, arm_ctl_output_t *out,
                        float acc[ARM_N_JOINTS])
 {
@@ -257,7 +200,7 @@ static void run_method(arm_ctl_t *ctl, const arm_ctl_input_t *in, arm_ctl_output
         out->e[i] = in->q_d[i] - ctl->last_q[i];
         out->e_dot[i] = in->qd_d[i] - ctl->last_qd[i];
     }
-    method_output(ctl, out);
+    arm_method_ops(ctl->cfg.method)->output(ctl, out);
     for (int i = 0; i < ARM_N_JOINTS; ++i) {
         /* IDC: commanding q_ddot_d - u makes the nominal error dynamics e_ddot = u (+ w). */
         acc[i] = in->qdd_d[i] - (out->u_o[i] - out->w_hat[i]);
@@ -326,7 +269,7 @@ void arm_ctl_step(arm_ctl_t *ctl, const arm_ctl_input_t *in, arm_ctl_output_t *o
             latch_joint_fault(ctl, ARM_FAULT_FOLLOWING_ERROR, following, out->e[following]);
         } else {
             apply_limits(ctl, out);
-            method_update(ctl, acc, out->saturated_mask);
+            arm_method_ops(ctl->cfg.method)->update(ctl, acc, out->saturated_mask);
         }
     }
 
@@ -375,13 +318,14 @@ const char *arm_fault_str(arm_fault_t f)
 
 const char *arm_method_str(arm_method_t m)
 {
-    return (unsigned)m < (unsigned)ARM_METHOD_COUNT ? k_method_names[m] : "?";
+    const arm_method_ops_t *ops = arm_method_ops(m);
+    return ops != NULL ? ops->name : "?";
 }
 
 arm_method_t arm_method_from_str(const char *name)
 {
     for (int i = 0; i < (int)ARM_METHOD_COUNT; ++i) {
-        if (strcmp(name, k_method_names[i]) == 0) {
+        if (strcmp(name, arm_method_ops((arm_method_t)i)->name) == 0) {
             return (arm_method_t)i;
         }
     }

@@ -9,10 +9,25 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "arm/methods.h"
+
+/* "pd | pm | ..." from the method table (arm/methods.h): the one list of methods. */
+static const char *method_list(const char *sep)
+{
+    static char list[256];
+    size_t len = 0;
+    list[0] = '\0';
+    for (int m = 0; m < (int)ARM_METHOD_COUNT && len < sizeof(list); ++m) {
+        len += (size_t)snprintf(list + len, sizeof(list) - len, "%s%s", m ? sep : "",
+                                arm_method_ops((arm_method_t)m)->name);
+    }
+    return list;
+}
+
 void options_usage(const char *prog)
 {
-    printf("usage: %s [options]\n"
-           "  --bus SPEC[@DRIVES]     udp | udp:GROUP:PORT (python-can udp_multicast wire format,\n"
+    printf("usage: %s [options]\n", prog);
+    printf("  --bus SPEC[@DRIVES]     udp | udp:GROUP:PORT (python-can udp_multicast wire format,\n"
            "                          loopback only, TTL 0) | socketcan:IFACE; repeatable (up to 4\n"
            "                          buses), DRIVES e.g. 1-3 or 4,5,6 (default: all); every drive\n"
            "                          on exactly one bus             [udp:239.74.163.2:43113]\n"
@@ -22,7 +37,7 @@ void options_usage(const char *prog)
            "  --duration S            trajectory length in seconds (> 0) [5]\n"
            "  --ref-hold S            hold the start pose this long first (added to the run) [0.5]\n"
            "  --rate HZ               control rate                    [1000]\n"
-           "  --method NAME           pm | pm-paper | gh2 | pd | tde | usde-smc [pd]\n"
+           "  --method NAME           %s [pd]\n"
            "  --numeric float|fixed   pm, pm-paper, gh2: float32 or int32 Q-format blocks [float]\n"
            "  --tde-cutoff HZ         tde: low-pass on the estimate   [50]\n"
            "  --usde-k S              usde-smc: filter time constant  [0.01]\n"
@@ -45,7 +60,7 @@ void options_usage(const char *prog)
            "  --ref-amp A1,..,An --ref-freq F1,..,Fn  reference q_d = q0 + A (1 - cos 2 pi F t)\n"
            "                          per joint, A may be negative (both or neither) [built-in]\n"
            "  --summary FILE          write a JSON summary of the run (atomically)\n",
-           prog);
+           method_list(" | "));
     rt_usage();
 }
 
@@ -211,10 +226,7 @@ int options_parse(int argc, char **argv, const arm_robot_model_t *model, options
         } else if (strcmp(a, "--method") == 0) {
             const arm_method_t m = arm_method_from_str(v);
             if (m == ARM_METHOD_COUNT) {
-                snprintf(err, errcap,
-                         "--method: unknown method '%s' (known: pm, pm-paper, gh2, pd, tde, "
-                         "usde-smc)",
-                         v);
+                snprintf(err, errcap, "--method: unknown method '%s' (known: %s)", v, method_list(", "));
                 rc = -1;
             }
             opt->ctl.method = m;
