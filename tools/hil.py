@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import json
 import os
+import platform
 import select
 import signal
+import socket
 import subprocess
 import time
 from dataclasses import dataclass, field
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
@@ -159,6 +162,26 @@ def write_json_atomic(path: Path, data: dict[str, Any]) -> None:
     os.replace(tmp, path)
 
 
+def _git(*args: str) -> str | None:
+    try:
+        r = subprocess.run(["git", "-C", str(REPO), *args], capture_output=True, text=True, timeout=20)
+    except (OSError, subprocess.TimeoutExpired):
+        return None
+    return r.stdout if r.returncode == 0 else None
+
+
+def provenance(started: datetime | None = None) -> dict[str, Any]:
+    """When, from which code and on which machine a run was made (run.json `provenance`): a
+    result can then be traced to its commit. `dirty`: tracked files differ from that commit
+    (untracked ones, such as run folders, do not count); both null outside a git checkout."""
+    head = _git("rev-parse", "HEAD")
+    status = _git("status", "--porcelain", "--untracked-files=no")
+    return {"date_utc": (started or datetime.now(timezone.utc)).isoformat(timespec="seconds"),
+            "commit": head.strip() if head else None,
+            "dirty": bool(status.strip()) if status is not None and head else None,
+            "hostname": socket.gethostname(), "platform": platform.platform()}
+
+
 def check_loopback_route(group: str) -> None:
     """Refuse to run unless the group is routed to lo: every membership then stays on lo."""
     r = subprocess.run(["ip", "route", "get", group], capture_output=True, text=True)
@@ -297,6 +320,7 @@ def _wait_run(opt: HilOptions, ctl: subprocess.Popen[bytes], sim: subprocess.Pop
 
 
 def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
+    started = datetime.now(timezone.utc)
     for group in ("239.255.76.67", "239.74.163.2"):
         check_loopback_route(group)
     bdir = arm_build_dir(opt.preset, opt.arm)
@@ -406,5 +430,6 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
         "model_hash": {"firmware": info["model_hash"], "simulator": simulator.get("model_hash")},
         "exit_codes": {"controller": ctl.returncode, "simulator": sim.returncode, "logger": logger.returncode}},
         opt.bounds)
+    run["provenance"] = provenance(started)
     write_json_atomic(opt.out / "run.json", run)
     return run

@@ -26,7 +26,7 @@ from host_sim.drive_model import DriveModel
 from tools import procs
 from tools.arm import HIL_TARGETS, ArmRef, arm_build_dir, build_arm
 from tools.paths import BUILD
-from tools.hil import HilError, HilOptions, run_hil, write_json_atomic
+from tools.hil import HilError, HilOptions, provenance, run_hil, write_json_atomic
 from tools.slots import Slot, acquire_slot
 
 
@@ -135,7 +135,7 @@ def execute(spec_d: dict[str, Any]) -> dict[str, Any]:
                 run = _run(spec, arm, slot, out)
         except HilError as exc:
             write_json_atomic(out / "run.json", {"results": {"result": "failed", "verdict_reasons": [f"failed: {exc}"]},
-                                                 "transport": {}, "environment": {}})
+                                                 "transport": {}, "environment": {}, "provenance": provenance()})
     if not spec.keep_log:
         (out / "telemetry.lcmlog").unlink(missing_ok=True)
     write_json_atomic(out / "spec.json", key)  # last: a spec beside a run.json marks the run done
