@@ -3,7 +3,7 @@
 Every command that builds or runs takes the same arm options. The arm is prepared at build time
 (gen/arm.py, a CMake step), so one build folder holds everything of one arm: the prepared model,
 arm.json, the design, the firmware, the simulator. The bundled arm builds in build/<preset>; any
-other in build/arms/<name>-<key>/<preset>, side by side, so switching arms rebuilds nothing that
+other in build/arms/<name>-<digest>/<preset>, side by side, so switching arms rebuilds nothing that
 did not change.
 """
 
