@@ -184,7 +184,7 @@ def arm_name(af: ArmFile, spec: mujoco.MjSpec) -> str:
         return af.name
     if spec.modelname and spec.modelname != "MuJoCo Model":
         return _slug(spec.modelname)
-    path = af.model
+    path = af.model.resolve()
     return _slug(path.parent.name if path.stem.lower() in GENERIC_STEMS and path.parent.name else path.stem)
 
 

@@ -419,3 +419,4 @@ def test_a_list_for_another_arm_stops_the_study_before_any_run(tmp_path: Path) -
                       "arm 'panda' has 7 joints; give one value per joint, or a rule: { each = x }, "
                       "{ torque_limit_fraction = f }, optionally with for_arm = { ARM = [...] }"], r.stderr
     assert "Traceback" not in r.stderr and not any(out.glob("*/*/seed-*"))
+    assert "armctl study: panda: locked (not controlled): panda_finger_joint1" in r.stderr  # what the import assumed
