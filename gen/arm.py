@@ -20,6 +20,7 @@ Errors name the element and say what to change (exit 2); nothing is written then
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import re
@@ -184,6 +185,32 @@ def _slug(text: str) -> str:
     return s[:40] or "arm"
 
 
+GENERIC_STEMS = ("robot", "model", "arm")  # a file named so says less than its folder
+
+
+def arm_name(af: ArmFile, spec: mujoco.MjSpec) -> str:
+    """The arm's name in reports and build folders: the arm file's name, else the model's, else
+    its file's stem (its folder's for robot.xml, model.xml, arm.xml)."""
+    if af.name:
+        return af.name
+    if spec.modelname and spec.modelname != "MuJoCo Model":
+        return _slug(spec.modelname)
+    path = af.model.resolve()
+    return _slug(path.parent.name if path.stem.lower() in GENERIC_STEMS and path.parent.name else path.stem)
+
+
+@functools.lru_cache(maxsize=64)
+def arm_name_of(arm_file: Path | None, model: Path | None) -> str:
+    """arm_name() without preparing the arm (the model is parsed, not compiled): for the name of
+    its build folder. An arm that cannot be read is named after its file (the import says why)."""
+    try:
+        af = load_arm_file(arm_file, model)
+        return arm_name(af, _load_spec(af.model.resolve()))
+    except ArmError:
+        what = arm_file or model or DEFAULT_MODEL
+        return _slug(what.stem)
+
+
 # ---- the model --------------------------------------------------------------------------------
 def _load_spec(path: Path) -> mujoco.MjSpec:
     if not path.is_file():
@@ -320,14 +347,44 @@ def _compile(spec: mujoco.MjSpec, path: Path, what: str) -> mujoco.MjModel:
 
 
 def _strip_meshes(spec: mujoco.MjSpec) -> int:
-    """Drops every mesh geom and mesh asset (and textures, whose files may be missing too)."""
+    """Drops every mesh geom and mesh asset, and textures and skins (their files may be missing too),
+    with every reference to them; the number of geoms dropped."""
+    return _remove_assets(spec, {"mesh", "hfield", "texture", "skin"})
+
+
+ASSET_KINDS = ("mesh", "hfield", "texture", "material", "skin")
+
+
+def _remove_assets(spec: mujoco.MjSpec, kinds: set[str]) -> int:
+    """Deletes every asset of the given kinds together with everything that refers to one, since
+    MuJoCo refuses a model whose reference names a missing element (a site's `material=` once
+    failed a Kinova Jaco with "material 'reference_site' not found"): the geoms drawn from a mesh
+    or height field are deleted, a mesh site becomes a sphere, a texture leaves its materials, a
+    material leaves the geoms, sites, skins, flexes and tendons that use it. The number of geoms
+    deleted."""
+    assert kinds <= set(ASSET_KINDS), kinds
     n = 0
     for g in list(spec.geoms):
-        if g.type == mujoco.mjtGeom.mjGEOM_MESH or g.type == mujoco.mjtGeom.mjGEOM_HFIELD:
+        if ("mesh" in kinds and (g.type == mujoco.mjtGeom.mjGEOM_MESH or g.meshname)) or \
+                ("hfield" in kinds and (g.type == mujoco.mjtGeom.mjGEOM_HFIELD or g.hfieldname)):
             spec.delete(g)
             n += 1
-    for a in [*spec.meshes, *spec.hfields, *spec.textures]:
-        spec.delete(a)
+    if "mesh" in kinds:
+        for s in spec.sites:
+            if s.meshname or s.type == mujoco.mjtGeom.mjGEOM_MESH:
+                s.meshname = ""
+                s.type = mujoco.mjtGeom.mjGEOM_SPHERE
+    if "texture" in kinds:
+        for mat in spec.materials:
+            mat.textures = [""] * len(mat.textures)
+    if "material" in kinds:
+        for e in [*spec.geoms, *spec.sites, *spec.skins, *spec.flexes, *spec.tendons]:
+            e.material = ""
+    lists = {"mesh": spec.meshes, "hfield": spec.hfields, "texture": spec.textures, "material": spec.materials,
+             "skin": spec.skins}
+    for kind in kinds:
+        for a in list(lists[kind]):
+            spec.delete(a)
     return n
 
 
@@ -442,7 +499,7 @@ def prepare(af: ArmFile, design: Path) -> Prepared:  # noqa: C901 - one pass ove
 
     spec = _load_spec(path)
     is_urdf = path.suffix.lower() == ".urdf"
-    arm_name = af.name or _slug(spec.modelname if spec.modelname and spec.modelname != "MuJoCo Model" else path.stem)
+    armname = arm_name(af, spec)
     try:
         spec.compile()
     except Exception as exc:  # noqa: BLE001
@@ -631,8 +688,7 @@ def prepare(af: ArmFile, design: Path) -> Prepared:  # noqa: C901 - one pass ove
     if not af.contacts:
         for g in list(spec.geoms):
             spec.delete(g)
-        for a in [*spec.meshes, *spec.hfields, *spec.textures, *spec.materials]:
-            spec.delete(a)
+        _remove_assets(spec, set(ASSET_KINDS))  # nothing left draws them
         spec.option.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
     else:
         spec.meshdir = str((path.parent / (spec.meshdir or "")).resolve())
@@ -657,7 +713,7 @@ def prepare(af: ArmFile, design: Path) -> Prepared:  # noqa: C901 - one pass ove
                             "(arm file timestep = \"model\" keeps it when it divides the period)")
     spec.option.timestep = dt
     spec.compiler.fusestatic = True
-    spec.modelname = arm_name
+    spec.modelname = armname
     m1 = _compile(spec, path, "preparing it")
     _check_float32(m1, path, names, limits, home)
     spec.add_key(name="home", qpos=home, ctrl=[0.0] * n)
@@ -686,7 +742,7 @@ def prepare(af: ArmFile, design: Path) -> Prepared:  # noqa: C901 - one pass ove
                            f"at the home pose, below {MIN_JOINT_INERTIA:g}): any torque gives an unbounded "
                            "acceleration; give the links beyond it their real mass and inertia")
         if m.body_mass[b] < LIGHT_LINK_KG:
-            warnings.append(f"link of joint '{name}' weighs {m.body_mass[b]:.3g} kg (its children carry the inertia)")
+            warnings.append(f"link of joint '{name}' weighs {m.body_mass[b]:.3g} kg ({_inertia_carrier(m, i)})")
 
     joints = []
     for i, jname in enumerate(names):
@@ -699,7 +755,7 @@ def prepare(af: ArmFile, design: Path) -> Prepared:  # noqa: C901 - one pass ove
     reference = default_reference(home, ranges)
     xml_bytes = xml.encode()
     info = {
-        "name": arm_name,
+        "name": armname,
         "model": str(path),
         "arm_file": str(af.path) if af.path else None,
         "model_format": "urdf" if is_urdf else "mjcf",
@@ -723,6 +779,23 @@ def prepare(af: ArmFile, design: Path) -> Prepared:  # noqa: C901 - one pass ove
     }
     del design_doc
     return Prepared(xml, info, _design_for(design_text, n, af.design or design))
+
+
+def _inertia_carrier(m: mujoco.MjModel, i: int) -> str:
+    """What gives joint i of a link without mass the inertia it moves (it passed MIN_JOINT_INERTIA):
+    the links beyond it, its rotor armature, or both."""
+    b = int(m.jnt_bodyid[i])
+    beyond = float(m.body_subtreemass[b] - m.body_mass[b])
+    armature = float(m.dof_armature[i])
+    parts = []
+    if beyond >= LIGHT_LINK_KG:
+        parts.append(f"{beyond:.3g} kg of links beyond it")
+    if armature > 0:
+        parts.append(f"its rotor armature of {armature:.3g} kg m^2")
+    if not parts:
+        return "its own rotational inertia is all it moves: no link beyond it, no armature"
+    return " and ".join(parts) + (" carry" if len(parts) > 1 else " carries") + " the inertia" + \
+        ("" if beyond >= LIGHT_LINK_KG else "; no link beyond it")
 
 
 def _inverse_dynamics_difference(a: mujoco.MjModel, b: mujoco.MjModel, samples: int = 20) -> float:

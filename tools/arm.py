@@ -3,7 +3,7 @@
 Every command that builds or runs takes the same arm options. The arm is prepared at build time
 (gen/arm.py, a CMake step), so one build folder holds everything of one arm: the prepared model,
 arm.json, the design, the firmware, the simulator. The bundled arm builds in build/<preset>; any
-other in build/arms/<name>-<key>/<preset>, side by side, so switching arms rebuilds nothing that
+other in build/arms/<name>-<digest>/<preset>, side by side, so switching arms rebuilds nothing that
 did not change.
 """
 
@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
-import re
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -41,13 +41,12 @@ class ArmRef:
         return str(self.arm_file or self.model or "the bundled arm")
 
     def key(self) -> str:
-        """The build folder's name: readable, and unique to the files that define the arm."""
-        what = self.arm_file or self.model
-        stem = re.sub(r"[^A-Za-z0-9_-]+", "-", what.stem if what else "default").strip("-").lower()[:32] or "arm"
-        if what is not None and stem in ("robot", "model", "arm"):  # robot.xml: the folder says more
-            stem = re.sub(r"[^A-Za-z0-9_-]+", "-", what.parent.name).lower()[:32] or stem
+        """The build folder's name, <name>-<digest>: the arm's name (gen/arm.py: arm_name, the one
+        in its reports) and a digest of the files that define it, so two arms of one name differ."""
+        from gen.arm import arm_name_of
+
         digest = hashlib.sha256("\0".join(str(p) for p in (self.model, self.arm_file, self.design)).encode())
-        return f"{stem}-{digest.hexdigest()[:8]}"
+        return f"{arm_name_of(self.arm_file, self.model)[:32]}-{digest.hexdigest()[:8]}"
 
     def cache(self) -> dict[str, str]:
         out: dict[str, str] = {}
@@ -144,6 +143,14 @@ def arm_info(bdir: Path) -> dict[str, Any]:
     except (OSError, ValueError) as exc:
         raise ArmChoiceError(f"{path}: the arm's description is missing or unreadable ({exc}): run tools/armctl "
                              "build with the same --model/--arm") from exc
+
+
+def print_arm_warnings(info: dict[str, Any], prog: str) -> None:
+    """The importer's warnings (arm.json): what it assumed or changed (a home pose from mid-range,
+    the timestep, dropped meshes, locked joints, a massless link), printed by every command that
+    prepared the arm, not only by build."""
+    for w in info["warnings"]:
+        print(f"{prog}: {info['name']}: {w}", file=sys.stderr)
 
 
 def prepared_model(bdir: Path) -> Path:

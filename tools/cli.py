@@ -26,7 +26,7 @@ def cmd_setup(ns: argparse.Namespace) -> int:
 
 
 def cmd_build(ns: argparse.Namespace) -> int:
-    from tools.arm import ArmChoiceError, arm_from_args, arm_info, build_arm
+    from tools.arm import ArmChoiceError, arm_from_args, arm_info, build_arm, print_arm_warnings
 
     try:
         arm = arm_from_args(ns)
@@ -37,8 +37,7 @@ def cmd_build(ns: argparse.Namespace) -> int:
     info = arm_info(bdir)
     print(f"arm: {info['name']}, {info['n_joints']} joints ({', '.join(j['name'] for j in info['joints'])}), "
           f"model hash {info['model_hash']} -> {bdir}")
-    for w in info["warnings"]:
-        print(f"armctl build: {info['name']}: {w}")
+    print_arm_warnings(info, "armctl build")
     check = bdir / "firmware" / "arm_rnea_check"
     if check.exists():  # host builds: the firmware's inverse dynamics against MuJoCo's on this arm
         r = subprocess.run([str(check)], capture_output=True, text=True)
@@ -68,7 +67,7 @@ def _float_list(text: str) -> list[float]:
 
 
 def cmd_hil(ns: argparse.Namespace) -> int:
-    from tools.arm import ArmChoiceError, arm_from_args, arm_info, build_arm, reference_for
+    from tools.arm import ArmChoiceError, arm_from_args, arm_info, build_arm, print_arm_warnings, reference_for
     from tools.hil import HilError, HilOptions, run_hil
     from tools.study_config import DRIVE_PRESETS
     from tools.verdict import Bounds
@@ -103,10 +102,12 @@ def cmd_hil(ns: argparse.Namespace) -> int:
         return _hil_in_vm(ns)
     try:
         bdir = build_arm("release", arm)
-        amp, freq, warnings = reference_for(arm_info(bdir), ns.ref_amp, ns.ref_freq)
+        info = arm_info(bdir)
+        amp, freq, warnings = reference_for(info, ns.ref_amp, ns.ref_freq)
     except ArmChoiceError as exc:
         print(f"armctl hil: {exc}", file=sys.stderr)
         return 2
+    print_arm_warnings(info, "armctl hil")
     for w in warnings:
         print(f"armctl hil: {w}", file=sys.stderr)
     ref = ("--ref-amp", ",".join(f"{a:g}" for a in amp), "--ref-freq", ",".join(f"{f:g}" for f in freq),
@@ -200,7 +201,7 @@ def cmd_synth(ns: argparse.Namespace) -> int:
     import tempfile
 
     from gen.synth import cli as synth_cli
-    from tools.arm import ArmChoiceError, arm_from_args
+    from tools.arm import ArmChoiceError, arm_from_args, print_arm_warnings
 
     try:
         arm = arm_from_args(ns)
@@ -218,6 +219,7 @@ def cmd_synth(ns: argparse.Namespace) -> int:
         except ArmError as exc:
             print(f"armctl synth: {exc}", file=sys.stderr)
             return 2
+        print_arm_warnings(prep.info, "armctl synth")
         with tempfile.TemporaryDirectory() as tmp:
             cfg = Path(tmp) / "design.toml"
             cfg.write_text(prep.design_text)

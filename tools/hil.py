@@ -6,11 +6,14 @@ from __future__ import annotations
 
 import json
 import os
+import platform
 import select
 import signal
+import socket
 import subprocess
 import time
 from dataclasses import dataclass, field
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
@@ -168,6 +171,26 @@ def _load_json(path: Path) -> dict[str, Any]:
         return json.loads(path.read_text())
     except (OSError, ValueError):
         return {}
+
+
+def _git(*args: str) -> str | None:
+    try:
+        r = subprocess.run(["git", "-C", str(REPO), *args], capture_output=True, text=True, timeout=20)
+    except (OSError, subprocess.TimeoutExpired):
+        return None
+    return r.stdout if r.returncode == 0 else None
+
+
+def provenance(started: datetime | None = None) -> dict[str, Any]:
+    """When, from which code and on which machine a run was made (run.json `provenance`): a
+    result can then be traced to its commit. `dirty`: tracked files differ from that commit
+    (untracked ones, such as run folders, do not count); both null outside a git checkout."""
+    head = _git("rev-parse", "HEAD")
+    status = _git("status", "--porcelain", "--untracked-files=no")
+    return {"date_utc": (started or datetime.now(timezone.utc)).isoformat(timespec="seconds"),
+            "commit": head.strip() if head else None,
+            "dirty": bool(status.strip()) if status is not None and head else None,
+            "hostname": socket.gethostname(), "platform": platform.platform()}
 
 
 def check_loopback_route(group: str) -> None:
@@ -414,6 +437,7 @@ def _wait_sil(opt: HilOptions, sil: subprocess.Popen[bytes], log: Any) -> None:
 
 
 def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
+    started = datetime.now(timezone.utc)
     sil = opt.bus == SIL
     if sil and (opt.mode != "lockstep" or opt.controller_cmd_prefix or opt.controller is not None):
         raise HilError("--bus sil: software in the loop runs the arm's own controller build, in lockstep only")
@@ -499,6 +523,7 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
                    if opt.capture and (opt.out / CAPTURE_FILE).exists() else None},
         opt.bounds)
     try:
+        run["provenance"] = provenance(started)
         write_json_atomic(opt.out / "run.json", run)
     except OutputError as exc:
         raise HilError(str(exc)) from None

@@ -134,7 +134,10 @@ def _distribution_figure(out: Path, study: dict[str, Any], scenario: str, index:
         ax.boxplot(data, showfliers=False)
         for i, d in enumerate(data):
             ax.scatter(np.full(len(d), i + 1.0), d, s=8, color="k", zorder=3)
-        ax.set_yscale("log")
+        if any(np.any(d > 0) for d in data):  # a scale of logs needs a value; no run may have measured
+            ax.set_yscale("log")
+        else:
+            ax.text(0.5, 0.5, "no run measured", ha="center", va="center", transform=ax.transAxes, fontsize=7)
         ax.set_xticks(range(1, len(methods) + 1), methods, rotation=70, fontsize=7)
         ax.set_title(study["arm"]["joint_names"][j], fontsize=8)
     axes[0].set_ylabel("L-inf tracking error (deg), one point per seed")
@@ -181,8 +184,11 @@ def _verdict(study: dict[str, Any], sc: dict[str, Any], labels: list[str]) -> li
         bad = [(seed, r) for seed, r in zip(study["seeds"], st["results"]) if r != "ok"]
         if bad:
             kinds = sorted({r for _, r in bad}, key=str)
+            why = next((reasons[0] for r in sc["runs"][m] if r.get("result") == "failed"
+                        for reasons in [r.get("verdict_reasons") or []] if reasons), None)
             lines.append(f"- {m}: {len(bad)} of {len(st['results'])} runs did not end ok ("
                          + "; ".join(f"{k} on seed(s) {', '.join(str(s) for s, r in bad if r == k)}" for k in kinds)
+                         + (f"; the first failure: {why}" if why else "")
                          + ("); its runs stopped before the trajectory ended have no metrics: means and "
                             "comparisons cover the runs that have them, and the comparisons say on how many seeds."
                             if any(not r.get("tracking_max_abs_rad") for r in sc["runs"][m]) else
@@ -300,7 +306,9 @@ def write_report(out: Path, study: dict[str, Any]) -> None:
         d = sc["definition"]
         md += [f"## Scenario `{name}`", "", d["description"], "",
                f"Uncertainty `{d['uncertainty']}`; drives `{d['drives']}`; bus timing "
-               f"{'emulated' if d['bus_timing'] else 'not emulated'}.", "", "### Verdict", ""]
+               f"{'emulated' if d['bus_timing'] else 'not emulated'}.", "",
+               *([f"Per-joint values on this arm from the config's `{d['per_joint_from']}`.", ""]
+                 if d.get("per_joint_from") else []), "### Verdict", ""]
         md += _verdict(study, sc, labels) + [""]
         md += ["The paper's claims, with this scenario's evidence:", ""] + _claims(sc) + [""]
         md += ["### Tuning", "", _md_table(

@@ -33,7 +33,7 @@ from tools.build import build_lock
 from tools.cluster import Cluster
 from tools.paths import BUILD
 from gen.atomic_output import write_json_atomic, write_text_atomic
-from tools.hil import LOCKSTEP_SPIN_US, HilError, HilOptions, lockstep_spin_us, run_hil
+from tools.hil import LOCKSTEP_SPIN_US, HilError, HilOptions, lockstep_spin_us, provenance, run_hil
 from tools.slots import Slot, acquire_slot
 
 # metric -> the run.json results field a study computes with (per joint, or one number for the arm)
@@ -213,7 +213,7 @@ def execute(spec_d: dict[str, Any], spin_us: float = LOCKSTEP_SPIN_US) -> dict[s
             write_json_atomic(out / "run.json", {"results": {**_identity(spec), "bus_timing": "on" if spec.bus_timing
                                                              else "off", "result": "failed",
                                                              "verdict_reasons": [f"failed: {exc}"]},
-                                                 "transport": {}, "environment": {}})
+                                                 "transport": {}, "environment": {}, "provenance": provenance()})
     if not spec.keep_log:
         (out / "telemetry.lcmlog").unlink(missing_ok=True)
     raw = (out / "run.json").read_bytes()

@@ -19,7 +19,7 @@ from tqdm import tqdm
 from gen import toml_input
 from gen.arm import DEFAULT_DESIGN
 from tools.arm import (DEFAULT_ARM, ArmChoiceError, ArmRef, add_arm_arguments, arm_build_dir, arm_from_args,
-                       arm_info, build_arm, reference_for)
+                       arm_info, build_arm, print_arm_warnings, reference_for)
 from tools import procs
 from tools.cluster import Cluster, ClusterError, add_cluster_arguments, cluster_from_args
 from tools.code_identity import code_identity
@@ -31,7 +31,7 @@ from tools.paths import REPO
 from tools.runner import METRICS, RunSpec, run_all
 from tools.slots import default_jobs
 from tools.stats import paired, summary
-from tools.study_config import METHODS, StudyConfig, StudyConfigError, Trajectory, load
+from tools.study_config import METHODS, StudyConfig, StudyConfigError, Trajectory, for_arm, load
 from tools.tuning import TuneSetup, trial_spec, tune_method
 
 DEFAULT_CONFIG = REPO / "tools" / "studies" / "paper.toml"
@@ -104,8 +104,12 @@ def _arm_args(arm: ArmRef) -> dict[str, str | None]:
 
 def setup_for(cfg: StudyConfig, arm: ArmRef, out: Path, jobs: int, cluster: Cluster | None, bus: str = SIL,
               preset: str = "release") -> tuple[TuneSetup, dict[str, Any], list[str]]:
+    """What tuning and the study's runs share on this arm. Its config (setup.cfg) is the one given
+    with every scenario's per-joint values made for the arm, so a value list of the wrong length
+    stops here, before anything runs."""
     bdir = arm_build_dir(preset, arm)
     info = arm_info(bdir)
+    cfg = for_arm(cfg, info)
     traj_args, _, notes = trajectory_for(info, cfg.tuning_trajectory, "tuning trajectory")
     base = (bdir / "generated" / "arm" / "design.toml").read_text()
     return TuneSetup(cfg, _arm_args(arm), base, traj_args, out, jobs, cluster, bus), info, notes
@@ -123,9 +127,10 @@ def tuning_key(cfg: StudyConfig, info: dict[str, Any], setup: TuneSetup, scenari
     """What a tuning result depends on: the arm, its design, the scenario, the method's space,
     the tuning seeds, trajectory, length and budget, the hold."""
     t = {k: v for k, v in cfg.raw["tuning"].items() if k not in ("space", "file")}
-    # the design's values, not its text: its header comment names the checkout's path
+    # the design's values, not its text (its header comment names the checkout's path); the
+    # scenario with its per-joint values on this arm (setup_for)
     doc = {"arm": info["model_hash"], "design": toml_input.loads(setup.base_design),
-           "scenario": cfg.scenarios[scenario].as_dict(), "space": cfg.spaces[method].as_dict(), "tuning": t,
+           "scenario": setup.cfg.scenarios[scenario].as_dict(), "space": cfg.spaces[method].as_dict(), "tuning": t,
            "trajectory": setup.trajectory_args, "hold_s": cfg.hold_s}
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:16]
 
@@ -211,6 +216,7 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
     scen_names = scenarios or list(cfg.scenarios)
     seed_list = cfg.seed_list(seeds)
     setup, info, notes = setup_for(cfg, arm, out / "tuning", jobs, cluster, bus)
+    cfg = setup.cfg  # the scenarios' per-joint values on this arm
     tuning = tuned(cfg, arm, setup, info, scen_names, methods, retune=retune, trials=trials)
     duration = duration_s or cfg.duration_s
     traj_args, traj_used, traj_notes = trajectory_for(info, cfg.trajectory, "trajectory")
@@ -262,7 +268,8 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
         "tuning_procedure": procedure(cfg, trials),
         "bus": bus,
         "confirmation": confirmation,
-        "scenarios": {s: scenario_result(cfg.scenarios[s].as_dict(), tuning[s], per[s], methods)
+        "scenarios": {s: scenario_result({**cfg.scenarios[s].as_dict(), "per_joint_from": cfg.scenarios[s].per_joint},
+                                         tuning[s], per[s], methods, info["n_joints"])
                       for s in scen_names},
     }
     write_json_atomic(out / "study.json", study)
@@ -281,15 +288,14 @@ def _values(runs: list[dict[str, Any]], key: str, j: int | None) -> list[float]:
         elif j is None:
             out.append(float(v) if not isinstance(v, list) else float(sum(v)))
         else:
-            out.append(float(v[j]))
+            out.append(float(v[j]) if j < len(v) else float("nan"))
     return out
 
 
 def scenario_result(definition: dict[str, Any], tuning: dict[str, Any], per: dict[str, list[dict[str, Any]]],
-                    methods: list[str]) -> dict[str, Any]:
-    """Per method: every run, the statistics of each metric per joint and in total; PM against
-    every other method on the same seeds."""
-    n = next((len(r["tracking_max_abs_rad"]) for runs in per.values() for r in runs if r.get("tracking_max_abs_rad")), 0)
+                    methods: list[str], n: int) -> dict[str, Any]:
+    """Per method: every run, the statistics of each metric per joint (the arm's n joints, also
+    when no run measured any) and in total; PM against every other method on the same seeds."""
     stats: dict[str, Any] = {}
     for m, runs in per.items():
         stats[m] = {"results": [r.get("result") for r in runs]}
@@ -366,7 +372,7 @@ def _common(ns: argparse.Namespace) -> tuple[StudyConfig, ArmRef, list[str] | No
     cluster = cluster_from_args(ns)
     check_out_dir(ns.out)
     arm = arm_from_args(ns)
-    build_arm("release", arm)
+    print_arm_warnings(arm_info(build_arm("release", arm)), f"armctl {getattr(ns, 'command', 'study')}")
     return cfg, arm, methods, scenarios, cluster
 
 
@@ -437,7 +443,7 @@ def cmd_tune(ns: argparse.Namespace) -> int:
         with ExitStack() as stack:
             _hold_out(stack, ns.out)
             setup, info, _ = setup_for(cfg, arm, ns.out, ns.jobs, cluster, ns.bus)
-            result = tuned(cfg, arm, setup, info, scenarios or list(cfg.scenarios), methods or cfg.methods,
+            result = tuned(setup.cfg, arm, setup, info, scenarios or list(cfg.scenarios), methods or cfg.methods,
                            retune=True, trials=ns.trials)
     except (StudyConfigError, ArmChoiceError, OutDirError, ClusterError) as exc:
         print(f"armctl tune: {exc}", file=sys.stderr)

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -53,15 +53,32 @@ class Trajectory:
         return ["--ref-amp", ",".join(f"{a:g}" for a in self.amp), "--ref-freq", ",".join(f"{f:g}" for f in self.freq_hz)]
 
 
+# The uncertainty's per-joint values (host_sim.uncertainty), and the rules that give them for an
+# arm of any joint count: a list is one value per joint; a table is a rule, optionally with lists
+# for arms by name (`for_arm`), which take precedence for that arm.
+PER_JOINT_FIELDS = ("viscous", "coulomb")
+PER_JOINT_RULES = {"each": "the same value for every joint",
+                   "torque_limit_fraction": "this fraction of each joint's torque limit (viscous: per rad/s)"}
+RULE_HINT = ("give one value per joint, or a rule: { each = x }, { torque_limit_fraction = f }, "
+             "optionally with for_arm = { ARM = [...] }")
+
+
 @dataclass
 class Scenario:
     name: str
     description: str
-    uncertainty: dict[str, Any]  # without the seed: each run adds its own
+    uncertainty: dict[str, Any]  # without the seed: each run adds its own; per-joint values once for_arm ran
     drives: DriveModel
     bus_timing: bool
+    # per-joint fields of the uncertainty as the config gives them (a list or a rule); for_arm()
+    # turns them into the arm's values in `uncertainty`, and keeps them here for the report
+    per_joint: dict[str, Any] = field(default_factory=dict)
+    resolved: bool = False
 
     def as_dict(self) -> dict[str, Any]:
+        """The scenario as it runs (what the tuning key and the report hold): only for an arm."""
+        if self.per_joint and not self.resolved:
+            raise RuntimeError(f"scenario.{self.name}: its per-joint values are for an arm: study_config.for_arm first")
         return {"name": self.name, "description": self.description, "uncertainty": self.uncertainty,
                 "drives": self.drives.to_dict(), "bus_timing": self.bus_timing}
 
@@ -156,6 +173,7 @@ def _scenario(name: str, d: Any) -> Scenario:
     unc = dict(_get(d, "uncertainty", where, dict, {}))
     if "seed" in unc:
         raise StudyConfigError(f"{where}.uncertainty.seed: the study's seeds set it")
+    per_joint = {k: _per_joint(unc.pop(k), f"{where}.uncertainty.{k}") for k in PER_JOINT_FIELDS if k in unc}
     try:
         UncertaintyConfig.from_dict({**unc, "seed": 0}, f"{where}.uncertainty")
     except (TypeError, ValueError) as exc:
@@ -172,7 +190,72 @@ def _scenario(name: str, d: Any) -> Scenario:
         except ValueError as exc:
             raise StudyConfigError(str(exc)) from exc
     bus_timing = _get(d, "bus_timing", where, bool, False)
-    return Scenario(name, str(d.get("description", "")), unc, drives, bus_timing)
+    return Scenario(name, str(d.get("description", "")), unc, drives, bus_timing, per_joint)
+
+
+def _coefficients(v: Any, where: str) -> list[Any]:
+    if not isinstance(v, list) or not v or not all(
+            isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) and 0 <= x <= 1e6 for x in v):
+        raise StudyConfigError(f"{where}: expected a list of friction coefficients in [0, 1e6], one per joint, "
+                               f"got {v!r}")
+    return list(v)
+
+
+def _per_joint(v: Any, where: str) -> list[Any] | dict[str, Any]:
+    """A per-joint field as the config gives it: a list (one value per joint of the arm it is
+    for) or a rule table (PER_JOINT_RULES, and lists for arms by name in for_arm)."""
+    if isinstance(v, list):
+        return _coefficients(v, where)
+    if not isinstance(v, dict):
+        raise StudyConfigError(f"{where}: {RULE_HINT}; got {v!r}")
+    unknown = set(v) - {*PER_JOINT_RULES, "for_arm"}
+    rules = [k for k in v if k in PER_JOINT_RULES]
+    if unknown or len(rules) > 1 or not v:
+        raise StudyConfigError(f"{where}: " + (f"unknown field(s) {sorted(unknown)}" if unknown else
+                                               f"one rule, not {rules}" if rules else "empty") + f"; {RULE_HINT}")
+    out: dict[str, Any] = {}
+    for k in rules:
+        x = v[k]
+        hi = 1.0 if k == "torque_limit_fraction" else 1e6
+        if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) or not 0 <= x <= hi:
+            raise StudyConfigError(f"{where}.{k}: must be a number in [0, {hi:g}], got {x!r}")
+        out[k] = float(x)
+    if "for_arm" in v:
+        if not isinstance(v["for_arm"], dict) or not v["for_arm"]:
+            raise StudyConfigError(f"{where}.for_arm: expected a table of arm name = [one value per joint]")
+        out["for_arm"] = {a: _coefficients(x, f"{where}.for_arm.{a}") for a, x in v["for_arm"].items()}
+    return out
+
+
+def _values_for_arm(spec: list[Any] | dict[str, Any], info: dict[str, Any], where: str) -> list[Any]:
+    """One per-joint field's values on this arm (arm.json), or an error naming the field and
+    both lengths."""
+    name, n = info["name"], info["n_joints"]
+    if isinstance(spec, dict) and name in spec.get("for_arm", {}):
+        spec, where = spec["for_arm"][name], f"{where}.for_arm.{name}"
+    if isinstance(spec, list):
+        if len(spec) != n:
+            raise StudyConfigError(f"{where}: {len(spec)} values, but arm '{name}' has {n} joints; {RULE_HINT}")
+        return spec
+    if "each" in spec:
+        return [spec["each"]] * n
+    if "torque_limit_fraction" in spec:
+        # rounded: a value the report prints as it is (no 2.2499999999999996)
+        return [round(spec["torque_limit_fraction"] * j["torque_limit"], 9) for j in info["joints"]]
+    raise StudyConfigError(f"{where}: no values for arm '{name}' (for_arm has {', '.join(spec['for_arm'])}); "
+                           f"add it, or a rule ({', '.join(PER_JOINT_RULES)})")
+
+
+def for_arm(cfg: "StudyConfig", info: dict[str, Any]) -> "StudyConfig":
+    """The config with every scenario's per-joint values made for this arm (its arm.json): called
+    before anything runs, so a list of the wrong length stops the study at once."""
+    scenarios = {}
+    for name, sc in cfg.scenarios.items():
+        unc = dict(sc.uncertainty)
+        for k, spec in sc.per_joint.items():
+            unc[k] = _values_for_arm(spec, info, f"scenario.{name}.uncertainty.{k}")
+        scenarios[name] = replace(sc, uncertainty=unc, resolved=True)
+    return replace(cfg, scenarios=scenarios)
 
 
 def _space(method: str, d: Any) -> Space:

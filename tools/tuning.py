@@ -108,6 +108,8 @@ def _sampler_seed(*parts: Any) -> int:
 def trial_spec(setup: TuneSetup, method: str, scenario: Scenario, knobs: dict[str, Any], seed: int, out: Path,
                duration_s: float, trajectory_args: list[str], keep_log: bool) -> RunSpec:
     """The run of one method with these knobs (tuning or the study itself)."""
+    if scenario.per_joint and not scenario.resolved:  # it would run without its per-joint values
+        raise RuntimeError(f"scenario {scenario.name}: per-joint values not made for the arm (study.setup_for)")
     firmware, how = METHODS[method]
     args = [*trajectory_args, "--ref-hold", f"{setup.cfg.hold_s:g}"]
     text = None

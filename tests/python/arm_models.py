@@ -33,3 +33,42 @@ def armature_variant(tmp_path: Path) -> Path:
     out = tmp_path / "ur5e_armature.xml"
     tree.write(out)
     return out
+
+
+# What a Kinova-Jaco-like MJCF carries besides its dynamics: textures (one built in, one from a
+# file that is not vendored), materials using them, and sites, geoms and a skin using the materials.
+MATERIAL_ASSETS = """
+    <texture name="grid" type="2d" builtin="checker" rgb1="0.1 0.2 0.3" rgb2="0.2 0.3 0.4" width="64" height="64"/>
+    <texture name="logo" type="2d" file="textures/kinova_logo.png"/>
+    <material name="reference_site" rgba="0.9 0.1 0.1 1"/>
+    <material name="grid" texture="grid" texrepeat="2 2"/>
+    <material name="logo" texture="logo"/>
+"""
+MATERIAL_SITES = {  # body -> what is added to it
+    "fixed_base_link": '<site name="basesite" material="grid" size="0.01"/>',
+    "wrist_3_link": '<site name="wristsite" material="reference_site" pos="0 0.08 0" size="0.01"/>'
+                    '<geom name="badge" type="box" size="0.01 0.01 0.001" material="logo" contype="0" '
+                    'conaffinity="0" group="1" mass="0"/>',
+}
+MATERIAL_SKIN = ('<deformable><skin name="cover" material="grid" vertex="0 0 0 0.02 0 0 0 0.02 0" face="0 1 2">'
+                 '<bone body="wrist_3_link" bindpos="0 0 0" bindquat="1 0 0 0" vertid="0 1 2" '
+                 'vertweight="1 1 1"/></skin></deformable>')
+
+
+def materials_variant(out: Path) -> Path:
+    """robosuite's UR5e with what MJCF files of other arms add (MATERIAL_ASSETS, MATERIAL_SITES,
+    MATERIAL_SKIN): MuJoCo compiles it, and so must the importer."""
+    tree = ET.parse(UR5E)
+    root = tree.getroot()
+    asset = root.find("asset")
+    assert asset is not None
+    for el in ET.fromstring(f"<a>{MATERIAL_ASSETS}</a>"):
+        asset.append(el)
+    for body in root.iter("body"):
+        if body.get("name") in MATERIAL_SITES:
+            for el in ET.fromstring(f"<a>{MATERIAL_SITES[body.get('name', '')]}</a>"):
+                body.append(el)
+    root.append(ET.fromstring(MATERIAL_SKIN))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tree.write(out)
+    return out

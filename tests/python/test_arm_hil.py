@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from arm_models import ARMATURE, armature_variant
+from arm_models import ARMATURE, armature_variant, materials_variant
 from tools.arm import ArmRef, arm_build_dir
 from tools.paths import BUILD, REPO
 
@@ -38,6 +38,19 @@ def stable_armature_variant() -> Path:
     return out
 
 
+def stable_materials_variant() -> Path:
+    """The UR5e dressed with textures, materials and sites using them (arm_models), at a fixed path."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        text = materials_variant(Path(tmp) / "m.xml").read_text()
+    out = BUILD / "test-arms" / "ur5e_materials.xml"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if not out.exists() or out.read_text() != text:
+        out.write_text(text)
+    return out
+
+
 CASES = {
     # 6-DOF MJCF, two fixed base bodies, joint damping and friction, motors with ctrlrange
     "robosuite-ur5e": (lambda: ["--model", str(ARMS / "robosuite" / "ur5e.xml")], 6),
@@ -47,6 +60,8 @@ CASES = {
     "panda-urdf-arm-file": (lambda: ["--arm", str(ARMS / "panda.toml")], 7),
     # 6-DOF with rotor armature 0.5-4 kg m^2, damping, friction and geared general actuators
     "ur5e-armature": (lambda: ["--model", str(stable_armature_variant())], 6),
+    # 6-DOF MJCF with textures (one from a missing file), materials and the sites, geoms and skin using them
+    "ur5e-materials": (lambda: ["--model", str(stable_materials_variant())], 6),
 }
 
 
@@ -58,7 +73,14 @@ def built_arm(request: pytest.FixtureRequest) -> tuple[str, list[str], int, str]
     assert synth.returncode == 0, synth.stderr[-3000:]
     r = armctl("build", *args)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    for w in _warnings(args):  # what the import assumed, said by both commands that prepared the arm
+        assert w in synth.stderr and w in r.stderr, (w, synth.stderr[-2000:], r.stderr[-2000:])
     return name, args, n, r.stdout
+
+
+def _warnings(args: list[str]) -> list[str]:
+    arm = ArmRef(model=Path(args[1]).resolve()) if args[0] == "--model" else ArmRef(arm_file=Path(args[1]).resolve())
+    return json.loads((arm_build_dir("release", arm) / "generated" / "arm" / "arm.json").read_text())["warnings"]
 
 
 def test_synth_designs_for_the_arms_joint_count(built_arm: tuple[str, list[str], int, str]) -> None:
@@ -83,6 +105,8 @@ def test_lockstep_hil_run_is_ok_within_stated_bounds(built_arm: tuple[str, list[
     run = json.loads((tmp_path / "run.json").read_text())
     res = run["results"]
     assert r.returncode == 0, (r.stdout[-2000:], r.stderr[-2000:], res.get("verdict_reasons"))
+    assert res["arm"]["warnings"] and all(f"armctl hil: {res['arm']['name']}: {w}" in r.stderr
+                                          for w in res["arm"]["warnings"]), r.stderr[-2000:]
     assert res["result"] == "ok" and res["verdict_reasons"] == []
     assert res["bounds"]["max_error_deg"] == MAX_ERROR_DEG
     assert len(res["tracking_max_abs_deg"]) == n and max(res["tracking_max_abs_deg"]) <= MAX_ERROR_DEG

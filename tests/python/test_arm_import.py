@@ -16,7 +16,7 @@ from gen.arm import ArmError, clip_amplitude, load_arm_file, prepare
 from gen.robot_model import extract, nominal_for_inverse
 from tools.arm import ArmChoiceError, reference_for
 
-from arm_models import ARMATURE, UR5E, armature_variant
+from arm_models import ARMATURE, UR5E, armature_variant, materials_variant
 
 REPO = Path(__file__).resolve().parents[2]
 ARMS = REPO / "tests" / "arms"
@@ -297,3 +297,68 @@ def test_contacts_are_off_unless_the_arm_file_keeps_them() -> None:
     assert "contacts" in p.info["nominal_model"] and p.info["contacts"] is True
     with pytest.raises(ArmError, match="contacts = true needs the collision meshes"):
         prep(UR5E, contacts=True)
+
+
+# ---- what MuJoCo compiles, the importer takes ---------------------------------------------------
+DRESSED = ('<asset><texture name="grid" type="2d" builtin="checker" rgb1="0.1 0.2 0.3" rgb2="0.2 0.3 0.4" '
+           'width="32" height="32"/><material name="reference_site" rgba="1 0 0 1"/>'
+           '<material name="grid" texture="grid"/></asset>'
+           '<deformable><skin name="cover" material="grid" vertex="0 0 0 0.02 0 0 0 0.02 0" face="0 1 2">'
+           '<bone body="l2" bindpos="0 0 0" bindquat="1 0 0 0" vertid="0 1 2" vertweight="1 1 1"/></skin></deformable>')
+DRESSED_BODY = ('<site name="wristsite" material="reference_site" size="0.01"/>'
+                '<geom name="badge" type="box" size="0.01 0.01 0.01" material="grid" mass="0"/>')
+
+
+def test_materials_textures_and_skins_go_with_everything_that_uses_them(tmp_path: Path) -> None:
+    """A Kinova-Jaco-like model: a site, a geom and a skin use materials, a material a texture.
+    MuJoCo compiles it, so the importer must: it drops the materials with the references to them
+    (the site stays, without its material), and keeps them with contacts = true."""
+    model = write(tmp_path, chain_mjcf(body_extra=DRESSED_BODY, extra=DRESSED))
+    mujoco.MjModel.from_xml_path(str(model))  # a valid model
+    m = mujoco.MjModel.from_xml_string(prep(model).xml)
+    assert m.nmat == m.ntex == m.nskin == m.ngeom == 0
+    site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, "wristsite")
+    assert site >= 0 and m.site_matid[site] == -1
+    kept = mujoco.MjModel.from_xml_string(prep(model, contacts=True).xml)
+    assert kept.nmat == 2 and kept.site_matid[mujoco.mj_name2id(kept, mujoco.mjtObj.mjOBJ_SITE, "wristsite")] >= 0
+
+
+def test_a_public_arm_with_materials_textures_and_sites_is_prepared(tmp_path: Path) -> None:
+    """robosuite's UR5e dressed like other vendors' MJCF (arm_models.materials_variant): its mesh
+    and texture files are not here, so meshes and textures go, with the materials' references to
+    the textures; then the materials go with the sites' and the skin's references."""
+    model = materials_variant(tmp_path / "ur5e_materials.xml")
+    p = prep(model)
+    m = mujoco.MjModel.from_xml_string(p.xml)
+    assert p.info["n_joints"] == 6 and m.nmat == m.ntex == m.nskin == m.ngeom == 0
+    assert {mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_SITE, i) for i in range(m.nsite)} >= {"wristsite", "basesite"}
+    assert any("mesh files not found" in w for w in p.info["warnings"])
+    same = prep(UR5E)  # the dressing changes nothing the controller uses
+    assert [j["torque_limit"] for j in p.info["joints"]] == [j["torque_limit"] for j in same.info["joints"]]
+    assert gen_arm._inverse_dynamics_difference(m, mujoco.MjModel.from_xml_string(same.xml)) < 1e-9
+
+
+def test_build_folder_is_named_after_the_arm_not_its_file(tmp_path: Path) -> None:
+    """README: build/arms/<name>-<digest>, the name being the one in the arm's reports."""
+    from tools.arm import ArmRef, arm_build_dir
+
+    model = materials_variant(tmp_path / "vendor_file_name.xml")  # <mujoco model="ur5e">
+    assert prep(model).info["name"] == "ur5e"
+    bdir = arm_build_dir("release", ArmRef(model=model))
+    assert bdir.parent.name.startswith("ur5e-") and bdir.parent.parent.name == "arms"
+    f = write(tmp_path, f'model = "{model}"\nname = "Left Arm"\n', "cell.toml")
+    assert ArmRef(arm_file=f).key().startswith("left-arm-")
+    assert ArmRef(arm_file=f).key() != ArmRef(model=model).key()
+
+
+def test_a_massless_link_says_what_carries_its_joints_inertia(tmp_path: Path) -> None:
+    """A 1e-9 kg tip link moved only by its rotor's armature (the Jaco's joint 6), and a 1e-9 kg
+    link in the middle whose joint moves the links beyond it."""
+    tip = write(tmp_path, chain_mjcf(tip_mass=1e-9, joint_attrs=["", "", 'armature="0.5"']))
+    w = [x for x in prep(tip).info["warnings"] if "weighs" in x]
+    assert len(w) == 1 and "'j2'" in w[0] and "(its rotor armature of 0.5 kg m^2 carries the inertia; no link beyond it)" in w[0]
+    middle = write(tmp_path, chain_mjcf().replace('mass="1.0" diaginertia="0.01 0.01 0.01"/><body name="l2"',
+                                                  'mass="1e-9" diaginertia="1e-11 1e-11 1e-11"/><body name="l2"'),
+                   "middle.xml")
+    w = [x for x in prep(middle).info["warnings"] if "weighs" in x]
+    assert len(w) == 1 and "'j1'" in w[0] and "(1 kg of links beyond it carries the inertia)" in w[0]

@@ -5,12 +5,15 @@ in a defined, named state; config errors name the field."""
 from __future__ import annotations
 
 import json
+import platform
 import re
 import shutil
 import signal
+import socket
 import subprocess
 import threading
 import time
+from datetime import datetime, timedelta, timezone
 from pathlib import Path
 
 import numpy as np
@@ -388,3 +391,137 @@ def test_a_second_study_on_the_same_out_is_refused_in_one_line(tmp_path: Path) -
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and str(out) in lines[0] and "another study" in lines[0], r.stderr
     assert sorted(p.name for p in out.iterdir()) == [OUT_LOCK, "ideal"]
+# ---- n joints everywhere ---------------------------------------------------------------------
+FRICTION = "realistic+friction+parameter-error"
+BUNDLED_VISCOUS = [2.0, 2.0, 1.5, 0.5, 0.5, 0.5]  # the README's results were made with these
+BUNDLED_COULOMB = [3.0, 3.0, 2.0, 0.8, 0.8, 0.8]
+
+
+def fake_arm(name: str, limits: list[float]) -> dict:
+    """What for_arm reads of arm.json."""
+    return {"name": name, "n_joints": len(limits), "joints": [{"torque_limit": x} for x in limits]}
+
+
+def test_scenario_per_joint_values_take_n_from_the_arm(tmp_path: Path) -> None:
+    from tools.study_config import for_arm
+
+    cfg = load(DEFAULT_CONFIG)
+    bundled = for_arm(cfg, fake_arm("ur5e_arm", [150, 150, 150, 28, 28, 28])).scenarios[FRICTION].uncertainty
+    assert bundled["viscous"] == BUNDLED_VISCOUS and bundled["coulomb"] == BUNDLED_COULOMB
+    panda = for_arm(cfg, fake_arm("panda", [87, 87, 87, 87, 12, 12, 12])).scenarios[FRICTION].uncertainty
+    assert panda["viscous"] == pytest.approx([0.015 * x for x in [87] * 4 + [12] * 3])
+    assert panda["coulomb"] == pytest.approx([0.02 * x for x in [87] * 4 + [12] * 3])
+    with pytest.raises(RuntimeError, match="per-joint values are for an arm"):
+        cfg.scenarios[FRICTION].as_dict()  # never run (or keyed) without them
+    text = DEFAULT_CONFIG.read_text()
+    old = "viscous = { for_arm = { ur5e_arm = [2.0, 2.0, 1.5, 0.5, 0.5, 0.5] }, torque_limit_fraction = 0.015 }"
+    assert old in text
+    for new, want in (("viscous = { each = 0.25 }", [0.25] * 7),
+                      ("viscous = [1, 2, 3, 4, 5, 6, 7]", [1, 2, 3, 4, 5, 6, 7])):
+        f = tmp_path / "c.toml"
+        f.write_text(text.replace(old, new))
+        assert for_arm(load(f), fake_arm("panda", [87] * 7)).scenarios[FRICTION].uncertainty["viscous"] == want
+
+
+@pytest.mark.parametrize(("new", "where", "named"), [
+    ("viscous = [2.0, 2.0, 1.5, 0.5, 0.5, 0.5]", "arm",
+     "scenario.realistic+friction+parameter-error.uncertainty.viscous: 6 values, but arm 'panda' has 7 joints"),
+    ("viscous = { for_arm = { panda = [1.0, 1.0] } }", "arm",
+     "uncertainty.viscous.for_arm.panda: 2 values, but arm 'panda' has 7 joints"),
+    ("viscous = { for_arm = { ur5e_arm = [1.0] } }", "arm", "uncertainty.viscous: no values for arm 'panda'"),
+    ("viscous = { each = 1, torque_limit_fraction = 0.1 }", "config", "uncertainty.viscous: one rule"),
+    ("viscous = { fraction = 0.1 }", "config", "uncertainty.viscous: unknown field(s) ['fraction']"),
+    ("viscous = { torque_limit_fraction = 2 }", "config", "uncertainty.viscous.torque_limit_fraction: must be"),
+    ("viscous = 3", "config", "uncertainty.viscous: give one value per joint, or a rule"),
+])
+def test_a_per_joint_value_that_does_not_fit_the_arm_is_named(tmp_path: Path, new: str, where: str,
+                                                             named: str) -> None:
+    """A malformed value when the config loads; one that does not fit this arm before any run
+    (study.setup_for): the scenario, the field, and both lengths."""
+    from tools.study_config import for_arm
+
+    old = "viscous = { for_arm = { ur5e_arm = [2.0, 2.0, 1.5, 0.5, 0.5, 0.5] }, torque_limit_fraction = 0.015 }"
+    f = tmp_path / "c.toml"
+    f.write_text(DEFAULT_CONFIG.read_text().replace(old, new))
+    with pytest.raises(StudyConfigError, match=re.escape(named)):
+        cfg = load(f)
+        assert where == "arm", "the config should have been refused as it loaded"
+        for_arm(cfg, fake_arm("panda", [87] * 7))
+
+
+def test_the_report_shows_a_run_that_failed_and_never_crashes_on_it(tmp_path: Path) -> None:
+    """Every run of a scenario failed before it measured (the 7-joint arm's friction scenario
+    once): the report has the arm's joints, says failed and why, and exits normally."""
+    from tools.report import write_report
+    from tools.study import scenario_result
+
+    n, methods = 7, ["pm", "pd"]
+    failed = {"result": "failed", "verdict_reasons": ["failed: the simulator refused its arguments: need 7 values"]}
+    ok = {"result": "ok", "verdict_reasons": [], "tracking_max_abs_rad": [0.01] * n, "tracking_rms_rad": [0.005] * n,
+          "estimation_error_rms": [0.1] * n, "torque_power_w": 3.0}
+    definition = {"name": "s", "description": "", "uncertainty": {}, "drives": {}, "bus_timing": False}
+    study = {"description": "t", "config": "c", "seeds": [1], "duration_s": 1.0, "hold_s": 0.5, "methods": methods,
+             "tuning_procedure": "-", "notes": [],
+             "arm": {"name": "panda", "n_joints": n, "joint_names": [f"j{i}" for i in range(n)], "model": "m",
+                     "model_hash": "0", "is_default": False, "buses": []},
+             "scenarios": {"all-failed": scenario_result(definition, {}, {m: [failed] for m in methods}, methods, n),
+                           "mixed": scenario_result(definition, {}, {"pm": [ok], "pd": [failed]}, methods, n)}}
+    write_report(tmp_path, study)
+    report = (tmp_path / "report.md").read_text()
+    assert "## Scenario `all-failed`" in report and "## Scenario `mixed`" in report
+    assert "- pd: 1 of 1 runs did not end ok (failed on seed(s) 1; the first failure: failed: the simulator" in report
+    assert "1 failed" in (tmp_path / "summary.txt").read_text()
+    assert all(len(study["scenarios"][s]["stats"]["pm"]["linf"]["per_joint"]) == n for s in study["scenarios"])
+
+
+def test_a_study_on_a_seven_joint_arm_runs_every_scenario(tmp_path: Path) -> None:
+    """The README's `study --arm tests/arms/panda.toml`, short: every scenario (friction values
+    from the torque limits), one seed, two methods; every run measured, a report naming every
+    scenario, and each run.json saying when, from which commit and where it ran."""
+    from tools.arm import ArmRef, build_arm
+
+    text = DEFAULT_CONFIG.read_text()
+    text = re.sub(r"(?m)^methods = .*$", 'methods = ["pm-paper-weights", "pd"]', text)
+    text = re.sub(r"(?m)^seeds = 5 .*$", "seeds = 1", text)
+    text = with_tuning(text, duration_s=0.5, trials=2, batch=2, widen=0)
+    cfg_path = tmp_path / "seven.toml"
+    cfg_path.write_text(text)
+    arm = ArmRef(arm_file=(REPO / "tests" / "arms" / "panda.toml").resolve())
+    build_arm("release", arm)
+    out = tmp_path / "study"
+    s = run_study(load(cfg_path), out, duration_s=1.0, arm=arm, jobs=2)
+    assert s["arm"]["n_joints"] == 7 and list(s["scenarios"]) == ["ideal", "realistic", FRICTION]
+    friction = s["scenarios"][FRICTION]["definition"]["uncertainty"]
+    assert len(friction["viscous"]) == len(friction["coulomb"]) == 7
+    report = (out / "report.md").read_text()
+    for name, sc in s["scenarios"].items():
+        assert f"## Scenario `{name}`" in report
+        for m in ("pm-paper-weights", "pd"):
+            r = sc["runs"][m][0]
+            assert r["result"] != "failed" or r.get("final_state") in ("safe-stop", "fault"), r["verdict_reasons"]
+            assert len(sc["stats"][m]["linf"]["per_joint"]) == 7
+    run = json.loads((out / FRICTION / "pd" / "seed-1" / "run.json").read_text())
+    prov = run["provenance"]
+    head = subprocess.run(["git", "-C", str(REPO), "rev-parse", "HEAD"], capture_output=True, text=True).stdout.strip()
+    assert prov["commit"] == head and isinstance(prov["dirty"], bool)
+    started = datetime.fromisoformat(prov["date_utc"])
+    assert started.utcoffset() == timedelta(0) and abs(datetime.now(timezone.utc) - started) < timedelta(hours=1)
+    assert prov["hostname"] == socket.gethostname() and prov["platform"] == platform.platform()
+
+
+def test_a_list_for_another_arm_stops_the_study_before_any_run(tmp_path: Path) -> None:
+    """The old config's six friction values on the 7-joint Panda: a one-line error, exit 2, and
+    nothing run (the CLI, as a user meets it)."""
+    old = "viscous = { for_arm = { ur5e_arm = [2.0, 2.0, 1.5, 0.5, 0.5, 0.5] }, torque_limit_fraction = 0.015 }"
+    cfg = tmp_path / "six.toml"
+    cfg.write_text(DEFAULT_CONFIG.read_text().replace(old, "viscous = [2.0, 2.0, 1.5, 0.5, 0.5, 0.5]"))
+    out = tmp_path / "study"
+    r = subprocess.run([str(REPO / "tools" / "armctl"), "study", "--arm", "tests/arms/panda.toml", "--config", str(cfg),
+                        "--seeds", "1", "--out", str(out)], cwd=REPO, capture_output=True, text=True, timeout=900)
+    assert r.returncode == 2, r.stdout[-2000:] + r.stderr[-2000:]
+    errors = [ln for ln in r.stderr.splitlines() if ln.startswith("armctl study: scenario.")]
+    assert errors == ["armctl study: scenario.realistic+friction+parameter-error.uncertainty.viscous: 6 values, but "
+                      "arm 'panda' has 7 joints; give one value per joint, or a rule: { each = x }, "
+                      "{ torque_limit_fraction = f }, optionally with for_arm = { ARM = [...] }"], r.stderr
+    assert "Traceback" not in r.stderr and not any(out.glob("*/*/seed-*"))
+    assert "armctl study: panda: locked (not controlled): panda_finger_joint1" in r.stderr  # what the import assumed
