@@ -10,7 +10,8 @@ import pytest
 
 from host_sim.drive_model import DriveModel
 from tools.hil import HilOptions, run_hil
-from tools.study_config import load
+from tools.arm import DEFAULT_ARM, arm_build_dir, arm_info
+from tools.study_config import for_arm, load
 from tools.study import DEFAULT_CONFIG
 from tools.telemetry_log import read_log
 
@@ -19,7 +20,7 @@ CFG = load(DEFAULT_CONFIG)
 
 
 def _run(out: Path, preset: str, method: str, scenario: str, bus: str) -> dict:
-    sc = CFG.scenarios[scenario]
+    sc = for_arm(CFG, arm_info(arm_build_dir(preset, DEFAULT_ARM))).scenarios[scenario]  # friction for this arm
     return run_hil(HilOptions(out=out, duration_s=0.4, method=method, preset=preset, bus=bus,
                               controller_args=("--ref-hold", "0.1"), uncertainty={**sc.uncertainty, "seed": 7},
                               drives=sc.drives, bus_timing=sc.bus_timing))
@@ -32,7 +33,8 @@ def test_sil_equals_lockstep_hil_for_every_method(tmp_path: Path, controller_bin
         sil = _run(tmp_path / method / "sil", preset, method, scenario, "sil")
         hil = _run(tmp_path / method / "udp", preset, method, scenario, "udp")
         assert sil["environment"]["bus_choice"].startswith("sil") and hil["environment"]["bus_choice"].startswith("udp")
-        assert sil["results"]["steps"] == 500 and sil["results"].get("periods_running", 0) > 0, sil["results"]
+        # (a method the safety layer stops in a scenario still has to stop the same way in both)
+        assert sil["results"]["steps"] > 100 and sil["results"].get("periods_running", 0) > 0, sil["results"]
         differ = {k: (sil["results"].get(k), hil["results"].get(k))
                   for k in set(sil["results"]) | set(hil["results"]) if sil["results"].get(k) != hil["results"].get(k)}
         assert not differ, f"{method} in {scenario}: {differ}"

@@ -155,8 +155,9 @@ ARMCTL = str(REPO / "tools" / "armctl")
 
 
 def _study_cmd(cfg: Path, out: Path) -> list[str]:
-    # 15 s runs: about 1 s each in lockstep, long enough to be stopped in the middle of one
-    return [ARMCTL, "study", "--config", str(cfg), "--duration", "15", "--jobs", "1", "--out", str(out)]
+    # 15 s runs in lockstep HIL: about 1 s each, long enough to be stopped in the middle of one (in
+    # software in the loop they take 0.2 s); three processes a run, each of which must end with armctl
+    return [ARMCTL, "study", "--config", str(cfg), "--duration", "15", "--jobs", "1", "--bus", "udp", "--out", str(out)]
 
 
 def _left_running(out: Path) -> list[str]:
