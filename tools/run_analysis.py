@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from tools.telemetry_log import EVENT_CHANNELS, FIXED_CHANNELS, Chunk, iter_chunks
+from tools.telemetry_log import CHUNK_BYTES, EVENT_CHANNELS, FIXED_CHANNELS, Chunk, iter_chunks
 from tools.verdict import Bounds, judge
 
 STATE_NAMES = {0: "init", 1: "running", 2: "fault", 3: "safe-stop"}
@@ -261,16 +261,17 @@ def _power_sums(chunks: Iterable[Chunk], t_min: float, n: int) -> tuple[np.float
     return power.result(), tau_sq.result()
 
 
-def scan_log(path: Path, hold_s: float, rate_hz: float, sent: dict[str, int], expected_periods: int) -> LogScan:
+def scan_log(path: Path, hold_s: float, rate_hz: float, sent: dict[str, int], expected_periods: int,
+             chunk_bytes: int = CHUNK_BYTES) -> LogScan:
     """Stream the log once (twice when the running periods are not the expected count: the two
     pairwise-summed means need the count before they start)."""
     scan = LogScan(hold_s, rate_hz, sent, max(int(expected_periods), 0))
     if path.exists():
-        for chunk in iter_chunks(path):
+        for chunk in iter_chunks(path, chunk_bytes):
             scan.feed(chunk)
     scan.finish()
     if scan.running and scan.running != scan.expected:
-        scan.power_total, scan.tau_sq_total = _power_sums(iter_chunks(path), scan.t_min, scan.running)
+        scan.power_total, scan.tau_sq_total = _power_sums(iter_chunks(path, chunk_bytes), scan.t_min, scan.running)
     else:
         scan.power_total, scan.tau_sq_total = scan.power.result(), scan.tau_sq.result()
     return scan
