@@ -37,7 +37,7 @@ CHANNEL_TYPES = {
     "ARM_SIM_EVENT": "event_t",
 }
 EVENT_CHANNELS = ("ARM_EVENT", "ARM_SIM_EVENT")
-CHUNK_BYTES = 4 << 20
+CHUNK_BYTES = 2 << 20
 
 SYNC = b"\xed\xa1\xda\x01"
 HEADER = 28          # sync, event number, timestamp, channel length, data length
@@ -130,8 +130,7 @@ class _Decoder:
         undecodable = {ch: 0 for ch in CHANNEL_TYPES}
         if len(pos) == 0:
             return Chunk({ch: self.empty(ch) for ch in FIXED_CHANNELS}, events, undecodable)
-        idx = np.minimum(pos[:, None] + HEADER + np.arange(self.width), len(b) - 1)
-        names = b[idx]
+        names = _rows(b, np.minimum(pos + HEADER, len(b) - self.width), self.width)
         data_at = pos + HEADER + chlen
         for ch, name in self.names.items():
             sel = np.flatnonzero((chlen == len(name)) & (names[:, :len(name)] == name).all(axis=1))
@@ -150,7 +149,7 @@ class _Decoder:
         lay = LAYOUTS[FIXED_CHANNELS[ch]]
         if len(at) == 0:
             return self.empty(ch)
-        fp = b[np.minimum(at[:, None] + np.arange(8), len(b) - 1)]
+        fp = _rows(b, np.minimum(at, len(b) - 8), 8)
         ok = (size >= 8) & (fp == self.fingerprint[ch]).all(axis=1)
         if lay.has_n:
             o = lay._offset_of_n()
@@ -170,8 +169,15 @@ class _Decoder:
         be, native = self.dtypes(ch, n)
         good = at[ok]
         undecodable[ch] += int(len(at) - len(good))
-        rows = b[good[:, None] + np.arange(be.itemsize)] if len(good) else np.empty((0, be.itemsize), np.uint8)
+        rows = _rows(b, good, be.itemsize)
         return rows.view(be).reshape(len(rows)).astype(native)
+
+
+def _rows(b: np.ndarray, at: np.ndarray, width: int) -> np.ndarray:
+    """The `width` bytes at each offset of `at` in b, one row each (a copy of just those bytes)."""
+    if len(at) == 0 or len(b) < width:
+        return np.empty((0, width), np.uint8)
+    return np.lib.stride_tricks.sliding_window_view(b, width)[at]
 
 
 def _chain(pos: np.ndarray, ends: np.ndarray, valid: np.ndarray, start: int) -> np.ndarray:
@@ -179,8 +185,9 @@ def _chain(pos: np.ndarray, ends: np.ndarray, valid: np.ndarray, start: int) -> 
     sync word at or after its end (liblcm skips anything else). Stops before an invalid header."""
     nxt = np.searchsorted(pos, ends)
     k = len(pos)
-    if start == 0 and valid.all() and (nxt == np.arange(1, k + 1)).all():
-        return np.arange(k)  # the usual case: every sync word begins an event and they are back to back
+    m = int(np.argmin(valid)) if not valid.all() else k  # the first not to read (the buffer's last, usually)
+    if start == 0 and (nxt[:m] == np.arange(1, m + 1)).all():
+        return np.arange(m)  # the usual case: every sync word begins an event and they are back to back
     out = []
     i = start
     while i < k and valid[i]:
@@ -209,8 +216,7 @@ def iter_chunks(path: Path, chunk_bytes: int = CHUNK_BYTES) -> Iterator[Chunk]:
             c = c[(b[c + 1] == 0xA1) & (b[c + 2] == 0xDA) & (b[c + 3] == 0x01)]
             whole = c + HEADER <= L  # the header is in the buffer
             hdr_at = c[whole]
-            h = b[hdr_at[:, None] + np.arange(20, 28)].copy().view(">i4").astype(np.int64) if len(hdr_at) \
-                else np.empty((0, 2), np.int64)
+            h = _rows(b, hdr_at + 20, 8).view(">i4").astype(np.int64)
             chlen, datalen = h[:, 0], h[:, 1]
             ends = hdr_at + HEADER + chlen + datalen
             valid = (chlen > 0) & (chlen < MAX_CHANNEL) & (datalen >= 0)
