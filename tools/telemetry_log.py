@@ -130,7 +130,8 @@ class _Decoder:
         undecodable = {ch: 0 for ch in CHANNEL_TYPES}
         if len(pos) == 0:
             return Chunk({ch: self.empty(ch) for ch in FIXED_CHANNELS}, events, undecodable)
-        names = _rows(b, np.minimum(pos + HEADER, len(b) - self.width), self.width)
+        nb = b if int(pos[-1]) + HEADER + self.width <= len(b) else np.concatenate([b, np.zeros(self.width, np.uint8)])
+        names = _rows(nb, pos + HEADER, self.width)  # (an event that ends within `width` of the buffer's end: padded)
         data_at = pos + HEADER + chlen
         for ch, name in self.names.items():
             sel = np.flatnonzero((chlen == len(name)) & (names[:, :len(name)] == name).all(axis=1))
