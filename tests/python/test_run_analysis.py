@@ -267,22 +267,21 @@ def test_telemetry_published_by_a_foreign_process_during_a_lockstep_run(tmp_path
         def forge() -> None:
             lc = lcm.LCM(url)
             sub_log = out / "telemetry.lcmlog"
-            while not stop.is_set() and not sub_log.exists():
-                time.sleep(0.01)
-            time.sleep(0.3)
+            while not stop.is_set() and not sub_log.exists():  # the logger listens
+                time.sleep(0.001)
             m = lcmtypes.load().sim_truth_t()
             m.n = 6
             m.q = m.qd = m.tau_applied = m.w_true = [0.0] * 6
             while not stop.is_set() and published[0] < 400:
-                m.seq = m.step = published[0] + 600  # sequence numbers the simulator sends too
+                m.seq = m.step = published[0]  # sequence numbers the simulator sends too
                 lc.publish("ARM_SIM", m.encode())
                 published[0] += 1
-                time.sleep(0.002)
+                time.sleep(0.0005)
 
         th = threading.Thread(target=forge, daemon=True)
         th.start()
         try:
-            run = run_hil(HilOptions(out=out, duration_s=1.5, method="pm", preset=controller_bin.parent.parent.name,
+            run = run_hil(HilOptions(out=out, duration_s=3.0, method="pm", preset=controller_bin.parent.parent.name,
                                      bus="udp", can_port=slot.can_port, lcm_port=slot.lcm_port))
         finally:
             stop.set()
