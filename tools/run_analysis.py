@@ -408,7 +408,9 @@ def table(run: dict[str, Any]) -> str:
     if t["telemetry"]:
         sent = sum(v["sent"] for v in t["telemetry"].values())
         logged = sum(v["logged"] for v in t["telemetry"].values())
-        lines.append(f"telemetry: {sent} messages sent, {logged} logged, {t['telemetry_lost_total']} lost")
+        foreign = sum(v.get("foreign", 0) for v in t["telemetry"].values())
+        lines.append(f"telemetry: {sent} messages sent, {logged} logged, {t['telemetry_lost_total']} lost"
+                     + (f", {foreign} foreign" if foreign else ""))
     else:
         lines.append("telemetry: unknown (no process said what it sent)")
     for b in t.get("bus_timing", []):

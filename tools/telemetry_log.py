@@ -53,7 +53,7 @@ class Layout:
     array_type: str = "f8"
     tail: tuple[tuple[str, str], ...] = ()
 
-    def _offset_of_n(self) -> int:
+    def offset_of_n(self) -> int:
         return 8 + sum(np.dtype(f).itemsize for name, f in self.head if name != "n")
 
     def size(self, n: int) -> int:
@@ -153,7 +153,7 @@ class _Decoder:
         fp = _rows(b, np.minimum(at, len(b) - 8), 8)
         ok = (size >= 8) & (fp == self.fingerprint[ch]).all(axis=1)
         if lay.has_n:
-            o = lay._offset_of_n()
+            o = lay.offset_of_n()
             ok &= size >= o + 2
             hi = b[np.minimum(at + o, len(b) - 1)].astype(np.int64)
             lo = b[np.minimum(at + o + 1, len(b) - 1)].astype(np.int64)

@@ -23,7 +23,7 @@ from tools.hil import HilOptions, run_hil
 from tools.run_analysis import PairwiseSum, RowSum, analyse, control_metrics, scan_log
 from tools.study import DEFAULT_CONFIG
 from tools.study_config import load
-from tools.telemetry_log import CHANNEL_TYPES, iter_chunks, read_log
+from tools.telemetry_log import CHANNEL_TYPES, read_log
 
 REPO = Path(__file__).resolve().parents[2]
 CFG = load(DEFAULT_CONFIG)
