@@ -58,13 +58,20 @@ def _p(c: dict[str, Any]) -> float | None:
 
 
 def _series(run_dir: Path, hold: float) -> dict[str, np.ndarray]:
-    log = read_log(run_dir / "telemetry.lcmlog")
-    ctl = [m for m in log["ARM_CTL"].messages if m.state == 1 and m.t >= hold - 1e-9]
-    sim = {m.step: np.array(m.w_true) for m in log["ARM_SIM"].messages}
-    t = np.array([m.t - hold for m in ctl])
-    w_hat = np.array([m.w_hat for m in ctl])
-    w = np.array([sim.get(m.bus_period, np.full(len(m.w_hat), np.nan)) for m in ctl])
-    return {"t": t, "e": np.array([m.e for m in ctl]), "w": w, "w_hat": w_hat}
+    """One kept run's trajectory series (the figures plot a seed): its whole ARM_CTL and ARM_SIM."""
+    log = read_log(run_dir / "telemetry.lcmlog", channels=("ARM_CTL", "ARM_SIM"))
+    ctl, sim = log["ARM_CTL"].messages, log["ARM_SIM"].messages
+    ctl = ctl[(ctl.state == 1) & (ctl.t >= hold - 1e-9)]
+    w_hat = ctl.w_hat.astype(float)
+    # w_true of the period each controller message names (the last one logged for it), NaN if none
+    steps, last = np.unique(sim.step[::-1], return_index=True)
+    truth = sim.w_true[::-1][last].astype(float)
+    at = np.searchsorted(steps, ctl.bus_period)
+    found = (at < len(steps)) & (steps[np.minimum(at, max(len(steps) - 1, 0))] == ctl.bus_period) if len(steps) \
+        else np.zeros(len(ctl), bool)
+    w = np.full(w_hat.shape, np.nan)
+    w[found] = truth[at[found]]
+    return {"t": ctl.t - hold, "e": ctl.e.astype(float), "w": w, "w_hat": w_hat}
 
 
 def _time_figures(out: Path, study: dict[str, Any], scenario: str) -> list[str]:

@@ -7,70 +7,338 @@ time: what differs between two runs of the same configuration).
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from tools.telemetry_log import ChannelLog, read_log
+from tools.telemetry_log import CHUNK_BYTES, EVENT_CHANNELS, FIXED_CHANNELS, Chunk, iter_chunks
 from tools.verdict import Bounds, judge
 
 STATE_NAMES = {0: "init", 1: "running", 2: "fault", 3: "safe-stop"}
 STATE_RUNNING = 1
+PAIRING_WINDOW = 4096  # periods: w_true and w_hat of one period are paired within this much of each other
+# Channels whose sender publishes exactly one message per period, numbered from 0: step == seq.
+ONE_PER_PERIOD = ("ARM_CTL", "ARM_TIMING", "ARM_SIM")
 
 
-def _rms(x: np.ndarray) -> list[float]:
-    return np.sqrt((x**2).mean(axis=0)).tolist() if len(x) else []
+class PairwiseSum:
+    """numpy's float64 np.add.reduce over a 1-D array of exactly n values (0 + pairwise
+    summation: halves rounded down to a multiple of 8, blocks of at most 128 summed by numpy
+    itself), fed in pieces of any size, so its result is bit for bit the whole array's sum
+    without keeping the array. result() is None if the count fed is not n."""
+
+    def __init__(self, n: int) -> None:
+        self.n, self.count, self.total = n, 0, None
+        self._pending: list[np.ndarray] = []
+        self._have = 0
+        self._gen = self._tree(n)
+        self._need = next(self._gen) if n > 0 else 0
+
+    @staticmethod
+    def _tree(n: int):  # noqa: ANN205 - a coroutine: yields block lengths, is sent their sums
+        if n <= 128:
+            return (yield n)
+        n2 = n // 2
+        n2 -= n2 % 8
+        left = yield from PairwiseSum._tree(n2)
+        right = yield from PairwiseSum._tree(n - n2)
+        return left + right
+
+    def feed(self, x: np.ndarray) -> None:
+        self.count += len(x)
+        if self.total is not None or self.count > self.n or len(x) == 0:
+            return
+        self._pending.append(np.ascontiguousarray(x, dtype=np.float64))
+        self._have += len(x)
+        if self._have < self._need:
+            return
+        buf = np.concatenate(self._pending)
+        at = 0
+        while len(buf) - at >= self._need:
+            s = np.add.reduce(buf[at:at + self._need])
+            at += self._need
+            try:
+                self._need = self._gen.send(s)
+            except StopIteration as done:
+                self.total = np.float64(0.0) + done.value
+                break
+        self._pending = [buf[at:]]
+        self._have = len(buf) - at
+
+    def result(self) -> np.float64 | None:
+        if self.n == 0 and self.count == 0:
+            return np.float64(0.0)
+        return self.total if self.count == self.n else None
 
 
-def control_metrics(ctl: ChannelLog, sim: ChannelLog, hold_s: float, rate_hz: float) -> dict[str, Any]:
+class RowSum:
+    """np.add.reduce(x, axis=0) of a 2-D array fed in row blocks: numpy adds the rows in order, so
+    carrying the running sum as the first row of the next block gives the same bits."""
+
+    def __init__(self) -> None:
+        self.total: np.ndarray | None = None
+
+    def feed(self, x: np.ndarray) -> None:
+        if len(x) == 0:
+            return
+        self.total = np.add.reduce(x if self.total is None else np.concatenate([self.total[None], x]), axis=0)
+
+
+class _Pairing:
+    """w_true (ARM_SIM, by step) and w_hat (ARM_CTL running periods, by bus_period), paired by
+    period in period order, the last message of a period winning, as a dict of the whole run
+    would; a period is settled once both channels are PAIRING_WINDOW periods past it. A message
+    for a period already settled is counted in `stale` and left out (only a foreign sender does
+    that)."""
+
+    def __init__(self) -> None:
+        self.keys = [np.empty(0, np.int64), np.empty(0, np.int64)]  # hat, true
+        self.rows: list[np.ndarray | None] = [None, None]
+        self.settled = -(1 << 62)
+        self.stale = 0
+        self.count = 0
+        self.sq_true, self.sq_err = RowSum(), RowSum()
+
+    def add(self, side: int, keys: np.ndarray, rows: np.ndarray) -> None:
+        fresh = keys > self.settled
+        self.stale += int(len(keys) - fresh.sum())
+        keys, rows = keys[fresh], rows[fresh]
+        if self.rows[side] is not None:
+            keys = np.concatenate([self.keys[side], keys])
+            rows = np.concatenate([self.rows[side], rows])
+        if len(keys) == 0:
+            return
+        # one row per period, the last one logged: np.unique of the reversed keys finds last occurrences
+        rev_unique, rev_at = np.unique(keys[::-1], return_index=True)
+        self.keys[side] = rev_unique
+        self.rows[side] = rows[len(keys) - 1 - rev_at]
+
+    def settle(self, upto: int | None = None) -> None:
+        """Pair and accumulate the periods up to `upto` (all when None)."""
+        if upto is None:
+            upto = 1 << 62
+        if self.rows[0] is None or self.rows[1] is None:
+            if upto == 1 << 62:
+                self.settled = upto
+            return
+        cut = [int(np.searchsorted(k, upto, side="right")) for k in self.keys]
+        common, ih, it = np.intersect1d(self.keys[0][:cut[0]], self.keys[1][:cut[1]], assume_unique=True,
+                                        return_indices=True)
+        if len(common):
+            wt = self.rows[1][it]
+            wh = self.rows[0][ih]
+            self.sq_true.feed(wt ** 2)
+            self.sq_err.feed((wt - wh) ** 2)
+            self.count += len(common)
+        for side in (0, 1):
+            self.keys[side] = self.keys[side][cut[side]:]
+            self.rows[side] = self.rows[side][cut[side]:]  # type: ignore[index]
+        self.settled = max(self.settled, upto)
+
+    def feed_chunk_done(self, high: list[int]) -> None:
+        # the channel behind sets the pace, unless it is more than 4 windows behind (it stopped):
+        # then the other's periods are settled unpaired, so that memory stays bounded
+        upto = max(min(high), max(high) - 4 * PAIRING_WINDOW) - PAIRING_WINDOW
+        if upto > self.settled:
+            self.settle(upto)
+
+
+class _Sequences:
+    """One channel's sequence numbers against what its sender says it sent: distinct ones in
+    [0, sent) in a bit set (sent / 8 bytes), duplicates, and messages that cannot be the sender's
+    (sequence number outside [0, sent), or a step that contradicts it)."""
+
+    def __init__(self, sent: int | None, one_per_period: bool) -> None:
+        self.sent = sent
+        self.one_per_period = one_per_period
+        self.bits = np.zeros((sent + 7) // 8 if sent else 0, np.uint8)
+        self.logged = self.distinct = self.duplicates = self.beyond = self.contradicting = 0
+        self.highest = -1
+
+    def feed(self, seq: np.ndarray, step: np.ndarray | None) -> None:
+        self.logged += len(seq)
+        if self.sent is None or len(seq) == 0:
+            return
+        bad = (seq < 0) | (seq >= self.sent)
+        self.beyond += int(bad.sum())
+        if self.one_per_period and step is not None:
+            contra = (step != seq) & ~bad
+            self.contradicting += int(contra.sum())
+            bad |= contra
+        s = seq[~bad]
+        if len(s) == 0:
+            return
+        u = np.unique(s)
+        fresh = u[((self.bits[u >> 3] >> (u & 7).astype(np.uint8)) & 1) == 0]
+        self.duplicates += int(len(s) - len(fresh))
+        self.distinct += len(fresh)
+        self.highest = max(self.highest, int(u[-1]))
+        byte = fresh >> 3
+        ub, first = np.unique(byte, return_index=True)
+        self.bits[ub] |= np.bitwise_or.reduceat((1 << (fresh & 7)).astype(np.uint8), first)
+
+    def accounting(self) -> dict[str, Any]:
+        sent = self.sent or 0
+        foreign = self.beyond + self.contradicting + self.duplicates
+        return {"sent": sent, "logged": self.logged, "lost": sent - self.distinct,
+                "sequence_gaps": self.highest + 1 - self.distinct,
+                "duplicates": self.duplicates, "beyond_sent": self.beyond, "contradicting_step": self.contradicting,
+                "logged_beyond_sent": max(0, self.logged - sent), "foreign": foreign}
+
+
+class LogScan:
+    """One streaming pass over a run's log: the metrics of control_metrics, the telemetry
+    accounting and the last controller state, in memory that does not grow with the run."""
+
+    def __init__(self, hold_s: float, rate_hz: float, sent: dict[str, int], expected_periods: int) -> None:
+        self.t_min = hold_s - 0.5 / rate_hz
+        self.seqs = {ch: _Sequences(sent.get(ch), ch in ONE_PER_PERIOD) for ch in set(sent) | set(FIXED_CHANNELS)
+                     | set(EVENT_CHANNELS)}
+        self.undecodable = dict.fromkeys(self.seqs, 0)
+        self.running = 0
+        self.n_joints: int | None = None
+        self.e_max: np.ndarray | None = None
+        self.tau_max: np.ndarray | None = None
+        self.e_sq = RowSum()
+        self.saturated: np.ndarray | None = None
+        self.expected = expected_periods
+        self.power = PairwiseSum(expected_periods)
+        self.tau_sq = PairwiseSum(expected_periods)
+        self.pairing = _Pairing()
+        self.high = [-(1 << 62), -(1 << 62)]
+        self.last_state: int | None = None
+        self.power_total: np.float64 | None = None
+        self.tau_sq_total: np.float64 | None = None
+
+    def feed(self, chunk: Chunk) -> None:
+        for ch, n in chunk.undecodable.items():
+            self.undecodable[ch] = self.undecodable.get(ch, 0) + n
+        for ch, arr in chunk.arrays.items():
+            self.seqs[ch].feed(arr["seq"], arr["step"])
+        for ch, evs in chunk.events.items():
+            self.seqs[ch].feed(np.array([m.seq for m in evs], dtype=np.int64), None)
+        ctl, sim = chunk.arrays["ARM_CTL"], chunk.arrays["ARM_SIM"]
+        if len(ctl):
+            self.last_state = int(ctl["state"][-1])
+        run = ctl[(ctl["state"] == STATE_RUNNING) & (ctl["t"] >= self.t_min)]
+        if len(sim):
+            self.pairing.add(1, sim["step"], sim["w_true"].astype(np.float64))
+            self.high[1] = max(self.high[1], int(sim["step"].max()))
+        if len(run):
+            e = run["e"].astype(np.float64)
+            tau = run["tau"].astype(np.float64)
+            qd = run["qd"].astype(np.float64)
+            self.running += len(run)
+            self.n_joints = e.shape[1]
+            em, tm = np.abs(e).max(axis=0), np.abs(tau).max(axis=0)
+            self.e_max = em if self.e_max is None else np.maximum(self.e_max, em)
+            self.tau_max = tm if self.tau_max is None else np.maximum(self.tau_max, tm)
+            self.e_sq.feed(e ** 2)
+            self.power.feed(np.abs(tau * qd).sum(axis=1))
+            self.tau_sq.feed((tau ** 2).sum(axis=1))
+            bits = (run["saturated_mask"][:, None] >> np.arange(e.shape[1])) & 1
+            sat = bits.sum(axis=0, dtype=np.int64)
+            self.saturated = sat if self.saturated is None else self.saturated + sat
+            self.pairing.add(0, run["bus_period"], run["w_hat"].astype(np.float64))
+            self.high[0] = max(self.high[0], int(run["bus_period"].max()))
+        self.pairing.feed_chunk_done(self.high)
+
+    def finish(self) -> None:
+        self.pairing.settle()
+
+
+def _power_sums(chunks: Iterable[Chunk], t_min: float, n: int) -> tuple[np.float64 | None, np.float64 | None]:
+    """The two per-period means' sums again, now that the count of running periods is known."""
+    power, tau_sq = PairwiseSum(n), PairwiseSum(n)
+    for chunk in chunks:
+        ctl = chunk.arrays["ARM_CTL"]
+        run = ctl[(ctl["state"] == STATE_RUNNING) & (ctl["t"] >= t_min)]
+        tau, qd = run["tau"].astype(np.float64), run["qd"].astype(np.float64)
+        power.feed(np.abs(tau * qd).sum(axis=1))
+        tau_sq.feed((tau ** 2).sum(axis=1))
+    return power.result(), tau_sq.result()
+
+
+def scan_log(path: Path, hold_s: float, rate_hz: float, sent: dict[str, int], expected_periods: int,
+             chunk_bytes: int = CHUNK_BYTES) -> LogScan:
+    """Stream the log once (twice when the running periods are not the expected count: the two
+    pairwise-summed means need the count before they start)."""
+    scan = LogScan(hold_s, rate_hz, sent, max(int(expected_periods), 0))
+    if path.exists():
+        for chunk in iter_chunks(path, chunk_bytes):
+            scan.feed(chunk)
+    scan.finish()
+    if scan.running and scan.running != scan.expected:
+        scan.power_total, scan.tau_sq_total = _power_sums(iter_chunks(path, chunk_bytes), scan.t_min, scan.running)
+    else:
+        scan.power_total, scan.tau_sq_total = scan.power.result(), scan.tau_sq.result()
+    return scan
+
+
+def _rms(sum_sq: np.ndarray | None, n: int) -> list[float]:
+    return np.sqrt(sum_sq / n).tolist() if n else []
+
+
+def control_metrics(scan: LogScan) -> dict[str, Any]:
     """Over the trajectory: running periods after the start-pose hold (t is the period's time as
     the controller logged it, float32: compared within half a period)."""
-    running = [m for m in ctl.messages if m.state == STATE_RUNNING and m.t >= hold_s - 0.5 / rate_hz]
-    if not running:
+    n = scan.running
+    if not n:
         return {"periods_running": 0}
-    e = np.array([m.e for m in running], dtype=float)
-    tau = np.array([m.tau for m in running], dtype=float)
-    qd = np.array([m.qd for m in running], dtype=float)
-    w_hat = {m.bus_period: np.array(m.w_hat, dtype=float) for m in running}
-    w_true = {m.step: np.array(m.w_true, dtype=float) for m in sim.messages}
-    paired = [(w_true[p], w_hat[p]) for p in sorted(w_hat) if p in w_true]
+    mean_sq = scan.e_sq.total / n
     out: dict[str, Any] = {
-        "periods_running": len(running),
-        "tracking_max_abs_rad": np.abs(e).max(axis=0).tolist(),
-        "tracking_rms_rad": _rms(e),
-        "tracking_max_abs_deg": np.degrees(np.abs(e).max(axis=0)).tolist(),
-        "tracking_rms_deg": np.degrees(np.sqrt((e**2).mean(axis=0))).tolist(),
-        "max_abs_torque_nm": np.abs(tau).max(axis=0).tolist(),
+        "periods_running": n,
+        "tracking_max_abs_rad": scan.e_max.tolist(),
+        "tracking_rms_rad": np.sqrt(mean_sq).tolist(),
+        "tracking_max_abs_deg": np.degrees(scan.e_max).tolist(),
+        "tracking_rms_deg": np.degrees(np.sqrt(mean_sq)).tolist(),
+        "max_abs_torque_nm": scan.tau_max.tolist(),
         # Mechanical power the joints deliver, |tau . qd| summed over joints, averaged in time.
-        "torque_power_w": float(np.abs(tau * qd).sum(axis=1).mean()),
-        "mean_sum_tau_squared_nm2": float((tau**2).sum(axis=1).mean()),
-        "saturated_fraction": [float(np.mean([(m.saturated_mask >> j) & 1 for m in running]))
-                               for j in range(e.shape[1])],
+        "torque_power_w": float(scan.power_total / n),
+        "mean_sum_tau_squared_nm2": float(scan.tau_sq_total / n),
+        "saturated_fraction": [float(np.float64(c) / n) for c in scan.saturated.tolist()],
     }
-    if paired:
-        wt = np.array([p[0] for p in paired])
-        wh = np.array([p[1] for p in paired])
-        out["w_rms"] = _rms(wt)
-        out["estimation_error_rms"] = _rms(wt - wh)
-        out["estimation_periods"] = len(paired)
+    p = scan.pairing
+    if p.count:
+        out["w_rms"] = _rms(p.sq_true.total, p.count)
+        out["estimation_error_rms"] = _rms(p.sq_err.total, p.count)
+        out["estimation_periods"] = p.count
     return out
 
 
-def telemetry_accounting(log: dict[str, ChannelLog], sent: dict[str, int]) -> dict[str, Any]:
+def telemetry_accounting(scan: LogScan, sent: dict[str, int]) -> dict[str, Any]:
+    """Per channel: sent (the sender's count), logged, lost (sent sequence numbers never logged),
+    sequence gaps, and what no sender of this run logged: duplicate sequence numbers, numbers at
+    or beyond what the sender sent, steps that contradict their number (channels with one message
+    per period number them by period), messages logged beyond those sent, and their sum `foreign`."""
     out: dict[str, Any] = {}
-    for ch, n_sent in sent.items():
-        logged = len(log[ch].messages) if ch in log else 0
-        out[ch] = {"sent": n_sent, "logged": logged, "lost": n_sent - logged,
-                   "sequence_gaps": log[ch].gaps if ch in log else 0}
+    for ch in sent:
+        acct = scan.seqs[ch].accounting()
+        acct["undecodable"] = scan.undecodable.get(ch, 0)
+        out[ch] = acct
     return out
 
 
-def final_state(log: dict[str, ChannelLog], controller: dict[str, Any]) -> str:
+def foreign_telemetry(tele: dict[str, Any]) -> list[str]:
+    """What in the log cannot come from the run's own senders, per channel, for the verdict."""
+    out = []
+    for ch, a in tele.items():
+        what = [f"{a[k]} {label}" for k, label in (("logged_beyond_sent", "logged beyond the sent"),
+                                                   ("duplicates", "duplicate sequence numbers"),
+                                                   ("beyond_sent", "with sequence numbers at or beyond the sent"),
+                                                   ("contradicting_step", "with a step that contradicts the sequence number"))
+                if a.get(k)]
+        if what:
+            out.append(f"{ch}: {', '.join(what)} (of {a['logged']} logged, {a['sent']} sent)")
+    return out
+
+
+def final_state(scan: LogScan, controller: dict[str, Any]) -> str:
     if controller.get("final_state"):
         return str(controller["final_state"])
-    msgs = log["ARM_CTL"].messages
-    return STATE_NAMES.get(msgs[-1].state, "?") if msgs else "unknown"
+    return STATE_NAMES.get(scan.last_state, "?") if scan.last_state is not None else "unknown"
 
 
 def analyse(out_dir: Path, controller: dict[str, Any], sim: dict[str, Any], config: dict[str, Any],
@@ -78,18 +346,18 @@ def analyse(out_dir: Path, controller: dict[str, Any], sim: dict[str, Any], conf
     """run.json. config: the run's settings, with ref_hold_s and rate_hz the controller was given
     (a controller that died wrote no summary: these still say what the run was asked for)."""
     bounds = bounds or Bounds()
-    log = read_log(out_dir / "telemetry.lcmlog")
     sent = dict(controller.get("telemetry", {}).get("sent", {}))
     sent.update(sim.get("telemetry_sent", {}))
-    tele = telemetry_accounting(log, sent) if sent else {}
     problems = [s for s in (controller.get("reason"), sim.get("reason")) if s]
     hold = float(controller.get("ref_hold_s", config.get("ref_hold_s", 0.0)))
     rate = float(controller.get("rate_hz", config.get("rate_hz", 1000.0)))
     requested = controller.get("steps_requested", round((config["duration_s"] + hold) * rate))
+    scan = scan_log(out_dir / "telemetry.lcmlog", hold, rate, sent, requested - round(hold * rate))
+    tele = telemetry_accounting(scan, sent) if sent else {}
     results = {
         **config,
         "problems": problems,
-        "final_state": final_state(log, controller),
+        "final_state": final_state(scan, controller),
         "final_fault": controller.get("final_fault", "unknown"),
         # None where the process that knows died without saying: unknown, not zero
         "steps": controller.get("steps_done"),
@@ -102,7 +370,7 @@ def analyse(out_dir: Path, controller: dict[str, Any], sim: dict[str, Any], conf
         "drive_faults": sim.get("drive_faults"),
         "ref_hold_s": hold,
         "design_hash": controller.get("design_hash", ""),
-        **control_metrics(log["ARM_CTL"], log["ARM_SIM"], hold, rate),
+        **control_metrics(scan),
     }
     transport = {
         "controller_frames": controller.get("frames", {}),
@@ -115,6 +383,7 @@ def analyse(out_dir: Path, controller: dict[str, Any], sim: dict[str, Any], conf
         "telemetry": tele,
         "telemetry_lost_total": int(sum(v["lost"] for v in tele.values())) if tele else None,
         "telemetry_gaps_total": int(sum(v["sequence_gaps"] for v in tele.values())) if tele else None,
+        "telemetry_foreign": foreign_telemetry(tele),
     }
     verdict, reasons = judge(results, transport, controller, sim, environment.get("exit_codes", {}), bounds)
     results["result"] = verdict
@@ -141,7 +410,9 @@ def table(run: dict[str, Any]) -> str:
     if t["telemetry"]:
         sent = sum(v["sent"] for v in t["telemetry"].values())
         logged = sum(v["logged"] for v in t["telemetry"].values())
-        lines.append(f"telemetry: {sent} messages sent, {logged} logged, {t['telemetry_lost_total']} lost")
+        foreign = sum(v.get("foreign", 0) for v in t["telemetry"].values())
+        lines.append(f"telemetry: {sent} messages sent, {logged} logged, {t['telemetry_lost_total']} lost"
+                     + (f", {foreign} foreign" if foreign else ""))
     else:
         lines.append("telemetry: unknown (no process said what it sent)")
     for b in t.get("bus_timing", []):

@@ -173,6 +173,8 @@ def measure(out: Path, duration_s: float, rate_hz: float, rt_priority: int, cpu:
             method: str = "pd", preset: str = "release") -> dict[str, Any]:
     """The measurement itself (the command and the tests call this). Returns timing.json's data."""
     from gen.atomic_output import write_json_atomic
+    import numpy as np
+
     from tools.hil import HilError, HilOptions, realtime_cpu, run_hil
     from tools.telemetry_log import read_log
 
@@ -231,12 +233,12 @@ def measure(out: Path, duration_s: float, rate_hz: float, rt_priority: int, cpu:
     t.join()
 
     run = result.get("run", {})
-    timing: list[Any] = []
+    timing: Any = []
     if log.exists():
-        timing = read_log(log)["ARM_TIMING"].messages
-    wake = [m.wake_latency_ns / 1e3 for m in timing]
-    compute = [m.compute_ns / 1e3 for m in timing]
-    cycle = [m.cycle_ns / 1e3 for m in timing]
+        timing = read_log(log, channels=("ARM_TIMING",))["ARM_TIMING"].messages
+    wake = (np.asarray(timing.wake_latency_ns) / 1e3).tolist() if len(timing) else []
+    compute = (np.asarray(timing.compute_ns) / 1e3).tolist() if len(timing) else []
+    cycle = (np.asarray(timing.cycle_ns) / 1e3).tolist() if len(timing) else []
     summary = json.loads((hil_dir / "controller_summary.json").read_text()) \
         if (hil_dir / "controller_summary.json").exists() else {}
     sim = json.loads((hil_dir / "sim_summary.json").read_text()) if (hil_dir / "sim_summary.json").exists() else {}
@@ -246,7 +248,7 @@ def measure(out: Path, duration_s: float, rate_hz: float, rt_priority: int, cpu:
     if ctl_log.exists():
         rt_line = next((ln.split("rt: ", 1)[1] for ln in ctl_log.read_text().splitlines() if " rt: " in ln), "")
     periods = len(timing)
-    overruns = int(timing[-1].overruns) if timing else int(summary.get("overruns", 0))
+    overruns = int(timing[-1].overruns) if len(timing) else int(summary.get("overruns", 0))
     ctl_stats = _stats(wake)
     cyc_stats = cyc.get("stats", {})
     relative = {}

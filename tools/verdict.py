@@ -9,7 +9,9 @@ is listed in verdict_reasons):
   beyond DIVERGED_DEG;
 - failed: a process failed or died (boot failure, runtime fault, lost controller or simulator), or
   the drives simulated another number of periods than the controller ran (another master);
-- incomplete: fewer periods than asked for, telemetry lost, frames the kernel dropped on a full
+- incomplete: fewer periods than asked for, telemetry lost, foreign telemetry (messages logged
+  beyond those sent, duplicate sequence numbers, numbers at or beyond what the sender sent, steps
+  that contradict their number: tools/run_analysis.py telemetry_accounting), frames the kernel dropped on a full
   receive queue, the logger failed, or the metrics do not cover every period of the trajectory;
 - tracking-bound-exceeded: a joint's L-infinity tracking error above bounds.max_error_deg;
 - torque-limited: a joint at its torque limit (or its torque-rate limit, the safety layer's slew
@@ -74,6 +76,9 @@ def judge(results: dict[str, Any], transport: dict[str, Any], controller: dict[s
     lost = transport.get("telemetry_lost_total")
     if lost is None or lost > 0:
         add("incomplete", f"telemetry lost: {lost if lost is not None else 'unknown'} messages")
+    foreign = transport.get("telemetry_foreign")
+    if foreign:
+        add("incomplete", f"foreign telemetry: {'; '.join(foreign)}")
     # Software in the loop writes its log in-process (no logger): what it lacks shows as lost above.
     if "sil" not in exit_codes and (exit_codes.get("logger") not in (0, None) or "logger" not in exit_codes):
         add("incomplete", f"the telemetry logger failed (exit {exit_codes.get('logger')}): the log may miss data")
