@@ -1,5 +1,6 @@
-"""`armctl bench study`: how many HIL runs a study gets through per minute at --jobs 1 and 2,
-and how many simulated seconds per wall second that is (runs/bench/study.json).
+"""`armctl bench study`: how many runs a study gets through per minute at --jobs 1 and 2, in
+software in the loop and in lockstep HIL over UDP, and how many simulated seconds per wall second
+that is (runs/bench/study.json).
 
 The runs are a study's: pd and tde (gains, so no design is built inside the timing; both run the
 whole trajectory), the realistic scenario (drives and bus timing emulated), distinct seeds, each
@@ -21,35 +22,41 @@ from tools.study_config import load
 from tools.tuning import trial_spec
 
 
-def bench_study(out: Path, quick: bool = False) -> dict[str, Any]:
+def _throughput(bus: str, jobs: int, n_runs: int, duration: float, tmp: Path) -> dict[str, float]:
     cfg = load(DEFAULT_CONFIG)
-    n_runs, duration = (4, 0.5) if quick else (12, 5.0)
     scenario = cfg.scenarios["realistic"]
-    result: dict[str, Any] = {"what": (f"{n_runs} HIL runs of {duration:g} s (+ {cfg.hold_s:g} s hold), pd and tde "
-                                       "alternating (wn 40 rad/s), scenario realistic, lockstep, through "
-                                       "tools/runner.py"),
-                              "quick": quick, "runs": n_runs, "trajectory_s": duration, "jobs": {}}
+    setup, _, _ = setup_for(cfg, DEFAULT_ARM, tmp, 1, None, bus)
+    where = tmp / f"{bus}-j{jobs}"
+    specs = [trial_spec(setup, "pd" if i % 2 == 0 else "tde", scenario,
+                        {"wn": 40.0} if i % 2 == 0 else {"wn": 40.0, "cutoff_hz": 50.0}, 100 + i,
+                        where / str(i), duration, setup.trajectory_args, keep_log=False)
+             for i in range(n_runs)]
+    run_all(specs[:1], jobs)  # the builds, outside the timing
+    (where / "0").rename(where / "warm")
+    t0 = time.monotonic()
+    runs = run_all(specs, jobs)
+    wall = time.monotonic() - t0
+    bad = [r["results"].get("result") for r in runs
+           if r["results"].get("periods_running") != r["results"].get("trajectory_periods")]
+    if bad:  # a run stopped early would make the throughput look better than it is
+        raise RuntimeError(f"bench study: {len(bad)} run(s) did not run to the end: {bad}")
+    simulated = n_runs * (duration + cfg.hold_s)
+    return {"wall_s": wall, "runs_per_minute": 60.0 * n_runs / wall, "simulated_s_per_wall_s": simulated / wall}
+
+
+def bench_study(out: Path, quick: bool = False) -> dict[str, Any]:
+    duration = 0.5 if quick else 5.0
+    counts = {"sil": 4 if quick else 48, "udp": 4 if quick else 12}  # SIL runs are ~10x shorter: more of them
+    result: dict[str, Any] = {"what": (f"runs of {duration:g} s (+ 0.5 s hold), pd and tde alternating (wn 40 rad/s), "
+                                       f"scenario realistic, through tools/runner.py as a study runs them: "
+                                       f"{counts['sil']} in software in the loop, {counts['udp']} in lockstep HIL "
+                                       "over UDP"),
+                              "quick": quick, "trajectory_s": duration, "buses": {}}
     with tempfile.TemporaryDirectory() as tmp:
-        setup, _, _ = setup_for(cfg, DEFAULT_ARM, Path(tmp), 1, None)
-        for jobs in (1, 2):
-            specs = [trial_spec(setup, "pd" if i % 2 == 0 else "tde", scenario,
-                                {"wn": 40.0} if i % 2 == 0 else {"wn": 40.0, "cutoff_hz": 50.0}, 100 + i,
-                                Path(tmp) / f"j{jobs}" / str(i), duration, setup.trajectory_args, keep_log=False)
-                     for i in range(n_runs)]
-            run_all(specs[:1], jobs)  # the builds, outside the timing
-            (Path(tmp) / f"j{jobs}" / "0").rename(Path(tmp) / f"j{jobs}" / "warm")
-            t0 = time.monotonic()
-            runs = run_all(specs, jobs)
-            wall = time.monotonic() - t0
-            bad = [r["results"].get("result") for r in runs
-                   if r["results"].get("periods_running") != r["results"].get("trajectory_periods")]
-            if bad:  # a run stopped early would make the throughput look better than it is
-                raise RuntimeError(f"bench study: {len(bad)} run(s) did not run to the end: {bad}")
-            simulated = n_runs * (duration + cfg.hold_s)
-            result["jobs"][str(jobs)] = {"wall_s": wall, "runs_per_minute": 60.0 * n_runs / wall,
-                                         "simulated_s_per_wall_s": simulated / wall}
-    one, two = result["jobs"]["1"], result["jobs"]["2"]
-    result["speedup_2_over_1"] = two["runs_per_minute"] / one["runs_per_minute"]
+        for bus, n in counts.items():
+            jobs = {str(j): _throughput(bus, j, n, duration, Path(tmp)) for j in (1, 2)}
+            result["buses"][bus] = {"runs": n, "jobs": jobs,
+                                    "speedup_2_over_1": jobs["2"]["runs_per_minute"] / jobs["1"]["runs_per_minute"]}
     from tools.bench import _write_json
 
     _write_json(out, result)
@@ -58,8 +65,9 @@ def bench_study(out: Path, quick: bool = False) -> dict[str, Any]:
 
 def table(r: dict[str, Any]) -> str:
     lines = [f"{r['what']}"]
-    for jobs, x in r["jobs"].items():
-        lines.append(f"--jobs {jobs}: {x['runs_per_minute']:.1f} runs/min, {x['simulated_s_per_wall_s']:.1f} simulated "
-                     f"s per wall s ({x['wall_s']:.1f} s)")
-    lines.append(f"--jobs 2 over --jobs 1: {r['speedup_2_over_1']:.2f}x")
+    for bus, b in r["buses"].items():
+        for jobs, x in b["jobs"].items():
+            lines.append(f"{bus} --jobs {jobs}: {x['runs_per_minute']:.1f} runs/min, {x['simulated_s_per_wall_s']:.1f} "
+                         f"simulated s per wall s ({x['wall_s']:.1f} s)")
+        lines.append(f"{bus}: --jobs 2 over --jobs 1: {b['speedup_2_over_1']:.2f}x")
     return "\n".join(lines)

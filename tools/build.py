@@ -11,6 +11,7 @@ import hashlib
 import json
 import os
 import platform
+import re
 import shutil
 import subprocess
 import sys
@@ -180,9 +181,10 @@ def build(preset: str = "release", quiet: bool = True, bdir: Path | None = None,
         raise ToolchainMissing(f"armctl: build ({preset}): {missing}")
     bdir = bdir or build_dir(preset)
     with build_lock(bdir):
+        fresh = not (bdir / "build.ninja").exists()
         ensure_configured(preset, bdir, quiet, cache)
-        r = subprocess.run(["cmake", "--build", str(bdir), *(["--target", *targets] if targets else [])], cwd=REPO,
-                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        r = _ninja(["cmake", "--build", str(bdir), *(["--target", *targets] if targets else [])],
+                   f"build {bdir.relative_to(REPO) if bdir.is_relative_to(REPO) else bdir}" if fresh else None)
     if r.returncode != 0:
         print(r.stdout, file=sys.stderr)
         raise BuildError(f"armctl: build ({preset}) failed (the compiler's output above)")
@@ -194,6 +196,30 @@ def build(preset: str = "release", quiet: bool = True, bdir: Path | None = None,
             print(ln)
         if lines and lines[-1] not in report:
             print(lines[-1])
+
+
+NINJA_STEP = re.compile(r"^\[(\d+)/(\d+)\] ")
+
+
+def _ninja(argv: list[str], progress: str | None) -> subprocess.CompletedProcess[str]:
+    """The build's output, kept for a failure; progress: the label of a bar of ninja's [k/N] steps
+    (a new build folder: a first build of an arm takes a minute or more)."""
+    if progress is None:
+        return subprocess.run(argv, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    from tqdm import tqdm
+
+    lines: list[str] = []
+    with subprocess.Popen(argv, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) as p, \
+            tqdm(desc=progress, unit="step", leave=False) as bar:
+        assert p.stdout is not None
+        for line in p.stdout:
+            lines.append(line)
+            m = NINJA_STEP.match(line)
+            if m:
+                bar.total = int(m.group(2))
+                bar.n = int(m.group(1))
+                bar.refresh()
+    return subprocess.CompletedProcess(argv, p.returncode, "".join(lines))
 
 
 def qemu_aarch64() -> Path:

@@ -217,7 +217,9 @@ def test_bench(tmp_path: Path) -> None:
     r = armctl("bench", "study", "--quick", "--out", str(tmp_path / "study.json"))
     assert r.returncode == 0, r.stdout + r.stderr
     study = json.loads((tmp_path / "study.json").read_text())
-    assert study["quick"] and study["jobs"]["1"]["runs_per_minute"] > 0 and study["jobs"]["2"]["simulated_s_per_wall_s"] > 0
+    for bus in ("sil", "udp"):
+        b = study["buses"][bus]
+        assert study["quick"] and b["jobs"]["1"]["runs_per_minute"] > 0 and b["jobs"]["2"]["simulated_s_per_wall_s"] > 0
     r = armctl("bench", "sim", "--quick", "--out", str(tmp_path / "sim.json"))
     assert r.returncode == 0, r.stdout + r.stderr
     sim = json.loads((tmp_path / "sim.json").read_text())
