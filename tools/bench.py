@@ -25,9 +25,10 @@ from tqdm import tqdm
 
 from gen.atomic_output import write_json_atomic
 from tools.build import build
+from tools.methods import firmware_methods, method_names
 from tools.paths import REPO, build_dir
 
-METHODS = ("pd", "pm", "pm-paper", "gh2", "tde", "usde-smc")
+METHODS = method_names()
 STEPS = 2000
 WARMUP = 1000  # the measured count is (N2 - N1) / (STEPS2 - STEPS1): start-up cost cancels
 
@@ -69,7 +70,7 @@ def bench_step(out: Path, quick: bool = False) -> dict[str, Any]:
     exe = build_dir("release") / "tests" / "bench" / "bench_step"
     methods = ("pm",) if quick else METHODS
     steps = 200 if quick else STEPS
-    jobs = [(m, n) for m in methods for n in ("float", "fixed") if n == "float" or m in ("pm", "pm-paper", "gh2")]
+    jobs = [(m, n) for m in methods for n in ("float", "fixed") if n == "float" or firmware_methods()[m]]
     jobs += [(m, "eigen") for m in methods if m in ("pd", "pm", "pm-paper", "gh2")]
     rows: dict[str, dict[str, float]] = {}
     for method, numeric in tqdm(jobs, desc="callgrind", unit="run"):

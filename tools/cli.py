@@ -12,6 +12,7 @@ from pathlib import Path
 
 from gen.atomic_output import OutputError
 from tools.arm import add_arm_arguments
+from tools.methods import method_names
 from tools.outdir import OutDirError, check_out_dir
 from tools.build import PRESETS, TARGETS, BuildError, build
 from tools.paths import REPO, build_dir, env_with_repo
@@ -258,7 +259,8 @@ def main(argv: list[str] | None = None) -> int:
 
     h = sub.add_parser("hil", help="one hardware-in-the-loop run")
     h.add_argument("--duration", type=float, default=5.0, help="simulated seconds")
-    h.add_argument("--method", default="pm", choices=("pm", "pm-paper", "gh2", "pd", "tde", "usde-smc"))
+    h.add_argument("--method", default="pm", choices=method_names(),
+                   help="the firmware's methods (the core's method table, firmware/core/src/methods.c) [pm]")
     h.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
     h.add_argument("--bus", choices=("auto", "udp", "vcan", "vm", "sil"), default="auto",
                    help="auto: vcan if this kernel has SocketCAN and vcan0, vcan1 (one per bus of "
