@@ -70,7 +70,7 @@ def test_spoofed_joint_states_are_a_named_fault_not_ok(tmp_path: Path) -> None:
 
 def test_spoofed_torque_commands_fault_the_drive_instead_of_being_clamped(tmp_path: Path) -> None:
     """DRIVE_2_CMD of 2147 Nm (enable operation) with the right counter: the drive refuses it
-    with EMCY 0x8300 and the controller stops the arm."""
+    with EMCY 0x8300, and the controller, which did not send it, stops the arm."""
     def command(counter: int) -> list[can.Message]:
         data = struct.pack("<HiB", 0x000F, 2**31 - 1, counter) + b"\x00"
         return [can.Message(arbitration_id=0x202, data=data, is_extended_id=False)]
@@ -81,7 +81,9 @@ def test_spoofed_torque_commands_fault_the_drive_instead_of_being_clamped(tmp_pa
     sim = json.loads((tmp_path / "sim_summary.json").read_text())
     assert 2 in r["drive_faults"] or sim["drive_fault_mask"] & 0b10, sim
     ctl = json.loads((tmp_path / "controller_summary.json").read_text())
-    assert "drive 2" in ctl["reason"], ctl["reason"]
+    # the controller hears the foreign command too (only a master sends commands): it may name that
+    # before the drive's EMCY arrives; either is the named fault
+    assert "drive 2" in ctl["reason"] or "another master on the bus" in ctl["reason"], ctl["reason"]
 
 
 def test_garbage_datagrams_are_counted_and_change_nothing(tmp_path: Path) -> None:

@@ -189,3 +189,53 @@ uint16_t arm_cia402_enable_controlword(uint16_t sw)
     }
     return ARM_CW_SHUTDOWN; /* fault or unknown: keep the power stage off */
 }
+
+static int first_joint(uint32_t mask)
+{
+    for (int j = 0; j < ARM_N_JOINTS; ++j) {
+        if ((mask & (1u << j)) != 0u) return j;
+    }
+    return -1;
+}
+
+arm_bus_fault_t arm_bus_supervise(arm_drive_bus_t *bus, int require_all, int running)
+{
+    const uint32_t all = (uint32_t)((1ull << ARM_N_JOINTS) - 1u);
+    const uint32_t fresh = bus->fresh_mask & all;
+    arm_bus_fault_t f = {ARM_BUS_WELL, -1, 0u};
+    const uint32_t foreign = bus->rx.foreign_master - bus->foreign_master_seen;
+    bus->foreign_master_seen = bus->rx.foreign_master;
+    const uint32_t emcy = bus->emcy_mask & all;
+    bus->emcy_mask = 0u;
+    uint32_t left = 0u;
+    for (int j = 0; j < ARM_N_JOINTS && running; ++j) {
+        if ((fresh & (1u << j)) != 0u && !arm_sw_operation_enabled(bus->statusword[j])) left |= 1u << j;
+    }
+    if (require_all && fresh != all) {
+        f = (arm_bus_fault_t){ARM_BUS_STATES_MISSING, first_joint(all & ~fresh), 0u};
+    } else if (emcy != 0u) {
+        const int j = first_joint(emcy);
+        f = (arm_bus_fault_t){ARM_BUS_DRIVE_EMCY, j, bus->last_emcy_code[j]};
+    } else if ((bus->duplicate_mask & all) != 0u) {
+        f = (arm_bus_fault_t){ARM_BUS_DUPLICATE_STATE, first_joint(bus->duplicate_mask & all), 0u};
+    } else if (foreign != 0u) {
+        f = (arm_bus_fault_t){ARM_BUS_FOREIGN_MASTER, -1, foreign};
+    } else if (left != 0u) {
+        const int j = first_joint(left);
+        f = (arm_bus_fault_t){ARM_BUS_LEFT_ENABLED, j, bus->statusword[j]};
+    }
+    return f;
+}
+
+const char *arm_bus_condition_str(arm_bus_condition_t c)
+{
+    switch (c) {
+    case ARM_BUS_WELL: return "well";
+    case ARM_BUS_STATES_MISSING: return "joint states missing";
+    case ARM_BUS_DRIVE_EMCY: return "a drive reports a fault";
+    case ARM_BUS_DUPLICATE_STATE: return "a drive's state came twice for one SYNC";
+    case ARM_BUS_FOREIGN_MASTER: return "another master on the bus";
+    case ARM_BUS_LEFT_ENABLED: return "a drive left operation enabled";
+    }
+    return "?";
+}

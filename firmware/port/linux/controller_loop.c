@@ -205,14 +205,205 @@ static void send_commands(link_t *l, const arm_ctl_output_t *out)
     }
 }
 
+/* Everything the periodic loop carries from one period to the next. */
+typedef struct {
+    const options_t *opt;
+    telemetry_t *telem;
+    run_report_t *report;
+    arm_ctl_t ctl;
+    arm_reference_t ref;
+    arm_ctl_input_t in;
+    arm_ctl_output_t out;
+    arm_state_t last_state;
+    int64_t next_deadline; /* realtime: the next period's start */
+    int64_t period_ns;
+    uint32_t k_run;        /* tracking periods done */
+} loop_t;
+
+/* Enable: the CiA 402 sequence with zero torque, one step a period. 1 when every drive is
+ * operation enabled (tracking starts), 0 while enabling, -1 on a boot failure (reason set). */
+static int enable(link_t *l, loop_t *p, uint32_t k, uint32_t fresh)
+{
+    uint32_t enabled = 0u;
+    for (int j = 0; j < ARM_N_JOINTS; ++j) {
+        const uint16_t sw = l->drives.statusword[j];
+        if ((fresh & (1u << j)) != 0u && arm_sw_operation_enabled(sw)) {
+            enabled |= 1u << j;
+        }
+        arm_can_frame_t f;
+        arm_bus_make_cmd(&l->drives, j, arm_cia402_enable_controlword(sw), 0.0f, &f);
+        send_frame(l, (unsigned)l->bus_of[j], &f);
+    }
+    if (enabled == ALL_JOINTS) {
+        if (p->opt->ref_given) {
+            arm_reference_set(&p->ref, l->drives.q, p->opt->ref_amp, p->opt->ref_freq_hz);
+        } else {
+            arm_reference_default(&p->ref, l->drives.q);
+        }
+        arm_reference_set_hold(&p->ref, (float)p->opt->ref_hold_s);
+        telemetry_event(p->telem, 0, "info", "all drives operation enabled; tracking starts");
+        return 1;
+    }
+    if (l->drives.rx.foreign_master != 0u) {
+        snprintf(p->report->reason, sizeof(p->report->reason),
+                 "boot: another master on the bus (%u SYNC or command frame(s) this controller did not send)",
+                 l->drives.rx.foreign_master);
+    } else if (k >= ENABLE_TIMEOUT_PERIODS) {
+        char missing[64];
+        list_joints(ALL_JOINTS & ~enabled, missing, sizeof(missing));
+        const int j0 = __builtin_ctz(ALL_JOINTS & ~enabled);
+        snprintf(p->report->reason, sizeof(p->report->reason),
+                 "boot: drive(s) %s not operation enabled after %u periods (drive %d statusword 0x%04x%s)",
+                 missing, ENABLE_TIMEOUT_PERIODS, j0 + 1, l->drives.statusword[j0],
+                 (fresh & (1u << j0)) ? "" : ", no state received");
+    } else {
+        return 0;
+    }
+    p->report->result = RUN_BOOT_FAILED;
+    telemetry_event(p->telem, 0, "fault", p->report->reason);
+    return -1;
+}
+
+/* Supervise: what the drives' frames of this period say (the core's bus master checks them); a
+ * problem is a named fault and a safe stop. */
+static void supervise(link_t *l, loop_t *p)
+{
+    if (p->ctl.state == ARM_STATE_SAFE_STOP) return;
+    const uint32_t fresh = l->drives.fresh_mask & ALL_JOINTS;
+    const arm_bus_fault_t f = arm_bus_supervise(&l->drives, p->opt->mode == MODE_LOCKSTEP,
+                                                p->ctl.state == ARM_STATE_RUNNING);
+    char *reason = p->report->reason;
+    const size_t cap = sizeof(p->report->reason);
+    char missing[64];
+    switch (f.condition) {
+    case ARM_BUS_WELL: return;
+    case ARM_BUS_STATES_MISSING:
+        list_joints(ALL_JOINTS & ~fresh, missing, sizeof(missing));
+        snprintf(reason, cap, "period %u: no joint state from drive(s) %s within %.3f s (simulator stopped?)",
+                 p->k_run, missing, p->opt->lockstep_timeout_s);
+        break;
+    case ARM_BUS_DRIVE_EMCY:
+        snprintf(reason, cap, "period %u: drive %d reports a fault (EMCY 0x%04x)", p->k_run, f.joint + 1,
+                 (unsigned)f.value);
+        break;
+    case ARM_BUS_DUPLICATE_STATE:
+        snprintf(reason, cap, "period %u: drive %d's state came twice for one SYNC: another node uses its id",
+                 p->k_run, f.joint + 1);
+        break;
+    case ARM_BUS_FOREIGN_MASTER:
+        snprintf(reason, cap, "period %u: another master on the bus: %u SYNC or command frame(s) this controller "
+                 "did not send", p->k_run, (unsigned)f.value);
+        break;
+    case ARM_BUS_LEFT_ENABLED:
+        snprintf(reason, cap, "period %u: drive %d left operation enabled (statusword 0x%04x, error %u)", p->k_run,
+                 f.joint + 1, (unsigned)f.value, l->drives.drive_error[f.joint]);
+        break;
+    }
+    arm_ctl_external_fault(&p->ctl);
+}
+
+/* Control: the core's step on this period's joint states and reference, and the commands out.
+ * Returns the step's own compute time. */
+static int64_t control(link_t *l, loop_t *p)
+{
+    memcpy(p->in.q, l->drives.q, sizeof(p->in.q));
+    memcpy(p->in.qd, l->drives.qd, sizeof(p->in.qd));
+    p->in.fresh_mask = l->drives.fresh_mask & ALL_JOINTS;
+    memcpy(p->in.tau_measured, l->drives.tau_measured, sizeof(p->in.tau_measured));
+    arm_reference_eval(&p->ref, (float)p->k_run * p->opt->ctl.period_s, p->in.q_d, p->in.qd_d, p->in.qdd_d);
+    const int64_t c0 = now_ns();
+    arm_ctl_step(&p->ctl, &p->in, &p->out);
+    if (p->opt->rt.debug_slow_step_us > 0u) {
+        rt_debug_busy_wait_us(p->opt->rt.debug_slow_step_us); /* TEST HOOK: forces overruns */
+    }
+    const int64_t compute = now_ns() - c0;
+    send_commands(l, &p->out);
+    return compute;
+}
+
+/* Publish: the period's telemetry, its timing, state changes and a fault's reason. 0 to go on, -1
+ * when the controller stopped the arm. */
+static int publish(loop_t *p, uint32_t k, int64_t wake_latency, int64_t compute, int64_t cycle)
+{
+    run_report_t *report = p->report;
+    telem_controller_t snap = {.step = p->k_run, .bus_period = k, .t = (double)p->k_run * p->opt->ctl.period_s,
+                               .method = (int8_t)p->opt->ctl.method, .out = p->out};
+    memcpy(snap.q, p->in.q, sizeof(snap.q));
+    memcpy(snap.qd, p->in.qd, sizeof(snap.qd));
+    memcpy(snap.q_d, p->in.q_d, sizeof(snap.q_d));
+    telemetry_controller(p->telem, &snap);
+    if (p->opt->mode == MODE_REALTIME) {
+        p->next_deadline += p->period_ns;
+        if (now_ns() > p->next_deadline) {
+            report->overruns++;
+            /* Skip the missed deadlines instead of bursting to catch up. */
+            while (p->next_deadline < now_ns()) p->next_deadline += p->period_ns;
+        }
+    }
+    const telem_timing_t tm = {.step = p->k_run, .period_ns = (int32_t)p->period_ns,
+                               .wake_latency_ns = (int32_t)wake_latency, .compute_ns = (int32_t)compute,
+                               .cycle_ns = (int32_t)cycle, .overruns = (int64_t)report->overruns};
+    telemetry_timing(p->telem, &tm);
+    report->steps_done = ++p->k_run;
+    const arm_ctl_output_t *out = &p->out;
+    if (out->state != p->last_state) {
+        char text[160];
+        snprintf(text, sizeof(text), "state %s -> %s (fault: %s)", arm_state_str(p->last_state),
+                 arm_state_str(out->state), arm_fault_str(out->fault));
+        telemetry_event(p->telem, p->k_run, out->state == ARM_STATE_FAULT ? "fault" : "info", text);
+        p->last_state = out->state;
+    }
+    if (out->state != ARM_STATE_FAULT && out->state != ARM_STATE_SAFE_STOP) {
+        return 0;
+    }
+    if (report->reason[0] == '\0' && out->fault_joint >= 0) {
+        snprintf(report->reason, sizeof(report->reason), "period %u: %s: joint %d (%s %.6g)", p->k_run,
+                 arm_fault_str(out->fault), out->fault_joint + 1, fault_quantity(out->fault),
+                 (double)out->fault_value);
+    } else if (report->reason[0] == '\0') {
+        snprintf(report->reason, sizeof(report->reason), "period %u: %s", p->k_run, arm_fault_str(out->fault));
+    }
+    telemetry_event(p->telem, p->k_run, "fault", report->reason);
+    report->result = RUN_FAULT;
+    return -1;
+}
+
+/* A stop signal at a period boundary: zero torque with controlword shutdown, before the NMT stop. */
+static void stop_on_signal(link_t *l, loop_t *p)
+{
+    snprintf(p->report->reason, sizeof(p->report->reason),
+             "stopped by signal %d after %u periods: zero torque, drives shut down and stopped",
+             (int)controller_stop_signal, p->k_run);
+    p->report->result = RUN_INTERRUPTED;
+    telemetry_event(p->telem, p->k_run, "fault", p->report->reason);
+    p->out.state = ARM_STATE_SAFE_STOP;
+    memset(p->out.tau, 0, sizeof(p->out.tau));
+    send_commands(l, &p->out);
+}
+
+/* Realtime: sleep to the period's absolute deadline; the wake-up's lateness. */
+static int64_t wait_for_period(loop_t *p)
+{
+    if (p->opt->mode != MODE_REALTIME) return 0;
+    const struct timespec dl = {.tv_sec = p->next_deadline / 1000000000LL, .tv_nsec = p->next_deadline % 1000000000LL};
+    while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &dl, NULL) == EINTR) {
+    }
+    return now_ns() - p->next_deadline;
+}
+
 void controller_run(const options_t *opt, const arm_robot_model_t *model, telemetry_t *telem,
                     run_report_t *report)
 {
     static link_t l; /* static: the loop's working set is fixed at start-up */
+    static loop_t p;
     memset(&l, 0, sizeof(l));
+    memset(&p, 0, sizeof(p));
     memset(report, 0, sizeof(*report));
     l.report = report;
     l.spin_ns = (int64_t)(opt->spin_us * 1e3);
+    p.opt = opt;
+    p.telem = telem;
+    p.report = report;
     report->final_state = ARM_STATE_INIT;
 
     char err[200];
@@ -226,11 +417,9 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
     }
     arm_bus_init(&l.drives);
 
-    static arm_ctl_t ctl;
-    const arm_ctl_init_result_t ir = arm_ctl_init(&ctl, model, &opt->ctl);
+    const arm_ctl_init_result_t ir = arm_ctl_init(&p.ctl, model, &opt->ctl);
     if (ir != ARM_CTL_OK) {
-        snprintf(report->reason, sizeof(report->reason), "controller config: %s",
-                 arm_ctl_init_result_str(ir));
+        snprintf(report->reason, sizeof(report->reason), "controller config: %s", arm_ctl_init_result_str(ir));
         report->result = RUN_FAULT;
         arm_can_bus_set_close(&l.buses);
         return;
@@ -253,209 +442,49 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
         return;
     }
 
-    const int64_t period_ns = (int64_t)(1e9 / opt->rate_hz);
-    const float period_s = opt->ctl.period_s;
-    arm_reference_t ref;
-    arm_ctl_input_t in;
-    arm_ctl_output_t out;
-    telem_controller_t snap;
-    memset(&in, 0, sizeof(in));
-    memset(&out, 0, sizeof(out));
-    arm_state_t last_state = ARM_STATE_INIT;
-    int64_t next_deadline = now_ns();
+    p.period_ns = (int64_t)(1e9 / opt->rate_hz);
+    p.last_state = ARM_STATE_INIT;
+    p.next_deadline = now_ns();
     report->result = RUN_OK;
     int enabling = 1;
-    uint32_t k_run = 0;
-    uint32_t foreign_seen = 0; /* SYNC or command frames from another master, as of the last period */
 
-    /* k counts bus periods (SYNCs); the first few bring the drives to operation enabled. */
-    uint32_t bus_periods = 0; /* SYNCs sent: the periods the drives should have simulated */
-    for (uint32_t k = 0; k_run < opt->steps; ++k) {
+    /* k counts bus periods (SYNCs); the first few bring the drives to operation enabled. Each
+     * period: SYNC out, the drives' states in, then enable, or supervise, control and publish. */
+    for (uint32_t k = 0; p.k_run < opt->steps; ++k) {
         if (controller_stop_signal != 0) {
-            snprintf(report->reason, sizeof(report->reason),
-                     "stopped by signal %d after %u periods: zero torque, drives shut down and stopped",
-                     (int)controller_stop_signal, k_run);
-            report->result = RUN_INTERRUPTED;
-            telemetry_event(telem, k_run, "fault", report->reason);
-            out.state = ARM_STATE_SAFE_STOP;
-            memset(out.tau, 0, sizeof(out.tau));
-            send_commands(&l, &out); /* controlword shutdown, zero torque, before the NMT stop */
+            stop_on_signal(&l, &p);
             break;
         }
-        int64_t wake_latency = 0;
-        if (opt->mode == MODE_REALTIME) {
-            const struct timespec dl = {.tv_sec = next_deadline / 1000000000LL,
-                                        .tv_nsec = next_deadline % 1000000000LL};
-            while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &dl, NULL) == EINTR) {
-            }
-            wake_latency = now_ns() - next_deadline;
-        }
+        const int64_t wake_latency = wait_for_period(&p);
         const int64_t cycle_start = now_ns();
         arm_can_frame_t sync;
         arm_bus_begin_period(&l.drives, k, &sync);
         send_all(&l, &sync);
-        bus_periods = k + 1u;
+        report->bus_periods = k + 1u;
         const int64_t wait_until = opt->mode == MODE_REALTIME
-                                       ? next_deadline + period_ns * 8 / 10
+                                       ? p.next_deadline + p.period_ns * 8 / 10
                                        : cycle_start + (int64_t)(opt->lockstep_timeout_s * 1e9);
         pump(&l, wait_until, states_done);
-        const uint32_t fresh = l.drives.fresh_mask & ALL_JOINTS;
-
         if (enabling) {
-            uint32_t enabled = 0u;
-            for (int j = 0; j < ARM_N_JOINTS; ++j) {
-                const uint16_t sw = l.drives.statusword[j];
-                if ((fresh & (1u << j)) != 0u && arm_sw_operation_enabled(sw)) {
-                    enabled |= 1u << j;
-                }
-                arm_can_frame_t f;
-                arm_bus_make_cmd(&l.drives, j, arm_cia402_enable_controlword(sw), 0.0f, &f);
-                send_frame(&l, (unsigned)l.bus_of[j], &f);
-            }
-            if (enabled == ALL_JOINTS) {
-                enabling = 0;
-                if (opt->ref_given) {
-                    arm_reference_set(&ref, l.drives.q, opt->ref_amp, opt->ref_freq_hz);
-                } else {
-                    arm_reference_default(&ref, l.drives.q);
-                }
-                arm_reference_set_hold(&ref, (float)opt->ref_hold_s);
-                telemetry_event(telem, 0, "info", "all drives operation enabled; tracking starts");
-            } else if (l.drives.rx.foreign_master != 0u) {
-                snprintf(report->reason, sizeof(report->reason),
-                         "boot: another master on the bus (%u SYNC or command frame(s) this controller did not send)",
-                         l.drives.rx.foreign_master);
-                report->result = RUN_BOOT_FAILED;
-                telemetry_event(telem, 0, "fault", report->reason);
-                break;
-            } else if (k >= ENABLE_TIMEOUT_PERIODS) {
-                char missing[64];
-                list_joints(ALL_JOINTS & ~enabled, missing, sizeof(missing));
-                const int j0 = __builtin_ctz(ALL_JOINTS & ~enabled);
-                snprintf(report->reason, sizeof(report->reason),
-                         "boot: drive(s) %s not operation enabled after %u periods (drive %d "
-                         "statusword 0x%04x%s)",
-                         missing, ENABLE_TIMEOUT_PERIODS, j0 + 1, l.drives.statusword[j0],
-                         (fresh & (1u << j0)) ? "" : ", no state received");
-                report->result = RUN_BOOT_FAILED;
-                telemetry_event(telem, 0, "fault", report->reason);
-                break;
-            }
+            const int e = enable(&l, &p, k, l.drives.fresh_mask & ALL_JOINTS);
+            if (e < 0) break;
+            enabling = e == 0;
             if (opt->mode == MODE_REALTIME) {
-                next_deadline += period_ns;
+                p.next_deadline += p.period_ns;
             }
             continue;
         }
-
-        if (opt->mode == MODE_LOCKSTEP && fresh != ALL_JOINTS) {
-            char missing[64];
-            list_joints(ALL_JOINTS & ~fresh, missing, sizeof(missing));
-            snprintf(report->reason, sizeof(report->reason),
-                     "period %u: no joint state from drive(s) %s within %.3f s (simulator stopped?)",
-                     k_run, missing, opt->lockstep_timeout_s);
-            arm_ctl_external_fault(&ctl);
-        }
-        if (l.drives.emcy_mask != 0u && ctl.state != ARM_STATE_SAFE_STOP) {
-            const int j = __builtin_ctz(l.drives.emcy_mask);
-            snprintf(report->reason, sizeof(report->reason), "period %u: drive %d reports a fault (EMCY 0x%04x)",
-                     k_run, j + 1, l.drives.last_emcy_code[j]);
-            arm_ctl_external_fault(&ctl);
-        }
-        l.drives.emcy_mask = 0u;
-        if (l.drives.duplicate_mask != 0u && ctl.state != ARM_STATE_SAFE_STOP) {
-            snprintf(report->reason, sizeof(report->reason),
-                     "period %u: drive %d's state came twice for one SYNC: another node on the bus uses its id",
-                     k_run, __builtin_ctz(l.drives.duplicate_mask) + 1);
-            arm_ctl_external_fault(&ctl);
-        }
-        if (l.drives.rx.foreign_master != foreign_seen && ctl.state != ARM_STATE_SAFE_STOP) {
-            snprintf(report->reason, sizeof(report->reason),
-                     "period %u: another master on the bus: %u SYNC or command frame(s) this controller did not send",
-                     k_run, l.drives.rx.foreign_master - foreign_seen);
-            arm_ctl_external_fault(&ctl);
-        }
-        foreign_seen = l.drives.rx.foreign_master;
-        for (int j = 0; j < ARM_N_JOINTS; ++j) {
-            if ((fresh & (1u << j)) != 0u && !arm_sw_operation_enabled(l.drives.statusword[j]) &&
-                ctl.state == ARM_STATE_RUNNING) {
-                snprintf(report->reason, sizeof(report->reason),
-                         "period %u: drive %d left operation enabled (statusword 0x%04x, error %u)",
-                         k_run, j + 1, l.drives.statusword[j], l.drives.drive_error[j]);
-                arm_ctl_external_fault(&ctl);
-            }
-        }
-        memcpy(in.q, l.drives.q, sizeof(in.q));
-        memcpy(in.qd, l.drives.qd, sizeof(in.qd));
-        in.fresh_mask = fresh;
-        memcpy(in.tau_measured, l.drives.tau_measured, sizeof(in.tau_measured));
-        arm_reference_eval(&ref, (float)k_run * period_s, in.q_d, in.qd_d, in.qdd_d);
-
-        const int64_t c0 = now_ns();
-        arm_ctl_step(&ctl, &in, &out);
-        if (opt->rt.debug_slow_step_us > 0u) {
-            rt_debug_busy_wait_us(opt->rt.debug_slow_step_us); /* TEST HOOK: forces overruns */
-        }
-        const int64_t compute = now_ns() - c0;
-        send_commands(&l, &out);
-        const int64_t cycle = now_ns() - cycle_start;
-
-        snap.step = k_run;
-        snap.bus_period = k;
-        snap.t = (double)k_run * (double)period_s;
-        snap.method = (int8_t)opt->ctl.method;
-        memcpy(snap.q, in.q, sizeof(snap.q));
-        memcpy(snap.qd, in.qd, sizeof(snap.qd));
-        memcpy(snap.q_d, in.q_d, sizeof(snap.q_d));
-        snap.out = out;
-        telemetry_controller(telem, &snap);
-        if (opt->mode == MODE_REALTIME) {
-            next_deadline += period_ns;
-            if (now_ns() > next_deadline) {
-                report->overruns++;
-                /* Skip the missed deadlines instead of bursting to catch up. */
-                while (next_deadline < now_ns()) next_deadline += period_ns;
-            }
-        }
-        const telem_timing_t tm = {
-            .step = k_run,
-            .period_ns = (int32_t)period_ns,
-            .wake_latency_ns = (int32_t)wake_latency,
-            .compute_ns = (int32_t)compute,
-            .cycle_ns = (int32_t)cycle,
-            .overruns = (int64_t)report->overruns,
-        };
-        telemetry_timing(telem, &tm);
-
-        report->steps_done = ++k_run;
-        if (out.state != last_state) {
-            char text[160];
-            snprintf(text, sizeof(text), "state %s -> %s (fault: %s)", arm_state_str(last_state),
-                     arm_state_str(out.state), arm_fault_str(out.fault));
-            telemetry_event(telem, k_run, out.state == ARM_STATE_FAULT ? "fault" : "info", text);
-            last_state = out.state;
-        }
-        if (out.state == ARM_STATE_FAULT || out.state == ARM_STATE_SAFE_STOP) {
-            if (report->reason[0] == '\0' && out.fault_joint >= 0) {
-                snprintf(report->reason, sizeof(report->reason), "period %u: %s: joint %d (%s %.6g)", k_run,
-                         arm_fault_str(out.fault), out.fault_joint + 1, fault_quantity(out.fault),
-                         (double)out.fault_value);
-            } else if (report->reason[0] == '\0') {
-                snprintf(report->reason, sizeof(report->reason), "period %u: %s", k_run,
-                         arm_fault_str(out.fault));
-            }
-            telemetry_event(telem, k_run, "fault", report->reason);
-            report->result = RUN_FAULT;
-            break;
-        }
+        supervise(&l, &p);
+        const int64_t compute = control(&l, &p);
+        if (publish(&p, k, wake_latency, compute, now_ns() - cycle_start) != 0) break;
     }
 
     /* Stop the drives: they go to a stopped NMT state and stop applying torque. */
     arm_can_frame_t stop;
     arm_bus_make_nmt(ARM_NMT_STOP, 0u, &stop);
     send_all(&l, &stop);
-    report->final_state = out.state;
-    report->final_fault = out.fault;
-    report->bus_periods = bus_periods;
+    report->final_state = p.out.state;
+    report->final_fault = p.out.fault;
     report->rx = l.drives.rx;
     for (unsigned b = 0; b < l.buses.n; ++b) {
         report->rx_undecodable += arm_can_bus_rx_undecodable(&l.buses.bus[b]);

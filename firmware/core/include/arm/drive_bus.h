@@ -77,7 +77,31 @@ typedef struct {
     uint32_t sim_model_hash32;
     uint8_t sim_n_joints;
     arm_rx_counters_t rx;
+    uint32_t foreign_master_seen; /* rx.foreign_master as of the last supervision */
 } arm_drive_bus_t;
+
+/* What the drives' frames of a period say about the bus, checked by arm_bus_supervise after the
+ * period's states are in (every port runs the same supervision). */
+typedef enum {
+    ARM_BUS_WELL = 0,
+    ARM_BUS_STATES_MISSING,  /* a drive's state did not come (joint: the first missing) */
+    ARM_BUS_DRIVE_EMCY,      /* a drive reported a fault (value: its EMCY code) */
+    ARM_BUS_DUPLICATE_STATE, /* a drive's state came twice for one SYNC: another node uses its id */
+    ARM_BUS_FOREIGN_MASTER,  /* SYNC or commands this master did not send (value: how many) */
+    ARM_BUS_LEFT_ENABLED,    /* a drive left operation enabled while running (value: statusword) */
+} arm_bus_condition_t;
+
+typedef struct {
+    arm_bus_condition_t condition;
+    int joint;       /* 0-based, -1 when it concerns no one drive */
+    uint32_t value;
+} arm_bus_fault_t;
+
+/* The first thing wrong with this period's frames, in the order above (ARM_BUS_WELL: none).
+ * require_all: every state must have come (lockstep: a missing one is a lost peer); running: the
+ * drives should be operation enabled. Clears what it reported once (EMCY, foreign frames). */
+arm_bus_fault_t arm_bus_supervise(arm_drive_bus_t *bus, int require_all, int running);
+const char *arm_bus_condition_str(arm_bus_condition_t c);
 
 void arm_bus_init(arm_drive_bus_t *bus);
 /* Start period k: the returned SYNC carries k mod 256; states of other periods are rejected. */
