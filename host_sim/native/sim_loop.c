@@ -74,6 +74,17 @@ static int64_t cpu_ns(void)
     return (int64_t)ts.tv_sec * 1000000000LL + ts.tv_nsec;
 }
 
+/* --profile: thread CPU time per activity. A mark, then the time since it added to one counter. */
+static int64_t prof_mark(const sim_t *s)
+{
+    return s->cfg->profile ? cpu_ns() : 0;
+}
+
+static void prof_add(const sim_t *s, uint64_t *counter, int64_t mark)
+{
+    if (s->cfg->profile) *counter += (uint64_t)(cpu_ns() - mark);
+}
+
 static uint32_t all_joints(const sim_t *s)
 {
     return (uint32_t)((1ull << s->n) - 1u);
@@ -82,9 +93,9 @@ static uint32_t all_joints(const sim_t *s)
 /* ---- telemetry ---------------------------------------------------------------------------- */
 static void event(sim_t *s, const char *source, const char *level, const char *text)
 {
-    const int64_t c0 = s->cfg->profile ? cpu_ns() : 0;
+    const int64_t c0 = prof_mark(s);
     sim_telemetry_event(s->tel, s->arm->step_count, source, level, text);
-    if (s->cfg->profile) s->rep->prof_telemetry_ns += (uint64_t)(cpu_ns() - c0);
+    prof_add(s, &s->rep->prof_telemetry_ns, c0);
 }
 
 static int32_t fault_bits(const sim_t *s)
@@ -123,14 +134,14 @@ static void send(sim_t *s, unsigned bus, const arm_can_frame_t *f)
         s->rep->tx_dropped++;
         return;
     }
-    const int64_t c0 = s->cfg->profile ? cpu_ns() : 0;
+    const int64_t c0 = prof_mark(s);
     if (arm_can_bus_set_send(&s->set, bus, f) == 0) {
         s->rep->frames_tx++;
         captured(s, bus, f);
     } else {
         s->rep->tx_dropped++;
     }
-    if (s->cfg->profile) s->rep->prof_bus_tx_ns += (uint64_t)(cpu_ns() - c0);
+    prof_add(s, &s->rep->prof_bus_tx_ns, c0);
 }
 
 static void send_batch(sim_t *s, unsigned bus, const arm_can_frame_t *frames, unsigned n)
@@ -140,12 +151,12 @@ static void send_batch(sim_t *s, unsigned bus, const arm_can_frame_t *frames, un
         s->rep->tx_dropped += n;
         return;
     }
-    const int64_t c0 = s->cfg->profile ? cpu_ns() : 0;
+    const int64_t c0 = prof_mark(s);
     const unsigned sent = arm_can_bus_set_send_many(&s->set, bus, frames, n);
     for (unsigned i = 0; i < sent; ++i) captured(s, bus, &frames[i]);
     s->rep->frames_tx += sent;
     s->rep->tx_dropped += n - sent;
-    if (s->cfg->profile) s->rep->prof_bus_tx_ns += (uint64_t)(cpu_ns() - c0);
+    prof_add(s, &s->rep->prof_bus_tx_ns, c0);
 }
 
 /* Heartbeats and EMCY are sent after a period's step: they delay the next SYNC if the bus is
@@ -200,7 +211,7 @@ static int recv_frame(sim_t *s, arm_can_frame_t *f, unsigned *bus, double timeou
      * sooner than a sleeping process is woken on a VM. */
     const int64_t spin_ns = (int64_t)(s->cfg->spin_us * 1e3);
     const int64_t spin_end = mono_ns() + (spin_ns < (int64_t)(timeout_s * 1e9) ? spin_ns : (int64_t)(timeout_s * 1e9));
-    const int64_t c_spin = s->cfg->profile ? cpu_ns() : 0;
+    const int64_t c_spin = prof_mark(s);
     int rc = 0;
     while (rc == 0 && spin_ns > 0 && mono_ns() < spin_end) {
         rc = arm_can_bus_set_recv(&s->set, f, bus, 0);
@@ -209,16 +220,16 @@ static int recv_frame(sim_t *s, arm_can_frame_t *f, unsigned *bus, double timeou
             rc = 0;
         }
     }
-    if (s->cfg->profile) s->rep->prof_bus_rx_ns += (uint64_t)(cpu_ns() - c_spin);
+    prof_add(s, &s->rep->prof_bus_rx_ns, c_spin);
     if (rc != 0) return rc;
     for (;;) {
         if (sim_stop_requested) return 0;
         int64_t left = end - mono_ns();
         if (left < 0) left = 0;
         const int64_t slice = left < (int64_t)(STOP_CHECK_S * 1e9) ? left : (int64_t)(STOP_CHECK_S * 1e9);
-        const int64_t c0 = s->cfg->profile ? cpu_ns() : 0;
+        const int64_t c0 = prof_mark(s);
         rc = arm_can_bus_set_recv(&s->set, f, bus, (int)(slice / 1000));
-        if (s->cfg->profile) s->rep->prof_bus_rx_ns += (uint64_t)(cpu_ns() - c0);
+        prof_add(s, &s->rep->prof_bus_rx_ns, c0);
         if (rc < 0) return rc;
         if (rc == 0) {
             if (mono_ns() >= end) return 0;
@@ -389,9 +400,9 @@ static void finish_period(sim_t *s)
         }
     }
     memcpy(s->last_tau, tau, (size_t)n * sizeof(double));
-    const int64_t c0 = s->cfg->profile ? cpu_ns() : 0;
+    const int64_t c0 = prof_mark(s);
     const int bad_dof = sim_arm_step(s->arm, tau, timed ? tau_cmd : NULL, s->last_w);
-    if (s->cfg->profile) s->rep->prof_physics_ns += (uint64_t)(cpu_ns() - c0);
+    prof_add(s, &s->rep->prof_physics_ns, c0);
     if (bad_dof != 0) {
         diverged(s, bad_dof);
     }
@@ -413,10 +424,10 @@ static void publish_truth(sim_t *s)
 {
     if (!s->truth_pending) return;
     s->truth_pending = 0;
-    const int64_t t1 = s->cfg->profile ? cpu_ns() : 0;
+    const int64_t t1 = prof_mark(s);
     sim_telemetry_truth(s->tel, s->arm->step_count - 1, s->arm->period, s->n, s->arm->data->qpos,
                         s->arm->data->qvel, s->last_tau, s->last_w, s->truth_faults);
-    if (s->cfg->profile) s->rep->prof_telemetry_ns += (uint64_t)(cpu_ns() - t1);
+    prof_add(s, &s->rep->prof_telemetry_ns, t1);
 }
 
 static void sleep_until(int64_t t_ns)
