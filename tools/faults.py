@@ -134,9 +134,28 @@ FAULTS = [
           ("--debug-lose-bus", f"1@{LOST_BUS_PERIOD}")),
     Fault("stalled-logger", "SIGSTOP to the telemetry logger for 0.5 s",
           lambda i: i.signal("arm_lcm_logger", signal.SIGSTOP, signal.SIGCONT, 0.5), False),
+    Fault("forged-telemetry", "another process republishes 400 ARM_SIM messages (simulator truth, w_true = 0) "
+          "on the run's telemetry port, with the simulator's own sequence numbers", lambda i: _forge_truth(i), False),
     Fault("second-master", "realtime: a second master sends its own SYNC periods on bus 1, each with a "
           "DRIVE_6_CMD of 0.2 N m, three times", lambda i: _second_master(i), True, mode="realtime"),
 ]
+
+
+def _forge_truth(i: Injector) -> None:
+    """Telemetry that would make the estimation error look better than it was, had it gone unseen."""
+    import lcm
+
+    from gen import lcmtypes
+
+    lc = lcm.LCM(f"udpm://239.255.76.67:{i.lcm_port}?ttl=0")
+    m = lcmtypes.load().sim_truth_t()
+    m.n = 6
+    m.q = m.qd = m.tau_applied = m.w_true = [0.0] * 6
+    for k in range(400):
+        m.seq = m.step = k
+        lc.publish("ARM_SIM", m.encode())
+        i.frames_sent += 1
+        i.acted = True
 
 
 def _second_master(i: Injector) -> None:
@@ -237,9 +256,11 @@ def run_fault(f: Fault, out: Path) -> dict[str, Any]:
         and inj.injected_at is not None else None
     safe = stopped
     lost = run.get("transport", {}).get("telemetry_lost_total")
+    # messages that cannot come from the run's own senders (tools/run_analysis.py), summed over channels
+    foreign = sum(a.get("foreign", 0) for a in (run.get("transport", {}).get("telemetry") or {}).values())
     return {"fault": f.name, "what": f.what, "detected_after_periods": detected, "safe_state": safe,
             "final_state": r.get("final_state"), "drives_faulted": faulted, "verdict": r.get("result"),
-            "reasons": r.get("verdict_reasons", []), "telemetry_lost": lost, "expect_stop": f.expect_stop,
+            "reasons": r.get("verdict_reasons", []), "telemetry_lost": lost, "telemetry_foreign": foreign, "expect_stop": f.expect_stop,
             "injected": inj.acted, "harness_problem": inj.problem or (None if inj.acted else
                                                                      "nothing sent while the arm ran"),
             "counters": {"controller": run.get("transport", {}).get("controller_frames", {}),
@@ -260,7 +281,8 @@ def table(rows: list[dict[str, Any]]) -> str:
         det = "-" if x["detected_after_periods"] is None else str(x["detected_after_periods"])
         safe = ("drives faulted, torque off" if x["drives_faulted"] else f"yes ({x['final_state']})") \
             if x["safe_state"] else f"no stop needed ({x['final_state']})"
-        tel = "complete" if x["telemetry_lost"] == 0 else f"{x['telemetry_lost']} lost" \
+        tel = f"{x['telemetry_foreign']} foreign" if x.get("telemetry_foreign") else \
+            "complete" if x["telemetry_lost"] == 0 else f"{x['telemetry_lost']} lost" \
             if x["telemetry_lost"] is not None else "unknown"
         lines.append(f"{x['fault']:<18}{det:>12}  {safe:<28}{str(x['verdict']):<26}{tel:<12}")
     return "\n".join(lines)

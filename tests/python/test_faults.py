@@ -44,6 +44,11 @@ def test_what_the_arm_can_run_through_is_counted(matrix: dict[str, dict]) -> Non
     assert ctl["rx_unknown_id"] + ctl["rx_kernel_drops"] > 0 and flood["verdict"] is not None
 
 
+def test_forged_telemetry_is_named_and_never_ok(matrix: dict[str, dict]) -> None:
+    row = matrix["forged-telemetry"]
+    assert row["verdict"] == "incomplete" and any("foreign telemetry: ARM_SIM" in r for r in row["reasons"]), row
+
+
 @pytest.mark.parametrize("name", ["kill-logger", "stalled-logger"])
 def test_a_logger_that_lost_telemetry_makes_the_run_incomplete(matrix: dict[str, dict], name: str) -> None:
     row = matrix[name]
