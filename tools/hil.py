@@ -298,7 +298,7 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
         return _run_hil(opt, 0, 0)
     if opt.can_port is not None and opt.lcm_port is not None:
         return _run_hil(opt, opt.can_port, opt.lcm_port)
-    with acquire_slot() as slot:
+    with acquire_slot(quiet_ports=True) as slot:
         return _run_hil(opt, opt.can_port or slot.can_port, opt.lcm_port or slot.lcm_port)
 
 

@@ -33,7 +33,7 @@ from tools.build import build_lock
 from tools.cluster import Cluster
 from tools.paths import BUILD
 from gen.atomic_output import write_json_atomic, write_text_atomic
-from tools.hil import LOCKSTEP_SPIN_US, HilError, HilOptions, lockstep_spin_us, provenance, run_hil
+from tools.hil import LOCKSTEP_SPIN_US, SIL, HilError, HilOptions, lockstep_spin_us, provenance, run_hil
 from tools.slots import Slot, acquire_slot
 
 # metric -> the run.json results field a study computes with (per joint, or one number for the arm)
@@ -196,7 +196,7 @@ def execute(spec_d: dict[str, Any], spin_us: float = LOCKSTEP_SPIN_US) -> dict[s
         shutil.rmtree(out)
     out.mkdir(parents=True)
     prefer = (lambda i: slot_has_design(spec.arm(), i, spec.design_text)) if spec.design_text is not None else None
-    with acquire_slot(prefer=prefer) as slot:
+    with acquire_slot(prefer=prefer, quiet_ports=spec.bus != SIL) as slot:
         arm = spec.arm()
         try:
             if spec.design_text is not None:

@@ -42,10 +42,40 @@ class Slot:
         return LCM_BASE + self.index
 
 
+CAN_GROUP, LCM_GROUP = "239.74.163.2", "239.255.76.67"
+LISTEN_S = 0.02  # a live lockstep run sends thousands of frames a second: 20 ms hears one
+
+
+def ports_carry_traffic(slot: Slot, listen_s: float = LISTEN_S) -> bool:
+    """Whether anything is sent on the slot's bus or telemetry ports: a run whose armctl was killed
+    (before its children could follow) may still hold them, although its lock is gone."""
+    import select
+    import socket
+
+    socks = []
+    try:
+        for group, port in [(CAN_GROUP, slot.can_port + b) for b in range(4)] + [(LCM_GROUP, slot.lcm_port)]:
+            s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM, socket.IPPROTO_UDP)
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            s.bind((group, port))
+            s.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP,
+                         socket.inet_aton(group) + socket.inet_aton("127.0.0.1"))
+            socks.append(s)
+        ready, _, _ = select.select(socks, [], [], listen_s)
+        return bool(ready)
+    except OSError:
+        return False  # no multicast here (no route to lo): the HIL run itself will say so
+    finally:
+        for s in socks:
+            s.close()
+
+
 @contextmanager
-def acquire_slot(timeout_s: float = 600.0, prefer: Callable[[int], bool] | None = None) -> Iterator[Slot]:
+def acquire_slot(timeout_s: float = 600.0, prefer: Callable[[int], bool] | None = None,
+                 quiet_ports: bool = False) -> Iterator[Slot]:
     """The lowest free slot (one that `prefer` likes first: e.g. the slot that already has this run's
-    design built), held until the block ends; waits while all are taken."""
+    design built), held until the block ends; waits while all are taken. quiet_ports: a run on the
+    slot's ports also needs them silent (ports_carry_traffic); a slot they are not is passed over."""
     d = _lock_dir()
     d.mkdir(parents=True, exist_ok=True)
     deadline = time.monotonic() + timeout_s
@@ -56,6 +86,10 @@ def acquire_slot(timeout_s: float = 600.0, prefer: Callable[[int], bool] | None 
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:
+                os.close(fd)
+                continue
+            if quiet_ports and ports_carry_traffic(Slot(i)):
+                fcntl.flock(fd, fcntl.LOCK_UN)
                 os.close(fd)
                 continue
             try:

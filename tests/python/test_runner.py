@@ -213,3 +213,38 @@ def test_cluster_certs_make_a_ca_and_refuse_to_overwrite(tmp_path: Path) -> None
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "ca.pem exists" in r.stderr
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+
+def test_a_slot_whose_ports_still_carry_traffic_is_passed_over() -> None:
+    """An orphaned run (its armctl killed before the children followed) keeps sending on its slot's
+    ports although the slot's lock is free: a new run must not take that slot."""
+    import socket
+    import threading
+    import time
+
+    from tools.slots import CAN_GROUP, acquire_slot
+
+    with acquire_slot() as probe:
+        free = probe.index  # the slot a run would take next
+    stop = threading.Event()
+
+    def orphan() -> None:
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
+        s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
+        while not stop.is_set():
+            s.sendto(b"frame", (CAN_GROUP, probe.can_port))
+            time.sleep(0.0005)
+        s.close()
+
+    t = threading.Thread(target=orphan)
+    t.start()
+    try:
+        time.sleep(0.05)
+        with acquire_slot(quiet_ports=True) as slot:
+            assert slot.index != free
+        with acquire_slot() as slot:  # software in the loop needs no ports: any free slot
+            assert slot.index == free
+    finally:
+        stop.set()
+        t.join()
