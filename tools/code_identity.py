@@ -1,5 +1,5 @@
 """The identity of the code that decides a HIL run's result: a hash over the firmware, the
-simulator, the synthesis and the run's own tooling. A kept run (tools/runner.py) is reused only
+simulator, the synthesis and the run's own tooling (their sources, not their documentation). A kept run (tools/runner.py) is reused only
 when this is unchanged, so changing the controller or the simulator never leaves stale results in
 a resumed study or tuning."""
 
@@ -15,13 +15,15 @@ from tools.paths import REPO
 SOURCES = ("firmware", "host_sim", "gen", "tools/lcm_logger", "tools/hil.py", "tools/run_analysis.py",
            "tools/verdict.py", "tools/telemetry_log.py", "tools/arm.py", "CMakeLists.txt", "CMakePresets.json")
 SKIP_PARTS = {"__pycache__", ".pytest_cache"}
+# Documentation in those folders changes no result: a README edit must not mark a kept tuning stale.
+DOCS = (".md", ".txt", ".pyc")
 
 
 def _files(root: Path) -> list[Path]:
     if root.is_file():
         return [root]
     return sorted(p for p in root.rglob("*") if p.is_file() and not SKIP_PARTS.intersection(p.parts)
-                  and p.suffix not in (".pyc",))
+                  and p.suffix not in DOCS and p.name != "LICENSE")
 
 
 @functools.cache

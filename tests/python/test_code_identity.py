@@ -1,0 +1,40 @@
+"""The code identity (tools/code_identity.py) moves with what can change a run's numbers, never
+with documentation: a README edit does not mark the kept tuning as made by other code."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+from tools import code_identity as ci
+
+
+@pytest.fixture()
+def tree(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    for name in ("firmware/core/src/x.c", "firmware/README.md", "host_sim/README.md", "host_sim/sim.c", "gen/a.py"):
+        p = tmp_path / name
+        p.parent.mkdir(parents=True, exist_ok=True)
+        p.write_text(f"// {name}\n")
+    monkeypatch.setattr(ci, "REPO", tmp_path)
+    monkeypatch.setattr(ci, "SOURCES", ("firmware", "host_sim", "gen"))
+    ci.code_identity.cache_clear()
+    yield tmp_path
+    ci.code_identity.cache_clear()
+
+
+def _identity() -> str:
+    ci.code_identity.cache_clear()
+    return ci.code_identity()
+
+
+def test_documentation_does_not_move_it_and_sources_do(tree: Path) -> None:
+    before = _identity()
+    (tree / "firmware" / "README.md").write_text("an edited README\n")
+    (tree / "host_sim" / "NOTES.md").write_text("new notes\n")
+    assert _identity() == before
+    (tree / "firmware" / "core" / "src" / "x.c").write_text("// changed\n")
+    assert _identity() != before
+    shutil.rmtree(tree / "gen")
+    assert _identity() != before
