@@ -23,6 +23,16 @@ class OutputError(OSError):
         return str(self.strerror)
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+# mkstemp makes its file 0600; an output is as readable as any file this process creates.
+_FILE_MODE = 0o666 & ~_umask()
+
+
 def _failed(path: Path, exc: OSError) -> OutputError:
     reason = exc.strerror or str(exc) or type(exc).__name__
     return OutputError(exc.errno, f"cannot write {path}: {reason}", str(path))
@@ -41,6 +51,7 @@ def write_bytes_atomic(path: Path, data: bytes) -> None:
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, name = tempfile.mkstemp(prefix=f".{path.name}.tmp.", dir=path.parent)
+        os.fchmod(fd, _FILE_MODE)
         os.close(fd)
         tmp = Path(name)
         _write_synced(tmp, data)

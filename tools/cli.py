@@ -171,6 +171,7 @@ def cmd_demo(ns: argparse.Namespace) -> int:
     print(f"armctl demo: a short study on {arm}: every method, tuned alike, {ns.duration:g} s {how} in "
           f"each scenario of {study.DEFAULT_CONFIG.relative_to(REPO)}, one seed -> {ns.out}")
     ns.config, ns.methods, ns.seeds, ns.retune, ns.cluster = study.DEFAULT_CONFIG, None, 1, False, None
+    ns.record = False  # the headline is the full study's (study --record)
     return study.cmd_study(ns)
 
 

@@ -338,6 +338,9 @@ def add_study_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seeds", type=int, default=None, help="seeds per method and scenario [the config's]")
     p.add_argument("--duration", type=float, default=None, help="override the config's trajectory length")
     p.add_argument("--retune", action="store_true", help="tune again even when a tuning is kept")
+    p.add_argument("--record", action="store_true",
+                   help="the default study only: keep its results as the headline (tools/studies/paper.headline.json) "
+                        "and write the README's result tables from them")
     p.add_argument("--confirm", type=int, default=DEFAULT_CONFIRM,
                    help=f"with --bus sil: repeat this many runs in lockstep HIL over the CAN bus and check that "
                         f"their results match bit for bit [{DEFAULT_CONFIRM}]")
@@ -398,11 +401,20 @@ def cmd_study(ns: argparse.Namespace) -> int:
         if not 0 <= ns.confirm <= 1000:
             raise StudyConfigError(f"--confirm: must be in [0, 1000], got {ns.confirm}")
         cfg, arm, methods, scenarios, cluster = _common(ns)
+        if ns.record and (cfg.path.resolve() != DEFAULT_CONFIG.resolve() or not arm.is_default or ns.seeds or
+                          ns.duration or methods or scenarios or ns.trials):
+            raise StudyConfigError("--record: the headline is the default study as it stands (no --config, "
+                                   "--model/--arm, --seeds, --duration, --methods, --scenarios or --trials)")
         with ExitStack() as stack:
             _hold_out(stack, ns.out)
             study = run_study(cfg, ns.out, seeds=ns.seeds, duration_s=ns.duration, methods=methods,
                               scenarios=scenarios, arm=arm, jobs=ns.jobs, cluster=cluster, retune=ns.retune,
                               trials=ns.trials, bus=ns.bus, confirm=ns.confirm)
+        if ns.record:
+            from tools import headline
+
+            headline.write(study)
+            print(f"armctl study: the headline recorded in {headline.RECORD} and README.md's result tables")
     except (StudyConfigError, ArmChoiceError, OutDirError, ClusterError) as exc:
         print(f"armctl study: {exc}", file=sys.stderr)
         return 2

@@ -234,3 +234,17 @@ def test_fixed_body_chains_are_walked_without_recursion() -> None:
     finally:
         sys.setrecursionlimit(old)
     assert info["n_joints"] == 6
+
+
+def test_an_output_is_as_readable_as_any_file_this_process_makes(tmp_path: Path) -> None:
+    """The writer's temporary file (mkstemp: 0600) must not leave the output unreadable to others."""
+    import os
+
+    from gen.atomic_output import write_text_atomic
+
+    mask = os.umask(0o022)
+    try:
+        write_text_atomic(tmp_path / "out.json", "{}\n")
+    finally:
+        os.umask(mask)
+    assert (tmp_path / "out.json").stat().st_mode & 0o777 == 0o644

@@ -1,0 +1,59 @@
+"""The study's headline, kept in the repository: `tools/armctl study --record` writes the default
+study's per-run results and statistics to tools/studies/paper.headline.json and renders the README's
+result tables from it (between the headline markers). tests/python/test_headline.py holds the
+README to the record, and reruns a slice of the record (one scenario, one seed, two methods, the
+full trajectory) bit for bit: the README's numbers cannot drift from the code at HEAD."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from gen.atomic_output import write_json_atomic, write_text_atomic
+from tools.code_identity import code_identity
+from tools.paths import REPO
+
+RECORD = REPO / "tools" / "studies" / "paper.headline.json"
+README = REPO / "README.md"
+BEGIN = "<!-- headline: tools/armctl study --record writes this table (tools/headline.py) -->"
+END = "<!-- /headline -->"
+# What a run's record keeps: its verdict and the numbers the tables and the slice test compare.
+RUN_FIELDS = ("result", "steps", "tracking_max_abs_rad", "tracking_rms_rad", "estimation_error_rms",
+              "torque_power_w", "saturated_fraction")
+
+
+class HeadlineError(RuntimeError):
+    pass
+
+
+def record_of(study: dict[str, Any]) -> dict[str, Any]:
+    """What summary_table needs (tools/report.py) and the runs' own numbers."""
+    return {"config": study["config"], "code": code_identity(), "seeds": study["seeds"],
+            "duration_s": study["duration_s"], "methods": study["methods"], "bus": study.get("bus"),
+            "arm": {"name": study["arm"]["name"], "n_joints": study["arm"]["n_joints"]},
+            "scenarios": {s: {"runs": {m: [{k: r.get(k) for k in RUN_FIELDS} for r in runs]
+                                       for m, runs in sc["runs"].items()},
+                              "stats": sc["stats"]}
+                          for s, sc in study["scenarios"].items()}}
+
+
+def render(record: dict[str, Any]) -> str:
+    from tools.report import summary_table
+
+    return "```\n" + summary_table(record) + "\n```"
+
+
+def readme_block(text: str) -> str:
+    try:
+        start = text.index(BEGIN) + len(BEGIN)
+        return text[start:text.index(END, start)].strip("\n")
+    except ValueError:
+        raise HeadlineError(f"{README}: the headline markers ({BEGIN} ... {END}) are missing") from None
+
+
+def write(study: dict[str, Any], readme: Path = README) -> None:
+    record = record_of(study)
+    text = readme.read_text()
+    old = readme_block(text)
+    write_json_atomic(RECORD, record)
+    write_text_atomic(readme, text.replace(old, render(record), 1))
