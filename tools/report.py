@@ -1,7 +1,9 @@
 """The study's report: report.md (per scenario: every method's mean and 95 % interval over the
 seeds, PM against every other method on the same seeds, a verdict in words, the paper's claims
-checked), PNG figures (distributions per method and joint; the paper's Figs. 6-8 for the first
-seed of the first scenario), and summary.txt (the table the CLI prints)."""
+checked), PNG figures named by scenario (distributions per method and joint; the paper's Figs.
+6-8 for the first seed of every scenario; one colour per method in every figure, runs that did not
+end ok marked), and summary.txt (the table the CLI prints). A person reads degrees: the tables give
+tracking errors in deg, study.json keeps the runs' radians."""
 
 from __future__ import annotations
 
@@ -26,8 +28,10 @@ PAPER_TABLE2 = {"usde-smc": [0.5956, 0.2118, 1.2881, 0.6978, 4.7868, 3.6274],
                 "pm": [0.2163, 0.0883, 0.3618, 0.2889, 2.7415, 2.1596]}
 PAPER_TABLE3 = {"usde-smc": 14.9473, "tde": 15.6809, "pm": 14.4772}
 ESTIMATING = ("pm", "pm-paper-weights", "pm-paper", "tde", "usde-smc")
-METRIC_TEXT = {"linf": "L-infinity tracking error (rad)", "rms": "RMS tracking error (rad)",
+METRIC_TEXT = {"linf": "L-infinity tracking error (deg)", "rms": "RMS tracking error (deg)",
                "est": "RMS estimation error w - w_hat (rad/s^2)", "power": "torque power (W)"}
+# What a person reads is in degrees; study.json keeps the runs' radians.
+IN_DEGREES = ("linf", "rms")
 ALPHA = 0.05  # a paired difference counts as significant below this p (Wilcoxon where defined, else t)
 
 
@@ -57,6 +61,17 @@ def _p(c: dict[str, Any]) -> float | None:
     return c.get("t_test_p")
 
 
+def colour_of(study: dict[str, Any]) -> dict[str, Any]:
+    """One colour per method, the same in every figure (the config's method order)."""
+    cmap = plt.get_cmap("tab10")
+    return {m: cmap(i % 10) for i, m in enumerate(study["methods"])}
+
+
+def fig_name(kind: str, scenario: str) -> str:
+    """fig_KIND_SCENARIO.png, the scenario's name made a file name."""
+    return f"fig_{kind}_{''.join(c if c.isalnum() else '-' for c in scenario)}.png"
+
+
 def _series(run_dir: Path, hold: float) -> dict[str, np.ndarray]:
     """One kept run's trajectory series (the figures plot a seed): its whole ARM_CTL and ARM_SIM."""
     log = read_log(run_dir / "telemetry.lcmlog", channels=("ARM_CTL", "ARM_SIM"))
@@ -75,49 +90,66 @@ def _series(run_dir: Path, hold: float) -> dict[str, np.ndarray]:
 
 
 def _time_figures(out: Path, study: dict[str, Any], scenario: str) -> list[str]:
-    """The paper's Figs. 6-8 for the first seed of one scenario."""
+    """The paper's Figs. 6-8 for the first seed of one scenario: every method in its own colour, a
+    run the safety layer stopped drawn up to its stop and marked, a run with no trajectory named."""
     hold, seed = study["hold_s"], study["seeds"][0]
     n = study["arm"]["n_joints"]
-    series = {}
+    colour = colour_of(study)
+    runs = study["scenarios"][scenario]["runs"]
+    series, empty = {}, []
     for m in study["methods"]:
         d = out / scenario / m / f"seed-{seed}"
-        if (d / "telemetry.lcmlog").exists():
-            got = _series(d, hold)
-            if len(got["t"]) >= 2:  # a run stopped before its trajectory began has nothing to draw
-                series[m] = got
-    made = []
+        got = _series(d, hold) if (d / "telemetry.lcmlog").exists() else None
+        if got is not None and len(got["t"]) >= 2:
+            series[m] = got
+        else:
+            empty.append(f"{m} ({runs[m][0].get('result') if runs.get(m) else 'not run'}: no trajectory)")
+    made: list[str] = []
     if not series:
         return made
+
+    def label(m: str) -> str:
+        r = runs[m][0].get("result") if runs.get(m) else None
+        return m if r == "ok" else f"{m} ({r})"
+
+    def finish(fig: Any, axes: Any, title: str, kind: str) -> None:
+        for m in series:
+            if runs.get(m) and runs[m][0].get("result") != "ok":  # where it stopped or ended badly
+                for ax in axes:
+                    ax.axvline(series[m]["t"][-1], color=colour[m], lw=0.8, ls=":")
+        axes[0].set_title(title + (f"; {', '.join(empty)}" if empty else ""), fontsize=9)
+        axes[-1].set_xlabel("t (s)")
+        made.append(_save(fig, out / fig_name(kind, scenario)))
+
     if "pm" in series:
         fig, axes = plt.subplots(n, 1, figsize=(9, 11), sharex=True)
         for j in range(n):
-            axes[j].plot(series["pm"]["t"], series["pm"]["w"][:, j], lw=0.6)
+            axes[j].plot(series["pm"]["t"], series["pm"]["w"][:, j], lw=0.6, color=colour["pm"])
             axes[j].set_ylabel(f"w{j + 1}")
-        axes[0].set_title(f"Total uncertainty w (rad/s^2) during the PM run, {scenario} (cf. the paper's Fig. 6)")
-        axes[-1].set_xlabel("t (s)")
-        made.append(_save(fig, out / "fig_uncertainty.png"))
+        finish(fig, axes, f"Total uncertainty w (rad/s^2) during the PM run, {scenario} (cf. the paper's Fig. 6)",
+               "uncertainty")
     est = [m for m in ESTIMATING if m in series]
     if est:
         fig, axes = plt.subplots(n, 1, figsize=(9, 11), sharex=True)
         for m in est:
             for j in range(n):
-                axes[j].plot(series[m]["t"], series[m]["w"][:, j] - series[m]["w_hat"][:, j], lw=0.6, label=m)
+                axes[j].plot(series[m]["t"], series[m]["w"][:, j] - series[m]["w_hat"][:, j], lw=0.6,
+                             color=colour[m], label=label(m))
         for j in range(n):
             axes[j].set_ylabel(f"joint {j + 1}")
         axes[0].legend(loc="upper right", fontsize=7, ncol=len(est))
-        axes[0].set_title(f"Estimation error w - w_hat (rad/s^2), {scenario} (cf. the paper's Fig. 7)")
-        axes[-1].set_xlabel("t (s)")
-        made.append(_save(fig, out / "fig_estimation_error.png"))
+        finish(fig, axes, f"Estimation error w - w_hat (rad/s^2), {scenario} (cf. the paper's Fig. 7)",
+               "estimation_error")
+    # |e| on a log scale: methods whose errors differ a hundredfold all stay visible
     fig, axes = plt.subplots(n, 1, figsize=(9, 11), sharex=True)
-    for m, s in series.items():
+    for m, sr in series.items():
         for j in range(n):
-            axes[j].plot(s["t"], np.degrees(s["e"][:, j]), lw=0.7, label=m)
+            axes[j].semilogy(sr["t"], np.maximum(np.degrees(np.abs(sr["e"][:, j])), 1e-6), lw=0.7,
+                             color=colour[m], label=label(m))
     for j in range(n):
-        axes[j].set_ylabel(f"e{j + 1} (deg)")
-    axes[0].legend(loc="upper right", fontsize=7, ncol=len(series))
-    axes[0].set_title(f"Tracking error, {scenario} (cf. the paper's Fig. 8)")
-    axes[-1].set_xlabel("t (s)")
-    made.append(_save(fig, out / "fig_tracking_error.png"))
+        axes[j].set_ylabel(f"|e{j + 1}| (deg)")
+    axes[0].legend(loc="upper right", fontsize=7, ncol=min(len(series), 4))
+    finish(fig, axes, f"Tracking error |e|, {scenario} (cf. the paper's Fig. 8)", "tracking_error")
     return made
 
 
@@ -128,19 +160,30 @@ def _save(fig: Any, path: Path) -> str:
     return path.name
 
 
-def _distribution_figure(out: Path, study: dict[str, Any], scenario: str, index: int) -> str:
-    """Per joint, each method's L-infinity error over the seeds (box with every seed's point)."""
+def _distribution_figure(out: Path, study: dict[str, Any], scenario: str) -> str:
+    """Per joint, each method's L-infinity error over the seeds (a box in the method's colour, every
+    seed's point; a run that did not end ok is a red cross)."""
     sc = study["scenarios"][scenario]
     n, methods = study["arm"]["n_joints"], study["methods"]
+    colour = colour_of(study)
     fig, axes = plt.subplots(1, n, figsize=(2.2 * n + 1, 4.2), sharey=False)
     axes = np.atleast_1d(axes)
     for j in range(n):
-        data = [np.degrees([v for v in sc["stats"][m]["linf"]["per_joint"][j]["values"]
-                            if v is not None and np.isfinite(v)]) for m in methods]
         ax = axes[j]
-        ax.boxplot(data, showfliers=False)
-        for i, d in enumerate(data):
+        data, bad = [], []
+        for m in methods:
+            vals = sc["stats"][m]["linf"]["per_joint"][j]["values"]
+            res = sc["stats"][m]["results"]
+            ok = [(v, r) for v, r in zip(vals, res) if v is not None and np.isfinite(v)]
+            data.append(np.degrees([v for v, _ in ok]))
+            bad.append(np.degrees([v for v, r in ok if r != "ok"]))
+        box = ax.boxplot(data, showfliers=False, patch_artist=True)
+        for patch, m in zip(box["boxes"], methods):
+            patch.set_facecolor(colour[m])
+            patch.set_alpha(0.5)
+        for i, (d, b) in enumerate(zip(data, bad)):
             ax.scatter(np.full(len(d), i + 1.0), d, s=8, color="k", zorder=3)
+            ax.scatter(np.full(len(b), i + 1.0), b, s=30, color="red", marker="x", zorder=4)
         if any(np.any(d > 0) for d in data):  # a scale of logs needs a value; no run may have measured
             ax.set_yscale("log")
         else:
@@ -148,8 +191,8 @@ def _distribution_figure(out: Path, study: dict[str, Any], scenario: str, index:
         ax.set_xticks(range(1, len(methods) + 1), methods, rotation=70, fontsize=7)
         ax.set_title(study["arm"]["joint_names"][j], fontsize=8)
     axes[0].set_ylabel("L-inf tracking error (deg), one point per seed")
-    fig.suptitle(f"{scenario}: {len(study['seeds'])} seed(s)")
-    return _save(fig, out / f"fig_distribution_{index}.png")
+    fig.suptitle(f"{scenario}: {len(study['seeds'])} seed(s); red x: a run that did not end ok")
+    return _save(fig, out / fig_name("distribution", scenario))
 
 
 def _labels(study: dict[str, Any], paper: bool) -> list[str]:
@@ -157,12 +200,21 @@ def _labels(study: dict[str, Any], paper: bool) -> list[str]:
     return [f"joint {j + 1}" if paper else f"{j + 1} {names[j]}" for j in range(len(names))]
 
 
+def _deg(s: dict[str, Any], metric: str) -> dict[str, Any]:
+    """A statistic of radians, in degrees when the metric is an angle (IN_DEGREES)."""
+    if metric not in IN_DEGREES or s.get("mean") is None:
+        return s
+    return {**s, "mean": float(np.degrees(s["mean"])),
+            "ci95": [float(np.degrees(v)) for v in s["ci95"]] if s.get("ci95") else s.get("ci95")}
+
+
 def _stats_table(study: dict[str, Any], sc: dict[str, Any], metric: str, labels: list[str]) -> str:
     methods = [m for m in study["methods"] if metric != "est" or m in ESTIMATING]
     if metric == "power":
         return _md_table(["method", "mean ± 95 % CI"], [[m, _ci(sc["stats"][m]["power"]["total"])] for m in methods])
-    rows = [[labels[j]] + [_ci(sc["stats"][m][metric]["per_joint"][j]) for m in methods] for j in range(len(labels))]
-    rows.append(["sum of joints"] + [_ci(sc["stats"][m][metric]["total"]) for m in methods])
+    rows = [[labels[j]] + [_ci(_deg(sc["stats"][m][metric]["per_joint"][j], metric)) for m in methods]
+            for j in range(len(labels))]
+    rows.append(["sum of joints"] + [_ci(_deg(sc["stats"][m][metric]["total"], metric)) for m in methods])
     return _md_table(["joint", *methods], rows)
 
 
@@ -308,7 +360,6 @@ def write_report(out: Path, study: dict[str, Any]) -> None:
           "Wilcoxon's signed-rank p, which with 5 seeds cannot go below 0.0625).",
           "", f"Tuning: {study['tuning_procedure']}", "", *_confirmation(study),
           *(["Notes:", "", *[f"- {x}" for x in study.get("notes", [])], ""] if study.get("notes") else [])]
-    figs_time: list[str] = []
     for i, (name, sc) in enumerate(study["scenarios"].items()):
         d = sc["definition"]
         md += [f"## Scenario `{name}`", "", d["description"], "",
@@ -345,12 +396,9 @@ def write_report(out: Path, study: dict[str, Any]) -> None:
                                *[_fmt(PAPER_TABLE2[m][j]) for m in ("pm", "tde", "usde-smc")]] for j in range(n)]), "",
                    f"Torque power, the paper: PM {PAPER_TABLE3['pm']} W, TDE {PAPER_TABLE3['tde']} W, EUSDE-SMC "
                    f"{PAPER_TABLE3['usde-smc']} W.", ""]
-        fig = _distribution_figure(out, study, name, i)
-        md += [f"![{fig}]({fig})", ""]
-        if i == 0:
-            figs_time = _time_figures(out, study, name)
-    md += [f"## Time series: the first seed of `{next(iter(study['scenarios']))}`", ""] + \
-          [f"![{f}]({f})" for f in figs_time] + [""]
+        fig = _distribution_figure(out, study, name)
+        md += [f"![{fig}]({fig})", "", f"Time series, the first seed of `{name}`:", ""]
+        md += [f"![{f}]({f})" for f in _time_figures(out, study, name)] + [""]
     md += ["## Summary", "", "```", summary_table(study), "```", ""]
     write_text_atomic(out / "report.md", "\n".join(md))
     write_text_atomic(out / "summary.txt", summary_table(study) + "\n")

@@ -77,7 +77,8 @@ def test_every_method_scenario_and_seed_is_reported(study: tuple[Path, dict, Pat
             assert len(comp["per_joint"]) == 6 and comp["total"]["n"] + comp["total"]["excluded"] == 2
             assert {"a_lower", "ratio_of_means", "t_test_p", "wilcoxon_p"} <= set(comp["total"])
     assert report.count("### Verdict") == 2 and "The paper's claims" in report
-    for fig in ("fig_distribution_0.png", "fig_distribution_1.png", "fig_uncertainty.png", "fig_tracking_error.png"):
+    for fig in ("fig_distribution_ideal.png", "fig_distribution_realistic.png", "fig_uncertainty_ideal.png",
+                "fig_tracking_error_ideal.png", "fig_tracking_error_realistic.png"):
         assert (out / fig).stat().st_size > 10_000
 
 
