@@ -13,6 +13,7 @@ from pathlib import Path
 from gen.atomic_output import OutputError
 from tools.arm import add_arm_arguments
 from tools.outdir import OutDirError, check_out_dir
+from tools.verdict import DEFAULT_MAX_ERROR_DEG, FOLLOWING_ERROR_STOP_DEG
 from tools.build import PRESETS, TARGETS, BuildError, build
 from tools.paths import REPO, build_dir, env_with_repo
 
@@ -81,6 +82,13 @@ def cmd_hil(ns: argparse.Namespace) -> int:
     if (ns.ref_amp is None) != (ns.ref_freq is None):
         print("armctl hil: --ref-amp and --ref-freq go together", file=sys.stderr)
         return 2
+    if not (math.isfinite(ns.max_error_deg) and ns.max_error_deg > 0):
+        print(f"armctl hil: --max-error-deg: must be a number above 0, got {ns.max_error_deg}", file=sys.stderr)
+        return 2
+    if ns.max_error_deg >= FOLLOWING_ERROR_STOP_DEG:
+        print(f"armctl hil: --max-error-deg {ns.max_error_deg:g}: the safety layer stops a run at "
+              f"{FOLLOWING_ERROR_STOP_DEG:.3g} deg of following error first (verdict failed): the bound is never "
+              "reached", file=sys.stderr)
     try:
         arm = arm_from_args(ns)
         check_out_dir(ns.out)
@@ -275,8 +283,9 @@ def main(argv: list[str] | None = None) -> int:
                         "to the joint ranges with a warning [the arm's default]")
     h.add_argument("--ref-freq", type=_float_list, default=None, metavar="F1,..,Fn", help="reference frequencies, Hz")
     h.add_argument("--ref-hold", type=float, default=0.5, help="hold the home pose this long first, s [0.5]")
-    h.add_argument("--max-error-deg", type=float, default=30.0,
-                   help="bound: any joint's L-infinity tracking error, deg [30]")
+    h.add_argument("--max-error-deg", type=float, default=DEFAULT_MAX_ERROR_DEG,
+                   help=f"bound: any joint's L-infinity tracking error, deg; above it a run is not ok "
+                        f"[{DEFAULT_MAX_ERROR_DEG:g}]; the safety layer stops a run at {FOLLOWING_ERROR_STOP_DEG:.3g} deg")
     h.add_argument("--max-saturated-fraction", type=float, default=0.05,
                    help="bound: time at the torque limit, per joint, fraction [0.05]")
     h.add_argument("--can-port", type=int, default=None, metavar="PORT",
