@@ -111,7 +111,7 @@ def cmd_hil(ns: argparse.Namespace) -> int:
     try:
         bdir = build_arm("release", arm)
         info = arm_info(bdir)
-        amp, freq, warnings = reference_for(info, ns.ref_amp, ns.ref_freq)
+        amp, freq, warnings = reference_for(info, ns.ref_amp, ns.ref_freq, bdir)
     except ArmChoiceError as exc:
         print(f"armctl hil: {exc}", file=sys.stderr)
         return 2

@@ -298,6 +298,16 @@ def _confirmation(study: dict[str, Any]) -> list[str]:
                               + ("same" if r["match"] else "differs in " + ", ".join(r["differences"])) for r in rows], ""]
 
 
+def _trajectory_lines(study: dict[str, Any]) -> list[str]:
+    """The reference every run followed: q_d = home + a (1 - cos 2 pi f t), per joint."""
+    t = study.get("trajectory") or {}
+    if not t.get("amp"):
+        return []
+    names = study["arm"]["joint_names"]
+    return [f"Trajectory ({t.get('from', 'the config')}): q_d = home + a (1 - cos 2 pi f t), "
+            + "; ".join(f"{n} a {a:g} rad, f {f:g} Hz" for n, a, f in zip(names, t["amp"], t["freq_hz"])) + "."]
+
+
 def write_report(out: Path, study: dict[str, Any]) -> None:
     arm = study["arm"]
     n = arm["n_joints"]
@@ -312,6 +322,7 @@ def write_report(out: Path, study: dict[str, Any]) -> None:
           "the seeds (Student's t); PM against another method is paired on the same seeds: the ratio of the means, "
           "on how many seeds PM was lower, and the p-value of the paired t-test (two-sided; study.json also has "
           "Wilcoxon's signed-rank p, which with 5 seeds cannot go below 0.0625).",
+          "", *_trajectory_lines(study),
           "", f"Tuning: {study['tuning_procedure']}", "", *_confirmation(study),
           *(["Notes:", "", *[f"- {x}" for x in study.get("notes", [])], ""] if study.get("notes") else [])]
     figs_time: list[str] = []

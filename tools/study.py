@@ -77,24 +77,49 @@ def confirm_over_bus(specs: list[RunSpec], runs: list[dict[str, Any]], where: li
     return {"runs": rows, "all_match": all(r["match"] for r in rows)}
 
 
-def trajectory_for(info: dict[str, Any], traj: Trajectory, what: str) -> tuple[list[str], dict[str, Any], list[str]]:
-    """The config's trajectory on this arm: its amplitudes clipped to the joint ranges, or the arm's
-    own default reference when the config's has another joint count. Controller arguments, the
-    trajectory used, and what was changed."""
+TUNING_SPEEDUP = 1.25  # another arm's tuning trajectory: its own reference this much faster (never the study's)
+
+
+def scenario_friction(cfg: StudyConfig) -> dict[str, list[float]] | None:
+    """The most friction any of the config's scenarios adds, joint by joint (their per-joint values
+    on this arm: study_config.for_arm first): what a trajectory shared by the scenarios must fit."""
+    out: dict[str, list[float]] = {}
+    for sc in cfg.scenarios.values():
+        for k in ("viscous", "coulomb"):
+            v = sc.uncertainty.get(k)
+            if isinstance(v, list):
+                out[k] = [max(a, float(b)) for a, b in zip(out.get(k, [0.0] * len(v)), v)]
+    return out or None
+
+
+def trajectory_for(info: dict[str, Any], traj: Trajectory, what: str, bdir: Path | None = None,
+                   friction: dict[str, list[float]] | None = None, speedup: float = 1.0) -> tuple[
+        list[str], dict[str, Any], list[str]]:
+    """The config's trajectory on this arm when the config gives one for it (by name, or for any
+    arm), else the arm's own reference (arm.json; `speedup` times its frequencies). Either way
+    clipped to the joint ranges and, given the build folder, fitted to the arm's torque limits with
+    the scenarios' friction (tools/arm.py reference_for). Controller arguments, the trajectory used
+    (amplitudes, frequencies, where from), and what was changed."""
     notes: list[str] = []
-    if len(traj.amp) != info["n_joints"]:
-        amp, freq = None, None
+    if traj.arm is not None and traj.arm != info["name"]:
+        amp, freq, source = None, None, f"the arm's own reference (the config's is for arm '{traj.arm}')"
+    elif len(traj.amp) != info["n_joints"]:
+        amp, freq, source = None, None, "the arm's own reference"
         notes.append(f"{what}: the config's trajectory is for {len(traj.amp)} joints, this arm has "
                      f"{info['n_joints']}: the arm's default reference is used (arm.json)")
     else:
-        amp, freq = traj.amp, traj.freq_hz
+        amp, freq, source = traj.amp, traj.freq_hz, f"the config's (for arm '{traj.arm}')" if traj.arm else "the config's"
+    if amp is None and speedup != 1.0:
+        amp = list(info["reference"]["amp"])
+        freq = [round(f * speedup, 6) for f in info["reference"]["freq_hz"]]
+        source += f", {speedup:g}x its frequencies"
     try:
-        amp_c, freq_c, clipped = reference_for(info, amp, freq)
+        amp_c, freq_c, clipped = reference_for(info, amp, freq, bdir, friction)
     except ArmChoiceError as exc:
         raise StudyConfigError(f"{what}: {exc}") from exc
     notes += [f"{what}: {c}" for c in clipped]
     used = Trajectory(amp_c, freq_c)
-    return used.args(), {"amp": amp_c, "freq_hz": freq_c}, notes
+    return used.args(), {"amp": amp_c, "freq_hz": freq_c, "from": source}, notes
 
 
 def _arm_args(arm: ArmRef) -> dict[str, str | None]:
@@ -110,7 +135,8 @@ def setup_for(cfg: StudyConfig, arm: ArmRef, out: Path, jobs: int, cluster: Clus
     bdir = arm_build_dir(preset, arm)
     info = arm_info(bdir)
     cfg = for_arm(cfg, info)
-    traj_args, _, notes = trajectory_for(info, cfg.tuning_trajectory, "tuning trajectory")
+    traj_args, _, notes = trajectory_for(info, cfg.tuning_trajectory, "tuning trajectory", bdir,
+                                         scenario_friction(cfg), TUNING_SPEEDUP)
     base = (bdir / "generated" / "arm" / "design.toml").read_text()
     return TuneSetup(cfg, _arm_args(arm), base, traj_args, out, jobs, cluster, bus), info, notes
 
@@ -126,7 +152,8 @@ def tuning_file(cfg: StudyConfig, arm: ArmRef, preset: str = "release") -> Path:
 def tuning_key(cfg: StudyConfig, info: dict[str, Any], setup: TuneSetup, scenario: str, method: str) -> str:
     """What a tuning result depends on: the arm, its design, the scenario, the method's space,
     the tuning seeds, trajectory, length and budget, the hold."""
-    t = {k: v for k, v in cfg.raw["tuning"].items() if k not in ("space", "file")}
+    # (`arm` names whom the tuning trajectory is for: the trajectory itself is in the key)
+    t = {k: v for k, v in cfg.raw["tuning"].items() if k not in ("space", "file", "arm")}
     # the design's values, not its text (its header comment names the checkout's path); the
     # scenario with its per-joint values on this arm (setup_for)
     doc = {"arm": info["model_hash"], "design": toml_input.loads(setup.base_design),
@@ -219,7 +246,8 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
     cfg = setup.cfg  # the scenarios' per-joint values on this arm
     tuning = tuned(cfg, arm, setup, info, scen_names, methods, retune=retune, trials=trials)
     duration = duration_s or cfg.duration_s
-    traj_args, traj_used, traj_notes = trajectory_for(info, cfg.trajectory, "trajectory")
+    traj_args, traj_used, traj_notes = trajectory_for(info, cfg.trajectory, "trajectory", arm_build_dir("release", arm),
+                                                      scenario_friction(cfg))
     notes += traj_notes
     stale = sorted(f"{m} in {s}" for s in tuning for m, rec in tuning[s].items() if rec.get("code") != code_identity())
     if stale:
