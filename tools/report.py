@@ -334,6 +334,9 @@ def write_report(out: Path, study: dict[str, Any]) -> None:
                *([f"Per-joint values on this arm from the config's `{d['per_joint_from']}`.", ""]
                  if d.get("per_joint_from") else []), "### Verdict", ""]
         md += _verdict(study, sc, labels) + [""]
+        if study.get("commands", {}).get(name):
+            md += [f"One run again on its own (SEED: one of {study['seeds']}; the same run.json results):", "", "```sh",
+                   *study["commands"][name].values(), "```", ""]
         md += ["The paper's claims, with this scenario's evidence:", ""] + _claims(sc) + [""]
         md += ["### Tuning", "", _md_table(
             ["method", "knobs", "objective (sum L-inf, rad)", "trials", "source", "note"],

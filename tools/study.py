@@ -278,6 +278,9 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
                     if bus == SIL and confirm > 0 else None)
     if procs.interrupted is not None:
         raise procs.Interrupted(procs.interrupted)
+    commands = {s: {m: run_command(cfg, arm, s, m, "SEED", duration, tuning[s][m]["knobs"] if m in tuning[s] else None,
+                                   bus, f"runs/hil/{s}-{m}-seed-SEED".replace("+", "-"))
+                    for m in methods} for s in scen_names}
     per: dict[str, dict[str, list[dict[str, Any]]]] = {s: {m: [] for m in methods} for s in scen_names}
     for (s, m, _), run in zip(where, runs):
         per[s][m].append({**run["results"], "transport_telemetry_lost": run.get("transport", {}).get("telemetry_lost_total")})
@@ -296,6 +299,7 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
         "tuning_procedure": procedure(cfg, trials),
         "bus": bus,
         "confirmation": confirmation,
+        "commands": commands,
         "scenarios": {s: scenario_result({**cfg.scenarios[s].as_dict(), "per_joint_from": cfg.scenarios[s].per_joint},
                                          tuning[s], per[s], methods, info["n_joints"])
                       for s in scen_names},
@@ -305,6 +309,68 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
 
     write_report(out, study)
     return study
+
+
+def run_command(cfg: StudyConfig, arm: ArmRef, scenario: str, method: str, seed: int | str, duration: float,
+                knobs: dict[str, Any] | None, bus: str, out: str) -> str:
+    """The `armctl hil` command that runs one run of a study again on its own (the same run.json
+    results: tests/python/test_study_rerun.py)."""
+    import shlex
+
+    parts = ["tools/armctl", "hil", "--bus", bus, "--config", _rel(cfg.path), "--scenario", scenario,
+             "--method", method, "--seed", str(seed), "--duration", f"{duration:g}"]
+    if knobs:
+        parts += ["--knobs", json.dumps(knobs, sort_keys=True)]
+    for opt, p in (("--model", arm.model if not arm.arm_file else None), ("--arm", arm.arm_file),
+                   ("--design", arm.design)):
+        if p is not None:
+            parts += [opt, _rel(p)]
+    return " ".join(shlex.quote(x) for x in [*parts, "--out", out])
+
+
+def _rel(p: Path) -> str:
+    p = Path(p)
+    return str(p.relative_to(REPO)) if p.is_absolute() and p.is_relative_to(REPO) else str(p)
+
+
+def kept_knobs(cfg: StudyConfig, arm: ArmRef, setup: TuneSetup, info: dict[str, Any], scenario: str,
+               method: str) -> dict[str, Any]:
+    """The kept tuning's knobs of a method in a scenario (hil --tuned), only when it was made for this
+    arm, design, scenario and settings; never tunes."""
+    path = tuning_file(cfg, arm)
+    rec = (_read_tuning(path)["scenarios"].get(scenario) or {}).get(method)
+    key = tuning_key(cfg, info, setup, scenario, method)
+    if not isinstance(rec, dict) or rec.get("key") != key:
+        raise StudyConfigError(f"--tuned {method}: no tuning of {method} in {scenario} kept in {path} for this arm and "
+                               f"these settings{' (it was made for others)' if isinstance(rec, dict) else ''}: "
+                               f"tools/armctl tune --scenarios {scenario} --methods {method} (with the same arm "
+                               "options) keeps one")
+    return dict(rec["knobs"])
+
+
+def study_run_spec(cfg: StudyConfig, arm: ArmRef, scenario: str, method: str, seed: int, duration_s: float | None,
+                   knobs: dict[str, Any] | None, tuned_knobs: bool, out: Path, bus: str) -> tuple[
+        RunSpec, dict[str, Any], list[str]]:
+    """One run of a study, exactly as run_study makes it (the same RunSpec: the same results), for
+    `armctl hil --scenario`. The knobs: given, the kept tuning's (tuned_knobs), or none (an untuned
+    method, or the method's firmware defaults)."""
+    if scenario not in cfg.scenarios:
+        raise StudyConfigError(f"--scenario {scenario}: not in {cfg.path} (scenarios: {', '.join(cfg.scenarios)})")
+    if method not in METHODS:
+        raise StudyConfigError(f"--method {method}: not a study method ({', '.join(METHODS)})")
+    setup, info, notes = setup_for(cfg, arm, out.parent / f".{out.name}-tuning", 1, None, bus)
+    rcfg = setup.cfg
+    if tuned_knobs:
+        if METHODS[method][1] is None:
+            raise StudyConfigError(f"--tuned {method}: {method} is not tuned (its weights are fixed)")
+        knobs = kept_knobs(cfg, arm, setup, info, scenario, method)
+    traj_args, traj_used, traj_notes = trajectory_for(info, rcfg.trajectory, "trajectory", arm_build_dir("release", arm),
+                                                      scenario_friction(rcfg))
+    spec = trial_spec(setup, method, rcfg.scenarios[scenario], knobs or {}, seed, out, duration_s or cfg.duration_s,
+                      traj_args, keep_log=True)
+    if method == "pm-paper-weights" and Path(info["design_config"]).resolve() != DEFAULT_DESIGN.resolve():
+        spec = replace(spec, design_text=DEFAULT_DESIGN.read_text())
+    return spec, traj_used, notes + traj_notes
 
 
 def _values(runs: list[dict[str, Any]], key: str, j: int | None) -> list[float]:
