@@ -157,12 +157,15 @@ def prepared_model(bdir: Path) -> Path:
     return bdir / "generated" / "arm" / "arm.xml"
 
 
-def reference_for(info: dict[str, Any], amp: list[float] | None, freq: list[float] | None) -> tuple[
+def reference_for(info: dict[str, Any], amp: list[float] | None, freq: list[float] | None,
+                  bdir: Path | None = None, friction: dict[str, list[float]] | None = None) -> tuple[
         list[float], list[float], list[str]]:
     """The reference for a run: the arm's default (arm.json), or the one asked for with every
-    amplitude clipped so the motion stays inside the joint ranges (gen/arm.py: RANGE_MARGIN); the
-    warnings say what was changed."""
-    from gen.arm import clip_amplitude
+    amplitude clipped so the motion stays inside the joint ranges (gen/arm.py: RANGE_MARGIN) and,
+    given the build folder (its prepared model), so that its inverse dynamics with the friction a
+    scenario adds (viscous, coulomb) fit the arm (gen/arm.py: fit_reference). The warnings say what
+    was changed, one line a joint, naming the torque the asked-for amplitude would need."""
+    from gen.arm import clip_amplitude, fit_reference
 
     n = info["n_joints"]
     want_amp = info["reference"]["amp"] if amp is None else amp
@@ -178,4 +181,14 @@ def reference_for(info: dict[str, Any], amp: list[float] | None, freq: list[floa
             warnings.append(f"reference: {j['name']}: amplitude {a:g} rad clipped to {c:g} rad (its range "
                             f"[{j['range'][0]:g}, {j['range'][1]:g}] from home {j['home']:g})")
         out.append(c)
+    if bdir is not None and (amp is not None or friction):
+        import mujoco
+
+        m = mujoco.MjModel.from_xml_path(str(prepared_model(bdir)))
+        fric = friction or {}
+        fitted, notes = fit_reference(m, [j["home"] for j in info["joints"]], out, list(want_freq),
+                                      [j["torque_limit"] for j in info["joints"]], [j["name"] for j in info["joints"]],
+                                      fric.get("viscous"), fric.get("coulomb"))
+        warnings += [f"reference: {x}" for x in notes]
+        out = fitted
     return out, list(want_freq), warnings

@@ -14,6 +14,7 @@ from gen.atomic_output import OutputError
 from tools.arm import add_arm_arguments
 from tools.methods import method_names
 from tools.outdir import OutDirError, check_out_dir
+from tools.verdict import DEFAULT_MAX_ERROR_DEG, FOLLOWING_ERROR_STOP_DEG
 from tools.build import PRESETS, TARGETS, BuildError, build
 from tools.paths import REPO, build_dir, env_with_repo
 
@@ -67,12 +68,84 @@ def _float_list(text: str) -> list[float]:
     return vals
 
 
+def _hil_study_run(ns: argparse.Namespace) -> int:
+    """hil --scenario: one run of a study, made as the study makes it (tools/study.py
+    study_run_spec) and run as it runs it (tools/runner.py execute)."""
+    import json
+    from dataclasses import asdict
+
+    from tools import study
+    from tools.arm import ArmChoiceError, arm_from_args, arm_info, build_arm, print_arm_warnings
+    from tools.hil import HilError
+    from tools.runner import DONE, execute
+    from tools.study_config import StudyConfigError, load
+
+    try:
+        if ns.tuned is not None and ns.knobs is not None:
+            raise StudyConfigError("--tuned and --knobs: give one")
+        if ns.tuned is not None:
+            if ns.method not in (None, ns.tuned):
+                raise StudyConfigError(f"--tuned {ns.tuned} with --method {ns.method}: give one method")
+            ns.method = ns.tuned
+        knobs = None
+        if ns.knobs is not None:
+            try:
+                knobs = json.loads(ns.knobs)
+            except ValueError as exc:
+                raise StudyConfigError(f"--knobs: not JSON ({exc})") from None
+            if not isinstance(knobs, dict):
+                raise StudyConfigError("--knobs: a JSON object of knob: value")
+        cfg = load(ns.config or study.DEFAULT_CONFIG)
+        arm = arm_from_args(ns)
+        check_out_dir(ns.out)
+        if ns.bus not in study.BUSES:
+            raise StudyConfigError(f"--scenario: --bus {ns.bus}: a study's run runs on {', '.join(study.BUSES)}")
+        print_arm_warnings(arm_info(build_arm("release", arm)), "armctl hil")
+        seed = cfg.seed if ns.seed is None else ns.seed
+        spec, traj, notes = study.study_run_spec(cfg, arm, ns.scenario, ns.method or "pm", seed, ns.duration, knobs,
+                                                 ns.tuned is not None, ns.out.resolve(), ns.bus)
+    except (StudyConfigError, ArmChoiceError, OutDirError) as exc:
+        print(f"armctl hil: {exc}", file=sys.stderr)
+        return 2
+    for n in notes:
+        print(f"armctl hil: {n}", file=sys.stderr)
+    print(f"armctl hil: {ns.method or 'pm'} in scenario {ns.scenario} of {cfg.path}, seed {seed}, "
+          f"{spec.duration_s:g} s, knobs {json.dumps(spec.labels['knobs'])}; trajectory ({traj['from']}) amplitudes "
+          f"{traj['amp']} rad, frequencies {traj['freq_hz']} Hz")
+    (ns.out / DONE).unlink(missing_ok=True)  # run it, never take a kept one
+    try:
+        run = execute(asdict(spec))
+    except HilError as exc:
+        print(f"armctl hil: {exc}", file=sys.stderr)
+        return 1
+    _print_run(run)
+    print(f"results: {ns.out / 'run.json'}  log: {ns.out / 'telemetry.lcmlog'}")
+    from tools import procs
+
+    if procs.interrupted is not None:
+        return 128 + procs.interrupted
+    return 0 if run["results"]["result"] == "ok" else 1
+
+
 def cmd_hil(ns: argparse.Namespace) -> int:
     from tools.arm import ArmChoiceError, arm_from_args, arm_info, build_arm, print_arm_warnings, reference_for
     from tools.hil import HilError, HilOptions, run_hil
     from tools.study_config import DRIVE_PRESETS
     from tools.verdict import Bounds
 
+    if ns.duration is not None and not (math.isfinite(ns.duration) and 0.001 <= ns.duration <= 86400):
+        print(f"armctl hil: --duration: must be in [0.001, 86400] s, got {ns.duration}", file=sys.stderr)
+        return 2
+    if ns.scenario is not None:
+        return _hil_study_run(ns)
+    study_only = [o for o, v in (("--config", ns.config), ("--seed", ns.seed), ("--knobs", ns.knobs),
+                                 ("--tuned", ns.tuned)) if v is not None]
+    if study_only or ns.method == "pm-paper-weights":
+        print(f"armctl hil: {', '.join(study_only) or '--method pm-paper-weights'}: one run of a study: give --scenario",
+              file=sys.stderr)
+        return 2
+    ns.duration = 5.0 if ns.duration is None else ns.duration
+    ns.method = ns.method or "pm"
     if not (math.isfinite(ns.duration) and 0.001 <= ns.duration <= 86400):
         print(f"armctl hil: --duration: must be in [0.001, 86400] s, got {ns.duration}", file=sys.stderr)
         return 2
@@ -82,6 +155,13 @@ def cmd_hil(ns: argparse.Namespace) -> int:
     if (ns.ref_amp is None) != (ns.ref_freq is None):
         print("armctl hil: --ref-amp and --ref-freq go together", file=sys.stderr)
         return 2
+    if not (math.isfinite(ns.max_error_deg) and ns.max_error_deg > 0):
+        print(f"armctl hil: --max-error-deg: must be a number above 0, got {ns.max_error_deg}", file=sys.stderr)
+        return 2
+    if ns.max_error_deg >= FOLLOWING_ERROR_STOP_DEG:
+        print(f"armctl hil: --max-error-deg {ns.max_error_deg:g}: the safety layer stops a run at "
+              f"{FOLLOWING_ERROR_STOP_DEG:.3g} deg of following error first (verdict failed): the bound is never "
+              "reached", file=sys.stderr)
     try:
         arm = arm_from_args(ns)
         check_out_dir(ns.out)
@@ -104,7 +184,7 @@ def cmd_hil(ns: argparse.Namespace) -> int:
     try:
         bdir = build_arm("release", arm)
         info = arm_info(bdir)
-        amp, freq, warnings = reference_for(info, ns.ref_amp, ns.ref_freq)
+        amp, freq, warnings = reference_for(info, ns.ref_amp, ns.ref_freq, bdir)
     except ArmChoiceError as exc:
         print(f"armctl hil: {exc}", file=sys.stderr)
         return 2
@@ -259,9 +339,23 @@ def main(argv: list[str] | None = None) -> int:
     tm.set_defaults(fn=timing.run)
 
     h = sub.add_parser("hil", help="one hardware-in-the-loop run")
-    h.add_argument("--duration", type=float, default=5.0, help="simulated seconds")
-    h.add_argument("--method", default="pm", choices=method_names(),
-                   help="the firmware's methods (the core's method table, firmware/core/src/methods.c) [pm]")
+    h.add_argument("--duration", type=float, default=None, help="simulated seconds [5; with --scenario the config's]")
+    from tools.study_config import METHODS as STUDY_METHODS
+
+    h.add_argument("--method", default=None,
+                   choices=(*method_names(), *(m for m in STUDY_METHODS if m not in method_names())),
+                   help="the firmware's methods (the core's method table, firmware/core/src/methods.c), and the "
+                        "study's variants [pm; pm-paper-weights (pm with the paper's design) with --scenario only]")
+    g = h.add_argument_group("one run of a study, on its own (the same run.json results as the study's)")
+    g.add_argument("--scenario", default=None, metavar="NAME",
+                   help="the study config's scenario: its uncertainty, drives, bus timing, trajectory and hold")
+    g.add_argument("--config", type=Path, default=None, metavar="FILE",
+                   help="the study config [tools/studies/paper.toml]")
+    g.add_argument("--seed", type=int, default=None, metavar="N", help="the uncertainty's seed [the config's first]")
+    g.add_argument("--knobs", default=None, metavar="JSON",
+                   help="the method's tuned knobs, as the study's report gives them (e.g. '{\"wn\": 40}')")
+    g.add_argument("--tuned", default=None, metavar="METHOD",
+                   help="the kept tuning's knobs of METHOD in the scenario (and --method METHOD)")
     h.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
     h.add_argument("--bus", choices=("auto", "udp", "vcan", "vm", "sil"), default="auto",
                    help="auto: vcan if this kernel has SocketCAN and vcan0, vcan1 (one per bus of "
@@ -278,8 +372,9 @@ def main(argv: list[str] | None = None) -> int:
                         "to the joint ranges with a warning [the arm's default]")
     h.add_argument("--ref-freq", type=_float_list, default=None, metavar="F1,..,Fn", help="reference frequencies, Hz")
     h.add_argument("--ref-hold", type=float, default=0.5, help="hold the home pose this long first, s [0.5]")
-    h.add_argument("--max-error-deg", type=float, default=30.0,
-                   help="bound: any joint's L-infinity tracking error, deg [30]")
+    h.add_argument("--max-error-deg", type=float, default=DEFAULT_MAX_ERROR_DEG,
+                   help=f"bound: any joint's L-infinity tracking error, deg; above it a run is not ok "
+                        f"[{DEFAULT_MAX_ERROR_DEG:g}]; the safety layer stops a run at {FOLLOWING_ERROR_STOP_DEG:.3g} deg")
     h.add_argument("--max-saturated-fraction", type=float, default=0.05,
                    help="bound: time at the torque limit, per joint, fraction [0.05]")
     h.add_argument("--can-port", type=int, default=None, metavar="PORT",

@@ -18,6 +18,7 @@ import numpy as np  # noqa: E402
 
 from gen.atomic_output import write_text_atomic  # noqa: E402
 from tools.telemetry_log import read_log  # noqa: E402
+from tools.verdict import FOLLOWING_ERROR_STOP_DEG, left_tracking_bound, stopped_by_following_error  # noqa: E402
 
 # Kim & Kim 2024, Tables 1-3 (Table 1 from their simulation, Tables 2-3 from their experiment).
 PAPER_TABLE1 = {"usde-smc": [0.0292, 0.0950, 0.0320, 0.0462, 0.0157, 0.0157],
@@ -316,10 +317,15 @@ def _claims(sc: dict[str, Any]) -> list[str]:
                    + ", ".join(f"PM/{b} {r:.4f}" for b, r in pw) + ".")
     if "gh2" in sc["stats"]:
         res = sc["stats"]["gh2"]["results"]
-        unbounded = sum(1 for r in res if r in ("diverged", "tracking-bound-exceeded"))
+        runs = sc.get("runs", {}).get("gh2") or [{"result": r} for r in res]
+        lost = [r for r in runs if left_tracking_bound(r)]
+        stops = sum(1 for r in lost if stopped_by_following_error(r))
+        how = (f" ({stops} stopped by the safety layer's following-error stop at {FOLLOWING_ERROR_STOP_DEG:.3g} deg)"
+               if stops else "")
         out.append(f"- Example 1 (the generalized-H2 controller alone, no estimator, loses track under 5 % "
-                   f"uncertainty): {'holds' if unbounded == len(res) else 'does not hold'} here: {unbounded} of "
-                   f"{len(res)} gh2 runs diverged or left the tracking bound (results: {', '.join(sorted(set(res)))}).")
+                   f"uncertainty): {'holds' if len(lost) == len(runs) else 'does not hold'} here: {len(lost)} of "
+                   f"{len(runs)} gh2 runs diverged or left the tracking bound{how} (results: "
+                   f"{', '.join(sorted(set(res)))}).")
     return out
 
 
@@ -344,6 +350,16 @@ def _confirmation(study: dict[str, Any]) -> list[str]:
                               + ("same" if r["match"] else "differs in " + ", ".join(r["differences"])) for r in rows], ""]
 
 
+def _trajectory_lines(study: dict[str, Any]) -> list[str]:
+    """The reference every run followed: q_d = home + a (1 - cos 2 pi f t), per joint."""
+    t = study.get("trajectory") or {}
+    if not t.get("amp"):
+        return []
+    names = study["arm"]["joint_names"]
+    return [f"Trajectory ({t.get('from', 'the config')}): q_d = home + a (1 - cos 2 pi f t), "
+            + "; ".join(f"{n} a {a:g} rad, f {f:g} Hz" for n, a, f in zip(names, t["amp"], t["freq_hz"])) + "."]
+
+
 def write_report(out: Path, study: dict[str, Any]) -> None:
     arm = study["arm"]
     n = arm["n_joints"]
@@ -358,6 +374,7 @@ def write_report(out: Path, study: dict[str, Any]) -> None:
           "the seeds (Student's t); PM against another method is paired on the same seeds: the ratio of the means, "
           "on how many seeds PM was lower, and the p-value of the paired t-test (two-sided; study.json also has "
           "Wilcoxon's signed-rank p, which with 5 seeds cannot go below 0.0625).",
+          "", *_trajectory_lines(study),
           "", f"Tuning: {study['tuning_procedure']}", "", *_confirmation(study),
           *(["Notes:", "", *[f"- {x}" for x in study.get("notes", [])], ""] if study.get("notes") else [])]
     for i, (name, sc) in enumerate(study["scenarios"].items()):
@@ -368,6 +385,9 @@ def write_report(out: Path, study: dict[str, Any]) -> None:
                *([f"Per-joint values on this arm from the config's `{d['per_joint_from']}`.", ""]
                  if d.get("per_joint_from") else []), "### Verdict", ""]
         md += _verdict(study, sc, labels) + [""]
+        if study.get("commands", {}).get(name):
+            md += [f"One run again on its own (SEED: one of {study['seeds']}; the same run.json results):", "", "```sh",
+                   *study["commands"][name].values(), "```", ""]
         md += ["The paper's claims, with this scenario's evidence:", ""] + _claims(sc) + [""]
         md += ["### Tuning", "", _md_table(
             ["method", "knobs", "objective (sum L-inf, rad)", "trials", "source", "note"],

@@ -77,24 +77,49 @@ def confirm_over_bus(specs: list[RunSpec], runs: list[dict[str, Any]], where: li
     return {"runs": rows, "all_match": all(r["match"] for r in rows)}
 
 
-def trajectory_for(info: dict[str, Any], traj: Trajectory, what: str) -> tuple[list[str], dict[str, Any], list[str]]:
-    """The config's trajectory on this arm: its amplitudes clipped to the joint ranges, or the arm's
-    own default reference when the config's has another joint count. Controller arguments, the
-    trajectory used, and what was changed."""
+TUNING_SPEEDUP = 1.25  # another arm's tuning trajectory: its own reference this much faster (never the study's)
+
+
+def scenario_friction(cfg: StudyConfig) -> dict[str, list[float]] | None:
+    """The most friction any of the config's scenarios adds, joint by joint (their per-joint values
+    on this arm: study_config.for_arm first): what a trajectory shared by the scenarios must fit."""
+    out: dict[str, list[float]] = {}
+    for sc in cfg.scenarios.values():
+        for k in ("viscous", "coulomb"):
+            v = sc.uncertainty.get(k)
+            if isinstance(v, list):
+                out[k] = [max(a, float(b)) for a, b in zip(out.get(k, [0.0] * len(v)), v)]
+    return out or None
+
+
+def trajectory_for(info: dict[str, Any], traj: Trajectory, what: str, bdir: Path | None = None,
+                   friction: dict[str, list[float]] | None = None, speedup: float = 1.0) -> tuple[
+        list[str], dict[str, Any], list[str]]:
+    """The config's trajectory on this arm when the config gives one for it (by name, or for any
+    arm), else the arm's own reference (arm.json; `speedup` times its frequencies). Either way
+    clipped to the joint ranges and, given the build folder, fitted to the arm's torque limits with
+    the scenarios' friction (tools/arm.py reference_for). Controller arguments, the trajectory used
+    (amplitudes, frequencies, where from), and what was changed."""
     notes: list[str] = []
-    if len(traj.amp) != info["n_joints"]:
-        amp, freq = None, None
+    if traj.arm is not None and traj.arm != info["name"]:
+        amp, freq, source = None, None, f"the arm's own reference (the config's is for arm '{traj.arm}')"
+    elif len(traj.amp) != info["n_joints"]:
+        amp, freq, source = None, None, "the arm's own reference"
         notes.append(f"{what}: the config's trajectory is for {len(traj.amp)} joints, this arm has "
                      f"{info['n_joints']}: the arm's default reference is used (arm.json)")
     else:
-        amp, freq = traj.amp, traj.freq_hz
+        amp, freq, source = traj.amp, traj.freq_hz, f"the config's (for arm '{traj.arm}')" if traj.arm else "the config's"
+    if amp is None and speedup != 1.0:
+        amp = list(info["reference"]["amp"])
+        freq = [round(f * speedup, 6) for f in info["reference"]["freq_hz"]]
+        source += f", {speedup:g}x its frequencies"
     try:
-        amp_c, freq_c, clipped = reference_for(info, amp, freq)
+        amp_c, freq_c, clipped = reference_for(info, amp, freq, bdir, friction)
     except ArmChoiceError as exc:
         raise StudyConfigError(f"{what}: {exc}") from exc
     notes += [f"{what}: {c}" for c in clipped]
     used = Trajectory(amp_c, freq_c)
-    return used.args(), {"amp": amp_c, "freq_hz": freq_c}, notes
+    return used.args(), {"amp": amp_c, "freq_hz": freq_c, "from": source}, notes
 
 
 def _arm_args(arm: ArmRef) -> dict[str, str | None]:
@@ -110,7 +135,8 @@ def setup_for(cfg: StudyConfig, arm: ArmRef, out: Path, jobs: int, cluster: Clus
     bdir = arm_build_dir(preset, arm)
     info = arm_info(bdir)
     cfg = for_arm(cfg, info)
-    traj_args, _, notes = trajectory_for(info, cfg.tuning_trajectory, "tuning trajectory")
+    traj_args, _, notes = trajectory_for(info, cfg.tuning_trajectory, "tuning trajectory", bdir,
+                                         scenario_friction(cfg), TUNING_SPEEDUP)
     base = (bdir / "generated" / "arm" / "design.toml").read_text()
     return TuneSetup(cfg, _arm_args(arm), base, traj_args, out, jobs, cluster, bus), info, notes
 
@@ -126,7 +152,8 @@ def tuning_file(cfg: StudyConfig, arm: ArmRef, preset: str = "release") -> Path:
 def tuning_key(cfg: StudyConfig, info: dict[str, Any], setup: TuneSetup, scenario: str, method: str) -> str:
     """What a tuning result depends on: the arm, its design, the scenario, the method's space,
     the tuning seeds, trajectory, length and budget, the hold."""
-    t = {k: v for k, v in cfg.raw["tuning"].items() if k not in ("space", "file")}
+    # (`arm` names whom the tuning trajectory is for: the trajectory itself is in the key)
+    t = {k: v for k, v in cfg.raw["tuning"].items() if k not in ("space", "file", "arm")}
     # the design's values, not its text (its header comment names the checkout's path); the
     # scenario with its per-joint values on this arm (setup_for)
     doc = {"arm": info["model_hash"], "design": toml_input.loads(setup.base_design),
@@ -219,7 +246,8 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
     cfg = setup.cfg  # the scenarios' per-joint values on this arm
     tuning = tuned(cfg, arm, setup, info, scen_names, methods, retune=retune, trials=trials)
     duration = duration_s or cfg.duration_s
-    traj_args, traj_used, traj_notes = trajectory_for(info, cfg.trajectory, "trajectory")
+    traj_args, traj_used, traj_notes = trajectory_for(info, cfg.trajectory, "trajectory", arm_build_dir("release", arm),
+                                                      scenario_friction(cfg))
     notes += traj_notes
     stale = sorted(f"{m} in {s}" for s in tuning for m, rec in tuning[s].items() if rec.get("code") != code_identity())
     if stale:
@@ -250,6 +278,9 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
                     if bus == SIL and confirm > 0 else None)
     if procs.interrupted is not None:
         raise procs.Interrupted(procs.interrupted)
+    commands = {s: {m: run_command(cfg, arm, s, m, "SEED", duration, tuning[s][m]["knobs"] if m in tuning[s] else None,
+                                   bus, f"runs/hil/{s}-{m}-seed-SEED".replace("+", "-"))
+                    for m in methods} for s in scen_names}
     per: dict[str, dict[str, list[dict[str, Any]]]] = {s: {m: [] for m in methods} for s in scen_names}
     for (s, m, _), run in zip(where, runs):
         per[s][m].append({**run["results"], "transport_telemetry_lost": run.get("transport", {}).get("telemetry_lost_total")})
@@ -268,6 +299,7 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
         "tuning_procedure": procedure(cfg, trials),
         "bus": bus,
         "confirmation": confirmation,
+        "commands": commands,
         "scenarios": {s: scenario_result({**cfg.scenarios[s].as_dict(), "per_joint_from": cfg.scenarios[s].per_joint},
                                          tuning[s], per[s], methods, info["n_joints"])
                       for s in scen_names},
@@ -277,6 +309,68 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
 
     write_report(out, study)
     return study
+
+
+def run_command(cfg: StudyConfig, arm: ArmRef, scenario: str, method: str, seed: int | str, duration: float,
+                knobs: dict[str, Any] | None, bus: str, out: str) -> str:
+    """The `armctl hil` command that runs one run of a study again on its own (the same run.json
+    results: tests/python/test_study_rerun.py)."""
+    import shlex
+
+    parts = ["tools/armctl", "hil", "--bus", bus, "--config", _rel(cfg.path), "--scenario", scenario,
+             "--method", method, "--seed", str(seed), "--duration", f"{duration:g}"]
+    if knobs:
+        parts += ["--knobs", json.dumps(knobs, sort_keys=True)]
+    for opt, p in (("--model", arm.model if not arm.arm_file else None), ("--arm", arm.arm_file),
+                   ("--design", arm.design)):
+        if p is not None:
+            parts += [opt, _rel(p)]
+    return " ".join(shlex.quote(x) for x in [*parts, "--out", out])
+
+
+def _rel(p: Path) -> str:
+    p = Path(p)
+    return str(p.relative_to(REPO)) if p.is_absolute() and p.is_relative_to(REPO) else str(p)
+
+
+def kept_knobs(cfg: StudyConfig, arm: ArmRef, setup: TuneSetup, info: dict[str, Any], scenario: str,
+               method: str) -> dict[str, Any]:
+    """The kept tuning's knobs of a method in a scenario (hil --tuned), only when it was made for this
+    arm, design, scenario and settings; never tunes."""
+    path = tuning_file(cfg, arm)
+    rec = (_read_tuning(path)["scenarios"].get(scenario) or {}).get(method)
+    key = tuning_key(cfg, info, setup, scenario, method)
+    if not isinstance(rec, dict) or rec.get("key") != key:
+        raise StudyConfigError(f"--tuned {method}: no tuning of {method} in {scenario} kept in {path} for this arm and "
+                               f"these settings{' (it was made for others)' if isinstance(rec, dict) else ''}: "
+                               f"tools/armctl tune --scenarios {scenario} --methods {method} (with the same arm "
+                               "options) keeps one")
+    return dict(rec["knobs"])
+
+
+def study_run_spec(cfg: StudyConfig, arm: ArmRef, scenario: str, method: str, seed: int, duration_s: float | None,
+                   knobs: dict[str, Any] | None, tuned_knobs: bool, out: Path, bus: str) -> tuple[
+        RunSpec, dict[str, Any], list[str]]:
+    """One run of a study, exactly as run_study makes it (the same RunSpec: the same results), for
+    `armctl hil --scenario`. The knobs: given, the kept tuning's (tuned_knobs), or none (an untuned
+    method, or the method's firmware defaults)."""
+    if scenario not in cfg.scenarios:
+        raise StudyConfigError(f"--scenario {scenario}: not in {cfg.path} (scenarios: {', '.join(cfg.scenarios)})")
+    if method not in METHODS:
+        raise StudyConfigError(f"--method {method}: not a study method ({', '.join(METHODS)})")
+    setup, info, notes = setup_for(cfg, arm, out.parent / f".{out.name}-tuning", 1, None, bus)
+    rcfg = setup.cfg
+    if tuned_knobs:
+        if METHODS[method][1] is None:
+            raise StudyConfigError(f"--tuned {method}: {method} is not tuned (its weights are fixed)")
+        knobs = kept_knobs(cfg, arm, setup, info, scenario, method)
+    traj_args, traj_used, traj_notes = trajectory_for(info, rcfg.trajectory, "trajectory", arm_build_dir("release", arm),
+                                                      scenario_friction(rcfg))
+    spec = trial_spec(setup, method, rcfg.scenarios[scenario], knobs or {}, seed, out, duration_s or cfg.duration_s,
+                      traj_args, keep_log=True)
+    if method == "pm-paper-weights" and Path(info["design_config"]).resolve() != DEFAULT_DESIGN.resolve():
+        spec = replace(spec, design_text=DEFAULT_DESIGN.read_text())
+    return spec, traj_used, notes + traj_notes
 
 
 def _values(runs: list[dict[str, Any]], key: str, j: int | None) -> list[float]:

@@ -48,6 +48,7 @@ class StudyConfigError(ValueError):
 class Trajectory:
     amp: list[float]
     freq_hz: list[float]
+    arm: str | None = None  # the arm (by name, arm.json) these are for; None: any arm given them
 
     def args(self) -> list[str]:
         return ["--ref-amp", ",".join(f"{a:g}" for a in self.amp), "--ref-freq", ",".join(f"{f:g}" for f in self.freq_hz)]
@@ -159,7 +160,10 @@ def _trajectory(d: dict[str, Any], where: str) -> Trajectory:
                                    f"got {vals!r}")
     if len(amp) != len(freq):
         raise StudyConfigError(f"{where}.amp: {len(amp)} values, but freq_hz has {len(freq)} (one of each per joint)")
-    return Trajectory([float(a) for a in amp], [float(f) for f in freq])
+    arm = d.get("arm")
+    if arm is not None and (not isinstance(arm, str) or not arm):
+        raise StudyConfigError(f"{where}.arm: the name of the arm these amplitudes are for (arm.json name), got {arm!r}")
+    return Trajectory([float(a) for a in amp], [float(f) for f in freq], arm)
 
 
 def _scenario(name: str, d: Any) -> Scenario:
@@ -310,7 +314,7 @@ def load(path: Path) -> StudyConfig:
     if missing or not chosen:
         raise StudyConfigError(f"study.scenarios: {missing or 'none'} not defined (defined: {', '.join(scenarios)})")
     tuning = _get(data, "tuning", "study", dict)
-    t_known = {"seeds", "duration_s", "amp", "freq_hz", "objective", "trials", "batch", "widen", "file", "space"}
+    t_known = {"seeds", "duration_s", "amp", "freq_hz", "arm", "objective", "trials", "batch", "widen", "file", "space"}
     t_unknown = set(tuning) - t_known
     if t_unknown:
         raise StudyConfigError(f"tuning: unknown field(s) {sorted(t_unknown)} (known: {', '.join(sorted(t_known))})")

@@ -13,7 +13,9 @@ is listed in verdict_reasons):
   beyond those sent, duplicate sequence numbers, numbers at or beyond what the sender sent, steps
   that contradict their number: tools/run_analysis.py telemetry_accounting), frames the kernel dropped on a full
   receive queue, the logger failed, or the metrics do not cover every period of the trajectory;
-- tracking-bound-exceeded: a joint's L-infinity tracking error above bounds.max_error_deg;
+- tracking-bound-exceeded: a joint's L-infinity tracking error above bounds.max_error_deg (2 deg
+  unless set); a run the safety layer stopped for its following error (0.5 rad, FOLLOWING_ERROR_STOP_DEG)
+  is failed, and its reasons name both the stop and the bound it left;
 - torque-limited: a joint at its torque limit (or its torque-rate limit, the safety layer's slew
   limit) longer than bounds.max_saturated_fraction of the time;
 - commands-missed: the drives missed more commands than bounds.max_commands_missed, or got any late.
@@ -26,16 +28,37 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 DIVERGED_DEG = 180.0  # an error of half a turn: the arm is no longer where the controller thinks
+DEFAULT_MAX_ERROR_DEG = 2.0  # the tracking bound a run must meet to be "ok" (armctl hil --max-error-deg)
+# The firmware safety layer's following-error stop (firmware/core/src/controller.c: 0.5 rad on every
+# joint): a run whose error grows past it is stopped (safe-stop, verdict failed) before it can be seen
+# larger. The tracking bound sits far below it, so a run the stop ended has left the bound first.
+FOLLOWING_ERROR_STOP_DEG = math.degrees(0.5)
+
+
+def stopped_by_following_error(results: dict[str, Any]) -> bool:
+    """The safety layer stopped this run because a joint's following error passed its stop."""
+    return "following error" in str(results.get("final_fault") or "")
+
+
+def left_tracking_bound(results: dict[str, Any]) -> bool:
+    """The run lost track: it diverged, exceeded the tracking bound, or the safety layer stopped it
+    for its following error (an error beyond FOLLOWING_ERROR_STOP_DEG, above any tracking bound)."""
+    if results.get("result") in ("diverged", "tracking-bound-exceeded") or stopped_by_following_error(results):
+        return True
+    bound = (results.get("bounds") or {}).get("max_error_deg")
+    errs = results.get("tracking_max_abs_deg") or []
+    return bound is not None and any(not math.isfinite(e) or e > bound for e in errs)
 
 
 @dataclass(frozen=True)
 class Bounds:
-    max_error_deg: float = 30.0
+    max_error_deg: float = DEFAULT_MAX_ERROR_DEG
     max_saturated_fraction: float = 0.05
     max_commands_missed: int = 0
 
     def as_dict(self) -> dict[str, Any]:
         return {**asdict(self), "diverged_beyond_deg": DIVERGED_DEG,
+                "following_error_stop_deg": round(FOLLOWING_ERROR_STOP_DEG, 4),
                 "also": "every period asked for ran, no telemetry lost, every process ended well"}
 
 
@@ -58,7 +81,11 @@ def judge(results: dict[str, Any], transport: dict[str, Any], controller: dict[s
         add("diverged", "tracking error beyond %g deg on %s" % (
             DIVERGED_DEG, ", ".join(names[i] if i < len(names) else f"joint {i + 1}" for i in bad)))
     if ctl_result not in (0, 5):
-        add("failed", f"controller: {controller.get('reason') or f'exit {ctl_result}'}")
+        why = controller.get('reason') or f'exit {ctl_result}'
+        if "following error" in str(controller.get("final_fault") or why):
+            why += (f" (the safety layer's stop at {FOLLOWING_ERROR_STOP_DEG:.3g} deg, beyond the tracking bound of "
+                    f"{bounds.max_error_deg:g} deg)")
+        add("failed", f"controller: {why}")
     if sim.get("result") not in ("ok", "interrupted", "diverged"):
         add("failed", f"simulator: {sim.get('reason') or sim.get('result')}")
     simulated, sent = results.get("simulated_periods"), results.get("controller_bus_periods")

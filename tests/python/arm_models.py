@@ -72,3 +72,29 @@ def materials_variant(out: Path) -> Path:
     out.parent.mkdir(parents=True, exist_ok=True)
     tree.write(out)
     return out
+
+
+def heavy_wrist_variant(tmp_path: Path) -> Path:
+    """robosuite's UR5e with the wrists of the arms in issue 21: a Sawyer's 10 N m s/rad damping
+    on 9 N m wrist motors, and a Jaco's last joint (armature 2 kg m^2, 1 N m friction, a 7 N m
+    motor). The default reference of the importer asks more than these wrists have."""
+    tree = ET.parse(UR5E)
+    root = tree.getroot()
+    wrists = {"wrist_1_joint": (0.0, 10.0, 0.0, 9.0), "wrist_2_joint": (0.0, 10.0, 0.0, 9.0),
+              "wrist_3_joint": (2.0, 0.0, 1.0, 7.0)}  # armature, damping, frictionloss, torque limit
+    for joint in root.iter("joint"):
+        if joint.get("name") in wrists:
+            arm_, damp, fric, _ = wrists[joint.get("name", "")]
+            joint.set("armature", str(arm_))
+            joint.set("damping", str(damp))
+            joint.set("frictionloss", str(fric))
+    act = root.find("actuator")
+    assert act is not None
+    for motor in act:
+        if motor.get("joint") in wrists:
+            lim = wrists[motor.get("joint", "")][3]
+            motor.set("ctrlrange", f"{-lim:g} {lim:g}")
+            motor.set("ctrllimited", "true")
+    out = tmp_path / "ur5e_heavy_wrist.xml"
+    tree.write(out)
+    return out

@@ -48,7 +48,7 @@ def test_a_good_run_is_ok() -> None:
     ({"exits": {"logger": 1}}, "incomplete", "logger failed"),
     ({"results": {"periods_running": 999}}, "incomplete", "cover 999 of the trajectory's 1000"),
     ({"results": {"estimation_periods": 10}}, "incomplete", "estimation error covers 10"),
-    ({"results": {"tracking_max_abs_deg": [0.5, 31.0]}}, "tracking-bound-exceeded", "b: max |e| 31 deg > 30"),
+    ({"results": {"tracking_max_abs_deg": [0.5, 3.0]}}, "tracking-bound-exceeded", "b: max |e| 3 deg > 2 deg"),
     ({"results": {"saturated_fraction": [0.2, 0.0]}}, "torque-limited", "a: at its torque or torque-rate limit 20.0 %"),
     ({"results": {"commands_missed": 2}}, "commands-missed", "missed 2"),
     ({"results": {"commands_missed": None}}, "commands-missed", "missed None"),
@@ -98,3 +98,48 @@ def test_hil_exits_non_zero_and_states_the_bounds_it_missed(tmp_path: Path) -> N
     assert res["result"] == "tracking-bound-exceeded" and "tracking-bound-exceeded" in r.stdout
     assert res["bounds"]["max_error_deg"] == 0.001 and res["bounds"]["max_commands_missed"] == 0
     assert all(x.startswith("tracking-bound-exceeded") for x in res["verdict_reasons"])
+
+
+def test_the_default_tracking_bound_is_a_few_degrees() -> None:
+    """A run 20 deg off on one joint is not ok by default (the bound is 2 deg, not 30)."""
+    kind, reasons = verdict(results={"tracking_max_abs_deg": [0.5, 20.1]})
+    assert Bounds().max_error_deg == 2.0
+    assert kind == "tracking-bound-exceeded" and "20.1 deg > 2 deg" in reasons[0]
+    assert verdict(results={"tracking_max_abs_deg": [0.5, 1.9]})[0] == "ok"
+
+
+def test_a_following_error_stop_names_the_stop_and_the_bound() -> None:
+    """The safety layer's 0.5 rad stop and the tracking bound, reported together: the run failed, and
+    it left the 2 deg bound on the way there."""
+    from tools.verdict import FOLLOWING_ERROR_STOP_DEG, left_tracking_bound
+
+    why = "following error above its limit"
+    kind, reasons = verdict(results={"tracking_max_abs_deg": [0.5, 28.6]},
+                            controller={"result": 4, "reason": why, "final_fault": why})
+    assert kind == "failed"
+    assert any(f"stop at {FOLLOWING_ERROR_STOP_DEG:.3g} deg, beyond the tracking bound of 2 deg" in r for r in reasons)
+    assert any(r.startswith("tracking-bound-exceeded") for r in reasons)
+    assert Bounds().as_dict()["following_error_stop_deg"] == pytest.approx(28.6479, abs=1e-3)
+    assert left_tracking_bound({"result": "failed", "final_fault": why})
+    assert not left_tracking_bound({"result": "failed", "final_fault": "joint velocity above its limit",
+                                    "tracking_max_abs_deg": [0.1], "bounds": {"max_error_deg": 2.0}})
+
+
+def test_example_1_counts_runs_the_following_error_stop_ended() -> None:
+    """issue 21, item 6: two gh2 runs stopped for their following error lost track: Example 1 holds."""
+    from tools.report import _claims
+
+    why = "following error above its limit"
+    runs = [{"result": "failed", "final_fault": why, "tracking_max_abs_deg": [28.6]} for _ in range(2)]
+    sc = {"pm_versus": {}, "stats": {"gh2": {"results": ["failed", "failed"]}}, "runs": {"gh2": runs}}
+    line = [c for c in _claims(sc) if "Example 1" in c][0]
+    assert "holds here: 2 of 2 gh2 runs" in line and "following-error stop" in line
+    ok = [{"result": "ok", "final_fault": "none", "tracking_max_abs_deg": [0.1], "bounds": {"max_error_deg": 2.0}}]
+    sc = {"pm_versus": {}, "stats": {"gh2": {"results": ["ok"]}}, "runs": {"gh2": ok}}
+    assert "does not hold here: 0 of 1" in [c for c in _claims(sc) if "Example 1" in c][0]
+
+
+def test_hil_takes_the_tracking_bound() -> None:
+    r = subprocess.run([str(REPO / "tools" / "armctl"), "hil", "--max-error-deg", "0", "--out", "/tmp/x-none"],
+                       cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "--max-error-deg: must be a number above 0" in r.stderr

@@ -1,0 +1,93 @@
+"""A reference every arm can follow (issue 21, item 2): the default reference is fitted to the arm's
+torque limits with its armature, damping and friction; a requested one that asks for more is clipped
+with a warning naming the joint and the torque; the bundled arm's reference and study trajectory are
+unchanged (they fit)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from pathlib import Path
+
+import mujoco
+import pytest
+
+from arm_models import heavy_wrist_variant
+from gen.arm import (DEFAULT_DESIGN, DEFAULT_MODEL, REF_TORQUE_FRACTION, load_arm_file, prepare,
+                     reference_peak_fraction)
+from tools.paths import REPO
+
+
+def _prepared(model: Path):
+    prep = prepare(load_arm_file(None, model), DEFAULT_DESIGN)
+    return prep, mujoco.MjModel.from_xml_string(prep.xml)
+
+
+def test_the_bundled_arms_default_reference_is_unchanged() -> None:
+    prep, _ = _prepared(DEFAULT_MODEL)
+    ref = prep.info["reference"]
+    assert ref["amp"] == [0.25, 0.28, 0.31, 0.34, 0.37, 0.4]
+    assert ref["freq_hz"] == [0.2, 0.25, 0.3, 0.35, 0.4, 0.45]
+    assert max(ref["peak_torque_fraction"]) < REF_TORQUE_FRACTION
+
+
+def test_a_heavy_wrists_default_reference_fits_its_torque_limits(tmp_path: Path) -> None:
+    prep, m = _prepared(heavy_wrist_variant(tmp_path))
+    ref, joints = prep.info["reference"], prep.info["joints"]
+    frac = reference_peak_fraction(m, [j["home"] for j in joints], ref["amp"], ref["freq_hz"],
+                                   [j["torque_limit"] for j in joints])
+    assert max(frac) <= REF_TORQUE_FRACTION + 1e-6
+    assert min(frac[3:]) > 0.4  # scaled no more than it needs (steps of 10 %)
+    assert ref["amp"][:3] == [0.25, 0.28, 0.31]  # the shoulders and elbow fit as they were
+    note = [w for w in prep.info["warnings"] if w.startswith("default reference")][0]
+    assert "wrist_3_joint: amplitude 0.4 rad scaled to" in note and "7.4 N m of its 7 N m" in note
+
+
+def test_a_requested_reference_is_clipped_with_one_line_a_joint(tmp_path: Path) -> None:
+    model = heavy_wrist_variant(tmp_path)
+    r = subprocess.run([str(REPO / "tools" / "armctl"), "hil", "--bus", "sil", "--duration", "1", "--model", str(model),
+                        "--ref-amp", "0.1,0.1,0.1,0.1,0.1,0.6", "--ref-freq", "0.2,0.2,0.2,0.2,0.2,0.5",
+                        "--out", str(tmp_path / "run")], cwd=REPO, capture_output=True, text=True, timeout=900)
+    lines = [x for x in r.stderr.splitlines() if x.startswith("armctl hil: reference:")]
+    assert len(lines) == 1, r.stderr
+    assert "wrist_3_joint: amplitude 0.6 rad scaled to" in lines[0] and "12.8 N m of its 7 N m" in lines[0]
+    run = json.loads((tmp_path / "run" / "run.json").read_text())
+    args = run["results"]["controller_args"]
+    amp = [float(x) for x in args[args.index("--ref-amp") + 1].split(",")]
+    assert amp[:5] == [0.1] * 5 and amp[5] < 0.2
+    assert run["results"]["result"] == "ok", run["results"]["verdict_reasons"]
+
+
+def test_a_study_uses_the_arms_own_reference_unless_named(tmp_path: Path) -> None:
+    """The paper config's trajectory is for the bundled arm by name: the bundled arm runs it as it
+    is (its documented numbers), any other arm its own reference; a shared trajectory fits the most
+    friction of the config's scenarios."""
+    from tools import study
+    from tools.study_config import Trajectory, for_arm, load
+
+    cfg = load(study.DEFAULT_CONFIG)
+    info = json.loads((REPO / "build" / "release" / "generated" / "arm" / "arm.json").read_text())
+    bdir = REPO / "build" / "release"
+    _, used, notes = study.trajectory_for(info, cfg.trajectory, "trajectory", bdir,
+                                          study.scenario_friction(for_arm(cfg, info)))
+    assert used["amp"] == [0.4, 0.3, 0.35, 0.5, 0.5, 0.6] and used["freq_hz"] == [0.2, 0.3, 0.2, 0.4, 0.3, 0.5]
+    assert not notes
+    other = {**info, "name": "another_arm"}
+    _, used, _ = study.trajectory_for(other, cfg.trajectory, "trajectory", bdir)
+    assert used["amp"] == info["reference"]["amp"] and "own reference" in used["from"]
+    # too much friction for this trajectory: clipped on the joint that lacks torque, named
+    _, used, notes = study.trajectory_for(info, Trajectory([0.1] * 6, [0.3] * 6), "trajectory", bdir,
+                                          {"viscous": [0, 0, 0, 0, 0, 200.0], "coulomb": [0.0] * 6})
+    assert used["amp"][:5] == [0.1] * 5 and used["amp"][5] < 0.1
+    assert len(notes) == 1 and "wrist_3" in notes[0] and "N m of its 28 N m" in notes[0]
+
+
+@pytest.mark.parametrize("bad", ["", 3])
+def test_a_trajectorys_arm_is_a_name(tmp_path: Path, bad) -> None:
+    from tools.study_config import StudyConfigError, load
+
+    text = (REPO / "tools" / "studies" / "paper.toml").read_text().replace('arm = "ur5e_arm"           #',
+                                                                          f'arm = {json.dumps(bad)}  #', 1)
+    (tmp_path / "c.toml").write_text(text)
+    with pytest.raises(StudyConfigError, match="trajectory.arm"):
+        load(tmp_path / "c.toml")
