@@ -20,7 +20,7 @@ import mujoco
 import numpy as np
 
 from gen.arm import fnv1a64
-from gen.atomic_output import write_files_atomically
+from gen.lib.atomic_output import write_files_atomically
 
 REPO = Path(__file__).resolve().parent.parent
 DEFAULT_MJCF = REPO / "host_sim" / "models" / "ur5e_arm.xml"

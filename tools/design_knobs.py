@@ -13,7 +13,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
-from gen import toml_input
+from gen.lib import toml_input
 
 
 class KnobError(ValueError):

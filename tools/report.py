@@ -14,7 +14,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from gen.atomic_output import write_text_atomic  # noqa: E402
+from gen.lib.atomic_output import write_text_atomic  # noqa: E402
 from tools.telemetry_log import read_log  # noqa: E402
 
 # Kim & Kim 2024, Tables 1-3 (Table 1 from their simulation, Tables 2-3 from their experiment).

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from gen import toml_input
+from gen.lib import toml_input
 from host_sim.drive_model import REALISTIC, DriveModel
 from host_sim.uncertainty import UncertaintyConfig
 

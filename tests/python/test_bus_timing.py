@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from host_sim.launch import frame_times, parse_phy, sim_binary
-from tools.busload import Bus, ConfigError, Protocol, compute
+from gen.lib.busload import Bus, ConfigError, Protocol, compute
 from tools.hil import HilOptions, run_hil
 from tools.telemetry_log import read_log
 

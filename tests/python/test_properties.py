@@ -17,7 +17,7 @@ from host_sim.drive_model import DriveModel
 from host_sim.protocol import DriveProtocol, FastCodec
 from host_sim.uncertainty import UncertaintyConfig
 from tools.design_knobs import dumps
-from tools.paths import REPO
+from gen.lib.paths import REPO
 from tools.study_config import StudyConfigError, load
 from tools.telemetry_log import CHANNEL_TYPES, read_log
 
