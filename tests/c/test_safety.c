@@ -11,9 +11,8 @@
 static void home_input(arm_ctl_input_t *in)
 {
     memset(in, 0, sizeof(*in));
-    const float home[6] = {0.0f, -1.3f, 1.6f, -1.87f, -1.5708f, 0.0f};
-    for (int j = 0; j < ARM_N_JOINTS; ++j) {
-        in->q[j] = home[j % 6];
+    for (int j = 0; j < ARM_N_JOINTS; ++j) { /* the arm's own home (its model's keyframe) */
+        in->q[j] = ARM_HOME_Q[j];
         in->q_d[j] = in->q[j];
     }
     in->fresh_mask = ALL;
