@@ -28,7 +28,7 @@ PAPER_TABLE3 = {"usde-smc": 14.9473, "tde": 15.6809, "pm": 14.4772}
 ESTIMATING = ("pm", "pm-paper-weights", "pm-paper", "tde", "usde-smc")
 METRIC_TEXT = {"linf": "L-infinity tracking error (rad)", "rms": "RMS tracking error (rad)",
                "est": "RMS estimation error w - w_hat (rad/s^2)", "power": "torque power (W)"}
-ALPHA = 0.05  # a paired difference counts as significant below this p (Wilcoxon where defined, else t)
+ALPHA = 0.05  # a paired difference counts as significant below this p (the paired t-test's: _p)
 
 
 def _fmt(v: float | None) -> str:
