@@ -1,39 +1,6 @@
-"""armctl busload: worst-case CAN bus load of the drive protocol per control period.
-
-The arithmetic is gen/lib/busload.py (shared with gen/ and host_sim/). Reads firmware/protocol/arm_drives.dbc: the messages with a GenMsgCycleTime are sent once per
-control period (SYNC, DRIVE_i_STATE, DRIVE_i_CMD); heartbeats are time-based (CANopen producer
-time, --heartbeat-ms) and amortised over the periods; NMT and EMCY are events and not counted.
-Each message goes on the bus of the drive it is sent to or from; SYNC (to every drive) goes on
-every bus that has drives. Frame format (classic / FD, bit-rate switch) is the DBC's.
-
-Frame lengths are exact worst cases (every bit the frame can take, including worst-case dynamic
-stuffing and the 3-bit intermission):
-
-Classic CAN (ISO 11898-1), n data bytes:
-    11-bit id: 8n + 47 + floor((34 + 8n - 1) / 4) bits   (34 + 8n bits SOF..CRC are stuffed)
-    29-bit id: 8n + 67 + floor((54 + 8n - 1) / 4) bits   (54 + 8n bits SOF..CRC are stuffed)
-    e.g. 8 bytes, 11-bit: 64 + 47 + 24 = 135 bits. The worst case inserts a stuff bit after the
-    first 5 bits and then after every 4 (the stuff bit starts the next run): floor((L - 1) / 4).
-
-CAN FD (ISO 11898-1:2015, ISO CRC), n data bytes (a DLC step), id 11-bit (29-bit):
-    nominal rate: SOF, id, RRS, IDE, FDF, res, BRS = 17 (36) bits, their worst-case stuff bits
-                  floor((17 - 1) / 4) = 4 (floor((36 - 1) / 4) = 8), CRC delimiter 1, ACK slot 1,
-                  ACK delimiter 1, EOF 7, intermission 3
-    data rate:    ESI 1, DLC 4, data 8n, the rest of the dynamic stuff bits
-                  floor((A + 5 + 8n - 1) / 4) - floor((A - 1) / 4) with A = 17 (36),
-                  stuff count 4 (3-bit Gray count + parity), CRC 17 (n <= 16) or 21 (n > 16),
-                  fixed stuff bits: one before the stuff count and one after every 4 bits of
-                  stuff count + CRC: 6 with CRC17 (21 bits), 7 with CRC21 (25 bits)
-    The bit rate switches inside BRS and inside the CRC delimiter (at their sample points); both
-    boundary bits, and the stuff bits of the arbitration field, are counted at the slower nominal
-    rate: the figures are upper bounds, never below the real length. Without BRS (or on a bus
-    without a data rate) every bit is at the nominal rate.
-    e.g. 16 bytes, 11-bit: nominal 17 + 4 + 13 = 34, data 1 + 4 + 128 + 33 + 4 + 17 + 6 = 193
-    -> 34 us + 38.6 us = 72.6 us at 1 / 5 Mbit/s.
-
-A message longer than 8 bytes on a classic bus (DRIVE_i_STATE is 16 bytes) is carried as
-ceil(n / 8) frames of 8 bytes, the way a classic CiA 402 drive maps it onto two TPDOs.
-"""
+"""armctl busload: worst-case CAN bus load of the drive protocol per control period, per bus,
+against a budget; exits 2 above it and names a wiring that fits. The frame lengths and their
+arithmetic are gen/lib/busload.py's (shared with gen/ and host_sim/)."""
 
 from __future__ import annotations
 
@@ -43,6 +10,7 @@ import math
 import sys
 from pathlib import Path
 
+from gen.lib import busload as lib
 from gen.lib.busload import (DEFAULT_DBC, DEFAULT_TOPOLOGY, BusLoad, ConfigError, Protocol, drives_arg,
                              rate_arg, compute, even_split, load_topology, parse_bus, topology_drives)
 
@@ -131,7 +99,8 @@ def run(ns: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="armctl busload", description=__doc__,
+    formulas = (lib.__doc__ or "").split("\n\n", 1)[1]  # the library's: what is counted, and how
+    p = argparse.ArgumentParser(prog="armctl busload", description=__doc__ + "\n\n" + formulas,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     add_arguments(p)
     return run(p.parse_args(argv))

@@ -12,18 +12,9 @@ from pathlib import Path
 
 import pytest
 
-from host_sim.launch import sim_binary
 from sim_master import SimMaster
 
 UNKNOWN_ID = 0x555  # no message of the DBC: arm_sim counts it (rx_unknown_id) and goes on
-
-
-@pytest.fixture(scope="module")
-def sim_exe(controller_bin: Path) -> Path:
-    exe = sim_binary(controller_bin.parent.parent.name)
-    if not exe.exists():
-        pytest.skip(f"{exe} not built")
-    return exe
 
 
 def test_a_sync_behind_a_full_other_bus_loses_no_frame(sim_exe: Path) -> None:
