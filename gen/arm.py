@@ -34,8 +34,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from gen import toml_input
-from gen.atomic_output import OutputError, write_files_atomically
+from gen.lib import toml_input
+from gen.lib.atomic_output import OutputError, write_files_atomically
 
 REPO = Path(__file__).resolve().parent.parent
 DEFAULT_MODEL = REPO / "host_sim" / "models" / "ur5e_arm.xml"
@@ -440,7 +440,7 @@ def _chain_default(m: mujoco.MjModel) -> list[int]:
 
 def _dbc_drive_slots() -> int:
     from gen.drive_ids import drive_slots
-    from tools.busload import DEFAULT_DBC
+    from gen.lib.busload import DEFAULT_DBC
 
     return len(drive_slots(DEFAULT_DBC)["STATE"])
 
@@ -981,7 +981,7 @@ def _design_for(text: str, n: int, path: Path) -> str:
 def _wiring(af: ArmFile, n: int, rate: float) -> list[dict[str, Any]]:
     """The buses: the arm file's, else firmware/protocol/buses.toml for six drives, else the fewest
     CAN FD 1/5 Mbit/s buses that fit the drives within the 70 % budget at the loop rate."""
-    from tools import busload
+    from gen.lib import busload
 
     try:
         if af.buses is not None:
@@ -1017,7 +1017,7 @@ def _bus_toml(b: dict[str, Any]) -> str:
 def _load_topology_text(text: str, where: str, n: int) -> list[Any]:
     import tempfile
 
-    from tools import busload
+    from gen.lib import busload
 
     with tempfile.NamedTemporaryFile("w", suffix=".toml", delete=True) as fh:
         fh.write(text)
@@ -1057,7 +1057,7 @@ def main(argv: list[str] | None = None) -> int:
             deps.append(str(af.path.resolve()))
         if af.topology:
             deps.append(str(af.topology.resolve()))
-        from tools.busload import DEFAULT_DBC
+        from gen.lib.busload import DEFAULT_DBC
 
         deps += [str(DEFAULT_DBC), str(DEFAULT_TOPOLOGY)]  # the drive slots; the six-drive wiring
         target = ns.out / "arm.xml"

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import cantools
 
-from gen.atomic_output import write_files_atomically
+from gen.lib.atomic_output import write_files_atomically
 
 KINDS = ("STATE", "CMD", "HEARTBEAT", "EMCY")
 

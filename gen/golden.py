@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gen.atomic_output import write_bytes_atomic, write_files_atomically
+from gen.lib.atomic_output import write_bytes_atomic, write_files_atomically
 from gen.design_headers import parse
 
 STRUCTURES = ("decoupled", "paper", "none")

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gen.atomic_output import write_files_atomically
+from gen.lib.atomic_output import write_files_atomically
 from gen.robot_model import ModelError, RobotModel, extract, fnv1a64
 
 SNAP = 1e-7

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from host_sim.launch import TIMING_MODES, parse_phy, sim_argv, sim_binary
 from host_sim.uncertainty import UncertaintyConfig
-from tools import busload
+from gen.lib import busload
 
 
 def main(argv: list[str] | None = None) -> int:

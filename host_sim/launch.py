@@ -2,7 +2,7 @@
 
 The simulator's per-period work is C (build/<preset>/host_sim/native/arm_sim). Python keeps what
 is configuration: the bus specs, the uncertainty (host_sim.uncertainty.UncertaintyConfig), and,
-for bus timing, each frame's worst-case length on each bus, computed once by tools/busload.py
+for bus timing, each frame's worst-case length on each bus, computed once by gen/lib/busload.py
 (the same bit counts `armctl busload` prints) and handed over as --frame-times.
 """
 
@@ -13,8 +13,8 @@ from typing import Any
 
 from host_sim.drive_model import DriveModel
 from host_sim.uncertainty import UncertaintyConfig
-from tools import busload
-from tools.paths import build_dir
+from gen.lib import busload
+from gen.lib.paths import build_dir
 
 TIMING_MODES = ("off", "virtual", "wallclock")
 

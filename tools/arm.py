@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from tools.build import build
-from tools.paths import BUILD, build_dir
+from gen.lib.paths import BUILD, build_dir
 
 MODEL_SUFFIXES = (".xml", ".urdf", ".mjcf")
 

@@ -23,10 +23,10 @@ from typing import Any
 
 from tqdm import tqdm
 
-from gen.atomic_output import write_json_atomic
+from gen.lib.atomic_output import write_json_atomic
 from tools.build import build
+from gen.lib.paths import REPO, build_dir
 from tools.methods import firmware_methods, method_names
-from tools.paths import REPO, build_dir
 
 METHODS = method_names()
 STEPS = 2000
@@ -88,7 +88,7 @@ def bench_step(out: Path, quick: bool = False) -> dict[str, Any]:
     if not quick:  # quick: no Pinocchio comparison (compiling it alone takes about 2 minutes)
         result["rnea"] = rnea_costs(rows["pm"]["float"], steps)
         result["cortex_m"] = cortex_m_costs()
-    _write_json(out, result)
+    write_json_atomic(out, result)
     return result
 
 
@@ -224,7 +224,7 @@ def bench_sim(out: Path, quick: bool = False) -> dict[str, Any]:
         "lockstep_udp": modes["udp"],
         "sil_over_lockstep": modes["sil"]["realtime_factor_median"] / modes["udp"]["realtime_factor_median"],
     }
-    _write_json(out, result)
+    write_json_atomic(out, result)
     return result
 
 
@@ -239,10 +239,6 @@ def sim_table(r: dict[str, Any]) -> str:
             f"{k} {v:.2f} ({m['breakdown_over_bare_mj_step'][k]:.1f}x)" for k, v in m["breakdown_us_per_period"].items()))
     lines.append(f"software in the loop / lockstep HIL: {r['sil_over_lockstep']:.1f}x")
     return "\n".join(lines)
-
-
-def _write_json(out: Path, result: dict[str, Any]) -> None:
-    write_json_atomic(out, result)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from gen.lib.atomic_output import write_json_atomic
 from tools.arm import DEFAULT_ARM
 from tools.runner import run_all
 from tools.study import DEFAULT_CONFIG, setup_for
@@ -57,9 +58,7 @@ def bench_study(out: Path, quick: bool = False) -> dict[str, Any]:
             jobs = {str(j): _throughput(bus, j, n, duration, Path(tmp)) for j in (1, 2)}
             result["buses"][bus] = {"runs": n, "jobs": jobs,
                                     "speedup_2_over_1": jobs["2"]["runs_per_minute"] / jobs["1"]["runs_per_minute"]}
-    from tools.bench import _write_json
-
-    _write_json(out, result)
+    write_json_atomic(out, result)
     return result
 
 

@@ -20,9 +20,9 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from gen.atomic_output import write_json_atomic
+from gen.lib.atomic_output import write_json_atomic
 from tools.locks import flocked
-from tools.paths import REPO, build_dir
+from gen.lib.paths import REPO, build_dir
 
 PRESETS = ("debug", "release")
 CROSS_PRESETS = ("aarch64", "cortex-m4", "cortex-m7", "cortex-m3")

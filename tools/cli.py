@@ -10,13 +10,13 @@ import subprocess
 import sys
 from pathlib import Path
 
-from gen.atomic_output import OutputError
+from gen.lib.atomic_output import OutputError
 from tools.arm import add_arm_arguments
+from gen.lib.outdir import OutDirError, check_out_dir
 from tools.methods import method_names
-from tools.outdir import OutDirError, check_out_dir
 from tools.verdict import DEFAULT_MAX_ERROR_DEG, FOLLOWING_ERROR_STOP_DEG
 from tools.build import PRESETS, TARGETS, BuildError, build
-from tools.paths import REPO, build_dir, env_with_repo
+from gen.lib.paths import REPO, build_dir, env_with_repo
 
 
 def cmd_setup(ns: argparse.Namespace) -> int:
@@ -169,7 +169,7 @@ def cmd_hil(ns: argparse.Namespace) -> int:
         print(f"armctl hil: {exc}", file=sys.stderr)
         return 2
     if ns.topology is not None:  # the file itself, before the build; its drives against the arm's after it
-        from tools import busload
+        from gen.lib import busload
 
         try:
             busload.load_topology(ns.topology, busload.topology_drives(ns.topology))

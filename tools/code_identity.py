@@ -9,7 +9,7 @@ import functools
 import hashlib
 from pathlib import Path
 
-from tools.paths import REPO
+from gen.lib.paths import REPO
 
 # What a run's result depends on; reporting, statistics and the CLI are not in it.
 SOURCES = ("firmware", "host_sim", "gen", "tools/lcm_logger", "tools/hil.py", "tools/run_analysis.py",

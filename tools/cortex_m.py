@@ -6,7 +6,7 @@ from __future__ import annotations
 import re
 import subprocess
 
-from tools.paths import build_dir
+from gen.lib.paths import build_dir
 
 MACHINES = {"cortex-m4": "mps2-an386", "cortex-m7": "mps2-an500", "cortex-m3": "mps2-an385"}
 

@@ -11,9 +11,11 @@ else (the loop rate, the design rules, the fixed-point ranges) is the base confi
 from __future__ import annotations
 
 import json
+import math
+import re
 from typing import Any
 
-from gen import toml_input
+from gen.lib import toml_input
 
 
 class KnobError(ValueError):
@@ -45,20 +47,35 @@ def design_text(base_text: str, knobs: dict[str, Any], with_estimator: bool = Tr
 def dumps(doc: dict[str, Any]) -> str:
     """TOML for a design config: top-level keys, then one [table] per section (values are numbers,
     strings, booleans, lists of them, or inline tables)."""
-    lines = [f"{k} = {_value(v)}" for k, v in doc.items() if not isinstance(v, dict)]
+    lines = [f"{_key(k)} = {_value(v)}" for k, v in doc.items() if not isinstance(v, dict)]
     for section, table in doc.items():
         if isinstance(table, dict):
-            lines += ["", f"[{section}]"] + [f"{k} = {_value(v)}" for k, v in table.items()]
+            lines += ["", f"[{_key(section)}]"] + [f"{_key(k)} = {_value(v)}" for k, v in table.items()]
     return "\n".join(lines) + "\n"
+
+
+def _key(k: str) -> str:
+    """A bare key where TOML allows one, else a quoted key (a scenario named realistic+friction)."""
+    return k if re.fullmatch(r"[A-Za-z0-9_-]+", k) else _string(k)
+
+
+def _string(text: str) -> str:
+    """A TOML basic string (JSON's escapes are not all TOML's: a surrogate pair is not)."""
+    return '"' + "".join(f"\\u{ord(c):04x}" if ord(c) < 0x20 or ord(c) == 0x7F
+                         else "\\" + c if c in '"\\' else c for c in text) + '"'
 
 
 def _value(v: Any) -> str:
     if isinstance(v, bool):
         return "true" if v else "false"
-    if isinstance(v, (int, float, str)):
+    if isinstance(v, float) and not math.isfinite(v):
+        return "nan" if math.isnan(v) else ("inf" if v > 0 else "-inf")  # TOML's words, not JSON's
+    if isinstance(v, str):
+        return _string(v)
+    if isinstance(v, (int, float)):
         return json.dumps(v)
     if isinstance(v, list):
         return "[" + ", ".join(_value(x) for x in v) + "]"
     if isinstance(v, dict):
-        return "{ " + ", ".join(f"{k} = {_value(x)}" for k, x in v.items()) + " }"
+        return "{ " + ", ".join(f"{_key(k)} = {_value(x)}" for k, x in v.items()) + " }"
     raise KnobError(f"cannot write {v!r} as TOML")

@@ -28,10 +28,10 @@ from typing import Any
 
 import can
 
-from gen.atomic_output import write_json_atomic
+from gen.lib.atomic_output import write_json_atomic
 from host_sim.canbus import open_bus
 from tools.hil import HilOptions, run_hil
-from tools.paths import REPO
+from gen.lib.paths import REPO
 from tools.slots import acquire_slot
 
 SYNC, NMT = 0x080, 0x000
@@ -295,7 +295,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(ns: argparse.Namespace) -> int:
     from tools.arm import build_arm
-    from tools.outdir import OutDirError, check_out_dir
+    from gen.lib.outdir import OutDirError, check_out_dir
 
     names = [f.name for f in FAULTS] if ns.only is None else ns.only.split(",")
     bad = [n for n in names if n not in {f.name for f in FAULTS}]

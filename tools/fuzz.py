@@ -18,7 +18,7 @@ import sys
 from pathlib import Path
 
 from tools.build import build
-from tools.paths import BUILD, REPO, build_dir
+from gen.lib.paths import BUILD, REPO, build_dir
 
 FUZZ_DIR = REPO / "tests" / "fuzz"
 OUT = BUILD / "fuzz"

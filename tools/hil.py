@@ -18,12 +18,12 @@ from pathlib import Path
 from typing import Any
 
 
-from gen.atomic_output import OutputError, write_json_atomic
+from gen.lib.atomic_output import OutputError, write_json_atomic
 from host_sim.drive_model import DriveModel
 from host_sim.launch import sim_argv
-from tools import busload
+from gen.lib import busload
 from tools.arm import DEFAULT_ARM, ArmChoiceError, ArmRef, arm_build_dir, arm_info, prepared_model
-from tools.paths import REPO, controller_binary, logger_binary
+from gen.lib.paths import REPO, controller_binary, logger_binary
 from tools import procs as procs_mod
 from tools.run_analysis import analyse
 from tools.slots import acquire_slot

@@ -1,29 +1,3 @@
-"""Where things live in the repository and the build tree."""
+"""Moved to gen/lib/paths.py (the library layer); this name stays for branches in flight."""
 
-from __future__ import annotations
-
-import os
-from pathlib import Path
-
-REPO = Path(__file__).resolve().parent.parent
-BUILD = REPO / "build"
-
-
-def build_dir(preset: str) -> Path:
-    return BUILD / preset
-
-
-def controller_binary(bdir: Path) -> Path:
-    """The controller in a build folder (build/<preset>, or an arm's: tools/arm.py)."""
-    return bdir / "firmware" / "arm_controller"
-
-
-def logger_binary(bdir: Path) -> Path:
-    """The HIL run's telemetry logger (tools/lcm_logger) in a build folder."""
-    return bdir / "tools" / "lcm_logger" / "arm_lcm_logger"
-
-
-def env_with_repo() -> dict[str, str]:
-    env = dict(os.environ)
-    env["PYTHONPATH"] = str(REPO) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-    return env
+from gen.lib.paths import *  # noqa: F401,F403

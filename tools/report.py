@@ -16,7 +16,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from gen.atomic_output import write_text_atomic  # noqa: E402
+from gen.lib.atomic_output import write_text_atomic  # noqa: E402
 from tools.telemetry_log import read_log  # noqa: E402
 from tools.verdict import FOLLOWING_ERROR_STOP_DEG, left_tracking_bound, stopped_by_following_error  # noqa: E402
 
@@ -33,7 +33,7 @@ METRIC_TEXT = {"linf": "L-infinity tracking error (deg)", "rms": "RMS tracking e
                "est": "RMS estimation error w - w_hat (rad/s^2)", "power": "torque power (W)"}
 # What a person reads is in degrees; study.json keeps the runs' radians.
 IN_DEGREES = ("linf", "rms")
-ALPHA = 0.05  # a paired difference counts as significant below this p (Wilcoxon where defined, else t)
+ALPHA = 0.05  # a paired difference counts as significant below this p (the paired t-test's: _p)
 
 
 def _fmt(v: float | None) -> str:

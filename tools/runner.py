@@ -31,8 +31,8 @@ from tools import procs
 from tools.arm import HIL_TARGETS, ArmChoiceError, targets_for, ArmRef, arm_build_dir, arm_info, build_arm
 from tools.build import build_lock
 from tools.cluster import Cluster
-from tools.paths import BUILD
-from gen.atomic_output import write_json_atomic, write_text_atomic
+from gen.lib.paths import BUILD
+from gen.lib.atomic_output import write_json_atomic, write_text_atomic
 from tools.hil import LOCKSTEP_SPIN_US, SIL, HilError, HilOptions, lockstep_spin_us, provenance, run_hil
 from tools.slots import Slot, acquire_slot
 

@@ -16,18 +16,18 @@ from typing import Any
 
 from tqdm import tqdm
 
-from gen import toml_input
+from gen.lib import toml_input
 from gen.arm import DEFAULT_DESIGN
 from tools.arm import (DEFAULT_ARM, ArmChoiceError, ArmRef, add_arm_arguments, arm_build_dir, arm_from_args,
                        arm_info, build_arm, print_arm_warnings, reference_for)
 from tools import procs
 from tools.cluster import Cluster, ClusterError, add_cluster_arguments, cluster_from_args
 from tools.code_identity import code_identity
-from gen.atomic_output import write_json_atomic
+from gen.lib.atomic_output import write_json_atomic
 from tools.hil import SIL, HilError
 from tools.locks import LockHeld, flocked
-from tools.outdir import OutDirError, check_out_dir
-from tools.paths import REPO
+from gen.lib.outdir import OutDirError, check_out_dir
+from gen.lib.paths import REPO
 from tools.runner import METRICS, RunSpec, run_all
 from tools.slots import default_jobs
 from tools.stats import paired, summary

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from gen import toml_input
+from gen.lib import toml_input
 from host_sim.drive_model import REALISTIC, DriveModel
 from host_sim.uncertainty import UncertaintyConfig
 
@@ -293,6 +293,13 @@ def _space(method: str, d: Any) -> Space:
     return sp
 
 
+def _names(items: list, where: str) -> None:
+    """A list of names is a list of strings (a nested list is a mistake, not a TypeError)."""
+    odd = [x for x in items if not isinstance(x, str)]
+    if odd:
+        raise StudyConfigError(f"{where}: expected names (strings), got {odd[0]!r}")
+
+
 def load(path: Path) -> StudyConfig:
     try:
         data = toml_input.loads(path.read_text())
@@ -304,12 +311,14 @@ def load(path: Path) -> StudyConfig:
     if unknown:
         raise StudyConfigError(f"study: unknown field(s) {sorted(unknown)} (known: {', '.join(sorted(known))})")
     methods = _get(data, "methods", "study", list)
+    _names(methods, "study.methods")
     bad = [m for m in methods if m not in METHODS]
     if bad or not methods or len(set(methods)) != len(methods):
         raise StudyConfigError(f"study.methods: unknown or repeated {bad or methods} (known: {', '.join(METHODS)})")
     tables = _get(data, "scenario", "study", dict)
     scenarios = {name: _scenario(name, d) for name, d in tables.items()}
     chosen = _get(data, "scenarios", "study", list, list(scenarios))
+    _names(chosen, "study.scenarios")
     missing = [s for s in chosen if s not in scenarios]
     if missing or not chosen:
         raise StudyConfigError(f"study.scenarios: {missing or 'none'} not defined (defined: {', '.join(scenarios)})")

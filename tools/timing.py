@@ -172,7 +172,7 @@ def _plot(path: Path, ctl_wake: list[float], cyc_hist: dict[int, int], compute: 
 def measure(out: Path, duration_s: float, rate_hz: float, rt_priority: int, cpu: int | None,
             method: str = "pd", preset: str = "release") -> dict[str, Any]:
     """The measurement itself (the command and the tests call this). Returns timing.json's data."""
-    from gen.atomic_output import write_json_atomic
+    from gen.lib.atomic_output import write_json_atomic
     import numpy as np
 
     from tools.hil import HilError, HilOptions, realtime_cpu, run_hil

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from gen.atomic_output import write_text_atomic
+from gen.lib.atomic_output import write_text_atomic
 from gen.synth.cli import DEFAULT_CONFIG
 from gen.synth.config import DesignConfig, load_config
 from gen.synth.hinf import hinf_synthesis

@@ -34,7 +34,7 @@ def synth_to_dir(config: Path, out: Path) -> dict[str, Any]:
     """Load, design, verify, emit. Raises ConfigError / SynthesisError before writing anything."""
     t0 = time.perf_counter()
     # Imported here, not at module level: armctl builds its parser without paying for cvxpy.
-    from gen.atomic_output import write_files_atomically
+    from gen.lib.atomic_output import write_files_atomically
     from gen.synth.config import load_config
     from gen.synth.emit import fixed_header, float_header
     from gen.synth.manifest import FIXED_HEADER, FLOAT_HEADER, build
@@ -74,11 +74,11 @@ def _summary(m: dict[str, Any], out: Path) -> str:
 
 
 def run(ns: argparse.Namespace) -> int:
-    from gen.atomic_output import OutputError
+    from gen.lib.atomic_output import OutputError
     from gen.synth.config import ConfigError
     from gen.synth.lmi import SynthesisError
 
-    from tools.outdir import OutDirError, check_out_dir
+    from gen.lib.outdir import OutDirError, check_out_dir
 
     try:
         check_out_dir(ns.out)  # before the solve, not after it

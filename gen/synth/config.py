@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from gen import toml_input
+from gen.lib import toml_input
 
 STRUCTURES = ("auto", "coupled")
 DEFAULT_LADDER = (1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2, 2e-2, 5e-2, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0)

@@ -12,7 +12,11 @@
 
 #define HEARTBEAT_PERIODS 100
 #define STOP_CHECK_S 0.1 /* a stop request is noticed within this */
-#define PENDING_MAX 256u
+/* A SYNC or NMT read fresh (the ring is then empty) puts back up to EARLIER_MAX frames already
+ * queued on the other buses, and itself: the ring holds all of them, so that path cannot overflow.
+ * requeue_deferred also runs on an empty ring only (at most ARM_CAN_BUS_SET_MAX frames). */
+#define EARLIER_MAX 256u
+#define PENDING_MAX (EARLIER_MAX + 1u)
 
 volatile sig_atomic_t sim_stop_requested = 0;
 
@@ -259,7 +263,10 @@ static int poll_bus(sim_t *s, unsigned bus, arm_can_frame_t *f)
 
 static void push_front(sim_t *s, unsigned bus, const arm_can_frame_t *f, int flag)
 {
-    if (s->pend_len == PENDING_MAX) return; /* bounded: a flood waits in the socket instead */
+    if (s->pend_len == PENDING_MAX) { /* cannot happen (see PENDING_MAX): counted, never silent */
+        s->rep->rx_pending_dropped++;
+        return;
+    }
     s->pend_head = (s->pend_head + PENDING_MAX - 1u) % PENDING_MAX;
     s->pending[s->pend_head] = (queued_t){.bus = bus, .f = *f, .flag = flag};
     s->pend_len++;
@@ -690,11 +697,11 @@ static void run_loop(sim_t *s)
             /* SYNC and NMT go on every bus. Order between buses is lost in the sockets: what is
              * already queued on the other buses was sent before this frame (e.g. the previous
              * period's commands), so it is handled first. */
-            queued_t earlier[PENDING_MAX];
+            queued_t earlier[EARLIER_MAX]; /* bounded: a flood beyond it waits in the socket */
             unsigned k = 0;
-            for (unsigned i = 0; i < s->set.n && k < PENDING_MAX; ++i) {
+            for (unsigned i = 0; i < s->set.n && k < EARLIER_MAX; ++i) {
                 if (i == bus) continue;
-                while (k < PENDING_MAX && poll_bus(s, i, &earlier[k].f)) {
+                while (k < EARLIER_MAX && poll_bus(s, i, &earlier[k].f)) {
                     earlier[k].bus = i;
                     earlier[k++].flag = 1;
                 }

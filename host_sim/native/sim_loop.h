@@ -51,6 +51,7 @@ typedef struct {
     uint64_t rx_foreign_drive; /* a frame only drives send (STATE, HEARTBEAT, EMCY), from another node */
     uint64_t rx_unknown_id;
     uint64_t rx_bad_frame;
+    uint64_t rx_pending_dropped; /* frames read but lost on a full reorder ring (0 by construction) */
     uint64_t rx_undecodable; /* UDP datagrams that are not python-can frames, SocketCAN frames that do not decode */
     uint64_t rx_kernel_drops; /* frames the kernel dropped on a full receive queue (SO_RXQ_OVFL) */
     uint64_t rx_wrong_bus;   /* a command for a drive that is not on the bus it arrived on */

@@ -43,11 +43,13 @@ int sim_write_summary(const char *path, const sim_options_t *o, const sim_arm_t 
             (unsigned long long)r->frames_tx, (unsigned long long)r->frames_rx, (unsigned long long)r->tx_dropped);
     fprintf(f, "  \"rx_foreign_drive\": %llu,\n  \"rx_unknown_id\": %llu,\n  \"rx_bad_frame\": %llu,\n"
             "  \"rx_undecodable\": %llu,\n  \"rx_kernel_drops\": %llu,\n  \"rx_wrong_bus\": %llu,\n"
-            "  \"rx_duplicate_command\": %llu,\n  \"rx_sync_out_of_sequence\": %llu,\n",
+            "  \"rx_duplicate_command\": %llu,\n  \"rx_sync_out_of_sequence\": %llu,\n"
+            "  \"rx_pending_dropped\": %llu,\n",
             (unsigned long long)r->rx_foreign_drive, (unsigned long long)r->rx_unknown_id,
             (unsigned long long)r->rx_bad_frame, (unsigned long long)r->rx_undecodable,
             (unsigned long long)r->rx_kernel_drops, (unsigned long long)r->rx_wrong_bus,
-            (unsigned long long)r->rx_duplicate_command, (unsigned long long)r->rx_sync_out_of_sequence);
+            (unsigned long long)r->rx_duplicate_command, (unsigned long long)r->rx_sync_out_of_sequence,
+            (unsigned long long)r->rx_pending_dropped);
     fprintf(f, "  \"commands_missed\": %llu,\n  \"commands_late\": %llu,\n  \"commands_missed_per_drive\": [",
             (unsigned long long)r->commands_missed, (unsigned long long)r->commands_late);
     for (int j = 0; j < arm->n; ++j) {

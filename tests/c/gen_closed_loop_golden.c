@@ -22,7 +22,7 @@ int main(void)
            "static const cl_golden_t CL_GOLDEN[CL_GOLDEN_CASES] = {\n",
            CL_STEPS, CL_RECORD_EVERY, n);
     for (int c = 0; c < n; ++c) {
-        cl_run(&ARM_ROBOT_MODEL, &cases[c], &r);
+        cl_run(&ARM_ROBOT_MODEL, ARM_HOME_Q, &cases[c], &r);
         printf("  {%d, %d, %d, %u,\n   {", (int)cases[c].method, (int)cases[c].numeric,
                r.init_result, (unsigned)r.final_state);
         for (int j = 0; j < ARM_N_JOINTS; ++j) printf("%s%af", j ? ", " : "", (double)r.q_final[j]);

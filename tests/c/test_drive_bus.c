@@ -47,7 +47,8 @@ int main(void)
     CHECK(bus.rx.wrong_counter == 1u && bus.rx.bad_length == 1u && bus.rx.bad_format == 1u &&
           bus.rx.unknown_id == 1u);
 
-    /* Our own frames echoed back by the UDP loopback are recognised, not counted as unknown. */
+    /* A SYNC, NMT or command from another node (a second master on the bus: no transport returns
+     * our own frames) is recognised and ignored, not counted as unknown. */
     CHECK(arm_bus_handle_rx(&bus, &sync) == ARM_RX_FOREIGN_MASTER);
 
     arm_can_frame_t cmd;

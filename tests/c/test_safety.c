@@ -11,9 +11,8 @@
 static void home_input(arm_ctl_input_t *in)
 {
     memset(in, 0, sizeof(*in));
-    const float home[6] = {0.0f, -1.3f, 1.6f, -1.87f, -1.5708f, 0.0f};
-    for (int j = 0; j < ARM_N_JOINTS; ++j) {
-        in->q[j] = home[j % 6];
+    for (int j = 0; j < ARM_N_JOINTS; ++j) { /* the arm's own home (its model's keyframe) */
+        in->q[j] = ARM_HOME_Q[j];
         in->q_d[j] = in->q[j];
     }
     in->fresh_mask = ALL;
@@ -219,7 +218,45 @@ static void test_plausible_motion_and_disabled_checks_pass(void)
     CHECK(out.state == ARM_STATE_RUNNING); /* off is off */
     arm_ctl_default_config(&ARM_ROBOT_MODEL, &cfg);
     cfg.following_error_limit[0] = 0.0f;
-    CHECK(arm_ctl_init(&ctl, &ARM_ROBOT_MODEL, &cfg) == ARM_CTL_BAD_LIMIT);
+    CHECK(arm_ctl_init(&ctl, &ARM_ROBOT_MODEL, &cfg) == ARM_CTL_BAD_FOLLOWING_LIMIT);
+}
+
+/* Each refused limit has its own result, and its text names the setting that is wrong. */
+static void test_each_bad_limit_is_named(void)
+{
+    arm_ctl_t ctl;
+    arm_ctl_config_t cfg;
+    const struct {
+        arm_ctl_init_result_t want;
+        const char *named;
+    } cases[] = {
+        {ARM_CTL_BAD_LIMIT, "torque"},           {ARM_CTL_BAD_LIMIT, "torque-rate"},
+        {ARM_CTL_BAD_RANGE, "q_min < q_max"},    {ARM_CTL_BAD_VELOCITY_LIMIT, "velocity"},
+        {ARM_CTL_BAD_FOLLOWING_LIMIT, "following-error"}, {ARM_CTL_BAD_MISMATCH_LIMIT, "mismatch"},
+        {ARM_CTL_BAD_MISMATCH_LIMIT, "periods"}, {ARM_CTL_BAD_STEP_TOLERANCE, "step tolerance"},
+    };
+    for (unsigned k = 0; k < sizeof(cases) / sizeof(cases[0]); ++k) {
+        arm_ctl_default_config(&ARM_ROBOT_MODEL, &cfg);
+        const int j = ARM_N_JOINTS - 1;
+        switch (k) {
+        case 0: cfg.torque_limit[j] = 0.0f; break;
+        case 1: cfg.torque_rate_limit[j] = INFINITY; break;
+        case 2: cfg.q_min[j] = cfg.q_max[j]; break;
+        case 3: cfg.velocity_limit[j] = 0.0f; break;
+        case 4: cfg.following_error_limit[j] = -1.0f; break;
+        case 5: cfg.torque_mismatch_limit[j] = 0.0f; break;
+        case 6: cfg.torque_mismatch_periods = 0u; break;
+        default: cfg.step_tolerance = 0.0f; break;
+        }
+        const arm_ctl_init_result_t r = arm_ctl_init(&ctl, &ARM_ROBOT_MODEL, &cfg);
+        CHECK(r == cases[k].want);
+        CHECK(strstr(arm_ctl_init_result_str(r), cases[k].named) != NULL);
+        /* no two settings share a text that names only one of them */
+        for (unsigned m = 0; m < sizeof(cases) / sizeof(cases[0]); ++m) {
+            if (cases[m].want != r) CHECK(strstr(arm_ctl_init_result_str(r), cases[m].named) == NULL ||
+                                          strcmp(cases[m].named, "torque") == 0);
+        }
+    }
 }
 
 int main(void)
@@ -229,6 +266,7 @@ int main(void)
     test_torque_and_rate_limits();
     test_watchdog_trips_after_configured_stale_periods();
     test_bad_config_refused();
+    test_each_bad_limit_is_named();
     test_external_fault_latches();
     test_plausibility_faults_name_the_joint();
     test_plausible_motion_and_disabled_checks_pass();

@@ -27,6 +27,17 @@ def controller_bin(build_dir: Path) -> Path:
     return exe
 
 
+@pytest.fixture(scope="session")
+def sim_exe(controller_bin: Path) -> Path:
+    """arm_sim of the same build (tests that drive it frame by frame: sim_master.py)."""
+    from host_sim.launch import sim_binary
+
+    exe = sim_binary(controller_bin.parent.parent.name)
+    if not exe.exists():
+        pytest.skip(f"{exe} not built")
+    return exe
+
+
 @pytest.fixture()
 def bus_spec() -> str:
     """A bus of its own per test, so tests and a running demo never hear each other."""

@@ -11,7 +11,7 @@ from pathlib import Path
 import can
 
 from host_sim.canbus import open_bus
-from tools.paths import REPO, env_with_repo
+from gen.lib.paths import REPO, env_with_repo
 
 
 class BusRecorder:

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from tools.paths import REPO
+from gen.lib.paths import REPO
 
 APT_LIST = REPO / "tools" / "apt-packages.txt"
 

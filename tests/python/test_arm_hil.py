@@ -13,7 +13,7 @@ import pytest
 
 from arm_models import ARMATURE, armature_variant, materials_variant
 from tools.arm import ArmRef, arm_build_dir
-from tools.paths import BUILD, REPO
+from gen.lib.paths import BUILD, REPO
 
 ARMS = REPO / "tests" / "arms"
 MAX_ERROR_DEG = 5.0  # "pm tracks within a few degrees" (issue 12), on every joint of every arm

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from tools.paths import REPO
+from gen.lib.paths import REPO
 
 
 def apt_missing(apt_list: Path) -> list[str]:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from tools.paths import REPO
+from gen.lib.paths import REPO
 
 ARMCTL = str(REPO / "tools" / "armctl")
 

@@ -52,7 +52,7 @@ def test_a_second_build_of_the_same_folder_waits_for_the_first() -> None:
     import time
 
     from tools.build import build_lock
-    from tools.paths import REPO, build_dir
+    from gen.lib.paths import REPO, build_dir
 
     with build_lock(build_dir("release")):
         p = subprocess.Popen([str(REPO / "tools" / "armctl"), "build", "--preset", "release"], cwd=REPO,

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from host_sim.launch import frame_times, parse_phy, sim_binary
-from tools.busload import Bus, ConfigError, Protocol, compute
+from host_sim.launch import frame_times, parse_phy
+from gen.lib.busload import Bus, ConfigError, Protocol, compute
 from tools.hil import HilOptions, run_hil
 from tools.telemetry_log import read_log
 
@@ -23,14 +23,6 @@ FD = (True, 1e6, 5e6)
 @pytest.fixture(scope="module")
 def proto() -> Protocol:
     return Protocol()
-
-
-@pytest.fixture(scope="module")
-def sim_exe(controller_bin: Path) -> Path:
-    exe = sim_binary(controller_bin.parent.parent.name)
-    if not exe.exists():
-        pytest.skip(f"{exe} not built")
-    return exe
 
 
 def test_parse_phy_names_what_is_wrong() -> None:

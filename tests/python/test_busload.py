@@ -1,5 +1,5 @@
-"""tools/busload.py against frame lengths and bus loads computed by hand (the arithmetic is in the
-comments, field by field, so a reviewer can check it without the code)."""
+"""gen/lib/busload.py (and its command line, tools/busload.py) against frame lengths and bus loads
+computed by hand (the arithmetic is in the comments, field by field, so a reviewer can check it without the code)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,9 @@ import math
 import pytest
 from pathlib import Path
 
-from tools import busload
-from tools.busload import Bus, Protocol, classic_frame_bits, compute, fd_frame_bits
+from gen.lib import busload
+from tools.busload import main as busload_main
+from gen.lib.busload import Bus, Protocol, classic_frame_bits, compute, fd_frame_bits
 
 # ---- classic CAN --------------------------------------------------------------------------------
 # 11-bit data frame: SOF 1 + id 11 + RTR 1 + IDE 1 + r0 1 + DLC 4 + data 8n + CRC 15 = 34 + 8n bits
@@ -138,7 +139,7 @@ def test_fd_bus_without_data_rate(proto: Protocol) -> None:
 # ---- the command ----------------------------------------------------------------------------------
 
 def _run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
-    rc = busload.main(list(argv))
+    rc = busload_main(list(argv))
     out, err = capsys.readouterr()
     return rc, out, err
 

@@ -13,7 +13,7 @@ import pytest
 
 from tools.build import build, toolchain_missing
 from tools.cortex_m import MACHINES, run_image, step_costs
-from tools.paths import build_dir
+from gen.lib.paths import build_dir
 
 
 def _image(preset: str):

@@ -12,7 +12,7 @@ import pytest
 
 from tools.build import build, qemu_aarch64, toolchain_missing
 from tools.hil import HilOptions, run_hil
-from tools.paths import build_dir
+from gen.lib.paths import build_dir
 
 DURATION_S = 1.0
 REL_TOL = 1e-4  # float32 on two ISAs and two libm's; measured: identical

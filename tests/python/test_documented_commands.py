@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from study_configs import with_tuning
-from tools.paths import REPO
+from gen.lib.paths import REPO
 
 ARMCTL = str(REPO / "tools" / "armctl")
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from tools.faults import FAULTS
-from tools.paths import REPO
+from gen.lib.paths import REPO
 
 
 @pytest.fixture(scope="module")

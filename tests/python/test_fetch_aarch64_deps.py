@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from tools.paths import REPO
+from gen.lib.paths import REPO
 
 
 def _module():

@@ -9,7 +9,7 @@ import subprocess
 import pytest
 
 from tools.fuzz import HARNESSES
-from tools.paths import REPO
+from gen.lib.paths import REPO
 
 
 def test_every_harness_runs_clean() -> None:

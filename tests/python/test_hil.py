@@ -224,7 +224,7 @@ def test_simulator_refuses_bad_bus_mappings(args: list[str], named: str) -> None
     import subprocess
     import sys
 
-    from tools.paths import REPO, env_with_repo
+    from gen.lib.paths import REPO, env_with_repo
 
     r = subprocess.run([sys.executable, "-m", "host_sim", *args, "--lcm-url", ""], capture_output=True, text=True,
                        timeout=60, cwd=REPO, env=env_with_repo())

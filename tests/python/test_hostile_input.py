@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from gen.atomic_output import OutputError, write_files_atomically, write_json_atomic
-from tools.paths import REPO
+from gen.lib.atomic_output import OutputError, write_files_atomically, write_json_atomic
+from gen.lib.paths import REPO
 
 ARMCTL = str(REPO / "tools" / "armctl")
 
@@ -122,7 +122,7 @@ def test_a_read_only_out_is_refused_before_any_work(read_only_disk: Path) -> Non
 
 # ---- TOML nested without end ----------------------------------------------------------------
 def test_toml_nesting_is_bounded_at_the_stated_limit() -> None:
-    from gen.toml_input import MAX_NESTING, TomlNestingError, loads
+    from gen.lib.toml_input import MAX_NESTING, TomlNestingError, loads
 
     assert loads("x = " + "[" * MAX_NESTING + "]" * MAX_NESTING)["x"] is not None
     for text in ("x = " + "[" * (MAX_NESTING + 1) + "]" * (MAX_NESTING + 1),  # parses, but too deep
@@ -193,7 +193,7 @@ HOSTILE_MODELS = {
 @pytest.mark.parametrize("case", sorted(HOSTILE_MODELS))
 def test_a_hostile_model_is_one_line_naming_the_element_and_nothing_is_built(tmp_path: Path, case: str) -> None:
     from tools.arm import ArmRef
-    from tools.paths import BUILD
+    from gen.lib.paths import BUILD
 
     make, named = HOSTILE_MODELS[case]
     text = make(tmp_path)

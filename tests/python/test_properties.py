@@ -1,13 +1,16 @@
 """Property tests (hypothesis) of the Python decoders and config loaders: on any input they
-return a value or raise their own named error, never anything else (no traceback reaches a user)."""
+return a value or raise their own named error, never anything else (no traceback reaches a user),
+and that error is one line naming what is wrong; a value they accept is the one they were given."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
 from pathlib import Path
 
 import lcm
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -16,8 +19,8 @@ from gen.synth.config import ConfigError, parse_config
 from host_sim.drive_model import DriveModel
 from host_sim.protocol import DriveProtocol, FastCodec
 from host_sim.uncertainty import UncertaintyConfig
-from tools.design_knobs import dumps
-from tools.paths import REPO
+from tools.design_knobs import KnobError, dumps
+from gen.lib.paths import REPO
 from tools.study_config import StudyConfigError, load
 from tools.telemetry_log import CHANNEL_TYPES, read_log
 
@@ -49,17 +52,75 @@ def _mutate(doc: dict, path: tuple, value: object) -> dict:
 DESIGN = tomllib.loads((REPO / "gen" / "configs" / "paper.toml").read_text())
 
 
+def _one_line_naming(exc: Exception, *names: str) -> None:
+    """A user's error: one line, naming (one of) the settings that is wrong."""
+    text = str(exc)
+    assert text and "\n" not in text, repr(text)
+    assert any(n in text for n in names), (names, text)
+
+
+def _contains(value: object, pred) -> bool:  # noqa: ANN001 - a predicate
+    if isinstance(value, dict):
+        return any(_contains(v, pred) for v in value.values())
+    if isinstance(value, list):
+        return any(_contains(v, pred) for v in value)
+    return pred(value)
+
+
+BASE_DESIGN = parse_config(DESIGN)
+
+
 @SETTINGS
 @given(_mutations(DESIGN))
 def test_design_config_parser_raises_only_config_error(m: tuple) -> None:
+    path, value = m
     try:
-        parse_config(_mutate(DESIGN, *m))
-    except ConfigError:
-        pass
+        cfg = parse_config(_mutate(DESIGN, path, value))
+    except ConfigError as exc:
+        _one_line_naming(exc, str(path[-1]))
+        return
+    assert type(cfg) is type(BASE_DESIGN)
+    # putting the original value back gives the original design: the mutation was all that changed
+    assert _same(parse_config(_mutate(_mutate(DESIGN, path, value), path, _get(DESIGN, path))), BASE_DESIGN)
+
+
+def _same(a: object, b: object) -> bool:
+    """Equality through dataclasses, containers and numpy arrays (whose == is elementwise)."""
+    if dataclasses.is_dataclass(a) and type(a) is type(b):
+        return all(_same(getattr(a, f.name), getattr(b, f.name)) for f in dataclasses.fields(a))
+    if isinstance(a, (list, tuple)) and type(a) is type(b):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return bool(np.array_equal(a, b, equal_nan=True))
+    return a == b or (a != a and b != b)  # NaN is NaN
+
+
+def _get(doc: dict, path: tuple) -> object:
+    for k in path:
+        doc = doc[k]
+    return doc
 
 
 STUDY_TEXT = (REPO / "tools" / "studies" / "paper.toml").read_text()
 STUDY = tomllib.loads(STUDY_TEXT)
+
+
+def test_the_study_document_round_trips_through_dumps() -> None:
+    """The property test below loads what dumps writes: it must be the study itself, unmutated
+    (a scenario named realistic+friction once made every example a TOML syntax error)."""
+    assert tomllib.loads(dumps(STUDY)) == STUDY
+    assert load_text_of(dumps(STUDY)) is not None
+
+
+def load_text_of(text: str, where: Path | None = None) -> object:
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        f = (where or Path(tmp)) / "cfg.toml"
+        f.write_text(text)
+        return load(f)
 
 
 @SETTINGS
@@ -67,15 +128,20 @@ STUDY = tomllib.loads(STUDY_TEXT)
 def test_study_config_loader_raises_only_study_config_error(tmp_path: Path, m: tuple) -> None:
     path, value = m
     doc = _mutate(STUDY, path, value)
-    f = tmp_path / "cfg.toml"
     try:
-        f.write_text(dumps(doc))
-    except Exception:  # noqa: BLE001 - a value TOML cannot hold (None): nothing to load
+        text = dumps(doc)
+    except KnobError as exc:  # a value TOML cannot hold: nothing to load
+        assert _contains(value, lambda v: v is None), (value, exc)
         return
+    tomllib.loads(text)  # what dumps writes is TOML
+    f = tmp_path / "cfg.toml"
+    f.write_text(text)
     try:
-        load(f)
-    except StudyConfigError:
-        pass
+        cfg = load(f)
+    except StudyConfigError as exc:
+        _one_line_naming(exc, *map(str, path), str(f))
+        return
+    assert cfg is not None
 
 
 @SETTINGS
@@ -95,9 +161,13 @@ def test_drive_model_raises_only_value_error(d: dict) -> None:
                                         "com_error_m", "viscous", "coulomb", "wind"]), values, max_size=5))
 def test_uncertainty_config_raises_only_value_error(d: dict) -> None:
     try:
-        UncertaintyConfig.from_dict(d)
-    except ValueError:
-        pass
+        cfg = UncertaintyConfig.from_dict(d)
+    except ValueError as exc:  # only a field that was given can be wrong: the defaults are valid
+        _one_line_naming(exc, *d)
+        return
+    for k, v in d.items():
+        assert getattr(cfg, k) == v, k
+    assert UncertaintyConfig.from_dict(dataclasses.asdict(cfg)) == cfg
 
 
 CODECS = [FastCodec.from_message(m) for m in DriveProtocol(6).state[:1] + DriveProtocol(6).cmd[:1]]

@@ -16,7 +16,7 @@ import pytest
 
 from tools.cluster import ClusterError, cert_files, check_cluster, make_certs
 from tools.hil import HilOptions, run_hil
-from tools.paths import REPO
+from gen.lib.paths import REPO
 from tools.runner import RunSpec, execute, run_all
 from tools.slots import CAN_BASE, LCM_BASE, _lock_dir, acquire_slot
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from hil_procs import BusRecorder
-from tools.paths import REPO
+from gen.lib.paths import REPO
 
 ARMCTL = str(REPO / "tools" / "armctl")
 CMD_IDS = set(range(0x201, 0x207))

@@ -84,7 +84,7 @@ def test_capture_holds_every_frame_and_the_field_s_tools_read_it(tmp_path: Path,
     import can
 
     from tools.hil import CAPTURE_FILE
-    from tools.paths import REPO
+    from gen.lib.paths import REPO
 
     preset = controller_bin.parent.parent.name
     for bus in ("sil", "udp"):

@@ -21,7 +21,7 @@ import pytest
 
 from study_configs import with_tuning
 from tools.hil import HilOptions, run_hil
-from tools.paths import REPO
+from gen.lib.paths import REPO
 from tools.study import DEFAULT_CONFIG, run_study
 from tools.study_config import METHODS, StudyConfigError, load
 from tools.telemetry_log import read_log

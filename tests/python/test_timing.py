@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from tools.hil import HilOptions, run_hil
-from tools.paths import REPO, env_with_repo
+from gen.lib.paths import REPO, env_with_repo
 from tools.timing import parse_cyclictest
 
 PCTS = ("p50", "p99", "p99.9", "max")

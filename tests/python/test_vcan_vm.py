@@ -36,7 +36,7 @@ import cantools
 import pytest
 
 from host_sim.protocol import DBC_PATH
-from tools.paths import REPO, env_with_repo
+from gen.lib.paths import REPO, env_with_repo
 
 PERIODS = 300
 VM_TIMEOUT_S = 420.0  # generous: the whole module takes ~2-4 min on the 2-core CI machine

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from tools.hil import HilOptions, run_hil
-from tools.paths import REPO
+from gen.lib.paths import REPO
 from tools.verdict import Bounds, judge
 
 GOOD_RESULTS = {"joint_names": ["a", "b"], "tracking_max_abs_deg": [0.5, 1.0], "saturated_fraction": [0.0, 0.01],

@@ -25,8 +25,8 @@ from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from gen.atomic_output import write_bytes_atomic
-from tools.paths import REPO
+from gen.lib.atomic_output import write_bytes_atomic
+from gen.lib.paths import REPO
 from tools.vm.kmod import ModuleError, load_order
 
 CACHE = REPO / ".cache" / "vm"

@@ -80,14 +80,13 @@ arm_ctl_init_result_t arm_ctl_init(arm_ctl_t *ctl, const arm_robot_model_t *mode
               cfg->torque_rate_limit[i] > 0.0f && isfinite(cfg->torque_rate_limit[i]))) {
             return ARM_CTL_BAD_LIMIT;
         }
-        if (!(cfg->q_min[i] < cfg->q_max[i] && cfg->velocity_limit[i] > 0.0f &&
-              cfg->following_error_limit[i] > 0.0f && cfg->torque_mismatch_limit[i] > 0.0f)) {
-            return ARM_CTL_BAD_LIMIT;
-        }
+        if (!(cfg->q_min[i] < cfg->q_max[i])) return ARM_CTL_BAD_RANGE;
+        if (!(cfg->velocity_limit[i] > 0.0f)) return ARM_CTL_BAD_VELOCITY_LIMIT;
+        if (!(cfg->following_error_limit[i] > 0.0f)) return ARM_CTL_BAD_FOLLOWING_LIMIT;
+        if (!(cfg->torque_mismatch_limit[i] > 0.0f)) return ARM_CTL_BAD_MISMATCH_LIMIT;
     }
-    if (!(cfg->step_tolerance > 0.0f) || cfg->torque_mismatch_periods < 1u) {
-        return ARM_CTL_BAD_LIMIT;
-    }
+    if (cfg->torque_mismatch_periods < 1u) return ARM_CTL_BAD_MISMATCH_LIMIT;
+    if (!(cfg->step_tolerance > 0.0f)) return ARM_CTL_BAD_STEP_TOLERANCE;
     memset(ctl, 0, sizeof(*ctl));
     ctl->model = model;
     ctl->rnea_kernel = arm_rnea_kernel_fits(model);
@@ -344,6 +343,11 @@ const char *arm_ctl_init_result_str(arm_ctl_init_result_t r)
         return "the loop rate differs from the rate the design was discretised for "
                "(pm_design_float.h ARM_LOOP_RATE_HZ): re-run armctl synth for this rate";
     case ARM_CTL_BAD_NUMERIC: return "numeric must be float or fixed";
+    case ARM_CTL_BAD_RANGE: return "each joint's range must have q_min < q_max";
+    case ARM_CTL_BAD_VELOCITY_LIMIT: return "velocity limits must be > 0";
+    case ARM_CTL_BAD_FOLLOWING_LIMIT: return "following-error limits must be > 0";
+    case ARM_CTL_BAD_MISMATCH_LIMIT: return "torque-mismatch limits must be > 0 and their periods >= 1";
+    case ARM_CTL_BAD_STEP_TOLERANCE: return "the step tolerance must be > 0";
     }
     return "?";
 }

@@ -6,8 +6,6 @@
 #include "arm/reference.h"
 #include "arm/rnea.h"
 
-static const float k_home[6] = {0.0f, -1.3f, 1.6f, -1.87f, -1.5708f, 0.0f}; /* MJCF keyframe */
-
 int cl_cases(cl_case_t cases[CL_MAX_CASES])
 {
     int n = 0;
@@ -71,7 +69,7 @@ static void forward_dynamics(const arm_robot_model_t *model, const float q[ARM_N
     }
 }
 
-void cl_run(const arm_robot_model_t *model, const cl_case_t *c, cl_result_t *r)
+void cl_run(const arm_robot_model_t *model, const float home[ARM_N_JOINTS], const cl_case_t *c, cl_result_t *r)
 {
     static arm_ctl_t ctl; /* large (method states): static, like the ports */
     memset(r, 0, sizeof(*r));
@@ -85,7 +83,7 @@ void cl_run(const arm_robot_model_t *model, const cl_case_t *c, cl_result_t *r)
     }
     float q[ARM_N_JOINTS], qd[ARM_N_JOINTS];
     for (int j = 0; j < ARM_N_JOINTS; ++j) {
-        q[j] = j < 6 ? k_home[j] : 0.0f;
+        q[j] = home[j];
         qd[j] = 0.0f;
     }
     arm_reference_t ref;

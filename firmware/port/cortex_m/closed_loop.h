@@ -33,7 +33,8 @@ typedef struct {
     uint32_t final_state;                       /* arm_state_t after the last step */
 } cl_result_t;
 
-/* Runs CL_STEPS periods of case c from the arm's home pose. No heap, no OS. */
-void cl_run(const arm_robot_model_t *model, const cl_case_t *c, cl_result_t *r);
+/* Runs CL_STEPS periods of case c from the arm's home pose (ARM_HOME_Q of the generated model).
+ * No heap, no OS. */
+void cl_run(const arm_robot_model_t *model, const float home[ARM_N_JOINTS], const cl_case_t *c, cl_result_t *r);
 
 #endif

@@ -74,7 +74,7 @@ static int check_closed_loop(void)
     for (int c = 0; c < CL_GOLDEN_CASES; ++c) {
         const cl_golden_t *g = &CL_GOLDEN[c];
         const cl_case_t cs = {.method = (arm_method_t)g->method, .numeric = (arm_numeric_t)g->numeric};
-        cl_run(&ARM_ROBOT_MODEL, &cs, &r);
+        cl_run(&ARM_ROBOT_MODEL, ARM_HOME_Q, &cs, &r);
         float scale = 0.0f, worst = 0.0f;
         for (unsigned k = 0; k < CL_RECORDS; ++k) {
             for (int j = 0; j < ARM_N_JOINTS; ++j) {

@@ -62,7 +62,8 @@ static int sender_joint(const arm_can_frame_t *f)
     return j;
 }
 
-/* Receive and dispatch frames until want_mask is complete (for states) or the deadline passes. */
+/* Receive and dispatch frames until done() reports every joint (e.g. this period's states) or the
+ * deadline passes; done == NULL: until the deadline. */
 static void pump(link_t *l, int64_t deadline_ns, uint32_t (*done)(const arm_drive_bus_t *))
 {
     for (;;) {

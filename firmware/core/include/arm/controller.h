@@ -129,9 +129,14 @@ typedef enum {
     ARM_CTL_BAD_METHOD,
     ARM_CTL_BAD_PERIOD,
     ARM_CTL_BAD_GAIN,
-    ARM_CTL_BAD_LIMIT,
+    ARM_CTL_BAD_LIMIT, /* torque or torque-rate limit */
     ARM_CTL_BAD_DESIGN_RATE, /* the synthesised design was discretised for another loop rate */
     ARM_CTL_BAD_NUMERIC,
+    ARM_CTL_BAD_RANGE,           /* q_min >= q_max */
+    ARM_CTL_BAD_VELOCITY_LIMIT,
+    ARM_CTL_BAD_FOLLOWING_LIMIT,
+    ARM_CTL_BAD_MISMATCH_LIMIT,  /* torque_mismatch_limit or torque_mismatch_periods */
+    ARM_CTL_BAD_STEP_TOLERANCE,
 } arm_ctl_init_result_t;
 
 /* Fills cfg with the defaults for the model: PD at 20 rad/s, critically damped; the model's

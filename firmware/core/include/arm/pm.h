@@ -55,13 +55,15 @@ void arm_pm_output(arm_pm_t *pm, const float e[ARM_N_JOINTS], const float e_dot[
                    float u_o[ARM_N_JOINTS], float w_hat[ARM_N_JOINTS]);
 
 /* Advances every state one period with this period's inputs. For joints in hold_mask (torque
- * limited this period) the estimator state is held and the internal model is reset to the
- * measured error: anti-windup, so K does not integrate the limiter's effect as disturbance. */
+ * limited this period) the estimator state is held and, in the decoupled structure, the internal
+ * model is reset to the measured error: anti-windup, so K does not integrate the limiter's effect
+ * as disturbance. */
 void arm_pm_update(arm_pm_t *pm, uint32_t hold_mask);
 
-/* The design's identity, for logs and the header check at init. */
+/* The design's identity (ARM_DESIGN_HASH of the generated headers), for logs. */
 const char *arm_pm_design_hash(void);
-/* 0 if the float and fixed headers are the same design and loop_rate_hz is the design's rate. */
+/* 0 if loop_rate_hz is the rate the design was discretised for (ARM_LOOP_RATE_HZ, within 0.1 %),
+ * else -1 (arm_ctl_init refuses with ARM_CTL_BAD_DESIGN_RATE). */
 int arm_pm_check_design(float loop_rate_hz);
 
 #endif
