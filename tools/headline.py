@@ -9,9 +9,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from gen.atomic_output import write_json_atomic, write_text_atomic
+from gen.lib.atomic_output import write_json_atomic, write_text_atomic
 from tools.code_identity import code_identity
-from tools.paths import REPO
+from gen.lib.paths import REPO
 
 RECORD = REPO / "tools" / "studies" / "paper.headline.json"
 README = REPO / "README.md"

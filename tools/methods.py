@@ -8,7 +8,7 @@ from __future__ import annotations
 import functools
 import re
 
-from tools.paths import REPO
+from gen.lib.paths import REPO
 
 TABLE = REPO / "firmware" / "core" / "src" / "methods.c"
 _ENTRY = re.compile(r'^\s*\[ARM_METHOD_\w+\]\s*=\s*\{\s*"([^"]+)"\s*,\s*([01])\s*,', re.M)

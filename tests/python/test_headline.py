@@ -35,7 +35,7 @@ def test_a_slice_of_the_record_reruns_bit_for_bit_at_head(tmp_path: Path, contro
 def test_record_refuses_a_study_that_is_not_the_default(tmp_path: Path) -> None:
     import subprocess
 
-    from tools.paths import REPO
+    from gen.lib.paths import REPO
 
     r = subprocess.run([str(REPO / "tools" / "armctl"), "study", "--record", "--seeds", "1", "--out",
                         str(tmp_path / "s")], cwd=REPO, capture_output=True, text=True)

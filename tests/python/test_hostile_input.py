@@ -240,7 +240,7 @@ def test_an_output_is_as_readable_as_any_file_this_process_makes(tmp_path: Path)
     """The writer's temporary file (mkstemp: 0600) must not leave the output unreadable to others."""
     import os
 
-    from gen.atomic_output import write_text_atomic
+    from gen.lib.atomic_output import write_text_atomic
 
     mask = os.umask(0o022)
     try:

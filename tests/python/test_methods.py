@@ -9,7 +9,7 @@ from pathlib import Path
 
 from tools import bench
 from tools.methods import TABLE, firmware_methods, method_names
-from tools.paths import REPO
+from gen.lib.paths import REPO
 from tools.study_config import METHODS as STUDY_METHODS
 
 

@@ -15,7 +15,7 @@ import pytest
 from arm_models import heavy_wrist_variant
 from gen.arm import (DEFAULT_DESIGN, DEFAULT_MODEL, REF_TORQUE_FRACTION, load_arm_file, prepare,
                      reference_peak_fraction)
-from tools.paths import REPO
+from gen.lib.paths import REPO
 
 
 def _prepared(model: Path):

@@ -8,7 +8,7 @@ import shlex
 import subprocess
 from pathlib import Path
 
-from tools.paths import REPO
+from gen.lib.paths import REPO
 
 ARMCTL = str(REPO / "tools" / "armctl")
 
