@@ -35,6 +35,7 @@ import mujoco
 import numpy as np
 
 from gen.lib import toml_input
+from gen.lib.bounds import DEFAULT_MAX_ERROR_DEG
 from gen.lib.atomic_output import OutputError, write_files_atomically
 
 REPO = Path(__file__).resolve().parent.parent
@@ -54,6 +55,13 @@ REF_TORQUE_FRACTION = 0.5
 REF_MAX_VELOCITY = math.pi       # rad/s
 REF_MAX_ACCELERATION = 20.0      # rad/s^2
 BUS_BUDGET = 0.70          # the highest bus load the wiring may reach (armctl busload's default)
+# The design of an arm that names none (no --design, none in its arm file), other than the bundled
+# arm: the paper's estimator with a critically damped static controller u_o = -(wn^2 e + 2 wn e_dot)
+# (gen/configs/wn40.toml's form), wn the largest at which a tracking error at the bound asks no
+# joint at home for more than the torque the reference leaves it ((1 - REF_TORQUE_FRACTION) of its
+# limit), within [AUTO_WN_MIN, AUTO_WN_MAX] rad/s (the top: tracked by the 1 kHz loop in every arm
+# tested). The paper's own weights make a 4.5 rad/s loop, which leaves light wrists 20-27 deg behind.
+AUTO_WN_MIN, AUTO_WN_MAX = 5.0, 40.0
 MAX_JOINTS = 16            # the firmware's bound (arm/robot_model.h); the DBC's drive slots bound it too
 MAX_NESTING = 256          # XML elements, and bodies below the world: deeper is no arm, and walks would recurse
 FLOAT32_MAX = float(np.finfo(np.float32).max)  # the firmware computes in float32: every number it takes fits
@@ -499,10 +507,13 @@ class Prepared:
     design_text: str
 
 
-def prepare(af: ArmFile, design: Path) -> Prepared:  # noqa: C901 - one pass over the model, step by step
+def prepare(af: ArmFile, design: Path | None) -> Prepared:  # noqa: C901 - one pass over the model, step by step
+    """design: the design config asked for (--design); None for the arm's default: the paper's weights
+    for the bundled arm, for any other arm one whose bandwidth fits it (auto_bandwidth)."""
     path = af.model.resolve()
     warnings: list[str] = []
-    design_doc, design_text, rate = _design(af.design or design)
+    template = af.design or design or DEFAULT_DESIGN
+    design_doc, design_text, rate = _design(template)
     period = 1.0 / rate
 
     spec = _load_spec(path)
@@ -788,13 +799,49 @@ def prepare(af: ArmFile, design: Path) -> Prepared:  # noqa: C901 - one pass ove
                           + " are left out on purpose: the estimator takes them as part of w"),
         "reference": reference,
         "buses": _wiring(af, n, rate),
-        "design_config": str(af.design or design),
         "model_hash": f"{fnv1a64(xml_bytes):016x}",
         "written_inverse_dynamics_error": written_error,
         "warnings": warnings,
     }
     del design_doc
-    return Prepared(xml, info, _design_for(design_text, n, af.design or design))
+    bundled = path == DEFAULT_MODEL.resolve() and not af.design and (design is None or design.resolve() ==
+                                                                       DEFAULT_DESIGN.resolve())
+    if af.design or design or bundled:
+        why = ("the bundled arm's default, the paper's weights (its kept study tuning is keyed by them)" if bundled
+               else f"the arm file's ({af.path})" if af.design else "asked for (--design)")
+        info["design"] = {"config": str(template), "why": why}
+    else:
+        wn, limiting = auto_bandwidth(np.diag(mass), [lim for lim, _ in limits])
+        design_text = with_static_controller(design_text, wn)
+        info["design"] = {"config": f"{template} with a critically damped {wn:.3g} rad/s controller", "wn_rad_s": wn,
+                          "why": (f"no design given: the largest bandwidth (in [{AUTO_WN_MIN:g}, {AUTO_WN_MAX:g}] rad/s) "
+                                  f"at which a {DEFAULT_MAX_ERROR_DEG:g} deg tracking error asks no joint at home for "
+                                  f"more than the {1 - REF_TORQUE_FRACTION:.0%} of its torque limit the reference "
+                                  f"leaves it (the tightest: {names[limiting]}); --design gen/configs/paper.toml "
+                                  "for the paper's weights")}
+    info["design_config"] = info["design"]["config"]
+    return Prepared(xml, info, _design_for(design_text, n, template))
+
+
+def auto_bandwidth(inertia_at_home: Any, torque_limits: list[float]) -> tuple[float, int]:
+    """The default design's wn (AUTO_WN_MIN..AUTO_WN_MAX), and the joint that bounds it: the feedback
+    M_jj wn^2 e of an error e at the tracking bound within the torque the reference leaves."""
+    e = math.radians(DEFAULT_MAX_ERROR_DEG)
+    room = [(1.0 - REF_TORQUE_FRACTION) * lim / (max(float(mjj), MIN_JOINT_INERTIA) * e)
+            for mjj, lim in zip(inertia_at_home, torque_limits)]
+    j = int(np.argmin(room))
+    return float(min(AUTO_WN_MAX, max(AUTO_WN_MIN, math.sqrt(room[j])))), j
+
+
+def with_static_controller(design_text: str, wn: float) -> str:
+    """The design config with its [controller] replaced by u_o = -(wn^2 e + 2 wn e_dot): z_o = E1 e +
+    E2 e_dot + D12 u_o with E1 = wn^2, E2 = 2 wn, D12 = 1 (one row: the static zeroing gain)."""
+    table = f"[controller]\nE1 = [[{wn * wn!r}]]\nE2 = [[{2.0 * wn!r}]]\nD12 = [[1.0]]\n"
+    out, count = re.subn(r"(?ms)^\[controller\].*?(?=^\[|\Z)", table + "\n", design_text, count=1)
+    if count != 1:
+        raise ArmError("design config: no [controller] table to set the default bandwidth in")
+    return re.sub(r'(?m)^(\s*description\s*=\s*")', lambda mm: f"{mm.group(1)}default for the arm: {wn:.3g} rad/s "
+                  "controller; ", out, count=1)
 
 
 def _inertia_carrier(m: mujoco.MjModel, i: int) -> str:
@@ -1033,7 +1080,9 @@ def main(argv: list[str] | None = None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--model", type=Path, default=None, help="MJCF or URDF [the arm file's, else the bundled UR5e]")
     ap.add_argument("--arm-file", type=Path, default=None, help="arm file (TOML)")
-    ap.add_argument("--design", type=Path, default=DEFAULT_DESIGN, help="design config when the arm file names none")
+    ap.add_argument("--design", type=Path, default=None,
+                    help="design config when the arm file names none [the arm's default: gen/configs/paper.toml "
+                         "for the bundled arm, else one whose bandwidth fits the arm (auto_bandwidth)]")
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--depfile", type=Path, default=None, help="write the files read, for the build (Ninja depfile)")
     ns = ap.parse_args(argv)
@@ -1052,7 +1101,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"gen.arm: {exc}", file=sys.stderr)
         return 1
     if ns.depfile is not None:
-        deps = [str(af.model.resolve()), str((af.design or ns.design).resolve())]
+        deps = [str(af.model.resolve()), str((af.design or ns.design or DEFAULT_DESIGN).resolve())]
         if af.path:
             deps.append(str(af.path.resolve()))
         if af.topology:

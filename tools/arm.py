@@ -53,8 +53,9 @@ class ArmRef:
         if self.model is not None:
             out["ARM_MODEL"] = str(self.model)
         out["ARM_FILE"] = str(self.arm_file) if self.arm_file is not None else ""
-        if self.design is not None:
-            out["ARM_DESIGN_CONFIG"] = str(self.design)
+        # always set: empty is the arm's own default design (gen/arm.py), and a build folder
+        # configured before this default existed must not keep another one in its cache
+        out["ARM_DESIGN_CONFIG"] = str(self.design) if self.design is not None else ""
         return out
 
 
@@ -69,7 +70,8 @@ def add_arm_arguments(p: argparse.ArgumentParser) -> None:
                    help="an arm file (TOML): its model, the controlled joints, home pose, torque limits, "
                         "bus wiring and design config")
     g.add_argument("--design", type=Path, default=None, metavar="FILE",
-                   help="design config when the arm file names none [gen/configs/paper.toml]")
+                   help="design config when the arm file names none [the bundled arm: gen/configs/paper.toml; "
+                        "another arm: its own, with a bandwidth that fits its torque limits and inertia]")
 
 
 def arm_from_args(ns: argparse.Namespace) -> ArmRef:
@@ -108,7 +110,7 @@ def _check_importable(arm: ArmRef) -> None:
     from gen.arm import DEFAULT_DESIGN, ArmError, load_arm_file, prepare
 
     try:
-        prepare(load_arm_file(arm.arm_file, None if arm.arm_file else arm.model), arm.design or DEFAULT_DESIGN)
+        prepare(load_arm_file(arm.arm_file, None if arm.arm_file else arm.model), arm.design)
     except ArmError as exc:
         raise ArmChoiceError(str(exc)) from exc
 

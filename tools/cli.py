@@ -189,6 +189,8 @@ def cmd_hil(ns: argparse.Namespace) -> int:
         print(f"armctl hil: {exc}", file=sys.stderr)
         return 2
     print_arm_warnings(info, "armctl hil")
+    if info.get("design"):
+        print(f"design: {info['design']['config']} ({info['design']['why']})")
     for w in warnings:
         print(f"armctl hil: {w}", file=sys.stderr)
     ref = ("--ref-amp", ",".join(f"{a:g}" for a in amp), "--ref-freq", ",".join(f"{f:g}" for f in freq),

@@ -510,6 +510,7 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
               "joint_names": [j["name"] for j in info["joints"]],
               "arm": {"name": info["name"], "model": info["model"], "arm_file": info["arm_file"],
                       "model_hash": info["model_hash"], "n_joints": info["n_joints"], "warnings": info["warnings"]},
+              "design": info.get("design"),
               "ref_hold_s": _arg_value(opt.controller_args, "--ref-hold", CONTROLLER_DEFAULT_HOLD_S),
               "rate_hz": _arg_value(opt.controller_args, "--rate", info["loop_rate_hz"]),
               "controller_args": list(opt.controller_args),

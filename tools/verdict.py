@@ -28,7 +28,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 DIVERGED_DEG = 180.0  # an error of half a turn: the arm is no longer where the controller thinks
-DEFAULT_MAX_ERROR_DEG = 2.0  # the tracking bound a run must meet to be "ok" (armctl hil --max-error-deg)
+from gen.lib.bounds import DEFAULT_MAX_ERROR_DEG  # noqa: E402 - the tracking bound a run must meet to be "ok"
 # The firmware safety layer's following-error stop (firmware/core/src/controller.c: 0.5 rad on every
 # joint): a run whose error grows past it is stopped (safe-stop, verdict failed) before it can be seen
 # larger. The tracking bound sits far below it, so a run the stop ended has left the bound first.
