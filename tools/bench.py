@@ -250,6 +250,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "figures are not the documented ones")
 
 
+def add_subparser(sub: argparse._SubParsersAction) -> None:
+    bn = sub.add_parser("bench", help="benchmarks that write results files (instructions per step; synthesis time)")
+    add_arguments(bn)
+    bn.set_defaults(run=run)
+
+
 def run(ns: argparse.Namespace) -> int:
     if ns.what == "step":
         out = ns.out or REPO / "runs" / "bench" / "step_instructions.json"

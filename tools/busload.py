@@ -48,24 +48,27 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print the result as JSON")
 
 
+def add_subparser(sub: argparse._SubParsersAction) -> None:
+    bl = sub.add_parser("busload", help="worst-case CAN bus load per control period from the DBC; refuses > budget")
+    add_arguments(bl)
+    bl.set_defaults(run=run)
+
+
 def run(ns: argparse.Namespace) -> int:
-    try:
-        if not 0 < ns.budget <= 100:
-            raise ConfigError(f"--budget {ns.budget:g}: must be in (0, 100] %")
-        if not ns.rate > 0 or not ns.heartbeat_ms > 0:
-            raise ConfigError("--rate and --heartbeat-ms must be > 0")
-        proto = Protocol(ns.dbc)
-        if ns.drives is not None and not 1 <= ns.drives <= proto.n_drives:
-            raise ConfigError(f"--drives {ns.drives}: the DBC has drive slots 1..{proto.n_drives}")
-        if ns.bus:
-            buses = [parse_bus(s, i) for i, s in enumerate(ns.bus)]
-        else:
-            buses = load_topology(ns.topology, ns.drives or topology_drives(ns.topology))
-        n_drives = ns.drives or max(d for b in buses for d in b.drives)
-        loads = compute(buses, ns.rate, ns.heartbeat_ms, proto, n_drives)
-    except ConfigError as exc:
-        print(f"armctl busload: {exc}", file=sys.stderr)
-        return 2
+    """armctl busload (a ConfigError exits 2: tools/cli.py)."""
+    if not 0 < ns.budget <= 100:
+        raise ConfigError(f"--budget {ns.budget:g}: must be in (0, 100] %")
+    if not ns.rate > 0 or not ns.heartbeat_ms > 0:
+        raise ConfigError("--rate and --heartbeat-ms must be > 0")
+    proto = Protocol(ns.dbc)
+    if ns.drives is not None and not 1 <= ns.drives <= proto.n_drives:
+        raise ConfigError(f"--drives {ns.drives}: the DBC has drive slots 1..{proto.n_drives}")
+    if ns.bus:
+        buses = [parse_bus(s, i) for i, s in enumerate(ns.bus)]
+    else:
+        buses = load_topology(ns.topology, ns.drives or topology_drives(ns.topology))
+    n_drives = ns.drives or max(d for b in buses for d in b.drives)
+    loads = compute(buses, ns.rate, ns.heartbeat_ms, proto, n_drives)
     budget = ns.budget / 100.0
     over = [bl for bl in loads if bl.load > budget]
     max_rate = math.floor(min(bl.max_rate_hz(budget) for bl in loads))
@@ -103,7 +106,10 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="armctl busload", description=__doc__ + "\n\n" + formulas,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     add_arguments(p)
-    return run(p.parse_args(argv))
+    p.set_defaults(command="busload", run=run)
+    from tools.cli import run_command
+
+    return run_command(p.parse_args(argv))
 
 
 if __name__ == "__main__":

@@ -14,7 +14,6 @@ import ipaddress
 import os
 import shutil
 import subprocess
-import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -155,12 +154,15 @@ def make_certs(folder: Path, days: int = CERT_DAYS) -> list[Path]:
     return out
 
 
-def cmd_cluster_certs(ns: argparse.Namespace) -> int:
-    try:
-        files = make_certs(ns.out)
-    except (ClusterError, OSError) as exc:
-        print(f"armctl cluster-certs: {exc}", file=sys.stderr)
-        return 1 if isinstance(exc, OSError) else 2
+def add_subparser(sub: argparse._SubParsersAction) -> None:
+    cc = sub.add_parser("cluster-certs", help="a CA and TLS certificates for a Dask cluster (study/tune --cluster tls://)")
+    cc.add_argument("--out", type=Path, required=True, help="an empty folder for ca.pem and scheduler/worker/client .pem/.key")
+    cc.set_defaults(run=run)
+
+
+def run(ns: argparse.Namespace) -> int:
+    """armctl cluster-certs (a ClusterError exits 2, an OSError 1: tools/cli.py)."""
+    files = make_certs(ns.out)
     print(f"armctl cluster-certs: a CA and certificates for the scheduler, the workers and the client in {ns.out}: "
           + ", ".join(p.name for p in files) + " (the .key files are secrets: copy each only to where it is used)")
     return 0

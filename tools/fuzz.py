@@ -14,7 +14,6 @@ import argparse
 import re
 import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 from tools.build import build
@@ -98,18 +97,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--only", default=None, help="comma-separated harnesses [all: " + ", ".join(HARNESSES) + "]")
 
 
+def add_subparser(sub: argparse._SubParsersAction) -> None:
+    fz = sub.add_parser("fuzz", help="libFuzzer (ASan/UBSan) on every C decoder, regression seeds first")
+    add_arguments(fz)
+    fz.set_defaults(run=run)
+
+
 def run(ns: argparse.Namespace) -> int:
+    """armctl fuzz (a FuzzError exits 1: tools/cli.py)."""
+    from tools.commands import UsageError
+
     names = list(HARNESSES) if ns.only is None else ns.only.split(",")
     bad = [n for n in names if n not in HARNESSES]
     if bad or not 1 <= ns.seconds <= 86400:
-        print(f"armctl fuzz: {'--only: unknown ' + ', '.join(bad) if bad else '--seconds: must be in [1, 86400]'}",
-              file=sys.stderr)
-        return 2
-    try:
-        exes = compile_all()
-    except FuzzError as exc:
-        print(f"armctl fuzz: {exc}", file=sys.stderr)
-        return 1
+        raise UsageError('--only: unknown ' + ', '.join(bad) if bad else '--seconds: must be in [1, 86400]')
+    exes = compile_all()
     each = ns.seconds / len(names)
     failed = 0
     for name in names:

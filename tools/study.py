@@ -21,10 +21,10 @@ from gen.arm import DEFAULT_DESIGN
 from tools.arm import (DEFAULT_ARM, ArmChoiceError, ArmRef, add_arm_arguments, arm_build_dir, arm_from_args,
                        arm_info, build_arm, print_arm_warnings, reference_for)
 from tools import procs
-from tools.cluster import Cluster, ClusterError, add_cluster_arguments, cluster_from_args
+from tools.cluster import Cluster, add_cluster_arguments, cluster_from_args
 from tools.code_identity import code_identity
 from gen.lib.atomic_output import write_json_atomic
-from tools.hil import SIL, HilError
+from tools.hil import SIL
 from tools.locks import LockHeld, flocked
 from gen.lib.outdir import OutDirError, check_out_dir
 from gen.lib.paths import REPO
@@ -486,35 +486,39 @@ def _hold_out(stack: ExitStack, out: Path) -> None:
                           "wait for it to end or give another --out") from None
 
 
-def cmd_study(ns: argparse.Namespace) -> int:
-    try:
-        if ns.seeds is not None and not 1 <= ns.seeds <= 1000:
-            raise StudyConfigError(f"--seeds: must be in [1, 1000], got {ns.seeds}")
-        if ns.duration is not None and not (0.001 <= ns.duration <= 86400):
-            raise StudyConfigError(f"--duration: must be in [0.001, 86400] s, got {ns.duration}")
-        if not 0 <= ns.confirm <= 1000:
-            raise StudyConfigError(f"--confirm: must be in [0, 1000], got {ns.confirm}")
-        cfg, arm, methods, scenarios, cluster = _common(ns)
-        if ns.record and (cfg.path.resolve() != DEFAULT_CONFIG.resolve() or not arm.is_default or ns.seeds or
-                          ns.duration or methods or scenarios or ns.trials):
-            raise StudyConfigError("--record: the headline is the default study as it stands (no --config, "
-                                   "--model/--arm, --seeds, --duration, --methods, --scenarios or --trials)")
-        with ExitStack() as stack:
-            _hold_out(stack, ns.out)
-            study = run_study(cfg, ns.out, seeds=ns.seeds, duration_s=ns.duration, methods=methods,
-                              scenarios=scenarios, arm=arm, jobs=ns.jobs, cluster=cluster, retune=ns.retune,
-                              trials=ns.trials, bus=ns.bus, confirm=ns.confirm)
-        if ns.record:
-            from tools import headline
+def add_subparser(sub: argparse._SubParsersAction) -> None:
+    """The study module's two commands: study (run = cmd_study) and tune (run = cmd_tune)."""
+    st = sub.add_parser("study", help="every method, tuned alike, in every scenario over seeds; the report")
+    add_study_arguments(st)
+    st.set_defaults(run=cmd_study)
+    tu = sub.add_parser("tune", help="tune every method alike (Optuna) per scenario; kept for the study")
+    add_tune_arguments(tu)
+    tu.set_defaults(run=cmd_tune)
 
-            headline.write(study)
-            print(f"armctl study: the headline recorded in {headline.RECORD} and README.md's result tables")
-    except (StudyConfigError, ArmChoiceError, OutDirError, ClusterError) as exc:
-        print(f"armctl study: {exc}", file=sys.stderr)
-        return 2
-    except (HilError, OSError) as exc:
-        print(f"armctl study: {exc}", file=sys.stderr)
-        return 1
+
+def cmd_study(ns: argparse.Namespace) -> int:
+    """armctl study (a bad config, arm, --out or cluster exits 2; a run that cannot run, 1: tools/cli.py)."""
+    if ns.seeds is not None and not 1 <= ns.seeds <= 1000:
+        raise StudyConfigError(f"--seeds: must be in [1, 1000], got {ns.seeds}")
+    if ns.duration is not None and not (0.001 <= ns.duration <= 86400):
+        raise StudyConfigError(f"--duration: must be in [0.001, 86400] s, got {ns.duration}")
+    if not 0 <= ns.confirm <= 1000:
+        raise StudyConfigError(f"--confirm: must be in [0, 1000], got {ns.confirm}")
+    cfg, arm, methods, scenarios, cluster = _common(ns)
+    if ns.record and (cfg.path.resolve() != DEFAULT_CONFIG.resolve() or not arm.is_default or ns.seeds or
+                      ns.duration or methods or scenarios or ns.trials):
+        raise StudyConfigError("--record: the headline is the default study as it stands (no --config, "
+                               "--model/--arm, --seeds, --duration, --methods, --scenarios or --trials)")
+    with ExitStack() as stack:
+        _hold_out(stack, ns.out)
+        study = run_study(cfg, ns.out, seeds=ns.seeds, duration_s=ns.duration, methods=methods,
+                          scenarios=scenarios, arm=arm, jobs=ns.jobs, cluster=cluster, retune=ns.retune,
+                          trials=ns.trials, bus=ns.bus, confirm=ns.confirm)
+    if ns.record:
+        from tools import headline
+
+        headline.write(study)
+        print(f"armctl study: the headline recorded in {headline.RECORD} and README.md's result tables")
     print((ns.out / "summary.txt").read_text())
     print(f"report: {ns.out / 'report.md'}")
     unmeasured = [f"{m} in {s} (seed {seed}): {r.get('result')}" for s, sc in study["scenarios"].items()
@@ -544,19 +548,13 @@ def measured(r: dict[str, Any]) -> bool:
 
 
 def cmd_tune(ns: argparse.Namespace) -> int:
-    try:
-        cfg, arm, methods, scenarios, cluster = _common(ns)
-        with ExitStack() as stack:
-            _hold_out(stack, ns.out)
-            setup, info, _ = setup_for(cfg, arm, ns.out, ns.jobs, cluster, ns.bus)
-            result = tuned(setup.cfg, arm, setup, info, scenarios or list(cfg.scenarios), methods or cfg.methods,
-                           retune=True, trials=ns.trials)
-    except (StudyConfigError, ArmChoiceError, OutDirError, ClusterError) as exc:
-        print(f"armctl tune: {exc}", file=sys.stderr)
-        return 2
-    except (HilError, OSError) as exc:
-        print(f"armctl tune: {exc}", file=sys.stderr)
-        return 1
+    """armctl tune (its errors as the study's)."""
+    cfg, arm, methods, scenarios, cluster = _common(ns)
+    with ExitStack() as stack:
+        _hold_out(stack, ns.out)
+        setup, info, _ = setup_for(cfg, arm, ns.out, ns.jobs, cluster, ns.bus)
+        result = tuned(setup.cfg, arm, setup, info, scenarios or list(cfg.scenarios), methods or cfg.methods,
+                       retune=True, trials=ns.trials)
     for s, recs in result.items():
         for m, rec in recs.items():
             print(f"{s:<40} {m:<10} objective {rec['objective']:.4g}  {json.dumps(rec['knobs'])}"

@@ -34,7 +34,6 @@ import math
 import shutil
 import signal
 import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
@@ -342,15 +341,20 @@ def table(d: dict[str, Any]) -> str:
     return "\n".join(rows)
 
 
+def add_subparser(sub: argparse._SubParsersAction) -> None:
+    tm = sub.add_parser("timing", help="real-time loop latency vs cyclictest in the same run")
+    add_arguments(tm)
+    tm.set_defaults(run=run)
+
+
 def run(ns: argparse.Namespace) -> int:
     from tools.build import build
+    from tools.commands import UsageError
 
     if not ns.duration > 0:
-        print(f"armctl timing: --duration: must be > 0, got {ns.duration}", file=sys.stderr)
-        return 2
+        raise UsageError(f"--duration: must be > 0, got {ns.duration}")
     if not 10 <= ns.rate <= 20000:
-        print(f"armctl timing: --rate: must be in [10, 20000] Hz, got {ns.rate}", file=sys.stderr)
-        return 2
+        raise UsageError(f"--rate: must be in [10, 20000] Hz, got {ns.rate}")
     build("release")
     d = measure(ns.out, ns.duration, ns.rate, ns.rt_priority, ns.cpu, ns.method)
     print(table(d))

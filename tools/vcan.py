@@ -62,15 +62,15 @@ def _run(cmd: list[str]) -> tuple[int, str]:
 
 
 def cmd_up(ns: argparse.Namespace) -> int:
+    from tools.commands import CommandError
+
     iface = ns.iface
     mtu = "16" if ns.classic else "72"
     steps = [["modprobe", "vcan"],
              ["ip", "link", "add", "dev", iface, "type", "vcan"],
              ["ip", "link", "set", iface, "mtu", mtu, "txqueuelen", str(ns.txqueuelen), "up"]]
     if os.geteuid() != 0:
-        print(f"armctl vcan up: needs root; run:\n  sudo {' && sudo '.join(' '.join(s) for s in steps)}",
-              file=sys.stderr)
-        return 1
+        raise CommandError(f"needs root; run:\n  sudo {' && sudo '.join(' '.join(s) for s in steps)}")
     ok, why = kernel_has_can()
     if not ok:
         mod_dir = Path("/lib/modules") / os.uname().release
@@ -81,20 +81,16 @@ def cmd_up(ns: argparse.Namespace) -> int:
         else:
             detail = f"no modprobe or no module tree {mod_dir}: nothing to load"
         if not ok:
-            print(f"armctl vcan up: {why}; {detail}.\n  {NO_CAN_HINT}", file=sys.stderr)
-            return 1
+            raise CommandError(f"{why}; {detail}.\n  {NO_CAN_HINT}")
     if not Path(f"/sys/class/net/{iface}").exists():
         if shutil.which("modprobe"):
             _run(steps[0])
         rc, msg = _run(steps[1])
         if rc != 0:
-            print(f"armctl vcan up: {' '.join(steps[1])}: {msg}\n  (no vcan driver in this kernel?) "
-                  f"{NO_CAN_HINT}", file=sys.stderr)
-            return 1
+            raise CommandError(f"{' '.join(steps[1])}: {msg}\n  (no vcan driver in this kernel?) {NO_CAN_HINT}")
     rc, msg = _run(steps[2])
     if rc != 0:
-        print(f"armctl vcan up: {' '.join(steps[2])}: {msg}", file=sys.stderr)
-        return 1
+        raise CommandError(f"{' '.join(steps[2])}: {msg}")
     for i in can_interfaces():
         if i["name"] == iface:
             print(f"armctl vcan: {iface} up (mtu {i['mtu']}{' = CAN FD' if i['mtu'] == '72' else ' = classic'}, "
@@ -129,32 +125,23 @@ def cmd_status(ns: argparse.Namespace) -> int:
 
 
 def cmd_setup(ns: argparse.Namespace) -> int:
-    from tools.vm.image import VmError, ensure_image
+    from tools.vm.image import ensure_image
 
-    try:
-        img = ensure_image(refresh=ns.refresh)
-    except VmError as exc:
-        print(f"armctl vcan setup: {exc}", file=sys.stderr)
-        return EXIT_NO_VM
+    img = ensure_image(refresh=ns.refresh)  # a VmError exits EXIT_NO_VM (add_arguments)
     print(f"armctl vcan: VM image ready: kernel {img.kernel_version}, {img.initrd}")
     return 0
 
 
 def cmd_run(ns: argparse.Namespace) -> int:
-    from tools.vm.image import VmError
+    from tools.commands import UsageError
     from tools.vm.run import run_in_vm
 
     argv = list(ns.argv)
     if argv and argv[0] == "--":
         argv = argv[1:]
     if not argv:
-        print("armctl vcan run: no command; usage: armctl vcan run -- CMD [ARGS...]", file=sys.stderr)
-        return 2
-    try:
-        res = run_in_vm(argv, timeout=ns.timeout, keep=ns.keep)
-    except VmError as exc:
-        print(f"armctl vcan run: {exc}", file=sys.stderr)
-        return EXIT_NO_VM
+        raise UsageError("no command; usage: armctl vcan run -- CMD [ARGS...]")
+    res = run_in_vm(argv, timeout=ns.timeout, keep=ns.keep)  # a VmError exits EXIT_NO_VM (add_arguments)
     if ns.verbose:
         print(f"armctl vcan: exit {res.returncode}; set-up {res.setup_s:.1f} s, boot {res.boot_s:.1f} s, "
               f"command {res.command_s:.1f} s, total {res.total_s:.1f} s", file=sys.stderr)
@@ -162,6 +149,10 @@ def cmd_run(ns: argparse.Namespace) -> int:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """vcan's own subcommands; each names itself in its messages (armctl vcan up: ...), and a VM
+    that cannot be set up exits EXIT_NO_VM."""
+    from tools.vm.image import VmError
+
     sub = parser.add_subparsers(dest="vcan_command", required=True)
     s = sub.add_parser("status", help="what CAN is available here: kernel, interfaces, the VM")
     s.set_defaults(vcan_fn=cmd_status)
@@ -179,6 +170,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     r.add_argument("-v", "--verbose", action="store_true", help="print boot and run times")
     r.add_argument("argv", nargs=argparse.REMAINDER, help="-- CMD [ARGS...]")
     r.set_defaults(vcan_fn=cmd_run)
+    for name, p in sub.choices.items():
+        p.set_defaults(prefix=f"armctl vcan {name}", exit_codes={VmError: EXIT_NO_VM})
+
+
+def add_subparser(sub: argparse._SubParsersAction) -> None:
+    vc = sub.add_parser("vcan", help="real SocketCAN: vcan interfaces natively, or a qemu VM that has them "
+                                     "(status/up/setup/run)")
+    add_arguments(vc)
+    vc.set_defaults(run=run)
 
 
 def run(ns: argparse.Namespace) -> int:
@@ -189,7 +189,10 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="armctl vcan", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     add_arguments(p)
-    return run(p.parse_args(argv))
+    p.set_defaults(command="vcan", run=run)
+    from tools.cli import run_command
+
+    return run_command(p.parse_args(argv))
 
 
 if __name__ == "__main__":

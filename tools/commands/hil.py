@@ -1,0 +1,263 @@
+"""armctl hil: one hardware-in-the-loop run; with --scenario, one run of a study on its own; with
+--bus vm, the same run inside the qemu VM (tools/vm)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+from gen.lib.outdir import check_out_dir
+from gen.lib.paths import REPO
+from tools.arm import add_arm_arguments
+from tools.commands import UsageError
+from tools.methods import method_names
+from tools.verdict import DEFAULT_MAX_ERROR_DEG, FOLLOWING_ERROR_STOP_DEG
+
+_PARSER: argparse.ArgumentParser | None = None  # hil's own, to read its arguments again for the VM
+PATH_OPTIONS = ("out", "topology", "model", "arm", "design", "config")  # dests whose values are paths
+
+
+def _float_list(text: str) -> list[float]:
+    try:
+        vals = [float(x) for x in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a comma-separated list of numbers") from None
+    if not all(math.isfinite(v) for v in vals):
+        raise argparse.ArgumentTypeError(f"'{text}': every value must be finite")
+    return vals
+
+
+def add_subparser(sub: argparse._SubParsersAction) -> None:
+    global _PARSER
+    from tools.study_config import METHODS as STUDY_METHODS
+
+    h = sub.add_parser("hil", help="one hardware-in-the-loop run")
+    h.add_argument("--duration", type=float, default=None, help="simulated seconds [5; with --scenario the config's]")
+    h.add_argument("--method", default=None,
+                   choices=(*method_names(), *(m for m in STUDY_METHODS if m not in method_names())),
+                   help="the firmware's methods (the core's method table, firmware/core/src/methods.c), and the "
+                        "study's variants [pm; pm-paper-weights (pm with the paper's design) with --scenario only]")
+    g = h.add_argument_group("one run of a study, on its own (the same run.json results as the study's)")
+    g.add_argument("--scenario", default=None, metavar="NAME",
+                   help="the study config's scenario: its uncertainty, drives, bus timing, trajectory and hold")
+    g.add_argument("--config", type=Path, default=None, metavar="FILE",
+                   help="the study config [tools/studies/paper.toml]")
+    g.add_argument("--seed", type=int, default=None, metavar="N", help="the uncertainty's seed [the config's first]")
+    g.add_argument("--knobs", default=None, metavar="JSON",
+                   help="the method's tuned knobs, as the study's report gives them (e.g. '{\"wn\": 40}')")
+    g.add_argument("--tuned", default=None, metavar="METHOD",
+                   help="the kept tuning's knobs of METHOD in the scenario (and --method METHOD)")
+    h.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
+    h.add_argument("--bus", choices=("auto", "udp", "vcan", "vm", "sil"), default="auto",
+                   help="auto: vcan if this kernel has SocketCAN and vcan0, vcan1 (one per bus of "
+                        "firmware/protocol/buses.toml), else udp (one port per bus; says which); "
+                        "vm: the whole run inside the qemu VM that has vcan0, vcan1")
+    h.add_argument("--topology", type=Path, default=None,
+                   help="which drive is on which bus, and each bus's bit rates [firmware/protocol/buses.toml]")
+    h.add_argument("--bus-timing", action="store_true",
+                   help="emulate the buses' bit timing in the simulator (frame lengths, arbitration by id): "
+                        "commands act when their frames would end on the bus")
+    h.add_argument("--out", type=Path, default=REPO / "runs" / "hil")
+    h.add_argument("--ref-amp", type=_float_list, default=None, metavar="A1,..,An",
+                   help="reference amplitudes, rad, one per joint (q_d = home + A (1 - cos 2 pi F t)); clipped "
+                        "to the joint ranges with a warning [the arm's default]")
+    h.add_argument("--ref-freq", type=_float_list, default=None, metavar="F1,..,Fn", help="reference frequencies, Hz")
+    h.add_argument("--ref-hold", type=float, default=0.5, help="hold the home pose this long first, s [0.5]")
+    h.add_argument("--max-error-deg", type=float, default=DEFAULT_MAX_ERROR_DEG,
+                   help=f"bound: any joint's L-infinity tracking error, deg; above it a run is not ok "
+                        f"[{DEFAULT_MAX_ERROR_DEG:g}]; the safety layer stops a run at {FOLLOWING_ERROR_STOP_DEG:.3g} deg")
+    h.add_argument("--max-saturated-fraction", type=float, default=0.05,
+                   help="bound: time at the torque limit, per joint, fraction [0.05]")
+    h.add_argument("--can-port", type=int, default=None, metavar="PORT",
+                   help="UDP bus: buses on PORT, PORT+1, .. (to watch them with python-can) [the run slot's]")
+    h.add_argument("--capture", action="store_true",
+                   help="write every frame on the buses to DIR/bus.log, from the simulator's side, in candump's "
+                        "log format (canplayer, python-can's LogReader, cantools decode)")
+    h.add_argument("--drives", choices=("ideal", "realistic"), default="ideal",
+                   help="the emulated drives' sensing and torque path (host_sim/README.md) [ideal]")
+    add_arm_arguments(h)
+    h.set_defaults(run=run)
+    _PARSER = h
+
+
+def _print_run(run: dict) -> None:
+    from tools.run_analysis import table
+
+    print(table(run))
+
+
+def _ended(run: dict, out: Path) -> int:
+    from tools import procs
+
+    _print_run(run)
+    print(f"results: {out / 'run.json'}  log: {out / 'telemetry.lcmlog'}")
+    if procs.interrupted is not None:
+        return 128 + procs.interrupted
+    return 0 if run["results"]["result"] == "ok" else 1
+
+
+def _check_duration(duration: float | None) -> None:
+    if duration is not None and not (math.isfinite(duration) and 0.001 <= duration <= 86400):
+        raise UsageError(f"--duration: must be in [0.001, 86400] s, got {duration}")
+
+
+def _study_run(ns: argparse.Namespace) -> int:
+    """hil --scenario: one run of a study, made as the study makes it (tools/study.py
+    study_run_spec) and run as it runs it (tools/runner.py execute)."""
+    import json
+    import sys
+    from dataclasses import asdict
+
+    from tools import study
+    from tools.arm import arm_from_args, arm_info, build_arm, print_arm_warnings
+    from tools.runner import DONE, execute
+    from tools.study_config import StudyConfigError, load
+
+    if ns.tuned is not None and ns.knobs is not None:
+        raise StudyConfigError("--tuned and --knobs: give one")
+    if ns.tuned is not None:
+        if ns.method not in (None, ns.tuned):
+            raise StudyConfigError(f"--tuned {ns.tuned} with --method {ns.method}: give one method")
+        ns.method = ns.tuned
+    knobs = None
+    if ns.knobs is not None:
+        try:
+            knobs = json.loads(ns.knobs)
+        except ValueError as exc:
+            raise StudyConfigError(f"--knobs: not JSON ({exc})") from None
+        if not isinstance(knobs, dict):
+            raise StudyConfigError("--knobs: a JSON object of knob: value")
+    cfg = load(ns.config or study.DEFAULT_CONFIG)
+    arm = arm_from_args(ns)
+    check_out_dir(ns.out)
+    if ns.bus not in study.BUSES:
+        raise StudyConfigError(f"--scenario: --bus {ns.bus}: a study's run runs on {', '.join(study.BUSES)}")
+    print_arm_warnings(arm_info(build_arm("release", arm)), "armctl hil")
+    seed = cfg.seed if ns.seed is None else ns.seed
+    spec, traj, notes = study.study_run_spec(cfg, arm, ns.scenario, ns.method or "pm", seed, ns.duration, knobs,
+                                             ns.tuned is not None, ns.out.resolve(), ns.bus)
+    for n in notes:
+        print(f"armctl hil: {n}", file=sys.stderr)
+    print(f"armctl hil: {ns.method or 'pm'} in scenario {ns.scenario} of {cfg.path}, seed {seed}, "
+          f"{spec.duration_s:g} s, knobs {json.dumps(spec.labels['knobs'])}; trajectory ({traj['from']}) amplitudes "
+          f"{traj['amp']} rad, frequencies {traj['freq_hz']} Hz")
+    (ns.out / DONE).unlink(missing_ok=True)  # run it, never take a kept one
+    return _ended(execute(asdict(spec)), ns.out)
+
+
+def run(ns: argparse.Namespace) -> int:
+    import sys
+
+    from tools.arm import arm_from_args, arm_info, build_arm, print_arm_warnings, reference_for
+    from tools.hil import HilOptions, run_hil
+    from tools.study_config import DRIVE_PRESETS
+    from tools.verdict import Bounds
+
+    _check_duration(ns.duration)
+    if ns.scenario is not None:
+        return _study_run(ns)
+    study_only = [o for o, v in (("--config", ns.config), ("--seed", ns.seed), ("--knobs", ns.knobs),
+                                 ("--tuned", ns.tuned)) if v is not None]
+    if study_only or ns.method == "pm-paper-weights":
+        raise UsageError(f"{', '.join(study_only) or '--method pm-paper-weights'}: one run of a study: give --scenario")
+    ns.duration = 5.0 if ns.duration is None else ns.duration
+    ns.method = ns.method or "pm"
+    _check_duration(ns.duration)
+    if not (0 <= ns.ref_hold <= 3600):
+        raise UsageError(f"--ref-hold: must be in [0, 3600] s, got {ns.ref_hold}")
+    if (ns.ref_amp is None) != (ns.ref_freq is None):
+        raise UsageError("--ref-amp and --ref-freq go together")
+    if not (math.isfinite(ns.max_error_deg) and ns.max_error_deg > 0):
+        raise UsageError(f"--max-error-deg: must be a number above 0, got {ns.max_error_deg}")
+    if ns.max_error_deg >= FOLLOWING_ERROR_STOP_DEG:
+        print(f"armctl hil: --max-error-deg {ns.max_error_deg:g}: the safety layer stops a run at "
+              f"{FOLLOWING_ERROR_STOP_DEG:.3g} deg of following error first (verdict failed): the bound is never "
+              "reached", file=sys.stderr)
+    arm = arm_from_args(ns)
+    check_out_dir(ns.out)
+    if ns.topology is not None:  # the file itself, before the build; its drives against the arm's after it
+        from gen.lib import busload
+
+        try:
+            busload.load_topology(ns.topology, busload.topology_drives(ns.topology))
+        except busload.ConfigError as exc:
+            raise UsageError(f"--topology: {exc}") from None
+    if ns.can_port is not None and not 1024 <= ns.can_port <= 65532:
+        raise UsageError(f"--can-port: must be in [1024, 65532], got {ns.can_port}")
+    if ns.bus == "vm":
+        return _in_vm(ns, arm)
+    bdir = build_arm("release", arm)
+    info = arm_info(bdir)
+    amp, freq, warnings = reference_for(info, ns.ref_amp, ns.ref_freq, bdir)
+    print_arm_warnings(info, "armctl hil")
+    if info.get("design"):
+        print(f"design: {info['design']['config']} ({info['design']['why']})")
+    for w in warnings:
+        print(f"armctl hil: {w}", file=sys.stderr)
+    ref = ("--ref-amp", ",".join(f"{a:g}" for a in amp), "--ref-freq", ",".join(f"{f:g}" for f in freq),
+           "--ref-hold", f"{ns.ref_hold:g}")
+    result = run_hil(HilOptions(out=ns.out, duration_s=ns.duration, method=ns.method, mode=ns.mode, arm=arm,
+                             bus=ns.bus, topology=ns.topology, bus_timing=ns.bus_timing, controller_args=ref,
+                             capture=ns.capture,
+                             bounds=Bounds(ns.max_error_deg, ns.max_saturated_fraction),
+                             drives=DRIVE_PRESETS[ns.drives], can_port=ns.can_port))
+    print(f"bus: {result['environment']['bus_choice']}")
+    for name, pct in result["environment"]["bus_load_pct"].items():
+        if pct > 100.0:
+            print(f"armctl hil: bus {name} needs {pct:g} % of its time at 1 kHz (tools/armctl busload): the "
+                  "frames of a period do not fit in it" + (", so commands end late (--bus-timing)"
+                                                           if ns.bus_timing else ""), file=sys.stderr)
+    return _ended(result, ns.out)
+
+
+def _option(parser: argparse.ArgumentParser, name: str) -> argparse.Action | None:
+    """The action an option string names, as argparse reads it: exactly, or by a unique prefix."""
+    table = parser._option_string_actions  # noqa: SLF001 - argparse's own table of option strings
+    if name in table:
+        return table[name]
+    found = {id(a): a for s, a in table.items() if name.startswith("--") and s.startswith(name)}
+    return next(iter(found.values())) if len(found) == 1 else None
+
+
+def vm_argv(args: list[str], parser: argparse.ArgumentParser | None = None, cwd: Path | None = None) -> list[str]:
+    """hil's own arguments as given, for the same run inside the VM: --bus vm becomes --bus vcan,
+    and every path is made absolute (against cwd, this process's folder unless told)."""
+    parser = parser or _PARSER
+    assert parser is not None, "hil's parser is made by add_subparser"
+    base = Path.cwd() if cwd is None else cwd
+    out: list[str] = []
+    i = 0
+    while i < len(args):
+        tok = args[i]
+        i += 1
+        if tok == "--":
+            out += args[i - 1:]
+            break
+        name, eq, val = tok.partition("=") if tok.startswith("--") else (tok, "", "")
+        action = _option(parser, name) if tok.startswith("-") else None
+        if action is None or action.nargs == 0 or action.dest not in ("bus", *PATH_OPTIONS):
+            out.append(tok)
+            continue
+        if not eq:
+            if i >= len(args):
+                out.append(tok)
+                break
+            val = args[i]
+            i += 1
+        val = "vcan" if action.dest == "bus" and val == "vm" else (
+            str((base / val).resolve()) if action.dest in PATH_OPTIONS else val)
+        out += [f"{name}={val}"] if eq else [name, val]
+    return out
+
+
+def _in_vm(ns: argparse.Namespace, arm) -> int:  # noqa: ANN001 - tools.arm.ArmRef
+    """The same HIL run inside the qemu VM whose kernel has vcan0..vcan3 (tools/vm)."""
+    from tools.arm import build_arm
+    from tools.vm.run import run_in_vm
+
+    build_arm("release", arm)
+    inner = ["tools/armctl", "hil", *vm_argv(ns.command_args)]
+    print("armctl hil: running inside the qemu VM (software emulation: minutes, not seconds)")
+    ns.prefix = "armctl hil --bus vm"  # a VM that cannot run says so under this name
+    return run_in_vm(inner, timeout=3600.0 + 600.0 * ns.duration, keep=False).returncode
