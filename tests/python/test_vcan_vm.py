@@ -62,7 +62,10 @@ def _frame_text(g: str) -> str:
 
 VM_SCRIPT = r"""#!/bin/sh
 # Runs inside the VM, chrooted into the host's filesystem (tests/python/test_vcan_vm.py).
-OUT=$1; CTL=$2; PY=$3; UNIT=$4; SELFTEST=$5; PERIODS=$6; GARBAGE=$7; CTL_EXTRA=$8; BUSES=$9
+OUT=$1; CTL=$2; PY=$3; UNIT=$4; SELFTEST=$5; PERIODS=$6; GARBAGE=$7; CTL_EXTRA=$8; BUSES=$9; BUSLOG=${10}
+# can-utils' canplayer reads a run's capture (armctl hil --capture: candump's log format), each
+# bus's lines printed as they would be sent (it needs AF_CAN even for that: here it has it)
+canplayer -I "$BUSLOG" -t stdout=can0 stdout=can1 > "$OUT/replay.log" 2> "$OUT/replay.err"; echo $? > "$OUT/replay.rc"
 DURATION=$PERIODS
 "$UNIT" > "$OUT/unit.out" 2>&1; echo $? > "$OUT/unit.rc"
 "$SELFTEST" vcan0 > "$OUT/selftest.out" 2>&1; echo $? > "$OUT/selftest.rc"
@@ -170,10 +173,14 @@ def vm_run(tmp_path_factory: pytest.TempPathFactory, build_dir: Path) -> dict:
     # no start-pose hold where the controller has one: the VM is slow, the periods are precious
     helptext = subprocess.run([str(exes["ctl"]), "--help"], capture_output=True, text=True).stdout
     ctl_extra = "--ref-hold 0" if "--ref-hold" in helptext else ""
+    from tools.hil import CAPTURE_FILE, HilOptions, run_hil
+
+    run_hil(HilOptions(out=out / "sil", duration_s=0.2, preset=build_dir.name, bus="sil", capture=True))
     log = io.BytesIO()
     res = run_in_vm(
         ["sh", str(script), str(out), str(exes["ctl"]), sys.executable, str(exes["unit"]),
-         str(exes["selftest"]), str(PERIODS), " ".join(g for g, _, _ in GARBAGE), ctl_extra, BUSES],
+         str(exes["selftest"]), str(PERIODS), " ".join(g for g, _, _ in GARBAGE), ctl_extra, BUSES,
+         str(out / "sil" / CAPTURE_FILE)],
         cwd=REPO, env=env_with_repo(), timeout=VM_TIMEOUT_S, stdout=log, stderr=log)
     console = "\n".join(res.console_tail)
     assert not res.timed_out, f"VM timed out after {VM_TIMEOUT_S:g} s; console:\n{console}"
@@ -192,6 +199,15 @@ def _rc(vm_run: dict, name: str) -> int:
     text = vm_run["read"](f"{name}.rc").strip()
     assert text.lstrip("-").isdigit(), f"{name} never finished in the VM ({text})"
     return int(text)
+
+
+def test_canplayer_replays_a_capture(vm_run: dict) -> None:
+    """Every line of a run's capture (--capture) is a frame canplayer replays, on both buses."""
+    assert _rc(vm_run, "replay") == 0, vm_run["read"]("replay.err")
+    capture = (vm_run["out"] / "sil" / "bus.log").read_text().splitlines()
+    replayed = vm_run["read"]("replay.log").splitlines()
+    assert len(replayed) == len(capture) > 0
+    assert [ln.split()[1:] for ln in replayed] == [ln.split()[1:] for ln in capture]  # ifaces, ids, data
 
 
 def test_socketcan_transport_on_a_kernel_with_can(vm_run: dict) -> None:
