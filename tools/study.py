@@ -573,5 +573,11 @@ def cmd_tune(ns: argparse.Namespace) -> int:
                   f"({rec['trials_run']} of at most {rec['cap']} trials)  {json.dumps(rec['knobs'])}"
                   + (f"  ({rec['edge_note']})" if rec["edge_note"] else "")
                   + (f"  validation: {rec['validation']['note']}" if rec.get("validation") else ""))
+    from tools.report import colour_of, convergence_figure
+
+    colour = colour_of({"methods": cfg.methods})
+    for s, recs in result.items():
+        print(f"best-so-far curves: {ns.out / convergence_figure(ns.out, s, recs, colour)}")
     print(f"tuning: {tuning_file(cfg, arm)}")
+    print(f"Optuna storage: {storage_url(ns.out)} (optuna-dashboard opens it)")
     return 0
