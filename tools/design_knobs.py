@@ -2,7 +2,8 @@
 
 The knobs are the paper's weights in one joint's terms (gen/SYNTH.md): the estimator weight
 F(s) = f_bw / (s + f_bw) and H, and the controller penalty z_o = E1 e + E2 e_dot + D12 u_o
-("single": one row, a degenerate generalized-H2 problem whose optimum is the static gain
+(searched as a bandwidth and a damping ratio, E1/D12 = wn^2, E2/D12 = 2 zeta wn, D12 = 1:
+both forms depend only on the ratios) ("single": one row, a degenerate generalized-H2 problem whose optimum is the static gain
 -(E1 e + E2 e_dot) / D12) or z_o = [E1 e + E2 e_dot; D12 u_o] ("split": the tracking and the
 control penalty in separate rows, a non-degenerate problem with a dynamic controller). Everything
 else (the loop rate, the design rules, the fixed-point ranges) is the base config's.
@@ -25,7 +26,11 @@ class KnobError(ValueError):
 def design_doc(base_text: str, knobs: dict[str, Any], with_estimator: bool = True) -> dict[str, Any]:
     doc = toml_input.loads(base_text)
     form = knobs.get("form", "single")
-    e1, e2, d12 = float(knobs["E1"]), float(knobs["E2"]), float(knobs["D12"])
+    if "wn" in knobs:  # the search's terms: E1/D12 = wn^2, E2/D12 = 2 zeta wn (only the ratios matter)
+        wn, zeta = float(knobs["wn"]), float(knobs["zeta"])
+        e1, e2, d12 = wn * wn, 2.0 * zeta * wn, 1.0
+    else:
+        e1, e2, d12 = float(knobs["E1"]), float(knobs["E2"]), float(knobs["D12"])
     if form == "single":
         doc["controller"] = {"E1": [[e1]], "E2": [[e2]], "D12": [[d12]]}
     elif form == "split":

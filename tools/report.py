@@ -196,6 +196,48 @@ def _distribution_figure(out: Path, study: dict[str, Any], scenario: str) -> str
     return _save(fig, out / fig_name("distribution", scenario))
 
 
+def convergence_figure(out: Path, scenario: str, recs: dict[str, dict[str, Any]], colour: dict[str, Any]) -> str:
+    """Each tuned method's best-so-far objective over its trials (log scale), in its colour; the
+    cap a dashed line; a converged method's end a dot, a capped one's a cross; round starts ticked."""
+    fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    cap, lows = 0, []
+    for m, r in recs.items():
+        curve = np.asarray(r.get("best_so_far") or [], dtype=float)
+        if not curve.size:
+            continue
+        cap = max(cap, int(r.get("cap") or 0))
+        lows.append(curve.min())
+        x = np.arange(1, curve.size + 1)
+        c = colour.get(m)
+        status = r.get("status", "?")
+        ax.step(x, curve, where="post", color=c, label=f"{m}: {status}, {curve.size} of at most {r.get('cap')} "
+                                                         f"trials, best {curve[-1]:.4g}")
+        ax.scatter([x[-1]], [curve[-1]], color=c, marker="o" if status == "converged" else "x", s=40, zorder=3)
+        starts = np.cumsum([len(rd["trials"]) for rd in r.get("rounds", [])])[:-1]
+        for st in starts:
+            ax.axvline(st + 0.5, color=c, lw=0.6, ls=":")
+    if cap:
+        ax.axvline(cap, color="k", ls="--", lw=0.8, label=f"cap {cap}")
+    if lows and min(lows) > 0:
+        ax.set_yscale("log")
+    ax.axhline(1000.0, color="red", lw=0.6, ls="-.")  # at and above: no trial ended well (tools/tuning.py)
+    ax.set_xlabel("trial (every round, in order)")
+    ax.set_ylabel("best objective so far (sum L-inf, rad; >= 1000: failed)")
+    ax.set_title(f"{scenario}: tuning, best so far (o converged, x capped; dotted: a widening round starts)",
+                 fontsize=9)
+    ax.legend(fontsize=7)
+    return _save(fig, out / fig_name("tuning", scenario))
+
+
+def _tuning_status(r: dict[str, Any]) -> str:
+    if "status" not in r:  # a tuning kept from before the rule
+        return f"{sum(len(x['trials']) for x in r['rounds'])} trials (no convergence rule)"
+    return (f"{r['status']}: {r['trials_run']} of at most {r['cap']} trials (best improved <= "
+            f"{100 * r['tolerance']:g} % over the last {r['plateau']})" if r["status"] == "converged" else
+            f"capped: {r['trials_run']} trials, the cap (no plateau of {r['plateau']} trials within "
+            f"{100 * r['tolerance']:g} %)")
+
+
 def _labels(study: dict[str, Any], paper: bool) -> list[str]:
     names = study["arm"]["joint_names"]
     return [f"joint {j + 1}" if paper else f"{j + 1} {names[j]}" for j in range(len(names))]
@@ -389,14 +431,17 @@ def write_report(out: Path, study: dict[str, Any]) -> None:
             md += [f"One run again on its own (SEED: one of {study['seeds']}; the same run.json results):", "", "```sh",
                    *study["commands"][name].values(), "```", ""]
         md += ["The paper's claims, with this scenario's evidence:", ""] + _claims(sc) + [""]
+        tfig = convergence_figure(out, name, sc["tuning"], colour_of(study))
         md += ["### Tuning", "", _md_table(
-            ["method", "knobs", "objective (sum L-inf, rad)", "trials", "source", "note"],
+            ["method", "knobs", "objective (sum L-inf, rad)", "trials", "validation", "source", "note"],
             [[m, f"`{ {k: (round(v, 4) if isinstance(v, float) else v) for k, v in r['knobs'].items()} }`",
-              _fmt(r["objective"]), str(sum(len(x["trials"]) for x in r["rounds"])), r.get("source", ""),
+              _fmt(r["objective"]), _tuning_status(r), (r.get("validation") or {}).get("note", "-"),
+              r.get("source", ""),
               r.get("edge_note") or (f"no trial ended well; the best: {r['failed']}" if r.get("failed") else "")]
              for m, r in sc["tuning"].items()]), "",
             "pm-paper-weights: the paper's own weights (gen/configs/paper.toml), not tuned. Every trial is in "
-            "study.json.", ""]
+            "study.json; the Optuna studies in the tuning's SQLite storage (optuna-dashboard opens it).", "",
+            f"![{tfig}]({tfig})", ""]
         for metric in ("linf", "rms", "est", "power"):
             md += [f"### {METRIC_TEXT[metric]}", "", _stats_table(study, sc, metric, labels), "",
                    f"PM against each method (ratio of means PM/other, seeds PM lower, p):", "",

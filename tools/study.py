@@ -32,7 +32,7 @@ from tools.runner import METRICS, RunSpec, run_all
 from tools.slots import default_jobs
 from tools.stats import paired, summary
 from tools.study_config import METHODS, StudyConfig, StudyConfigError, Trajectory, for_arm, load
-from tools.tuning import TuneSetup, trial_spec, tune_method
+from tools.tuning import REFUSED_SCORE, TuneSetup, batch_size, storage_url, trial_spec, tune_method
 
 DEFAULT_CONFIG = REPO / "tools" / "studies" / "paper.toml"
 BASELINES = ("tde", "usde-smc", "pd", "pm-paper-weights", "pm-paper", "gh2")
@@ -201,38 +201,47 @@ def tuned(cfg: StudyConfig, arm: ArmRef, setup: TuneSetup, info: dict[str, Any],
             scen = doc["scenarios"].get(s)
             rec = scen.get(m) if isinstance(scen, dict) else None
             rec = rec if isinstance(rec, dict) else None
-            budget = trials or cfg.trials
-            if rec and rec.get("key") == key and rec.get("budget_per_round") == budget and not retune:
+            cap = trials or cfg.cap
+            if rec and rec.get("key") == key and rec.get("cap") == cap and not retune:
                 out[s][m] = {**rec, "source": f"tuned earlier, kept in {path}"}
             else:
                 todo.append((s, m, key, "retune asked for" if retune and rec else
                              "no tuning kept for this arm, scenario and settings" if not rec or rec.get("key") != key
-                             else f"the kept tuning had a budget of {rec.get('budget_per_round')} trials"))
+                             else f"the kept tuning had a cap of {rec.get('cap')} trials"))
     if todo:
-        total = sum((trials or cfg.trials) * (cfg.widen + 1) for _ in todo)
+        cap = trials or cfg.cap
         print(f"armctl: tuning {len(todo)} method/scenario pairs ({', '.join(f'{m} in {s}' for s, m, _, _ in todo)}): "
-              f"{todo[0][3]}; at most {total} trials", file=sys.stderr)
-        bar = tqdm(total=sum((trials or cfg.trials) for _ in todo), desc="tune", unit="trial")
+              f"{todo[0][3]}; each to convergence (1 % over {cfg.plateau} trials) or at most {cap} trials; Optuna "
+              f"storage {storage_url(setup.out)}", file=sys.stderr)
+        bar = tqdm(total=cap * len(todo), desc="tune", unit="trial")
         for s, m, key, _ in todo:
             bar.set_postfix_str(f"{m} / {s}")
-            rec = tune_method(setup, cfg.scenarios[s], m, trials, progress=lambda: bar.update(1))
+            rec = tune_method(setup, cfg.scenarios[s], m, trials, progress=lambda: bar.update(1), key=key)
+            bar.update(cap - rec["trials_run"])  # a converged tuning ends before its cap
             rec["key"] = key
             rec["code"] = code_identity()
             keep_tuning(path, s, m, rec, {"arm": {"name": info["name"], "model_hash": info["model_hash"]},
-                                          "procedure": procedure(cfg, trials)})
+                                          "procedure": procedure(cfg, trials, setup.jobs)})
             out[s][m] = {**rec, "source": f"tuned now, kept in {path}"}
         bar.close()
     return out
 
 
-def procedure(cfg: StudyConfig, trials: int | None = None) -> str:
-    return (f"Optuna TPE, the same budget of {trials or cfg.trials} trials per method and scenario (batches of {cfg.batch}), "
-            f"tuning seed(s) {cfg.tuning_seeds} and the tuning trajectory ({cfg.tuning_duration_s:g} s), never the "
-            f"study's; objective: {cfg.tuning_objective}; a run that failed, diverged or was torque-limited scores "
-            f"1000 to 2000 (more the earlier the safety layer stopped it; 2000 when the synthesis refused the "
-            f"weights); a best value at the edge of its range widens that range tenfold and runs the budget again "
-            f"(at most {cfg.widen} times). pm, pm-paper and gh2 are tuned through their synthesis weights (each "
-            f"candidate synthesised and built); pm-paper-weights is the paper's own weights, not tuned.")
+def procedure(cfg: StudyConfig, trials: int | None = None, jobs: int | None = None) -> str:
+    batch = cfg.batch if jobs is None else batch_size(cfg, jobs)
+    tol = f"{100 * cfg.tolerance:g} %"
+    return (f"Optuna TPE under one rule for every method and scenario: run until the best has improved by no more "
+            f"than {tol} over the last {cfg.plateau} trials (converged), or {trials or cfg.cap} trials (capped; "
+            f"the same cap for every method, widening rounds included), in batches of {batch} (at most --jobs); "
+            f"tuning seeds {cfg.tuning_seeds} and the tuning trajectory ({cfg.tuning_duration_s:g} s), never the "
+            f"study's; objective: {cfg.tuning_objective}; a trial with a run that failed, diverged or was "
+            f"torque-limited scores 1000 x (1 + the share of the trajectory not covered) plus the tracking error it "
+            f"achieved, its share of time at the torque limit and its share of failed seeds (so failed trials rank, "
+            f"always behind any that ended well; {REFUSED_SCORE:g} when the synthesis refused the weights); a best "
+            f"value at the edge of its range widens that range tenfold in a new round (at most {cfg.widen}). The "
+            f"pick must also run ok on the held-out validation seed(s) {cfg.validation_seeds}, else the next best "
+            f"(of the best {cfg.validation_tries}) is taken. pm, pm-paper and gh2 are tuned through their synthesis "
+            f"weights (each candidate synthesised and built); pm-paper-weights is the paper's own weights, not tuned.")
 
 
 def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration_s: float | None = None,
@@ -296,7 +305,7 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
         "trajectory": traj_used,
         "methods": methods,
         "notes": notes,
-        "tuning_procedure": procedure(cfg, trials),
+        "tuning_procedure": procedure(cfg, trials, jobs),
         "bus": bus,
         "confirmation": confirmation,
         "commands": commands,
@@ -421,7 +430,8 @@ def add_common_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--jobs", type=int, default=None,
                    help="runs at once on this machine [sil: every core; a CAN bus: half the cores, since a lockstep "
                         "run keeps two busy]")
-    p.add_argument("--trials", type=int, default=None, help="tuning budget per method and scenario [the config's]")
+    p.add_argument("--trials", type=int, default=None,
+                   help="tuning cap per method and scenario: at most this many trials [the config's [tuning] cap]")
     add_cluster_arguments(p)
     add_arm_arguments(p)
 
@@ -557,7 +567,15 @@ def cmd_tune(ns: argparse.Namespace) -> int:
                        retune=True, trials=ns.trials)
     for s, recs in result.items():
         for m, rec in recs.items():
-            print(f"{s:<40} {m:<10} objective {rec['objective']:.4g}  {json.dumps(rec['knobs'])}"
-                  + (f"  ({rec['edge_note']})" if rec["edge_note"] else ""))
+            print(f"{s:<40} {m:<10} objective {rec['objective']:.4g}  {rec['status']} "
+                  f"({rec['trials_run']} of at most {rec['cap']} trials)  {json.dumps(rec['knobs'])}"
+                  + (f"  ({rec['edge_note']})" if rec["edge_note"] else "")
+                  + (f"  validation: {rec['validation']['note']}" if rec.get("validation") else ""))
+    from tools.report import colour_of, convergence_figure
+
+    colour = colour_of({"methods": cfg.methods})
+    for s, recs in result.items():
+        print(f"best-so-far curves: {ns.out / convergence_figure(ns.out, s, recs, colour)}")
     print(f"tuning: {tuning_file(cfg, arm)}")
+    print(f"Optuna storage: {storage_url(ns.out)} (optuna-dashboard opens it)")
     return 0

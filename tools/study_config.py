@@ -34,8 +34,24 @@ TUNED = tuple(m for m, (_, how) in METHODS.items() if how is not None)
 # The synthesis knobs: the estimator's weight F(s) = f_bw / (s + f_bw) and H, the controller's
 # z_o = E1 e + E2 e_dot + D12 u_o ("single") or [E1 e + E2 e_dot; D12 u_o] ("split", which keeps
 # the generalized-H2 problem non-degenerate). gh2 has no estimator: only the controller's.
-DESIGN_KNOBS = ("E1", "E2", "D12", "H", "f_bw")
-GAIN_KNOBS = {"pd": ("wn",), "tde": ("wn", "cutoff_hz"), "usde-smc": ("k", "lambda")}
+# Both forms depend only on E1/D12 and E2/D12 (scaling z_o scales the norm, not the optimum), so
+# the search gives them as a bandwidth and a damping ratio, as every other method's:
+# E1/D12 = wn^2, E2/D12 = 2 zeta wn, D12 = 1 (tools/design_knobs.py). E1, E2, D12 still name a
+# design directly (an older tuning, --knobs).
+DESIGN_KNOBS = ("wn", "zeta", "H", "f_bw")
+LEGACY_DESIGN_KNOBS = ("E1", "E2", "D12", "H", "f_bw")
+# The gain methods, in the same terms: a bandwidth wn and a damping ratio zeta of the PD part.
+#   pd:       kp = wn^2, kd = 2 zeta wn
+#   tde:      the same PD, and its time-delay estimate low-passed at cutoff_hz
+#   usde-smc: u_o = -lambda e_dot - eta sat(s/phi) - ks s, s = e_dot + lambda e: its linear part is a
+#             PD with kp = ks lambda, kd = lambda + ks; lambda and ks are the roots of
+#             x^2 - 2 zeta wn x + wn^2 (lambda the slower: the sliding surface's bandwidth), which are
+#             real only for zeta >= 1: its structure cannot be underdamped, so its zeta range starts
+#             at 1 (USDE_SMC_MIN_ZETA). k: the USDE filter's time constant. eta 1, phi 0.05.
+GAIN_KNOBS = {"pd": ("wn", "zeta"), "tde": ("wn", "zeta", "cutoff_hz"), "usde-smc": ("wn", "zeta", "k")}
+USDE_SMC_MIN_ZETA = 1.0
+# A knob's floor where the method's structure ends (widening never goes past it).
+KNOB_FLOOR = {("usde-smc", "zeta"): USDE_SMC_MIN_ZETA}
 MAX_JOINTS = 16
 DRIVE_PRESETS = {"ideal": DriveModel(), "realistic": REALISTIC}
 
@@ -109,19 +125,24 @@ class StudyConfig:
     tuning_duration_s: float
     tuning_trajectory: Trajectory
     tuning_objective: str
-    trials: int                   # per method and scenario, the same for every method
-    batch: int                    # trials asked of the optimiser at once (results do not depend on --jobs)
+    cap: int                      # at most this many trials per method and scenario (every round), the same for all
+    plateau: int                  # converged: the best improved by no more than `tolerance` over this many trials
+    tolerance: float              # relative (0.01: 1 %)
+    batch: int                    # trials asked of the optimiser at once (at most --jobs)
     widen: int                    # rounds of widening a range whose best value sits at its edge
+    startup: int                  # TPE's random trials before it models (per round)
+    validation_seeds: list[int]   # a pick must run ok on each (held out: neither tuned on nor the study's)
+    validation_tries: int         # the best this many trials are tried in turn on the validation seeds
     spaces: dict[str, Space]
     tuning_file: Path             # the tuning record (for the bundled arm; other arms: their build folder)
     raw: dict[str, Any] = field(default_factory=dict)
 
     def seed_list(self, n: int | None = None) -> list[int]:
         out = [self.seed + i for i in range(n or self.seeds)]
-        clash = sorted(set(out) & set(self.tuning_seeds))
+        clash = sorted(set(out) & set(self.tuning_seeds + self.validation_seeds))
         if clash:
-            raise StudyConfigError(f"--seeds {len(out)}: seeds {out[0]}..{out[-1]} include the tuning seed(s) {clash}; "
-                                   "the study never runs on the seeds it was tuned on")
+            raise StudyConfigError(f"--seeds {len(out)}: seeds {out[0]}..{out[-1]} include tuning seed(s) or "
+                                   f"validation seed(s) {clash}; the study never runs on the seeds it was tuned on")
         return out
 
 
@@ -269,8 +290,12 @@ def _space(method: str, d: Any) -> Space:
     if not isinstance(d, dict):
         raise StudyConfigError(f"{where}: expected a table of knob = [low, high]")
     how = METHODS[method][1]
-    known = set(GAIN_KNOBS[method]) if how == "gains" else (
-        {"E1", "E2", "D12", "form"} if method == "gh2" else {*DESIGN_KNOBS, "form"})
+    knobs = set(GAIN_KNOBS[method]) if how == "gains" else {*DESIGN_KNOBS}
+    if how == "design" and {"E1", "E2", "D12"} & set(d):
+        knobs = {*LEGACY_DESIGN_KNOBS}
+    if method == "gh2":
+        knobs -= {"H", "f_bw"}
+    known = knobs | ({"form"} if how == "design" else set())
     unknown = set(d) - known
     missing = known - set(d) - {"form"}
     if unknown or missing:
@@ -287,6 +312,10 @@ def _space(method: str, d: Any) -> Space:
                                                               and math.isfinite(x) and x > 0 for x in v) or not v[0] < v[1]):
             raise StudyConfigError(f"{where}.{k}: expected [low, high] with 0 < low < high (searched on a log scale), "
                                    f"got {v!r}")
+        floor = KNOB_FLOOR.get((method, k))
+        if floor is not None and v[0] < floor:
+            raise StudyConfigError(f"{where}.{k}: its structure reaches no lower than {floor:g} "
+                                   f"(tools/study_config.py GAIN_KNOBS), got {v!r}")
         sp.ranges[k] = (float(v[0]), float(v[1]))
     if how == "design" and "form" not in sp.choices:
         sp.choices["form"] = ["single"]
@@ -323,7 +352,8 @@ def load(path: Path) -> StudyConfig:
     if missing or not chosen:
         raise StudyConfigError(f"study.scenarios: {missing or 'none'} not defined (defined: {', '.join(scenarios)})")
     tuning = _get(data, "tuning", "study", dict)
-    t_known = {"seeds", "duration_s", "amp", "freq_hz", "arm", "objective", "trials", "batch", "widen", "file", "space"}
+    t_known = {"seeds", "duration_s", "amp", "freq_hz", "arm", "objective", "cap", "plateau", "tolerance", "batch",
+               "widen", "startup", "validation_seeds", "validation_tries", "file", "space"}
     t_unknown = set(tuning) - t_known
     if t_unknown:
         raise StudyConfigError(f"tuning: unknown field(s) {sorted(t_unknown)} (known: {', '.join(sorted(t_known))})")
@@ -334,6 +364,12 @@ def load(path: Path) -> StudyConfig:
     seeds = _whole(data, "seeds", "study", 1, 1000, 1)
     if set(tseeds) & set(range(seed, seed + seeds)):
         raise StudyConfigError(f"tuning.seeds {tseeds}: must differ from the study's seeds ({seed}..{seed + seeds - 1})")
+    vseeds = _get(tuning, "validation_seeds", "tuning", list, [])
+    if not all(isinstance(s, int) and not isinstance(s, bool) and 0 <= s < 2**63 for s in vseeds):
+        raise StudyConfigError(f"tuning.validation_seeds: a list of whole numbers >= 0, got {vseeds!r}")
+    if set(vseeds) & (set(tseeds) | set(range(seed, seed + seeds))):
+        raise StudyConfigError(f"tuning.validation_seeds {vseeds}: held out: must differ from the tuning seeds "
+                               f"{tseeds} and the study's ({seed}..{seed + seeds - 1})")
     spaces_t = _get(tuning, "space", "tuning", dict)
     spaces = {m: _space(m, d) for m, d in spaces_t.items()}
     untuned = [m for m in methods if METHODS[m][1] is not None and m not in spaces]
@@ -356,25 +392,43 @@ def load(path: Path) -> StudyConfig:
         tuning_duration_s=_number(tuning, "duration_s", "tuning", 0.001, 3600),
         tuning_trajectory=_trajectory(tuning, "tuning"),
         tuning_objective=str(tuning.get("objective", "")),
-        trials=_whole(tuning, "trials", "tuning", 1, 100000),
+        cap=_whole(tuning, "cap", "tuning", 1, 100000, 400),
+        plateau=_whole(tuning, "plateau", "tuning", 1, 100000, 50),
+        tolerance=_number(tuning, "tolerance", "tuning", 0.0, 1.0, 0.01),
         batch=_whole(tuning, "batch", "tuning", 1, 64, 4),
         widen=_whole(tuning, "widen", "tuning", 0, 10, 2),
+        startup=_whole(tuning, "startup", "tuning", 1, 10000, 8),
+        validation_seeds=list(vseeds),
+        validation_tries=_whole(tuning, "validation_tries", "tuning", 1, 1000, 5),
         spaces=spaces,
         tuning_file=path.parent / file_name,
         raw=data,
     )
 
 
+def usde_smc_gains(wn: float, zeta: float) -> tuple[float, float]:
+    """(lambda, ks) whose linear part is the PD kp = wn^2, kd = 2 zeta wn (zeta >= 1; below, the
+    structure cannot reach it and zeta 1 is used)."""
+    z = max(zeta, USDE_SMC_MIN_ZETA)
+    lam = wn * (z - math.sqrt(z * z - 1.0))
+    return lam, wn * wn / lam
+
+
 def gain_args(method: str, gains: dict[str, float]) -> list[str]:
-    """Controller arguments for one method's gains (the search space's knob names)."""
+    """Controller arguments for one method's gains (the search space's knob names; an older
+    tuning's pd/tde {wn} is critically damped, usde-smc's {k, lambda} has ks = lambda)."""
     if method in ("pd", "tde"):
         wn = gains["wn"]
-        args = ["--kp", f"{wn * wn:g}", "--kd", f"{2 * wn:g}"]
+        zeta = gains.get("zeta", 1.0)
+        args = ["--kp", f"{wn * wn:g}", "--kd", f"{2 * zeta * wn:g}"]
         if method == "tde":
             args += ["--tde-cutoff", f"{gains['cutoff_hz']:g}"]
         return args
     if method == "usde-smc":
-        lam = gains["lambda"]
-        return ["--usde-k", f"{gains['k']:g}", "--smc-lambda", f"{lam:g}", "--smc-ks", f"{lam:g}",
+        if "wn" in gains:
+            lam, ks = usde_smc_gains(gains["wn"], gains.get("zeta", 1.0))
+        else:
+            lam = ks = gains["lambda"]
+        return ["--usde-k", f"{gains['k']:g}", "--smc-lambda", f"{lam:g}", "--smc-ks", f"{ks:g}",
                 "--smc-eta", "1", "--smc-phi", "0.05"]
     return []

@@ -1,13 +1,19 @@
-"""Every method tuned alike: Optuna's TPE sampler, the same trial budget, tuning seeds and tuning
+"""Every method tuned alike: Optuna's TPE sampler under one rule, the same tuning seeds and tuning
 trajectory for each method, per scenario.
 
 A trial is a set of knobs: a method's gains (pd, tde, usde-smc), or its synthesis weights (pm,
-pm-paper, gh2: each candidate is synthesised, refused designs score as failed, and accepted ones
-are built into the firmware the trial runs). Its score is the objective over the tuning seeds.
-Trials are asked in batches of a fixed size and told in order, so the result does not depend on
-how many run at once. A best value within 2 % (on the log scale) of a range's edge is reported,
-the range is widened tenfold on that side, and the same budget runs again, up to `widen` times;
-every trial of every round is recorded.
+pm-paper, gh2: each candidate is synthesised, refused designs score REFUSED_SCORE, and accepted
+ones are built into the firmware the trial runs). Its score is the objective over the tuning
+seeds (no ties: a failed trial scores by what it achieved).
+
+Each method and scenario runs until its best has improved by no more than [tuning] tolerance
+(1 %) over its last `plateau` trials, or until `cap` trials, the same cap for every method.
+Trials are asked in batches of min([tuning] batch, --jobs) and told in order. A best value within
+2 % (on the log scale) of a range's edge when the round ends (converged, or `plateau` trials run
+with the best at the edge) widens the range tenfold on that side and starts a new round (up to
+`widen` times), whose trials count against the same cap. The pick is the best trial
+that also runs ok on every validation seed (held out); else the next best, and the record says
+so. The record keeps every trial, the best-so-far curve and whether it converged or was capped.
 """
 
 from __future__ import annotations
@@ -26,9 +32,11 @@ from tools.cluster import Cluster
 from tools.code_identity import code_identity
 from tools.design_knobs import design_text
 from tools.runner import RunSpec, run_all
-from tools.study_config import METHODS, Scenario, Space, StudyConfig, gain_args
+from tools.study_config import KNOB_FLOOR, METHODS, Scenario, Space, StudyConfig, gain_args
 
-FAILED_SCORE = 1e3  # rad: what a run that failed, diverged or hit its torque limit scores at least
+FAILED_SCORE = 1e3  # rad: what a trial with a run that failed, diverged or hit its torque limit scores at least
+ACHIEVED_CAP = 30.0   # rad: one joint's error in a failed run counts at most this much (so a failed trial < 3000)
+REFUSED_SCORE = 4 * FAILED_SCORE  # a design the synthesis refused: nothing ran
 EDGE = 0.02         # a best value this close to a range's end (fraction of its log width) is at the edge
 SCORED = ("ok", "tracking-bound-exceeded")  # a run that ended well scores its tracking error
 
@@ -46,19 +54,46 @@ class TuneSetup:
 
 
 def objective(results: list[dict[str, Any]]) -> tuple[float, str]:
-    """The mean over the tuning seeds of the sum over joints of the L-infinity tracking error
-    (rad), the paper's Table 2 measure. A run that did not end well scores FAILED_SCORE or more:
-    up to twice that as the share of the trajectory it covered falls (a method the safety layer
-    stopped early is worse than one stopped late, so the search can still climb where every
-    trial fails; a synthesis refusal scores the most)."""
-    total = 0.0
-    for r in results:
-        res = r.get("results", {})
-        if res.get("result") not in SCORED or not res.get("tracking_max_abs_rad"):
-            why = (res.get("verdict_reasons") or [res.get("result", "failed")])[0]
-            return FAILED_SCORE * (2.0 - min(_covered(x.get("results", {})) for x in results)), str(why)
-        total += sum(res["tracking_max_abs_rad"])
-    return total / len(results), ""
+    """A trial's score over its tuning seeds, lower is better, never tied unless the runs are.
+
+    Every seed's run ended well (ok, or tracking bound exceeded): the mean over the seeds of the
+    sum over joints of the L-infinity tracking error (rad), the paper's Table 2 measure.
+
+    Otherwise (failed, diverged, torque-limited, ...) the trial scores by what it achieved:
+        FAILED_SCORE * (1 + the mean share of the trajectory the runs did not cover)
+        + the mean over seeds of the sum over joints of the L-inf error over the periods each ran
+        + the mean over seeds of the sum over joints of the share of the time at the torque limit
+        + the share of the seeds that did not end well
+    so it is always at least FAILED_SCORE (behind any trial that ended well: they score less),
+    at most ~3 * FAILED_SCORE (a synthesis refusal, REFUSED_SCORE, scores more), and a trial that
+    ran longer, tracked better or sat at its limit less scores better."""
+    if results and all(_ended_well(r.get("results", {})) for r in results):
+        return sum(sum(r["results"]["tracking_max_abs_rad"]) for r in results) / len(results), ""
+    res_all = [r.get("results", {}) for r in results]
+    n = max(1, len(res_all))
+    uncovered = sum(1.0 - _covered(res) for res in res_all) / n
+    tracking = sum(_achieved(res) for res in res_all) / n
+    saturated = sum(sum(_finite(x, 1.0) for x in (res.get("saturated_fraction") or [])) for res in res_all) / n
+    failed_share = sum(not _ended_well(res) for res in res_all) / n
+    first = next((res for res in res_all if not _ended_well(res)), {})
+    why = (first.get("verdict_reasons") or [first.get("result", "failed")])[0]
+    return FAILED_SCORE * (1.0 + uncovered) + tracking + saturated + failed_share, str(why)
+
+
+def _ended_well(res: dict[str, Any]) -> bool:
+    e = res.get("tracking_max_abs_rad")
+    return res.get("result") in SCORED and bool(e) and all(isinstance(x, (int, float)) and math.isfinite(x) for x in e)
+
+
+def _finite(x: Any, cap: float) -> float:
+    """x, or cap where it is not a finite number (a diverged run's error), never more than cap."""
+    return min(float(x), cap) if isinstance(x, (int, float)) and math.isfinite(x) else cap
+
+
+def _achieved(res: dict[str, Any]) -> float:
+    """The sum over joints of the L-inf tracking error of the periods a run has (rad), each joint's
+    capped at ACHIEVED_CAP (a diverged joint's error is not a number worth ranking by)."""
+    return sum(_finite(x, ACHIEVED_CAP) for x in (res.get("tracking_max_abs_rad") or []))
 
 
 def _covered(res: dict[str, Any]) -> float:
@@ -124,78 +159,209 @@ def trial_spec(setup: TuneSetup, method: str, scenario: Scenario, knobs: dict[st
                    code=code_identity(), bus=setup.bus, **setup.arm_args)
 
 
+STORAGE = "optuna.db"  # in the tuning's output folder: optuna-dashboard sqlite:///.../optuna.db
+
+
+def storage_url(out: Path) -> str:
+    out.mkdir(parents=True, exist_ok=True)
+    return f"sqlite:///{(out / STORAGE).resolve()}"
+
+
+def batch_size(cfg: StudyConfig, jobs: int) -> int:
+    """Trials asked at once: [tuning] batch, never more than --jobs."""
+    return max(1, min(cfg.batch, jobs))
+
+
+def best_so_far(scores: list[float]) -> list[float]:
+    out: list[float] = []
+    for v in scores:
+        out.append(v if not out else min(out[-1], v))
+    return out
+
+
+def plateaued(curve: list[float], since: int, plateau: int, tolerance: float) -> bool:
+    """The best-so-far curve's last `plateau` trials (all after index `since`, the round's start)
+    improved it by no more than `tolerance` (relative), and its best ended well."""
+    n = len(curve)
+    if n - since < plateau or n <= plateau or curve[-1] >= FAILED_SCORE:
+        return False
+    before = curve[n - plateau - 1]
+    return before - curve[-1] <= tolerance * abs(before)
+
+
+def _edges(method: str, recorded: list[dict[str, Any]], ranges: dict[str, tuple[float, float]]) -> dict[str, str]:
+    """The knobs whose best value (of these trials) sits at an edge of its range it may widen past."""
+    top = min(recorded, key=lambda x: x["objective"])
+    return {k: e for k, (lo, hi) in ranges.items() if (e := _at_edge(top["knobs"][k], lo, hi))
+            and not (e == "low" and KNOB_FLOOR.get((method, k)) == lo)}
+
+
+def _record_of(t: Any) -> dict[str, Any] | None:
+    rec = t.user_attrs.get("record")
+    return json.loads(rec) if isinstance(rec, str) else None
+
+
+def _trial_runs(setup: TuneSetup, method: str, scenario: Scenario, knob_sets: list[dict[str, Any]],
+                seeds: list[int], names: list[str]) -> list[tuple[float, str, list[dict[str, Any]]]]:
+    """Every knob set run on every seed (refused designs not run): (score, why, runs) each."""
+    specs: list[RunSpec] = []
+    refused: dict[int, str] = {}
+    for i, knobs in enumerate(knob_sets):
+        if METHODS[method][1] == "design":
+            why = design_check(design_text(setup.base_design, knobs, with_estimator=method != "gh2"))
+            if why:
+                refused[i] = why
+                continue
+        for s in seeds:
+            specs.append(trial_spec(setup, method, scenario, knobs, s, setup.out / scenario.name / method / f"{names[i]}-s{s}",
+                                    setup.cfg.tuning_duration_s, setup.trajectory_args, keep_log=False))
+    runs = run_all(specs, setup.jobs, setup.cluster)
+    if procs.interrupted is not None:  # the methods tuned so far are kept
+        raise procs.Interrupted(procs.interrupted)
+    it = iter(runs)
+    out = []
+    for i in range(len(knob_sets)):
+        if i in refused:
+            out.append((REFUSED_SCORE, refused[i], []))
+        else:
+            per_seed = [next(it) for _ in seeds]
+            score, why = objective(per_seed)
+            out.append((score, why, per_seed))
+    return out
+
+
+def _run_summary(seeds: list[int], runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    return [{"seed": s, "result": r["results"].get("result"),
+             "tracking_max_abs_deg": r["results"].get("tracking_max_abs_deg")} for s, r in zip(seeds, runs)]
+
+
 def tune_method(setup: TuneSetup, scenario: Scenario, method: str, trials: int | None = None,
-                progress: Any = None) -> dict[str, Any]:
+                progress: Any = None, key: str = "") -> dict[str, Any]:
+    """One method in one scenario, to convergence or the cap (`trials` overrides [tuning] cap);
+    then the pick checked on the validation seeds. The Optuna study lives in an SQLite storage in
+    the tuning's output folder, one study per round, named by scenario, method, the tuning key and
+    the batch: a tuning stopped part way resumes there (its told trials are kept, its untold ones
+    asked again), and optuna-dashboard can open it."""
     import optuna
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     cfg = setup.cfg
     space: Space = cfg.spaces[method]
-    budget = trials or cfg.trials
+    cap = trials or cfg.cap
+    batch = batch_size(cfg, setup.jobs)
+    storage = optuna.storages.RDBStorage(storage_url(setup.out))
     ranges = dict(space.ranges)
     rounds: list[dict[str, Any]] = []
+    scores: list[float] = []  # every trial of every round, in order: the best-so-far curve's source
     best: dict[str, Any] | None = None
+    status = "capped"
     for rnd in range(cfg.widen + 1):
+        if len(scores) >= cap:
+            break
+        since = len(scores)
         sampler = optuna.samplers.TPESampler(seed=_sampler_seed(method, scenario.name, rnd),
-                                             n_startup_trials=max(1, min(8, budget // 2)))
-        study = optuna.create_study(direction="minimize", sampler=sampler)
-        if best is not None:  # the previous round's best, inside the widened ranges, is trial 0
-            study.enqueue_trial(best["knobs"])
+                                             n_startup_trials=max(1, min(cfg.startup, cap // 2)))
+        name = f"{scenario.name}/{method}/{key or 'nokey'}/cap{cap}/b{batch}/r{rnd}"
+        study = optuna.create_study(direction="minimize", sampler=sampler, storage=storage, study_name=name,
+                                    load_if_exists=True)
         recorded: list[dict[str, Any]] = []
-        while len(recorded) < budget:
-            asked = [study.ask() for _ in range(min(cfg.batch, budget - len(recorded)))]
+        for t in study.get_trials(deepcopy=False):  # resumed: what an earlier run told
+            rec = _record_of(t) if t.state == optuna.trial.TrialState.COMPLETE else None
+            if rec is not None:
+                recorded.append(rec)
+                scores.append(rec["objective"])
+            elif t.state == optuna.trial.TrialState.RUNNING:
+                study.tell(t.number, state=optuna.trial.TrialState.FAIL)  # asked, never told: asked again
+        if not study.trials and best is not None:  # the previous round's best, inside the widened ranges, is trial 0
+            study.enqueue_trial(best["knobs"])
+        converged = plateaued(best_so_far(scores), since, cfg.plateau, cfg.tolerance)
+        while not converged and len(scores) < cap:
+            asked = [study.ask() for _ in range(min(batch, cap - len(scores)))]
             knob_sets = [_suggest(t, ranges, space.choices) for t in asked]
-            specs: list[RunSpec] = []
-            refused: dict[int, str] = {}
-            for i, knobs in enumerate(knob_sets):
-                n = len(recorded) + i
-                if METHODS[method][1] == "design":
-                    why = design_check(design_text(setup.base_design, knobs, with_estimator=method != "gh2"))
-                    if why:
-                        refused[i] = why
-                        continue
-                for s in cfg.tuning_seeds:
-                    specs.append(trial_spec(setup, method, scenario, knobs, s,
-                                            setup.out / scenario.name / method / f"r{rnd}-t{n:03d}-s{s}",
-                                            cfg.tuning_duration_s, setup.trajectory_args, keep_log=False))
-            runs = run_all(specs, setup.jobs, setup.cluster)
-            if procs.interrupted is not None:  # the methods tuned so far are kept
-                raise procs.Interrupted(procs.interrupted)
-            by_trial = iter(runs)
-            for i, (t, knobs) in enumerate(zip(asked, knob_sets)):
-                if i in refused:
-                    score, why, per_seed = 2.0 * FAILED_SCORE, refused[i], []
-                else:
-                    per_seed = [next(by_trial) for _ in cfg.tuning_seeds]
-                    score, why = objective(per_seed)
+            names = [f"r{rnd}-t{len(recorded) + i:03d}" for i in range(len(asked))]
+            for t, knobs, (score, why, per_seed) in zip(asked, knob_sets, _trial_runs(
+                    setup, method, scenario, knob_sets, cfg.tuning_seeds, names)):
+                rec = {"trial": len(recorded), "round": rnd, "knobs": knobs, "objective": score, "failed": why or None,
+                       "runs": _run_summary(cfg.tuning_seeds, per_seed)}
+                t.set_user_attr("record", json.dumps(rec))
                 study.tell(t, score)
-                recorded.append({"trial": len(recorded), "knobs": knobs, "objective": score, "failed": why or None,
-                                 "runs": [{"seed": s, "result": r["results"].get("result"),
-                                           "tracking_max_abs_deg": r["results"].get("tracking_max_abs_deg")}
-                                          for s, r in zip(cfg.tuning_seeds, per_seed)]})
+                recorded.append(rec)
+                scores.append(score)
                 if progress:
                     progress()
+            converged = plateaued(best_so_far(scores), since, cfg.plateau, cfg.tolerance)
+            if rnd < cfg.widen and len(recorded) >= cfg.plateau and _edges(method, recorded, ranges):
+                break  # its best sits at an edge after `plateau` trials: widen now, within the same cap
+        if not recorded:
+            break
         top = min(recorded, key=lambda x: x["objective"])
-        edges = {k: e for k, (lo, hi) in ranges.items() if (e := _at_edge(top["knobs"][k], lo, hi))}
+        edges = _edges(method, recorded, ranges)
         rounds.append({"round": rnd, "ranges": {k: list(v) for k, v in ranges.items()}, "trials": recorded,
-                       "best": top, "at_edge": edges})
+                       "best": top, "at_edge": edges, "converged": converged, "storage_study": name})
         if best is None or top["objective"] <= best["objective"]:
             best = top
+        status = "converged" if converged else "capped"
         if not edges or top["objective"] >= FAILED_SCORE:
             break
         for k, side in edges.items():
             lo, hi = ranges[k]
-            ranges[k] = (lo / 10, hi) if side == "low" else (lo, hi * 10)
+            floor = KNOB_FLOOR.get((method, k))
+            ranges[k] = (max(lo / 10, floor or 0.0), hi) if side == "low" else (lo, hi * 10)
     assert best is not None
     last = rounds[-1]
     note = ""
-    if last["at_edge"] and len(rounds) > cfg.widen:
+    if last["at_edge"]:
         note = (f"the best value of {', '.join(last['at_edge'])} is still at the edge of its range after "
-                f"{cfg.widen} widenings: the optimum may lie beyond {last['ranges']}")
+                f"{len(rounds) - 1} widening(s)" + (" (the cap ended the tuning)" if len(scores) >= cap else "")
+                + f": the optimum may lie beyond {last['ranges']}")
     elif len(rounds) > 1:
         note = "ranges widened: " + "; ".join(f"round {r['round']}: {r['at_edge']}" for r in rounds[:-1])
-    return {"method": method, "scenario": scenario.name, "space": space.as_dict(), "budget_per_round": budget,
-            "rounds": rounds, "knobs": best["knobs"], "objective": best["objective"],
-            "failed": best["failed"], "edge_note": note,
-            "design_text": design_text(setup.base_design, best["knobs"], with_estimator=method != "gh2")
+    everything = [t for r in rounds for t in r["trials"]]
+    pick, validation = validate(setup, scenario, method, everything, best)
+    return {"method": method, "scenario": scenario.name, "space": space.as_dict(), "cap": cap,
+            "plateau": cfg.plateau, "tolerance": cfg.tolerance, "batch": batch, "status": status,
+            "trials_run": len(scores), "best_so_far": best_so_far(scores), "best_by_objective": best,
+            "rounds": rounds, "knobs": pick["knobs"], "objective": pick["objective"],
+            "failed": pick["failed"], "edge_note": note, "validation": validation,
+            "storage": storage_url(setup.out),
+            "design_text": design_text(setup.base_design, pick["knobs"], with_estimator=method != "gh2")
             if METHODS[method][1] == "design" else None}
+
+
+def _tried_text(x: dict[str, Any]) -> str:
+    return f"round {x['round']} trial {x['trial']}: {', '.join(map(str, x['results']))}"
+
+
+def validate(setup: TuneSetup, scenario: Scenario, method: str, trials: list[dict[str, Any]],
+             best: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The pick: the best trial that also runs ok on every validation seed, trying the best
+    [tuning] validation_tries trials (distinct knobs, ended well on the tuning seeds) in turn;
+    none does: the best by objective, and the record says so."""
+    cfg = setup.cfg
+    seeds = cfg.validation_seeds
+    if not seeds:
+        return best, {"seeds": [], "note": "no validation seeds: the best by objective"}
+    seen: set[str] = set()
+    ranked = []
+    for t in sorted(trials, key=lambda x: x["objective"]):
+        k = json.dumps(t["knobs"], sort_keys=True)
+        if t["objective"] < FAILED_SCORE and k not in seen:
+            seen.add(k)
+            ranked.append(t)
+    tried = []
+    for rank, t in enumerate(ranked[:cfg.validation_tries]):
+        (_, why, runs), = _trial_runs(setup, method, scenario, [t["knobs"]], seeds,
+                                      [f"validate-r{t.get('round', 0)}-t{t['trial']:03d}"])
+        results = [r["results"].get("result") for r in runs] or ["refused"]
+        ok = bool(runs) and all(x == "ok" for x in results)
+        tried.append({"rank": rank, "round": t.get("round", 0), "trial": t["trial"], "objective": t["objective"],
+                      "results": results, "ok": ok, "runs": _run_summary(seeds, runs)})
+        if ok:
+            note = ("the best by objective ran ok on every validation seed" if rank == 0 else
+                    f"the best {rank} trial(s) by objective did not run ok on every validation seed "
+                    f"({'; '.join(_tried_text(x) for x in tried[:-1])}); "
+                    f"picked the next best, round {t.get('round', 0)} trial {t['trial']}")
+            return t, {"seeds": seeds, "picked_rank": rank, "tried": tried, "note": note}
+    note = (f"none of the best {len(tried)} trial(s) ran ok on every validation seed {seeds}: kept the best by "
+            "objective" if tried else "no trial ended well on the tuning seeds: nothing to validate; kept the best")
+    return best, {"seeds": seeds, "picked_rank": None, "tried": tried, "note": note}

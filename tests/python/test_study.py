@@ -5,6 +5,7 @@ in a defined, named state; config errors name the field."""
 from __future__ import annotations
 
 import json
+import math
 import platform
 import re
 import shutil
@@ -36,7 +37,7 @@ def small_config(dirpath: Path, seeds: int = 2, methods: str = SMALL["methods"],
     text = re.sub(r"(?m)^methods = .*$", f"methods = {methods}", text)
     text = re.sub(r"(?m)^scenarios = .*$", f"scenarios = {scenarios}", text)
     text = re.sub(r"(?m)^seeds = 5 .*$", f"seeds = {seeds}", text)
-    text = re.sub(r"(?m)^trials = \d+$", "trials = 2", text)
+    text = re.sub(r"(?m)^cap = \d+$", "cap = 2", text)
     text = re.sub(r"(?m)^batch = \d+$", "batch = 2", text)
     text = re.sub(r"(?m)^widen = \d+$", "widen = 0", text)
     text = with_tuning(text, duration_s=0.5)  # the tuning runs' length, not the study's
@@ -91,8 +92,10 @@ def test_every_tuned_method_has_its_tuning_record(study: tuple[Path, dict, Path]
         for m, rec in sc["tuning"].items():
             trials = [t for r in rec["rounds"] for t in r["trials"]]
             assert len(trials) == 2 and all("knobs" in t and "objective" in t for t in trials)
-            assert rec["objective"] == min(t["objective"] for t in trials)
-        assert set(sc["tuning"]["pm"]["knobs"]) == {"form", "E1", "E2", "D12", "H", "f_bw"}
+            assert rec["best_by_objective"]["objective"] == min(t["objective"] for t in trials)
+            assert rec["status"] in ("converged", "capped") and len(rec["best_so_far"]) == rec["trials_run"]
+            assert rec["validation"]["seeds"] == load(study[2]).validation_seeds
+        assert set(sc["tuning"]["pm"]["knobs"]) == {"form", "wn", "zeta", "H", "f_bw"}
         assert sc["tuning"]["pm"]["design_text"].startswith('description = "tuned:')
     assert s["tuning_procedure"].startswith("Optuna TPE")
 
@@ -129,7 +132,7 @@ def test_tuning_is_the_same_whatever_jobs(tmp_path: Path) -> None:
 
     cfg = load(small_config(tmp_path))
     recs = []
-    for jobs in (1, 2):
+    for jobs in (2, 3):  # batches of min(batch, --jobs): the same at any --jobs of at least the batch (2)
         setup, _, _ = setup_for(cfg, DEFAULT_ARM, tmp_path / f"tune{jobs}", jobs, None)
         recs.append([tune_method(setup, cfg.scenarios["ideal"], m, trials=3) for m in ("pm", "tde")])
     for a, b in zip(*recs):
@@ -224,15 +227,16 @@ def test_tuning_widens_a_range_whose_best_is_at_its_edge(tmp_path: Path, monkeyp
     def fake_run_all(specs, jobs, cluster):  # noqa: ANN001, ANN202 - an in-process stand-in for the HIL runs
         out = []
         for sp in specs:
-            wn = sp.labels["knobs"]["wn"]
-            out.append({"results": {"result": "ok", "tracking_max_abs_rad": [1.0 / wn] * 6}})
+            wn, zeta = sp.labels["knobs"]["wn"], sp.labels["knobs"]["zeta"]
+            out.append({"results": {"result": "ok", "tracking_max_abs_rad": [math.exp(-wn / 5) * (1 + abs(zeta - 1))] * 6}})
         return out
 
     monkeypatch.setattr(tuning, "run_all", fake_run_all)
     cfg = load(small_config(tmp_path))
-    cfg.widen = 1
+    cfg.widen, cfg.plateau = 1, 12
+    cfg.validation_seeds = []
     setup, _, _ = setup_for(cfg, DEFAULT_ARM, tmp_path / "t", 1, None)
-    rec = tuning.tune_method(setup, cfg.scenarios["ideal"], "pd", trials=12)
+    rec = tuning.tune_method(setup, cfg.scenarios["ideal"], "pd", trials=60)
     assert len(rec["rounds"]) == 2
     assert rec["rounds"][0]["at_edge"] == {"wn": "high"} and rec["rounds"][1]["ranges"]["wn"] == [2.0, 3000.0]
     assert rec["knobs"]["wn"] > 300 and "still at the edge" in rec["edge_note"]
@@ -286,10 +290,12 @@ def test_a_killed_process_ends_the_run_in_a_named_state(tmp_path: Path, controll
     (('drives = "ideal"', "drives = { encoder_bits = 99 }"), "scenario.ideal.drives.encoder_bits"),
     (("amp = [0.4, 0.3, 0.35, 0.5, 0.5, 0.6]", "amp = [0.4, 0.3]"), "trajectory.amp"),
     (("duration_s = 10.0", "duration_s = -1.0"), "study.duration_s"),
-    (("wn = [2.0, 300.0]", "wn = []"), "tuning.space.pd.wn"),
+    (("wn = [2.0, 300.0]", "wn = []"), "tuning.space.pm.wn"),
+    (("zeta = [1.0, 2.0]", "zeta = [0.5, 2.0]"), "tuning.space.usde-smc.zeta"),
     (("H = [0.05, 5.0]", "H = [5.0, 0.05]"), "tuning.space.pm.H"),
-    (("trials = 24", "trials = 0"), "tuning.trials"),
-    (("seeds = [1001, 1002]", "seeds = [1, 1002]"), "tuning.seeds"),
+    (("cap = 48", "cap = 0"), "tuning.cap"),
+    (("seeds = [1001, 1002, 1003, 1004]", "seeds = [1, 1002]"), "tuning.seeds"),
+    (("validation_seeds = [2001, 2002]", "validation_seeds = [1001]"), "tuning.validation_seeds"),
     (('scenarios = ["ideal",', 'scenarios = ["windy",'), "study.scenarios"),
     (("seed = 1 ", "colour = 1\nseed = 1 "), "study: unknown field"),
 ])
@@ -328,7 +334,7 @@ def test_the_kept_tuning_serves_this_checkout(tmp_path: Path) -> None:
                 continue
             assert kept[s][m]["key"] == tuning_key(cfg, info, setup, s, m), \
                 f"the kept tuning of {m} in {s} does not match this checkout: run tools/armctl tune"
-            assert kept[s][m]["budget_per_round"] == cfg.trials
+            assert kept[s][m]["cap"] == cfg.cap
     moved = setup.base_design.replace(str(REPO), "/elsewhere/checkout")
     assert moved != setup.base_design  # the design's header comment names the checkout's path ...
     setup.base_design = moved
@@ -336,19 +342,92 @@ def test_the_kept_tuning_serves_this_checkout(tmp_path: Path) -> None:
 
 
 def test_a_failed_trial_scores_by_how_much_it_ran() -> None:
-    """Failed trials still rank (later stop, lower score), always behind any trial that ended well."""
-    from tools.tuning import FAILED_SCORE, objective
+    """No ties: failed trials rank by what they achieved (coverage, tracking over the part they
+    ran, time at the limit, failed seeds), always behind any trial that ended well."""
+    from tools.tuning import FAILED_SCORE, REFUSED_SCORE, objective
 
-    def run(result: str, ran: int, err: float = 0.01) -> dict:
+    def run(result: str, ran: int, err: float = 0.01, sat: float = 0.0) -> dict:
         return {"results": {"result": result, "tracking_max_abs_rad": [err] * 6, "trajectory_periods": 4000,
-                            "periods_running": ran, "verdict_reasons": [f"{result}: why"]}}
+                            "periods_running": ran, "saturated_fraction": [sat] * 6,
+                            "verdict_reasons": [f"{result}: why"]}}
 
     good, _ = objective([run("ok", 4000), run("tracking-bound-exceeded", 4000, 0.6)])
     assert good == pytest.approx((0.06 + 3.6) / 2)
     late, why = objective([run("ok", 4000), run("failed", 3000)])
     early, _ = objective([run("failed", 1000), run("ok", 4000)])
-    assert FAILED_SCORE <= late < early <= 2 * FAILED_SCORE and good < FAILED_SCORE and why == "failed: why"
-    assert objective([run("torque-limited", 4000), run("ok", 4000)])[0] == FAILED_SCORE
+    assert FAILED_SCORE <= late < early < REFUSED_SCORE and good < FAILED_SCORE and why == "failed: why"
+    # torque-limited over the whole trajectory: the better tracker, then the less saturated, scores better
+    tl = [objective([run("torque-limited", 4000, err, sat), run("ok", 4000)])[0]
+          for err, sat in ((0.40, 0.3), (0.39, 0.3), (0.39, 0.2), (0.39, 0.1))]
+    assert FAILED_SCORE < tl[3] < tl[2] < tl[1] < tl[0] < early
+    assert len(set(tl)) == len(tl)
+    # fewer failed seeds is better; a diverged (non-finite) error still ranks, below REFUSED_SCORE
+    one = objective([run("torque-limited", 4000, 0.1, 0.1), run("ok", 4000, 0.1, 0.1)])[0]
+    both = objective([run("torque-limited", 4000, 0.1, 0.1), run("torque-limited", 4000, 0.1, 0.1)])[0]
+    assert one < both
+    nan = objective([run("diverged", 10, float("nan")), run("diverged", 10, float("inf"))])[0]
+    assert early < nan < REFUSED_SCORE
+    # 200 random failed trials: distinct achievements, distinct scores
+    rng = np.random.default_rng(0)
+    scores = {objective([run(str(rng.choice(["torque-limited", "failed", "diverged"])), int(rng.integers(1, 4001)),
+                             float(rng.uniform(0, 2)), float(rng.uniform(0, 1))), run("ok", 4000)])[0]
+              for _ in range(200)}
+    assert len(scores) == 200 and min(scores) > FAILED_SCORE
+
+
+def test_tuning_runs_to_a_plateau_or_the_cap_and_validates_its_pick(tmp_path: Path,
+                                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    """One rule: stop when the best improved by <= 1 % over the last `plateau` trials, else at the
+    cap; batches no larger than --jobs; the best-so-far curve kept; a pick that fails a validation
+    seed gives way to the next best, and the record says so; the SQLite storage resumes."""
+    import optuna
+
+    from tools import tuning
+    from tools.arm import DEFAULT_ARM
+    from tools.study import setup_for
+
+    batches: list[int] = []
+
+    def fake_run_all(specs, jobs, cluster):  # noqa: ANN001, ANN202
+        batches.append(len({json.dumps(sp.labels["knobs"], sort_keys=True) for sp in specs}))
+        out = []
+        for sp in specs:
+            wn, zeta = sp.labels["knobs"]["wn"], sp.labels["knobs"]["zeta"]
+            bad = sp.labels["seed"] >= 2000 and wn > 250  # the best (highest wn) fails a validation seed
+            out.append({"results": {"result": "torque-limited" if bad else "ok",
+                                    "tracking_max_abs_rad": [1.0 / wn + abs(zeta - 1) / 100] * 6}})
+        return out
+
+    monkeypatch.setattr(tuning, "run_all", fake_run_all)
+    cfg = load(small_config(tmp_path))
+    cfg.widen, cfg.plateau, cfg.batch, cfg.cap = 0, 5, 4, 40
+    cfg.validation_seeds = [2001, 2002]
+    setup, _, _ = setup_for(cfg, DEFAULT_ARM, tmp_path / "t", 3, None)
+    rec = tuning.tune_method(setup, cfg.scenarios["ideal"], "pd", key="k1")
+    assert rec["batch"] == 3 and max(batches[:-3]) <= 3  # batches: at most --jobs
+    curve = rec["best_so_far"]
+    assert len(curve) == rec["trials_run"] <= 40 and all(a >= b for a, b in zip(curve, curve[1:]))
+    if rec["status"] == "converged":
+        assert curve[-6] - curve[-1] <= 0.01 * curve[-6]
+    else:
+        assert rec["trials_run"] == 40
+    v = rec["validation"]
+    assert v["seeds"] == [2001, 2002] and v["tried"]
+    if rec["best_by_objective"]["knobs"]["wn"] > 250:
+        assert v["picked_rank"] >= 1 and "next best" in v["note"] and rec["knobs"]["wn"] <= 250
+    # the storage holds the study; tuning again resumes it: no new trial runs, the same record
+    db = tmp_path / "t" / tuning.STORAGE
+    assert db.exists()
+    names = [s.study_name for s in optuna.get_all_study_summaries(storage=f"sqlite:///{db}")]
+    assert any(n.startswith("ideal/pd/k1/") for n in names)
+    batches.clear()
+    again = tuning.tune_method(setup, cfg.scenarios["ideal"], "pd", key="k1")
+    assert again["best_so_far"] == curve and again["knobs"] == rec["knobs"]
+    assert sum(batches) == len(v["tried"])  # only the validation runs ran again
+    # a cap the rule cannot reach: capped
+    cfg.plateau = 1000
+    capped = tuning.tune_method(setup, cfg.scenarios["ideal"], "pd", trials=7, key="k2")
+    assert capped["status"] == "capped" and capped["trials_run"] == 7 and capped["cap"] == 7
 
 
 def _keep_many(path: str, method: str, n: int) -> None:
