@@ -39,6 +39,10 @@ BASELINES = ("tde", "usde-smc", "pd", "pm-paper-weights", "pm-paper", "gh2")
 BUSES = (SIL, "udp", "vcan", "auto")  # a study's runs: software in the loop, or lockstep HIL on a CAN bus
 CONFIRM_BUS = "auto"  # a software-in-the-loop study's sample, repeated over vcan where this kernel has it, else UDP
 DEFAULT_CONFIRM = 3
+# Fields of a run's results that say where it was built, not what it measured: a tuned design is
+# built in whichever run slot the run got (results.design names that slot's file); design_hash,
+# which is compared, says the design's content was the same.
+NOT_RESULTS = ("design",)
 
 
 def confirmation_sample(where: list[tuple[str, str, int]], count: int) -> list[int]:
@@ -70,7 +74,7 @@ def confirm_over_bus(specs: list[RunSpec], runs: list[dict[str, Any]], where: li
     rows = []
     for i, run in zip(picks, hil):
         a, b = runs[i]["results"], run["results"]
-        differ = sorted(k for k in set(a) | set(b) if a.get(k) != b.get(k))
+        differ = sorted(k for k in set(a) | set(b) if k not in NOT_RESULTS and a.get(k) != b.get(k))
         rows.append({"scenario": where[i][0], "method": where[i][1], "seed": where[i][2],
                      "bus": run.get("environment", {}).get("bus_choice", "?"), "match": not differ,
                      "differences": differ})
