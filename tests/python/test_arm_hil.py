@@ -79,7 +79,14 @@ def built_arm(request: pytest.FixtureRequest) -> tuple[str, list[str], int, str]
 
 
 def _warnings(args: list[str]) -> list[str]:
-    arm = ArmRef(model=Path(args[1]).resolve()) if args[0] == "--model" else ArmRef(arm_file=Path(args[1]).resolve())
+    import argparse
+
+    from tools.arm import arm_from_args
+
+    # the arm as the CLI makes it from its arguments (an arm file names its model too)
+    ns = argparse.Namespace(model=Path(args[1]) if args[0] == "--model" else None,
+                            arm=Path(args[1]) if args[0] == "--arm" else None, design=None)
+    arm = arm_from_args(ns)
     return json.loads((arm_build_dir("release", arm) / "generated" / "arm" / "arm.json").read_text())["warnings"]
 
 
