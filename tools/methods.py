@@ -1,5 +1,5 @@
 """The firmware's methods, read from the one table that defines them (firmware/core/src/methods.c,
-`[ARM_METHOD_X] = {"name", uses_design, ...}`): the CLI, the benchmarks and the study's method map
+`X(ARM_METHOD_ID, "name", uses_design, init, output, update)` in ARM_METHOD_TABLE): the CLI, the benchmarks and the study's method map
 take the names from here, so adding a method to the core's table is all a new method needs for them
 to list it (README "Adding a method")."""
 
@@ -11,7 +11,7 @@ import re
 from gen.lib.paths import REPO
 
 TABLE = REPO / "firmware" / "core" / "src" / "methods.c"
-_ENTRY = re.compile(r'^\s*\[ARM_METHOD_\w+\]\s*=\s*\{\s*"([^"]+)"\s*,\s*([01])\s*,', re.M)
+_ENTRY = re.compile(r'^\s*X\(ARM_METHOD_\w+,\s*"([^"]+)",\s*([01]),', re.M)
 
 
 @functools.cache
@@ -19,7 +19,7 @@ def firmware_methods() -> dict[str, bool]:
     """name -> uses the synthesised design, in the table's order."""
     found = {m.group(1): m.group(2) == "1" for m in _ENTRY.finditer(TABLE.read_text())}
     if not found:
-        raise RuntimeError(f"{TABLE}: no method entries found (expected [ARM_METHOD_X] = {{\"name\", 0|1, ...}})")
+        raise RuntimeError(f"{TABLE}: no method entries found (expected X(ARM_METHOD_ID, \"name\", 0|1, ...) lines)")
     return found
 
 

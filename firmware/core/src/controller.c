@@ -94,7 +94,7 @@ arm_ctl_init_result_t arm_ctl_init(arm_ctl_t *ctl, const arm_robot_model_t *mode
     ctl->state = ARM_STATE_INIT;
     ctl->fault = ARM_FAULT_NONE;
     ctl->fault_joint = -1;
-    ops->init(ctl);
+    arm_method_init(ctl);
     return ARM_CTL_OK;
 }
 
@@ -199,7 +199,7 @@ static void run_method(arm_ctl_t *ctl, const arm_ctl_input_t *in, arm_ctl_output
         out->e[i] = in->q_d[i] - ctl->last_q[i];
         out->e_dot[i] = in->qd_d[i] - ctl->last_qd[i];
     }
-    arm_method_ops(ctl->cfg.method)->output(ctl, out);
+    arm_method_output(ctl, out);
     for (int i = 0; i < ARM_N_JOINTS; ++i) {
         /* IDC: commanding q_ddot_d - u makes the nominal error dynamics e_ddot = u (+ w). */
         acc[i] = in->qdd_d[i] - (out->u_o[i] - out->w_hat[i]);
@@ -268,7 +268,7 @@ void arm_ctl_step(arm_ctl_t *ctl, const arm_ctl_input_t *in, arm_ctl_output_t *o
             latch_joint_fault(ctl, ARM_FAULT_FOLLOWING_ERROR, following, out->e[following]);
         } else {
             apply_limits(ctl, out);
-            arm_method_ops(ctl->cfg.method)->update(ctl, acc, out->saturated_mask);
+            arm_method_update(ctl, acc, out->saturated_mask);
         }
     }
 

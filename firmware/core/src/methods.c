@@ -68,16 +68,50 @@ static void usde_smc_update(arm_ctl_t *ctl, const float acc[ARM_N_JOINTS], uint3
     arm_usde_smc_update(&ctl->m.usde_smc, ctl->last_qd, acc, hold_mask);
 }
 
-static const arm_method_ops_t k_methods[ARM_METHOD_COUNT] = {
-    [ARM_METHOD_PD] = {"pd", 0, no_state, pd_output, no_update},
-    [ARM_METHOD_PM] = {"pm", 1, pm_init, pm_output, pm_update},
-    [ARM_METHOD_PM_PAPER] = {"pm-paper", 1, pm_paper_init, pm_output, pm_update},
-    [ARM_METHOD_GH2] = {"gh2", 1, gh2_init, pm_output, pm_update},
-    [ARM_METHOD_TDE] = {"tde", 0, tde_init, tde_output, tde_update},
-    [ARM_METHOD_USDE_SMC] = {"usde-smc", 0, usde_smc_init, usde_smc_output, usde_smc_update},
-};
+/* The table: X(index, name, uses the design, init, output, update), one line a method. */
+#define ARM_METHOD_TABLE(X)                                                      \
+    X(ARM_METHOD_PD, "pd", 0, no_state, pd_output, no_update)                    \
+    X(ARM_METHOD_PM, "pm", 1, pm_init, pm_output, pm_update)                     \
+    X(ARM_METHOD_PM_PAPER, "pm-paper", 1, pm_paper_init, pm_output, pm_update)   \
+    X(ARM_METHOD_GH2, "gh2", 1, gh2_init, pm_output, pm_update)                  \
+    X(ARM_METHOD_TDE, "tde", 0, tde_init, tde_output, tde_update)                \
+    X(ARM_METHOD_USDE_SMC, "usde-smc", 0, usde_smc_init, usde_smc_output, usde_smc_update)
+
+#define OPS(id, name, design, init, output, update) [id] = {name, design},
+static const arm_method_ops_t k_methods[ARM_METHOD_COUNT] = {ARM_METHOD_TABLE(OPS)};
+#undef OPS
 
 const arm_method_ops_t *arm_method_ops(arm_method_t m)
 {
     return (unsigned)m < (unsigned)ARM_METHOD_COUNT ? &k_methods[m] : NULL;
+}
+
+void arm_method_init(arm_ctl_t *ctl)
+{
+#define INIT(id, name, design, init, output, update) case id: init(ctl); break;
+    switch (ctl->cfg.method) {
+        ARM_METHOD_TABLE(INIT)
+    case ARM_METHOD_COUNT: break;
+    }
+#undef INIT
+}
+
+void arm_method_output(arm_ctl_t *ctl, arm_ctl_output_t *out)
+{
+#define OUTPUT(id, name, design, init, output, update) case id: output(ctl, out); break;
+    switch (ctl->cfg.method) {
+        ARM_METHOD_TABLE(OUTPUT)
+    case ARM_METHOD_COUNT: break;
+    }
+#undef OUTPUT
+}
+
+void arm_method_update(arm_ctl_t *ctl, const float acc[ARM_N_JOINTS], uint32_t hold_mask)
+{
+#define UPDATE(id, name, design, init, output, update) case id: update(ctl, acc, hold_mask); break;
+    switch (ctl->cfg.method) {
+        ARM_METHOD_TABLE(UPDATE)
+    case ARM_METHOD_COUNT: break;
+    }
+#undef UPDATE
 }
