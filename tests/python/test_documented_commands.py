@@ -172,7 +172,7 @@ def test_tune_and_study_on_another_arm(tmp_path: Path) -> None:
     common = ["--model", model, "--config", str(cfg), "--scenarios", "ideal", "--methods", "pm,tde", "--trials", "2"]
     r = armctl("tune", *common, "--out", str(tmp_path / "runs"))
     assert r.returncode == 0, r.stdout + r.stderr
-    kept = Path(r.stdout.strip().splitlines()[-1].removeprefix("tuning: "))
+    kept = Path(next(ln for ln in r.stdout.splitlines() if ln.startswith("tuning: ")).removeprefix("tuning: "))
     assert kept.is_relative_to(REPO / "build" / "arms") and kept.name == "tune7.paper.tuning.json"
     assert not (tmp_path / "paper.tuning.json").exists()  # never next to the config: that is the bundled arm's
     r = armctl("study", *common, "--duration", "0.2", "--out", str(tmp_path / "study"))
