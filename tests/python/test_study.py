@@ -37,9 +37,9 @@ def small_config(dirpath: Path, seeds: int = 2, methods: str = SMALL["methods"],
     text = re.sub(r"(?m)^methods = .*$", f"methods = {methods}", text)
     text = re.sub(r"(?m)^scenarios = .*$", f"scenarios = {scenarios}", text)
     text = re.sub(r"(?m)^seeds = 5 .*$", f"seeds = {seeds}", text)
-    text = re.sub(r"(?m)^cap = \d+$", "cap = 2", text)
-    text = re.sub(r"(?m)^batch = \d+$", "batch = 2", text)
-    text = re.sub(r"(?m)^widen = \d+$", "widen = 0", text)
+    for key, value in (("cap", 2), ("batch", 2), ("widen", 0)):  # (a line may end in a comment)
+        text, n = re.subn(rf"(?m)^{key} = \d+(\s*#.*)?$", f"{key} = {value}", text)
+        assert n == 1, f"the default config's [tuning] {key} line"
     text = with_tuning(text, duration_s=0.5)  # the tuning runs' length, not the study's
     dirpath.mkdir(parents=True, exist_ok=True)
     cfg = dirpath / "small.toml"
