@@ -564,7 +564,7 @@ def test_a_study_on_a_seven_joint_arm_runs_every_scenario(tmp_path: Path) -> Non
     text = DEFAULT_CONFIG.read_text()
     text = re.sub(r"(?m)^methods = .*$", 'methods = ["pm-paper-weights", "pd"]', text)
     text = re.sub(r"(?m)^seeds = 5 .*$", "seeds = 1", text)
-    text = with_tuning(text, duration_s=0.5, trials=2, batch=2, widen=0)
+    text = with_tuning(text, duration_s=0.5, cap=2, batch=2, widen=0)
     cfg_path = tmp_path / "seven.toml"
     cfg_path.write_text(text)
     arm = ArmRef(arm_file=(REPO / "tests" / "arms" / "panda.toml").resolve())
