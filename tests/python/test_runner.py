@@ -66,7 +66,11 @@ def test_runs_side_by_side_never_hear_each_other(tmp_path: Path) -> None:
         # or twice the states: none, and exactly the states the run alone got
         assert ctl["rx_wrong_counter"] == ctl["rx_foreign_master"] == ctl["rx_unknown_id"] == 0, ctl
         assert sim["rx_foreign_drive"] == sim["rx_unknown_id"] == 0, sim
-        assert ctl["rx_state"] == solo["rx_state"] and ctl["rx_heartbeat"] == solo["rx_heartbeat"]
+        # the drives' boot-up heartbeats (one per drive) reach the controller only when it is already
+        # listening: whether it is depends on how fast each process starts, so one round may differ
+        boot_round = len(r["results"]["joint_names"])
+        assert ctl["rx_state"] == solo["rx_state"]
+        assert abs(ctl["rx_heartbeat"] - solo["rx_heartbeat"]) in (0, boot_round), (ctl, solo)
 
 
 def _spec(out: Path, seed: int) -> RunSpec:
