@@ -15,7 +15,7 @@ from pathlib import Path
 
 import cantools
 
-from gen.lib.atomic_output import write_files_atomically
+from gen.lib.atomic_output import exit_on_output_error, write_files_atomically
 
 KINDS = ("STATE", "CMD", "HEARTBEAT", "EMCY")
 
@@ -64,6 +64,7 @@ def emit(slots: dict[str, list[int]], dbc_name: str) -> dict[str, str]:
     return {"arm_drive_ids.h": "".join(h), "arm_drive_ids.c": "".join(c)}
 
 
+@exit_on_output_error("gen.drive_ids")
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m gen.drive_ids", description=__doc__)
     ap.add_argument("--dbc", type=Path, required=True)

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gen.lib.atomic_output import write_bytes_atomic, write_files_atomically
+from gen.lib.atomic_output import exit_on_output_error, write_bytes_atomic, write_files_atomically
 from gen.design_headers import parse
 
 STRUCTURES = ("decoupled", "paper", "none")
@@ -134,6 +134,7 @@ def golden(design_dir: Path, n: int = 10_000) -> bytes:
     return np.stack(cols, axis=1).astype("<f4").tobytes()
 
 
+@exit_on_output_error("gen.golden")
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="gen.golden", description=__doc__)
     p.add_argument("--design", type=Path, required=True, help="directory with pm_design_*.h")

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gen.lib.atomic_output import write_files_atomically
+from gen.lib.atomic_output import exit_on_output_error, write_files_atomically
 from gen.robot_model import ModelError, RobotModel, extract, fnv1a64
 
 SNAP = 1e-7
@@ -275,6 +275,7 @@ def kernel_source(model: RobotModel, model_hash: int) -> tuple[str, str]:
     return header, source
 
 
+@exit_on_output_error("gen.rnea_kernel")
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m gen.rnea_kernel", description=__doc__.splitlines()[0])
     p.add_argument("--mjcf", type=Path, required=True, help="the prepared arm (gen/arm.py)")

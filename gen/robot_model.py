@@ -20,7 +20,7 @@ import mujoco
 import numpy as np
 
 from gen.arm import fnv1a64
-from gen.lib.atomic_output import write_files_atomically
+from gen.lib.atomic_output import exit_on_output_error, write_files_atomically
 
 REPO = Path(__file__).resolve().parent.parent
 DEFAULT_MJCF = REPO / "host_sim" / "models" / "ur5e_arm.xml"
@@ -219,6 +219,7 @@ def rnea_golden_header(mjcf: Path, count: int, seed: int) -> str:
     )
 
 
+@exit_on_output_error("gen.robot_model")
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="gen.robot_model", description=__doc__)
     p.add_argument("--mjcf", type=Path, default=DEFAULT_MJCF)

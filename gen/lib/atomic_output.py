@@ -5,12 +5,14 @@ layer below them)."""
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import shutil
+import sys
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 
 class OutputError(OSError):
@@ -112,3 +114,21 @@ def write_files_atomically(out_dir: Path, files: dict[str, str]) -> None:
     finally:
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)
+
+
+def exit_on_output_error(prog: str) -> Callable[[Callable[[list[str] | None], int]], Callable[[list[str] | None], int]]:
+    """For a generator's main: an unwritable output is one line (`prog: cannot write PATH: reason`)
+    and exit 1, not a traceback in the middle of a build's log."""
+
+    def decorate(main: Callable[[list[str] | None], int]) -> Callable[[list[str] | None], int]:
+        @functools.wraps(main)
+        def wrapped(argv: list[str] | None = None) -> int:
+            try:
+                return main(argv)
+            except OutputError as exc:
+                print(f"{prog}: {exc}", file=sys.stderr)
+                return 1
+
+        return wrapped
+
+    return decorate

@@ -120,6 +120,21 @@ def test_a_read_only_out_is_refused_before_any_work(read_only_disk: Path) -> Non
     assert sorted(p.name for p in read_only_disk.iterdir()) == ["old.json"]
 
 
+@pytest.mark.parametrize("module,args", [
+    ("gen.robot_model", []),
+    ("gen.rnea_kernel", ["--mjcf", str(REPO / "host_sim" / "models" / "ur5e_arm.xml")]),
+    ("gen.drive_ids", ["--dbc", str(REPO / "firmware" / "protocol" / "arm_drives.dbc")]),
+])
+def test_a_build_step_generator_on_a_read_only_disk_is_one_line(read_only_disk: Path, module: str,
+                                                                 args: list[str]) -> None:
+    """Inside CMake a generator's traceback would bury the reason in the build's log."""
+    out = read_only_disk / "gen"
+    r = subprocess.run([str(REPO / ".venv" / "bin" / "python"), "-m", module, *args, "--out", str(out)],
+                       cwd=REPO, capture_output=True, text=True, timeout=120)
+    one_line_error(r, 1, f"{module}: cannot write {out}", "Read-only file system")
+    assert sorted(p.name for p in read_only_disk.iterdir()) == ["old.json"]
+
+
 # ---- TOML nested without end ----------------------------------------------------------------
 def test_toml_nesting_is_bounded_at_the_stated_limit() -> None:
     from gen.lib.toml_input import MAX_NESTING, TomlNestingError, loads
