@@ -106,7 +106,9 @@ int main(int argc, char **argv)
     o.cfg.capture = &capture;
     static sim_report_t rep;
     int exit_code = 0;
-    if (sim_run(&o.cfg, &arm, tel, &rep, err, sizeof(err)) != 0) {
+    const int run_rc = o.protocol == SIM_PROTOCOL_CANOPEN ? sim_canopen_run(&o.cfg, &o.co, &arm, tel, &rep, err, sizeof(err))
+                                                          : sim_run(&o.cfg, &arm, tel, &rep, err, sizeof(err));
+    if (run_rc != 0) {
         fprintf(stderr, "arm_sim: %s\n", err);
         snprintf(rep.result, sizeof(rep.result), "bus-error");
         snprintf(rep.reason, sizeof(rep.reason), "%.390s", err);

@@ -53,7 +53,15 @@ static void usage(const char *prog)
            "                             sleep costs tens of us on a VM (lockstep speed)   [0]\n"
            "  --profile                  break each period's CPU time down (physics, bus, telemetry)\n"
            "  --debug-lose-bus I@PERIOD  TEST HOOK: bus I sends nothing from that period on (a lost bus)\n"
-           "  --bench-mj-step N          time N bare mj_step calls on the model, print ns/step, exit\n",
+           "  --bench-mj-step N          time N bare mj_step calls on the model, print ns/step, exit\n"
+           "protocol (README \"Real drives\"):\n"
+           "  --protocol arm|canopen     arm: this project's frames (arm_drives.dbc); canopen: CiA 301/402\n"
+           "                             slaves per firmware/protocol/cia402_servo.eds, node id = drive [arm]\n"
+           "  --rated-torque-mnm N       canopen: 0x6076 motor rated torque, mN m at the joint [EDS: 150000]\n"
+           "  --encoder-increments N     canopen: 0x608F.1 increments per motor turn [EDS: 524288]\n"
+           "  --gear-ratio M:S           canopen: 0x6091 motor turns per shaft turn [EDS: 101:1]\n"
+           "  --inject-overcurrent NODE:TIME  TEST HOOK (canopen): node NODE trips EMCY 0x2310 at\n"
+           "                             simulated time TIME s, once operation is enabled\n",
            prog, ARM_CAN_BUS_SET_MAX, ARM_SIM_DEFAULT_MODEL);
 }
 
@@ -284,6 +292,46 @@ int sim_options_parse(int argc, char **argv, sim_options_t *o, char *err, unsign
             c->reorder_wait_s = d * 1e-6;
         } else if (strcmp(a, "--spin-us") == 0) {
             rc = parse_double(a, v, 0.0, 1e5, 0, &c->spin_us, err, errcap);
+        } else if (strcmp(a, "--protocol") == 0) {
+            if (strcmp(v, "arm") == 0) o->protocol = SIM_PROTOCOL_ARM;
+            else if (strcmp(v, "canopen") == 0) o->protocol = SIM_PROTOCOL_CANOPEN;
+            else {
+                snprintf(err, errcap, "--protocol: '%s' is not arm or canopen", v);
+                rc = -1;
+            }
+        } else if (strcmp(a, "--rated-torque-mnm") == 0 || strcmp(a, "--encoder-increments") == 0) {
+            rc = parse_double(a, v, 1.0, 4294967295.0, 0, &d, err, errcap);
+            if (rc == 0 && d != floor(d)) {
+                snprintf(err, errcap, "%s: '%s' is not a whole number", a, v);
+                rc = -1;
+            }
+            *(strcmp(a, "--rated-torque-mnm") == 0 ? &o->co.preset.rated_torque_mnm
+                                                   : &o->co.preset.encoder_increments) = (uint32_t)d;
+            o->co_given = 1;
+        } else if (strcmp(a, "--gear-ratio") == 0) {
+            unsigned long m = 0, sh = 0;
+            char tail = 0;
+            if (sscanf(v, "%lu:%lu%c", &m, &sh, &tail) != 2 || m == 0u || sh == 0u || m > 0xFFFFFFFFul ||
+                sh > 0xFFFFFFFFul || v[0] == '-') {
+                snprintf(err, errcap, "--gear-ratio: '%s' is not MOTOR:SHAFT (whole numbers >= 1)", v);
+                rc = -1;
+            }
+            o->co.preset.gear_motor = (uint32_t)m;
+            o->co.preset.gear_shaft = (uint32_t)sh;
+            o->co_given = 1;
+        } else if (strcmp(a, "--inject-overcurrent") == 0) {
+            unsigned node = 0;
+            double t = 0.0;
+            char tail = 0;
+            if (sscanf(v, "%u:%lf%c", &node, &t, &tail) != 2 || node < 1u || node > SIM_MAX_JOINTS || !isfinite(t) ||
+                t < 0.0) {
+                snprintf(err, errcap, "--inject-overcurrent: '%s' is not NODE:TIME (node 1..%d, time >= 0 s)", v,
+                         SIM_MAX_JOINTS);
+                rc = -1;
+            }
+            o->co.overcurrent_node = (int)node;
+            o->co.overcurrent_at_s = t;
+            o->co_given = 1;
         } else if (strcmp(a, "--bench-mj-step") == 0) {
             rc = parse_double(a, v, 1.0, 1e9, 0, &d, err, errcap);
             o->bench_mj_steps = (long)d;
@@ -305,6 +353,15 @@ int sim_options_parse(int argc, char **argv, sim_options_t *o, char *err, unsign
     }
     if (c->servo.position_noise_counts > 0.0 && c->servo.encoder_bits == 0) {
         snprintf(err, errcap, "--position-noise-counts: counts of what? give --encoder-bits too");
+        return -1;
+    }
+    if (o->co_given && o->protocol != SIM_PROTOCOL_CANOPEN) {
+        snprintf(err, errcap, "--rated-torque-mnm/--encoder-increments/--gear-ratio/--inject-overcurrent: only with "
+                 "--protocol canopen");
+        return -1;
+    }
+    if (o->protocol == SIM_PROTOCOL_CANOPEN && c->timing != SIM_TIMING_OFF) {
+        snprintf(err, errcap, "--bus-timing: not with --protocol canopen (the master's clock sets the pace)");
         return -1;
     }
     if (c->timing == SIM_TIMING_OFF && frames_given != 0u) {

@@ -3,6 +3,7 @@
 #define ARM_SIM_OPTIONS_H
 
 #include "sim_arm.h"
+#include "sim_canopen_loop.h"
 #include "sim_loop.h"
 
 typedef struct {
@@ -19,6 +20,9 @@ typedef struct {
     sim_config_t cfg;
     long bench_mj_steps; /* > 0: time bare mj_step on the model and exit */
     int substeps;        /* MuJoCo steps per period */
+    sim_protocol_t protocol; /* what the drives speak on the bus */
+    sim_co_config_t co;      /* --protocol canopen: the drives' configuration */
+    int co_given;            /* a canopen-only option was given */
 } sim_options_t;
 
 /* 0: run; 1: --help printed; -1: bad argument, message (naming the option) in err. */

@@ -1,0 +1,255 @@
+#define _GNU_SOURCE
+#include "sim_canopen_loop.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+#include <time.h>
+
+#define COB_SYNC 0x080u
+#define COB_NMT 0x000u
+#define STEPS_PER_SYNC_MAX 1000u /* 0x1006 beyond this many periods is clamped (a stall, not a cycle) */
+
+typedef struct {
+    const sim_config_t *cfg;
+    sim_arm_t *arm;
+    sim_telemetry_t *tel;
+    sim_report_t *rep;
+    arm_can_bus_set_t set;
+    int n;
+    int bus_of[SIM_MAX_JOINTS];
+    sim_co_node_t node[SIM_MAX_JOINTS];
+    sim_servo_t servo[SIM_MAX_JOINTS];
+    sim_rng_t noise[SIM_MAX_JOINTS];
+    double tau[SIM_MAX_JOINTS];
+    double w[SIM_MAX_JOINTS];
+    uint16_t last_emcy[SIM_MAX_JOINTS];
+} co_sim_t;
+
+static int64_t mono_ns(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (int64_t)ts.tv_sec * 1000000000LL + ts.tv_nsec;
+}
+
+static void set_result(sim_report_t *rep, const char *result, const char *reason)
+{
+    if (strcmp(rep->result, "ok") == 0) {
+        snprintf(rep->result, sizeof(rep->result), "%s", result);
+        snprintf(rep->reason, sizeof(rep->reason), "%.390s", reason);
+    }
+}
+
+static void captured(const co_sim_t *s, unsigned bus, const arm_can_frame_t *f)
+{
+    if (s->cfg->capture != NULL) {
+        sim_capture_frame(s->cfg->capture, (double)s->arm->step_count * s->arm->period, bus, f);
+    }
+}
+
+/* Every frame the nodes queued goes out on their bus; EMCYs are also telemetry events. */
+static void flush(co_sim_t *s)
+{
+    for (int j = 0; j < s->n; ++j) {
+        sim_co_node_t *nd = &s->node[j];
+        const unsigned bus = (unsigned)s->bus_of[j];
+        for (unsigned k = 0; k < nd->n_out; ++k) {
+            const arm_can_frame_t *f = &nd->out[k];
+            if (arm_can_bus_set_send(&s->set, bus, f) == 0) {
+                s->rep->frames_tx++;
+                captured(s, bus, f);
+            } else {
+                s->rep->tx_dropped++;
+            }
+            if (f->id == 0x080u + nd->id) {
+                char src[24], text[96];
+                const unsigned code = (unsigned)(f->data[0] | (f->data[1] << 8));
+                snprintf(src, sizeof(src), "drive%d", j + 1);
+                snprintf(text, sizeof(text), "EMCY 0x%04x from node %u%s", code, nd->id,
+                         code != 0u ? ": fault, torque off" : ": error reset");
+                sim_telemetry_event(s->tel, s->arm->step_count, src, code != 0u ? "fault" : "info", text);
+            }
+        }
+        s->rep->tx_dropped += nd->out_dropped;
+        nd->out_dropped = 0u;
+        nd->n_out = 0u;
+    }
+}
+
+static int32_t fault_bits(const co_sim_t *s)
+{
+    int32_t m = 0;
+    for (int j = 0; j < s->n; ++j) {
+        if (s->node[j].power == SIM_PS_FAULT) m |= (int32_t)(1u << j);
+    }
+    return m;
+}
+
+/* The arm advances by the first joint's communication cycle (0x1006), in whole periods. */
+static void advance(co_sim_t *s)
+{
+    const double cycle_s = (double)sim_co_od_get(&s->node[0].od, 0x1006u, 0u) * 1e-6;
+    unsigned steps = (unsigned)nearbyint(cycle_s / s->arm->period);
+    steps = steps < 1u ? 1u : steps > STEPS_PER_SYNC_MAX ? STEPS_PER_SYNC_MAX : steps;
+    const int ideal = sim_servo_is_ideal(&s->cfg->servo);
+    for (unsigned k = 0; k < steps; ++k) {
+        double cmd[SIM_MAX_JOINTS];
+        for (int j = 0; j < s->n; ++j) {
+            cmd[j] = sim_co_node_torque(&s->node[j]);
+            s->tau[j] = ideal ? cmd[j]
+                              : sim_servo_period_torque(&s->cfg->servo, &s->servo[j], cmd[j], 0.0, s->arm->period,
+                                                        s->arm->data->qpos[j]);
+        }
+        const int bad = sim_arm_step(s->arm, s->tau, cmd, s->w);
+        s->rep->periods++;
+        sim_telemetry_truth(s->tel, s->arm->step_count - 1, s->arm->period, s->n, s->arm->data->qpos,
+                            s->arm->data->qvel, s->tau, s->w, fault_bits(s));
+        if (bad != 0) {
+            char why[200];
+            snprintf(why, sizeof(why), "the simulation diverged at joint %d (period %llu): drives faulted, torque off",
+                     bad, (unsigned long long)s->rep->periods);
+            set_result(s->rep, "diverged", why);
+            for (int j = 0; j < s->n; ++j) sim_co_node_fault(&s->node[j], 0xFF00u, 0x80u);
+            break;
+        }
+    }
+}
+
+static void on_sync(co_sim_t *s, unsigned bus)
+{
+    const double *q = s->arm->data->qpos, *qd = s->arm->data->qvel;
+    for (int j = 0; j < s->n; ++j) {
+        if (s->bus_of[j] != (int)bus) continue;
+        double qm = q[j], qdm = qd[j], taum = NAN;
+        if (!sim_servo_is_ideal(&s->cfg->servo)) {
+            sim_servo_measure(&s->cfg->servo, &s->servo[j], &s->noise[j], q[j], qd[j], s->arm->period, &qm, &qdm, &taum);
+        }
+        sim_co_node_on_sync(&s->node[j], qm, qdm, taum);
+    }
+    flush(s); /* the TPDOs before the physics: they report the state at the SYNC */
+    if ((int)bus == s->bus_of[0]) advance(s);
+}
+
+static int all_stopped(const co_sim_t *s)
+{
+    for (int j = 0; j < s->n; ++j) {
+        if (s->node[j].nmt != SIM_NMT_STATE_STOPPED) return 0;
+    }
+    return 1;
+}
+
+static void run(co_sim_t *s)
+{
+    const sim_config_t *cfg = s->cfg;
+    sim_report_t *rep = s->rep;
+    int64_t last_rx = mono_ns();
+    int booted = 0;
+    for (;;) {
+        if (sim_stop_requested) {
+            set_result(rep, "interrupted", "stopped by a signal");
+            return;
+        }
+        int64_t now = mono_ns();
+        int64_t wait = 100000000; /* a stop request is noticed within 100 ms */
+        for (int j = 0; j < s->n; ++j) {
+            const int64_t w = sim_co_node_wait_ns(&s->node[j], now);
+            if (w < wait) wait = w;
+        }
+        arm_can_frame_t f;
+        unsigned bus = 0;
+        const int rc = arm_can_bus_set_recv(&s->set, &f, &bus, (int)(wait / 1000));
+        if (rc < 0) {
+            char text[200];
+            snprintf(text, sizeof(text), "receiving on bus %u failed: %s", bus, strerror(errno));
+            set_result(rep, "bus-error", text);
+            return;
+        }
+        now = mono_ns();
+        if (rc == 1) {
+            int own = 0;
+            for (int j = 0; j < s->n && !own; ++j) own = s->bus_of[j] == (int)bus && sim_co_node_sends(&s->node[j], f.id);
+            if (own) {
+                rep->rx_foreign_drive++; /* a drive's frame heard back (UDP), or another node's */
+                captured(s, bus, &f);
+            } else {
+                rep->frames_rx++;
+                captured(s, bus, &f);
+                last_rx = now;
+                booted = 1;
+                if ((f.flags & (ARM_CAN_FLAG_RTR | ARM_CAN_FLAG_ERR | ARM_CAN_FLAG_EXT | ARM_CAN_FLAG_FD)) != 0u) {
+                    rep->rx_bad_frame++; /* classic 11-bit data frames only */
+                } else if (f.id == COB_SYNC) {
+                    if (f.len <= 1u) on_sync(s, bus);
+                    else rep->rx_bad_frame++;
+                } else {
+                    for (int j = 0; j < s->n; ++j) {
+                        if (s->bus_of[j] == (int)bus) sim_co_node_on_frame(&s->node[j], &f, now);
+                    }
+                }
+            }
+        }
+        const double sim_s = (double)s->arm->step_count * s->arm->period;
+        for (int j = 0; j < s->n; ++j) sim_co_node_tick(&s->node[j], now, sim_s);
+        flush(s);
+        if (rc == 1 && f.id == COB_NMT && all_stopped(s)) return; /* the master stopped every drive */
+        const double timeout = booted ? cfg->idle_timeout_s : cfg->boot_timeout_s;
+        if ((double)(now - last_rx) * 1e-9 > timeout) {
+            char why[160];
+            snprintf(why, sizeof(why), "%s for %g s: drives faulted, torque off",
+                     booted ? "master silent" : "no master on the bus", timeout);
+            set_result(rep, "controller-lost", why);
+            for (int j = 0; j < s->n; ++j) sim_co_node_fault(&s->node[j], SIM_CO_EMCY_HEARTBEAT, 0x10u);
+            flush(s);
+            return;
+        }
+    }
+}
+
+int sim_canopen_run(const sim_config_t *cfg, const sim_co_config_t *co, sim_arm_t *arm, sim_telemetry_t *tel,
+                    sim_report_t *rep, char *err, unsigned long errcap)
+{
+    static co_sim_t s;
+    memset(&s, 0, sizeof(s));
+    memset(rep, 0, sizeof(*rep));
+    snprintf(rep->result, sizeof(rep->result), "ok");
+    s.cfg = cfg;
+    s.arm = arm;
+    s.tel = tel;
+    s.rep = rep;
+    s.n = arm->n;
+    const int64_t t0 = mono_ns();
+    for (int j = 0; j < s.n; ++j) {
+        s.bus_of[j] = arm_can_bus_set_bus_of(&cfg->buses, (unsigned)j);
+        if (s.bus_of[j] < 0) {
+            snprintf(err, errcap, "--bus: drive %d is on no bus", j + 1);
+            return -1;
+        }
+        const uint8_t id = (uint8_t)(j + 1);
+        sim_co_node_init(&s.node[j], id, &co->preset, arm->torque_limit[j],
+                         co->overcurrent_node == id ? co->overcurrent_at_s : -1.0);
+        sim_servo_init(&s.servo[j]);
+        sim_rng_seed(&s.noise[j], arm->unc.seed ^ (0x9E3779B97F4A7C15ull * ((uint64_t)j + 1u)));
+    }
+    if (arm_can_bus_set_open(&s.set, &cfg->buses, err, errcap) != 0) return -1;
+    for (int j = 0; j < s.n; ++j) sim_co_node_boot(&s.node[j], t0);
+    flush(&s);
+    char text[700];
+    snprintf(text, sizeof(text), "%d CANopen CiA 402 drives (nodes 1..%d) up on bus %s", s.n, s.n, cfg->bus_text);
+    sim_telemetry_event(tel, 0, "sim", "info", text);
+    run(&s);
+    for (int j = 0; j < s.n; ++j) {
+        if (s.node[j].power == SIM_PS_FAULT) rep->drive_fault_mask |= 1u << j;
+    }
+    for (unsigned b = 0; b < s.set.n; ++b) {
+        rep->rx_undecodable += arm_can_bus_rx_undecodable(&s.set.bus[b]);
+        rep->rx_kernel_drops += arm_can_bus_rx_kernel_drops(&s.set.bus[b]);
+    }
+    rep->n_buses = s.set.n;
+    rep->wall_s = (double)(mono_ns() - t0) * 1e-9;
+    sim_telemetry_event(tel, arm->step_count, "sim", rep->reason[0] ? "fault" : "info",
+                        rep->reason[0] ? rep->reason : "stopped by the master (NMT stop)");
+    arm_can_bus_set_close(&s.set);
+    return 0;
+}

@@ -1,0 +1,22 @@
+/* arm_sim --protocol canopen: the emulated drives as CANopen CiA 402 slaves (sim_canopen_node.c)
+ * for an external master, in realtime: the arm advances when the master's SYNC comes (0x1006's
+ * cycle period of simulated time per SYNC, at least one period), as the firmware's own protocol
+ * does in realtime runs. Node id = drive number; SYNC on the first joint's bus moves the arm. */
+#ifndef ARM_SIM_CANOPEN_LOOP_H
+#define ARM_SIM_CANOPEN_LOOP_H
+
+#include "sim_canopen_node.h"
+#include "sim_loop.h"
+
+typedef enum { SIM_PROTOCOL_ARM = 0, SIM_PROTOCOL_CANOPEN } sim_protocol_t;
+
+typedef struct {
+    sim_co_preset_t preset;  /* the arm's drive configuration (0: the EDS's defaults) */
+    int overcurrent_node;    /* TEST HOOK: this node trips 0x2310 (0: none) */
+    double overcurrent_at_s; /* at this simulated time, once operation is enabled */
+} sim_co_config_t;
+
+int sim_canopen_run(const sim_config_t *cfg, const sim_co_config_t *co, sim_arm_t *arm, sim_telemetry_t *tel,
+                    sim_report_t *rep, char *err, unsigned long errcap);
+
+#endif

@@ -1,0 +1,235 @@
+"""The emulated drives as CANopen CiA 402 slaves (`arm_sim --protocol canopen`), with an
+independent stack as the master: python-canopen (RemoteNode / BaseNode402 with our EDS) on the
+UDP bus through python-can's udp_multicast interface, loopback only (TTL 0, 127.0.0.1).
+
+The master does what the contract's boot sequence says (README "Real drives"): SDO reads of
+0x1000 and 0x1018, the PDO mappings, 0x1006, 0x1017, 0x1016, the mode, NMT start, then the CiA
+402 enable sequence over RPDO1/TPDO2 on SYNC, and a target torque that moves the joint."""
+
+from __future__ import annotations
+
+import random
+import socket
+import struct
+import subprocess
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+canopen = pytest.importorskip("canopen")
+from canopen.profiles.p402 import BaseNode402  # noqa: E402
+from canopen.sdo.exceptions import SdoAbortedError  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[2]
+EDS = REPO / "firmware" / "protocol" / "cia402_servo.eds"
+MASTER_ID = 0x7F
+CYCLE_S = 0.01       # SYNC period: the master's clock
+HEARTBEAT_MS = 100   # the drives' producer heartbeat
+CONSUMER_MS = 300    # the drives watch the master's heartbeat this closely
+TWO_PI = 6.283185307179586
+
+
+@pytest.fixture(scope="module")
+def sim_bin() -> Path:
+    from host_sim.launch import sim_binary
+
+    exe = sim_binary("debug")
+    if not exe.exists():
+        pytest.skip(f"{exe} not built (cmake --build build/debug --target arm_sim)")
+    return exe
+
+
+def _connect(monkeypatch: pytest.MonkeyPatch, group: str, port: int) -> canopen.Network:
+    """python-canopen's Network on python-can's udp_multicast, joined on lo only (see
+    test_pycan_wire.py's _loopback_bus: INADDR_ANY means 127.0.0.1 while the bus is built)."""
+    net = canopen.Network()
+    lo_native = struct.unpack("@I", socket.inet_aton("127.0.0.1"))[0]
+    with monkeypatch.context() as m:
+        m.setattr(socket, "INADDR_ANY", lo_native)
+        net.connect(interface="udp_multicast", channel=group, port=port, hop_limit=0)
+    sock = net.bus._multicast._socket
+    sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
+    assert sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL) == 0
+    return net
+
+
+@dataclass
+class Rig:
+    net: canopen.Network
+    node: BaseNode402
+    proc: subprocess.Popen
+    heartbeat: object | None = None
+
+    def sdo_abort(self, index: int, sub: int, value: bytes) -> int:
+        with pytest.raises(SdoAbortedError) as exc:
+            self.node.sdo.download(index, sub, value)
+        return exc.value.code
+
+
+def _start(sim_bin: Path, monkeypatch: pytest.MonkeyPatch, extra: list[str]) -> Rig:
+    group, port = "239.74.163.2", random.randint(45000, 45999)
+    net = _connect(monkeypatch, group, port)
+    node = BaseNode402(1, str(EDS))
+    net.add_node(node)
+    proc = subprocess.Popen([str(sim_bin), "--protocol", "canopen", "--bus", f"udp:{group}:{port}",
+                             "--lcm-url", "", "--boot-timeout", "20", "--idle-timeout", "5", *extra],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    node.nmt.wait_for_bootup(15)
+    return Rig(net, node, proc)
+
+
+def _configure(rig: Rig) -> None:
+    """The contract's boot sequence, through python-canopen's SDO client and PDO maps."""
+    node = rig.node
+    node.nmt.state = "PRE-OPERATIONAL"
+    assert node.sdo[0x1000].raw == 0x00020192
+    ident = [node.sdo[0x1018][k].raw for k in range(1, 5)]
+    assert ident[1] == 0x402 and ident[3] == 1  # product code; serial = node id
+    node.tpdo.read()
+    node.rpdo.read()
+    for pdo, entries in ((node.rpdo[1], [(0x6040, 0), (0x6071, 0)]), (node.tpdo[1], [(0x6064, 0), (0x606C, 0)]),
+                         (node.tpdo[2], [(0x6077, 0), (0x6041, 0)])):
+        pdo.clear()
+        for index, sub in entries:
+            pdo.add_variable(index, sub)
+        pdo.trans_type = 1
+        pdo.enabled = True
+        pdo.save()
+    node.sdo[0x1006].raw = int(CYCLE_S * 1e6)
+    node.sdo[0x1017].raw = HEARTBEAT_MS
+    node.sdo[0x1016][1].raw = MASTER_ID << 16 | CONSUMER_MS
+    node.sdo[0x6060].raw = 10
+    assert node.sdo[0x6061].raw == 10
+    node.setup_402_state_machine(read_pdos=False)
+    rig.heartbeat = rig.net.send_periodic(0x700 + MASTER_ID, [0x05], 0.05)
+
+
+def _run(rig: Rig) -> None:
+    """NMT start, SYNC every cycle, RPDO1 every cycle, then the CiA 402 enable sequence."""
+    rig.node.nmt.state = "OPERATIONAL"
+    rig.net.sync.start(CYCLE_S)
+    rig.node.rpdo[1]["Target torque"].raw = 0
+    rig.node.rpdo[1].start(CYCLE_S)
+    rig.node.state = "OPERATION ENABLED"
+
+
+def _stop(rig: Rig) -> tuple[int, str]:
+    try:
+        rig.net.sync.stop()
+        rig.node.rpdo[1].stop()
+        if rig.heartbeat is not None:
+            rig.heartbeat.stop()
+        rig.node.nmt.state = "STOPPED"
+        out, err = rig.proc.communicate(timeout=10)
+    finally:
+        if rig.proc.poll() is None:
+            rig.proc.kill()
+            rig.proc.communicate()
+        rig.net.disconnect()
+    return rig.proc.returncode, err
+
+
+@pytest.fixture()
+def rig(sim_bin: Path, monkeypatch: pytest.MonkeyPatch, request: pytest.FixtureRequest) -> Iterator[Rig]:
+    extra = getattr(request, "param", [])
+    r = _start(sim_bin, monkeypatch, extra)
+    try:
+        yield r
+    finally:
+        _stop(r)
+
+
+def _emcy(rig: Rig, code: int, timeout: float = 3.0) -> bool:
+    """The node sent an EMCY with this code (already logged, or within the timeout)."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if any(e.code == code for e in rig.node.emcy.log):
+            return True
+        rig.node.emcy.wait(None, timeout=0.1)
+    return any(e.code == code for e in rig.node.emcy.log)
+
+
+def _tpdo_value(rig: Rig, pdo: int, name: str) -> int:
+    rig.node.tpdo[pdo].wait_for_reception(1.0)
+    return rig.node.tpdo[pdo][name].raw
+
+
+def test_sdo_identity_and_segmented_name(rig: Rig) -> None:
+    node = rig.node
+    assert node.sdo[0x1000].raw == 0x00020192
+    assert node.sdo[0x1018][2].raw == 0x402
+    name = node.sdo[0x1008].raw  # 32 bytes: a segmented upload
+    assert name == "Arm emulated CiA 402 servo drive" and len(name) > 4
+    assert node.sdo[0x6502].raw & (1 << 9)  # CST
+
+
+def test_target_torque_moves_the_joint(rig: Rig) -> None:
+    _configure(rig)
+    _run(rig)
+    assert rig.node.statusword & 0x6F == 0x27
+    rated_nm = rig.node.sdo[0x6076].raw * 1e-3
+    inc_per_rad = rig.node.sdo[0x608F][1].raw * rig.node.sdo[0x6091][1].raw / rig.node.sdo[0x6091][2].raw / TWO_PI
+    p0 = _tpdo_value(rig, 1, "Position actual value")
+    permille = 200  # 30 N m on the base joint (rated 150 N m): the arm turns about it
+    rig.node.rpdo[1]["Target torque"].raw = permille
+    time.sleep(0.5)
+    assert _tpdo_value(rig, 2, "Torque actual value") == permille
+    p1 = _tpdo_value(rig, 1, "Position actual value")
+    assert p1 - p0 > 0.001 * inc_per_rad, (p0, p1)  # more than a milliradian, the commanded way
+    assert _tpdo_value(rig, 1, "Velocity actual value") > 0
+    assert abs(permille * 1e-3 * rated_nm - 30.0) < 1e-9
+    rig.node.rpdo[1]["Target torque"].raw = -permille
+    time.sleep(1.0)
+    assert _tpdo_value(rig, 1, "Velocity actual value") < 0
+
+
+def test_unsupported_mode_is_refused(rig: Rig) -> None:
+    assert rig.sdo_abort(0x6060, 0, bytes([3])) == 0x06090030
+    assert rig.node.sdo[0x6061].raw == 0
+
+
+def test_read_only_unknown_and_wrong_length(rig: Rig) -> None:
+    assert rig.sdo_abort(0x1000, 0, struct.pack("<I", 0x00020192)) == 0x06010002
+    assert rig.sdo_abort(0x2345, 0, bytes(4)) == 0x06020000
+    assert rig.sdo_abort(0x1018, 9, bytes(4)) == 0x06090011
+    assert rig.sdo_abort(0x6040, 0, bytes(4)) == 0x06070010  # controlword is 16 bits
+
+
+def test_mapping_refused_while_pdo_valid(rig: Rig) -> None:
+    rig.node.nmt.state = "PRE-OPERATIONAL"
+    assert rig.node.sdo[0x1800][1].raw & 0x80000000 == 0  # TPDO1 valid (EDS default)
+    assert rig.sdo_abort(0x1A00, 0, bytes([0])) == 0x08000022
+    assert rig.sdo_abort(0x1A00, 1, struct.pack("<I", 0x60410010)) == 0x08000022
+
+
+def test_master_heartbeat_lost_faults_the_drive(rig: Rig) -> None:
+    _configure(rig)
+    _run(rig)
+    rig.node.rpdo[1]["Target torque"].raw = 100
+    time.sleep(0.2)
+    assert _tpdo_value(rig, 2, "Torque actual value") == 100
+    rig.heartbeat.stop()
+    assert _emcy(rig, 0x8130)
+    time.sleep(0.1)
+    assert rig.node.check_statusword() & 0x4F == 0x08  # fault
+    assert _tpdo_value(rig, 2, "Torque actual value") == 0
+    assert rig.node.sdo[0x603F].raw == 0x8130
+
+
+@pytest.mark.parametrize("rig", [["--inject-overcurrent", "1:0.05"]], indirect=True)
+def test_injected_overcurrent_faults_the_drive(rig: Rig) -> None:
+    _configure(rig)
+    _run(rig)
+    assert _emcy(rig, 0x2310)
+    assert rig.node.emcy.active[-1].register & 0x02  # error register: current
+    time.sleep(0.1)
+    assert rig.node.check_statusword() & 0x4F == 0x08
+    rig.node.rpdo[1]["Target torque"].raw = 100
+    time.sleep(0.1)
+    assert _tpdo_value(rig, 2, "Torque actual value") == 0
+    rig.node.state = "OPERATION ENABLED"  # fault reset (controlword bit 7), then enable again
+    assert _emcy(rig, 0x0000, timeout=1.0) and rig.node.emcy.active == []
+    assert rig.node.statusword & 0x6F == 0x27
