@@ -35,6 +35,7 @@ int sim_write_summary(const char *path, const sim_options_t *o, const sim_arm_t 
     fprintf(f, ",\n  \"model\": ");
     json_string(f, o->model);
     fprintf(f, ",\n  \"model_hash\": \"%016llx\",\n  \"substeps\": %d", arm->model_hash, arm->substeps);
+    fprintf(f, ",\n  \"protocol\": \"%s\"", o->protocol == SIM_PROTOCOL_CANOPEN ? "canopen" : "arm");
     /* MuJoCo's own clock: substeps x timestep per period, checked against the periods run */
     fprintf(f, ",\n  \"mujoco_time_s\": %.6f", arm->data->time);
     fprintf(f, ",\n  \"n_drives\": %d,\n  \"periods\": %llu,\n  \"simulated_s\": %.6f,\n", arm->n,

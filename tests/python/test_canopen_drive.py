@@ -8,6 +8,7 @@ The master does what the contract's boot sequence says (README "Real drives"): S
 
 from __future__ import annotations
 
+import json
 import random
 import socket
 import struct
@@ -62,6 +63,7 @@ class Rig:
     node: BaseNode402
     proc: subprocess.Popen
     heartbeat: object | None = None
+    ended: tuple[int, str] | None = None  # the simulator's exit code and stderr, once stopped
 
     def sdo_abort(self, index: int, sub: int, value: bytes) -> int:
         with pytest.raises(SdoAbortedError) as exc:
@@ -69,8 +71,10 @@ class Rig:
         return exc.value.code
 
 
-def _start(sim_bin: Path, monkeypatch: pytest.MonkeyPatch, extra: list[str]) -> Rig:
+def _start(sim_bin: Path, monkeypatch: pytest.MonkeyPatch, extra: list[str], summary: Path | None = None) -> Rig:
     group, port = "239.74.163.2", random.randint(45000, 45999)
+    if summary is not None:
+        extra = [*extra, "--summary", str(summary)]
     net = _connect(monkeypatch, group, port)
     node = BaseNode402(1, str(EDS))
     # python-canopen's state-change timeouts are sized for a quiet host; this one is shared
@@ -119,6 +123,9 @@ def _run(rig: Rig) -> None:
 
 
 def _stop(rig: Rig) -> tuple[int, str]:
+    if rig.ended is not None:
+        return rig.ended
+    err = ""
     try:
         rig.net.sync.stop()
         rig.node.rpdo[1].stop()
@@ -131,13 +138,15 @@ def _stop(rig: Rig) -> tuple[int, str]:
             rig.proc.kill()
             rig.proc.communicate()
         rig.net.disconnect()
-    return rig.proc.returncode, err
+    rig.ended = (rig.proc.returncode, err)
+    return rig.ended
 
 
 @pytest.fixture()
-def rig(sim_bin: Path, monkeypatch: pytest.MonkeyPatch, request: pytest.FixtureRequest) -> Iterator[Rig]:
+def rig(sim_bin: Path, monkeypatch: pytest.MonkeyPatch, request: pytest.FixtureRequest,
+        tmp_path: Path) -> Iterator[Rig]:
     extra = getattr(request, "param", [])
-    r = _start(sim_bin, monkeypatch, extra)
+    r = _start(sim_bin, monkeypatch, extra, tmp_path / "summary.json")
     try:
         yield r
     finally:
@@ -177,7 +186,7 @@ def test_sdo_identity_and_segmented_name(rig: Rig) -> None:
     assert node.sdo[0x6502].raw & (1 << 9)  # CST
 
 
-def test_target_torque_moves_the_joint(rig: Rig) -> None:
+def test_target_torque_moves_the_joint(rig: Rig, tmp_path: Path) -> None:
     _configure(rig)
     _run(rig)
     assert rig.node.statusword & 0x6F == 0x27
@@ -195,6 +204,12 @@ def test_target_torque_moves_the_joint(rig: Rig) -> None:
     rig.node.rpdo[1]["Target torque"].raw = -permille
     _until("torque actual = -target", lambda: _tpdo_value(rig, 2, "Torque actual value") == -permille)
     _until("the joint to turn back", lambda: _tpdo_value(rig, 1, "Velocity actual value") < 0)
+    rc, err = _stop(rig)
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert rc == 0 and summary["result"] == "ok", err
+    assert summary["protocol"] == "canopen" and summary["drive_faults"] == []
+    # every SYNC (all after 0x1006 = 10000 us was written) moved the arm by ten 1 ms periods
+    assert summary["periods"] % 10 == 0 and summary["periods"] >= 100, summary["periods"]
 
 
 def test_unsupported_mode_is_refused(rig: Rig) -> None:
