@@ -22,7 +22,7 @@ import pytest
 
 canopen = pytest.importorskip("canopen")
 from canopen.profiles.p402 import BaseNode402  # noqa: E402
-from canopen.sdo.exceptions import SdoAbortedError  # noqa: E402
+from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
 EDS = REPO / "firmware" / "protocol" / "cia402_servo.eds"
@@ -290,3 +290,30 @@ def test_nmt_resets_restore_defaults(rig: Rig) -> None:
 def test_bad_canopen_options(sim_bin: Path, args: list[str], needle: str) -> None:
     p = subprocess.run([str(sim_bin), "--lcm-url", "", *args], capture_output=True, text=True, timeout=30)
     assert p.returncode == 2 and needle in p.stderr and len(p.stderr.strip().splitlines()) == 1, p.stderr
+
+
+def test_nodes_on_a_second_bus(sim_bin: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Today's wiring (buses.toml): drives 1-3 on one bus, 4-6 on another; node id = drive number."""
+    group, port = "239.74.163.2", 2 * random.randint(23000, 23499)
+    net = _connect(monkeypatch, group, port + 1)
+    node = BaseNode402(4, str(EDS))
+    net.add_node(node)
+    proc = subprocess.Popen([str(sim_bin), "--protocol", "canopen", "--bus", f"udp:{group}:{port}@1-3",
+                             "--bus", f"udp:{group}:{port + 1}@4-6", "--lcm-url", "", "--idle-timeout", "1"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        node.nmt.wait_for_bootup(15)
+        assert node.sdo[0x1018][4].raw == 4  # serial = node id
+        assert node.sdo[0x1400][1].raw == 0x204
+        with pytest.raises(SdoCommunicationError):  # nodes 1-3 are not on this bus: nobody answers
+            net.add_node(BaseNode402(1, str(EDS))).sdo[0x1000].raw
+    finally:
+        net.nmt.state = "STOPPED"  # this bus's nodes; the others then stop on their idle timeout
+        try:
+            _, err = proc.communicate(timeout=15)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.communicate()
+            net.disconnect()
+    assert proc.returncode == 3 and "master silent" in err  # bus 0 never heard a master
