@@ -16,7 +16,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from gen.lib.atomic_output import write_files_atomically
+from gen.lib.atomic_output import exit_on_output_error, write_files_atomically
 
 # CiA 301 data types this drive uses: code -> (C enum suffix, size in bytes, signed).
 TYPES = {0x0001: ("BOOL", 1, False), 0x0002: ("I8", 1, True), 0x0003: ("I16", 2, True),
@@ -141,6 +141,7 @@ def emit(es: list[Entry], eds_name: str) -> dict[str, str]:
     return {"sim_co_od_table.h": "".join(h), "sim_co_od_table.c": "".join(c)}
 
 
+@exit_on_output_error("gen.eds")
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m gen.eds", description=__doc__)
     ap.add_argument("--eds", type=Path, required=True)
@@ -148,7 +149,7 @@ def main(argv: list[str] | None = None) -> int:
     ns = ap.parse_args(argv)
     try:
         files = emit(entries(ns.eds), ns.eds.name)
-    except (EdsError, OSError) as exc:
+    except (EdsError, OSError) as exc:  # the EDS: missing, unreadable or wrong
         print(f"gen.eds: {exc}", file=sys.stderr)
         return 2
     write_files_atomically(ns.out, files)
