@@ -1,0 +1,327 @@
+/* arm_canopen_boot: configures the CiA 402 drives of one bus with the boot configurator
+ * (firmware/canopen, arm/co_boot.h), prints every SDO write and the result, and exits 0 when every
+ * node reached operation enabled, else 1 with one line naming the node, the object and the abort
+ * code (2: bad arguments). The node options come from the drive configuration (gen/drives.py
+ * --boot-args). README: Real drives, The CANopen master. */
+#define _GNU_SOURCE
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "arm/can_bus.h"
+#include "arm/co_boot.h"
+
+static const char k_usage[] =
+    "usage: arm_canopen_boot --bus SPEC --node ID[,rated=mNm][,encoder=INC][,gear=M/S][,vendor=X][,product=X]...\n"
+    "         [--cycle-us N] [--heartbeat-ms N] [--master-id N] [--consumer-ms N] [--sdo-timeout-ms N]\n"
+    "         [--sdo-tries N] [--state-timeout-ms N] [--period-us N] [--timeout-ms N]\n"
+    "  --bus SPEC         udp | udp:GROUP:PORT | socketcan:IFACE (the drives' bus)\n"
+    "  --node ...         a node to configure (repeatable): its id and the EDS defaults it overrides\n"
+    "                     (0x6076 rated torque mN m, 0x608F.1 increments per motor rev, 0x6091 gear)\n"
+    "  --cycle-us         0x1006 communication cycle period [1000]\n"
+    "  --heartbeat-ms     0x1017 producer heartbeat of the drives [100]\n"
+    "  --master-id        the master's node id (its heartbeat, 0x1016.1) [127]\n"
+    "  --consumer-ms      0x1016.1 the drive's timeout for the master's heartbeat [300]\n"
+    "  --sdo-timeout-ms   per SDO request [50]; --sdo-tries: tries of a transfer [3]\n"
+    "  --state-timeout-ms the statusword must follow each controlword by then [500]\n"
+    "  --period-us        the configurator's step period [1000]; --timeout-ms: give up after [10000]\n";
+
+static uint64_t mono_us(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (uint64_t)ts.tv_sec * 1000000u + (uint64_t)ts.tv_nsec / 1000u;
+}
+
+static int parse_u32(const char *s, uint32_t lo, uint32_t hi, uint32_t *out)
+{
+    char *end = NULL;
+    errno = 0;
+    const unsigned long long v = strtoull(s, &end, 0);
+    if (errno != 0 || end == s || *end != '\0' || s[0] == '-' || v < lo || v > hi) {
+        return -1;
+    }
+    *out = (uint32_t)v;
+    return 0;
+}
+
+/* "ID[,key=value]..." into nc; -1 with a message naming the option's field. */
+static int parse_node(const char *arg, arm_co_node_config_t *nc, char *err, size_t cap)
+{
+    char buf[256];
+    if (strlen(arg) >= sizeof(buf)) {
+        snprintf(err, cap, "--node '%.40s...': too long", arg);
+        return -1;
+    }
+    strcpy(buf, arg);
+    *nc = (arm_co_node_config_t){0};
+    char *save = NULL;
+    char *tok = strtok_r(buf, ",", &save);
+    uint32_t v = 0;
+    if (tok == NULL || parse_u32(tok, 1u, 127u, &v) != 0) {
+        snprintf(err, cap, "--node '%s': the node id must be 1..127", arg);
+        return -1;
+    }
+    nc->node_id = (uint8_t)v;
+    while ((tok = strtok_r(NULL, ",", &save)) != NULL) {
+        char *eq = strchr(tok, '=');
+        if (eq == NULL) {
+            snprintf(err, cap, "--node '%s': '%s' is not key=value", arg, tok);
+            return -1;
+        }
+        *eq = '\0';
+        const char *val = eq + 1;
+        int bad = 0;
+        if (strcmp(tok, "rated") == 0) {
+            bad = parse_u32(val, 1u, UINT32_MAX, &nc->rated_torque_mnm);
+            nc->overrides |= ARM_CO_OVERRIDE_RATED;
+        } else if (strcmp(tok, "encoder") == 0) {
+            bad = parse_u32(val, 1u, UINT32_MAX, &nc->encoder_increments);
+            nc->overrides |= ARM_CO_OVERRIDE_ENCODER;
+        } else if (strcmp(tok, "gear") == 0) {
+            char *slash = strchr(val, '/');
+            if (slash == NULL) {
+                bad = -1;
+            } else {
+                *slash = '\0';
+                bad = parse_u32(val, 1u, UINT32_MAX, &nc->gear_motor_revs) ||
+                      parse_u32(slash + 1, 1u, UINT32_MAX, &nc->gear_shaft_revs);
+            }
+            nc->overrides |= ARM_CO_OVERRIDE_GEAR;
+        } else if (strcmp(tok, "vendor") == 0) {
+            bad = parse_u32(val, 0u, UINT32_MAX, &nc->vendor_id);
+        } else if (strcmp(tok, "product") == 0) {
+            bad = parse_u32(val, 0u, UINT32_MAX, &nc->product_code);
+        } else {
+            snprintf(err, cap, "--node '%s': unknown field '%s' (rated, encoder, gear, vendor, product)", arg, tok);
+            return -1;
+        }
+        if (bad) {
+            snprintf(err, cap, "--node '%s': field %s: expected %s", arg, tok,
+                     strcmp(tok, "gear") == 0 ? "MOTOR/SHAFT revolutions, both >= 1" : "an unsigned 32-bit number");
+            return -1;
+        }
+    }
+    return 0;
+}
+
+typedef struct {
+    const char *bus;
+    arm_co_boot_config_t cfg;
+    uint32_t period_us;
+    uint32_t timeout_ms;
+} boot_options_t;
+
+static int parse_args(int argc, char **argv, boot_options_t *o, char *err, size_t cap)
+{
+    arm_co_boot_default_config(&o->cfg);
+    o->bus = NULL;
+    o->period_us = 1000u;
+    o->timeout_ms = 10000u;
+    for (int i = 1; i < argc; ++i) {
+        const char *a = argv[i];
+        if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
+            fputs(k_usage, stdout);
+            return 1;
+        }
+        if (i + 1 >= argc) {
+            snprintf(err, cap, "%s: missing value (or unknown option)", a);
+            return -1;
+        }
+        const char *v = argv[++i];
+        uint32_t x = 0;
+        int bad = 0;
+        if (strcmp(a, "--bus") == 0) {
+            o->bus = v;
+        } else if (strcmp(a, "--node") == 0) {
+            if (o->cfg.n_nodes >= ARM_CO_BOOT_MAX_NODES) {
+                snprintf(err, cap, "--node: at most %u nodes on one bus", ARM_CO_BOOT_MAX_NODES);
+                return -1;
+            }
+            if (parse_node(v, &o->cfg.node[o->cfg.n_nodes], err, cap) != 0) {
+                return -1;
+            }
+            for (unsigned k = 0; k < o->cfg.n_nodes; ++k) {
+                if (o->cfg.node[k].node_id == o->cfg.node[o->cfg.n_nodes].node_id) {
+                    snprintf(err, cap, "--node '%s': node %u is given twice", v, o->cfg.node[k].node_id);
+                    return -1;
+                }
+            }
+            o->cfg.n_nodes++;
+        } else if (strcmp(a, "--cycle-us") == 0) {
+            bad = parse_u32(v, 1u, UINT32_MAX, &o->cfg.cycle_us);
+        } else if (strcmp(a, "--heartbeat-ms") == 0) {
+            bad = parse_u32(v, 0u, 65535u, &x);
+            o->cfg.heartbeat_ms = (uint16_t)x;
+        } else if (strcmp(a, "--master-id") == 0) {
+            bad = parse_u32(v, 1u, 127u, &x);
+            o->cfg.master_id = (uint8_t)x;
+        } else if (strcmp(a, "--consumer-ms") == 0) {
+            bad = parse_u32(v, 0u, 65535u, &x);
+            o->cfg.consumer_ms = (uint16_t)x;
+        } else if (strcmp(a, "--sdo-timeout-ms") == 0) {
+            bad = parse_u32(v, 1u, 60000u, &x);
+            o->cfg.sdo_timeout_us = x * 1000u;
+        } else if (strcmp(a, "--sdo-tries") == 0) {
+            bad = parse_u32(v, 1u, 20u, &x);
+            o->cfg.sdo_tries = (uint8_t)x;
+        } else if (strcmp(a, "--state-timeout-ms") == 0) {
+            bad = parse_u32(v, 1u, 60000u, &x);
+            o->cfg.state_timeout_us = x * 1000u;
+        } else if (strcmp(a, "--period-us") == 0) {
+            bad = parse_u32(v, 100u, 1000000u, &o->period_us);
+        } else if (strcmp(a, "--timeout-ms") == 0) {
+            bad = parse_u32(v, 1u, 3600000u, &o->timeout_ms);
+        } else {
+            snprintf(err, cap, "%s: unknown option (--help lists them)", a);
+            return -1;
+        }
+        if (bad) {
+            snprintf(err, cap, "%s '%s': out of range or not a number (--help)", a, v);
+            return -1;
+        }
+    }
+    if (o->bus == NULL) {
+        snprintf(err, cap, "--bus: missing (udp, udp:GROUP:PORT or socketcan:IFACE)");
+        return -1;
+    }
+    if (o->cfg.n_nodes == 0u) {
+        snprintf(err, cap, "--node: missing (one per drive on the bus)");
+        return -1;
+    }
+    return arm_can_bus_spec_valid(o->bus, err, cap) == 0 ? 0 : -1;
+}
+
+static void describe_fault(const arm_co_fault_t *f, char *out, size_t cap)
+{
+    switch (f->code) {
+    case ARM_CO_FAULT_SDO_ABORT:
+    case ARM_CO_FAULT_CLIENT_ABORT:
+        snprintf(out, cap, "node %u: 0x%04X:%02X: %s 0x%08X (%s)", f->node, f->index, f->sub,
+                 f->code == ARM_CO_FAULT_SDO_ABORT ? "SDO abort" : "master aborted the response with",
+                 f->abort_code, arm_co_abort_text(f->abort_code));
+        break;
+    case ARM_CO_FAULT_NO_ANSWER:
+        snprintf(out, cap, "node %u: 0x%04X:%02X: no answer after %u tries (SDO abort 0x%08X sent)", f->node,
+                 f->index, f->sub, f->tries, f->abort_code);
+        break;
+    case ARM_CO_FAULT_WRONG_VALUE:
+        snprintf(out, cap, "node %u: 0x%04X:%02X: read 0x%08X, expected 0x%08X", f->node, f->index, f->sub,
+                 f->value, f->expected);
+        break;
+    case ARM_CO_FAULT_STATE_TIMEOUT:
+        snprintf(out, cap, "node %u: 0x6041:00: statusword 0x%04X did not reach 0x%02X (under mask 0x6F)", f->node,
+                 f->value, f->expected);
+        break;
+    case ARM_CO_FAULT_DRIVE_FAULT:
+        snprintf(out, cap, "node %u: 0x6041:00: statusword 0x%04X shows fault (bit 3) while waiting for 0x%02X",
+                 f->node, f->value, f->expected);
+        break;
+    case ARM_CO_FAULT_BAD_CONFIG:
+        snprintf(out, cap, "node %u: bad configuration (value %u)", f->node, f->value);
+        break;
+    case ARM_CO_FAULT_NONE:
+    default:
+        snprintf(out, cap, "no fault");
+        break;
+    }
+}
+
+int main(int argc, char **argv)
+{
+    static boot_options_t opt;
+    static arm_can_bus_t bus;
+    static arm_co_boot_t boot;
+    char err[512];
+    const int prc = parse_args(argc, argv, &opt, err, sizeof(err));
+    if (prc == 1) {
+        return 0;
+    }
+    if (prc != 0) {
+        fprintf(stderr, "arm_canopen_boot: %s\n", err);
+        return 2;
+    }
+    if (arm_can_bus_open(&bus, opt.bus, err, sizeof(err)) != 0) {
+        fprintf(stderr, "arm_canopen_boot: %s\n", err);
+        return 1;
+    }
+    uint64_t now = mono_us();
+    const uint64_t give_up = now + (uint64_t)opt.timeout_ms * 1000u;
+    if (arm_co_boot_init(&boot, &opt.cfg, now) != 0) {
+        describe_fault(&boot.fault, err, sizeof(err));
+        fprintf(stderr, "arm_canopen_boot: %s: %s\n", arm_co_fault_name(boot.fault.code), err);
+        arm_can_bus_close(&bus);
+        return 2;
+    }
+    unsigned printed = 0;
+    int rc = 1;
+    uint64_t next = now;
+    for (;;) {
+        now = mono_us();
+        rc = arm_co_boot_step(&boot, now);
+        arm_can_frame_t f;
+        while (arm_co_boot_take_tx(&boot, &f)) {
+            if (arm_can_bus_send(&bus, &f) != ARM_BUS_OK) {
+                fprintf(stderr, "arm_canopen_boot: bus %s: send of frame 0x%03X failed\n", opt.bus, f.id);
+                arm_can_bus_close(&bus);
+                return 1;
+            }
+        }
+        for (; printed < boot.n_log; ++printed) {
+            const arm_co_write_t *w = &boot.log[printed];
+            printf("write node %u 0x%04X:%02X = 0x%0*X (%u bytes)\n", w->node, w->index, w->sub, 2 * w->len,
+                   w->value, w->len);
+        }
+        if (rc <= 0 || now >= give_up) {
+            break;
+        }
+        next += opt.period_us;
+        /* Every frame until the next period goes to the configurator. */
+        for (;;) {
+            now = mono_us();
+            if (now >= next) {
+                break;
+            }
+            const int r = arm_can_bus_recv(&bus, &f, (int)(next - now));
+            if (r == 1) {
+                arm_co_boot_rx(&boot, &f, mono_us());
+            } else if (r < 0) {
+                fprintf(stderr, "arm_canopen_boot: bus %s: receive failed (%d)\n", opt.bus, r);
+                arm_can_bus_close(&bus);
+                return 1;
+            }
+        }
+        if (now > next + 100u * opt.period_us) {
+            next = now; /* a long stall (the host was busy): do not run the missed periods at once */
+        }
+    }
+    fflush(stdout);
+    arm_can_bus_close(&bus);
+    if (rc == 0) {
+        for (unsigned i = 0; i < boot.cfg.n_nodes; ++i) {
+            const arm_co_node_t *n = &boot.node[i];
+            printf("node %u: operation enabled (statusword 0x%04X; vendor 0x%08X product 0x%08X revision 0x%08X "
+                   "serial 0x%08X)\n", boot.cfg.node[i].node_id, n->statusword, n->identity[0], n->identity[1],
+                   n->identity[2], n->identity[3]);
+        }
+        printf("arm_canopen_boot: %u nodes operation enabled, %u SDO writes\n", boot.cfg.n_nodes, boot.n_log);
+        return 0;
+    }
+    if (rc < 0) {
+        describe_fault(&boot.fault, err, sizeof(err));
+        fprintf(stderr, "arm_canopen_boot: %s: %s\n", arm_co_fault_name(boot.fault.code), err);
+        return 1;
+    }
+    for (unsigned i = 0; i < boot.cfg.n_nodes; ++i) {
+        const arm_co_node_t *n = &boot.node[i];
+        if (n->state == ARM_CO_NODE_RUNNING) {
+            const arm_co_action_t *a = &n->action[n->next];
+            fprintf(stderr, "arm_canopen_boot: timeout: node %u: 0x%04X:%02X still under way after %u ms\n",
+                    boot.cfg.node[i].node_id, a->index, a->sub, opt.timeout_ms);
+            break;
+        }
+    }
+    return 1;
+}

@@ -1,0 +1,238 @@
+"""The firmware's CANopen master (firmware/canopen, arm_canopen_boot) against python-canopen's
+LocalNode with the drives' EDS, on the UDP bus (python-can udp_multicast on loopback, TTL 0).
+
+The test drive is a LocalNode with a thin CiA 402 device in its SDO callbacks: the statusword
+follows the controlword (written by SDO, the way the master confirms each state), 0x6060 takes
+the modes 0x6502 lists, and a PDO mapping may be written only while its PDO's COB-ID is invalid
+(else abort 0x08000022, CiA 301). After the boot the test reads back, from LocalNode's own
+dictionary, every object the master wrote and checks it against the contract (README: Real drives).
+Also gen/drives.py: the drive configuration's rule and its one-line errors."""
+
+from __future__ import annotations
+
+import json
+import socket
+import struct
+import subprocess
+import threading
+from pathlib import Path
+
+import pytest
+
+canopen = pytest.importorskip("canopen")
+from canopen.sdo import SdoAbortedError  # noqa: E402
+
+from gen import drives as gen_drives  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[2]
+EDS = REPO / "firmware" / "protocol" / "cia402_servo.eds"
+GROUP = "239.74.163.2"
+MASTER_ID = 127
+PDOS = {  # communication, mapping, COB-ID base, the contract's mapping
+    "rpdo1": (0x1400, 0x1600, 0x200, [0x60400010, 0x60710010]),
+    "tpdo1": (0x1800, 0x1A00, 0x180, [0x60640020, 0x606C0020]),
+    "tpdo2": (0x1801, 0x1A01, 0x280, [0x60770010, 0x60410010]),
+}
+
+
+@pytest.fixture(scope="module")
+def boot_bin(build_dir: Path) -> Path:
+    exe = build_dir / "firmware" / "arm_canopen_boot"
+    if not exe.exists():
+        pytest.skip(f"{exe} not built (cmake --build build/debug --target arm_canopen_boot)")
+    return exe
+
+
+def _loopback_network(monkeypatch: pytest.MonkeyPatch, port: int) -> "canopen.Network":
+    """python-canopen's Network on python-can's udp_multicast, confined to this host as
+    test_pycan_wire.py's _loopback_bus does: membership on 127.0.0.1, TTL 0, outgoing IF lo."""
+    lo_native = struct.unpack("@I", socket.inet_aton("127.0.0.1"))[0]
+    net = canopen.Network()
+    with monkeypatch.context() as m:
+        m.setattr(socket, "INADDR_ANY", lo_native)
+        net.connect(interface="udp_multicast", channel=GROUP, port=port, hop_limit=0)
+    sock = net.bus._multicast._socket
+    sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
+    assert sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL) == 0
+    return net
+
+
+class Cia402Drive:
+    """A LocalNode that behaves like the contract's drive, as far as the boot needs."""
+
+    def __init__(self, node_id: int, reject_mode: bool = False, device_type: int | None = None) -> None:
+        self.node = canopen.LocalNode(node_id, str(EDS))
+        self.id = node_id
+        self.reject_mode = reject_mode
+        self.device_type = device_type
+        self.sw = 0x0040  # switch on disabled
+        self.mode = 0
+        self.writes: list[tuple[int, int, int]] = []  # (index, sub, value) in the order they came
+        self.lock = threading.Lock()
+        self.node.add_write_callback(self.on_write)
+        self.node.add_read_callback(self.on_read)
+
+    def stored(self, index: int, sub: int = 0) -> int:
+        od = self.node.object_dictionary[index]
+        var = od if isinstance(od, canopen.objectdictionary.ODVariable) else od[sub]
+        return var.decode_raw(self.node.get_data(index, sub))
+
+    def on_read(self, index: int, subindex: int, od) -> int | None:  # noqa: ANN001 - canopen's ODVariable
+        if index == 0x6041:
+            return self.sw
+        if index == 0x6061:
+            return self.mode
+        if index == 0x1000 and self.device_type is not None:
+            return self.device_type
+        return None
+
+    def on_write(self, index: int, subindex: int, od, data: bytes) -> None:  # noqa: ANN001
+        value = od.decode_raw(data)
+        for comm, mapping, _, _ in PDOS.values():
+            if index == mapping and not self.stored(comm, 1) & 0x80000000:
+                raise SdoAbortedError(0x08000022)  # mapping written while the PDO is valid
+        if index == 0x6060:
+            supported = {10: 1 << 9, 8: 1 << 7}
+            if self.reject_mode or not self.stored(0x6502) & supported.get(value, 0):
+                raise SdoAbortedError(0x06090030)
+            self.mode = value
+        if index == 0x6040:
+            state = {0x06: 0x21, 0x07: 0x23, 0x0F: 0x27}.get(value & 0x8F)
+            operational = self.node.nmt.state == "OPERATIONAL"
+            if state is not None and (state != 0x27 or operational):
+                self.sw = state
+        with self.lock:
+            self.writes.append((index, subindex, value))
+
+
+@pytest.fixture()
+def udp_port() -> int:
+    import random
+
+    return random.randint(45000, 45999)
+
+
+def _run(boot_bin: Path, port: int, args: list[str], drives: list[Cia402Drive], monkeypatch: pytest.MonkeyPatch,
+         watch: list[int] | None = None) -> tuple[subprocess.CompletedProcess[str], list[bytes]]:
+    net = _loopback_network(monkeypatch, port)
+    seen: list[bytes] = []
+    try:
+        for d in drives:
+            net.add_node(d.node)
+        for cob in watch or []:
+            net.subscribe(cob, lambda can_id, data, ts: seen.append(bytes(data)))
+        p = subprocess.run([str(boot_bin), "--bus", f"udp:{GROUP}:{port}", "--sdo-timeout-ms", "300", *args],
+                           capture_output=True, text=True, timeout=120)
+    finally:
+        for d in drives:
+            d.node.nmt.stop_heartbeat()
+        net.disconnect()
+    return p, seen
+
+
+def _arm(n: int = 3, limits: tuple[float, ...] = (150.0, 150.0, 28.0)) -> dict:
+    return {"joints": [{"name": f"j{i + 1}", "torque_limit": limits[i]} for i in range(n)],
+            "buses": [{"name": "can0", "drives": list(range(1, n + 1))}], "loop_rate_hz": 1000.0}
+
+
+def test_boot_brings_every_node_to_operation_enabled(boot_bin: Path, udp_port: int,
+                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    cfg = gen_drives.load(_arm())
+    args = cfg.boot_args("can0")
+    assert "3,rated=28000" in args  # the rule: the 28 N m joint's torque limit overrides the EDS's 150
+    drives = [Cia402Drive(i) for i in (1, 2, 3)]
+    p, _ = _run(boot_bin, udp_port, args, drives, monkeypatch)
+    assert p.returncode == 0, p.stderr
+    assert "3 nodes operation enabled" in p.stdout
+    printed = [ln.split() for ln in p.stdout.splitlines() if ln.startswith("write node")]
+    for d in drives:
+        nid = d.id
+        # what the master says it wrote is what the drive received, in that order
+        mine = [(int(w[3].split(":")[0], 16), int(w[3].split(":")[1], 16), int(w[5], 16)) for w in printed if w[2] == str(nid)]
+        assert [(i, s, v) for i, s, v in mine] == [(i, s, v & 0xFFFFFFFF) for i, s, v in d.writes], nid
+        for comm, mapping, base, entries in PDOS.values():
+            assert d.stored(comm, 1) == base + nid
+            assert d.stored(comm, 2) == 1  # on every SYNC
+            assert d.stored(mapping, 0) == len(entries)
+            assert [d.stored(mapping, k + 1) for k in range(len(entries))] == entries
+            seq = [(s, v) for i, s, v in d.writes if i in (comm, mapping)]
+            assert seq[0] == (1, 0x80000000 | (base + nid)) and seq[1] == (0, 0) and seq[-1] == (1, base + nid)
+        assert d.stored(0x1006) == 1000
+        assert d.stored(0x1017) == 100
+        assert d.stored(0x1016, 1) == (MASTER_ID << 16) | 300
+        assert d.stored(0x6060) == 10
+        assert d.stored(0x6040) == 0x0F and d.sw & 0x6F == 0x27
+        written = {(i, s) for i, s, _ in d.writes}
+        if nid == 3:
+            assert d.stored(0x6076) == 28000
+        else:  # no override: the EDS default stays, not written
+            assert (0x6076, 0) not in written and d.stored(0x6076) == 150000
+        assert (0x608F, 1) not in written and (0x6091, 1) not in written
+        assert [v for i, _, v in d.writes if i == 0x6040] == [0x06, 0x07, 0x0F]
+
+
+def test_unsupported_mode_names_node_object_and_abort(boot_bin: Path, udp_port: int,
+                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    p, _ = _run(boot_bin, udp_port, ["--node", "1", "--node", "2"], [Cia402Drive(1), Cia402Drive(2, reject_mode=True)],
+                monkeypatch)
+    assert p.returncode == 1
+    line = p.stderr.strip().splitlines()[-1]
+    assert "node 2: 0x6060:00: SDO abort 0x06090030" in line, p.stderr
+
+
+def test_wrong_device_type_is_named(boot_bin: Path, udp_port: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    p, _ = _run(boot_bin, udp_port, ["--node", "1"], [Cia402Drive(1, device_type=0x00020191)], monkeypatch)
+    assert p.returncode == 1
+    assert "node 1: 0x1000:00: read 0x00020191, expected 0x00020192" in p.stderr, p.stderr
+
+
+def test_silent_node_is_no_answer_after_the_tries(boot_bin: Path, udp_port: int,
+                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    p, seen = _run(boot_bin, udp_port, ["--node", "1", "--node", "9", "--sdo-tries", "3"], [Cia402Drive(1)],
+                   monkeypatch, watch=[0x600 + 9])
+    assert p.returncode == 1
+    assert "node 9: 0x1000:00: no answer after 3 tries" in p.stderr, p.stderr
+    initiates = [d for d in seen if d[0] == 0x40 and d[1:4] == bytes([0x00, 0x10, 0x00])]
+    assert len(initiates) == 3  # one upload request per try
+    assert seen[-1][0] == 0x80 and int.from_bytes(seen[-1][4:8], "little") == 0x05040000
+
+
+def test_bad_node_option_is_one_line(boot_bin: Path) -> None:
+    p = subprocess.run([str(boot_bin), "--bus", "udp", "--node", "2,gear=101"], capture_output=True, text=True)
+    assert p.returncode == 2
+    assert p.stderr.strip() == "arm_canopen_boot: --node '2,gear=101': field gear: expected MOTOR/SHAFT revolutions, both >= 1"
+
+
+# ---- the drive configuration (gen/drives.py) ----------------------------------------------------
+
+def test_drive_config_rule_and_overrides(tmp_path: Path) -> None:
+    f = tmp_path / "drives.toml"
+    f.write_text(f'eds = "{EDS}"\n[defaults]\ngear = [160, 1]\n[joint.j2]\nnode = 7\nrated_torque_nm = 150\n'
+                 "encoder_increments = 4096\n")
+    cfg = gen_drives.load(_arm(), f)
+    d1, d2, d3 = cfg.drives
+    assert (d1.node, d1.rated_torque_mnm, d1.gear, d1.overrides) == (1, 150000, (160, 1), ["0x6091"])
+    assert (d2.node, d2.encoder_increments, d2.overrides) == (7, 4096, ["0x608F", "0x6091"])
+    assert (d3.rated_torque_mnm, d3.overrides) == (28000, ["0x6076", "0x6091"])
+    assert cfg.boot_args("can0")[-4:] == ["--node", "7,encoder=4096,gear=160/1", "--node", "3,rated=28000,gear=160/1"]
+
+
+@pytest.mark.parametrize("body, message", [
+    ('[joint.j9]\nnode = 2\n', "joint.j9: not a joint of the arm"),
+    ('[joint.j1]\nnode = 0\n', "joint.j1.node: expected an integer 1..127, got 0"),
+    ('[defaults]\ngear = [101]\n', "defaults.gear: expected [motor revolutions, shaft revolutions]"),
+    ('[defaults]\nspeed = 1\n', "defaults: unknown field(s) speed"),
+    ('[joint.j2]\nnode = 1\n', "node: node id 1 is used twice on bus can0"),
+    ('[pdo]\nrpdo1 = ["0x6040:0:16"]\n', "pdo.rpdo1: the codec (firmware/canopen co_pdo.c) packs"),
+    ('[joint.j3]\nrated_torque_nm = -1\n', "joint.j3.rated_torque_nm: expected a torque in N m"),
+])
+def test_drive_config_bad_input_is_one_line(tmp_path: Path, body: str, message: str) -> None:
+    f = tmp_path / "drives.toml"
+    f.write_text(f'eds = "{EDS}"\n' + body)
+    arm_json = tmp_path / "arm.json"
+    arm_json.write_text(json.dumps(_arm()))
+    p = subprocess.run([str(REPO / ".venv" / "bin" / "python"), "-m", "gen.drives", "--arm-json", str(arm_json),
+                        "--drives", str(f)], capture_output=True, text=True, cwd=REPO)
+    assert p.returncode == 2
+    assert len(p.stderr.strip().splitlines()) == 1 and message in p.stderr, p.stderr
+    assert p.stdout == ""
