@@ -236,3 +236,32 @@ def test_drive_config_bad_input_is_one_line(tmp_path: Path, body: str, message: 
     assert p.returncode == 2
     assert len(p.stderr.strip().splitlines()) == 1 and message in p.stderr, p.stderr
     assert p.stdout == ""
+
+
+def test_arm_file_names_its_drive_config(tmp_path: Path) -> None:
+    from gen.arm import ArmError, load_arm_file
+
+    own = tmp_path / "my_drives.toml"
+    own.write_text(f'eds = "{EDS}"\n[defaults]\nrated_torque_nm = 150\n')
+    arm_file = tmp_path / "arm.toml"
+    arm_file.write_text('model = "m.xml"\ndrives = "my_drives.toml"\n')
+    assert gen_drives.drives_file_of({"arm_file": str(arm_file)}) == own.resolve()
+    assert gen_drives.load({**_arm(), "arm_file": str(arm_file)}).drives[2].rated_torque_mnm == 150000
+    assert gen_drives.drives_file_of({"arm_file": None}) == gen_drives.DEFAULT_DRIVES
+    arm_file.write_text('model = "m.xml"\ndrives = "missing.toml"\n')
+    with pytest.raises(ArmError, match="drives: .*missing.toml is not a file"):
+        load_arm_file(arm_file)
+
+
+def test_readme_bus_load_table_is_what_busload_computes() -> None:
+    from gen.lib.busload import Bus, canopen_drives_per_bus, canopen_load
+
+    readme = (REPO / "README.md").read_text()
+    classic, fd = Bus("c", False, 1e6, None, []), Bus("f", True, 1e6, 5e6, [])
+    for bus, label in ((classic, "classic 1 Mbit/s"), (fd, "CAN FD 1/5 Mbit/s")):
+        row = next(ln for ln in readme.splitlines() if ln.startswith(f"| {label} | 1 / 2 / 3 / 6 |"))
+        for rate in (1000, 500):
+            cells = " / ".join(f"{100 * canopen_load(bus, n, rate):.1f}" for n in (1, 2, 3, 6)) + " %"
+            assert cells in row, (label, rate, cells)
+    assert canopen_drives_per_bus(classic, 1000) == 1 and canopen_drives_per_bus(classic, 500) == 4
+    assert canopen_drives_per_bus(fd, 1000) == 4 and canopen_drives_per_bus(fd, 500) == 8
