@@ -135,15 +135,23 @@ def _arm(n: int = 3, limits: tuple[float, ...] = (150.0, 150.0, 28.0)) -> dict:
             "buses": [{"name": "can0", "drives": list(range(1, n + 1))}], "loop_rate_hz": 1000.0}
 
 
-def test_boot_brings_every_node_to_operation_enabled(boot_bin: Path, udp_port: int,
+def test_boot_brings_every_node_to_operation_enabled(boot_bin: Path, udp_port: int, tmp_path: Path,
                                                      monkeypatch: pytest.MonkeyPatch) -> None:
     cfg = gen_drives.load(_arm())
     args = cfg.boot_args("can0")
     assert "3,rated=28000" in args  # the rule: the 28 N m joint's torque limit overrides the EDS's 150
     drives = [Cia402Drive(i) for i in (1, 2, 3)]
-    p, _ = _run(boot_bin, udp_port, args, drives, monkeypatch)
+    out = tmp_path / "boot.json"
+    p, _ = _run(boot_bin, udp_port, [*args, "--json", str(out)], drives, monkeypatch)
     assert p.returncode == 0, p.stderr
     assert "3 nodes operation enabled" in p.stdout
+    result = json.loads(out.read_text())
+    assert result["result"] == "operation_enabled" and result["fault"]["code"] == "none"
+    assert [(n["node"], n["state"], n["statusword"] & 0x6F) for n in result["nodes"]] == \
+        [(i, "operation_enabled", 0x27) for i in (1, 2, 3)]
+    assert result["nodes"][0]["identity"][1] == drives[0].stored(0x1018, 2)  # product code, from the EDS
+    assert [(w["node"], w["index"], w["sub"], w["value"]) for w in result["sdo_writes"] if w["node"] == 1] == \
+        [(1, i, s, v) for i, s, v in drives[0].writes]
     printed = [ln.split() for ln in p.stdout.splitlines() if ln.startswith("write node")]
     for d in drives:
         nid = d.id
@@ -171,13 +179,23 @@ def test_boot_brings_every_node_to_operation_enabled(boot_bin: Path, udp_port: i
         assert [v for i, _, v in d.writes if i == 0x6040] == [0x06, 0x07, 0x0F]
 
 
-def test_unsupported_mode_names_node_object_and_abort(boot_bin: Path, udp_port: int,
+def test_unsupported_mode_names_node_object_and_abort(boot_bin: Path, udp_port: int, tmp_path: Path,
                                                       monkeypatch: pytest.MonkeyPatch) -> None:
-    p, _ = _run(boot_bin, udp_port, ["--node", "1", "--node", "2"], [Cia402Drive(1), Cia402Drive(2, reject_mode=True)],
-                monkeypatch)
+    out = tmp_path / "boot.json"
+    p, _ = _run(boot_bin, udp_port, ["--node", "1", "--node", "2", "--json", str(out)],
+                [Cia402Drive(1), Cia402Drive(2, reject_mode=True)], monkeypatch)
     assert p.returncode == 1
     line = p.stderr.strip().splitlines()[-1]
-    assert "node 2: 0x6060:00: SDO abort 0x06090030" in line, p.stderr
+    assert line == ("arm_canopen_boot: sdo_abort: node 2: 0x6060:00: SDO abort 0x06090030 "
+                    "(value range of parameter exceeded)"), p.stderr
+    fault = json.loads(out.read_text())["fault"]
+    assert (fault["code"], fault["node"], fault["index"], fault["abort_code"]) == ("sdo_abort", 2, 0x6060, 0x06090030)
+
+
+def test_unwritable_json_is_refused_before_the_bus(boot_bin: Path, tmp_path: Path) -> None:
+    p = subprocess.run([str(boot_bin), "--bus", "udp", "--node", "1", "--json", str(tmp_path / "no" / "x.json")],
+                       capture_output=True, text=True, timeout=30)
+    assert p.returncode == 2 and "--json" in p.stderr and "cannot write into" in p.stderr, p.stderr
 
 
 def test_wrong_device_type_is_named(boot_bin: Path, udp_port: int, monkeypatch: pytest.MonkeyPatch) -> None:

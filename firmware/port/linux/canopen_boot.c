@@ -9,14 +9,16 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include <unistd.h>
 
 #include "arm/can_bus.h"
 #include "arm/co_boot.h"
+#include "json_file.h"
 
 static const char k_usage[] =
     "usage: arm_canopen_boot --bus SPEC --node ID[,rated=mNm][,encoder=INC][,gear=M/S][,vendor=X][,product=X]...\n"
     "         [--cycle-us N] [--heartbeat-ms N] [--master-id N] [--consumer-ms N] [--sdo-timeout-ms N]\n"
-    "         [--sdo-tries N] [--state-timeout-ms N] [--period-us N] [--timeout-ms N]\n"
+    "         [--sdo-tries N] [--state-timeout-ms N] [--period-us N] [--timeout-ms N] [--json FILE]\n"
     "  --bus SPEC         udp | udp:GROUP:PORT | socketcan:IFACE (the drives' bus)\n"
     "  --node ...         a node to configure (repeatable): its id and the EDS defaults it overrides\n"
     "                     (0x6076 rated torque mN m, 0x608F.1 increments per motor rev, 0x6091 gear)\n"
@@ -26,7 +28,8 @@ static const char k_usage[] =
     "  --consumer-ms      0x1016.1 the drive's timeout for the master's heartbeat [300]\n"
     "  --sdo-timeout-ms   per SDO request [50]; --sdo-tries: tries of a transfer [3]\n"
     "  --state-timeout-ms the statusword must follow each controlword by then [500]\n"
-    "  --period-us        the configurator's step period [1000]; --timeout-ms: give up after [10000]\n";
+    "  --period-us        the configurator's step period [1000]; --timeout-ms: give up after [10000]\n"
+    "  --json FILE        the result as JSON: every SDO write, each node's state and identity, the fault\n";
 
 static uint64_t mono_us(void)
 {
@@ -112,6 +115,7 @@ typedef struct {
     arm_co_boot_config_t cfg;
     uint32_t period_us;
     uint32_t timeout_ms;
+    const char *json_path;
 } boot_options_t;
 
 static int parse_args(int argc, char **argv, boot_options_t *o, char *err, size_t cap)
@@ -120,6 +124,7 @@ static int parse_args(int argc, char **argv, boot_options_t *o, char *err, size_
     o->bus = NULL;
     o->period_us = 1000u;
     o->timeout_ms = 10000u;
+    o->json_path = NULL;
     for (int i = 1; i < argc; ++i) {
         const char *a = argv[i];
         if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
@@ -172,6 +177,8 @@ static int parse_args(int argc, char **argv, boot_options_t *o, char *err, size_
             o->cfg.state_timeout_us = x * 1000u;
         } else if (strcmp(a, "--period-us") == 0) {
             bad = parse_u32(v, 100u, 1000000u, &o->period_us);
+        } else if (strcmp(a, "--json") == 0) {
+            o->json_path = v;
         } else if (strcmp(a, "--timeout-ms") == 0) {
             bad = parse_u32(v, 1u, 3600000u, &o->timeout_ms);
         } else {
@@ -190,6 +197,27 @@ static int parse_args(int argc, char **argv, boot_options_t *o, char *err, size_
     if (o->cfg.n_nodes == 0u) {
         snprintf(err, cap, "--node: missing (one per drive on the bus)");
         return -1;
+    }
+    if (o->json_path != NULL) { /* refused before any drive is touched, not after the boot */
+        char dir[1024];
+        const char *slash = strrchr(o->json_path, '/');
+        const size_t n = slash == NULL ? 0u : (size_t)(slash - o->json_path);
+        if (o->json_path[0] == '\0' || n >= sizeof(dir)) {
+            snprintf(err, cap, "--json '%s': not a file path", o->json_path);
+            return -1;
+        }
+        if (slash == NULL) {
+            strcpy(dir, ".");
+        } else if (n == 0u) {
+            strcpy(dir, "/");
+        } else {
+            memcpy(dir, o->json_path, n);
+            dir[n] = '\0';
+        }
+        if (access(dir, W_OK) != 0) {
+            snprintf(err, cap, "--json '%s': cannot write into %s (%s)", o->json_path, dir, strerror(errno));
+            return -1;
+        }
     }
     return arm_can_bus_spec_valid(o->bus, err, cap) == 0 ? 0 : -1;
 }
@@ -227,6 +255,45 @@ static void describe_fault(const arm_co_fault_t *f, char *out, size_t cap)
         snprintf(out, cap, "no fault");
         break;
     }
+}
+
+static const char *node_state_name(arm_co_node_state_t s)
+{
+    return s == ARM_CO_NODE_ENABLED ? "operation_enabled" : s == ARM_CO_NODE_FAILED ? "failed" : "unfinished";
+}
+
+/* The result for run.json: written whole or not at all (json_file). */
+static int write_json(const char *path, const arm_co_boot_t *b, const char *result, const char *detail, char *err,
+                      size_t cap)
+{
+    json_file_t j;
+    if (json_file_open(&j, path, "--json", err, cap) != 0) {
+        return -1;
+    }
+    FILE *f = j.f;
+    fprintf(f, "{\n  \"result\": ");
+    json_string(f, result);
+    fprintf(f, ",\n  \"detail\": ");
+    json_string(f, detail);
+    fprintf(f, ",\n  \"fault\": {\"code\": ");
+    json_string(f, arm_co_fault_name(b->fault.code));
+    fprintf(f, ", \"node\": %u, \"index\": %u, \"sub\": %u, \"abort_code\": %u, \"value\": %u, \"tries\": %u},\n",
+            b->fault.node, b->fault.index, b->fault.sub, b->fault.abort_code, b->fault.value, b->fault.tries);
+    fprintf(f, "  \"nodes\": [");
+    for (unsigned i = 0; i < b->cfg.n_nodes; ++i) {
+        const arm_co_node_t *n = &b->node[i];
+        fprintf(f, "%s\n    {\"node\": %u, \"state\": \"%s\", \"statusword\": %u, \"identity\": [%u, %u, %u, %u]}",
+                i ? "," : "", b->cfg.node[i].node_id, node_state_name(n->state), n->statusword, n->identity[0],
+                n->identity[1], n->identity[2], n->identity[3]);
+    }
+    fprintf(f, "\n  ],\n  \"sdo_writes\": [");
+    for (unsigned i = 0; i < b->n_log; ++i) {
+        const arm_co_write_t *w = &b->log[i];
+        fprintf(f, "%s\n    {\"node\": %u, \"index\": %u, \"sub\": %u, \"value\": %u, \"bytes\": %u}", i ? "," : "",
+                w->node, w->index, w->sub, w->value, w->len);
+    }
+    fprintf(f, "\n  ]\n}\n");
+    return json_file_commit(&j, "--json", err, cap);
 }
 
 int main(int argc, char **argv)
@@ -299,29 +366,35 @@ int main(int argc, char **argv)
     }
     fflush(stdout);
     arm_can_bus_close(&bus);
-    if (rc == 0) {
+    char detail[512] = "";
+    const char *result = rc == 0 ? "operation_enabled" : rc < 0 ? arm_co_fault_name(boot.fault.code) : "timeout";
+    if (rc < 0) {
+        describe_fault(&boot.fault, detail, sizeof(detail));
+    } else if (rc > 0) {
         for (unsigned i = 0; i < boot.cfg.n_nodes; ++i) {
             const arm_co_node_t *n = &boot.node[i];
-            printf("node %u: operation enabled (statusword 0x%04X; vendor 0x%08X product 0x%08X revision 0x%08X "
-                   "serial 0x%08X)\n", boot.cfg.node[i].node_id, n->statusword, n->identity[0], n->identity[1],
-                   n->identity[2], n->identity[3]);
+            if (n->state == ARM_CO_NODE_RUNNING) {
+                const arm_co_action_t *a = &n->action[n->next];
+                snprintf(detail, sizeof(detail), "node %u: 0x%04X:%02X still under way after %u ms",
+                         boot.cfg.node[i].node_id, a->index, a->sub, opt.timeout_ms);
+                break;
+            }
         }
-        printf("arm_canopen_boot: %u nodes operation enabled, %u SDO writes\n", boot.cfg.n_nodes, boot.n_log);
-        return 0;
     }
-    if (rc < 0) {
-        describe_fault(&boot.fault, err, sizeof(err));
-        fprintf(stderr, "arm_canopen_boot: %s: %s\n", arm_co_fault_name(boot.fault.code), err);
+    if (opt.json_path != NULL && write_json(opt.json_path, &boot, result, detail, err, sizeof(err)) != 0) {
+        fprintf(stderr, "arm_canopen_boot: %s\n", err);
+        return 1;
+    }
+    if (rc != 0) {
+        fprintf(stderr, "arm_canopen_boot: %s: %s\n", result, detail);
         return 1;
     }
     for (unsigned i = 0; i < boot.cfg.n_nodes; ++i) {
         const arm_co_node_t *n = &boot.node[i];
-        if (n->state == ARM_CO_NODE_RUNNING) {
-            const arm_co_action_t *a = &n->action[n->next];
-            fprintf(stderr, "arm_canopen_boot: timeout: node %u: 0x%04X:%02X still under way after %u ms\n",
-                    boot.cfg.node[i].node_id, a->index, a->sub, opt.timeout_ms);
-            break;
-        }
+        printf("node %u: operation enabled (statusword 0x%04X; vendor 0x%08X product 0x%08X revision 0x%08X "
+               "serial 0x%08X)\n", boot.cfg.node[i].node_id, n->statusword, n->identity[0], n->identity[1],
+               n->identity[2], n->identity[3]);
     }
-    return 1;
+    printf("arm_canopen_boot: %u nodes operation enabled, %u SDO writes\n", boot.cfg.n_nodes, boot.n_log);
+    return 0;
 }
