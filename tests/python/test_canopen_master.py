@@ -11,6 +11,8 @@ Also gen/drives.py: the drive configuration's rule and its one-line errors."""
 from __future__ import annotations
 
 import json
+import math
+import re
 import socket
 import struct
 import subprocess
@@ -219,6 +221,82 @@ def test_bad_node_option_is_one_line(boot_bin: Path) -> None:
     p = subprocess.run([str(boot_bin), "--bus", "udp", "--node", "2,gear=101"], capture_output=True, text=True)
     assert p.returncode == 2
     assert p.stderr.strip() == "arm_canopen_boot: --node '2,gear=101': field gear: expected MOTOR/SHAFT revolutions, both >= 1"
+
+
+def test_hold_packs_rpdo1_and_decodes_tpdos_in_si_units(boot_bin: Path, udp_port: int, tmp_path: Path,
+                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    """After the boot: RPDO1 (enable operation, the torque in per-mille of the node's rated torque)
+    then SYNC every period; the test drive answers each SYNC with TPDO1 and TPDO2 (LocalNode does not
+    produce or consume PDOs by itself: its SYNC and RPDO1 subscriptions do it here)."""
+    drive = Cia402Drive(4)
+    pos, vel, tq = -12_345_678, 52_953_088, -250  # increments, increments/s (one joint rev/s), per-mille
+    rpdo1: list[bytes] = []
+    net = _loopback_network(monkeypatch, udp_port)
+    out = tmp_path / "boot.json"
+    try:
+        net.add_node(drive.node)
+        net.subscribe(0x200 + 4, lambda can_id, data, ts: rpdo1.append(bytes(data)))
+
+        def on_sync(can_id: int, data: bytes, ts: float) -> None:
+            if drive.node.nmt.state == "OPERATIONAL":
+                net.send_message(0x180 + 4, struct.pack("<ii", pos, vel))
+                net.send_message(0x280 + 4, struct.pack("<hH", tq, drive.sw))
+
+        net.subscribe(0x080, on_sync)
+        p = subprocess.run([str(boot_bin), "--bus", f"udp:{GROUP}:{udp_port}", "--sdo-timeout-ms", "300",
+                            "--node", "4,rated=28000,encoder=4096,gear=160/1", "--hold-periods", "50",
+                            "--hold-torque", "-3.5", "--json", str(out)], capture_output=True, text=True, timeout=120)
+    finally:
+        drive.node.nmt.stop_heartbeat()
+        net.disconnect()
+    assert p.returncode == 0, p.stderr
+    assert drive.stored(0x608F, 1) == 4096 and drive.stored(0x6091, 1) == 160 and drive.stored(0x6076) == 28000
+    assert len(rpdo1) == 50
+    assert all(struct.unpack("<Hh", r) == (0x000F, -125) for r in rpdo1)  # -3.5 N m / 28 N m = -125 per-mille
+    hold = json.loads(out.read_text())["nodes"][0]["hold"]
+    assert hold["target_permille"] == -125 and hold["tpdo1"] >= 45 and hold["tpdo2"] >= 45
+    inc_per_rad = 4096 * 160 / (2 * math.pi)
+    assert hold["q_rad"] == pytest.approx(pos / inc_per_rad, rel=1e-6)
+    assert hold["qd_rad_s"] == pytest.approx(vel / inc_per_rad, rel=1e-6)
+    assert hold["tau_nm"] == pytest.approx(tq * 28.0 / 1000, rel=1e-6)
+    assert hold["statusword"] & 0x6F == 0x27
+
+
+def test_boots_the_simulators_cia402_drives(boot_bin: Path, build_dir: Path, udp_port: int, tmp_path: Path) -> None:
+    """The master against the emulated drives (arm_sim --protocol canopen, task D's side of the
+    contract) when this build's simulator has them: every drive enabled, then held at 2 N m."""
+    sim = build_dir / "host_sim" / "native" / "arm_sim"
+    if not sim.exists():
+        pytest.skip(f"{sim} not built")
+    if "--protocol" not in subprocess.run([str(sim), "--help"], capture_output=True, text=True).stdout:
+        pytest.skip(f"{sim} has no --protocol canopen (the emulated CiA 402 drives are not in this build)")
+    bus = f"udp:{GROUP}:{udp_port}"
+    proc = subprocess.Popen([str(sim), "--protocol", "canopen", "--bus", bus, "--lcm-url", "", "--boot-timeout", "30",
+                             "--idle-timeout", "5"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    out = tmp_path / "boot.json"
+    try:
+        nodes = [a for i in range(1, 7) for a in ("--node", str(i))]
+        p = subprocess.run([str(boot_bin), "--bus", bus, "--sdo-timeout-ms", "300", "--timeout-ms", "60000", *nodes,
+                            "--hold-periods", "100", "--hold-torque", "2", "--json", str(out)],
+                           capture_output=True, text=True, timeout=120)
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+    assert p.returncode == 0, p.stderr
+    result = json.loads(out.read_text())
+    assert [n["state"] for n in result["nodes"]] == ["operation_enabled"] * 6
+    assert len(result["sdo_writes"]) == 6 * 28  # no overrides: the contract's 28 writes per node
+    for n in result["nodes"]:
+        assert n["hold"]["target_permille"] == 13 and n["hold"]["tpdo1"] > 0 and n["hold"]["tpdo2"] > 0
+        assert n["hold"]["statusword"] & 0x6F == 0x27
+
+
+def test_c_eds_defaults_are_the_eds() -> None:
+    header = (REPO / "firmware" / "canopen" / "include" / "arm" / "co_pdo.h").read_text()
+    c = {k: int(v) for k, v in re.findall(r"#define ARM_CO_EDS_(\w+) (\d+)u", header)}
+    eds = gen_drives.eds_defaults(EDS)
+    assert c == {"RATED_TORQUE_MNM": eds["rated"], "ENCODER_INCREMENTS": eds["encoder"],
+                 "GEAR_MOTOR_REVS": eds["gear_motor"], "GEAR_SHAFT_REVS": eds["gear_shaft"]}
 
 
 # ---- the drive configuration (gen/drives.py) ----------------------------------------------------

@@ -13,12 +13,14 @@
 
 #include "arm/can_bus.h"
 #include "arm/co_boot.h"
+#include "arm/co_pdo.h"
 #include "json_file.h"
 
 static const char k_usage[] =
     "usage: arm_canopen_boot --bus SPEC --node ID[,rated=mNm][,encoder=INC][,gear=M/S][,vendor=X][,product=X]...\n"
     "         [--cycle-us N] [--heartbeat-ms N] [--master-id N] [--consumer-ms N] [--sdo-timeout-ms N]\n"
     "         [--sdo-tries N] [--state-timeout-ms N] [--period-us N] [--timeout-ms N] [--json FILE]\n"
+    "         [--hold-periods N] [--hold-torque NM]\n"
     "  --bus SPEC         udp | udp:GROUP:PORT | socketcan:IFACE (the drives' bus)\n"
     "  --node ...         a node to configure (repeatable): its id and the EDS defaults it overrides\n"
     "                     (0x6076 rated torque mN m, 0x608F.1 increments per motor rev, 0x6091 gear)\n"
@@ -29,7 +31,9 @@ static const char k_usage[] =
     "  --sdo-timeout-ms   per SDO request [50]; --sdo-tries: tries of a transfer [3]\n"
     "  --state-timeout-ms the statusword must follow each controlword by then [500]\n"
     "  --period-us        the configurator's step period [1000]; --timeout-ms: give up after [10000]\n"
-    "  --json FILE        the result as JSON: every SDO write, each node's state and identity, the fault\n";
+    "  --json FILE        the result as JSON: every SDO write, each node's state and identity, the fault\n"
+    "  --hold-periods N   once enabled, N periods of RPDO1 (0x0F, --hold-torque) + SYNC, TPDOs decoded [0]\n"
+    "  --hold-torque NM   the target torque of every node while holding, N m [0]\n";
 
 static uint64_t mono_us(void)
 {
@@ -116,7 +120,18 @@ typedef struct {
     uint32_t period_us;
     uint32_t timeout_ms;
     const char *json_path;
+    uint32_t hold_periods;
+    float hold_torque_nm;
 } boot_options_t;
+
+/* What the TPDOs of the hold phase said, per node, in SI units (arm/co_pdo.h). */
+typedef struct {
+    arm_co_units_t units;
+    int16_t target_permille;
+    uint32_t tpdo1, tpdo2;
+    float q, qd, tau;
+    uint16_t statusword;
+} hold_state_t;
 
 static int parse_args(int argc, char **argv, boot_options_t *o, char *err, size_t cap)
 {
@@ -125,6 +140,8 @@ static int parse_args(int argc, char **argv, boot_options_t *o, char *err, size_
     o->period_us = 1000u;
     o->timeout_ms = 10000u;
     o->json_path = NULL;
+    o->hold_periods = 0u;
+    o->hold_torque_nm = 0.0f;
     for (int i = 1; i < argc; ++i) {
         const char *a = argv[i];
         if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
@@ -177,6 +194,13 @@ static int parse_args(int argc, char **argv, boot_options_t *o, char *err, size_
             o->cfg.state_timeout_us = x * 1000u;
         } else if (strcmp(a, "--period-us") == 0) {
             bad = parse_u32(v, 100u, 1000000u, &o->period_us);
+        } else if (strcmp(a, "--hold-periods") == 0) {
+            bad = parse_u32(v, 0u, 1000000u, &o->hold_periods);
+        } else if (strcmp(a, "--hold-torque") == 0) {
+            char *end = NULL;
+            const double t = strtod(v, &end);
+            bad = (end == v || *end != '\0' || !(t > -1e6 && t < 1e6)) ? -1 : 0;
+            o->hold_torque_nm = (float)t;
         } else if (strcmp(a, "--json") == 0) {
             o->json_path = v;
         } else if (strcmp(a, "--timeout-ms") == 0) {
@@ -257,14 +281,78 @@ static void describe_fault(const arm_co_fault_t *f, char *out, size_t cap)
     }
 }
 
+/* Once every node is enabled: n periods of RPDO1 (enable operation, the target torque in
+ * per-mille of the node's rated torque) then SYNC, the TPDOs of each period decoded into SI units;
+ * the master's heartbeat goes on. 0, or -1 with err set on a bus error. */
+static int hold(arm_can_bus_t *bus, const boot_options_t *o, hold_state_t *hs, char *err, size_t cap)
+{
+    const arm_co_boot_config_t *c = &o->cfg;
+    for (unsigned i = 0; i < c->n_nodes; ++i) {
+        const arm_co_node_config_t *nc = &c->node[i];
+        const uint32_t rated = (nc->overrides & ARM_CO_OVERRIDE_RATED) ? nc->rated_torque_mnm : ARM_CO_EDS_RATED_TORQUE_MNM;
+        const uint32_t enc = (nc->overrides & ARM_CO_OVERRIDE_ENCODER) ? nc->encoder_increments : ARM_CO_EDS_ENCODER_INCREMENTS;
+        const int gear = (nc->overrides & ARM_CO_OVERRIDE_GEAR) != 0;
+        if (arm_co_units_init(&hs[i].units, rated, enc, gear ? nc->gear_motor_revs : ARM_CO_EDS_GEAR_MOTOR_REVS,
+                              gear ? nc->gear_shaft_revs : ARM_CO_EDS_GEAR_SHAFT_REVS, 32767) != 0) {
+            snprintf(err, cap, "node %u: units cannot be built", nc->node_id);
+            return -1;
+        }
+        hs[i].target_permille = arm_co_torque_to_permille(&hs[i].units, o->hold_torque_nm);
+    }
+    uint64_t next = mono_us(), next_hb = next;
+    for (uint32_t k = 0; k < o->hold_periods; ++k) {
+        arm_can_frame_t f;
+        for (unsigned i = 0; i < c->n_nodes; ++i) {
+            arm_co_pack_rpdo1(c->node[i].node_id, 0x000Fu, hs[i].target_permille, &f);
+            if (arm_can_bus_send(bus, &f) != ARM_BUS_OK) {
+                snprintf(err, cap, "bus %s: send of RPDO1 0x%03X failed", o->bus, f.id);
+                return -1;
+            }
+        }
+        f = (arm_can_frame_t){.id = ARM_CO_COB_SYNC, .len = 0u};
+        if (arm_can_bus_send(bus, &f) != ARM_BUS_OK) {
+            snprintf(err, cap, "bus %s: send of SYNC failed", o->bus);
+            return -1;
+        }
+        if (c->heartbeat_ms > 0u && mono_us() >= next_hb) {
+            f = (arm_can_frame_t){.id = ARM_CO_COB_HEARTBEAT + c->master_id, .len = 1u, .data = {0x05u}};
+            (void)arm_can_bus_send(bus, &f);
+            next_hb += (uint64_t)c->heartbeat_ms * 1000u;
+        }
+        next += o->period_us;
+        for (uint64_t now = mono_us(); now < next; now = mono_us()) {
+            const int r = arm_can_bus_recv(bus, &f, (int)(next - now));
+            if (r < 0) {
+                snprintf(err, cap, "bus %s: receive failed (%d)", o->bus, r);
+                return -1;
+            }
+            for (unsigned i = 0; r == 1 && i < c->n_nodes; ++i) {
+                int32_t pos, vel;
+                int16_t tq;
+                uint16_t sw;
+                if (arm_co_unpack_tpdo1(c->node[i].node_id, &f, &pos, &vel) == 0) {
+                    hs[i].tpdo1++;
+                    hs[i].q = arm_co_increments_to_rad(&hs[i].units, pos);
+                    hs[i].qd = arm_co_increments_to_rad(&hs[i].units, vel);
+                } else if (arm_co_unpack_tpdo2(c->node[i].node_id, &f, &tq, &sw) == 0) {
+                    hs[i].tpdo2++;
+                    hs[i].tau = arm_co_permille_to_torque(&hs[i].units, tq);
+                    hs[i].statusword = sw;
+                }
+            }
+        }
+    }
+    return 0;
+}
+
 static const char *node_state_name(arm_co_node_state_t s)
 {
     return s == ARM_CO_NODE_ENABLED ? "operation_enabled" : s == ARM_CO_NODE_FAILED ? "failed" : "unfinished";
 }
 
 /* The result for run.json: written whole or not at all (json_file). */
-static int write_json(const char *path, const arm_co_boot_t *b, const char *result, const char *detail, char *err,
-                      size_t cap)
+static int write_json(const char *path, const arm_co_boot_t *b, const hold_state_t *hs, uint32_t hold_periods,
+                      const char *result, const char *detail, char *err, size_t cap)
 {
     json_file_t j;
     if (json_file_open(&j, path, "--json", err, cap) != 0) {
@@ -282,9 +370,17 @@ static int write_json(const char *path, const arm_co_boot_t *b, const char *resu
     fprintf(f, "  \"nodes\": [");
     for (unsigned i = 0; i < b->cfg.n_nodes; ++i) {
         const arm_co_node_t *n = &b->node[i];
-        fprintf(f, "%s\n    {\"node\": %u, \"state\": \"%s\", \"statusword\": %u, \"identity\": [%u, %u, %u, %u]}",
+        fprintf(f, "%s\n    {\"node\": %u, \"state\": \"%s\", \"statusword\": %u, \"identity\": [%u, %u, %u, %u]",
                 i ? "," : "", b->cfg.node[i].node_id, node_state_name(n->state), n->statusword, n->identity[0],
                 n->identity[1], n->identity[2], n->identity[3]);
+        if (hold_periods > 0u) {
+            const hold_state_t *h = &hs[i];
+            fprintf(f, ", \"hold\": {\"periods\": %u, \"target_permille\": %d, \"tpdo1\": %u, \"tpdo2\": %u, "
+                       "\"q_rad\": %.9g, \"qd_rad_s\": %.9g, \"tau_nm\": %.9g, \"statusword\": %u}",
+                    hold_periods, h->target_permille, h->tpdo1, h->tpdo2, (double)h->q, (double)h->qd, (double)h->tau,
+                    h->statusword);
+        }
+        fputc('}', f);
     }
     fprintf(f, "\n  ],\n  \"sdo_writes\": [");
     for (unsigned i = 0; i < b->n_log; ++i) {
@@ -364,6 +460,13 @@ int main(int argc, char **argv)
             next = now; /* a long stall (the host was busy): do not run the missed periods at once */
         }
     }
+    static hold_state_t hs[ARM_CO_BOOT_MAX_NODES];
+    const uint32_t held = rc == 0 ? opt.hold_periods : 0u;
+    if (held > 0u && hold(&bus, &opt, hs, err, sizeof(err)) != 0) {
+        fprintf(stderr, "arm_canopen_boot: hold: %s\n", err);
+        arm_can_bus_close(&bus);
+        return 1;
+    }
     fflush(stdout);
     arm_can_bus_close(&bus);
     char detail[512] = "";
@@ -381,7 +484,7 @@ int main(int argc, char **argv)
             }
         }
     }
-    if (opt.json_path != NULL && write_json(opt.json_path, &boot, result, detail, err, sizeof(err)) != 0) {
+    if (opt.json_path != NULL && write_json(opt.json_path, &boot, hs, held, result, detail, err, sizeof(err)) != 0) {
         fprintf(stderr, "arm_canopen_boot: %s\n", err);
         return 1;
     }
@@ -394,6 +497,12 @@ int main(int argc, char **argv)
         printf("node %u: operation enabled (statusword 0x%04X; vendor 0x%08X product 0x%08X revision 0x%08X "
                "serial 0x%08X)\n", boot.cfg.node[i].node_id, n->statusword, n->identity[0], n->identity[1],
                n->identity[2], n->identity[3]);
+        if (held > 0u) {
+            const hold_state_t *h = &hs[i];
+            printf("node %u: held %u periods at %d per-mille: q %.6f rad, qd %.6f rad/s, tau %.3f N m, statusword "
+                   "0x%04X (%u TPDO1, %u TPDO2)\n", boot.cfg.node[i].node_id, held, h->target_permille, (double)h->q,
+                   (double)h->qd, (double)h->tau, h->statusword, h->tpdo1, h->tpdo2);
+        }
     }
     printf("arm_canopen_boot: %u nodes operation enabled, %u SDO writes\n", boot.cfg.n_nodes, boot.n_log);
     return 0;

@@ -15,6 +15,13 @@
 
 #include "arm/can_frame.h"
 
+/* The EDS's defaults (firmware/protocol/cia402_servo.eds; tests/python/test_canopen_master.py
+ * holds them equal): what a drive uses where the configuration overrides nothing. */
+#define ARM_CO_EDS_RATED_TORQUE_MNM 150000u
+#define ARM_CO_EDS_ENCODER_INCREMENTS 524288u
+#define ARM_CO_EDS_GEAR_MOTOR_REVS 101u
+#define ARM_CO_EDS_GEAR_SHAFT_REVS 1u
+
 typedef struct {
     double rated_torque_nm;  /* 0x6076 / 1000 */
     double increments_per_rad; /* 0x608F.1 * 0x6091.1 / 0x6091.2 / (2 pi) */
