@@ -162,7 +162,7 @@ static int serve(server_t *s, const arm_can_frame_t *req, arm_can_frame_t *resp)
         s->writes++;
         d[0] = 0x60u;
         if (index == 0x6040u) {
-            s->sw[node] = v == 6u ? 0x21u : v == 7u ? 0x23u : v == 15u ? 0x27u : s->sw[node];
+            s->sw[node] = v == 0u ? 0x40u : v == 6u ? 0x21u : v == 7u ? 0x23u : v == 15u ? 0x27u : s->sw[node];
         } else if (index == 0x6060u) {
             s->mode[node] = (int8_t)v;
         } else if (index == 0x1400u && req->data[3] == 1u) {
@@ -211,21 +211,31 @@ static void test_boot_sequence(void)
                                          .rated_torque_mnm = 28000u, .gear_motor_revs = 160u, .gear_shaft_revs = 1u};
     memset(&s, 0, sizeof(s));
     s.device_type = ARM_CO_DEVICE_TYPE;
+    s.sw[1] = 0x40u; /* switch on disabled: a fresh drive */
+    s.sw[2] = 0x27u; /* left operation enabled by an earlier master: gets controlword 0x00 first */
     CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
     CHECK(run_boot(&b, &s, 1000u) == 0);
     CHECK(b.node[0].state == ARM_CO_NODE_ENABLED && b.node[1].state == ARM_CO_NODE_ENABLED);
     /* per node: 3 PDOs x (5 + 2 entries) + 1006, 1017, 1016 + 6060 + three controlwords = 28 */
-    CHECK_MSG(b.n_log == 28u + 31u, "%u writes", b.n_log);
+    CHECK_MSG(b.n_log == 28u + 32u, "%u writes", b.n_log); /* node 2: + 0x6076, 0x6091.1-2, the 0x00 */
     CHECK(s.writes == b.n_log);
     const arm_co_write_t *w = b.log;
-    unsigned rated = 0u;
+    unsigned rated = 0u, disable = 0u;
     for (unsigned i = 0; i < b.n_log; ++i) {
         rated += (w[i].index == 0x6076u) ? 1u : 0u;
+        if (w[i].index == 0x6040u && w[i].value == 0u) {
+            ++disable;
+            unsigned j = i + 1u;
+            while (j < b.n_log && w[j].node != w[i].node) {
+                ++j;
+            }
+            CHECK(w[i].node == 2u && j < b.n_log && w[j].index == 0x1400u); /* before the configuration */
+        }
         if (w[i].index == 0x6076u) {
             CHECK(w[i].node == 2u && w[i].value == 28000u);
         }
     }
-    CHECK(rated == 1u);
+    CHECK(rated == 1u && disable == 1u);
     CHECK(s.mode[1] == 10 && s.mode[2] == 10 && s.sw[1] == 0x27u && s.sw[2] == 0x27u);
 
     /* a wrong device type is named: node, 0x1000, the value read */

@@ -62,12 +62,14 @@ def _loopback_network(monkeypatch: pytest.MonkeyPatch, port: int) -> "canopen.Ne
 class Cia402Drive:
     """A LocalNode that behaves like the contract's drive, as far as the boot needs."""
 
-    def __init__(self, node_id: int, reject_mode: bool = False, device_type: int | None = None) -> None:
+    def __init__(self, node_id: int, reject_mode: bool = False, device_type: int | None = None,
+                 in_fault: bool = False) -> None:
         self.node = canopen.LocalNode(node_id, str(EDS))
         self.id = node_id
         self.reject_mode = reject_mode
         self.device_type = device_type
-        self.sw = 0x0040  # switch on disabled
+        self.sw = 0x0008 if in_fault else 0x0040  # fault, or switch on disabled
+        self.cw = 0
         self.mode = 0
         self.writes: list[tuple[int, int, int]] = []  # (index, sub, value) in the order they came
         self.lock = threading.Lock()
@@ -99,10 +101,16 @@ class Cia402Drive:
                 raise SdoAbortedError(0x06090030)
             self.mode = value
         if index == 0x6040:
-            state = {0x06: 0x21, 0x07: 0x23, 0x0F: 0x27}.get(value & 0x8F)
-            operational = self.node.nmt.state == "OPERATIONAL"
-            if state is not None and (state != 0x27 or operational):
-                self.sw = state
+            rising_reset = value & 0x80 and not self.cw & 0x80
+            self.cw = value
+            if self.sw & 0x08:  # fault: only bit 7's rising edge leaves it (to switch on disabled)
+                if rising_reset:
+                    self.sw = 0x0040
+            else:
+                state = {0x00: 0x40, 0x06: 0x21, 0x07: 0x23, 0x0F: 0x27}.get(value & 0x8F)
+                operational = self.node.nmt.state == "OPERATIONAL"
+                if state is not None and (state != 0x27 or operational):
+                    self.sw = state
         with self.lock:
             self.writes.append((index, subindex, value))
 
@@ -178,7 +186,7 @@ def test_boot_brings_every_node_to_operation_enabled(boot_bin: Path, udp_port: i
         else:  # no override: the EDS default stays, not written
             assert (0x6076, 0) not in written and d.stored(0x6076) == 150000
         assert (0x608F, 1) not in written and (0x6091, 1) not in written
-        assert [v for i, _, v in d.writes if i == 0x6040] == [0x06, 0x07, 0x0F]
+        assert [v for i, _, v in d.writes if i == 0x6040] == [0x06, 0x07, 0x0F]  # fresh: no 0x00 first
 
 
 def test_unsupported_mode_names_node_object_and_abort(boot_bin: Path, udp_port: int, tmp_path: Path,
@@ -192,6 +200,32 @@ def test_unsupported_mode_names_node_object_and_abort(boot_bin: Path, udp_port: 
                     "(value range of parameter exceeded)"), p.stderr
     fault = json.loads(out.read_text())["fault"]
     assert (fault["code"], fault["node"], fault["index"], fault["abort_code"]) == ("sdo_abort", 2, 0x6060, 0x06090030)
+
+
+def test_drive_in_fault_is_reported_or_reset_when_asked(boot_bin: Path, udp_port: int,
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    p, _ = _run(boot_bin, udp_port, ["--node", "1"], [Cia402Drive(1, in_fault=True)], monkeypatch)
+    assert p.returncode == 1
+    assert "drive_fault: node 1: 0x6041:00: statusword 0x0008 shows fault (bit 3) while waiting for 0x40" in p.stderr
+    drive = Cia402Drive(1, in_fault=True)
+    p, _ = _run(boot_bin, udp_port + 1, ["--node", "1", "--fault-reset"], [drive], monkeypatch)
+    assert p.returncode == 0, p.stderr
+    # the reset (0x00, 0x80) before the configuration, then switch on disabled confirmed (0x00)
+    assert [v for i, _, v in drive.writes if i == 0x6040] == [0x00, 0x80, 0x00, 0x06, 0x07, 0x0F]
+    first_config = next(k for k, (i, _, _) in enumerate(drive.writes) if i == 0x1400)
+    assert [i for i, _, _ in drive.writes[:first_config]] == [0x6040] * 3
+    assert drive.sw & 0x6F == 0x27
+
+
+def test_a_drive_left_enabled_is_disabled_before_it_is_configured(boot_bin: Path, udp_port: int,
+                                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """A master that restarts finds its drives enabled: no new mode or scaling while torque flows
+    (the emulated drive aborts 0x08000022), so controlword 0x00 goes first; a fresh drive gets none."""
+    drive = Cia402Drive(1)
+    drive.sw = 0x0027
+    p, _ = _run(boot_bin, udp_port, ["--node", "1"], [drive], monkeypatch)
+    assert p.returncode == 0, p.stderr
+    assert drive.writes[0] == (0x6040, 0, 0x00) and drive.writes[1][0] == 0x1400
 
 
 def test_unwritable_json_is_refused_before_the_bus(boot_bin: Path, tmp_path: Path) -> None:
@@ -276,16 +310,19 @@ def test_boots_the_simulators_cia402_drives(boot_bin: Path, build_dir: Path, udp
     out = tmp_path / "boot.json"
     try:
         nodes = [a for i in range(1, 7) for a in ("--node", str(i))]
-        p = subprocess.run([str(boot_bin), "--bus", bus, "--sdo-timeout-ms", "300", "--timeout-ms", "60000", *nodes,
-                            "--hold-periods", "100", "--hold-torque", "2", "--json", str(out)],
-                           capture_output=True, text=True, timeout=120)
+        for _ in range(2):  # the second boot finds the drives enabled (or faulted: --fault-reset)
+            p = subprocess.run([str(boot_bin), "--bus", bus, "--sdo-timeout-ms", "300", "--timeout-ms", "60000",
+                                *nodes, "--fault-reset", "--hold-periods", "100", "--hold-torque", "2",
+                                "--json", str(out)], capture_output=True, text=True, timeout=120)
+            assert p.returncode == 0, p.stderr
     finally:
         proc.terminate()
         proc.wait(timeout=30)
     assert p.returncode == 0, p.stderr
     result = json.loads(out.read_text())
     assert [n["state"] for n in result["nodes"]] == ["operation_enabled"] * 6
-    assert len(result["sdo_writes"]) == 6 * 28  # no overrides: the contract's 28 writes per node
+    # no overrides: the contract's 28 writes per node, and the restart's controlword 0x00 (+ a reset)
+    assert 6 * 29 <= len(result["sdo_writes"]) <= 6 * 31
     for n in result["nodes"]:
         assert n["hold"]["target_permille"] == 13 and n["hold"]["tpdo1"] > 0 and n["hold"]["tpdo2"] > 0
         assert n["hold"]["statusword"] & 0x6F == 0x27

@@ -6,7 +6,10 @@
 #include <stddef.h>
 
 #define SW_STATE_MASK 0x006Fu
+#define SW_DISABLED_MASK 0x004Fu /* switch on disabled: bit 5 (quick stop) is not part of it */
 #define SW_FAULT 0x0008u
+/* A CONTROL or QUIESCE action's mask field: the state expected, and the statusword bits that show it. */
+#define SW_EXPECT(state, mask) ((uint32_t)(state) | ((uint32_t)(mask) << 8))
 
 void arm_co_boot_default_config(arm_co_boot_config_t *cfg)
 {
@@ -68,6 +71,9 @@ static void build(arm_co_node_t *n, const arm_co_boot_config_t *cfg, const arm_c
     add(n, ARM_CO_ACT_READ, 0x1018u, 2u, 4u, nc->product_code, nc->product_code ? 0xFFFFFFFFu : 0u);
     add(n, ARM_CO_ACT_READ, 0x1018u, 3u, 4u, 0u, 0u);
     add(n, ARM_CO_ACT_READ, 0x1018u, 4u, 4u, 0u, 0u);
+    /* A drive left enabled (a master restarted) takes no new mode or scaling (0x08000022): switch
+     * on disabled first. A fresh drive already is, and nothing is written. */
+    add(n, ARM_CO_ACT_QUIESCE, 0x6040u, 0u, 2u, 0x0000u, SW_EXPECT(0x40u, SW_DISABLED_MASK));
     add_pdo(n, 0x1400u, 0x1600u, ARM_CO_COB_RPDO1 + id, &cfg->rpdo1);
     add_pdo(n, 0x1800u, 0x1A00u, ARM_CO_COB_TPDO1 + id, &cfg->tpdo1);
     add_pdo(n, 0x1801u, 0x1A01u, ARM_CO_COB_TPDO2 + id, &cfg->tpdo2);
@@ -88,14 +94,14 @@ static void build(arm_co_node_t *n, const arm_co_boot_config_t *cfg, const arm_c
     add(n, ARM_CO_ACT_WRITE, 0x6060u, 0u, 1u, (uint32_t)ARM_CO_MODE_CST, 0u);
     add(n, ARM_CO_ACT_READ, 0x6061u, 0u, 1u, (uint32_t)ARM_CO_MODE_CST, 0xFFu);
     add(n, ARM_CO_ACT_NMT, 0u, 0u, 0u, ARM_CO_NMT_START, 0u);
-    add(n, ARM_CO_ACT_CONTROL, 0x6040u, 0u, 2u, 0x0006u, 0x21u);
-    add(n, ARM_CO_ACT_CONTROL, 0x6040u, 0u, 2u, 0x0007u, 0x23u);
-    add(n, ARM_CO_ACT_CONTROL, 0x6040u, 0u, 2u, 0x000Fu, 0x27u);
+    add(n, ARM_CO_ACT_CONTROL, 0x6040u, 0u, 2u, 0x0006u, SW_EXPECT(0x21u, SW_STATE_MASK));
+    add(n, ARM_CO_ACT_CONTROL, 0x6040u, 0u, 2u, 0x0007u, SW_EXPECT(0x23u, SW_STATE_MASK));
+    add(n, ARM_CO_ACT_CONTROL, 0x6040u, 0u, 2u, 0x000Fu, SW_EXPECT(0x27u, SW_STATE_MASK));
 }
 
 static unsigned sequence_length(const arm_co_boot_config_t *cfg)
 {
-    return 6u + 3u * 5u + cfg->rpdo1.n + cfg->tpdo1.n + cfg->tpdo2.n + 3u + 5u + 2u + 1u + 3u;
+    return 6u + 1u + 3u * 5u + cfg->rpdo1.n + cfg->tpdo1.n + cfg->tpdo2.n + 3u + 5u + 2u + 1u + 3u;
 }
 
 static int bad_config(arm_co_boot_t *b, uint8_t node, uint32_t value)
@@ -118,7 +124,8 @@ int arm_co_boot_init(arm_co_boot_t *b, const arm_co_boot_config_t *cfg, uint64_t
         return bad_config(b, 0u, cfg->n_nodes);
     }
     if (cfg->rpdo1.n > ARM_CO_PDO_MAX_ENTRIES || cfg->tpdo1.n > ARM_CO_PDO_MAX_ENTRIES ||
-        cfg->tpdo2.n > ARM_CO_PDO_MAX_ENTRIES || sequence_length(cfg) > ARM_CO_BOOT_MAX_ACTIONS) {
+        cfg->tpdo2.n > ARM_CO_PDO_MAX_ENTRIES ||
+        sequence_length(cfg) + 3u > ARM_CO_BOOT_MAX_ACTIONS) { /* + a fault reset's 3 logged writes */
         return bad_config(b, 0u, sequence_length(cfg));
     }
     for (uint8_t i = 0; i < cfg->n_nodes; ++i) {
@@ -160,7 +167,7 @@ static void fail(arm_co_boot_t *b, arm_co_node_t *n, arm_co_fault_code_t code, c
     b->fault.code = code;
     b->fault.node = n->sdo.node;
     b->fault.index = index;
-    b->fault.sub = a->kind == ARM_CO_ACT_CONTROL && index == 0x6041u ? 0u : a->sub;
+    b->fault.sub = index == a->index ? a->sub : 0u;
     b->fault.abort_code = n->sdo.abort_code;
     b->fault.value = value;
     b->fault.expected = expected;
@@ -180,11 +187,18 @@ static int transfer_ok(arm_co_boot_t *b, arm_co_node_t *n, const arm_co_action_t
     return 0;
 }
 
+static void log_value(arm_co_boot_t *b, const arm_co_node_t *n, uint16_t index, uint8_t sub, uint8_t len,
+                      uint32_t value)
+{
+    if (b->n_log < ARM_CO_BOOT_LOG_MAX) { /* sized for every node's sequence; a fault reset's two
+                                           * writes fit in the room ARM_CO_BOOT_MAX_ACTIONS leaves */
+        b->log[b->n_log++] = (arm_co_write_t){n->sdo.node, index, sub, len, value};
+    }
+}
+
 static void log_write(arm_co_boot_t *b, const arm_co_node_t *n, const arm_co_action_t *a)
 {
-    if (b->n_log < ARM_CO_BOOT_LOG_MAX) { /* every node's writes fit: sized from the sequence */
-        b->log[b->n_log++] = (arm_co_write_t){n->sdo.node, a->index, a->sub, a->len, a->value};
-    }
+    log_value(b, n, a->index, a->sub, a->len, a->value);
 }
 
 static void download(arm_co_node_t *n, uint16_t index, uint8_t sub, uint8_t len, uint32_t value, uint64_t now)
@@ -223,6 +237,12 @@ static void step_node(arm_co_boot_t *b, uint8_t i, uint64_t now)
             case ARM_CO_ACT_READ:
                 (void)arm_co_sdo_upload(&n->sdo, a->index, a->sub, now);
                 return;
+            case ARM_CO_ACT_QUIESCE: /* the statusword first: written only if not there yet */
+                n->control_deadline_us = now + b->cfg.state_timeout_us;
+                n->control_phase = 1u;
+                n->cw_written = 0u;
+                (void)arm_co_sdo_upload(&n->sdo, 0x6041u, 0u, now);
+                return;
             case ARM_CO_ACT_CONTROL:
             default:
                 n->control_deadline_us = now + b->cfg.state_timeout_us;
@@ -250,16 +270,41 @@ static void step_node(arm_co_boot_t *b, uint8_t i, uint64_t now)
         } else { /* CONTROL: the controlword is in; read the statusword until it follows */
             if (n->control_phase == 0u) {
                 log_write(b, n, a);
+                n->cw_written = 1u;
                 n->control_phase = 1u;
                 (void)arm_co_sdo_upload(&n->sdo, 0x6041u, 0u, now);
                 return;
             }
+            if (n->control_phase == 2u) { /* 0x00 is in: now bit 7's rising edge */
+                log_value(b, n, 0x6040u, 0u, 2u, 0x0000u);
+                n->control_phase = 3u;
+                download(n, 0x6040u, 0u, 2u, 0x0080u, now);
+                return;
+            }
+            if (n->control_phase == 3u) { /* reset sent: the step's own controlword again */
+                log_value(b, n, 0x6040u, 0u, 2u, 0x0080u);
+                n->fault_resets++;
+                n->control_phase = 0u;
+                n->control_deadline_us = now + b->cfg.state_timeout_us;
+                download(n, a->index, a->sub, a->len, a->value, now);
+                return;
+            }
             n->statusword = (uint16_t)arm_co_sdo_u32(&n->sdo);
             if (n->statusword & SW_FAULT) {
+                if (b->cfg.fault_reset && n->fault_resets == 0u) {
+                    n->control_phase = 2u;
+                    download(n, 0x6040u, 0u, 2u, 0x0000u, now);
+                    return;
+                }
                 fail(b, n, ARM_CO_FAULT_DRIVE_FAULT, a, 0x6041u, n->statusword, a->mask);
                 return;
             }
-            if ((n->statusword & SW_STATE_MASK) != a->mask) {
+            if ((n->statusword & (a->mask >> 8)) != (a->mask & 0xFFu)) {
+                if (!n->cw_written) { /* QUIESCE: not there yet, so the controlword goes out */
+                    n->control_phase = 0u;
+                    download(n, a->index, a->sub, a->len, a->value, now);
+                    return;
+                }
                 if (now >= n->control_deadline_us) {
                     fail(b, n, ARM_CO_FAULT_STATE_TIMEOUT, a, 0x6041u, n->statusword, a->mask);
                     return;

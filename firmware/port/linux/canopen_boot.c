@@ -20,7 +20,7 @@ static const char k_usage[] =
     "usage: arm_canopen_boot --bus SPEC --node ID[,rated=mNm][,encoder=INC][,gear=M/S][,vendor=X][,product=X]...\n"
     "         [--cycle-us N] [--heartbeat-ms N] [--master-id N] [--consumer-ms N] [--sdo-timeout-ms N]\n"
     "         [--sdo-tries N] [--state-timeout-ms N] [--period-us N] [--timeout-ms N] [--json FILE]\n"
-    "         [--hold-periods N] [--hold-torque NM]\n"
+    "         [--hold-periods N] [--hold-torque NM] [--fault-reset]\n"
     "  --bus SPEC         udp | udp:GROUP:PORT | socketcan:IFACE (the drives' bus)\n"
     "  --node ...         a node to configure (repeatable): its id and the EDS defaults it overrides\n"
     "                     (0x6076 rated torque mN m, 0x608F.1 increments per motor rev, 0x6091 gear)\n"
@@ -33,7 +33,8 @@ static const char k_usage[] =
     "  --period-us        the configurator's step period [1000]; --timeout-ms: give up after [10000]\n"
     "  --json FILE        the result as JSON: every SDO write, each node's state and identity, the fault\n"
     "  --hold-periods N   once enabled, N periods of RPDO1 (0x0F, --hold-torque) + SYNC, TPDOs decoded [0]\n"
-    "  --hold-torque NM   the target torque of every node while holding, N m [0]\n";
+    "  --hold-torque NM   the target torque of every node while holding, N m [0]\n"
+    "  --fault-reset      a drive in fault gets one fault reset (0x6040 = 0x00, 0x80) [report the fault]\n";
 
 static uint64_t mono_us(void)
 {
@@ -147,6 +148,10 @@ static int parse_args(int argc, char **argv, boot_options_t *o, char *err, size_
         if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
             fputs(k_usage, stdout);
             return 1;
+        }
+        if (strcmp(a, "--fault-reset") == 0) {
+            o->cfg.fault_reset = 1u;
+            continue;
         }
         if (i + 1 >= argc) {
             snprintf(err, cap, "%s: missing value (or unknown option)", a);
@@ -264,12 +269,12 @@ static void describe_fault(const arm_co_fault_t *f, char *out, size_t cap)
                  f->value, f->expected);
         break;
     case ARM_CO_FAULT_STATE_TIMEOUT:
-        snprintf(out, cap, "node %u: 0x6041:00: statusword 0x%04X did not reach 0x%02X (under mask 0x6F)", f->node,
-                 f->value, f->expected);
+        snprintf(out, cap, "node %u: 0x6041:00: statusword 0x%04X did not reach 0x%02X (under mask 0x%02X)", f->node,
+                 f->value, f->expected & 0xFFu, f->expected >> 8);
         break;
     case ARM_CO_FAULT_DRIVE_FAULT:
         snprintf(out, cap, "node %u: 0x6041:00: statusword 0x%04X shows fault (bit 3) while waiting for 0x%02X",
-                 f->node, f->value, f->expected);
+                 f->node, f->value, f->expected & 0xFFu);
         break;
     case ARM_CO_FAULT_BAD_CONFIG:
         snprintf(out, cap, "node %u: bad configuration (value %u)", f->node, f->value);

@@ -5,12 +5,15 @@
  * boot side by side (each has its own SDO channel). No heap, no I/O.
  *
  * Per node, in order: NMT pre-operational; upload 0x1000 (must be ARM_CO_DEVICE_TYPE) and
- * 0x1018.1-4 (vendor and product checked when the configuration names them); for RPDO1, TPDO1,
+ * 0x1018.1-4 (vendor and product checked when the configuration names them); the statusword, and
+ * controlword 0x00 if the drive is not switch on disabled (a drive left enabled takes no new mode
+ * or scaling); for RPDO1, TPDO1,
  * TPDO2: COB-ID invalid (bit 31), mapping count 0, entries, count, transmission type 1, COB-ID
  * valid; 0x1006 cycle period; 0x1017 heartbeat; 0x1016.1 consumer heartbeat of the master;
  * 0x6076, 0x608F, 0x6091 where the configuration overrides the EDS; 0x6060 = 10, upload 0x6061 must
  * be 10; NMT start; controlword 0x06, 0x07, 0x0F, each confirmed by statusword & 0x6F (0x21,
- * 0x23, 0x27) read back over SDO. Every download is logged (arm_co_boot_t.log). */
+ * 0x23, 0x27) read back over SDO (a drive in fault: one fault reset if the configuration allows).
+ * Every download is logged (arm_co_boot_t.log). */
 #ifndef ARM_CO_BOOT_H
 #define ARM_CO_BOOT_H
 
@@ -20,7 +23,7 @@
 #include "arm/co_sdo.h"
 
 #define ARM_CO_BOOT_MAX_NODES 8u    /* nodes of one bus */
-#define ARM_CO_BOOT_MAX_ACTIONS 48u /* steps of one node's sequence (the default uses 37) */
+#define ARM_CO_BOOT_MAX_ACTIONS 48u /* steps of one node's sequence (the default uses 38) */
 #define ARM_CO_BOOT_LOG_MAX (ARM_CO_BOOT_MAX_NODES * ARM_CO_BOOT_MAX_ACTIONS)
 #define ARM_CO_PDO_MAX_ENTRIES 4u   /* mapping entries per PDO the configurator writes */
 
@@ -68,6 +71,9 @@ typedef struct {
     uint32_t sdo_timeout_us;
     uint8_t sdo_tries;
     uint32_t state_timeout_us;  /* per controlword step: the statusword must follow by then */
+    uint8_t fault_reset;        /* 1: a drive in fault gets one fault reset (controlword 0x00, then
+                                 * 0x80: bit 7's rising edge) before its failure is reported; 0: a
+                                 * fault is reported at once (resetting is the operator's decision) */
 } arm_co_boot_config_t;
 
 /* The contract's defaults: RPDO1 6040+6071, TPDO1 6064+606C, TPDO2 6077+6041; 1 ms, 100 ms,
@@ -110,7 +116,8 @@ typedef enum {
     ARM_CO_ACT_NMT = 0,  /* value: NMT command */
     ARM_CO_ACT_WRITE,    /* SDO download */
     ARM_CO_ACT_READ,     /* SDO upload; checked against value under mask (mask 0: recorded) */
-    ARM_CO_ACT_CONTROL,  /* controlword value via SDO, then statusword & 0x6F == expect */
+    ARM_CO_ACT_CONTROL,  /* controlword value via SDO, then the statusword shows the state (mask) */
+    ARM_CO_ACT_QUIESCE,  /* the statusword; if it does not show the state, the controlword, as CONTROL */
 } arm_co_action_kind_t;
 
 typedef struct {
@@ -119,7 +126,7 @@ typedef struct {
     uint8_t len;
     uint16_t index;
     uint32_t value;
-    uint32_t mask;       /* READ: bits that must equal value; CONTROL: the expected sw & 0x6F */
+    uint32_t mask;       /* READ: bits that must equal value; CONTROL, QUIESCE: state | sw mask << 8 */
 } arm_co_action_t;
 
 typedef enum { ARM_CO_NODE_RUNNING = 0, ARM_CO_NODE_ENABLED, ARM_CO_NODE_FAILED } arm_co_node_state_t;
@@ -129,7 +136,9 @@ typedef struct {
     uint8_t n_actions;
     uint8_t next;                 /* the action under way */
     uint8_t started;              /* the action's first request is out */
-    uint8_t control_phase;        /* CONTROL: 0 write cw, 1 read sw */
+    uint8_t control_phase;        /* CONTROL: 0 write cw, 1 read sw, 2 and 3 fault reset 0x00, 0x80 */
+    uint8_t fault_resets;         /* fault resets done (at most one per node) */
+    uint8_t cw_written;           /* CONTROL, QUIESCE: this action's controlword is out */
     uint64_t control_deadline_us;
     uint16_t statusword;
     uint32_t identity[4];         /* 0x1018.1..4 as read */
