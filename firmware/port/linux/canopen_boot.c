@@ -14,6 +14,7 @@
 #include "arm/can_bus.h"
 #include "arm/co_boot.h"
 #include "arm/co_pdo.h"
+#include "canopen_text.h"
 #include "json_file.h"
 
 static const char k_usage[] =
@@ -251,41 +252,6 @@ static int parse_args(int argc, char **argv, boot_options_t *o, char *err, size_
     return arm_can_bus_spec_valid(o->bus, err, cap) == 0 ? 0 : -1;
 }
 
-static void describe_fault(const arm_co_fault_t *f, char *out, size_t cap)
-{
-    switch (f->code) {
-    case ARM_CO_FAULT_SDO_ABORT:
-    case ARM_CO_FAULT_CLIENT_ABORT:
-        snprintf(out, cap, "node %u: 0x%04X:%02X: %s 0x%08X (%s)", f->node, f->index, f->sub,
-                 f->code == ARM_CO_FAULT_SDO_ABORT ? "SDO abort" : "master aborted the response with",
-                 f->abort_code, arm_co_abort_text(f->abort_code));
-        break;
-    case ARM_CO_FAULT_NO_ANSWER:
-        snprintf(out, cap, "node %u: 0x%04X:%02X: no answer after %u tries (SDO abort 0x%08X sent)", f->node,
-                 f->index, f->sub, f->tries, f->abort_code);
-        break;
-    case ARM_CO_FAULT_WRONG_VALUE:
-        snprintf(out, cap, "node %u: 0x%04X:%02X: read 0x%08X, expected 0x%08X", f->node, f->index, f->sub,
-                 f->value, f->expected);
-        break;
-    case ARM_CO_FAULT_STATE_TIMEOUT:
-        snprintf(out, cap, "node %u: 0x6041:00: statusword 0x%04X did not reach 0x%02X (under mask 0x%02X)", f->node,
-                 f->value, f->expected & 0xFFu, f->expected >> 8);
-        break;
-    case ARM_CO_FAULT_DRIVE_FAULT:
-        snprintf(out, cap, "node %u: 0x6041:00: statusword 0x%04X shows fault (bit 3) while waiting for 0x%02X",
-                 f->node, f->value, f->expected & 0xFFu);
-        break;
-    case ARM_CO_FAULT_BAD_CONFIG:
-        snprintf(out, cap, "node %u: bad configuration (value %u)", f->node, f->value);
-        break;
-    case ARM_CO_FAULT_NONE:
-    default:
-        snprintf(out, cap, "no fault");
-        break;
-    }
-}
-
 /* Once every node is enabled: n periods of RPDO1 (enable operation, the target torque in
  * per-mille of the node's rated torque) then SYNC, the TPDOs of each period decoded into SI units;
  * the master's heartbeat goes on. 0, or -1 with err set on a bus error. */
@@ -418,7 +384,7 @@ int main(int argc, char **argv)
     uint64_t now = mono_us();
     const uint64_t give_up = now + (uint64_t)opt.timeout_ms * 1000u;
     if (arm_co_boot_init(&boot, &opt.cfg, now) != 0) {
-        describe_fault(&boot.fault, err, sizeof(err));
+        canopen_fault_text(&boot.fault, err, sizeof(err));
         fprintf(stderr, "arm_canopen_boot: %s: %s\n", arm_co_fault_name(boot.fault.code), err);
         arm_can_bus_close(&bus);
         return 2;
@@ -477,7 +443,7 @@ int main(int argc, char **argv)
     char detail[512] = "";
     const char *result = rc == 0 ? "operation_enabled" : rc < 0 ? arm_co_fault_name(boot.fault.code) : "timeout";
     if (rc < 0) {
-        describe_fault(&boot.fault, detail, sizeof(detail));
+        canopen_fault_text(&boot.fault, detail, sizeof(detail));
     } else if (rc > 0) {
         for (unsigned i = 0; i < boot.cfg.n_nodes; ++i) {
             const arm_co_node_t *n = &boot.node[i];
