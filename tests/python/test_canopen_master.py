@@ -354,6 +354,58 @@ def test_controller_runs_on_the_simulators_cia402_drives(build_dir: Path, udp_po
     assert s["frames"]["rx_bad_length"] == 0 and s["frames"]["rx_unknown_id"] == 0
 
 
+def test_controller_runs_on_localnode_drives(build_dir: Path, udp_port: int, tmp_path: Path,
+                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    """arm_controller --protocol canopen, lockstep, on six LocalNodes: the CANopen boot (the wrists'
+    rated torque, their 28 N m limit, written), then each SYNC answered with TPDO1 (a fixed pose) and
+    TPDO2 (the torque of the RPDO1 the drive applied at that SYNC, CiA 301's synchronous RPDO)."""
+    ctl = build_dir / "firmware" / "arm_controller"
+    if not ctl.exists():
+        pytest.skip(f"{ctl} not built")
+    drives = {i: Cia402Drive(i) for i in range(1, 7)}
+    pending = {i: 0 for i in drives}   # the latest RPDO1 torque, applied at the next SYNC
+    applied = {i: 0 for i in drives}
+    rpdo_cw: set[int] = set()
+    sync_lengths: set[int] = set()
+    net = _loopback_network(monkeypatch, udp_port)
+    summary = tmp_path / "controller.json"
+    try:
+        for i, d in drives.items():
+            net.add_node(d.node)
+
+            def on_rpdo(can_id: int, data: bytes, ts: float, i: int = i) -> None:
+                cw, tq = struct.unpack("<Hh", data)
+                rpdo_cw.add(cw)
+                pending[i] = tq
+
+            net.subscribe(0x200 + i, on_rpdo)
+
+        def on_sync(can_id: int, data: bytes, ts: float) -> None:
+            sync_lengths.add(len(data))
+            for i, d in drives.items():
+                if d.node.nmt.state != "OPERATIONAL":
+                    continue
+                applied[i] = pending[i]
+                net.send_message(0x180 + i, struct.pack("<ii", 1000 * i, 0))
+                net.send_message(0x280 + i, struct.pack("<hH", applied[i], d.sw))
+
+        net.subscribe(0x080, on_sync)
+        p = subprocess.run([str(ctl), "--protocol", "canopen", "--bus", f"udp:{GROUP}:{udp_port}", "--mode", "lockstep",
+                            "--duration", "0.2", "--ref-hold", "0.1", "--lcm-url", "", "--summary", str(summary)],
+                           capture_output=True, text=True, timeout=300)
+    finally:
+        for d in drives.values():
+            d.node.nmt.stop_heartbeat()
+        net.disconnect()
+    assert p.returncode == 0, p.stderr
+    s = json.loads(summary.read_text())
+    assert s["final_state"] == "running" and s["frames"]["rx_state"] == 6 * s["bus_periods"], s["reason"]
+    assert [drives[i].stored(0x6076) for i in range(1, 7)] == [150000] * 3 + [28000] * 3
+    assert all(drives[i].sw & 0x6F == 0x27 and drives[i].stored(0x6060) == 10 for i in drives)
+    assert rpdo_cw == {0x000F}  # enable operation all along (the NMT stop ends the run)
+    assert sync_lengths == {0}  # CiA 301 SYNC without a counter
+
+
 def test_controller_protocol_option_is_checked(build_dir: Path) -> None:
     ctl = build_dir / "firmware" / "arm_controller"
     if not ctl.exists():
