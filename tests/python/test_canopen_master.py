@@ -63,13 +63,14 @@ class Cia402Drive:
     """A LocalNode that behaves like the contract's drive, as far as the boot needs."""
 
     def __init__(self, node_id: int, reject_mode: bool = False, device_type: int | None = None,
-                 in_fault: bool = False) -> None:
+                 in_fault: bool = False, stuck_at: int | None = None) -> None:
         self.node = canopen.LocalNode(node_id, str(EDS))
         self.id = node_id
         self.reject_mode = reject_mode
         self.device_type = device_type
         self.sw = 0x0008 if in_fault else 0x0040  # fault, or switch on disabled
         self.cw = 0
+        self.stuck_at = stuck_at  # a statusword state the drive never leaves
         self.mode = 0
         self.writes: list[tuple[int, int, int]] = []  # (index, sub, value) in the order they came
         self.lock = threading.Lock()
@@ -109,7 +110,7 @@ class Cia402Drive:
             else:
                 state = {0x00: 0x40, 0x06: 0x21, 0x07: 0x23, 0x0F: 0x27}.get(value & 0x8F)
                 operational = self.node.nmt.state == "OPERATIONAL"
-                if state is not None and (state != 0x27 or operational):
+                if state is not None and (state != 0x27 or operational) and self.sw != self.stuck_at:
                     self.sw = state
         with self.lock:
             self.writes.append((index, subindex, value))
@@ -226,6 +227,38 @@ def test_a_drive_left_enabled_is_disabled_before_it_is_configured(boot_bin: Path
     p, _ = _run(boot_bin, udp_port, ["--node", "1"], [drive], monkeypatch)
     assert p.returncode == 0, p.stderr
     assert drive.writes[0] == (0x6040, 0, 0x00) and drive.writes[1][0] == 0x1400
+
+
+def test_a_statusword_that_does_not_follow_is_a_state_timeout(boot_bin: Path, udp_port: int,
+                                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    p, _ = _run(boot_bin, udp_port, ["--node", "1", "--state-timeout-ms", "200", "--period-us", "2000"],
+                [Cia402Drive(1, stuck_at=0x21)], monkeypatch)
+    assert p.returncode == 1
+    assert p.stderr.strip().splitlines()[-1] == ("arm_canopen_boot: state_timeout: node 1: 0x6041:00: statusword "
+                                                 "0x0021 did not reach 0x23 (under mask 0x6F)"), p.stderr
+
+
+def test_help_lists_every_option(boot_bin: Path) -> None:
+    p = subprocess.run([str(boot_bin), "--help"], capture_output=True, text=True, timeout=30)
+    assert p.returncode == 0
+    for opt in ("--bus", "--node", "--cycle-us", "--heartbeat-ms", "--master-id", "--consumer-ms", "--sdo-timeout-ms",
+                "--sdo-tries", "--state-timeout-ms", "--period-us", "--timeout-ms", "--json", "--hold-periods",
+                "--hold-torque", "--fault-reset"):
+        assert opt in p.stdout, opt
+
+
+def test_gen_drives_boot_args_on_the_command_line(tmp_path: Path) -> None:
+    arm_json = tmp_path / "arm.json"
+    arm_json.write_text(json.dumps(_arm()))
+    run = [str(REPO / ".venv" / "bin" / "python"), "-m", "gen.drives", "--arm-json", str(arm_json)]
+    p = subprocess.run([*run, "--boot-args", "can0"], capture_output=True, text=True, cwd=REPO)
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.split() == ["--cycle-us", "1000", "--heartbeat-ms", "100", "--consumer-ms", "300", "--master-id",
+                                "127", "--node", "1", "--node", "2", "--node", "3,rated=28000"]
+    p = subprocess.run([*run, "--boot-args", "can7"], capture_output=True, text=True, cwd=REPO)
+    assert p.returncode == 2 and "no drive is on bus 'can7'" in p.stderr
+    table = json.loads(subprocess.run(run, capture_output=True, text=True, cwd=REPO).stdout)
+    assert [d["rated_torque_mnm"] for d in table["drives"]] == [150000, 150000, 28000]
 
 
 def test_unwritable_json_is_refused_before_the_bus(boot_bin: Path, tmp_path: Path) -> None:
