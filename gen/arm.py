@@ -67,7 +67,7 @@ MAX_NESTING = 256          # XML elements, and bodies below the world: deeper is
 FLOAT32_MAX = float(np.finfo(np.float32).max)  # the firmware computes in float32: every number it takes fits
 
 ARM_FILE_FIELDS = {"name", "model", "joints", "locked", "home", "keyframe", "torque_limits", "buses",
-                   "topology", "design", "contacts", "timestep"}
+                   "topology", "design", "contacts", "timestep", "drives"}
 
 
 class ArmError(ValueError):
@@ -184,6 +184,11 @@ def load_arm_file(path: Path | None, model: Path | None = None) -> ArmFile:
         af.topology = rel(doc["topology"], "topology")
     if "design" in doc:
         af.design = rel(doc["design"], "design")
+    if "drives" in doc:  # the CiA 402 drive configuration: read by gen/drives.py, checked here early
+        drives = rel(doc["drives"], "drives")
+        if not drives.is_file():
+            raise ArmError(f"arm file {path}: drives: {drives} is not a file (the drive configuration, "
+                           "like firmware/protocol/drives.toml)")
     if "contacts" in doc:
         if not isinstance(doc["contacts"], bool):
             raise ArmError(f"arm file {path}: contacts: expected true or false")

@@ -1,8 +1,9 @@
 """`armctl fuzz [--seconds N]`: libFuzzer on every C decoder, under AddressSanitizer and UBSan.
 
 Harnesses (tests/fuzz/): the python-can wire format (msgpack), the controller's frame handling
-(arm_bus_handle_rx), SocketCAN frames, LCM URLs, and every DBC unpacker (generated here from
-the DBC's C, one harness that feeds each message's unpack). Each starts from its corpus
+(arm_bus_handle_rx), SocketCAN frames, LCM URLs, every DBC unpacker (generated here from
+the DBC's C, one harness that feeds each message's unpack), and the CANopen master's boot
+configurator and SDO client answered by a drive that says anything. Each starts from its corpus
 (tests/fuzz/corpus/NAME) and first replays every input that ever crashed it
 (tests/fuzz/regressions/NAME), which stay there as regression seeds. The time is shared equally
 between the harnesses; a crash writes its input to runs/fuzz/NAME/ and the command exits 1.
@@ -29,6 +30,7 @@ HARNESSES: dict[str, list[str]] = {
                   "firmware/transport/src/fd_wait.c"],
     "lcm_url": ["firmware/transport/src/lcm_url.c"],
     "dbc_unpack": ["{gen}/arm_drives.c"],
+    "canopen_master": ["firmware/canopen/src/co_sdo.c", "firmware/canopen/src/co_boot.c"],
 }
 
 
@@ -56,7 +58,7 @@ def compile_all() -> dict[str, Path]:
     OUT.mkdir(parents=True, exist_ok=True)
     (OUT / "fuzz_dbc_unpack.c").write_text(dbc_harness(gen / "arm_drives.h"))
     includes = [f"-I{REPO / 'firmware' / 'core' / 'include'}", f"-I{REPO / 'firmware' / 'transport' / 'include'}",
-                f"-I{gen}"]
+                f"-I{REPO / 'firmware' / 'canopen' / 'include'}", f"-I{gen}"]
     exes = {}
     for name, srcs in HARNESSES.items():
         harness = OUT / "fuzz_dbc_unpack.c" if name == "dbc_unpack" else FUZZ_DIR / f"fuzz_{name}.c"

@@ -392,3 +392,30 @@ def rate_arg(b: Bus) -> str:
 def phy_spec(b: Bus) -> str:
     """The bus's physical layer as host_sim --bus-phy takes it: fd:1M/5M, fd:1M, classic:500k."""
     return f"{'fd' if b.fd else 'classic'}:{rate_arg(b)}"
+
+
+# The CiA 402 drives of issue #23 (README: Real drives, The CANopen master): per drive and period
+# RPDO1 (controlword + target torque), TPDO1 (position + velocity), TPDO2 (torque + statusword);
+# one SYNC (no counter) per bus and period; a 1-byte heartbeat per drive every heartbeat_ms.
+CANOPEN_PDO_BYTES = {"RPDO1": 4, "TPDO1": 8, "TPDO2": 4}
+
+
+def _frame_s(n_bytes: int, bus: Bus) -> float:
+    if not bus.fd:
+        return classic_frame_bits(n_bytes) / bus.nominal_bps
+    nom, dat = fd_frame_bits(n_bytes, brs=bus.data_bps is not None)
+    return nom / bus.nominal_bps + (dat / bus.data_bps if dat else 0.0)  # type: ignore[operator]
+
+
+def canopen_load(bus: Bus, n_drives: int, rate_hz: float, heartbeat_ms: float = 100.0) -> float:
+    """Worst-case load (fraction of bus time) of n_drives CiA 402 drives on one bus at rate_hz."""
+    period_s = n_drives * sum(_frame_s(n, bus) for n in CANOPEN_PDO_BYTES.values()) + _frame_s(0, bus)
+    return period_s * rate_hz + n_drives * _frame_s(1, bus) / (heartbeat_ms * 1e-3)
+
+
+def canopen_drives_per_bus(bus: Bus, rate_hz: float, budget: float = 0.70, heartbeat_ms: float = 100.0) -> int:
+    """The most drives one bus carries within the budget (0: not even one)."""
+    n = 0
+    while n < 127 and canopen_load(bus, n + 1, rate_hz, heartbeat_ms) <= budget:
+        n += 1
+    return n

@@ -8,8 +8,11 @@
 #include <time.h>
 
 #include "arm/can_bus.h"
+#include "arm/co_boot.h"
+#include "arm/co_pdo.h"
 #include "arm_drives.h"
 #include "arm/reference.h"
+#include "canopen_text.h"
 
 #define ALL_JOINTS ((uint32_t)((1ull << ARM_N_JOINTS) - 1u))
 
@@ -29,7 +32,49 @@ typedef struct {
     arm_drive_bus_t drives;
     run_report_t *report;
     int64_t spin_ns;
+    /* --protocol canopen: each joint's units (node j + 1), this period's TPDOs, the master's heartbeat */
+    int canopen;
+    arm_co_units_t units[ARM_N_JOINTS];
+    uint32_t tpdo1_mask, tpdo2_mask;
+    int64_t next_heartbeat_ns;
 } link_t;
+
+#define CANOPEN_MASTER_ID 0x7Fu
+#define CANOPEN_HEARTBEAT_MS 100u
+
+/* A CANopen drive's TPDO1 or TPDO2: its joint's state in SI units (arm/co_pdo.h); 1 if it was one.
+ * The state is fresh once both came for this SYNC. */
+static int canopen_rx(link_t *l, const arm_can_frame_t *f)
+{
+    const uint32_t base = f->id & ~0x7Fu, node = f->id & 0x7Fu;
+    if ((base != ARM_CO_COB_TPDO1 && base != ARM_CO_COB_TPDO2) || node < 1u || node > ARM_N_JOINTS) {
+        return 0;
+    }
+    const unsigned j = node - 1u;
+    arm_drive_bus_t *d = &l->drives;
+    int32_t pos, vel;
+    int16_t tq;
+    uint16_t sw;
+    if (arm_co_unpack_tpdo1((uint8_t)node, f, &pos, &vel) == 0) {
+        if (l->tpdo1_mask & (1u << j)) d->duplicate_mask |= 1u << j;
+        l->tpdo1_mask |= 1u << j;
+        d->q[j] = arm_co_increments_to_rad(&l->units[j], pos);
+        d->qd[j] = arm_co_increments_to_rad(&l->units[j], vel);
+    } else if (arm_co_unpack_tpdo2((uint8_t)node, f, &tq, &sw) == 0) {
+        if (l->tpdo2_mask & (1u << j)) d->duplicate_mask |= 1u << j;
+        l->tpdo2_mask |= 1u << j;
+        d->tau_measured[j] = arm_co_permille_to_torque(&l->units[j], tq);
+        d->statusword[j] = sw;
+    } else {
+        d->rx.bad_length++;
+        return 1;
+    }
+    if ((l->tpdo1_mask & l->tpdo2_mask & (1u << j)) != 0u && (d->fresh_mask & (1u << j)) == 0u) {
+        d->fresh_mask |= 1u << j;
+        d->rx.state++;
+    }
+    return 1;
+}
 
 static int send_frame(link_t *l, unsigned bus, const arm_can_frame_t *f)
 {
@@ -95,7 +140,9 @@ static void pump(link_t *l, int64_t deadline_ns, uint32_t (*done)(const arm_driv
                 l->report->rx_wrong_bus++; /* drive j is not on this bus: not its frame */
                 continue;
             }
-            (void)arm_bus_handle_rx(&l->drives, &f);
+            if (!l->canopen || !canopen_rx(l, &f)) {
+                (void)arm_bus_handle_rx(&l->drives, &f); /* heartbeats and EMCY: the same in both */
+            }
         } else if (rc < 0) {
             return;
         }
@@ -186,6 +233,80 @@ static int boot(link_t *l, const options_t *opt, const arm_robot_model_t *model,
     return -1;
 }
 
+/* --protocol canopen: the CANopen master boots every bus's drives side by side (arm/co_boot.h),
+ * to operation enabled in CST with zero torque. Node = drive number; rated torque = the joint's
+ * torque limit (written where it differs from the EDS), encoder and gear the EDS's. */
+static int boot_canopen(link_t *l, const options_t *opt, const arm_robot_model_t *model, telemetry_t *telem)
+{
+    static arm_co_boot_t co[ARM_CAN_BUS_SET_MAX];
+    const int64_t start = now_ns();
+    const int64_t give_up = start + (int64_t)(opt->boot_timeout_s * 1e9);
+    for (unsigned b = 0; b < l->buses.n; ++b) {
+        arm_co_boot_config_t cfg;
+        arm_co_boot_default_config(&cfg);
+        cfg.cycle_us = (uint32_t)(1e6 / opt->rate_hz + 0.5);
+        cfg.heartbeat_ms = CANOPEN_HEARTBEAT_MS;
+        cfg.master_id = CANOPEN_MASTER_ID;
+        for (int j = 0; j < ARM_N_JOINTS; ++j) {
+            if (l->bus_of[j] != (int)b || cfg.n_nodes >= ARM_CO_BOOT_MAX_NODES) continue;
+            const uint32_t rated = (uint32_t)(model->link[j].torque_limit * 1000.0f + 0.5f);
+            arm_co_node_config_t *nc = &cfg.node[cfg.n_nodes++];
+            *nc = (arm_co_node_config_t){.node_id = (uint8_t)(j + 1), .rated_torque_mnm = rated};
+            nc->overrides = rated != ARM_CO_EDS_RATED_TORQUE_MNM ? ARM_CO_OVERRIDE_RATED : 0u;
+            (void)arm_co_units_init(&l->units[j], rated ? rated : 1u, ARM_CO_EDS_ENCODER_INCREMENTS,
+                                    ARM_CO_EDS_GEAR_MOTOR_REVS, ARM_CO_EDS_GEAR_SHAFT_REVS, 32767);
+        }
+        if (arm_co_boot_init(&co[b], &cfg, (uint64_t)(now_ns() / 1000)) != 0) {
+            char text[200];
+            canopen_fault_text(&co[b].fault, text, sizeof(text));
+            snprintf(l->report->reason, sizeof(l->report->reason), "boot: canopen: bus %u: %s", b, text);
+            return -1;
+        }
+    }
+    int rc[ARM_CAN_BUS_SET_MAX];
+    for (unsigned b = 0; b < l->buses.n; ++b) rc[b] = 1;
+    while (now_ns() < give_up && controller_stop_signal == 0) {
+        int running = 0;
+        for (unsigned b = 0; b < l->buses.n; ++b) {
+            if (rc[b] == 1) rc[b] = arm_co_boot_step(&co[b], (uint64_t)(now_ns() / 1000));
+            arm_can_frame_t f;
+            while (arm_co_boot_take_tx(&co[b], &f)) (void)send_frame(l, b, &f);
+            if (rc[b] < 0) {
+                char text[200];
+                canopen_fault_text(&co[b].fault, text, sizeof(text));
+                snprintf(l->report->reason, sizeof(l->report->reason), "boot: canopen: %s: %s",
+                         arm_co_fault_name(co[b].fault.code), text);
+                return -1;
+            }
+            running |= rc[b] == 1;
+        }
+        if (!running) {
+            unsigned writes = 0u;
+            for (unsigned b = 0; b < l->buses.n; ++b) writes += co[b].n_log;
+            l->report->boot_s = (double)(now_ns() - start) * 1e-9;
+            char text[120];
+            snprintf(text, sizeof(text), "all drives operation enabled (CANopen boot, %u SDO writes)", writes);
+            telemetry_event(telem, 0, "info", text);
+            return 0;
+        }
+        const int64_t slice_end = now_ns() + 1000000LL; /* the configurator's period: 1 ms */
+        for (int64_t t = now_ns(); t < slice_end; t = now_ns()) {
+            arm_can_frame_t f;
+            unsigned bus = 0u;
+            const int r = arm_can_bus_set_recv(&l->buses, &f, &bus, (int)((slice_end - t) / 1000 + 1));
+            if (r == 1 && bus < l->buses.n) {
+                l->report->frames_rx++;
+                arm_co_boot_rx(&co[bus], &f, (uint64_t)(now_ns() / 1000));
+            } else if (r < 0) {
+                break;
+            }
+        }
+    }
+    snprintf(l->report->reason, sizeof(l->report->reason), "boot: canopen: %s within %.1f s",
+             controller_stop_signal != 0 ? "stopped by a signal" : "drives not operation enabled", opt->boot_timeout_s);
+    return -1;
+}
+
 /* Each bus's commands in one batch (one syscall on the UDP transport): the period's critical
  * path in lockstep is mostly syscalls. */
 static void send_commands(link_t *l, const arm_ctl_output_t *out)
@@ -195,8 +316,13 @@ static void send_commands(link_t *l, const arm_ctl_output_t *out)
     unsigned count[ARM_CAN_BUS_SET_MAX] = {0};
     for (int j = 0; j < ARM_N_JOINTS; ++j) {
         const unsigned b = (unsigned)l->bus_of[j];
-        arm_bus_make_cmd(&l->drives, j, enabled ? ARM_CW_ENABLE_OPERATION : ARM_CW_SHUTDOWN,
-                         out->tau[j], &batch[b][count[b]++]);
+        const uint16_t cw = enabled ? ARM_CW_ENABLE_OPERATION : ARM_CW_SHUTDOWN;
+        if (l->canopen) {
+            arm_co_pack_rpdo1((uint8_t)(j + 1), cw, arm_co_torque_to_permille(&l->units[j], out->tau[j]),
+                              &batch[b][count[b]++]);
+        } else {
+            arm_bus_make_cmd(&l->drives, j, cw, out->tau[j], &batch[b][count[b]++]);
+        }
     }
     for (unsigned b = 0; b < l->buses.n; ++b) {
         if (count[b] == 0u) continue;
@@ -226,7 +352,7 @@ typedef struct {
 static int enable(link_t *l, loop_t *p, uint32_t k, uint32_t fresh)
 {
     uint32_t enabled = 0u;
-    for (int j = 0; j < ARM_N_JOINTS; ++j) {
+    for (int j = 0; j < ARM_N_JOINTS && !l->canopen; ++j) {
         const uint16_t sw = l->drives.statusword[j];
         if ((fresh & (1u << j)) != 0u && arm_sw_operation_enabled(sw)) {
             enabled |= 1u << j;
@@ -234,6 +360,14 @@ static int enable(link_t *l, loop_t *p, uint32_t k, uint32_t fresh)
         arm_can_frame_t f;
         arm_bus_make_cmd(&l->drives, j, arm_cia402_enable_controlword(sw), 0.0f, &f);
         send_frame(l, (unsigned)l->bus_of[j], &f);
+    }
+    for (int j = 0; j < ARM_N_JOINTS && l->canopen; ++j) { /* enabled, zero torque until tracking */
+        arm_can_frame_t f;
+        arm_co_pack_rpdo1((uint8_t)(j + 1), ARM_CW_ENABLE_OPERATION, 0, &f);
+        send_frame(l, (unsigned)l->bus_of[j], &f);
+    }
+    if (l->canopen) { /* the boot enabled them: tracking starts with the first whole state */
+        enabled = fresh;
     }
     if (enabled == ALL_JOINTS) {
         if (p->opt->ref_given) {
@@ -402,6 +536,7 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
     memset(report, 0, sizeof(*report));
     l.report = report;
     l.spin_ns = (int64_t)(opt->spin_us * 1e3);
+    l.canopen = opt->protocol_canopen;
     p.opt = opt;
     p.telem = telem;
     p.report = report;
@@ -427,7 +562,7 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
     }
 
     const int64_t t_start = now_ns();
-    if (boot(&l, opt, model, telem) != 0) {
+    if ((l.canopen ? boot_canopen(&l, opt, model, telem) : boot(&l, opt, model, telem)) != 0) {
         report->result = RUN_BOOT_FAILED;
         if (controller_stop_signal != 0) {
             snprintf(report->reason, sizeof(report->reason), "stopped by signal %d while the drives booted",
@@ -460,6 +595,15 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
         const int64_t cycle_start = now_ns();
         arm_can_frame_t sync;
         arm_bus_begin_period(&l.drives, k, &sync);
+        if (l.canopen) {
+            sync.len = 0u; /* CiA 301 SYNC without a counter (0x1019 = 0) */
+            l.tpdo1_mask = l.tpdo2_mask = 0u;
+            if (cycle_start >= l.next_heartbeat_ns) { /* the drives consume it (0x1016.1) */
+                const arm_can_frame_t hb = {.id = ARM_CO_COB_HEARTBEAT + CANOPEN_MASTER_ID, .len = 1u, .data = {0x05u}};
+                send_all(&l, &hb);
+                l.next_heartbeat_ns = cycle_start + (int64_t)CANOPEN_HEARTBEAT_MS * 1000000LL;
+            }
+        }
         send_all(&l, &sync);
         report->bus_periods = k + 1u;
         const int64_t wait_until = opt->mode == MODE_REALTIME

@@ -54,6 +54,9 @@ void options_usage(const char *prog)
            "  --step-tolerance RAD    position step the velocities must explain [0.01]\n"
            "  --torque-mismatch F     reported vs commanded torque, fraction of the limit [0.1]\n"
            "  --boot-timeout S        wait for the drives' heartbeats [20]\n"
+           "  --protocol arm|canopen  arm: this project's frames (arm_drives.dbc); canopen: CiA 402 drives,\n"
+           "                          booted by the CANopen master (node = drive number, rated torque =\n"
+           "                          the joint's torque limit), RPDO1/TPDO1/TPDO2 on SYNC [arm]\n"
            "  --lockstep-timeout S    lockstep: wall time to wait for a period's joint states [1]\n"
            "  --spin-us US            poll the bus this long before sleeping on it: a wake-up from\n"
            "                          sleep costs tens of us on a VM (lockstep speed)   [0]\n"
@@ -320,6 +323,13 @@ int options_parse(int argc, char **argv, const arm_robot_model_t *model, options
         } else if (strcmp(a, "--ref-freq") == 0) {
             rc = parse_list(a, v, 0.0, 50.0, opt->ref_freq_hz, err, errcap);
             ref_freq_given = 1;
+        } else if (strcmp(a, "--protocol") == 0) {
+            if (strcmp(v, "arm") == 0 || strcmp(v, "canopen") == 0) {
+                opt->protocol_canopen = strcmp(v, "canopen") == 0;
+            } else {
+                snprintf(err, errcap, "--protocol '%s': expected arm or canopen", v);
+                rc = -1;
+            }
         } else if (strcmp(a, "--boot-timeout") == 0) {
             rc = parse_double(a, v, 0.01, 3600.0, &opt->boot_timeout_s, err, errcap);
         } else if (strcmp(a, "--spin-us") == 0) {

@@ -22,6 +22,7 @@ typedef struct {
     double boot_timeout_s;
     double lockstep_timeout_s; /* lockstep: wall time to wait for a period's states */
     double spin_us;            /* poll this long for a frame before sleeping in ppoll */
+    int protocol_canopen;      /* --protocol canopen: CiA 301/402 drives (README: Real drives) */
     arm_ctl_config_t ctl;
     rt_options_t rt; /* --rt-priority, --cpu (rt.h) */
     double ref_hold_s;               /* --ref-hold: settle on the start pose first */

@@ -1,0 +1,172 @@
+/* The CiA 402 boot configurator: brings every node of one bus from power-on to operation enabled
+ * in cyclic synchronous torque mode, as the project's CANopen contract says (README: Real drives,
+ * The CANopen master). Non-blocking: the port calls arm_co_boot_rx for every received frame and
+ * arm_co_boot_step once per period, and sends the frames arm_co_boot_take_tx hands it. The nodes
+ * boot side by side (each has its own SDO channel). No heap, no I/O.
+ *
+ * Per node, in order: NMT pre-operational; upload 0x1000 (must be ARM_CO_DEVICE_TYPE) and
+ * 0x1018.1-4 (vendor and product checked when the configuration names them); the statusword, and
+ * controlword 0x00 if the drive is not switch on disabled (a drive left enabled takes no new mode
+ * or scaling); for RPDO1, TPDO1,
+ * TPDO2: COB-ID invalid (bit 31), mapping count 0, entries, count, transmission type 1, COB-ID
+ * valid; 0x1006 cycle period; 0x1017 heartbeat; 0x1016.1 consumer heartbeat of the master;
+ * 0x6076, 0x608F, 0x6091 where the configuration overrides the EDS; 0x6060 = 10, upload 0x6061 must
+ * be 10; NMT start; controlword 0x06, 0x07, 0x0F, each confirmed by statusword & 0x6F (0x21,
+ * 0x23, 0x27) read back over SDO (a drive in fault: one fault reset if the configuration allows).
+ * Every download is logged (arm_co_boot_t.log). */
+#ifndef ARM_CO_BOOT_H
+#define ARM_CO_BOOT_H
+
+#include <stdint.h>
+
+#include "arm/can_frame.h"
+#include "arm/co_sdo.h"
+
+#define ARM_CO_BOOT_MAX_NODES 8u    /* nodes of one bus */
+#define ARM_CO_BOOT_MAX_ACTIONS 48u /* steps of one node's sequence (the default uses 38) */
+#define ARM_CO_BOOT_LOG_MAX (ARM_CO_BOOT_MAX_NODES * ARM_CO_BOOT_MAX_ACTIONS)
+#define ARM_CO_PDO_MAX_ENTRIES 4u   /* mapping entries per PDO the configurator writes */
+
+#define ARM_CO_DEVICE_TYPE 0x00020192u /* CiA 402 servo drive (contract) */
+#define ARM_CO_MODE_CST 10
+#define ARM_CO_COB_NMT 0x000u
+#define ARM_CO_COB_SYNC 0x080u
+#define ARM_CO_COB_TPDO1 0x180u
+#define ARM_CO_COB_RPDO1 0x200u
+#define ARM_CO_COB_TPDO2 0x280u
+#define ARM_CO_COB_HEARTBEAT 0x700u
+#define ARM_CO_NMT_START 0x01u
+#define ARM_CO_NMT_PREOP 0x80u
+#define ARM_CO_PDO_INVALID 0x80000000u
+
+/* Which EDS defaults a node's configuration overrides (written at boot). */
+#define ARM_CO_OVERRIDE_RATED 0x01u
+#define ARM_CO_OVERRIDE_ENCODER 0x02u
+#define ARM_CO_OVERRIDE_GEAR 0x04u
+
+typedef struct {
+    uint8_t n;                                  /* entries */
+    uint32_t entry[ARM_CO_PDO_MAX_ENTRIES];     /* index << 16 | sub << 8 | bits */
+} arm_co_pdo_map_t;
+
+typedef struct {
+    uint8_t node_id;             /* 1..127 */
+    uint8_t overrides;           /* ARM_CO_OVERRIDE_* */
+    uint32_t rated_torque_mnm;   /* 0x6076 */
+    uint32_t encoder_increments; /* 0x608F.1 (per motor revolution) */
+    uint32_t gear_motor_revs;    /* 0x6091.1 */
+    uint32_t gear_shaft_revs;    /* 0x6091.2 */
+    uint32_t vendor_id;          /* 0x1018.1 expected; 0: any */
+    uint32_t product_code;       /* 0x1018.2 expected; 0: any */
+} arm_co_node_config_t;
+
+typedef struct {
+    uint8_t n_nodes;
+    arm_co_node_config_t node[ARM_CO_BOOT_MAX_NODES];
+    arm_co_pdo_map_t rpdo1, tpdo1, tpdo2;
+    uint32_t cycle_us;          /* 0x1006 */
+    uint16_t heartbeat_ms;      /* 0x1017 */
+    uint8_t master_id;          /* the master's node id in 0x1016.1 */
+    uint16_t consumer_ms;       /* 0x1016.1 low 16 bits: the drive's timeout for the master */
+    uint32_t sdo_timeout_us;
+    uint8_t sdo_tries;
+    uint32_t state_timeout_us;  /* per controlword step: the statusword must follow by then */
+    uint8_t fault_reset;        /* 1: a drive in fault gets one fault reset (controlword 0x00, then
+                                 * 0x80: bit 7's rising edge) before its failure is reported; 0: a
+                                 * fault is reported at once (resetting is the operator's decision) */
+} arm_co_boot_config_t;
+
+/* The contract's defaults: RPDO1 6040+6071, TPDO1 6064+606C, TPDO2 6077+6041; 1 ms, 100 ms,
+ * master 0x7F with 300 ms, SDO 50 ms x 3 tries, 500 ms per state. No nodes. */
+void arm_co_boot_default_config(arm_co_boot_config_t *cfg);
+
+typedef enum {
+    ARM_CO_FAULT_NONE = 0,
+    ARM_CO_FAULT_SDO_ABORT,     /* the node aborted a transfer (abort_code) */
+    ARM_CO_FAULT_CLIENT_ABORT,  /* the master aborted the node's bad response (abort_code) */
+    ARM_CO_FAULT_NO_ANSWER,     /* no answer after `tries` tries */
+    ARM_CO_FAULT_WRONG_VALUE,   /* an uploaded value is not the expected one (value, expected) */
+    ARM_CO_FAULT_STATE_TIMEOUT, /* the statusword did not follow the controlword (value: last sw) */
+    ARM_CO_FAULT_DRIVE_FAULT,   /* the statusword shows fault (value: sw) */
+    ARM_CO_FAULT_BAD_CONFIG,    /* the configuration cannot be run (node id, counts) */
+} arm_co_fault_code_t;
+
+typedef struct {
+    arm_co_fault_code_t code;
+    uint8_t node;
+    uint16_t index;
+    uint8_t sub;
+    uint32_t abort_code;
+    uint32_t value;
+    uint32_t expected;
+    uint8_t tries;
+} arm_co_fault_t;
+
+const char *arm_co_fault_name(arm_co_fault_code_t code);
+
+typedef struct {
+    uint8_t node;
+    uint16_t index;
+    uint8_t sub;
+    uint8_t len;   /* bytes */
+    uint32_t value;
+} arm_co_write_t;
+
+typedef enum {
+    ARM_CO_ACT_NMT = 0,  /* value: NMT command */
+    ARM_CO_ACT_WRITE,    /* SDO download */
+    ARM_CO_ACT_READ,     /* SDO upload; checked against value under mask (mask 0: recorded) */
+    ARM_CO_ACT_CONTROL,  /* controlword value via SDO, then the statusword shows the state (mask) */
+    ARM_CO_ACT_QUIESCE,  /* the statusword; if it does not show the state, the controlword, as CONTROL */
+} arm_co_action_kind_t;
+
+typedef struct {
+    uint8_t kind;        /* arm_co_action_kind_t */
+    uint8_t sub;
+    uint8_t len;
+    uint16_t index;
+    uint32_t value;
+    uint32_t mask;       /* READ: bits that must equal value; CONTROL, QUIESCE: state | sw mask << 8 */
+} arm_co_action_t;
+
+typedef enum { ARM_CO_NODE_RUNNING = 0, ARM_CO_NODE_ENABLED, ARM_CO_NODE_FAILED } arm_co_node_state_t;
+
+typedef struct {
+    arm_co_node_state_t state;
+    uint8_t n_actions;
+    uint8_t next;                 /* the action under way */
+    uint8_t started;              /* the action's first request is out */
+    uint8_t control_phase;        /* CONTROL: 0 write cw, 1 read sw, 2 and 3 fault reset 0x00, 0x80 */
+    uint8_t fault_resets;         /* fault resets done (at most one per node) */
+    uint8_t cw_written;           /* CONTROL, QUIESCE: this action's controlword is out */
+    uint64_t control_deadline_us;
+    uint16_t statusword;
+    uint32_t identity[4];         /* 0x1018.1..4 as read */
+    arm_co_action_t action[ARM_CO_BOOT_MAX_ACTIONS];
+    arm_co_sdo_t sdo;
+} arm_co_node_t;
+
+typedef struct {
+    arm_co_boot_config_t cfg;
+    arm_co_node_t node[ARM_CO_BOOT_MAX_NODES];
+    arm_co_fault_t fault;          /* the first failure (code NONE: none) */
+    unsigned n_log;
+    arm_co_write_t log[ARM_CO_BOOT_LOG_MAX];
+    uint8_t nmt_pending[ARM_CO_BOOT_MAX_NODES]; /* NMT frame queued for node i (command + 1) */
+    uint64_t next_heartbeat_us;
+    uint8_t heartbeat_due;
+} arm_co_boot_t;
+
+/* Builds every node's sequence; -1 with fault ARM_CO_FAULT_BAD_CONFIG (node: the bad one) if a
+ * node id is out of 1..127 or twice, a mapping has too many entries, or there are too many nodes. */
+int arm_co_boot_init(arm_co_boot_t *b, const arm_co_boot_config_t *cfg, uint64_t now_us);
+/* A received frame (SDO answers; anything else is ignored). */
+void arm_co_boot_rx(arm_co_boot_t *b, const arm_can_frame_t *f, uint64_t now_us);
+/* One period: timeouts, the next request of every node. Returns 1 while any node still runs,
+ * 0 when every node is enabled, -1 once a node failed (b->fault says which and why; the others
+ * stop where they are). */
+int arm_co_boot_step(arm_co_boot_t *b, uint64_t now_us);
+/* The next frame to send (1), or 0 when nothing is due. */
+int arm_co_boot_take_tx(arm_co_boot_t *b, arm_can_frame_t *out);
+
+#endif

@@ -1,0 +1,370 @@
+/* The CiA 402 boot configurator (arm/co_boot.h). Each node's sequence is built once, at init, as
+ * a list of actions; the step then only walks the lists, so what is written is fixed before the
+ * first frame goes out (and the log is the list's WRITE actions, in the order they were done). */
+#include "arm/co_boot.h"
+
+#include <stddef.h>
+
+#define SW_STATE_MASK 0x006Fu
+#define SW_DISABLED_MASK 0x004Fu /* switch on disabled: bit 5 (quick stop) is not part of it */
+#define SW_FAULT 0x0008u
+/* A CONTROL or QUIESCE action's mask field: the state expected, and the statusword bits that show it. */
+#define SW_EXPECT(state, mask) ((uint32_t)(state) | ((uint32_t)(mask) << 8))
+
+void arm_co_boot_default_config(arm_co_boot_config_t *cfg)
+{
+    *cfg = (arm_co_boot_config_t){0};
+    cfg->rpdo1 = (arm_co_pdo_map_t){2u, {0x60400010u, 0x60710010u, 0u, 0u}};
+    cfg->tpdo1 = (arm_co_pdo_map_t){2u, {0x60640020u, 0x606C0020u, 0u, 0u}};
+    cfg->tpdo2 = (arm_co_pdo_map_t){2u, {0x60770010u, 0x60410010u, 0u, 0u}};
+    cfg->cycle_us = 1000u;
+    cfg->heartbeat_ms = 100u;
+    cfg->master_id = 0x7Fu;
+    cfg->consumer_ms = 300u;
+    cfg->sdo_timeout_us = 50000u;
+    cfg->sdo_tries = 3u;
+    cfg->state_timeout_us = 500000u;
+}
+
+const char *arm_co_fault_name(arm_co_fault_code_t code)
+{
+    switch (code) {
+    case ARM_CO_FAULT_NONE: return "none";
+    case ARM_CO_FAULT_SDO_ABORT: return "sdo_abort";
+    case ARM_CO_FAULT_CLIENT_ABORT: return "bad_response";
+    case ARM_CO_FAULT_NO_ANSWER: return "no_answer";
+    case ARM_CO_FAULT_WRONG_VALUE: return "wrong_value";
+    case ARM_CO_FAULT_STATE_TIMEOUT: return "state_timeout";
+    case ARM_CO_FAULT_DRIVE_FAULT: return "drive_fault";
+    case ARM_CO_FAULT_BAD_CONFIG: return "bad_config";
+    }
+    return "unknown";
+}
+
+static void add(arm_co_node_t *n, uint8_t kind, uint16_t index, uint8_t sub, uint8_t len, uint32_t value,
+                uint32_t mask)
+{
+    if (n->n_actions < ARM_CO_BOOT_MAX_ACTIONS) { /* sized for the longest sequence: init checks */
+        n->action[n->n_actions++] = (arm_co_action_t){kind, sub, len, index, value, mask};
+    }
+}
+
+static void add_pdo(arm_co_node_t *n, uint16_t comm, uint16_t map, uint32_t cob, const arm_co_pdo_map_t *m)
+{
+    add(n, ARM_CO_ACT_WRITE, comm, 1u, 4u, cob | ARM_CO_PDO_INVALID, 0u);
+    add(n, ARM_CO_ACT_WRITE, map, 0u, 1u, 0u, 0u);
+    for (uint8_t i = 0; i < m->n && i < ARM_CO_PDO_MAX_ENTRIES; ++i) {
+        add(n, ARM_CO_ACT_WRITE, map, (uint8_t)(i + 1u), 4u, m->entry[i], 0u);
+    }
+    add(n, ARM_CO_ACT_WRITE, map, 0u, 1u, m->n, 0u);
+    add(n, ARM_CO_ACT_WRITE, comm, 2u, 1u, 1u, 0u); /* transmission type 1: every SYNC */
+    add(n, ARM_CO_ACT_WRITE, comm, 1u, 4u, cob, 0u);
+}
+
+static void build(arm_co_node_t *n, const arm_co_boot_config_t *cfg, const arm_co_node_config_t *nc)
+{
+    const uint32_t id = nc->node_id;
+    n->n_actions = 0u;
+    add(n, ARM_CO_ACT_NMT, 0u, 0u, 0u, ARM_CO_NMT_PREOP, 0u);
+    add(n, ARM_CO_ACT_READ, 0x1000u, 0u, 4u, ARM_CO_DEVICE_TYPE, 0xFFFFFFFFu);
+    add(n, ARM_CO_ACT_READ, 0x1018u, 1u, 4u, nc->vendor_id, nc->vendor_id ? 0xFFFFFFFFu : 0u);
+    add(n, ARM_CO_ACT_READ, 0x1018u, 2u, 4u, nc->product_code, nc->product_code ? 0xFFFFFFFFu : 0u);
+    add(n, ARM_CO_ACT_READ, 0x1018u, 3u, 4u, 0u, 0u);
+    add(n, ARM_CO_ACT_READ, 0x1018u, 4u, 4u, 0u, 0u);
+    /* A drive left enabled (a master restarted) takes no new mode or scaling (0x08000022): switch
+     * on disabled first. A fresh drive already is, and nothing is written. */
+    add(n, ARM_CO_ACT_QUIESCE, 0x6040u, 0u, 2u, 0x0000u, SW_EXPECT(0x40u, SW_DISABLED_MASK));
+    add_pdo(n, 0x1400u, 0x1600u, ARM_CO_COB_RPDO1 + id, &cfg->rpdo1);
+    add_pdo(n, 0x1800u, 0x1A00u, ARM_CO_COB_TPDO1 + id, &cfg->tpdo1);
+    add_pdo(n, 0x1801u, 0x1A01u, ARM_CO_COB_TPDO2 + id, &cfg->tpdo2);
+    add(n, ARM_CO_ACT_WRITE, 0x1006u, 0u, 4u, cfg->cycle_us, 0u);
+    add(n, ARM_CO_ACT_WRITE, 0x1017u, 0u, 2u, cfg->heartbeat_ms, 0u);
+    add(n, ARM_CO_ACT_WRITE, 0x1016u, 1u, 4u, ((uint32_t)cfg->master_id << 16) | cfg->consumer_ms, 0u);
+    if (nc->overrides & ARM_CO_OVERRIDE_RATED) {
+        add(n, ARM_CO_ACT_WRITE, 0x6076u, 0u, 4u, nc->rated_torque_mnm, 0u);
+    }
+    if (nc->overrides & ARM_CO_OVERRIDE_ENCODER) {
+        add(n, ARM_CO_ACT_WRITE, 0x608Fu, 1u, 4u, nc->encoder_increments, 0u);
+        add(n, ARM_CO_ACT_WRITE, 0x608Fu, 2u, 4u, 1u, 0u);
+    }
+    if (nc->overrides & ARM_CO_OVERRIDE_GEAR) {
+        add(n, ARM_CO_ACT_WRITE, 0x6091u, 1u, 4u, nc->gear_motor_revs, 0u);
+        add(n, ARM_CO_ACT_WRITE, 0x6091u, 2u, 4u, nc->gear_shaft_revs, 0u);
+    }
+    add(n, ARM_CO_ACT_WRITE, 0x6060u, 0u, 1u, (uint32_t)ARM_CO_MODE_CST, 0u);
+    add(n, ARM_CO_ACT_READ, 0x6061u, 0u, 1u, (uint32_t)ARM_CO_MODE_CST, 0xFFu);
+    add(n, ARM_CO_ACT_NMT, 0u, 0u, 0u, ARM_CO_NMT_START, 0u);
+    add(n, ARM_CO_ACT_CONTROL, 0x6040u, 0u, 2u, 0x0006u, SW_EXPECT(0x21u, SW_STATE_MASK));
+    add(n, ARM_CO_ACT_CONTROL, 0x6040u, 0u, 2u, 0x0007u, SW_EXPECT(0x23u, SW_STATE_MASK));
+    add(n, ARM_CO_ACT_CONTROL, 0x6040u, 0u, 2u, 0x000Fu, SW_EXPECT(0x27u, SW_STATE_MASK));
+}
+
+static unsigned sequence_length(const arm_co_boot_config_t *cfg)
+{
+    return 6u + 1u + 3u * 5u + cfg->rpdo1.n + cfg->tpdo1.n + cfg->tpdo2.n + 3u + 5u + 2u + 1u + 3u;
+}
+
+static int bad_config(arm_co_boot_t *b, uint8_t node, uint32_t value)
+{
+    b->fault = (arm_co_fault_t){0};
+    b->fault.code = ARM_CO_FAULT_BAD_CONFIG;
+    b->fault.node = node;
+    b->fault.value = value;
+    return -1;
+}
+
+int arm_co_boot_init(arm_co_boot_t *b, const arm_co_boot_config_t *cfg, uint64_t now_us)
+{
+    b->cfg = *cfg;
+    b->fault = (arm_co_fault_t){0};
+    b->n_log = 0u;
+    b->next_heartbeat_us = now_us;
+    b->heartbeat_due = 0u;
+    if (cfg->n_nodes == 0u || cfg->n_nodes > ARM_CO_BOOT_MAX_NODES) {
+        return bad_config(b, 0u, cfg->n_nodes);
+    }
+    if (cfg->rpdo1.n > ARM_CO_PDO_MAX_ENTRIES || cfg->tpdo1.n > ARM_CO_PDO_MAX_ENTRIES ||
+        cfg->tpdo2.n > ARM_CO_PDO_MAX_ENTRIES ||
+        sequence_length(cfg) + 3u > ARM_CO_BOOT_MAX_ACTIONS) { /* + a fault reset's 3 logged writes */
+        return bad_config(b, 0u, sequence_length(cfg));
+    }
+    for (uint8_t i = 0; i < cfg->n_nodes; ++i) {
+        const arm_co_node_config_t *nc = &cfg->node[i];
+        if (nc->node_id == 0u || nc->node_id > 127u || nc->node_id == cfg->master_id) {
+            return bad_config(b, nc->node_id, nc->node_id);
+        }
+        for (uint8_t j = 0; j < i; ++j) {
+            if (cfg->node[j].node_id == nc->node_id) {
+                return bad_config(b, nc->node_id, nc->node_id);
+            }
+        }
+        arm_co_node_t *n = &b->node[i];
+        *n = (arm_co_node_t){0};
+        n->state = ARM_CO_NODE_RUNNING;
+        build(n, cfg, nc);
+        arm_co_sdo_init(&n->sdo, nc->node_id, cfg->sdo_timeout_us, cfg->sdo_tries);
+        b->nmt_pending[i] = 0u;
+    }
+    return 0;
+}
+
+void arm_co_boot_rx(arm_co_boot_t *b, const arm_can_frame_t *f, uint64_t now_us)
+{
+    for (uint8_t i = 0; i < b->cfg.n_nodes; ++i) {
+        if (arm_co_sdo_rx(&b->node[i].sdo, f, now_us)) {
+            return;
+        }
+    }
+}
+
+static void fail(arm_co_boot_t *b, arm_co_node_t *n, arm_co_fault_code_t code, const arm_co_action_t *a,
+                 uint16_t index, uint32_t value, uint32_t expected)
+{
+    n->state = ARM_CO_NODE_FAILED;
+    if (b->fault.code != ARM_CO_FAULT_NONE) {
+        return; /* the first failure is the one reported */
+    }
+    b->fault.code = code;
+    b->fault.node = n->sdo.node;
+    b->fault.index = index;
+    b->fault.sub = index == a->index ? a->sub : 0u;
+    b->fault.abort_code = n->sdo.abort_code;
+    b->fault.value = value;
+    b->fault.expected = expected;
+    b->fault.tries = n->sdo.tries;
+}
+
+/* The SDO transfer of action a ended (DONE, ABORTED or TIMEOUT): 1 if it succeeded. */
+static int transfer_ok(arm_co_boot_t *b, arm_co_node_t *n, const arm_co_action_t *a)
+{
+    if (n->sdo.status == ARM_CO_SDO_DONE) {
+        return 1;
+    }
+    const arm_co_fault_code_t code = n->sdo.status == ARM_CO_SDO_TIMEOUT ? ARM_CO_FAULT_NO_ANSWER
+                                     : n->sdo.abort_by_server        ? ARM_CO_FAULT_SDO_ABORT
+                                                                     : ARM_CO_FAULT_CLIENT_ABORT;
+    fail(b, n, code, a, n->sdo.index, 0u, 0u);
+    return 0;
+}
+
+static void log_value(arm_co_boot_t *b, const arm_co_node_t *n, uint16_t index, uint8_t sub, uint8_t len,
+                      uint32_t value)
+{
+    if (b->n_log < ARM_CO_BOOT_LOG_MAX) { /* sized for every node's sequence; a fault reset's two
+                                           * writes fit in the room ARM_CO_BOOT_MAX_ACTIONS leaves */
+        b->log[b->n_log++] = (arm_co_write_t){n->sdo.node, index, sub, len, value};
+    }
+}
+
+static void log_write(arm_co_boot_t *b, const arm_co_node_t *n, const arm_co_action_t *a)
+{
+    log_value(b, n, a->index, a->sub, a->len, a->value);
+}
+
+static void download(arm_co_node_t *n, uint16_t index, uint8_t sub, uint8_t len, uint32_t value, uint64_t now)
+{
+    uint8_t d[4];
+    for (unsigned k = 0; k < 4u; ++k) {
+        d[k] = (uint8_t)(value >> (8u * k));
+    }
+    (void)arm_co_sdo_download(&n->sdo, index, sub, d, len, now);
+}
+
+/* Advances node i by what its SDO channel finished; starts the next request. */
+static void step_node(arm_co_boot_t *b, uint8_t i, uint64_t now)
+{
+    arm_co_node_t *n = &b->node[i];
+    arm_co_sdo_tick(&n->sdo, now);
+    /* A bounded walk: at most every action once per step (NMT actions finish at once). */
+    for (unsigned guard = 0; guard < ARM_CO_BOOT_MAX_ACTIONS && n->state == ARM_CO_NODE_RUNNING; ++guard) {
+        if (n->next >= n->n_actions) {
+            n->state = ARM_CO_NODE_ENABLED;
+            return;
+        }
+        const arm_co_action_t *a = &n->action[n->next];
+        if (!n->started) {
+            n->started = 1u;
+            n->control_phase = 0u;
+            switch (a->kind) {
+            case ARM_CO_ACT_NMT:
+                b->nmt_pending[i] = (uint8_t)a->value;
+                n->started = 0u;
+                n->next++;
+                continue;
+            case ARM_CO_ACT_WRITE:
+                download(n, a->index, a->sub, a->len, a->value, now);
+                return;
+            case ARM_CO_ACT_READ:
+                (void)arm_co_sdo_upload(&n->sdo, a->index, a->sub, now);
+                return;
+            case ARM_CO_ACT_QUIESCE: /* the statusword first: written only if not there yet */
+                n->control_deadline_us = now + b->cfg.state_timeout_us;
+                n->control_phase = 1u;
+                n->cw_written = 0u;
+                (void)arm_co_sdo_upload(&n->sdo, 0x6041u, 0u, now);
+                return;
+            case ARM_CO_ACT_CONTROL:
+            default:
+                n->control_deadline_us = now + b->cfg.state_timeout_us;
+                download(n, a->index, a->sub, a->len, a->value, now);
+                return;
+            }
+        }
+        if (n->sdo.status == ARM_CO_SDO_BUSY) {
+            return;
+        }
+        if (!transfer_ok(b, n, a)) {
+            return;
+        }
+        if (a->kind == ARM_CO_ACT_WRITE) {
+            log_write(b, n, a);
+        } else if (a->kind == ARM_CO_ACT_READ) {
+            const uint32_t v = arm_co_sdo_u32(&n->sdo);
+            if (a->index == 0x1018u && a->sub >= 1u && a->sub <= 4u) {
+                n->identity[a->sub - 1u] = v;
+            }
+            if ((v & a->mask) != (a->value & a->mask)) {
+                fail(b, n, ARM_CO_FAULT_WRONG_VALUE, a, a->index, v, a->value);
+                return;
+            }
+        } else { /* CONTROL: the controlword is in; read the statusword until it follows */
+            if (n->control_phase == 0u) {
+                log_write(b, n, a);
+                n->cw_written = 1u;
+                n->control_phase = 1u;
+                (void)arm_co_sdo_upload(&n->sdo, 0x6041u, 0u, now);
+                return;
+            }
+            if (n->control_phase == 2u) { /* 0x00 is in: now bit 7's rising edge */
+                log_value(b, n, 0x6040u, 0u, 2u, 0x0000u);
+                n->control_phase = 3u;
+                download(n, 0x6040u, 0u, 2u, 0x0080u, now);
+                return;
+            }
+            if (n->control_phase == 3u) { /* reset sent: the step's own controlword again */
+                log_value(b, n, 0x6040u, 0u, 2u, 0x0080u);
+                n->fault_resets++;
+                n->control_phase = 0u;
+                n->control_deadline_us = now + b->cfg.state_timeout_us;
+                download(n, a->index, a->sub, a->len, a->value, now);
+                return;
+            }
+            n->statusword = (uint16_t)arm_co_sdo_u32(&n->sdo);
+            if (n->statusword & SW_FAULT) {
+                if (b->cfg.fault_reset && n->fault_resets == 0u) {
+                    n->control_phase = 2u;
+                    download(n, 0x6040u, 0u, 2u, 0x0000u, now);
+                    return;
+                }
+                fail(b, n, ARM_CO_FAULT_DRIVE_FAULT, a, 0x6041u, n->statusword, a->mask);
+                return;
+            }
+            if ((n->statusword & (a->mask >> 8)) != (a->mask & 0xFFu)) {
+                if (!n->cw_written) { /* QUIESCE: not there yet, so the controlword goes out */
+                    n->control_phase = 0u;
+                    download(n, a->index, a->sub, a->len, a->value, now);
+                    return;
+                }
+                if (now >= n->control_deadline_us) {
+                    fail(b, n, ARM_CO_FAULT_STATE_TIMEOUT, a, 0x6041u, n->statusword, a->mask);
+                    return;
+                }
+                (void)arm_co_sdo_upload(&n->sdo, 0x6041u, 0u, now);
+                return; /* read again next step: one request per node per period */
+            }
+        }
+        n->started = 0u;
+        n->next++;
+    }
+}
+
+int arm_co_boot_step(arm_co_boot_t *b, uint64_t now_us)
+{
+    if (b->fault.code != ARM_CO_FAULT_NONE) {
+        return -1;
+    }
+    if (now_us >= b->next_heartbeat_us && b->cfg.heartbeat_ms > 0u) {
+        b->heartbeat_due = 1u;
+        b->next_heartbeat_us = now_us + (uint64_t)b->cfg.heartbeat_ms * 1000u;
+    }
+    unsigned running = 0u;
+    for (uint8_t i = 0; i < b->cfg.n_nodes; ++i) {
+        step_node(b, i, now_us);
+        if (b->node[i].state == ARM_CO_NODE_RUNNING) {
+            ++running;
+        }
+    }
+    if (b->fault.code != ARM_CO_FAULT_NONE) {
+        return -1;
+    }
+    return running ? 1 : 0;
+}
+
+int arm_co_boot_take_tx(arm_co_boot_t *b, arm_can_frame_t *out)
+{
+    for (uint8_t i = 0; i < b->cfg.n_nodes; ++i) {
+        if (b->nmt_pending[i]) {
+            *out = (arm_can_frame_t){0};
+            out->id = ARM_CO_COB_NMT;
+            out->len = 2u;
+            out->data[0] = b->nmt_pending[i];
+            out->data[1] = b->cfg.node[i].node_id;
+            b->nmt_pending[i] = 0u;
+            return 1;
+        }
+    }
+    if (b->heartbeat_due) { /* the master's own heartbeat, which the drives consume (0x1016) */
+        *out = (arm_can_frame_t){0};
+        out->id = ARM_CO_COB_HEARTBEAT + b->cfg.master_id;
+        out->len = 1u;
+        out->data[0] = 0x05u; /* operational */
+        b->heartbeat_due = 0u;
+        return 1;
+    }
+    for (uint8_t i = 0; i < b->cfg.n_nodes; ++i) {
+        if (arm_co_sdo_take_tx(&b->node[i].sdo, out)) {
+            return 1;
+        }
+    }
+    return 0;
+}

@@ -1,0 +1,480 @@
+/* arm_canopen_boot: configures the CiA 402 drives of one bus with the boot configurator
+ * (firmware/canopen, arm/co_boot.h), prints every SDO write and the result, and exits 0 when every
+ * node reached operation enabled, else 1 with one line naming the node, the object and the abort
+ * code (2: bad arguments). The node options come from the drive configuration (gen/drives.py
+ * --boot-args). README: Real drives, The CANopen master. */
+#define _GNU_SOURCE
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "arm/can_bus.h"
+#include "arm/co_boot.h"
+#include "arm/co_pdo.h"
+#include "canopen_text.h"
+#include "json_file.h"
+
+static const char k_usage[] =
+    "usage: arm_canopen_boot --bus SPEC --node ID[,rated=mNm][,encoder=INC][,gear=M/S][,vendor=X][,product=X]...\n"
+    "         [--cycle-us N] [--heartbeat-ms N] [--master-id N] [--consumer-ms N] [--sdo-timeout-ms N]\n"
+    "         [--sdo-tries N] [--state-timeout-ms N] [--period-us N] [--timeout-ms N] [--json FILE]\n"
+    "         [--hold-periods N] [--hold-torque NM] [--fault-reset]\n"
+    "  --bus SPEC         udp | udp:GROUP:PORT | socketcan:IFACE (the drives' bus)\n"
+    "  --node ...         a node to configure (repeatable): its id and the EDS defaults it overrides\n"
+    "                     (0x6076 rated torque mN m, 0x608F.1 increments per motor rev, 0x6091 gear)\n"
+    "  --cycle-us         0x1006 communication cycle period [1000]\n"
+    "  --heartbeat-ms     0x1017 producer heartbeat of the drives [100]\n"
+    "  --master-id        the master's node id (its heartbeat, 0x1016.1) [127]\n"
+    "  --consumer-ms      0x1016.1 the drive's timeout for the master's heartbeat [300]\n"
+    "  --sdo-timeout-ms   per SDO request [50]; --sdo-tries: tries of a transfer [3]\n"
+    "  --state-timeout-ms the statusword must follow each controlword by then [500]\n"
+    "  --period-us        the configurator's step period [1000]; --timeout-ms: give up after [10000]\n"
+    "  --json FILE        the result as JSON: every SDO write, each node's state and identity, the fault\n"
+    "  --hold-periods N   once enabled, N periods of RPDO1 (0x0F, --hold-torque) + SYNC, TPDOs decoded [0]\n"
+    "  --hold-torque NM   the target torque of every node while holding, N m [0]\n"
+    "  --fault-reset      a drive in fault gets one fault reset (0x6040 = 0x00, 0x80) [report the fault]\n";
+
+static uint64_t mono_us(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (uint64_t)ts.tv_sec * 1000000u + (uint64_t)ts.tv_nsec / 1000u;
+}
+
+static int parse_u32(const char *s, uint32_t lo, uint32_t hi, uint32_t *out)
+{
+    char *end = NULL;
+    errno = 0;
+    const unsigned long long v = strtoull(s, &end, 0);
+    if (errno != 0 || end == s || *end != '\0' || s[0] == '-' || v < lo || v > hi) {
+        return -1;
+    }
+    *out = (uint32_t)v;
+    return 0;
+}
+
+/* "ID[,key=value]..." into nc; -1 with a message naming the option's field. */
+static int parse_node(const char *arg, arm_co_node_config_t *nc, char *err, size_t cap)
+{
+    char buf[256];
+    if (strlen(arg) >= sizeof(buf)) {
+        snprintf(err, cap, "--node '%.40s...': too long", arg);
+        return -1;
+    }
+    strcpy(buf, arg);
+    *nc = (arm_co_node_config_t){0};
+    char *save = NULL;
+    char *tok = strtok_r(buf, ",", &save);
+    uint32_t v = 0;
+    if (tok == NULL || parse_u32(tok, 1u, 127u, &v) != 0) {
+        snprintf(err, cap, "--node '%s': the node id must be 1..127", arg);
+        return -1;
+    }
+    nc->node_id = (uint8_t)v;
+    while ((tok = strtok_r(NULL, ",", &save)) != NULL) {
+        char *eq = strchr(tok, '=');
+        if (eq == NULL) {
+            snprintf(err, cap, "--node '%s': '%s' is not key=value", arg, tok);
+            return -1;
+        }
+        *eq = '\0';
+        const char *val = eq + 1;
+        int bad = 0;
+        if (strcmp(tok, "rated") == 0) {
+            bad = parse_u32(val, 1u, UINT32_MAX, &nc->rated_torque_mnm);
+            nc->overrides |= ARM_CO_OVERRIDE_RATED;
+        } else if (strcmp(tok, "encoder") == 0) {
+            bad = parse_u32(val, 1u, UINT32_MAX, &nc->encoder_increments);
+            nc->overrides |= ARM_CO_OVERRIDE_ENCODER;
+        } else if (strcmp(tok, "gear") == 0) {
+            char *slash = strchr(val, '/');
+            if (slash == NULL) {
+                bad = -1;
+            } else {
+                *slash = '\0';
+                bad = parse_u32(val, 1u, UINT32_MAX, &nc->gear_motor_revs) ||
+                      parse_u32(slash + 1, 1u, UINT32_MAX, &nc->gear_shaft_revs);
+            }
+            nc->overrides |= ARM_CO_OVERRIDE_GEAR;
+        } else if (strcmp(tok, "vendor") == 0) {
+            bad = parse_u32(val, 0u, UINT32_MAX, &nc->vendor_id);
+        } else if (strcmp(tok, "product") == 0) {
+            bad = parse_u32(val, 0u, UINT32_MAX, &nc->product_code);
+        } else {
+            snprintf(err, cap, "--node '%s': unknown field '%s' (rated, encoder, gear, vendor, product)", arg, tok);
+            return -1;
+        }
+        if (bad) {
+            snprintf(err, cap, "--node '%s': field %s: expected %s", arg, tok,
+                     strcmp(tok, "gear") == 0 ? "MOTOR/SHAFT revolutions, both >= 1" : "an unsigned 32-bit number");
+            return -1;
+        }
+    }
+    return 0;
+}
+
+typedef struct {
+    const char *bus;
+    arm_co_boot_config_t cfg;
+    uint32_t period_us;
+    uint32_t timeout_ms;
+    const char *json_path;
+    uint32_t hold_periods;
+    float hold_torque_nm;
+} boot_options_t;
+
+/* What the TPDOs of the hold phase said, per node, in SI units (arm/co_pdo.h). */
+typedef struct {
+    arm_co_units_t units;
+    int16_t target_permille;
+    uint32_t tpdo1, tpdo2;
+    float q, qd, tau;
+    uint16_t statusword;
+} hold_state_t;
+
+static int parse_args(int argc, char **argv, boot_options_t *o, char *err, size_t cap)
+{
+    arm_co_boot_default_config(&o->cfg);
+    o->bus = NULL;
+    o->period_us = 1000u;
+    o->timeout_ms = 10000u;
+    o->json_path = NULL;
+    o->hold_periods = 0u;
+    o->hold_torque_nm = 0.0f;
+    for (int i = 1; i < argc; ++i) {
+        const char *a = argv[i];
+        if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
+            fputs(k_usage, stdout);
+            return 1;
+        }
+        if (strcmp(a, "--fault-reset") == 0) {
+            o->cfg.fault_reset = 1u;
+            continue;
+        }
+        if (i + 1 >= argc) {
+            snprintf(err, cap, "%s: missing value (or unknown option)", a);
+            return -1;
+        }
+        const char *v = argv[++i];
+        uint32_t x = 0;
+        int bad = 0;
+        if (strcmp(a, "--bus") == 0) {
+            o->bus = v;
+        } else if (strcmp(a, "--node") == 0) {
+            if (o->cfg.n_nodes >= ARM_CO_BOOT_MAX_NODES) {
+                snprintf(err, cap, "--node: at most %u nodes on one bus", ARM_CO_BOOT_MAX_NODES);
+                return -1;
+            }
+            if (parse_node(v, &o->cfg.node[o->cfg.n_nodes], err, cap) != 0) {
+                return -1;
+            }
+            for (unsigned k = 0; k < o->cfg.n_nodes; ++k) {
+                if (o->cfg.node[k].node_id == o->cfg.node[o->cfg.n_nodes].node_id) {
+                    snprintf(err, cap, "--node '%s': node %u is given twice", v, o->cfg.node[k].node_id);
+                    return -1;
+                }
+            }
+            o->cfg.n_nodes++;
+        } else if (strcmp(a, "--cycle-us") == 0) {
+            bad = parse_u32(v, 1u, UINT32_MAX, &o->cfg.cycle_us);
+        } else if (strcmp(a, "--heartbeat-ms") == 0) {
+            bad = parse_u32(v, 0u, 65535u, &x);
+            o->cfg.heartbeat_ms = (uint16_t)x;
+        } else if (strcmp(a, "--master-id") == 0) {
+            bad = parse_u32(v, 1u, 127u, &x);
+            o->cfg.master_id = (uint8_t)x;
+        } else if (strcmp(a, "--consumer-ms") == 0) {
+            bad = parse_u32(v, 0u, 65535u, &x);
+            o->cfg.consumer_ms = (uint16_t)x;
+        } else if (strcmp(a, "--sdo-timeout-ms") == 0) {
+            bad = parse_u32(v, 1u, 60000u, &x);
+            o->cfg.sdo_timeout_us = x * 1000u;
+        } else if (strcmp(a, "--sdo-tries") == 0) {
+            bad = parse_u32(v, 1u, 20u, &x);
+            o->cfg.sdo_tries = (uint8_t)x;
+        } else if (strcmp(a, "--state-timeout-ms") == 0) {
+            bad = parse_u32(v, 1u, 60000u, &x);
+            o->cfg.state_timeout_us = x * 1000u;
+        } else if (strcmp(a, "--period-us") == 0) {
+            bad = parse_u32(v, 100u, 1000000u, &o->period_us);
+        } else if (strcmp(a, "--hold-periods") == 0) {
+            bad = parse_u32(v, 0u, 1000000u, &o->hold_periods);
+        } else if (strcmp(a, "--hold-torque") == 0) {
+            char *end = NULL;
+            const double t = strtod(v, &end);
+            bad = (end == v || *end != '\0' || !(t > -1e6 && t < 1e6)) ? -1 : 0;
+            o->hold_torque_nm = (float)t;
+        } else if (strcmp(a, "--json") == 0) {
+            o->json_path = v;
+        } else if (strcmp(a, "--timeout-ms") == 0) {
+            bad = parse_u32(v, 1u, 3600000u, &o->timeout_ms);
+        } else {
+            snprintf(err, cap, "%s: unknown option (--help lists them)", a);
+            return -1;
+        }
+        if (bad) {
+            snprintf(err, cap, "%s '%s': out of range or not a number (--help)", a, v);
+            return -1;
+        }
+    }
+    if (o->bus == NULL) {
+        snprintf(err, cap, "--bus: missing (udp, udp:GROUP:PORT or socketcan:IFACE)");
+        return -1;
+    }
+    if (o->cfg.n_nodes == 0u) {
+        snprintf(err, cap, "--node: missing (one per drive on the bus)");
+        return -1;
+    }
+    if (o->json_path != NULL) { /* refused before any drive is touched, not after the boot */
+        char dir[1024];
+        const char *slash = strrchr(o->json_path, '/');
+        const size_t n = slash == NULL ? 0u : (size_t)(slash - o->json_path);
+        if (o->json_path[0] == '\0' || n >= sizeof(dir)) {
+            snprintf(err, cap, "--json '%s': not a file path", o->json_path);
+            return -1;
+        }
+        if (slash == NULL) {
+            strcpy(dir, ".");
+        } else if (n == 0u) {
+            strcpy(dir, "/");
+        } else {
+            memcpy(dir, o->json_path, n);
+            dir[n] = '\0';
+        }
+        if (access(dir, W_OK) != 0) {
+            snprintf(err, cap, "--json '%s': cannot write into %s (%s)", o->json_path, dir, strerror(errno));
+            return -1;
+        }
+    }
+    return arm_can_bus_spec_valid(o->bus, err, cap) == 0 ? 0 : -1;
+}
+
+/* Once every node is enabled: n periods of RPDO1 (enable operation, the target torque in
+ * per-mille of the node's rated torque) then SYNC, the TPDOs of each period decoded into SI units;
+ * the master's heartbeat goes on. 0, or -1 with err set on a bus error. */
+static int hold(arm_can_bus_t *bus, const boot_options_t *o, hold_state_t *hs, char *err, size_t cap)
+{
+    const arm_co_boot_config_t *c = &o->cfg;
+    for (unsigned i = 0; i < c->n_nodes; ++i) {
+        const arm_co_node_config_t *nc = &c->node[i];
+        const uint32_t rated = (nc->overrides & ARM_CO_OVERRIDE_RATED) ? nc->rated_torque_mnm : ARM_CO_EDS_RATED_TORQUE_MNM;
+        const uint32_t enc = (nc->overrides & ARM_CO_OVERRIDE_ENCODER) ? nc->encoder_increments : ARM_CO_EDS_ENCODER_INCREMENTS;
+        const int gear = (nc->overrides & ARM_CO_OVERRIDE_GEAR) != 0;
+        if (arm_co_units_init(&hs[i].units, rated, enc, gear ? nc->gear_motor_revs : ARM_CO_EDS_GEAR_MOTOR_REVS,
+                              gear ? nc->gear_shaft_revs : ARM_CO_EDS_GEAR_SHAFT_REVS, 32767) != 0) {
+            snprintf(err, cap, "node %u: units cannot be built", nc->node_id);
+            return -1;
+        }
+        hs[i].target_permille = arm_co_torque_to_permille(&hs[i].units, o->hold_torque_nm);
+    }
+    uint64_t next = mono_us(), next_hb = next;
+    for (uint32_t k = 0; k < o->hold_periods; ++k) {
+        arm_can_frame_t f;
+        for (unsigned i = 0; i < c->n_nodes; ++i) {
+            arm_co_pack_rpdo1(c->node[i].node_id, 0x000Fu, hs[i].target_permille, &f);
+            if (arm_can_bus_send(bus, &f) != ARM_BUS_OK) {
+                snprintf(err, cap, "bus %s: send of RPDO1 0x%03X failed", o->bus, f.id);
+                return -1;
+            }
+        }
+        f = (arm_can_frame_t){.id = ARM_CO_COB_SYNC, .len = 0u};
+        if (arm_can_bus_send(bus, &f) != ARM_BUS_OK) {
+            snprintf(err, cap, "bus %s: send of SYNC failed", o->bus);
+            return -1;
+        }
+        if (c->heartbeat_ms > 0u && mono_us() >= next_hb) {
+            f = (arm_can_frame_t){.id = ARM_CO_COB_HEARTBEAT + c->master_id, .len = 1u, .data = {0x05u}};
+            (void)arm_can_bus_send(bus, &f);
+            next_hb += (uint64_t)c->heartbeat_ms * 1000u;
+        }
+        next += o->period_us;
+        for (uint64_t now = mono_us(); now < next; now = mono_us()) {
+            const int r = arm_can_bus_recv(bus, &f, (int)(next - now));
+            if (r < 0) {
+                snprintf(err, cap, "bus %s: receive failed (%d)", o->bus, r);
+                return -1;
+            }
+            for (unsigned i = 0; r == 1 && i < c->n_nodes; ++i) {
+                int32_t pos, vel;
+                int16_t tq;
+                uint16_t sw;
+                if (arm_co_unpack_tpdo1(c->node[i].node_id, &f, &pos, &vel) == 0) {
+                    hs[i].tpdo1++;
+                    hs[i].q = arm_co_increments_to_rad(&hs[i].units, pos);
+                    hs[i].qd = arm_co_increments_to_rad(&hs[i].units, vel);
+                } else if (arm_co_unpack_tpdo2(c->node[i].node_id, &f, &tq, &sw) == 0) {
+                    hs[i].tpdo2++;
+                    hs[i].tau = arm_co_permille_to_torque(&hs[i].units, tq);
+                    hs[i].statusword = sw;
+                }
+            }
+        }
+    }
+    return 0;
+}
+
+static const char *node_state_name(arm_co_node_state_t s)
+{
+    return s == ARM_CO_NODE_ENABLED ? "operation_enabled" : s == ARM_CO_NODE_FAILED ? "failed" : "unfinished";
+}
+
+/* The result for run.json: written whole or not at all (json_file). */
+static int write_json(const char *path, const arm_co_boot_t *b, const hold_state_t *hs, uint32_t hold_periods,
+                      const char *result, const char *detail, char *err, size_t cap)
+{
+    json_file_t j;
+    if (json_file_open(&j, path, "--json", err, cap) != 0) {
+        return -1;
+    }
+    FILE *f = j.f;
+    fprintf(f, "{\n  \"result\": ");
+    json_string(f, result);
+    fprintf(f, ",\n  \"detail\": ");
+    json_string(f, detail);
+    fprintf(f, ",\n  \"fault\": {\"code\": ");
+    json_string(f, arm_co_fault_name(b->fault.code));
+    fprintf(f, ", \"node\": %u, \"index\": %u, \"sub\": %u, \"abort_code\": %u, \"value\": %u, \"tries\": %u},\n",
+            b->fault.node, b->fault.index, b->fault.sub, b->fault.abort_code, b->fault.value, b->fault.tries);
+    fprintf(f, "  \"nodes\": [");
+    for (unsigned i = 0; i < b->cfg.n_nodes; ++i) {
+        const arm_co_node_t *n = &b->node[i];
+        fprintf(f, "%s\n    {\"node\": %u, \"state\": \"%s\", \"statusword\": %u, \"identity\": [%u, %u, %u, %u]",
+                i ? "," : "", b->cfg.node[i].node_id, node_state_name(n->state), n->statusword, n->identity[0],
+                n->identity[1], n->identity[2], n->identity[3]);
+        if (hold_periods > 0u) {
+            const hold_state_t *h = &hs[i];
+            fprintf(f, ", \"hold\": {\"periods\": %u, \"target_permille\": %d, \"tpdo1\": %u, \"tpdo2\": %u, "
+                       "\"q_rad\": %.9g, \"qd_rad_s\": %.9g, \"tau_nm\": %.9g, \"statusword\": %u}",
+                    hold_periods, h->target_permille, h->tpdo1, h->tpdo2, (double)h->q, (double)h->qd, (double)h->tau,
+                    h->statusword);
+        }
+        fputc('}', f);
+    }
+    fprintf(f, "\n  ],\n  \"sdo_writes\": [");
+    for (unsigned i = 0; i < b->n_log; ++i) {
+        const arm_co_write_t *w = &b->log[i];
+        fprintf(f, "%s\n    {\"node\": %u, \"index\": %u, \"sub\": %u, \"value\": %u, \"bytes\": %u}", i ? "," : "",
+                w->node, w->index, w->sub, w->value, w->len);
+    }
+    fprintf(f, "\n  ]\n}\n");
+    return json_file_commit(&j, "--json", err, cap);
+}
+
+int main(int argc, char **argv)
+{
+    static boot_options_t opt;
+    static arm_can_bus_t bus;
+    static arm_co_boot_t boot;
+    char err[512];
+    const int prc = parse_args(argc, argv, &opt, err, sizeof(err));
+    if (prc == 1) {
+        return 0;
+    }
+    if (prc != 0) {
+        fprintf(stderr, "arm_canopen_boot: %s\n", err);
+        return 2;
+    }
+    if (arm_can_bus_open(&bus, opt.bus, err, sizeof(err)) != 0) {
+        fprintf(stderr, "arm_canopen_boot: %s\n", err);
+        return 1;
+    }
+    uint64_t now = mono_us();
+    const uint64_t give_up = now + (uint64_t)opt.timeout_ms * 1000u;
+    if (arm_co_boot_init(&boot, &opt.cfg, now) != 0) {
+        canopen_fault_text(&boot.fault, err, sizeof(err));
+        fprintf(stderr, "arm_canopen_boot: %s: %s\n", arm_co_fault_name(boot.fault.code), err);
+        arm_can_bus_close(&bus);
+        return 2;
+    }
+    unsigned printed = 0;
+    int rc = 1;
+    uint64_t next = now;
+    for (;;) {
+        now = mono_us();
+        rc = arm_co_boot_step(&boot, now);
+        arm_can_frame_t f;
+        while (arm_co_boot_take_tx(&boot, &f)) {
+            if (arm_can_bus_send(&bus, &f) != ARM_BUS_OK) {
+                fprintf(stderr, "arm_canopen_boot: bus %s: send of frame 0x%03X failed\n", opt.bus, f.id);
+                arm_can_bus_close(&bus);
+                return 1;
+            }
+        }
+        for (; printed < boot.n_log; ++printed) {
+            const arm_co_write_t *w = &boot.log[printed];
+            printf("write node %u 0x%04X:%02X = 0x%0*X (%u bytes)\n", w->node, w->index, w->sub, 2 * w->len,
+                   w->value, w->len);
+        }
+        if (rc <= 0 || now >= give_up) {
+            break;
+        }
+        next += opt.period_us;
+        /* Every frame until the next period goes to the configurator. */
+        for (;;) {
+            now = mono_us();
+            if (now >= next) {
+                break;
+            }
+            const int r = arm_can_bus_recv(&bus, &f, (int)(next - now));
+            if (r == 1) {
+                arm_co_boot_rx(&boot, &f, mono_us());
+            } else if (r < 0) {
+                fprintf(stderr, "arm_canopen_boot: bus %s: receive failed (%d)\n", opt.bus, r);
+                arm_can_bus_close(&bus);
+                return 1;
+            }
+        }
+        if (now > next + 100u * opt.period_us) {
+            next = now; /* a long stall (the host was busy): do not run the missed periods at once */
+        }
+    }
+    static hold_state_t hs[ARM_CO_BOOT_MAX_NODES];
+    const uint32_t held = rc == 0 ? opt.hold_periods : 0u;
+    if (held > 0u && hold(&bus, &opt, hs, err, sizeof(err)) != 0) {
+        fprintf(stderr, "arm_canopen_boot: hold: %s\n", err);
+        arm_can_bus_close(&bus);
+        return 1;
+    }
+    fflush(stdout);
+    arm_can_bus_close(&bus);
+    char detail[512] = "";
+    const char *result = rc == 0 ? "operation_enabled" : rc < 0 ? arm_co_fault_name(boot.fault.code) : "timeout";
+    if (rc < 0) {
+        canopen_fault_text(&boot.fault, detail, sizeof(detail));
+    } else if (rc > 0) {
+        for (unsigned i = 0; i < boot.cfg.n_nodes; ++i) {
+            const arm_co_node_t *n = &boot.node[i];
+            if (n->state == ARM_CO_NODE_RUNNING) {
+                const arm_co_action_t *a = &n->action[n->next];
+                snprintf(detail, sizeof(detail), "node %u: 0x%04X:%02X still under way after %u ms",
+                         boot.cfg.node[i].node_id, a->index, a->sub, opt.timeout_ms);
+                break;
+            }
+        }
+    }
+    if (opt.json_path != NULL && write_json(opt.json_path, &boot, hs, held, result, detail, err, sizeof(err)) != 0) {
+        fprintf(stderr, "arm_canopen_boot: %s\n", err);
+        return 1;
+    }
+    if (rc != 0) {
+        fprintf(stderr, "arm_canopen_boot: %s: %s\n", result, detail);
+        return 1;
+    }
+    for (unsigned i = 0; i < boot.cfg.n_nodes; ++i) {
+        const arm_co_node_t *n = &boot.node[i];
+        printf("node %u: operation enabled (statusword 0x%04X; vendor 0x%08X product 0x%08X revision 0x%08X "
+               "serial 0x%08X)\n", boot.cfg.node[i].node_id, n->statusword, n->identity[0], n->identity[1],
+               n->identity[2], n->identity[3]);
+        if (held > 0u) {
+            const hold_state_t *h = &hs[i];
+            printf("node %u: held %u periods at %d per-mille: q %.6f rad, qd %.6f rad/s, tau %.3f N m, statusword "
+                   "0x%04X (%u TPDO1, %u TPDO2)\n", boot.cfg.node[i].node_id, held, h->target_permille, (double)h->q,
+                   (double)h->qd, (double)h->tau, h->statusword, h->tpdo1, h->tpdo2);
+        }
+    }
+    printf("arm_canopen_boot: %u nodes operation enabled, %u SDO writes\n", boot.cfg.n_nodes, boot.n_log);
+    return 0;
+}

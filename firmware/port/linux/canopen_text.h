@@ -1,0 +1,12 @@
+/* The CANopen master's faults as one line (arm_canopen_boot, arm_controller --protocol canopen). */
+#ifndef ARM_CANOPEN_TEXT_H
+#define ARM_CANOPEN_TEXT_H
+
+#include <stddef.h>
+
+#include "arm/co_boot.h"
+
+/* "node 2: 0x6060:00: SDO abort 0x06090030 (value range of parameter exceeded)" and the like. */
+void canopen_fault_text(const arm_co_fault_t *f, char *out, size_t cap);
+
+#endif
