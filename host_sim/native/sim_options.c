@@ -36,6 +36,10 @@ static void usage(const char *prog)
            "drives (host_sim/drive_model.py: DriveModel; default the ideal drive):\n"
            "  --encoder-bits N           counts per joint turn 2^N (1..32); position quantised\n"
            "  --position-noise-counts X  Gaussian position noise, sigma in counts (needs --encoder-bits)\n"
+           "  --motor-encoder-bits N --gear-ratio R  an encoder on the motor, 2^N counts per motor\n"
+           "                             turn, R motor turns per joint turn (both or neither)\n"
+           "  --position-source joint|motor  the encoder the reported position comes from [joint]\n"
+           "  --velocity-source joint|motor  the encoder whose differences give the velocity [joint]\n"
            "  --velocity-filter-hz F     velocity from encoder differences, first-order low-pass F\n"
            "  --torque-noise-nm X        Gaussian noise on the torque the drive reports, sigma\n"
            "  --current-loop-hz F        torque follows the command through a first-order lag of F\n"
@@ -231,6 +235,23 @@ int sim_options_parse(int argc, char **argv, sim_options_t *o, char *err, unsign
             c->servo.encoder_bits = (int)d;
         } else if (strcmp(a, "--position-noise-counts") == 0) {
             rc = parse_double(a, v, 0.0, 1e6, 0, &c->servo.position_noise_counts, err, errcap);
+        } else if (strcmp(a, "--motor-encoder-bits") == 0) {
+            rc = parse_double(a, v, 1.0, 32.0, 0, &d, err, errcap);
+            if (rc == 0 && d != floor(d)) {
+                snprintf(err, errcap, "%s: '%s' is not a whole number", a, v);
+                rc = -1;
+            }
+            c->servo.motor_encoder_bits = (int)d;
+        } else if (strcmp(a, "--gear-ratio") == 0) {
+            rc = parse_double(a, v, 1.0, 1e4, 0, &c->servo.gear_ratio, err, errcap);
+        } else if (strcmp(a, "--position-source") == 0 || strcmp(a, "--velocity-source") == 0) {
+            int *src = a[2] == 'p' ? &c->servo.position_source : &c->servo.velocity_source;
+            if (strcmp(v, "joint") == 0) *src = SIM_ENCODER_JOINT;
+            else if (strcmp(v, "motor") == 0) *src = SIM_ENCODER_MOTOR;
+            else {
+                snprintf(err, errcap, "%s: '%s' is not joint or motor", a, v);
+                rc = -1;
+            }
         } else if (strcmp(a, "--velocity-filter-hz") == 0) {
             rc = parse_double(a, v, 0.0, 1e6, 0, &c->servo.velocity_filter_hz, err, errcap);
         } else if (strcmp(a, "--torque-noise-nm") == 0) {
@@ -305,6 +326,20 @@ int sim_options_parse(int argc, char **argv, sim_options_t *o, char *err, unsign
     }
     if (c->servo.position_noise_counts > 0.0 && c->servo.encoder_bits == 0) {
         snprintf(err, errcap, "--position-noise-counts: counts of what? give --encoder-bits too");
+        return -1;
+    }
+    if ((c->servo.motor_encoder_bits > 0) != (c->servo.gear_ratio > 0.0)) {
+        snprintf(err, errcap, "--motor-encoder-bits/--gear-ratio: give both (a motor encoder turns with the gear)");
+        return -1;
+    }
+    if ((c->servo.position_source == SIM_ENCODER_MOTOR || c->servo.velocity_source == SIM_ENCODER_MOTOR) &&
+        c->servo.motor_encoder_bits == 0) {
+        snprintf(err, errcap, "--%s-source motor: give --motor-encoder-bits and --gear-ratio",
+                 c->servo.position_source == SIM_ENCODER_MOTOR ? "position" : "velocity");
+        return -1;
+    }
+    if (c->servo.velocity_source == SIM_ENCODER_MOTOR && c->servo.velocity_filter_hz == 0.0) {
+        snprintf(err, errcap, "--velocity-source motor: give --velocity-filter-hz (without it the velocity is the true one)");
         return -1;
     }
     if (c->timing == SIM_TIMING_OFF && frames_given != 0u) {
