@@ -36,6 +36,10 @@ static void usage(const char *prog)
            "drives (host_sim/drive_model.py: DriveModel; default the ideal drive):\n"
            "  --encoder-bits N           counts per joint turn 2^N (1..32); position quantised\n"
            "  --position-noise-counts X  Gaussian position noise, sigma in counts (needs --encoder-bits)\n"
+           "  --motor-encoder-bits N --gear-ratio R  an encoder on the motor, 2^N counts per motor\n"
+           "                             turn, R motor turns per joint turn (both or neither)\n"
+           "  --position-source joint|motor  the encoder the reported position comes from [joint]\n"
+           "  --velocity-source joint|motor  the encoder whose differences give the velocity [joint]\n"
            "  --velocity-filter-hz F     velocity from encoder differences, first-order low-pass F\n"
            "  --torque-noise-nm X        Gaussian noise on the torque the drive reports, sigma\n"
            "  --current-loop-hz F        torque follows the command through a first-order lag of F\n"
@@ -59,7 +63,7 @@ static void usage(const char *prog)
            "                             slaves per firmware/protocol/cia402_servo.eds, node id = drive [arm]\n"
            "  --rated-torque-mnm N       canopen: 0x6076 motor rated torque, mN m at the joint [EDS: 150000]\n"
            "  --encoder-increments N     canopen: 0x608F.1 increments per motor turn [EDS: 524288]\n"
-           "  --gear-ratio M:S           canopen: 0x6091 motor turns per shaft turn [EDS: 101:1]\n"
+           "  --od-gear-ratio M:S        canopen: 0x6091 motor turns per shaft turn [EDS: 101:1]\n"
            "  --inject-overcurrent NODE:TIME  TEST HOOK (canopen): node NODE trips EMCY 0x2310 at\n"
            "                             simulated time TIME s, once operation is enabled\n",
            prog, ARM_CAN_BUS_SET_MAX, ARM_SIM_DEFAULT_MODEL);
@@ -239,6 +243,23 @@ int sim_options_parse(int argc, char **argv, sim_options_t *o, char *err, unsign
             c->servo.encoder_bits = (int)d;
         } else if (strcmp(a, "--position-noise-counts") == 0) {
             rc = parse_double(a, v, 0.0, 1e6, 0, &c->servo.position_noise_counts, err, errcap);
+        } else if (strcmp(a, "--motor-encoder-bits") == 0) {
+            rc = parse_double(a, v, 1.0, 32.0, 0, &d, err, errcap);
+            if (rc == 0 && d != floor(d)) {
+                snprintf(err, errcap, "%s: '%s' is not a whole number", a, v);
+                rc = -1;
+            }
+            c->servo.motor_encoder_bits = (int)d;
+        } else if (strcmp(a, "--gear-ratio") == 0) {
+            rc = parse_double(a, v, 1.0, 1e4, 0, &c->servo.gear_ratio, err, errcap);
+        } else if (strcmp(a, "--position-source") == 0 || strcmp(a, "--velocity-source") == 0) {
+            int *src = a[2] == 'p' ? &c->servo.position_source : &c->servo.velocity_source;
+            if (strcmp(v, "joint") == 0) *src = SIM_ENCODER_JOINT;
+            else if (strcmp(v, "motor") == 0) *src = SIM_ENCODER_MOTOR;
+            else {
+                snprintf(err, errcap, "%s: '%s' is not joint or motor", a, v);
+                rc = -1;
+            }
         } else if (strcmp(a, "--velocity-filter-hz") == 0) {
             rc = parse_double(a, v, 0.0, 1e6, 0, &c->servo.velocity_filter_hz, err, errcap);
         } else if (strcmp(a, "--torque-noise-nm") == 0) {
@@ -308,12 +329,12 @@ int sim_options_parse(int argc, char **argv, sim_options_t *o, char *err, unsign
             *(strcmp(a, "--rated-torque-mnm") == 0 ? &o->co.preset.rated_torque_mnm
                                                    : &o->co.preset.encoder_increments) = (uint32_t)d;
             o->co_given = 1;
-        } else if (strcmp(a, "--gear-ratio") == 0) {
+        } else if (strcmp(a, "--od-gear-ratio") == 0) {
             unsigned long m = 0, sh = 0;
             char tail = 0;
             if (sscanf(v, "%lu:%lu%c", &m, &sh, &tail) != 2 || m == 0u || sh == 0u || m > 0xFFFFFFFFul ||
                 sh > 0xFFFFFFFFul || v[0] == '-') {
-                snprintf(err, errcap, "--gear-ratio: '%s' is not MOTOR:SHAFT (whole numbers >= 1)", v);
+                snprintf(err, errcap, "--od-gear-ratio: '%s' is not MOTOR:SHAFT (whole numbers >= 1)", v);
                 rc = -1;
             }
             o->co.preset.gear_motor = (uint32_t)m;
@@ -356,12 +377,26 @@ int sim_options_parse(int argc, char **argv, sim_options_t *o, char *err, unsign
         return -1;
     }
     if (o->co_given && o->protocol != SIM_PROTOCOL_CANOPEN) {
-        snprintf(err, errcap, "--rated-torque-mnm/--encoder-increments/--gear-ratio/--inject-overcurrent: only with "
+        snprintf(err, errcap, "--rated-torque-mnm/--encoder-increments/--od-gear-ratio/--inject-overcurrent: only with "
                  "--protocol canopen");
         return -1;
     }
     if (o->protocol == SIM_PROTOCOL_CANOPEN && c->timing != SIM_TIMING_OFF) {
         snprintf(err, errcap, "--bus-timing: not with --protocol canopen (the master's clock sets the pace)");
+        return -1;
+    }
+    if ((c->servo.motor_encoder_bits > 0) != (c->servo.gear_ratio > 0.0)) {
+        snprintf(err, errcap, "--motor-encoder-bits/--gear-ratio: give both (a motor encoder turns with the gear)");
+        return -1;
+    }
+    if ((c->servo.position_source == SIM_ENCODER_MOTOR || c->servo.velocity_source == SIM_ENCODER_MOTOR) &&
+        c->servo.motor_encoder_bits == 0) {
+        snprintf(err, errcap, "--%s-source motor: give --motor-encoder-bits and --gear-ratio",
+                 c->servo.position_source == SIM_ENCODER_MOTOR ? "position" : "velocity");
+        return -1;
+    }
+    if (c->servo.velocity_source == SIM_ENCODER_MOTOR && c->servo.velocity_filter_hz == 0.0) {
+        snprintf(err, errcap, "--velocity-source motor: give --velocity-filter-hz (without it the velocity is the true one)");
         return -1;
     }
     if (c->timing == SIM_TIMING_OFF && frames_given != 0u) {

@@ -14,7 +14,7 @@ void sim_servo_config_default(sim_servo_config_t *c)
 
 int sim_servo_is_ideal(const sim_servo_config_t *c)
 {
-    return c->encoder_bits == 0 && c->velocity_filter_hz == 0.0 && c->torque_noise_nm == 0.0 &&
+    return c->encoder_bits == 0 && c->motor_encoder_bits == 0 && c->velocity_filter_hz == 0.0 && c->torque_noise_nm == 0.0 &&
            c->current_loop_hz == 0.0 && c->latency_s == 0.0 && c->ripple == 0.0;
 }
 
@@ -67,32 +67,42 @@ double sim_rng_normal(sim_rng_t *r)
     return sqrt(-2.0 * log(u1)) * cos(2.0 * SIM_PI * u2);
 }
 
+/* One encoder's reading of the joint angle q: 2^bits counts per turn of a shaft turning `ratio`
+ * times the joint, the noise (sigma in counts) before quantisation, in joint radians. */
+static double encoder_read(int bits, double ratio, double noise_counts, sim_rng_t *noise, double q)
+{
+    const double count = 2.0 * SIM_PI / (ldexp(1.0, bits) * ratio);
+    double counts = q / count;
+    if (noise_counts > 0.0) counts += noise_counts * sim_rng_normal(noise);
+    return floor(counts + 0.5) * count;
+}
+
 void sim_servo_measure(const sim_servo_config_t *c, sim_servo_t *s, sim_rng_t *noise, double q, double qd,
                        double period_s, double *q_out, double *qd_out, double *tau_out)
 {
-    double qm = q;
-    if (c->encoder_bits > 0) {
-        const double count = 2.0 * SIM_PI / ldexp(1.0, c->encoder_bits);
-        double counts = q / count;
-        if (c->position_noise_counts > 0.0) counts += c->position_noise_counts * sim_rng_normal(noise);
-        qm = floor(counts + 0.5) * count;
-    }
+    const double qj = c->encoder_bits > 0 ? encoder_read(c->encoder_bits, 1.0, c->position_noise_counts, noise, q) : q;
+    /* The motor encoder counts turns from power-up, where the joint encoder gave the absolute
+     * position: modelled as already referenced (the gear rigid, no backlash or wind-up). */
+    const double qm = c->motor_encoder_bits > 0
+                          ? encoder_read(c->motor_encoder_bits, c->gear_ratio, c->position_noise_counts, noise, q)
+                          : q;
+    const double qv = c->velocity_source == SIM_ENCODER_MOTOR ? qm : qj;
     double vm = qd;
     if (c->velocity_filter_hz > 0.0) {
         if (!s->primed) {
             s->v_filtered = qd; /* the drive has been running before the controller asks */
         } else {
-            const double raw = (qm - s->q_prev) / period_s;
+            const double raw = (qv - s->q_prev) / period_s;
             const double a = 1.0 - exp(-2.0 * SIM_PI * c->velocity_filter_hz * period_s);
             s->v_filtered += a * (raw - s->v_filtered);
         }
         vm = s->v_filtered;
     }
-    s->q_prev = qm;
+    s->q_prev = qv;
     s->primed = 1;
     double tm = s->torque;
     if (c->torque_noise_nm > 0.0) tm += c->torque_noise_nm * sim_rng_normal(noise);
-    *q_out = qm;
+    *q_out = c->position_source == SIM_ENCODER_MOTOR ? qm : qj;
     *qd_out = vm;
     *tau_out = tm;
 }

@@ -1,9 +1,11 @@
 /* What a real servo drive puts between the controller and the joint, emulated per drive:
  *
  * - sensing: an absolute encoder of 2^bits counts per joint turn (quantised position, with
- *   Gaussian noise in counts before quantisation), a velocity the drive estimates from encoder
- *   differences and low-passes (first order, exact discretisation), and the measured torque
- *   with Gaussian noise;
+ *   Gaussian noise in counts before quantisation), optionally a second encoder on the motor,
+ *   2^motor_bits counts per motor turn through a rigid gear of gear_ratio (so gear_ratio times
+ *   finer at the joint), a velocity the drive estimates from one encoder's differences and
+ *   low-passes (first order, exact discretisation), and the measured torque with Gaussian noise;
+ *   which encoder reports the position and which feeds the velocity is configured;
  * - actuation: a transport latency from the command's arrival to the current loop, and the
  *   current (torque) loop as a first-order lag of the stated bandwidth; optional torque ripple
  *   (cogging), a relative amplitude at a number of periods per joint turn.
@@ -17,9 +19,15 @@
 
 #include "sim_rng.h"
 
+enum { SIM_ENCODER_JOINT = 0, SIM_ENCODER_MOTOR = 1 };
+
 typedef struct {
     int encoder_bits;              /* counts per turn = 2^bits; 0: the true position */
-    double position_noise_counts;  /* sigma, in encoder counts (needs encoder_bits) */
+    double position_noise_counts;  /* sigma, in each encoder's own counts (needs encoder_bits) */
+    int motor_encoder_bits;        /* counts per motor turn = 2^bits; 0: no motor encoder */
+    double gear_ratio;             /* motor turns per joint turn (needs motor_encoder_bits) */
+    int position_source;           /* SIM_ENCODER_JOINT or _MOTOR: the position reported */
+    int velocity_source;           /* the encoder whose differences give the velocity */
     double velocity_filter_hz;     /* velocity from encoder differences, low-passed here; 0: the true velocity */
     double torque_noise_nm;        /* sigma of the torque the drive reports */
     double current_loop_hz;        /* first-order torque lag of this bandwidth; 0: immediate */
@@ -31,7 +39,7 @@ typedef struct {
 typedef struct {
     double torque;       /* the current loop's output at the start of the period */
     double input;        /* its input (the last command) */
-    double q_prev;       /* last measured position, for the velocity estimate */
+    double q_prev;       /* the velocity source's last position, for the velocity estimate */
     double v_filtered;
     int primed;          /* q_prev and v_filtered hold values */
 } sim_servo_t;

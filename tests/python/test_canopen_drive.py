@@ -272,7 +272,7 @@ def test_injected_overcurrent_faults_the_drive(rig: Rig) -> None:
 
 
 @pytest.mark.parametrize("rig", [["--rated-torque-mnm", "28000", "--encoder-increments", "4096",
-                                  "--gear-ratio", "50:1"]], indirect=True)
+                                  "--od-gear-ratio", "50:1"]], indirect=True)
 def test_arm_overrides_preset_the_scaling(rig: Rig) -> None:
     node = rig.node
     assert node.sdo[0x6076].raw == 28000
@@ -296,8 +296,8 @@ def test_nmt_resets_restore_defaults(rig: Rig) -> None:
 
 @pytest.mark.parametrize(("args", "needle"), [
     (["--protocol", "ethercat"], "--protocol: 'ethercat' is not arm or canopen"),
-    (["--gear-ratio", "50:1"], "only with --protocol canopen"),
-    (["--protocol", "canopen", "--gear-ratio", "50:0"], "--gear-ratio: '50:0' is not MOTOR:SHAFT"),
+    (["--od-gear-ratio", "50:1"], "only with --protocol canopen"),
+    (["--protocol", "canopen", "--od-gear-ratio", "50:0"], "--od-gear-ratio: '50:0' is not MOTOR:SHAFT"),
     (["--protocol", "canopen", "--inject-overcurrent", "0:1"], "--inject-overcurrent: '0:1' is not NODE:TIME"),
     (["--protocol", "canopen", "--rated-torque-mnm", "1.5"], "--rated-torque-mnm: '1.5' is not a whole number"),
 ])

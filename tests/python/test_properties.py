@@ -145,9 +145,11 @@ def test_study_config_loader_raises_only_study_config_error(tmp_path: Path, m: t
 
 
 @SETTINGS
-@given(st.dictionaries(st.sampled_from(["encoder_bits", "position_noise_counts", "velocity_filter_hz",
+@given(st.dictionaries(st.sampled_from(["encoder_bits", "position_noise_counts", "motor_encoder_bits", "gear_ratio",
+                                        "position_source", "velocity_source", "velocity_filter_hz",
                                         "torque_noise_nm", "current_loop_hz", "torque_latency_us", "ripple",
-                                        "ripple_periods", "colour"]), scalars, max_size=5))
+                                        "ripple_periods", "colour"]), scalars | st.sampled_from(["joint", "motor"]),
+                       max_size=5))
 def test_drive_model_raises_only_value_error(d: dict) -> None:
     try:
         m = DriveModel.from_dict(d)
