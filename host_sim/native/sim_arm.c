@@ -1,5 +1,7 @@
 #include "sim_arm.h"
 
+#include "arm_params.h"
+
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -7,8 +9,8 @@
 void sim_uncertainty_default(sim_uncertainty_t *u)
 {
     memset(u, 0, sizeof(*u));
-    u->seed = 1u;
-    u->paper_knot_s = 0.05;
+    u->seed = ARM_P_SIMULATOR_SEED_DEFAULT;
+    u->paper_knot_s = ARM_P_SIMULATOR_PAPER_KNOT_S_DEFAULT;
 }
 
 static void draw_knot(sim_arm_t *a, double *dst)

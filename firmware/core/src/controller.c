@@ -5,47 +5,58 @@
 #include <string.h>
 
 #include "arm/methods.h"
+#include "arm_params.h"
 #include "arm/rnea.h"
 #include "arm_rnea_kernel.h"
 
 #define ARM_ALL_JOINTS_MASK ((uint32_t)((1ull << ARM_N_JOINTS) - 1u))
 
+void arm_ctl_joint_range(const arm_robot_model_t *model, float margin, float q_min[ARM_N_JOINTS],
+                         float q_max[ARM_N_JOINTS])
+{
+    for (int i = 0; i < ARM_N_JOINTS; ++i) {
+        const arm_link_t *l = &model->link[i];
+        q_min[i] = l->q_min > -ARM_UNLIMITED ? l->q_min - margin : -ARM_UNLIMITED;
+        q_max[i] = l->q_max < ARM_UNLIMITED ? l->q_max + margin : ARM_UNLIMITED;
+    }
+}
+
+/* The defaults are the registry's (firmware/params/params.toml, as arm_params.h): arm_controller's
+ * options document and parse the same numbers. */
 void arm_ctl_default_config(const arm_robot_model_t *model, arm_ctl_config_t *cfg)
 {
-    const float wn = 20.0f; /* rad/s: well below the 1 kHz loop, above the reference's content */
     memset(cfg, 0, sizeof(*cfg));
     cfg->method = ARM_METHOD_PD;
-    cfg->period_s = 0.001f;
-    cfg->kp = wn * wn;
-    cfg->kd = 2.0f * wn;
+    cfg->period_s = (float)(1.0 / ARM_P_CONTROLLER_RATE_DEFAULT);
+    /* wn = 20 rad/s: well below the 1 kHz loop, above the reference's content */
+    cfg->kp = (float)ARM_P_CONTROLLER_KP_DEFAULT;
+    cfg->kd = (float)ARM_P_CONTROLLER_KD_DEFAULT;
     cfg->numeric = ARM_NUMERIC_FLOAT;
-    cfg->tde_cutoff_hz = 50.0f;
-    cfg->usde_k = 0.01f;
-    cfg->smc_lambda = 20.0f;
-    cfg->smc_eta = 1.0f;
-    cfg->smc_phi = 0.05f;
-    cfg->smc_ks = 20.0f;
+    cfg->tde_cutoff_hz = (float)ARM_P_CONTROLLER_TDE_CUTOFF_DEFAULT;
+    cfg->usde_k = (float)ARM_P_CONTROLLER_USDE_K_DEFAULT;
+    cfg->smc_lambda = (float)ARM_P_CONTROLLER_SMC_LAMBDA_DEFAULT;
+    cfg->smc_eta = (float)ARM_P_CONTROLLER_SMC_ETA_DEFAULT;
+    cfg->smc_phi = (float)ARM_P_CONTROLLER_SMC_PHI_DEFAULT;
+    cfg->smc_ks = (float)ARM_P_CONTROLLER_SMC_KS_DEFAULT;
     for (int i = 0; i < ARM_N_JOINTS; ++i) {
         cfg->torque_limit[i] = model->link[i].torque_limit;
         /* Full scale in 10 ms: fast enough to take the arm's weight within a few periods of
          * enabling, slow enough to turn a corrupted command into a ramp rather than a jump. */
         cfg->torque_rate_limit[i] = model->link[i].torque_limit * (cfg->period_s / 0.010f);
     }
-    cfg->watchdog_periods = 3u;
+    cfg->watchdog_periods = ARM_P_CONTROLLER_WATCHDOG_PERIODS_DEFAULT;
     cfg->safe_stop_mode = ARM_SAFE_STOP_ZERO_TORQUE;
     cfg->safe_stop_damping = 0.0f;
     cfg->checks = ARM_CHECK_ALL;
     /* A noisy encoder, a filtered velocity and a lagging current loop stay far inside these; a
      * corrupted or spoofed state, a runaway joint or a drive that does not do as told do not. */
-    cfg->step_tolerance = 0.01f;
+    cfg->step_tolerance = (float)ARM_P_CONTROLLER_STEP_TOLERANCE_DEFAULT;
     cfg->torque_mismatch_periods = 3u;
+    arm_ctl_joint_range(model, (float)ARM_P_CONTROLLER_POSITION_MARGIN_DEFAULT, cfg->q_min, cfg->q_max);
     for (int i = 0; i < ARM_N_JOINTS; ++i) {
-        const arm_link_t *l = &model->link[i];
-        cfg->q_min[i] = l->q_min > -ARM_UNLIMITED ? l->q_min - 0.1f : -ARM_UNLIMITED;
-        cfg->q_max[i] = l->q_max < ARM_UNLIMITED ? l->q_max + 0.1f : ARM_UNLIMITED;
-        cfg->velocity_limit[i] = 6.2831853f;
-        cfg->following_error_limit[i] = 0.5f;
-        cfg->torque_mismatch_limit[i] = 0.1f * l->torque_limit;
+        cfg->velocity_limit[i] = (float)ARM_P_CONTROLLER_MAX_VELOCITY_DEFAULT;
+        cfg->following_error_limit[i] = (float)ARM_P_CONTROLLER_MAX_FOLLOWING_ERROR_DEFAULT;
+        cfg->torque_mismatch_limit[i] = (float)ARM_P_CONTROLLER_TORQUE_MISMATCH_DEFAULT * model->link[i].torque_limit;
     }
 }
 

@@ -30,12 +30,6 @@ void rt_options_default(rt_options_t *o)
     o->debug_slow_step_us = 0u;
 }
 
-int rt_option_known(const char *name)
-{
-    return strcmp(name, "--cpu") == 0 || strcmp(name, "--rt-priority") == 0 ||
-           strcmp(name, "--debug-slow-step-us") == 0;
-}
-
 static int parse_int(const char *name, const char *s, long lo, long hi, long *out, char *err,
                      unsigned long errcap)
 {
@@ -69,14 +63,6 @@ int rt_option_parse(const char *name, const char *value, rt_options_t *o, char *
         return -1;
     }
     return 0;
-}
-
-void rt_usage(void)
-{
-    printf("  --rt-priority P         SCHED_FIFO priority 1..99 for the loop thread, 0 = none\n"
-           "                          [realtime: %d if permitted; lockstep: 0]\n"
-           "  --cpu N                 pin the loop thread to CPU N    [no affinity]\n",
-           RT_DEFAULT_PRIORITY);
 }
 
 /* Touches the stack the loop will use, so its pages are mapped (and, after mlockall, locked)

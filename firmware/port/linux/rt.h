@@ -30,12 +30,9 @@ typedef struct {
 } rt_status_t;
 
 void rt_options_default(rt_options_t *o);
-/* 1 if name is one of this file's options (--cpu, --rt-priority, --debug-slow-step-us). */
-int rt_option_known(const char *name);
 /* Parses one option's value; 0, or -1 with a message naming the option and value in err. */
 int rt_option_parse(const char *name, const char *value, rt_options_t *o, char *err,
                     unsigned long errcap);
-void rt_usage(void);
 
 /* Applies the options to the calling thread (call it from the loop's thread, after other threads
  * were started: they keep the ordinary policy). realtime: 1 for the wall-clock mode (an AUTO

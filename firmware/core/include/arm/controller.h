@@ -139,12 +139,16 @@ typedef enum {
     ARM_CTL_BAD_STEP_TOLERANCE,
 } arm_ctl_init_result_t;
 
-/* Fills cfg with the defaults for the model: PD at 20 rad/s, critically damped; the model's
+/* Fills cfg with the defaults for the model (the numbers are the registry's,
+ * firmware/params/params.toml): PD at 20 rad/s, critically damped; the model's
  * torque limits; a rate limit of full scale per 10 ms; zero-torque safe stop after 3 stale periods;
  * every plausibility check: the model's joint ranges + 0.1 rad, 2 pi rad/s, steps within 0.01 rad
  * of what the velocities explain, 0.5 rad of following error, and the reported torque within 10 %
  * of the torque limit of the commanded one for no more than 3 periods in a row. */
 void arm_ctl_default_config(const arm_robot_model_t *model, arm_ctl_config_t *cfg);
+/* The plausible joint range: the model's widened by margin (rad); an unlimited joint stays so. */
+void arm_ctl_joint_range(const arm_robot_model_t *model, float margin, float q_min[ARM_N_JOINTS],
+                         float q_max[ARM_N_JOINTS]);
 arm_ctl_init_result_t arm_ctl_init(arm_ctl_t *ctl, const arm_robot_model_t *model,
                                    const arm_ctl_config_t *cfg);
 const char *arm_ctl_init_result_str(arm_ctl_init_result_t r);

@@ -1,0 +1,148 @@
+"""The parameter registry (firmware/params/params.toml) for Python: every option of arm_controller,
+arm_sim and armctl hil with its type, default, range, unit and help, declared once. gen/params.py
+writes the C side from the same file; argparse defaults, the drive model's ranges and the README's
+option tables come from here."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+from gen.lib.paths import REPO
+from gen.lib.toml_input import loads as toml_loads
+
+REGISTRY = REPO / "firmware" / "params" / "params.toml"
+PROGRAMS = ("controller", "simulator", "hil")
+TYPES = ("float", "int", "text", "flag", "special")
+C_TYPES = ("double", "float", "floats", "uint32", "int", "long")
+_FIELDS = {"type", "c", "field", "default", "min", "max", "min_open", "scale", "unit", "arg", "help", "group", "hidden"}
+
+
+class RegistryError(ValueError):
+    pass
+
+
+@dataclass(frozen=True)
+class Param:
+    program: str
+    name: str  # the option without its leading "--"
+    type: str
+    default: Any
+    help: str
+    min: float | None = None
+    max: float | None = None
+    min_open: bool = False
+    scale: float = 1.0
+    unit: str = ""
+    arg: str = ""
+    c: str = "double"
+    field: str = ""
+    group: str = ""
+    hidden: bool = False
+
+    @property
+    def option(self) -> str:
+        return f"--{self.name}"
+
+    def range_text(self) -> str:
+        """'[lo, hi]' or '(lo, hi]' as the C parser's messages write it; '' when unbounded."""
+        if self.min is None and self.max is None:
+            return ""
+        lo = "-inf" if self.min is None else f"{self.min:g}"
+        hi = "inf" if self.max is None else f"{self.max:g}"
+        return f"{'(' if self.min_open else '['}{lo}, {hi}]"
+
+    def default_text(self) -> str:
+        d = self.default
+        if isinstance(d, bool):
+            return "off" if not d else "on"
+        if isinstance(d, float):
+            return f"{d:g}"
+        return str(d)
+
+    def check(self, value: float, where: str | None = None) -> float:
+        """value if it is a finite number in range, else a ValueError naming where and the range."""
+        name = where or self.option
+        ok = not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
+        if ok and self.min is not None:
+            ok = value > self.min if self.min_open else value >= self.min
+        if ok and self.max is not None:
+            ok = value <= self.max
+        if not ok:
+            raise ValueError(f"{name}: must be a number in {self.range_text()}, got {value!r}")
+        if self.type == "int" and value != int(value):
+            raise ValueError(f"{name}: must be a whole number, got {value!r}")
+        return value
+
+
+def _param(program: str, name: str, t: Any, where: str) -> Param:
+    if not isinstance(t, dict):
+        raise RegistryError(f"{where}: expected a table")
+    unknown = set(t) - _FIELDS
+    if unknown:
+        raise RegistryError(f"{where}: unknown field(s) {sorted(unknown)}")
+    if t.get("type") not in TYPES:
+        raise RegistryError(f"{where}.type: one of {', '.join(TYPES)}, got {t.get('type')!r}")
+    if "default" not in t or not isinstance(t.get("help"), str):
+        raise RegistryError(f"{where}: default and help are required")
+    if t.get("c", "double") not in C_TYPES:
+        raise RegistryError(f"{where}.c: one of {', '.join(C_TYPES)}, got {t['c']!r}")
+    for k in ("min", "max", "scale"):
+        if k in t and (isinstance(t[k], bool) or not isinstance(t[k], (int, float))):
+            raise RegistryError(f"{where}.{k}: a number, got {t[k]!r}")
+    return Param(program=program, name=name, type=t["type"], default=t["default"], help=t["help"],
+                 min=None if "min" not in t else float(t["min"]), max=None if "max" not in t else float(t["max"]),
+                 min_open=bool(t.get("min_open", False)), scale=float(t.get("scale", 1.0)), unit=t.get("unit", ""),
+                 arg=t.get("arg", ""), c=t.get("c", "double"), field=t.get("field", ""), group=t.get("group", ""),
+                 hidden=bool(t.get("hidden", False)))
+
+
+@lru_cache(maxsize=4)
+def _load(path: Path) -> tuple[dict[str, dict[str, Param]], dict[str, Any]]:
+    doc = toml_loads(path.read_text())
+    out: dict[str, dict[str, Param]] = {}
+    for program in PROGRAMS:
+        table = doc.get(program, {})
+        out[program] = {name: _param(program, name, t, f"{path.name}: {program}.{name}") for name, t in table.items()}
+    constants = {name: t["value"] for name, t in doc.get("constant", {}).items()}
+    return out, constants
+
+
+def params(program: str, path: Path = REGISTRY) -> dict[str, Param]:
+    """The program's parameters by option name (without "--"), in the registry's order."""
+    return _load(path)[0][program]
+
+
+def param(program: str, name: str) -> Param:
+    return params(program)[name]
+
+
+def default(program: str, name: str) -> Any:
+    return param(program, name).default
+
+
+def constant(name: str) -> Any:
+    return _load(REGISTRY)[1][name]
+
+
+def markdown_table(program: str, path: Path = REGISTRY) -> str:
+    """The README's option table of a program: option, default, range, unit, what."""
+    rows = ["| option | default | range | unit | what |", "|---|---|---|---|---|"]
+    for p in params(program, path).values():
+        if p.hidden:
+            continue
+        arg = f" {p.arg}".replace("|", "\\|") if p.arg else ""
+        what = p.help.replace("|", "\\|").replace("{max_buses}", "4").replace("{methods}", "the method table's")
+        default_text = p.default_text().replace("{model}", "the built arm")
+        rows.append(f"| `{p.option}{arg}` | {default_text or '-'} | {p.range_text() or '-'} | {p.unit or '-'} | "
+                    f"{what} |")
+    return "\n".join(rows) + "\n"
+
+
+# The README's generated tables sit between these lines (gen/params.py --readme rewrites them).
+def readme_markers(program: str) -> tuple[str, str]:
+    return f"<!-- params:{program} (generated from firmware/params/params.toml: python -m gen.params --readme) -->", \
+        f"<!-- /params:{program} -->"
