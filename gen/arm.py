@@ -36,6 +36,7 @@ import numpy as np
 
 from gen.lib import toml_input
 from gen.lib.bounds import DEFAULT_MAX_ERROR_DEG
+from gen.lib.params import constant
 from gen.lib.atomic_output import OutputError, write_files_atomically
 
 REPO = Path(__file__).resolve().parent.parent
@@ -54,7 +55,7 @@ RANGE_MARGIN = 0.05        # rad: the reference and the home pose stay this far 
 REF_TORQUE_FRACTION = 0.5
 REF_MAX_VELOCITY = math.pi       # rad/s
 REF_MAX_ACCELERATION = 20.0      # rad/s^2
-BUS_BUDGET = 0.70          # the highest bus load the wiring may reach (armctl busload's default)
+BUS_BUDGET: float = constant("bus-budget")  # the highest bus load the wiring may reach (the registry's)
 # The design of an arm that names none (no --design, none in its arm file), other than the bundled
 # arm: the paper's estimator with a critically damped static controller u_o = -(wn^2 e + 2 wn e_dot)
 # (gen/configs/wn40.toml's form), wn the largest at which a tracking error at the bound asks no
@@ -1045,7 +1046,7 @@ def _wiring(af: ArmFile, n: int, rate: float) -> list[dict[str, Any]]:
             buses = busload.load_topology(DEFAULT_TOPOLOGY, n)
         else:
             buses = busload.default_wiring(n, rate)
-        loads = busload.compute(buses, rate, 100.0, busload.default_protocol(), n)
+        loads = busload.compute(buses, rate, constant("heartbeat-ms"), busload.default_protocol(), n)
         over = [bl for bl in loads if bl.load > BUS_BUDGET]
         if over:
             raise busload.ConfigError(

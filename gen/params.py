@@ -17,7 +17,7 @@ import textwrap
 from pathlib import Path
 
 from gen.lib.atomic_output import write_text_atomic
-from gen.lib.params import PROGRAMS, REGISTRY, Param, RegistryError, markdown_table, params, readme_markers
+from gen.lib.params import PROGRAMS, REGISTRY, Param, RegistryError, constants, markdown_table, params, readme_markers
 
 C_PROGRAMS = ("controller", "simulator")
 _KIND = {("float", "double"): "ARGV_DOUBLE", ("float", "float"): "ARGV_FLOAT", ("float", "floats"): "ARGV_FLOATS",
@@ -91,6 +91,17 @@ def header() -> str:
             if p.max is not None:
                 out.append(f"#define {m}_MAX {_num(p.max)}")
         out.append("")
+    out.append("/* shared constants */")
+    for name, v in constants().items():
+        m = "ARM_P_" + re.sub(r"[^A-Z0-9]", "_", name.upper())
+        if isinstance(v, list):  # names in order: each one's index, and the list
+            out += [f"#define {m}_{re.sub(r'[^A-Z0-9]', '_', x.upper())} {i}" for i, x in enumerate(v)]
+            out.append(f"#define {m}_NAMES {', '.join(_cstr(x) for x in v)}")
+        elif isinstance(v, dict):
+            out += [f"#define {m}_{re.sub(r'[^A-Z0-9]', '_', k.upper())} {x}" for k, x in v.items()]
+        else:
+            out.append(f"#define {m} {_num(v) if isinstance(v, float) else v}")
+    out.append("")
     for program in C_PROGRAMS:
         rows = []
         for p in params(program).values():

@@ -11,14 +11,18 @@ sources are in the README (Realistic drives).
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
+from gen.lib.params import check_table, param
 
+# Each field's arm_sim option: its range, unit and default are the registry's (firmware/params/params.toml).
+OPTIONS = {"encoder_bits": "encoder-bits", "position_noise_counts": "position-noise-counts",
+           "motor_encoder_bits": "motor-encoder-bits", "gear_ratio": "gear-ratio", "velocity_filter_hz": "velocity-filter-hz", "torque_noise_nm": "torque-noise-nm",
+           "current_loop_hz": "current-loop-hz", "torque_latency_us": "torque-latency-us", "ripple": "ripple",
+           "ripple_periods": "ripple-periods"}
 SOURCES = ("joint", "motor")
-SOURCE_FIELDS = ("position_source", "velocity_source")
-INT_FIELDS = ("encoder_bits", "motor_encoder_bits")
+SOURCE_FIELDS = ("position_source", "velocity_source")  # --position-source, --velocity-source
 
 
 @dataclass(frozen=True)
@@ -34,32 +38,20 @@ class DriveModel:
     current_loop_hz: float = 0.0          # first-order torque lag of this bandwidth; 0: immediate
     torque_latency_us: float = 0.0        # command arrival -> current loop
     ripple: float = 0.0                   # relative torque ripple amplitude
-    ripple_periods: float = 6.0           # ripple periods per joint turn
+    ripple_periods: float = param("simulator", "ripple-periods").default  # per joint turn
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], where: str = "drives") -> "DriveModel":
-        if not isinstance(data, dict):
-            raise ValueError(f"{where}: expected a table of fields, got {type(data).__name__}")
-        known = {f.name for f in fields(cls)}
-        unknown = set(data) - known
-        if unknown:
-            raise ValueError(f"{where}: unknown field(s) {sorted(unknown)} (known: {', '.join(sorted(known))})")
-        limits = {"encoder_bits": (0, 32), "position_noise_counts": (0, 1e6), "motor_encoder_bits": (0, 32),
-                  "gear_ratio": (0, 1e4), "velocity_filter_hz": (0, 1e6),
-                  "torque_noise_nm": (0, 1e4), "current_loop_hz": (0, 1e7), "torque_latency_us": (0, 1e6),
-                  "ripple": (0, 1), "ripple_periods": (0, 1e4)}
+        check_table(data, {f.name for f in fields(cls)}, where)
         for k, v in data.items():
             if k in SOURCE_FIELDS:
                 if v not in SOURCES:
                     raise ValueError(f"{where}.{k}: must be one of {', '.join(SOURCES)}, got {v!r}")
                 continue
-            lo, hi = limits[k]
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not lo <= v <= hi:
-                raise ValueError(f"{where}.{k}: must be a number in [{lo:g}, {hi:g}], got {v!r}")
-        for k in INT_FIELDS:
-            if k in data and data[k] != int(data[k]):
-                raise ValueError(f"{where}.{k}: must be a whole number, got {data[k]!r}")
-        m = cls(**{k: (v if k in SOURCE_FIELDS else int(v) if k in INT_FIELDS else float(v)) for k, v in data.items()})
+            # a field's range holds its default too: 0 bits, ratio 0, ... is the drive without it
+            param("simulator", OPTIONS[k]).check(v, f"{where}.{k}", with_default=True)
+        m = cls(**{k: (v if k in SOURCE_FIELDS else int(v) if param("simulator", OPTIONS[k]).type == "int" else float(v))
+                   for k, v in data.items()})
         if m.position_noise_counts > 0 and m.encoder_bits == 0:
             raise ValueError(f"{where}.position_noise_counts: needs encoder_bits (noise in counts of what?)")
         if m.motor_encoder_bits > 0 and not m.gear_ratio >= 1:
@@ -82,17 +74,13 @@ class DriveModel:
         if self.ideal:
             return []
         out = []
-        for name, opt in (("encoder_bits", "--encoder-bits"), ("position_noise_counts", "--position-noise-counts"),
-                          ("motor_encoder_bits", "--motor-encoder-bits"), ("gear_ratio", "--gear-ratio"),
-                          ("velocity_filter_hz", "--velocity-filter-hz"), ("torque_noise_nm", "--torque-noise-nm"),
-                          ("current_loop_hz", "--current-loop-hz"), ("torque_latency_us", "--torque-latency-us"),
-                          ("ripple", "--ripple"), ("ripple_periods", "--ripple-periods")):
+        for name, opt in OPTIONS.items():
             v = getattr(self, name)
             if v:
-                out += [opt, repr(v)]
-        for name, opt in (("position_source", "--position-source"), ("velocity_source", "--velocity-source")):
+                out += [f"--{opt}", repr(v)]
+        for name in SOURCE_FIELDS:
             if getattr(self, name) != "joint":
-                out += [opt, getattr(self, name)]
+                out += [f"--{name.replace('_', '-')}", getattr(self, name)]
         return out
 
     def to_dict(self) -> dict[str, Any]:

@@ -18,19 +18,19 @@ reproduced bit for bit in host_sim/native/sim_rng.c), in a fixed order.
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
-MIN_KNOT_S = 1e-4  # arm_sim's bound: a new random value at most every 0.1 ms
+from gen.lib.params import check_table, param
+
 
 
 @dataclass
 class UncertaintyConfig:
-    seed: int = 1
+    seed: int = param("simulator", "seed").default
     paper_ratio: float = 0.0  # r; 0 disables the paper-style uncertainty
-    paper_knot_s: float = 0.05
+    paper_knot_s: float = param("simulator", "paper-knot-s").default
     mass_error: float = 0.0  # relative, per link
     inertia_error: float = 0.0  # relative, per link
     com_error_m: float = 0.0  # metres, per link and axis
@@ -39,12 +39,7 @@ class UncertaintyConfig:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], where: str = "uncertainty") -> "UncertaintyConfig":
-        if not isinstance(data, dict):
-            raise ValueError(f"{where}: expected a table of fields, got {type(data).__name__}")
-        known = {f.name for f in fields(cls)}
-        unknown = set(data) - known
-        if unknown:
-            raise ValueError(f"{where}: unknown field(s) {sorted(unknown)} (known: {', '.join(sorted(known))})")
+        check_table(data, {f.name for f in fields(cls)}, where)
         cfg = cls(**data)
         cfg.validate(where)
         return cfg
@@ -56,19 +51,16 @@ class UncertaintyConfig:
     def validate(self, where: str = "uncertainty") -> None:
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not 0 <= self.seed < 2**64:
             raise ValueError(f"{where}.seed: must be a whole number in 0..2^64-1, got {self.seed!r}")
-        for name in ("paper_ratio", "mass_error", "inertia_error", "com_error_m"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0.0 <= v < 1.0):
-                raise ValueError(f"{where}.{name}: must be a number in [0, 1), got {v!r}")
-        k = self.paper_knot_s
-        if isinstance(k, bool) or not isinstance(k, (int, float)) or not (MIN_KNOT_S <= k <= 3600.0):
-            raise ValueError(f"{where}.paper_knot_s: must be a number of seconds in [{MIN_KNOT_S:g}, 3600], got {k!r}")
+        for name in ("paper_ratio", "mass_error", "inertia_error", "com_error_m", "paper_knot_s"):
+            param("simulator", name.replace("_", "-")).check(getattr(self, name), f"{where}.{name}")
         for name in ("viscous", "coulomb"):
             vals = getattr(self, name)
-            if not isinstance(vals, list) or not all(
-                    isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) and 0 <= x <= 1e6
-                    for x in vals):
-                raise ValueError(f"{where}.{name}: must be a list of friction coefficients in [0, 1e6], got {vals!r}")
+            p = param("simulator", name)
+            if not isinstance(vals, list):
+                raise ValueError(f"{where}.{name}: must be a list of friction coefficients in {p.range_text()}, "
+                                 f"got {vals!r}")
+            for i, x in enumerate(vals):
+                p.check(x, f"{where}.{name}[{i}]")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 from gen.lib import busload as lib
+from gen.lib.params import constant, default
 from gen.lib.busload import (DEFAULT_DBC, DEFAULT_TOPOLOGY, BusLoad, ConfigError, Protocol, drives_arg,
                              rate_arg, compute, even_split, load_topology, parse_bus, topology_drives)
 
@@ -39,9 +40,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "[the buses of --topology]")
     p.add_argument("--topology", type=Path, default=DEFAULT_TOPOLOGY,
                    help="bus topology file used when no --bus is given [firmware/protocol/buses.toml]")
-    p.add_argument("--rate", type=float, default=1000.0, help="control loop rate, Hz [1000]")
-    p.add_argument("--budget", type=float, default=70.0, help="highest acceptable bus load, %% [70]")
-    p.add_argument("--heartbeat-ms", type=float, default=100.0, help="drive heartbeat period [100]")
+    rate, budget, heartbeat = default("controller", "rate"), 100 * constant("bus-budget"), constant("heartbeat-ms")
+    p.add_argument("--rate", type=float, default=rate, help=f"control loop rate, Hz [{rate:g}]")
+    p.add_argument("--budget", type=float, default=budget, help=f"highest acceptable bus load, %% [{budget:g}]")
+    p.add_argument("--heartbeat-ms", type=float, default=heartbeat, help=f"drive heartbeat period [{heartbeat:g}]")
     p.add_argument("--drives", type=int, default=None,
                    help="the arm's drives, 1..N [the highest drive the buses name]")
     p.add_argument("--dbc", type=Path, default=DEFAULT_DBC)

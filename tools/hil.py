@@ -23,13 +23,14 @@ from host_sim.drive_model import DriveModel
 from host_sim.launch import sim_argv
 from gen.lib import busload
 from tools.arm import DEFAULT_ARM, ArmChoiceError, ArmRef, arm_build_dir, arm_info, prepared_model
+from gen.lib.params import constant, default as param_default
 from gen.lib.paths import REPO, controller_binary, logger_binary
 from tools import procs as procs_mod
 from tools.run_analysis import analyse
 from tools.slots import acquire_slot
 from tools.verdict import Bounds
 
-CONTROLLER_DEFAULT_HOLD_S = 0.5  # arm_controller --ref-hold's default
+CONTROLLER_DEFAULT_HOLD_S: float = param_default("controller", "ref-hold")
 
 
 # Lockstep: both sides poll the bus this long before they sleep on it. A period's answer comes
@@ -41,8 +42,8 @@ LOCKSTEP_SPIN_US = 50
 @dataclass
 class HilOptions:
     out: Path
-    duration_s: float = 5.0
-    method: str = "pd"
+    duration_s: float = param_default("controller", "duration")  # arm_controller's defaults (the registry's)
+    method: str = param_default("controller", "method")
     mode: str = "lockstep"
     preset: str = "release"
     # udp | vcan | auto (vcan if this kernel has SocketCAN and vcan0.., else udp) | sil (one process)
@@ -255,9 +256,9 @@ def bus_args(kind: str, can_port: int, topology: list[busload.Bus]) -> list[str]
     return out
 
 
-def topology_load_pct(topology: list[busload.Bus], rate_hz: float = 1000.0) -> dict[str, float]:
+def topology_load_pct(topology: list[busload.Bus], rate_hz: float = param_default("controller", "rate")) -> dict[str, float]:
     """Worst-case load of each bus of the topology at the loop rate (tools/armctl busload)."""
-    loads = busload.compute(topology, rate_hz, 100.0, busload.default_protocol(),
+    loads = busload.compute(topology, rate_hz, constant("heartbeat-ms"), busload.default_protocol(),
                             max(d for b in topology for d in b.drives))
     return {bl.bus.name: round(bl.load * 100.0, 2) for bl in loads}
 

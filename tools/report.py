@@ -19,6 +19,7 @@ import numpy as np  # noqa: E402
 from gen.lib.atomic_output import write_text_atomic  # noqa: E402
 from tools.telemetry_log import read_log  # noqa: E402
 from tools.verdict import FOLLOWING_ERROR_STOP_DEG, left_tracking_bound, stopped_by_following_error  # noqa: E402
+from gen.lib.params import default  # noqa: E402
 
 # Kim & Kim 2024, Tables 1-3 (Table 1 from their simulation, Tables 2-3 from their experiment).
 PAPER_TABLE1 = {"usde-smc": [0.0292, 0.0950, 0.0320, 0.0462, 0.0157, 0.0157],
@@ -410,7 +411,7 @@ def write_report(out: Path, study: dict[str, Any]) -> None:
     wiring = ", ".join(f"{b['name']}: drives {','.join(map(str, b['drives']))}" for b in arm["buses"])
     md = [f"# Study: {study['description']}", "",
           f"Arm `{arm['name']}` ({n} joints: {', '.join(arm['joint_names'])}; model `{arm['model']}`, hash "
-          f"{arm['model_hash']}), its CAN buses {wiring}, {_how_run(study)} at 1 kHz. Config `{study['config']}`; "
+          f"{arm['model_hash']}), its CAN buses {wiring}, {_how_run(study)} at {default('controller', 'rate') / 1000:g} kHz. Config `{study['config']}`; "
           f"seeds {study['seeds']}; trajectory {study['duration_s']:g} s after a {study['hold_s']:g} s hold on the "
           "start pose (metrics cover the trajectory only). Intervals are 95 % confidence intervals of the mean over "
           "the seeds (Student's t); PM against another method is paired on the same seeds: the ratio of the means, "

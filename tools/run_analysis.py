@@ -15,9 +15,11 @@ import numpy as np
 
 from tools.telemetry_log import CHUNK_BYTES, EVENT_CHANNELS, FIXED_CHANNELS, Chunk, iter_chunks
 from tools.verdict import Bounds, judge
+from gen.lib.params import constant, default as param_default
 
-STATE_NAMES = {0: "init", 1: "running", 2: "fault", 3: "safe-stop"}
-STATE_RUNNING = 1
+# The controller's states as telemetry numbers them (the registry's, firmware/params/params.toml).
+STATE_NAMES = dict(enumerate(constant("controller-states")))
+STATE_RUNNING = constant("controller-states").index("running")
 PAIRING_WINDOW = 4096  # periods: w_true and w_hat of one period are paired within this much of each other
 # Channels whose sender publishes exactly one message per period, numbered from 0: step == seq.
 ONE_PER_PERIOD = ("ARM_CTL", "ARM_TIMING", "ARM_SIM")
@@ -350,7 +352,7 @@ def analyse(out_dir: Path, controller: dict[str, Any], sim: dict[str, Any], conf
     sent.update(sim.get("telemetry_sent", {}))
     problems = [s for s in (controller.get("reason"), sim.get("reason")) if s]
     hold = float(controller.get("ref_hold_s", config.get("ref_hold_s", 0.0)))
-    rate = float(controller.get("rate_hz", config.get("rate_hz", 1000.0)))
+    rate = float(controller.get("rate_hz", config.get("rate_hz", param_default("controller", "rate"))))
     requested = controller.get("steps_requested", round((config["duration_s"] + hold) * rate))
     scan = scan_log(out_dir / "telemetry.lcmlog", hold, rate, sent, requested - round(hold * rate))
     tele = telemetry_accounting(scan, sent) if sent else {}

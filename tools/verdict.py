@@ -29,10 +29,13 @@ from typing import Any
 
 DIVERGED_DEG = 180.0  # an error of half a turn: the arm is no longer where the controller thinks
 from gen.lib.bounds import DEFAULT_MAX_ERROR_DEG  # noqa: E402 - the tracking bound a run must meet to be "ok"
-# The firmware safety layer's following-error stop (firmware/core/src/controller.c: 0.5 rad on every
-# joint): a run whose error grows past it is stopped (safe-stop, verdict failed) before it can be seen
+from gen.lib.params import constant, default as param_default  # noqa: E402
+
+EXIT: dict[str, int] = constant("controller-exit")  # arm_controller's exit codes (the registry's)
+# The firmware safety layer's following-error stop (arm_controller --max-following-error's default
+# in the registry, firmware/params/params.toml: 0.5 rad on every joint): a run whose error grows past it is stopped (safe-stop, verdict failed) before it can be seen
 # larger. The tracking bound sits far below it, so a run the stop ended has left the bound first.
-FOLLOWING_ERROR_STOP_DEG = math.degrees(0.5)
+FOLLOWING_ERROR_STOP_DEG = math.degrees(param_default("controller", "max-following-error"))
 
 
 def stopped_by_following_error(results: dict[str, Any]) -> bool:
@@ -53,7 +56,7 @@ def left_tracking_bound(results: dict[str, Any]) -> bool:
 @dataclass(frozen=True)
 class Bounds:
     max_error_deg: float = DEFAULT_MAX_ERROR_DEG
-    max_saturated_fraction: float = 0.05
+    max_saturated_fraction: float = param_default("hil", "max-saturated-fraction")
     max_commands_missed: int = 0
 
     def as_dict(self) -> dict[str, Any]:
@@ -70,7 +73,7 @@ def judge(results: dict[str, Any], transport: dict[str, Any], controller: dict[s
         found.append((kind, why))
 
     ctl_result = controller.get("result")
-    if ctl_result == 5 or sim.get("result") == "interrupted":
+    if ctl_result == EXIT["interrupted"] or sim.get("result") == "interrupted":
         add("interrupted", controller.get("reason") or sim.get("reason") or "stopped by a signal")
     if sim.get("result") == "diverged":
         add("diverged", sim.get("reason", "the simulation diverged"))
@@ -80,7 +83,7 @@ def judge(results: dict[str, Any], transport: dict[str, Any], controller: dict[s
         names = results.get("joint_names") or []
         add("diverged", "tracking error beyond %g deg on %s" % (
             DIVERGED_DEG, ", ".join(names[i] if i < len(names) else f"joint {i + 1}" for i in bad)))
-    if ctl_result not in (0, 5):
+    if ctl_result not in (EXIT["ok"], EXIT["interrupted"]):
         why = controller.get('reason') or f'exit {ctl_result}'
         if "following error" in str(controller.get("final_fault") or why):
             why += (f" (the safety layer's stop at {FOLLOWING_ERROR_STOP_DEG:.3g} deg, beyond the tracking bound of "

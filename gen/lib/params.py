@@ -6,7 +6,7 @@ option tables come from here."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -63,16 +63,20 @@ class Param:
             return f"{d:g}"
         return str(d)
 
-    def check(self, value: float, where: str | None = None) -> float:
-        """value if it is a finite number in range, else a ValueError naming where and the range."""
+    def check(self, value: float, where: str | None = None, with_default: bool = False) -> float:
+        """value if it is a finite number in range, else a ValueError naming where and the range;
+        with_default: the range extended down to a numeric default below it (0: the feature off)."""
+        p = self
+        if with_default and isinstance(self.default, (int, float)) and self.min is not None and self.default < self.min:
+            p = replace(self, min=float(self.default), min_open=False)
         name = where or self.option
         ok = not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
-        if ok and self.min is not None:
-            ok = value > self.min if self.min_open else value >= self.min
-        if ok and self.max is not None:
-            ok = value <= self.max
+        if ok and p.min is not None:
+            ok = value > p.min if p.min_open else value >= p.min
+        if ok and p.max is not None:
+            ok = value <= p.max
         if not ok:
-            raise ValueError(f"{name}: must be a number in {self.range_text()}, got {value!r}")
+            raise ValueError(f"{name}: must be a number in {p.range_text()}, got {value!r}")
         if self.type == "int" and value != int(value):
             raise ValueError(f"{name}: must be a whole number, got {value!r}")
         return value
@@ -124,8 +128,12 @@ def default(program: str, name: str) -> Any:
     return param(program, name).default
 
 
+def constants(path: Path = REGISTRY) -> dict[str, Any]:
+    return _load(path)[1]
+
+
 def constant(name: str) -> Any:
-    return _load(REGISTRY)[1][name]
+    return constants()[name]
 
 
 def markdown_table(program: str, path: Path = REGISTRY) -> str:
@@ -146,3 +154,13 @@ def markdown_table(program: str, path: Path = REGISTRY) -> str:
 def readme_markers(program: str) -> tuple[str, str]:
     return f"<!-- params:{program} (generated from firmware/params/params.toml: python -m gen.params --readme) -->", \
         f"<!-- /params:{program} -->"
+
+
+def check_table(data: Any, known: set[str], where: str) -> None:
+    """A config table of a dataclass's fields (the drive model, the uncertainty): a dict with no
+    unknown field, else a ValueError naming where."""
+    if not isinstance(data, dict):
+        raise ValueError(f"{where}: expected a table of fields, got {type(data).__name__}")
+    unknown = set(data) - known
+    if unknown:
+        raise ValueError(f"{where}: unknown field(s) {sorted(unknown)} (known: {', '.join(sorted(known))})")

@@ -26,6 +26,7 @@
 #include "sim_summary.h"
 #include "summary.h"
 #include "telemetry.h"
+#include "stop_signals.h"
 
 #define SIL_MAX_ARGS 512
 
@@ -126,12 +127,7 @@ int main(int argc, char **argv)
         return 1;
     }
     telemetry_event(telem, 0, "info", "software in the loop: one process, in-process bus, telemetry to the log");
-    struct sigaction sa;
-    memset(&sa, 0, sizeof(sa));
-    sa.sa_handler = on_signal;
-    sigaction(SIGTERM, &sa, NULL);
-    sigaction(SIGINT, &sa, NULL);
-    sigaction(SIGHUP, &sa, NULL);
+    stop_signals_install(on_signal);
 
     static sim_capture_t capture;
     if (sim_capture_open(&capture, so.capture, 0, err, sizeof(err)) != 0) {

@@ -19,6 +19,7 @@
 #include "sim_loop.h"
 #include "sim_options.h"
 #include "sim_summary.h"
+#include "stop_signals.h"
 
 static void on_signal(int sig)
 {
@@ -90,12 +91,7 @@ int main(int argc, char **argv)
     /* No page fault in the loop once it runs (MuJoCo, the buses and LCM are set up by now): a
      * realtime run's peer must not stall on one. Not permitted (not root): runs anyway. */
     const int locked = mlockall(MCL_CURRENT | MCL_FUTURE) == 0;
-    struct sigaction sa;
-    memset(&sa, 0, sizeof(sa));
-    sa.sa_handler = on_signal;
-    sigaction(SIGINT, &sa, NULL);
-    sigaction(SIGTERM, &sa, NULL);
-    sigaction(SIGHUP, &sa, NULL);
+    stop_signals_install(on_signal);
     static sim_capture_t capture;
     if (sim_capture_open(&capture, o.capture, o.capture_wall, err, sizeof(err)) != 0) {
         fprintf(stderr, "arm_sim: %s\n", err);

@@ -8,6 +8,7 @@ import math
 from pathlib import Path
 
 from gen.lib.outdir import check_out_dir
+from gen.lib.params import param
 from gen.lib.paths import REPO
 from tools.arm import add_arm_arguments
 from tools.commands import UsageError
@@ -63,18 +64,21 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
                    help="reference amplitudes, rad, one per joint (q_d = home + A (1 - cos 2 pi F t)); clipped "
                         "to the joint ranges with a warning [the arm's default]")
     h.add_argument("--ref-freq", type=_float_list, default=None, metavar="F1,..,Fn", help="reference frequencies, Hz")
-    h.add_argument("--ref-hold", type=float, default=0.5, help="hold the home pose this long first, s [0.5]")
+    hold = param("hil", "ref-hold")
+    h.add_argument("--ref-hold", type=float, default=hold.default,
+                   help=f"{hold.help}, {hold.unit} [{hold.default_text()}]")
     h.add_argument("--max-error-deg", type=float, default=DEFAULT_MAX_ERROR_DEG,
                    help=f"bound: any joint's L-infinity tracking error, deg; above it a run is not ok "
                         f"[{DEFAULT_MAX_ERROR_DEG:g}]; the safety layer stops a run at {FOLLOWING_ERROR_STOP_DEG:.3g} deg")
-    h.add_argument("--max-saturated-fraction", type=float, default=0.05,
-                   help="bound: time at the torque limit, per joint, fraction [0.05]")
+    sat = param("hil", "max-saturated-fraction")
+    h.add_argument("--max-saturated-fraction", type=float, default=sat.default,
+                   help=f"{sat.help}, fraction [{sat.default_text()}]")
     h.add_argument("--can-port", type=int, default=None, metavar="PORT",
                    help="UDP bus: buses on PORT, PORT+1, .. (to watch them with python-can) [the run slot's]")
     h.add_argument("--capture", action="store_true",
                    help="write every frame on the buses to DIR/bus.log, from the simulator's side, in candump's "
                         "log format (canplayer, python-can's LogReader, cantools decode)")
-    h.add_argument("--drives", choices=("ideal", "realistic"), default="ideal",
+    h.add_argument("--drives", choices=("ideal", "realistic"), default=param("hil", "drives").default,
                    help="the emulated drives' sensing and torque path (host_sim/README.md) [ideal]")
     add_arm_arguments(h)
     h.set_defaults(run=run)
@@ -98,8 +102,9 @@ def _ended(run: dict, out: Path) -> int:
 
 
 def _check_duration(duration: float | None) -> None:
-    if duration is not None and not (math.isfinite(duration) and 0.001 <= duration <= 86400):
-        raise UsageError(f"--duration: must be in [0.001, 86400] s, got {duration}")
+    p = param("hil", "duration")
+    if duration is not None and not (math.isfinite(duration) and p.min <= duration <= p.max):
+        raise UsageError(f"--duration: must be in {p.range_text()} s, got {duration}")
 
 
 def _study_run(ns: argparse.Namespace) -> int:
@@ -161,8 +166,8 @@ def run(ns: argparse.Namespace) -> int:
                                  ("--tuned", ns.tuned)) if v is not None]
     if study_only or ns.method == "pm-paper-weights":
         raise UsageError(f"{', '.join(study_only) or '--method pm-paper-weights'}: one run of a study: give --scenario")
-    ns.duration = 5.0 if ns.duration is None else ns.duration
-    ns.method = ns.method or "pm"
+    ns.duration = param("hil", "duration").default if ns.duration is None else ns.duration
+    ns.method = ns.method or param("hil", "method").default
     _check_duration(ns.duration)
     if not (0 <= ns.ref_hold <= 3600):
         raise UsageError(f"--ref-hold: must be in [0, 3600] s, got {ns.ref_hold}")

@@ -300,13 +300,8 @@ void arm_ctl_step(arm_ctl_t *ctl, const arm_ctl_input_t *in, arm_ctl_output_t *o
 
 const char *arm_state_str(arm_state_t s)
 {
-    switch (s) {
-    case ARM_STATE_INIT: return "init";
-    case ARM_STATE_RUNNING: return "running";
-    case ARM_STATE_FAULT: return "fault";
-    case ARM_STATE_SAFE_STOP: return "safe-stop";
-    }
-    return "?";
+    static const char *const k_names[] = {ARM_P_CONTROLLER_STATES_NAMES};
+    return (unsigned)s < sizeof(k_names) / sizeof(k_names[0]) ? k_names[s] : "?";
 }
 
 const char *arm_fault_str(arm_fault_t f)

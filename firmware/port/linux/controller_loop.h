@@ -5,15 +5,18 @@
 #include <stdint.h>
 
 #include "arm/drive_bus.h"
+#include "arm_params.h"
 #include "options.h"
 #include "telemetry.h"
 
+/* arm_controller's exit codes: the registry's (controller-exit, firmware/params/params.toml), which
+ * tools/verdict.py reads too. */
 typedef enum {
-    RUN_OK = 0,
-    RUN_BUS_ERROR = 1,   /* could not open or use the bus */
-    RUN_BOOT_FAILED = 3, /* a drive did not come up */
-    RUN_FAULT = 4,       /* runtime fault: safe stop was commanded */
-    RUN_INTERRUPTED = 5, /* SIGTERM, SIGINT or SIGHUP: safe stop was commanded */
+    RUN_OK = ARM_P_CONTROLLER_EXIT_OK,
+    RUN_BUS_ERROR = ARM_P_CONTROLLER_EXIT_BUS_ERROR,     /* could not open or use the bus */
+    RUN_BOOT_FAILED = ARM_P_CONTROLLER_EXIT_BOOT_FAILED, /* a drive did not come up */
+    RUN_FAULT = ARM_P_CONTROLLER_EXIT_FAULT,             /* runtime fault: safe stop was commanded */
+    RUN_INTERRUPTED = ARM_P_CONTROLLER_EXIT_INTERRUPTED, /* SIGTERM, SIGINT or SIGHUP: safe stop was commanded */
 } run_result_t;
 
 #include <signal.h>

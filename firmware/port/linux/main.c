@@ -11,6 +11,7 @@
 #include "rt.h"
 #include "summary.h"
 #include "telemetry.h"
+#include "stop_signals.h"
 
 static void on_stop_signal(int sig)
 {
@@ -46,12 +47,7 @@ int main(int argc, char **argv)
     telemetry_event(telem, 0, rt.sched_fifo || opt.mode != MODE_REALTIME ? "info" : "warn", rt.message);
     /* SIGTERM (a CI timeout, kill), SIGINT (Ctrl-C), SIGHUP (the terminal went): stop the way a
      * fault does, zero torque, shutdown and NMT stop, then the summary. */
-    struct sigaction sa;
-    memset(&sa, 0, sizeof(sa));
-    sa.sa_handler = on_stop_signal;
-    sigaction(SIGTERM, &sa, NULL);
-    sigaction(SIGINT, &sa, NULL);
-    sigaction(SIGHUP, &sa, NULL);
+    stop_signals_install(on_stop_signal);
     static run_report_t report;
     controller_run(&opt, &ARM_ROBOT_MODEL, telem, &report);
     telemetry_stop(telem);

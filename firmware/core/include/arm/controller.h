@@ -7,6 +7,7 @@
 #include "arm/baselines.h"
 #include "arm/pm.h"
 #include "arm/robot_model.h"
+#include "arm_params.h"
 
 /* Every method runs on the same inverse dynamics control and produces u_o and w_hat. */
 typedef enum {
@@ -20,10 +21,12 @@ typedef enum {
 } arm_method_t;
 
 typedef enum {
-    ARM_STATE_INIT = 0,  /* configured, no valid input yet */
-    ARM_STATE_RUNNING,   /* method output reaches the drives */
-    ARM_STATE_FAULT,     /* a fault was detected this period; the safe-stop output is commanded */
-    ARM_STATE_SAFE_STOP, /* latched after a fault: safe-stop output until re-initialised */
+    /* The numbers and names are the registry's (controller-states, firmware/params/params.toml):
+     * telemetry carries the number, tools/run_analysis.py reads the names from there too. */
+    ARM_STATE_INIT = ARM_P_CONTROLLER_STATES_INIT,           /* configured, no valid input yet */
+    ARM_STATE_RUNNING = ARM_P_CONTROLLER_STATES_RUNNING,     /* method output reaches the drives */
+    ARM_STATE_FAULT = ARM_P_CONTROLLER_STATES_FAULT,         /* a fault was detected this period; the safe-stop output is commanded */
+    ARM_STATE_SAFE_STOP = ARM_P_CONTROLLER_STATES_SAFE_STOP, /* latched after a fault: safe-stop output until re-initialised */
 } arm_state_t;
 
 typedef enum {
