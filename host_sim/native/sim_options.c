@@ -139,28 +139,22 @@ static int sim_bus_timing(void *t, void *c, const argv_opt_t *opt, const char *v
     return 0;
 }
 
-static int sim_frame_times(void *t, void *c, const argv_opt_t *opt, const char *v, char *err, unsigned long errcap)
+/* The per-bus options, I=VALUE: --frame-times (the frame lengths of bus I) and --bus-label. */
+static int sim_bus_indexed(void *t, void *c, const argv_opt_t *opt, const char *v, char *err, unsigned long errcap)
 {
     sim_config_t *cfg = &((sim_options_t *)t)->cfg;
     unsigned b = 0;
     const char *rest = NULL;
     if (bus_indexed(opt->name, v, &b, &rest, err, errcap) != 0) return -1;
+    if (strcmp(opt->name, "--bus-label") == 0) {
+        return argv_copy(opt->name, rest, cfg->timelines[b].label, sizeof(cfg->timelines[b].label), err, errcap);
+    }
     if (sim_timeline_parse_frames(&cfg->timelines[b], rest) != 0) {
         snprintf(err, errcap, "%s: '%s' is not I=ID:US,ID:US,... (11-bit ids, 0..1e6 us)", opt->name, v);
         return -1;
     }
     *(unsigned *)c |= 1u << b;
     return 0;
-}
-
-static int sim_bus_label(void *t, void *c, const argv_opt_t *opt, const char *v, char *err, unsigned long errcap)
-{
-    sim_config_t *cfg = &((sim_options_t *)t)->cfg;
-    unsigned b = 0;
-    const char *rest = NULL;
-    (void)c;
-    if (bus_indexed(opt->name, v, &b, &rest, err, errcap) != 0) return -1;
-    return argv_copy(opt->name, rest, cfg->timelines[b].label, sizeof(cfg->timelines[b].label), err, errcap);
 }
 
 static int sim_lose_bus(void *t, void *c, const argv_opt_t *opt, const char *v, char *err, unsigned long errcap)

@@ -96,10 +96,8 @@ static int check_lcm_url(const char *url, char *err, unsigned long errcap)
     return arm_lcm_url_check_route(&u, "--lcm-url", err, errcap);
 }
 
-/* The special options' handlers (the registry's type "special"): target is the options_t, ctx the
- * model. */
+/* The special options' handlers (the registry's type "special"): target is the options_t. */
 typedef struct {
-    const arm_robot_model_t *model;
     int bus_given;
 } parse_ctx_t;
 
@@ -176,34 +174,6 @@ static int opt_checks(void *t, void *c, const argv_opt_t *o, const char *v, char
     return parse_checks(v, &((options_t *)t)->ctl.checks, err, errcap);
 }
 
-static int opt_position_margin(void *t, void *c, const argv_opt_t *o, const char *v, char *err,
-                               unsigned long errcap)
-{
-    options_t *opt = t;
-    const arm_robot_model_t *model = ((parse_ctx_t *)c)->model;
-    double d = 0.0;
-    if (argv_double(o->name, v, ARM_P_CONTROLLER_POSITION_MARGIN_MIN, ARM_P_CONTROLLER_POSITION_MARGIN_MAX, 0, &d,
-                    err, errcap) != 0) {
-        return -1;
-    }
-    arm_ctl_joint_range(model, (float)d, opt->ctl.q_min, opt->ctl.q_max);
-    return 0;
-}
-
-static int opt_torque_mismatch(void *t, void *c, const argv_opt_t *o, const char *v, char *err,
-                               unsigned long errcap)
-{
-    options_t *opt = t;
-    const arm_robot_model_t *model = ((parse_ctx_t *)c)->model;
-    double d = 0.0;
-    if (argv_double(o->name, v, ARM_P_CONTROLLER_TORQUE_MISMATCH_MIN, ARM_P_CONTROLLER_TORQUE_MISMATCH_MAX, 0, &d,
-                    err, errcap) != 0) {
-        return -1;
-    }
-    for (int j = 0; j < ARM_N_JOINTS; ++j) opt->ctl.torque_mismatch_limit[j] = (float)d * model->link[j].torque_limit;
-    return 0;
-}
-
 static int opt_safe_stop(void *t, void *c, const argv_opt_t *o, const char *v, char *err, unsigned long errcap)
 {
     options_t *opt = t;
@@ -275,7 +245,7 @@ int options_parse(int argc, char **argv, const arm_robot_model_t *model, options
     }
     strcpy(opt->lcm_url, ARM_P_CONTROLLER_LCM_URL_DEFAULT);
     opt->mode = MODE_LOCKSTEP;
-    parse_ctx_t ctx = {model, 0};
+    parse_ctx_t ctx = {0};
     unsigned char given[ARGV_COUNT];
     const int rc = argv_parse(argc, argv, k_options, ARGV_COUNT, opt, &ctx, given, err, errcap);
     if (rc == 1) {
@@ -293,6 +263,12 @@ int options_parse(int argc, char **argv, const arm_robot_model_t *model, options
         return -1;
     }
     opt->ref_given = given[ARGV_OPT_REF_AMP];
+    /* The margin and the mismatch fraction are per arm: in the joints' units here (the defaults
+     * give what arm_ctl_default_config gave). */
+    arm_ctl_joint_range(model, (float)opt->position_margin_rad, opt->ctl.q_min, opt->ctl.q_max);
+    for (int j = 0; j < ARM_N_JOINTS; ++j) {
+        opt->ctl.torque_mismatch_limit[j] = (float)opt->torque_mismatch * model->link[j].torque_limit;
+    }
     const float default_period = opt->ctl.period_s;
     opt->ctl.period_s = (float)(1.0 / opt->rate_hz);
     if (!given[ARGV_OPT_TORQUE_RATE_LIMIT]) {

@@ -24,6 +24,8 @@ typedef struct {
     double spin_us;            /* poll this long for a frame before sleeping in ppoll */
     int protocol_canopen;      /* --protocol canopen: CiA 301/402 drives (README: Real drives) */
     arm_ctl_config_t ctl;
+    double position_margin_rad; /* --position-margin: ctl's q_min, q_max are the model's widened by it */
+    double torque_mismatch;     /* --torque-mismatch: ctl's limits, a fraction of each torque limit */
     rt_options_t rt; /* --rt-priority, --cpu (rt.h) */
     double ref_hold_s;               /* --ref-hold: settle on the start pose first */
     int ref_given;                   /* 1: --ref-amp/--ref-freq replace the default reference */
