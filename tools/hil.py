@@ -256,7 +256,8 @@ def bus_args(kind: str, can_port: int, topology: list[busload.Bus]) -> list[str]
     return out
 
 
-def topology_load_pct(topology: list[busload.Bus], rate_hz: float = param_default("controller", "rate")) -> dict[str, float]:
+def topology_load_pct(topology: list[busload.Bus],
+                      rate_hz: float = param_default("controller", "rate")) -> dict[str, float]:
     """Worst-case load of each bus of the topology at the loop rate (tools/armctl busload)."""
     loads = busload.compute(topology, rate_hz, constant("heartbeat-ms"), busload.default_protocol(),
                             max(d for b in topology for d in b.drives))

@@ -411,7 +411,8 @@ def write_report(out: Path, study: dict[str, Any]) -> None:
     wiring = ", ".join(f"{b['name']}: drives {','.join(map(str, b['drives']))}" for b in arm["buses"])
     md = [f"# Study: {study['description']}", "",
           f"Arm `{arm['name']}` ({n} joints: {', '.join(arm['joint_names'])}; model `{arm['model']}`, hash "
-          f"{arm['model_hash']}), its CAN buses {wiring}, {_how_run(study)} at {default('controller', 'rate') / 1000:g} kHz. Config `{study['config']}`; "
+          f"{arm['model_hash']}), its CAN buses {wiring}, {_how_run(study)} at "
+          f"{default('controller', 'rate') / 1000:g} kHz. Config `{study['config']}`; "
           f"seeds {study['seeds']}; trajectory {study['duration_s']:g} s after a {study['hold_s']:g} s hold on the "
           "start pose (metrics cover the trajectory only). Intervals are 95 % confidence intervals of the mean over "
           "the seeds (Student's t); PM against another method is paired on the same seeds: the ratio of the means, "

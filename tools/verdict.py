@@ -33,8 +33,8 @@ from gen.lib.params import constant, default as param_default  # noqa: E402
 
 EXIT: dict[str, int] = constant("controller-exit")  # arm_controller's exit codes (the registry's)
 # The firmware safety layer's following-error stop (arm_controller --max-following-error's default
-# in the registry, firmware/params/params.toml: 0.5 rad on every joint): a run whose error grows past it is stopped (safe-stop, verdict failed) before it can be seen
-# larger. The tracking bound sits far below it, so a run the stop ended has left the bound first.
+# in the registry, firmware/params/params.toml: 0.5 rad on every joint): a run whose error grows
+# past it is stopped (safe-stop, verdict failed) before it can be seen larger. The tracking bound sits far below it, so a run the stop ended has left the bound first.
 FOLLOWING_ERROR_STOP_DEG = math.degrees(param_default("controller", "max-following-error"))
 
 

@@ -263,7 +263,8 @@ def topology_drives(path: Path) -> int:
         return 0
 
 
-def default_wiring(n_drives: int, rate_hz: float = default("controller", "rate"), budget: float = constant("bus-budget"),
+def default_wiring(n_drives: int, rate_hz: float = default("controller", "rate"),
+                   budget: float = constant("bus-budget"),
                    template: Bus | None = None) -> list[Bus]:
     """The fewest buses of the template's kind (CAN FD 1/5 Mbit/s) that carry drives 1..n within
     the budget at the loop rate, drives split evenly in order; at most 4 buses (the controller's

@@ -1,6 +1,8 @@
 /* The emulated servo drive's sensing and torque path (sim_servo.h). */
 #include "sim_servo.h"
 
+#include "arm_params.h"
+
 #include <math.h>
 #include <string.h>
 
@@ -9,7 +11,7 @@
 void sim_servo_config_default(sim_servo_config_t *c)
 {
     memset(c, 0, sizeof(*c));
-    c->ripple_periods = 6.0;
+    c->ripple_periods = ARM_P_SIMULATOR_RIPPLE_PERIODS_DEFAULT;
 }
 
 int sim_servo_is_ideal(const sim_servo_config_t *c)
