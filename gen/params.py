@@ -16,7 +16,7 @@ import sys
 import textwrap
 from pathlib import Path
 
-from gen.lib.atomic_output import write_text_atomic
+from gen.lib.atomic_output import exit_on_output_error, write_files_atomically, write_text_atomic
 from gen.lib.params import PROGRAMS, REGISTRY, Param, RegistryError, constants, markdown_table, params, readme_markers
 
 C_PROGRAMS = ("controller", "simulator")
@@ -150,6 +150,7 @@ def readme_with_tables(text: str, where: str) -> str:
     return text
 
 
+@exit_on_output_error("gen.params")
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m gen.params", description=__doc__.split("\n\n")[0])
     g = ap.add_mutually_exclusive_group(required=True)
@@ -159,8 +160,7 @@ def main(argv: list[str] | None = None) -> int:
     ns = ap.parse_args(argv)
     try:
         if ns.out is not None:
-            ns.out.mkdir(parents=True, exist_ok=True)
-            write_text_atomic(ns.out / "arm_params.h", header())
+            write_files_atomically(ns.out, {"arm_params.h": header()})  # unchanged: untouched (no rebuild)
             return 0
         path = ns.readme or ns.check
         text = path.read_text()
@@ -174,7 +174,7 @@ def main(argv: list[str] | None = None) -> int:
         if new != text:
             write_text_atomic(path, new)
         return 0
-    except (RegistryError, OSError, ValueError) as exc:
+    except (RegistryError, ValueError) as exc:
         print(f"gen.params: {exc}", file=sys.stderr)
         return 2
 

@@ -125,6 +125,7 @@ def test_a_read_only_out_is_refused_before_any_work(read_only_disk: Path) -> Non
     ("gen.rnea_kernel", ["--mjcf", str(REPO / "host_sim" / "models" / "ur5e_arm.xml")]),
     ("gen.drive_ids", ["--dbc", str(REPO / "firmware" / "protocol" / "arm_drives.dbc")]),
     ("gen.eds", ["--eds", str(REPO / "firmware" / "protocol" / "cia402_servo.eds")]),
+    ("gen.params", []),
 ])
 def test_a_build_step_generator_on_a_read_only_disk_is_one_line(read_only_disk: Path, module: str,
                                                                  args: list[str]) -> None:
