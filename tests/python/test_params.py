@@ -129,3 +129,26 @@ def test_every_table_has_a_row_per_option() -> None:
     for program in ("controller", "simulator", "hil"):
         table = markdown_table(program)
         assert table.count("\n") == 2 + sum(not p.hidden for p in params(program).values())
+
+
+# A default the prose mentions: "`--opt`, default 20 s", "(`--opt`, 0.5 s)", "`--opt` of the time (default 0.05".
+_PROSE = re.compile(r"`(--[a-z0-9-]+)`\)?(?:,? \(?|[^`.;\n]{0,20}\(default )(?:default )?(-?\d[\d.]*)(?![\d.])")
+
+
+def prose_defaults(text: str) -> list[tuple[int, str, float]]:
+    return [(text.count("\n", 0, m.start()) + 1, m.group(1), float(m.group(2))) for m in _PROSE.finditer(text)]
+
+
+def test_the_defaults_the_readmes_prose_names_are_the_registrys() -> None:
+    defaults: dict[str, set[float]] = {}
+    for program in ("controller", "simulator", "hil"):
+        for p in params(program).values():
+            if isinstance(p.default, (int, float)) and not isinstance(p.default, bool):
+                defaults.setdefault(p.option, set()).add(float(p.default))
+    found = [(f.name, *m) for f in (README, REPO / "host_sim" / "README.md") for m in prose_defaults(f.read_text())]
+    assert len(found) >= 6  # the hold, the timeouts, the watchdog, the bounds
+    for name, line, opt, value in found:
+        if opt in defaults:
+            assert value in defaults[opt], f"{name}:{line}: {opt} {value:g}, the registry says {sorted(defaults[opt])}"
+    # and the check bites: a stale mention is found
+    assert prose_defaults("hold (`--ref-hold`, 0.7 s) first") == [(1, "--ref-hold", 0.7)]

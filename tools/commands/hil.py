@@ -34,7 +34,8 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
     from tools.study_config import METHODS as STUDY_METHODS
 
     h = sub.add_parser("hil", help="one hardware-in-the-loop run")
-    h.add_argument("--duration", type=float, default=None, help="simulated seconds [5; with --scenario the config's]")
+    h.add_argument("--duration", type=float, default=None,
+                   help=f"simulated seconds [{param('hil', 'duration').default_text()}; with --scenario the config's]")
     h.add_argument("--method", default=None,
                    choices=(*method_names(), *(m for m in STUDY_METHODS if m not in method_names())),
                    help="the firmware's methods (the core's method table, firmware/core/src/methods.c), and the "
