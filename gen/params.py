@@ -109,7 +109,11 @@ def header() -> str:
             if p.type == "special":
                 rows.append(f"S({ident}, {_cstr(p.option)}, {p.field})")
                 continue
-            if p.type == "text":
+            choices = "NULL"
+            if p.type == "choice":  # the index is the enum's value: 0, 1, ... in the registry's order
+                kind, lo, hi = "ARGV_CHOICE", "0.0", _num(len(p.choices) - 1)
+                choices = "((const char *const[]){" + ", ".join(_cstr(c) for c in p.choices) + ", NULL})"
+            elif p.type == "text":
                 kind, lo, hi = "ARGV_TEXT", "0.0", "0.0"
             elif p.type == "flag":
                 kind, lo, hi = "ARGV_FLAG", "0.0", "0.0"
@@ -119,13 +123,13 @@ def header() -> str:
                     raise RegistryError(f"{program}.{p.name}: type {p.type} with c = {p.c!r} has no C parser")
                 lo = _num(p.min if p.min is not None else -1e308)
                 hi = _num(p.max if p.max is not None else 1e308)
-            has_default = isinstance(p.default, (int, float)) and p.type in ("float", "int", "flag")
-            dv = _num(float(p.default)) if has_default else "0.0"
+            has_default = (isinstance(p.default, (int, float)) and p.type in ("float", "int", "flag")) or bool(p.choices)
+            dv = _num(float(p.choices.index(p.default) if p.choices else p.default)) if has_default else "0.0"
             rows.append(f"X({ident}, {_cstr(p.option)}, {kind}, {lo}, {hi}, {int(p.min_open)}, {_num(p.scale)}, "
-                        f"{dv}, {int(has_default)}, {p.field})")
+                        f"{dv}, {int(has_default)}, {p.field}, {choices})")
         name = f"ARM_{program.upper()}_OPTIONS"
-        out.append(f"/* {program}: X(ID, NAME, KIND, MIN, MAX, MIN_OPEN, SCALE, DEFAULT, HAS_DEFAULT, MEMBER) for the"
-                   " options the table parses, S(ID, NAME, HANDLER) for those the program's handler does */")
+        out.append(f"/* {program}: X(ID, NAME, KIND, MIN, MAX, MIN_OPEN, SCALE, DEFAULT, HAS_DEFAULT, MEMBER, CHOICES) "
+                   "for the options the table parses, S(ID, NAME, HANDLER) for those the program's handler does */")
         out.append(f"#define {name}(X, S) \\")
         out += [f"    {r} \\" for r in rows]
         out.append("")

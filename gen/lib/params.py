@@ -16,9 +16,10 @@ from gen.lib.toml_input import loads as toml_loads
 
 REGISTRY = REPO / "firmware" / "params" / "params.toml"
 PROGRAMS = ("controller", "simulator", "hil")
-TYPES = ("float", "int", "text", "flag", "special")
+TYPES = ("float", "int", "text", "flag", "choice", "special")
 C_TYPES = ("double", "float", "floats", "uint32", "int", "long")
-_FIELDS = {"type", "c", "field", "default", "min", "max", "min_open", "scale", "unit", "arg", "help", "group", "hidden"}
+_FIELDS = {"type", "c", "field", "default", "min", "max", "min_open", "scale", "unit", "arg", "help", "group", "hidden",
+           "choices"}
 
 
 class RegistryError(ValueError):
@@ -42,6 +43,7 @@ class Param:
     field: str = ""
     group: str = ""
     hidden: bool = False
+    choices: tuple[str, ...] = ()
 
     @property
     def option(self) -> str:
@@ -94,13 +96,18 @@ def _param(program: str, name: str, t: Any, where: str) -> Param:
         raise RegistryError(f"{where}: default and help are required")
     if t.get("c", "double") not in C_TYPES:
         raise RegistryError(f"{where}.c: one of {', '.join(C_TYPES)}, got {t['c']!r}")
+    choices = t.get("choices", [])
+    if (t["type"] == "choice") != bool(choices) or not all(isinstance(c, str) for c in choices):
+        raise RegistryError(f"{where}.choices: a list of words for type choice (and only for it)")
+    if choices and t["default"] not in choices:
+        raise RegistryError(f"{where}.default: one of the choices {choices}, got {t['default']!r}")
     for k in ("min", "max", "scale"):
         if k in t and (isinstance(t[k], bool) or not isinstance(t[k], (int, float))):
             raise RegistryError(f"{where}.{k}: a number, got {t[k]!r}")
     return Param(program=program, name=name, type=t["type"], default=t["default"], help=t["help"],
                  min=None if "min" not in t else float(t["min"]), max=None if "max" not in t else float(t["max"]),
                  min_open=bool(t.get("min_open", False)), scale=float(t.get("scale", 1.0)), unit=t.get("unit", ""),
-                 arg=t.get("arg", ""), c=t.get("c", "double"), field=t.get("field", ""), group=t.get("group", ""),
+                 arg=t.get("arg", "|".join(choices)), c=t.get("c", "double"), choices=tuple(choices), field=t.get("field", ""), group=t.get("group", ""),
                  hidden=bool(t.get("hidden", False)))
 
 

@@ -83,18 +83,6 @@ static int sim_lcm_url(void *t, void *c, const argv_opt_t *opt, const char *v, c
     return arm_lcm_url_check_route(&u, opt->name, err, errcap);
 }
 
-static int sim_capture_clock(void *t, void *c, const argv_opt_t *opt, const char *v, char *err,
-                             unsigned long errcap)
-{
-    (void)c;
-    if (strcmp(v, "sim") != 0 && strcmp(v, "wall") != 0) {
-        snprintf(err, errcap, "%s: '%s': expected sim or wall", opt->name, v);
-        return -1;
-    }
-    ((sim_options_t *)t)->capture_wall = strcmp(v, "wall") == 0;
-    return 0;
-}
-
 static int sim_seed(void *t, void *c, const argv_opt_t *opt, const char *v, char *err, unsigned long errcap)
 {
     char *end = NULL;
@@ -123,20 +111,6 @@ static int sim_coulomb(void *t, void *c, const argv_opt_t *opt, const char *v, c
     (void)c;
     return parse_list(opt->name, v, ARM_P_SIMULATOR_COULOMB_MIN, ARM_P_SIMULATOR_COULOMB_MAX, o->unc.coulomb,
                       &o->n_coulomb, err, errcap);
-}
-
-static int sim_bus_timing(void *t, void *c, const argv_opt_t *opt, const char *v, char *err, unsigned long errcap)
-{
-    sim_config_t *cfg = &((sim_options_t *)t)->cfg;
-    (void)c;
-    if (strcmp(v, "off") == 0) cfg->timing = SIM_TIMING_OFF;
-    else if (strcmp(v, "virtual") == 0) cfg->timing = SIM_TIMING_VIRTUAL;
-    else if (strcmp(v, "wallclock") == 0) cfg->timing = SIM_TIMING_WALLCLOCK;
-    else {
-        snprintf(err, errcap, "%s: '%s' is not off, virtual or wallclock", opt->name, v);
-        return -1;
-    }
-    return 0;
 }
 
 /* The per-bus options, I=VALUE: --frame-times (the frame lengths of bus I) and --bus-label. */

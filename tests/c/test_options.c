@@ -20,6 +20,7 @@ typedef struct {
     long l;
     char text[8];
     int flag;
+    enum { CHOICE_A, CHOICE_BB, CHOICE_C } choice;
     int special_calls;
 } target_t;
 
@@ -33,14 +34,15 @@ static int special(void *t, void *c, const argv_opt_t *o, const char *v, char *e
 }
 
 #define TEST_OPTIONS(X, S)                                                                     \
-    X(D, "--d", ARGV_DOUBLE, 0.0, 10.0, 1, 1e-6, 2.0, 1, d)                                   \
-    X(F, "--f", ARGV_FLOAT, -1.0, 1.0, 0, 1.0, 0.5, 1, f)                                     \
-    X(J, "--j", ARGV_FLOATS, 0.0, 5.0, 0, 1.0, 0.25, 1, joints)                              \
-    X(U, "--u", ARGV_UINT32, 1.0, 100.0, 0, 1.0, 3.0, 1, u)                                  \
-    X(I, "--i", ARGV_INT, -5.0, 5.0, 0, 1.0, 0.0, 0, i)                                      \
-    X(L, "--l", ARGV_LONG, 1.0, 1e9, 0, 1.0, 0.0, 0, l)                                      \
-    X(T, "--t", ARGV_TEXT, 0.0, 0.0, 0, 1.0, 0.0, 0, text)                                   \
-    X(G, "--g", ARGV_FLAG, 0.0, 0.0, 0, 1.0, 0.0, 1, flag)                                   \
+    X(D, "--d", ARGV_DOUBLE, 0.0, 10.0, 1, 1e-6, 2.0, 1, d, NULL)                                   \
+    X(F, "--f", ARGV_FLOAT, -1.0, 1.0, 0, 1.0, 0.5, 1, f, NULL)                                     \
+    X(J, "--j", ARGV_FLOATS, 0.0, 5.0, 0, 1.0, 0.25, 1, joints, NULL)                              \
+    X(U, "--u", ARGV_UINT32, 1.0, 100.0, 0, 1.0, 3.0, 1, u, NULL)                                  \
+    X(I, "--i", ARGV_INT, -5.0, 5.0, 0, 1.0, 0.0, 0, i, NULL)                                      \
+    X(L, "--l", ARGV_LONG, 1.0, 1e9, 0, 1.0, 0.0, 0, l, NULL)                                      \
+    X(T, "--t", ARGV_TEXT, 0.0, 0.0, 0, 1.0, 0.0, 0, text, NULL)                                   \
+    X(G, "--g", ARGV_FLAG, 0.0, 0.0, 0, 1.0, 0.0, 1, flag, NULL)                                   \
+    X(C, "--c", ARGV_CHOICE, 0.0, 2.0, 0, 1.0, 1.0, 1, choice, ((const char *const[]){"a", "bb", "c", NULL})) \
     S(SP, "--s", special)
 
 #define ROW(...) ARGV_ROW(target_t, __VA_ARGS__)
@@ -63,14 +65,14 @@ static void test_table(void)
     char *none[] = {"prog"};
     CHECK(parse(&t, given, err, 1, none) == 0);
     CHECK(t.d == 2.0 * 1e-6 && t.f == 0.5f && t.joints[0] == 0.25f && t.joints[2] == 0.25f && t.u == 3u);
-    CHECK(t.flag == 0 && t.special_calls == 0 && given[ARGV_OPT_D] == 0);
+    CHECK(t.flag == 0 && t.special_calls == 0 && given[ARGV_OPT_D] == 0 && t.choice == CHOICE_BB);
 
     char *all[] = {"prog", "--d", "5", "--f", "-1", "--j", "4.5", "--u", "100", "--i", "-5", "--l", "7",
-                   "--t", "abcdefg", "--g", "--s", "xyz"};
+                   "--t", "abcdefg", "--g", "--s", "xyz", "--c", "c"};
     CHECK(parse(&t, given, err, (int)(sizeof(all) / sizeof(all[0])), all) == 0);
     CHECK(t.d == 5.0 * 1e-6 && t.f == -1.0f && t.joints[1] == 4.5f && t.u == 100u && t.i == -5 && t.l == 7);
     CHECK(strcmp(t.text, "abcdefg") == 0 && t.flag == 1 && t.special_calls == 1 + 3 + 10);
-    CHECK(given[ARGV_OPT_D] && given[ARGV_OPT_G] && given[ARGV_OPT_SP]);
+    CHECK(given[ARGV_OPT_D] && given[ARGV_OPT_G] && given[ARGV_OPT_SP] && t.choice == CHOICE_C);
 
     struct { char *argv[3]; const char *msg; } bad[] = {
         {{"prog", "--d", "0"}, "--d: '0' is not a number in (0, 10]"},
@@ -81,6 +83,7 @@ static void test_table(void)
         {{"prog", "--nope", "1"}, "unknown option '--nope' (see --help)"},
         {{"prog", "nope", "1"}, "unexpected argument 'nope' (options start with --)"},
         {{"prog", "--j", "nan"}, "--j: 'nan' is not a number in [0, 5]"},
+        {{"prog", "--c", "b"}, "--c: 'b' is not a, bb or c"},
     };
     for (size_t k = 0; k < sizeof(bad) / sizeof(bad[0]); ++k) {
         CHECK(parse(&t, given, err, 3, bad[k].argv) == -1);

@@ -50,7 +50,8 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
                    help="the method's tuned knobs, as the study's report gives them (e.g. '{\"wn\": 40}')")
     g.add_argument("--tuned", default=None, metavar="METHOD",
                    help="the kept tuning's knobs of METHOD in the scenario (and --method METHOD)")
-    h.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
+    mode = param("controller", "mode")  # arm_controller's --mode, passed on
+    h.add_argument("--mode", choices=mode.choices, default=mode.default)
     h.add_argument("--bus", choices=("auto", "udp", "vcan", "vm", "sil"), default="auto",
                    help="auto: vcan if this kernel has SocketCAN and vcan0, vcan1 (one per bus of "
                         "firmware/protocol/buses.toml), else udp (one port per bus; says which); "

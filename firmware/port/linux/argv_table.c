@@ -53,7 +53,8 @@ static void store(const argv_opt_t *o, void *target, double v)
         break;
     case ARGV_UINT32: *(uint32_t *)(void *)p = (uint32_t)v; break;
     case ARGV_INT:
-    case ARGV_FLAG: *(int *)(void *)p = (int)v; break;
+    case ARGV_FLAG:
+    case ARGV_CHOICE: *(int *)(void *)p = (int)v; break;
     case ARGV_LONG: *(long *)(void *)p = (long)v; break;
     case ARGV_TEXT:
     case ARGV_SPECIAL: break;
@@ -72,6 +73,21 @@ static int parse_one(const argv_opt_t *o, const char *v, void *target, void *ctx
     double d = 0.0;
     switch (o->kind) {
     case ARGV_SPECIAL: return o->handler(target, ctx, o, v, err, errcap);
+    case ARGV_CHOICE: {
+        size_t k = 0, len = 0;
+        while (o->choices[k] != NULL && strcmp(o->choices[k], v) != 0) ++k;
+        if (o->choices[k] != NULL) {
+            store(o, target, (double)k);
+            return 0;
+        }
+        /* "'x' is not a, b or c" */
+        len = (size_t)snprintf(err, errcap, "%s: '%s' is not ", o->name, v);
+        for (k = 0; o->choices[k] != NULL && len < errcap; ++k) {
+            const char *sep = k == 0 ? "" : o->choices[k + 1] == NULL ? " or " : ", ";
+            len += (size_t)snprintf(err + len, errcap - len, "%s%s", sep, o->choices[k]);
+        }
+        return -1;
+    }
     case ARGV_TEXT: return argv_copy(o->name, v, (char *)target + o->offset, o->size, err, errcap);
     case ARGV_UINT32:
     case ARGV_INT:

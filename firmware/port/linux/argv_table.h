@@ -18,6 +18,7 @@ typedef enum {
     ARGV_LONG,
     ARGV_TEXT,    /* a char array */
     ARGV_FLAG,    /* an int set to 1; takes no value */
+    ARGV_CHOICE,  /* one of choices: its index into an int-sized enum */
     ARGV_SPECIAL  /* the program's handler */
 } argv_kind_t;
 
@@ -35,13 +36,15 @@ typedef struct argv_opt {
     double def;
     int has_default;
     size_t offset, size; /* the member in the target */
+    const char *const *choices; /* ARGV_CHOICE: the words, NULL-terminated */
     argv_handler_t handler;
 } argv_opt_t;
 
 /* One row per registry entry: ARM_<PROGRAM>_OPTIONS(ARGV_ROW_OF(type), ARGV_SPECIAL_ROW). */
-#define ARGV_ROW(T, id, name, kind, lo, hi, lo_open, scale, def, has_def, member) \
-    {name, kind, lo, hi, lo_open, scale, def, has_def, offsetof(T, member), sizeof(((T *)0)->member), NULL},
-#define ARGV_SPECIAL_ROW(id, name, handler) {name, ARGV_SPECIAL, 0.0, 0.0, 0, 1.0, 0.0, 0, 0u, 0u, handler},
+#define ARGV_ROW(T, id, name, kind, lo, hi, lo_open, scale, def, has_def, member, choices)                    \
+    {name, kind, lo, hi, lo_open, scale, def, has_def, offsetof(T, member), sizeof(((T *)0)->member), choices, \
+     NULL},
+#define ARGV_SPECIAL_ROW(id, name, handler) {name, ARGV_SPECIAL, 0.0, 0.0, 0, 1.0, 0.0, 0, 0u, 0u, NULL, handler},
 #define ARGV_ID(id, ...) ARGV_OPT_##id,
 
 /* The table's numeric defaults into target. */

@@ -124,21 +124,6 @@ static int opt_lcm_url(void *t, void *c, const argv_opt_t *o, const char *v, cha
     return check_lcm_url(v, err, errcap);
 }
 
-static int opt_mode(void *t, void *c, const argv_opt_t *o, const char *v, char *err, unsigned long errcap)
-{
-    options_t *opt = t;
-    (void)c;
-    if (strcmp(v, "lockstep") == 0) {
-        opt->mode = MODE_LOCKSTEP;
-    } else if (strcmp(v, "realtime") == 0) {
-        opt->mode = MODE_REALTIME;
-    } else {
-        snprintf(err, errcap, "%s: '%s' is not lockstep or realtime", o->name, v);
-        return -1;
-    }
-    return 0;
-}
-
 static int opt_method(void *t, void *c, const argv_opt_t *o, const char *v, char *err, unsigned long errcap)
 {
     options_t *opt = t;
@@ -149,21 +134,6 @@ static int opt_method(void *t, void *c, const argv_opt_t *o, const char *v, char
         return -1;
     }
     opt->ctl.method = m;
-    return 0;
-}
-
-static int opt_numeric(void *t, void *c, const argv_opt_t *o, const char *v, char *err, unsigned long errcap)
-{
-    options_t *opt = t;
-    (void)c;
-    if (strcmp(v, "float") == 0) {
-        opt->ctl.numeric = ARM_NUMERIC_FLOAT;
-    } else if (strcmp(v, "fixed") == 0) {
-        opt->ctl.numeric = ARM_NUMERIC_FIXED;
-    } else {
-        snprintf(err, errcap, "%s: '%s' is not float or fixed", o->name, v);
-        return -1;
-    }
     return 0;
 }
 
@@ -244,7 +214,6 @@ int options_parse(int argc, char **argv, const arm_robot_model_t *model, options
         return -1;
     }
     strcpy(opt->lcm_url, ARM_P_CONTROLLER_LCM_URL_DEFAULT);
-    opt->mode = MODE_LOCKSTEP;
     parse_ctx_t ctx = {0};
     unsigned char given[ARGV_COUNT];
     const int rc = argv_parse(argc, argv, k_options, ARGV_COUNT, opt, &ctx, given, err, errcap);
