@@ -21,7 +21,7 @@ OPTIONS = {"encoder_bits": "encoder-bits", "position_noise_counts": "position-no
            "motor_encoder_bits": "motor-encoder-bits", "gear_ratio": "gear-ratio", "velocity_filter_hz": "velocity-filter-hz", "torque_noise_nm": "torque-noise-nm",
            "current_loop_hz": "current-loop-hz", "torque_latency_us": "torque-latency-us", "ripple": "ripple",
            "ripple_periods": "ripple-periods"}
-SOURCES = ("joint", "motor")
+SOURCES = param("simulator", "position-source").choices  # ("joint", "motor"), as arm_sim takes them
 SOURCE_FIELDS = ("position_source", "velocity_source")  # --position-source, --velocity-source
 
 

@@ -147,34 +147,6 @@ static int sim_lose_bus(void *t, void *c, const argv_opt_t *opt, const char *v, 
     return 0;
 }
 
-static int sim_protocol(void *t, void *c, const argv_opt_t *opt, const char *v, char *err, unsigned long errcap)
-{
-    sim_options_t *o = t;
-    (void)c;
-    if (strcmp(v, "arm") == 0) o->protocol = SIM_PROTOCOL_ARM;
-    else if (strcmp(v, "canopen") == 0) o->protocol = SIM_PROTOCOL_CANOPEN;
-    else {
-        snprintf(err, errcap, "%s: '%s' is not arm or canopen", opt->name, v);
-        return -1;
-    }
-    return 0;
-}
-
-static int sim_encoder_source(void *t, void *c, const argv_opt_t *opt, const char *v, char *err,
-                              unsigned long errcap)
-{
-    sim_servo_config_t *servo = &((sim_options_t *)t)->cfg.servo;
-    int *src = opt->name[2] == 'p' ? &servo->position_source : &servo->velocity_source;
-    (void)c;
-    if (strcmp(v, "joint") == 0) *src = SIM_ENCODER_JOINT;
-    else if (strcmp(v, "motor") == 0) *src = SIM_ENCODER_MOTOR;
-    else {
-        snprintf(err, errcap, "%s: '%s' is not joint or motor", opt->name, v);
-        return -1;
-    }
-    return 0;
-}
-
 static int sim_gear_ratio(void *t, void *c, const argv_opt_t *opt, const char *v, char *err, unsigned long errcap)
 {
     sim_options_t *o = t;
