@@ -444,7 +444,7 @@ def test_controller_protocol_option_is_checked(build_dir: Path) -> None:
     if not ctl.exists():
         pytest.skip(f"{ctl} not built")
     p = subprocess.run([str(ctl), "--protocol", "cia402"], capture_output=True, text=True, timeout=30)
-    assert p.returncode == 2 and "--protocol 'cia402': expected arm or canopen" in p.stderr, p.stderr
+    assert p.returncode == 2 and "--protocol: 'cia402' is not arm or canopen" in p.stderr, p.stderr
 
 
 def test_c_eds_defaults_are_the_eds() -> None:

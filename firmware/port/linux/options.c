@@ -180,17 +180,6 @@ static int opt_ref_freq(void *t, void *c, const argv_opt_t *o, const char *v, ch
                       ((options_t *)t)->ref_freq_hz, err, errcap);
 }
 
-static int opt_protocol(void *t, void *c, const argv_opt_t *o, const char *v, char *err, unsigned long errcap)
-{
-    (void)c;
-    if (strcmp(v, "arm") != 0 && strcmp(v, "canopen") != 0) {
-        snprintf(err, errcap, "%s '%s': expected arm or canopen", o->name, v);
-        return -1;
-    }
-    ((options_t *)t)->protocol_canopen = strcmp(v, "canopen") == 0;
-    return 0;
-}
-
 static int opt_rt(void *t, void *c, const argv_opt_t *o, const char *v, char *err, unsigned long errcap)
 {
     (void)c;
