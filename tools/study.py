@@ -365,12 +365,15 @@ def study_run_spec(cfg: StudyConfig, arm: ArmRef, scenario: str, method: str, se
                    knobs: dict[str, Any] | None, tuned_knobs: bool, out: Path, bus: str) -> tuple[
         RunSpec, dict[str, Any], list[str]]:
     """One run of a study, exactly as run_study makes it (the same RunSpec: the same results), for
-    `armctl hil --scenario`. The knobs: given, the kept tuning's (tuned_knobs), or none (an untuned
-    method, or the method's firmware defaults)."""
+    `armctl hil --scenario`. The knobs: given, or the kept tuning's (tuned_knobs); none only for a
+    method that is not tuned (its weights are fixed)."""
     if scenario not in cfg.scenarios:
         raise StudyConfigError(f"--scenario {scenario}: not in {cfg.path} (scenarios: {', '.join(cfg.scenarios)})")
     if method not in METHODS:
         raise StudyConfigError(f"--method {method}: not a study method ({', '.join(METHODS)})")
+    if METHODS[method][1] is not None and knobs is None and not tuned_knobs:
+        raise StudyConfigError(f"--scenario {scenario} --method {method}: {method} is tuned; give --tuned {method} "
+                               "(the kept tuning's knobs, as the study runs it) or --knobs JSON")
     setup, info, notes = setup_for(cfg, arm, out.parent / f".{out.name}-tuning", 1, None, bus)
     rcfg = setup.cfg
     if tuned_knobs:

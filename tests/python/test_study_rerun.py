@@ -50,3 +50,7 @@ def test_study_options_need_a_scenario(tmp_path: Path) -> None:
     assert r.returncode == 2 and "--scenario nowhere: not in" in r.stderr
     r = _armctl("hil", "--scenario", "ideal", "--tuned", "pm-paper-weights", "--out", str(tmp_path / "x"))
     assert r.returncode == 2 and "is not tuned" in r.stderr
+    for method in ("pm", "pd"):  # a tuned method's knobs are the tuning's: none given is a usage error, not a crash
+        r = _armctl("hil", "--scenario", "ideal", "--method", method, "--out", str(tmp_path / "x"))
+        assert r.returncode == 2 and f"{method} is tuned; give --tuned {method}" in r.stderr, r.stderr
+        assert "Traceback" not in r.stderr and not (tmp_path / "x").exists()
