@@ -894,11 +894,12 @@ def _inverse_dynamics_difference(a: mujoco.MjModel, b: mujoco.MjModel, samples: 
 def default_reference(home: list[float], ranges: list[list[float] | None]) -> dict[str, list[float]]:
     """q_d = home + a (1 - cos 2 pi f t): the firmware's default amplitudes and distinct frequencies,
     each joint moving towards the side of its range with more room and staying RANGE_MARGIN inside."""
+    rule = constant("default-reference")
     amp, freq = [], []
     for i, (h, r) in enumerate(zip(home, ranges)):
-        a = round(0.25 + 0.03 * i, 6)
+        a = round(rule["amp-base"] + rule["amp-step"] * i, 6)
         amp.append(clip_amplitude(a, h, r))
-        freq.append(round(0.2 + 0.05 * i, 6))
+        freq.append(round(rule["freq-base-hz"] + rule["freq-step-hz"] * i, 6))
     return {"amp": amp, "freq_hz": freq}
 
 

@@ -2,6 +2,8 @@
 
 #include <math.h>
 
+#include "arm_params.h"
+
 #define ARM_TWO_PI 6.28318531f
 
 void arm_reference_set_hold(arm_reference_t *ref, float hold_s)
@@ -16,8 +18,9 @@ void arm_reference_default(arm_reference_t *ref, const float q0[ARM_N_JOINTS])
         /* Distinct, incommensurate frequencies so the joints excite each other's coupling. */
         const float k = (float)i;
         ref->q0[i] = q0[i];
-        ref->amp[i] = 0.25f + 0.03f * k;
-        ref->omega[i] = ARM_TWO_PI * (0.2f + 0.05f * k);
+        ref->amp[i] = (float)ARM_P_DEFAULT_REFERENCE_AMP_BASE + (float)ARM_P_DEFAULT_REFERENCE_AMP_STEP * k;
+        ref->omega[i] = ARM_TWO_PI * ((float)ARM_P_DEFAULT_REFERENCE_FREQ_BASE_HZ +
+                                      (float)ARM_P_DEFAULT_REFERENCE_FREQ_STEP_HZ * k);
     }
 }
 
