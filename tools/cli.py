@@ -13,7 +13,9 @@ from gen.lib.paths import REPO
 def _commands() -> list:
     """Every command module, in the order `armctl --help` lists them: each has add_subparser(sub)
     and a run(ns) -> int that its parser names (set_defaults(run=...)); tools/commands/__init__.py."""
-    from tools import bench, busload, cluster, faults, fuzz, study, timing, vcan
+    from tools import bench, busload, study, vcan
+    from tools.run import cluster
+    from tools.bench import faults, fuzz, timing
     from tools.commands import build, demo, hil, setup, synth, test
 
     return [setup, build, cluster, timing, hil, demo, test, synth, vcan, busload, study, faults, fuzz, bench]
@@ -26,14 +28,14 @@ def _errors() -> list[tuple[tuple[type[BaseException], ...], int | Callable[[Bas
     from gen.arm import ArmError
     from gen.lib.busload import ConfigError as BusConfigError
     from gen.lib.outdir import OutDirError
-    from tools import procs
-    from tools.arm import ArmChoiceError
+    from tools.run import procs
+    from tools.build.arm import ArmChoiceError
     from tools.build import BuildError
-    from tools.cluster import ClusterError
+    from tools.run.cluster import ClusterError
     from tools.commands import CommandError
-    from tools.fuzz import FuzzError
-    from tools.hil import HilError
-    from tools.study_config import StudyConfigError
+    from tools.bench.fuzz import FuzzError
+    from tools.run.hil import HilError
+    from tools.study.config import StudyConfigError
     from tools.vm.image import VmError
 
     return [
@@ -63,7 +65,7 @@ def exit_code(exc: BaseException, ns: argparse.Namespace) -> int | None:
 
 def run_command(ns: argparse.Namespace) -> int:
     """ns.run(ns), its exceptions turned into exit codes and messages by the one map."""
-    from tools import procs
+    from tools.run import procs
 
     procs.install()
     try:

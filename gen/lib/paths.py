@@ -14,7 +14,7 @@ def build_dir(preset: str) -> Path:
 
 
 def controller_binary(bdir: Path) -> Path:
-    """The controller in a build folder (build/<preset>, or an arm's: tools/arm.py)."""
+    """The controller in a build folder (build/<preset>, or an arm's: tools/build/arm.py)."""
     return bdir / "firmware" / "arm_controller"
 
 

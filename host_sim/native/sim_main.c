@@ -1,5 +1,5 @@
 /* arm_sim: the simulated arm and its emulated drives on the CAN bus, the per-period path of the
- * hardware-in-the-loop rig in C on MuJoCo's C API. Python (tools/hil.py, python -m host_sim)
+ * hardware-in-the-loop rig in C on MuJoCo's C API. Python (tools/run/hil.py, python -m host_sim)
  * configures and starts it; see host_sim/README.md.
  *
  * Exit codes: 0 the controller stopped the drives (a normal end); 1 bus or telemetry error;

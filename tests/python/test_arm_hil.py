@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from arm_models import ARMATURE, armature_variant, materials_variant
-from tools.arm import ArmRef, arm_build_dir
+from tools.build.arm import ArmRef, arm_build_dir
 from gen.lib.paths import BUILD, REPO
 
 ARMS = REPO / "tests" / "arms"
@@ -81,7 +81,7 @@ def built_arm(request: pytest.FixtureRequest) -> tuple[str, list[str], int, str]
 def _warnings(args: list[str]) -> list[str]:
     import argparse
 
-    from tools.arm import arm_from_args
+    from tools.build.arm import arm_from_args
 
     # the arm as the CLI makes it from its arguments (an arm file names its model too)
     ns = argparse.Namespace(model=Path(args[1]) if args[0] == "--model" else None,

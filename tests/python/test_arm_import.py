@@ -14,7 +14,7 @@ import pytest
 from gen import arm as gen_arm
 from gen.arm import ArmError, clip_amplitude, load_arm_file, prepare
 from gen.robot_model import extract, nominal_for_inverse
-from tools.arm import ArmChoiceError, reference_for
+from tools.build.arm import ArmChoiceError, reference_for
 
 from arm_models import ARMATURE, UR5E, armature_variant, materials_variant
 
@@ -340,7 +340,7 @@ def test_a_public_arm_with_materials_textures_and_sites_is_prepared(tmp_path: Pa
 
 def test_build_folder_is_named_after_the_arm_not_its_file(tmp_path: Path) -> None:
     """README: build/arms/<name>-<digest>, the name being the one in the arm's reports."""
-    from tools.arm import ArmRef, arm_build_dir
+    from tools.build.arm import ArmRef, arm_build_dir
 
     model = materials_variant(tmp_path / "vendor_file_name.xml")  # <mujoco model="ur5e">
     assert prep(model).info["name"] == "ur5e"

@@ -1,5 +1,5 @@
 """A build directory configures itself again when its configure failed, is junk, or was made on
-another machine or with another toolchain: re-running after a fix just works (tools/build.py).
+another machine or with another toolchain: re-running after a fix just works (tools/build/__init__.py).
 Uses the Cortex-M3 image (the cheapest full configure + build) in a directory of its own."""
 
 from __future__ import annotations

@@ -12,8 +12,8 @@ import pytest
 
 from host_sim.launch import frame_times, parse_phy
 from gen.lib.busload import Bus, ConfigError, Protocol, compute
-from tools.hil import HilOptions, run_hil
-from tools.telemetry_log import read_log
+from tools.run.hil import HilOptions, run_hil
+from tools.run.telemetry_log import read_log
 
 from sim_master import SimMaster
 

@@ -9,7 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from tools import cli, procs
+from tools import cli
+
+from tools.run import procs
 from tools.commands import CommandError, UsageError
 from tools.commands import hil as hil_command
 
@@ -68,11 +70,11 @@ def test_the_map(capsys: pytest.CaptureFixture[str], exc: BaseException, code: i
 def test_the_map_by_library_exception(capsys: pytest.CaptureFixture[str]) -> None:
     from gen.lib.atomic_output import OutputError
     from gen.lib.outdir import OutDirError
-    from tools.arm import ArmChoiceError
+    from tools.build.arm import ArmChoiceError
     from tools.build import BuildError
-    from tools.cluster import ClusterError
-    from tools.hil import HilError
-    from tools.study_config import StudyConfigError
+    from tools.run.cluster import ClusterError
+    from tools.run.hil import HilError
+    from tools.study.config import StudyConfigError
     from tools.vm.image import VmError
 
     for exc, code in ((StudyConfigError("s"), 2), (ArmChoiceError("a"), 2), (OutDirError("o"), 2),
@@ -134,7 +136,7 @@ def test_hil_in_the_vm_rewrites_only_bus_and_paths(hil_parser: argparse.Argument
 
 
 def test_hil_in_the_vm_reads_the_arguments_main_was_given(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
-    from tools import arm
+    from tools.build import arm
     from tools.vm import run as vm_run
 
     seen: dict[str, object] = {}

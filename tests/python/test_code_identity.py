@@ -1,4 +1,4 @@
-"""The code identity (tools/code_identity.py) moves with what can change a run's numbers, never
+"""The code identity (tools/build/code_identity.py) moves with what can change a run's numbers, never
 with documentation: a README edit does not mark the kept tuning as made by other code."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from tools import code_identity as ci
+from tools.build import code_identity as ci
 
 
 @pytest.fixture()

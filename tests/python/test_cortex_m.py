@@ -12,7 +12,7 @@ import subprocess
 import pytest
 
 from tools.build import build, toolchain_missing
-from tools.cortex_m import MACHINES, run_image, step_costs
+from tools.build.cortex_m import MACHINES, run_image, step_costs
 from gen.lib.paths import build_dir
 
 

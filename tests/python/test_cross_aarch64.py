@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 
 from tools.build import build, qemu_aarch64, toolchain_missing
-from tools.hil import HilOptions, run_hil
+from tools.run.hil import HilOptions, run_hil
 from gen.lib.paths import build_dir
 
 DURATION_S = 1.0

@@ -70,13 +70,13 @@ def documented_commands() -> set[str]:
             out.add("hil --bus vm")
         if sub == "hil" and "sil" in cell:
             out.add("hil --bus sil")
-        if "--model FILE" in cell or "--arm FILE" in cell:  # one code path for both (tools/arm.py)
+        if "--model FILE" in cell or "--arm FILE" in cell:  # one code path for both (tools/build/arm.py)
             out.add(f"{sub} --model|--arm")
     return out
 
 
 def armctl(*args: str, timeout: float = 900.0) -> subprocess.CompletedProcess[str]:
-    """armctl, stopped with SIGTERM on a timeout: it then stops its own children (tools/procs.py),
+    """armctl, stopped with SIGTERM on a timeout: it then stops its own children (tools/run/procs.py),
     so a hung command fails this test and leaves no process behind to fail the others."""
     p = subprocess.Popen([ARMCTL, *args], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:

@@ -1,4 +1,4 @@
-"""The fault-injection matrix (tools/faults.py, `tools/armctl faults`): every fault that must stop
+"""The fault-injection matrix (tools/bench/faults.py, `tools/armctl faults`): every fault that must stop
 the arm stopped it in a safe state under a named verdict, the others left it running with what
 they did counted; no fault left a process behind."""
 
@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from tools.faults import FAULTS
+from tools.bench.faults import FAULTS
 from gen.lib.paths import REPO
 
 

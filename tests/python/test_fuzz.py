@@ -1,5 +1,5 @@
 """Every libFuzzer harness runs briefly on its corpus under ASan/UBSan, after replaying every input
-that ever crashed it (tools/fuzz.py; `tools/armctl fuzz --seconds N` for as long as asked)."""
+that ever crashed it (tools/bench/fuzz.py; `tools/armctl fuzz --seconds N` for as long as asked)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import subprocess
 
 import pytest
 
-from tools.fuzz import HARNESSES
+from tools.bench.fuzz import HARNESSES
 from gen.lib.paths import REPO
 
 

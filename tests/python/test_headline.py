@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from tools import headline
+from tools.study import headline
 from tools.study import DEFAULT_CONFIG, run_study
-from tools.study_config import load
+from tools.study.config import load
 
 RECORD = json.loads(headline.RECORD.read_text())
 SLICE = ("ideal", ("pd", "usde-smc"))

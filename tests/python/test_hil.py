@@ -13,8 +13,8 @@ import pytest
 
 from hil_procs import BusRecorder, start_controller, start_sim, wait_exit
 from host_sim.canbus import open_bus, udp_socket
-from tools.hil import HilOptions, run_hil
-from tools.telemetry_log import read_log
+from tools.run.hil import HilOptions, run_hil
+from tools.run.telemetry_log import read_log
 
 CMD_IDS = set(range(0x201, 0x207))
 

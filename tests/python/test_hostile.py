@@ -15,7 +15,7 @@ import can
 import msgpack
 
 from host_sim.canbus import open_bus
-from tools.hil import HilOptions, run_hil
+from tools.run.hil import HilOptions, run_hil
 
 SYNC = 0x080
 

@@ -209,7 +209,7 @@ HOSTILE_MODELS = {
 
 @pytest.mark.parametrize("case", sorted(HOSTILE_MODELS))
 def test_a_hostile_model_is_one_line_naming_the_element_and_nothing_is_built(tmp_path: Path, case: str) -> None:
-    from tools.arm import ArmRef
+    from tools.build.arm import ArmRef
     from gen.lib.paths import BUILD
 
     make, named = HOSTILE_MODELS[case]

@@ -10,7 +10,7 @@ from pathlib import Path
 from tools import bench
 from tools.methods import TABLE, firmware_methods, method_names
 from gen.lib.paths import REPO
-from tools.study_config import METHODS as STUDY_METHODS
+from tools.study.config import METHODS as STUDY_METHODS
 
 
 def test_the_table_is_read_in_its_order_with_its_design_flags() -> None:

@@ -104,9 +104,9 @@ def test_the_parser_takes_each_ranges_bounds_and_refuses_beyond(program: str, co
 def test_python_takes_the_registrys_numbers() -> None:
     from host_sim.drive_model import DriveModel
     from host_sim.uncertainty import UncertaintyConfig
-    from tools.hil import CONTROLLER_DEFAULT_HOLD_S, HilOptions
-    from tools.run_analysis import STATE_NAMES
-    from tools.verdict import EXIT, FOLLOWING_ERROR_STOP_DEG, Bounds
+    from tools.run.hil import CONTROLLER_DEFAULT_HOLD_S, HilOptions
+    from tools.run.run_analysis import STATE_NAMES
+    from tools.run.verdict import EXIT, FOLLOWING_ERROR_STOP_DEG, Bounds
 
     assert CONTROLLER_DEFAULT_HOLD_S == param("controller", "ref-hold").default
     assert HilOptions(out=Path("x")).duration_s == param("controller", "duration").default

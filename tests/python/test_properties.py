@@ -19,10 +19,10 @@ from gen.synth.config import ConfigError, parse_config
 from host_sim.drive_model import DriveModel
 from host_sim.protocol import DriveProtocol, FastCodec
 from host_sim.uncertainty import UncertaintyConfig
-from tools.design_knobs import KnobError, dumps
+from tools.study.design_knobs import KnobError, dumps
 from gen.lib.paths import REPO
-from tools.study_config import StudyConfigError, load
-from tools.telemetry_log import CHANNEL_TYPES, read_log
+from tools.study.config import StudyConfigError, load
+from tools.run.telemetry_log import CHANNEL_TYPES, read_log
 
 SETTINGS = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 scalars = st.one_of(st.none(), st.booleans(), st.integers(-2**70, 2**70), st.floats(allow_nan=True),

@@ -63,7 +63,7 @@ def test_a_study_uses_the_arms_own_reference_unless_named(tmp_path: Path) -> Non
     is (its documented numbers), any other arm its own reference; a shared trajectory fits the most
     friction of the config's scenarios."""
     from tools import study
-    from tools.study_config import Trajectory, for_arm, load
+    from tools.study.config import Trajectory, for_arm, load
 
     cfg = load(study.DEFAULT_CONFIG)
     info = json.loads((REPO / "build" / "release" / "generated" / "arm" / "arm.json").read_text())
@@ -84,7 +84,7 @@ def test_a_study_uses_the_arms_own_reference_unless_named(tmp_path: Path) -> Non
 
 @pytest.mark.parametrize("bad", ["", 3])
 def test_a_trajectorys_arm_is_a_name(tmp_path: Path, bad) -> None:
-    from tools.study_config import StudyConfigError, load
+    from tools.study.config import StudyConfigError, load
 
     text = (REPO / "tools" / "studies" / "paper.toml").read_text().replace('arm = "ur5e_arm"           #',
                                                                           f'arm = {json.dumps(bad)}  #', 1)

@@ -1,5 +1,5 @@
-"""The run analysis streams the telemetry log (tools/telemetry_log.py iter_chunks,
-tools/run_analysis.py scan_log): the same run.json results, bit for bit, as decoding the whole log
+"""The run analysis streams the telemetry log (tools/run/telemetry_log.py iter_chunks,
+tools/run/run_analysis.py scan_log): the same run.json results, bit for bit, as decoding the whole log
 with lcm-gen's classes (the way it was done before, kept here only as the reference); forged
 telemetry is named, never `ok`; memory does not grow with the run's duration."""
 
@@ -19,11 +19,11 @@ import numpy as np
 import pytest
 
 from gen import lcmtypes
-from tools.hil import HilOptions, run_hil
-from tools.run_analysis import PairwiseSum, RowSum, analyse, control_metrics, scan_log
+from tools.run.hil import HilOptions, run_hil
+from tools.run.run_analysis import PairwiseSum, RowSum, analyse, control_metrics, scan_log
 from tools.study import DEFAULT_CONFIG
-from tools.study_config import load
-from tools.telemetry_log import CHANNEL_TYPES, read_log
+from tools.study.config import load
+from tools.run.telemetry_log import CHANNEL_TYPES, read_log
 
 REPO = Path(__file__).resolve().parents[2]
 CFG = load(DEFAULT_CONFIG)
@@ -256,7 +256,7 @@ def test_forged_sim_truth_appended_to_a_run_makes_it_incomplete(tmp_path: Path, 
 
 def test_telemetry_published_by_a_foreign_process_during_a_lockstep_run(tmp_path: Path, controller_bin: Path) -> None:
     """Another process on the run's telemetry port republishes ARM_SIM while the run goes."""
-    from tools.slots import acquire_slot
+    from tools.run.slots import acquire_slot
 
     with acquire_slot() as slot:
         url = f"udpm://239.255.76.67:{slot.lcm_port}?ttl=0"
@@ -299,8 +299,8 @@ PEAK = """
 import json, resource, sys
 sys.path.insert(0, {repo!r})
 from pathlib import Path
-from tools.run_analysis import analyse
-from tools.telemetry_log import read_log  # noqa: F401 - imported as in armctl
+from tools.run.run_analysis import analyse
+from tools.run.telemetry_log import read_log  # noqa: F401 - imported as in armctl
 out = Path(sys.argv[1])
 run = json.loads((out / "run.json").read_text())
 ctl = json.loads((out / "controller_summary.json").read_text())

@@ -14,11 +14,11 @@ from pathlib import Path
 
 import pytest
 
-from tools.cluster import ClusterError, cert_files, check_cluster, make_certs
-from tools.hil import HilOptions, run_hil
+from tools.run.cluster import ClusterError, cert_files, check_cluster, make_certs
+from tools.run.hil import HilOptions, run_hil
 from gen.lib.paths import REPO
-from tools.runner import RunSpec, execute, run_all
-from tools.slots import CAN_BASE, LCM_BASE, _lock_dir, acquire_slot
+from tools.run.runner import RunSpec, execute, run_all
+from tools.run.slots import CAN_BASE, LCM_BASE, _lock_dir, acquire_slot
 
 
 def test_a_taken_slot_is_skipped_and_released_on_exit() -> None:
@@ -134,7 +134,7 @@ def test_the_same_runs_on_a_dask_cluster(tmp_path: Path, monkeypatch: pytest.Mon
     distributed = pytest.importorskip("distributed")
     from distributed.security import Security
 
-    monkeypatch.setenv("PYTHONPATH", str(REPO))  # the workers import tools.runner from this checkout
+    monkeypatch.setenv("PYTHONPATH", str(REPO))  # the workers import tools.run.runner from this checkout
     tls = tmp_path / "tls"
     make_certs(tls)
     f = {p.name: str(p) for p in cert_files(tls)}
@@ -226,7 +226,7 @@ def test_a_slot_whose_ports_still_carry_traffic_is_passed_over() -> None:
     import threading
     import time
 
-    from tools.slots import CAN_GROUP, acquire_slot
+    from tools.run.slots import CAN_GROUP, acquire_slot
 
     with acquire_slot() as probe:
         free = probe.index  # the slot a run would take next

@@ -9,11 +9,11 @@ from pathlib import Path
 import pytest
 
 from host_sim.drive_model import DriveModel
-from tools.hil import HilOptions, run_hil
-from tools.arm import DEFAULT_ARM, arm_build_dir, arm_info
-from tools.study_config import for_arm, load
+from tools.run.hil import HilOptions, run_hil
+from tools.build.arm import DEFAULT_ARM, arm_build_dir, arm_info
+from tools.study.config import for_arm, load
 from tools.study import DEFAULT_CONFIG
-from tools.telemetry_log import read_log
+from tools.run.telemetry_log import read_log
 
 FIRMWARE_METHODS = ("pm", "pm-paper", "gh2", "pd", "tde", "usde-smc")
 CFG = load(DEFAULT_CONFIG)
@@ -47,7 +47,7 @@ def test_sil_equals_lockstep_hil_for_every_method(tmp_path: Path, controller_bin
 
 
 def test_sil_refuses_realtime_and_a_foreign_controller(tmp_path: Path, controller_bin: Path) -> None:
-    from tools.hil import HilError
+    from tools.run.hil import HilError
 
     preset = controller_bin.parent.parent.name
     with pytest.raises(HilError, match="lockstep only"):
@@ -83,7 +83,7 @@ def test_capture_holds_every_frame_and_the_field_s_tools_read_it(tmp_path: Path,
 
     import can
 
-    from tools.hil import CAPTURE_FILE
+    from tools.run.hil import CAPTURE_FILE
     from gen.lib.paths import REPO
 
     preset = controller_bin.parent.parent.name

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from tools.stats import paired, summary
+from tools.study.stats import paired, summary
 
 
 def test_summary_covers_the_values_there_are_and_counts_the_missing() -> None:

@@ -21,11 +21,11 @@ import numpy as np
 import pytest
 
 from study_configs import with_tuning
-from tools.hil import HilOptions, run_hil
+from tools.run.hil import HilOptions, run_hil
 from gen.lib.paths import REPO
 from tools.study import DEFAULT_CONFIG, run_study
-from tools.study_config import METHODS, StudyConfigError, load
-from tools.telemetry_log import read_log
+from tools.study.config import METHODS, StudyConfigError, load
+from tools.run.telemetry_log import read_log
 
 SMALL = {"methods": '["pm", "pm-paper-weights", "tde"]', "scenarios": '["ideal", "realistic"]'}
 
@@ -126,9 +126,9 @@ def test_same_numbers_whatever_jobs(study: tuple[Path, dict, Path], tmp_path: Pa
 
 
 def test_tuning_is_the_same_whatever_jobs(tmp_path: Path) -> None:
-    from tools.arm import DEFAULT_ARM
+    from tools.build.arm import DEFAULT_ARM
     from tools.study import setup_for
-    from tools.tuning import tune_method
+    from tools.study.tuning import tune_method
 
     cfg = load(small_config(tmp_path))
     recs = []
@@ -220,8 +220,8 @@ def test_a_study_stopped_by_a_signal_resumes_to_the_same_numbers(uninterrupted, 
 def test_tuning_widens_a_range_whose_best_is_at_its_edge(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """An objective that keeps falling as wn grows: the best lands on the range's top, the
     range is widened tenfold and the budget runs again, and the record says so."""
-    from tools import tuning
-    from tools.arm import DEFAULT_ARM
+    from tools.study import tuning
+    from tools.build.arm import DEFAULT_ARM
     from tools.study import setup_for
 
     def fake_run_all(specs, jobs, cluster):  # noqa: ANN001, ANN202 - an in-process stand-in for the HIL runs
@@ -321,7 +321,7 @@ def test_default_config_tunes_every_method_but_the_papers_weights() -> None:
 def test_the_kept_tuning_serves_this_checkout(tmp_path: Path) -> None:
     """The committed tuning is reused by `armctl demo` and `study` on any clone, wherever it lies
     (its key once held the checkout's path, and a fresh clone retuned for 20 minutes)."""
-    from tools.arm import DEFAULT_ARM, build_arm
+    from tools.build.arm import DEFAULT_ARM, build_arm
     from tools.study import setup_for, tuning_file, tuning_key
 
     build_arm("release", DEFAULT_ARM)
@@ -344,7 +344,7 @@ def test_the_kept_tuning_serves_this_checkout(tmp_path: Path) -> None:
 def test_a_failed_trial_scores_by_how_much_it_ran() -> None:
     """No ties: failed trials rank by what they achieved (coverage, tracking over the part they
     ran, time at the limit, failed seeds), always behind any trial that ended well."""
-    from tools.tuning import FAILED_SCORE, REFUSED_SCORE, objective
+    from tools.study.tuning import FAILED_SCORE, REFUSED_SCORE, objective
 
     def run(result: str, ran: int, err: float = 0.01, sat: float = 0.0) -> dict:
         return {"results": {"result": result, "tracking_max_abs_rad": [err] * 6, "trajectory_periods": 4000,
@@ -382,8 +382,8 @@ def test_tuning_runs_to_a_plateau_or_the_cap_and_validates_its_pick(tmp_path: Pa
     seed gives way to the next best, and the record says so; the SQLite storage resumes."""
     import optuna
 
-    from tools import tuning
-    from tools.arm import DEFAULT_ARM
+    from tools.study import tuning
+    from tools.build.arm import DEFAULT_ARM
     from tools.study import setup_for
 
     batches: list[int] = []
@@ -459,7 +459,7 @@ def test_two_tunings_at_once_keep_both(tmp_path: Path) -> None:
 def test_a_second_study_on_the_same_out_is_refused_in_one_line(tmp_path: Path) -> None:
     """Another study holds --out (its lock, taken here as that study would): this one exits at
     once with one line naming the folder, and leaves the other's files alone."""
-    from tools.locks import flocked
+    from gen.lib.locks import flocked
     from tools.study import OUT_LOCK
 
     out = tmp_path / "out"
@@ -484,7 +484,7 @@ def fake_arm(name: str, limits: list[float]) -> dict:
 
 
 def test_scenario_per_joint_values_take_n_from_the_arm(tmp_path: Path) -> None:
-    from tools.study_config import for_arm
+    from tools.study.config import for_arm
 
     cfg = load(DEFAULT_CONFIG)
     bundled = for_arm(cfg, fake_arm("ur5e_arm", [150, 150, 150, 28, 28, 28])).scenarios[FRICTION].uncertainty
@@ -519,7 +519,7 @@ def test_a_per_joint_value_that_does_not_fit_the_arm_is_named(tmp_path: Path, ne
                                                              named: str) -> None:
     """A malformed value when the config loads; one that does not fit this arm before any run
     (study.setup_for): the scenario, the field, and both lengths."""
-    from tools.study_config import for_arm
+    from tools.study.config import for_arm
 
     old = "viscous = { for_arm = { ur5e_arm = [2.0, 2.0, 1.5, 0.5, 0.5, 0.5] }, torque_limit_fraction = 0.015 }"
     f = tmp_path / "c.toml"
@@ -533,7 +533,7 @@ def test_a_per_joint_value_that_does_not_fit_the_arm_is_named(tmp_path: Path, ne
 def test_the_report_shows_a_run_that_failed_and_never_crashes_on_it(tmp_path: Path) -> None:
     """Every run of a scenario failed before it measured (the 7-joint arm's friction scenario
     once): the report has the arm's joints, says failed and why, and exits normally."""
-    from tools.report import write_report
+    from tools.study.report import write_report
     from tools.study import scenario_result
 
     n, methods = 7, ["pm", "pd"]
@@ -559,7 +559,7 @@ def test_a_study_on_a_seven_joint_arm_runs_every_scenario(tmp_path: Path) -> Non
     """The README's `study --arm tests/arms/panda.toml`, short: every scenario (friction values
     from the torque limits), one seed, two methods; every run measured, a report naming every
     scenario, and each run.json saying when, from which commit and where it ran."""
-    from tools.arm import ArmRef, build_arm
+    from tools.build.arm import ArmRef, build_arm
 
     text = DEFAULT_CONFIG.read_text()
     text = re.sub(r"(?m)^methods = .*$", 'methods = ["pm-paper-weights", "pd"]', text)

@@ -14,9 +14,9 @@ from pathlib import Path
 
 import pytest
 
-from tools.hil import HilOptions, run_hil
+from tools.run.hil import HilOptions, run_hil
 from gen.lib.paths import REPO, env_with_repo
-from tools.timing import parse_cyclictest
+from tools.bench.timing import parse_cyclictest
 
 PCTS = ("p50", "p99", "p99.9", "max")
 
@@ -105,7 +105,7 @@ def test_cyclictest_histogram_is_parsed() -> None:
 def test_a_slower_loop_gets_its_whole_period_simulated() -> None:
     """At 200 Hz on a 1 kHz arm each period is 5 MuJoCo steps (it once was 1: the simulated arm ran
     5x slow and the controller's step check caught the positions the velocities did not explain)."""
-    from tools.hil import HilError, sim_substeps
+    from tools.run.hil import HilError, sim_substeps
 
     assert sim_substeps({"loop_rate_hz": 1000.0, "substeps": 1}, 200.0) == 5
     assert sim_substeps({"loop_rate_hz": 1000.0, "substeps": 2}, 500.0) == 4

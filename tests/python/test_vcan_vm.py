@@ -174,7 +174,7 @@ def vm_run(tmp_path_factory: pytest.TempPathFactory, build_dir: Path) -> dict:
     # no start-pose hold where the controller has one: the VM is slow, the periods are precious
     helptext = subprocess.run([str(exes["ctl"]), "--help"], capture_output=True, text=True).stdout
     ctl_extra = "--ref-hold 0" if "--ref-hold" in helptext else ""
-    from tools.hil import CAPTURE_FILE, HilOptions, run_hil
+    from tools.run.hil import CAPTURE_FILE, HilOptions, run_hil
 
     run_hil(HilOptions(out=out / "sil", duration_s=0.2, preset=build_dir.name, bus="sil", capture=True))
     log = io.BytesIO()

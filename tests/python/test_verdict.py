@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from tools.hil import HilOptions, run_hil
+from tools.run.hil import HilOptions, run_hil
 from gen.lib.paths import REPO
-from tools.verdict import Bounds, judge
+from tools.run.verdict import Bounds, judge
 
 GOOD_RESULTS = {"joint_names": ["a", "b"], "tracking_max_abs_deg": [0.5, 1.0], "saturated_fraction": [0.0, 0.01],
                 "commands_missed": 0, "commands_late": 0, "trajectory_periods": 1000, "periods_running": 1000,
@@ -111,7 +111,7 @@ def test_the_default_tracking_bound_is_a_few_degrees() -> None:
 def test_a_following_error_stop_names_the_stop_and_the_bound() -> None:
     """The safety layer's 0.5 rad stop and the tracking bound, reported together: the run failed, and
     it left the 2 deg bound on the way there."""
-    from tools.verdict import FOLLOWING_ERROR_STOP_DEG, left_tracking_bound
+    from tools.run.verdict import FOLLOWING_ERROR_STOP_DEG, left_tracking_bound
 
     why = "following error above its limit"
     kind, reasons = verdict(results={"tracking_max_abs_deg": [0.5, 28.6]},
@@ -127,7 +127,7 @@ def test_a_following_error_stop_names_the_stop_and_the_bound() -> None:
 
 def test_example_1_counts_runs_the_following_error_stop_ended() -> None:
     """issue 21, item 6: two gh2 runs stopped for their following error lost track: Example 1 holds."""
-    from tools.report import _claims
+    from tools.study.report import _claims
 
     why = "following error above its limit"
     runs = [{"result": "failed", "final_fault": why, "tracking_max_abs_deg": [28.6]} for _ in range(2)]

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import subprocess
 
-from tools.arm import add_arm_arguments
+from tools.build.arm import add_arm_arguments
 from tools.build import PRESETS, TARGETS
 from tools.commands import CommandError
 
@@ -20,7 +20,7 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(ns: argparse.Namespace) -> int:
-    from tools.arm import arm_from_args, arm_info, build_arm, print_arm_warnings
+    from tools.build.arm import arm_from_args, arm_info, build_arm, print_arm_warnings
 
     arm = arm_from_args(ns)
     bdir = build_arm(TARGETS[ns.target] if ns.target else ns.preset, arm, quiet=False)

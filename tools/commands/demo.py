@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from gen.lib.paths import REPO
-from tools.arm import add_arm_arguments
+from tools.build.arm import add_arm_arguments
 from tools.study import BUSES as SIL_OR_BUS, DEFAULT_CONFIRM
 
 

@@ -10,10 +10,10 @@ from pathlib import Path
 from gen.lib.outdir import check_out_dir
 from gen.lib.params import param
 from gen.lib.paths import REPO
-from tools.arm import add_arm_arguments
+from tools.build.arm import add_arm_arguments
 from tools.commands import UsageError
 from tools.methods import method_names
-from tools.verdict import DEFAULT_MAX_ERROR_DEG, FOLLOWING_ERROR_STOP_DEG
+from tools.run.verdict import DEFAULT_MAX_ERROR_DEG, FOLLOWING_ERROR_STOP_DEG
 
 _PARSER: argparse.ArgumentParser | None = None  # hil's own, to read its arguments again for the VM
 PATH_OPTIONS = ("out", "topology", "model", "arm", "design", "config")  # dests whose values are paths
@@ -31,7 +31,7 @@ def _float_list(text: str) -> list[float]:
 
 def add_subparser(sub: argparse._SubParsersAction) -> None:
     global _PARSER
-    from tools.study_config import METHODS as STUDY_METHODS
+    from tools.study.config import METHODS as STUDY_METHODS
 
     h = sub.add_parser("hil", help="one hardware-in-the-loop run")
     h.add_argument("--duration", type=float, default=None,
@@ -88,13 +88,13 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
 
 
 def _print_run(run: dict) -> None:
-    from tools.run_analysis import table
+    from tools.run.run_analysis import table
 
     print(table(run))
 
 
 def _ended(run: dict, out: Path) -> int:
-    from tools import procs
+    from tools.run import procs
 
     _print_run(run)
     print(f"results: {out / 'run.json'}  log: {out / 'telemetry.lcmlog'}")
@@ -110,16 +110,16 @@ def _check_duration(duration: float | None) -> None:
 
 
 def _study_run(ns: argparse.Namespace) -> int:
-    """hil --scenario: one run of a study, made as the study makes it (tools/study.py
-    study_run_spec) and run as it runs it (tools/runner.py execute)."""
+    """hil --scenario: one run of a study, made as the study makes it (tools/study/__init__.py
+    study_run_spec) and run as it runs it (tools/run/runner.py execute)."""
     import json
     import sys
     from dataclasses import asdict
 
     from tools import study
-    from tools.arm import arm_from_args, arm_info, build_arm, print_arm_warnings
-    from tools.runner import DONE, execute
-    from tools.study_config import StudyConfigError, load
+    from tools.build.arm import arm_from_args, arm_info, build_arm, print_arm_warnings
+    from tools.run.runner import DONE, execute
+    from tools.study.config import StudyConfigError, load
 
     if ns.tuned is not None and ns.knobs is not None:
         raise StudyConfigError("--tuned and --knobs: give one")
@@ -156,10 +156,10 @@ def _study_run(ns: argparse.Namespace) -> int:
 def run(ns: argparse.Namespace) -> int:
     import sys
 
-    from tools.arm import arm_from_args, arm_info, build_arm, print_arm_warnings, reference_for
-    from tools.hil import HilOptions, run_hil
-    from tools.study_config import DRIVE_PRESETS
-    from tools.verdict import Bounds
+    from tools.build.arm import arm_from_args, arm_info, build_arm, print_arm_warnings, reference_for
+    from tools.run.hil import HilOptions, run_hil
+    from tools.study.config import DRIVE_PRESETS
+    from tools.run.verdict import Bounds
 
     _check_duration(ns.duration)
     if ns.scenario is not None:
@@ -258,9 +258,9 @@ def vm_argv(args: list[str], parser: argparse.ArgumentParser | None = None, cwd:
     return out
 
 
-def _in_vm(ns: argparse.Namespace, arm) -> int:  # noqa: ANN001 - tools.arm.ArmRef
+def _in_vm(ns: argparse.Namespace, arm) -> int:  # noqa: ANN001 - tools.build.arm.ArmRef
     """The same HIL run inside the qemu VM whose kernel has vcan0..vcan3 (tools/vm)."""
-    from tools.arm import build_arm
+    from tools.build.arm import build_arm
     from tools.vm.run import run_in_vm
 
     build_arm("release", arm)

@@ -22,7 +22,7 @@ def run(ns: argparse.Namespace) -> int:
     firmware gets this design (a design in DIR alone is only for looking at)."""
     import tempfile
 
-    from tools.arm import arm_from_args, print_arm_warnings
+    from tools.build.arm import arm_from_args, print_arm_warnings
 
     arm = arm_from_args(ns)
     arm_opts = (f" --arm {arm.arm_file}" if arm.arm_file else f" --model {arm.model}" if arm.model else "")

@@ -235,7 +235,7 @@ int main(int argc, char **argv)
         return 1;
     }
     /* Ready: the membership is in place and the file open, so nothing published from now on is
-     * missed (tools/hil.py starts the run when it reads this line). */
+     * missed (tools/run/hil.py starts the run when it reads this line). */
     printf("arm_lcm_logger: ready\n");
     (void)fflush(stdout);
     static batch_t batch; /* 4 MB: static, not on the stack */

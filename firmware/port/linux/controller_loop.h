@@ -10,7 +10,7 @@
 #include "telemetry.h"
 
 /* arm_controller's exit codes: the registry's (controller-exit, firmware/params/params.toml), which
- * tools/verdict.py reads too. */
+ * tools/run/verdict.py reads too. */
 typedef enum {
     RUN_OK = ARM_P_CONTROLLER_EXIT_OK,
     RUN_BUS_ERROR = ARM_P_CONTROLLER_EXIT_BUS_ERROR,     /* could not open or use the bus */

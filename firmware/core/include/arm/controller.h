@@ -22,7 +22,7 @@ typedef enum {
 
 typedef enum {
     /* The numbers and names are the registry's (controller-states, firmware/params/params.toml):
-     * telemetry carries the number, tools/run_analysis.py reads the names from there too. */
+     * telemetry carries the number, tools/run/run_analysis.py reads the names from there too. */
     ARM_STATE_INIT = ARM_P_CONTROLLER_STATES_INIT,           /* configured, no valid input yet */
     ARM_STATE_RUNNING = ARM_P_CONTROLLER_STATES_RUNNING,     /* method output reaches the drives */
     ARM_STATE_FAULT = ARM_P_CONTROLLER_STATES_FAULT,         /* a fault was detected this period; the safe-stop output is commanded */

@@ -21,7 +21,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from gen.lib.atomic_output import write_json_atomic
-from tools.locks import flocked
+from gen.lib.locks import flocked
 from gen.lib.paths import REPO, build_dir
 
 PRESETS = ("debug", "release")

@@ -11,7 +11,7 @@ is listed in verdict_reasons):
   the drives simulated another number of periods than the controller ran (another master);
 - incomplete: fewer periods than asked for, telemetry lost, foreign telemetry (messages logged
   beyond those sent, duplicate sequence numbers, numbers at or beyond what the sender sent, steps
-  that contradict their number: tools/run_analysis.py telemetry_accounting), frames the kernel dropped on a full
+  that contradict their number: tools/run/run_analysis.py telemetry_accounting), frames the kernel dropped on a full
   receive queue, the logger failed, or the metrics do not cover every period of the trajectory;
 - tracking-bound-exceeded: a joint's L-infinity tracking error above bounds.max_error_deg (2 deg
   unless set); a run the safety layer stopped for its following error (0.5 rad, FOLLOWING_ERROR_STOP_DEG)

@@ -30,9 +30,9 @@ import can
 
 from gen.lib.atomic_output import write_json_atomic
 from host_sim.canbus import open_bus
-from tools.hil import HilOptions, run_hil
+from tools.run.hil import HilOptions, run_hil
 from gen.lib.paths import REPO
-from tools.slots import acquire_slot
+from tools.run.slots import acquire_slot
 
 SYNC, NMT = 0x080, 0x000
 LOST_BUS_PERIOD = 1500
@@ -46,7 +46,7 @@ class Fault:
     inject: Callable[["Injector"], None]
     expect_stop: bool                          # the arm must end stopped (a named fault, never ok)
     sim_args: tuple[str, ...] = ()
-    mode: str = "lockstep"                     # the run's mode (tools/hil.py)
+    mode: str = "lockstep"                     # the run's mode (tools/run/hil.py)
 
 
 class Injector:
@@ -256,7 +256,7 @@ def run_fault(f: Fault, out: Path) -> dict[str, Any]:
         and inj.injected_at is not None else None
     safe = stopped
     lost = run.get("transport", {}).get("telemetry_lost_total")
-    # messages that cannot come from the run's own senders (tools/run_analysis.py), summed over channels
+    # messages that cannot come from the run's own senders (tools/run/run_analysis.py), summed over channels
     foreign = sum(a.get("foreign", 0) for a in (run.get("transport", {}).get("telemetry") or {}).values())
     return {"fault": f.name, "what": f.what, "detected_after_periods": detected, "safe_state": safe,
             "final_state": r.get("final_state"), "drives_faulted": faulted, "verdict": r.get("result"),
@@ -300,7 +300,7 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(ns: argparse.Namespace) -> int:
-    from tools.arm import build_arm
+    from tools.build.arm import build_arm
     from gen.lib.outdir import OutDirError, check_out_dir
 
     names = [f.name for f in FAULTS] if ns.only is None else ns.only.split(",")

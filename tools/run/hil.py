@@ -22,13 +22,13 @@ from gen.lib.atomic_output import OutputError, write_json_atomic
 from host_sim.drive_model import DriveModel
 from host_sim.launch import sim_argv
 from gen.lib import busload
-from tools.arm import DEFAULT_ARM, ArmChoiceError, ArmRef, arm_build_dir, arm_info, prepared_model
+from tools.build.arm import DEFAULT_ARM, ArmChoiceError, ArmRef, arm_build_dir, arm_info, prepared_model
 from gen.lib.params import constant, default as param_default
 from gen.lib.paths import REPO, controller_binary, logger_binary
-from tools import procs as procs_mod
-from tools.run_analysis import analyse
-from tools.slots import acquire_slot
-from tools.verdict import Bounds
+from tools.run import procs as procs_mod
+from tools.run.run_analysis import analyse
+from tools.run.slots import acquire_slot
+from tools.run.verdict import Bounds
 
 CONTROLLER_DEFAULT_HOLD_S: float = param_default("controller", "ref-hold")
 
@@ -48,8 +48,8 @@ class HilOptions:
     preset: str = "release"
     # udp | vcan | auto (vcan if this kernel has SocketCAN and vcan0.., else udp) | sil (one process)
     bus: str = "udp"
-    can_port: int | None = None  # None: the run slot's (tools/slots.py): no concurrent run shares it; bus i: port + i
-    # The arm (tools/arm.py: --model / --arm); its build folder holds the binaries and arm.json.
+    can_port: int | None = None  # None: the run slot's (tools/run/slots.py): no concurrent run shares it; bus i: port + i
+    # The arm (tools/build/arm.py: --model / --arm); its build folder holds the binaries and arm.json.
     arm: ArmRef = DEFAULT_ARM
     # Which drive is on which bus (a topology file; None: the arm's wiring, arm.json).
     topology: Path | None = None
@@ -69,7 +69,7 @@ class HilOptions:
     # Emulate each bus's bit timing in the simulator (host_sim/bus_timing.py) with the topology's
     # physical layers: virtual in lockstep, wallclock in realtime.
     bus_timing: bool = False
-    # What the run must meet to be "ok" (tools/verdict.py).
+    # What the run must meet to be "ok" (tools/run/verdict.py).
     bounds: Bounds = field(default_factory=Bounds)
     # The emulated drives' sensing and torque path (host_sim/drive_model.py; default: ideal).
     drives: DriveModel = field(default_factory=DriveModel)

@@ -13,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from tools.telemetry_log import CHUNK_BYTES, EVENT_CHANNELS, FIXED_CHANNELS, Chunk, iter_chunks
-from tools.verdict import Bounds, judge
+from tools.run.telemetry_log import CHUNK_BYTES, EVENT_CHANNELS, FIXED_CHANNELS, Chunk, iter_chunks
+from tools.run.verdict import Bounds, judge
 from gen.lib.params import constant, default as param_default
 
 # The controller's states as telemetry numbers them (the registry's, firmware/params/params.toml).

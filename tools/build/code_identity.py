@@ -1,5 +1,5 @@
 """The identity of the code that decides a HIL run's result: a hash over the firmware, the
-simulator, the synthesis and the run's own tooling (their sources, not their documentation). A kept run (tools/runner.py) is reused only
+simulator, the synthesis and the run's own tooling (their sources, not their documentation). A kept run (tools/run/runner.py) is reused only
 when this is unchanged, so changing the controller or the simulator never leaves stale results in
 a resumed study or tuning."""
 
@@ -12,8 +12,8 @@ from pathlib import Path
 from gen.lib.paths import REPO
 
 # What a run's result depends on; reporting, statistics and the CLI are not in it.
-SOURCES = ("firmware", "host_sim", "gen", "tools/lcm_logger", "tools/hil.py", "tools/run_analysis.py",
-           "tools/verdict.py", "tools/telemetry_log.py", "tools/arm.py", "CMakeLists.txt", "CMakePresets.json")
+SOURCES = ("firmware", "host_sim", "gen", "tools/lcm_logger", "tools/run/hil.py", "tools/run/run_analysis.py",
+           "tools/run/verdict.py", "tools/run/telemetry_log.py", "tools/build/arm.py", "CMakeLists.txt", "CMakePresets.json")
 SKIP_PARTS = {"__pycache__", ".pytest_cache"}
 # Documentation in those folders changes no result: a README edit must not mark a kept tuning stale.
 DOCS = (".md", ".txt", ".pyc")

@@ -174,8 +174,8 @@ def measure(out: Path, duration_s: float, rate_hz: float, rt_priority: int, cpu:
     from gen.lib.atomic_output import write_json_atomic
     import numpy as np
 
-    from tools.hil import HilError, HilOptions, realtime_cpu, run_hil
-    from tools.telemetry_log import read_log
+    from tools.run.hil import HilError, HilOptions, realtime_cpu, run_hil
+    from tools.run.telemetry_log import read_log
 
     out.mkdir(parents=True, exist_ok=True)
     for stale in ("timing.json", "timing.png", "cyclictest.txt"):

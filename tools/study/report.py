@@ -17,8 +17,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from gen.lib.atomic_output import write_text_atomic  # noqa: E402
-from tools.telemetry_log import read_log  # noqa: E402
-from tools.verdict import FOLLOWING_ERROR_STOP_DEG, left_tracking_bound, stopped_by_following_error  # noqa: E402
+from tools.run.telemetry_log import read_log  # noqa: E402
+from tools.run.verdict import FOLLOWING_ERROR_STOP_DEG, left_tracking_bound, stopped_by_following_error  # noqa: E402
 from gen.lib.params import default  # noqa: E402
 
 # Kim & Kim 2024, Tables 1-3 (Table 1 from their simulation, Tables 2-3 from their experiment).
@@ -221,7 +221,7 @@ def convergence_figure(out: Path, scenario: str, recs: dict[str, dict[str, Any]]
         ax.axvline(cap, color="k", ls="--", lw=0.8, label=f"cap {cap}")
     if lows and min(lows) > 0:
         ax.set_yscale("log")
-    ax.axhline(1000.0, color="red", lw=0.6, ls="-.")  # at and above: no trial ended well (tools/tuning.py)
+    ax.axhline(1000.0, color="red", lw=0.6, ls="-.")  # at and above: no trial ended well (tools/study/tuning.py)
     ax.set_xlabel("trial (every round, in order)")
     ax.set_ylabel("best objective so far (sum L-inf, rad; >= 1000: failed)")
     ax.set_title(f"{scenario}: tuning, best so far (o converged, x capped; dotted: a widening round starts)",

@@ -36,7 +36,7 @@ TUNED = tuple(m for m, (_, how) in METHODS.items() if how is not None)
 # the generalized-H2 problem non-degenerate). gh2 has no estimator: only the controller's.
 # Both forms depend only on E1/D12 and E2/D12 (scaling z_o scales the norm, not the optimum), so
 # the search gives them as a bandwidth and a damping ratio, as every other method's:
-# E1/D12 = wn^2, E2/D12 = 2 zeta wn, D12 = 1 (tools/design_knobs.py). E1, E2, D12 still name a
+# E1/D12 = wn^2, E2/D12 = 2 zeta wn, D12 = 1 (tools/study/design_knobs.py). E1, E2, D12 still name a
 # design directly (an older tuning, --knobs).
 DESIGN_KNOBS = ("wn", "zeta", "H", "f_bw")
 LEGACY_DESIGN_KNOBS = ("E1", "E2", "D12", "H", "f_bw")
@@ -315,7 +315,7 @@ def _space(method: str, d: Any) -> Space:
         floor = KNOB_FLOOR.get((method, k))
         if floor is not None and v[0] < floor:
             raise StudyConfigError(f"{where}.{k}: its structure reaches no lower than {floor:g} "
-                                   f"(tools/study_config.py GAIN_KNOBS), got {v!r}")
+                                   f"(tools/study/config.py GAIN_KNOBS), got {v!r}")
         sp.ranges[k] = (float(v[0]), float(v[1]))
     if how == "design" and "form" not in sp.choices:
         sp.choices["form"] = ["single"]

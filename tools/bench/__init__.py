@@ -117,7 +117,7 @@ def cortex_m_costs() -> dict[str, Any]:
     instructions; it does not model cycles, caches or the M7's dual issue). On silicon the same
     image prints SysTick ticks, which are core cycles."""
     from tools.build import toolchain_missing
-    from tools.cortex_m import run_image, step_costs
+    from tools.build.cortex_m import run_image, step_costs
 
     out: dict[str, Any] = {"what": "instructions per call under QEMU -icount shift=0, SysTick calibrated by a loop "
                                    "of known length (firmware/port/cortex_m/step_count.c); not cycles"}
@@ -157,7 +157,7 @@ def table(result: dict[str, Any]) -> str:
 
 def _sim_runs(bus: str, repeats: int, duration: float, tmp: Path) -> tuple[list[dict[str, Any]], dict[str, float]]:
     """The default run on this bus, repeated; one more with --profile (where a period's time goes)."""
-    from tools.hil import HilOptions, run_hil
+    from tools.run.hil import HilOptions, run_hil
 
     runs, breakdown = [], {}
     for i in tqdm(range(repeats + 1), desc=bus, unit="run"):
@@ -264,7 +264,7 @@ def run(ns: argparse.Namespace) -> int:
         print(f"results: {out}")
         return 0
     if ns.what == "study":
-        from tools.bench_study import bench_study, table as study_table
+        from tools.bench.study import bench_study, table as study_table
 
         out = ns.out or REPO / "runs" / "bench" / "study.json"
         print(study_table(bench_study(out, ns.quick)))

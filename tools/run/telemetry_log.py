@@ -14,7 +14,7 @@ as undecodable. A torn last event (a killed writer) is read up to the last whole
 between events that are not an event are skipped up to the next sync word, as liblcm does.
 
 read_log() loads a whole run through the same reader (for the figures of a kept run and for
-tests): its memory grows with the run; the analysis (tools/run_analysis.py) streams instead.
+tests): its memory grows with the run; the analysis (tools/run/run_analysis.py) streams instead.
 """
 
 from __future__ import annotations

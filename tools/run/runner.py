@@ -3,7 +3,7 @@
 A run is a RunSpec: everything that decides its result (the arm, the design when it is not the
 arm's own, the method and its arguments, the scenario, the seed). The same spec gives the same
 run.json in lockstep, whichever worker runs it and whatever else runs beside it: each run holds a
-run slot (tools/slots.py) for its own bus and telemetry ports, and a design other than the arm's
+run slot (tools/run/slots.py) for its own bus and telemetry ports, and a design other than the arm's
 is built in a build folder of that slot.
 
 A finished run's folder holds its run.json and, written last, spec.json: the spec and the
@@ -27,14 +27,14 @@ from pathlib import Path
 from typing import Any
 
 from host_sim.drive_model import DriveModel
-from tools import procs
-from tools.arm import HIL_TARGETS, ArmChoiceError, targets_for, ArmRef, arm_build_dir, arm_info, build_arm
+from tools.run import procs
+from tools.build.arm import HIL_TARGETS, ArmChoiceError, targets_for, ArmRef, arm_build_dir, arm_info, build_arm
 from tools.build import build_lock
-from tools.cluster import Cluster
+from tools.run.cluster import Cluster
 from gen.lib.paths import BUILD
 from gen.lib.atomic_output import write_json_atomic, write_text_atomic
-from tools.hil import LOCKSTEP_SPIN_US, SIL, HilError, HilOptions, lockstep_spin_us, provenance, run_hil
-from tools.slots import Slot, acquire_slot
+from tools.run.hil import LOCKSTEP_SPIN_US, SIL, HilError, HilOptions, lockstep_spin_us, provenance, run_hil
+from tools.run.slots import Slot, acquire_slot
 
 # metric -> the run.json results field a study computes with (per joint, or one number for the arm)
 METRICS = {"linf": "tracking_max_abs_rad", "rms": "tracking_rms_rad", "est": "estimation_error_rms",
@@ -51,14 +51,14 @@ class RunSpec:
     uncertainty: dict[str, Any]
     drives: dict[str, Any] = field(default_factory=dict)
     bus_timing: bool = False
-    model: str | None = None           # the arm (tools/arm.py ArmRef), as paths
+    model: str | None = None           # the arm (tools/build/arm.py ArmRef), as paths
     arm_file: str | None = None
     design: str | None = None          # the arm's design config, or None
     design_text: str | None = None     # a design built for this run alone (tuning, tuned designs)
     keep_log: bool = True              # tuning runs drop their telemetry log once analysed
     labels: dict[str, Any] = field(default_factory=dict)
-    code: str = ""                     # tools/code_identity.py: a kept run of other code is run again
-    bus: str = "udp"                   # tools/hil.py's --bus: sil (one process) or a CAN bus
+    code: str = ""                     # tools/build/code_identity.py: a kept run of other code is run again
+    bus: str = "udp"                   # tools/run/hil.py's --bus: sil (one process) or a CAN bus
 
     def key(self) -> dict[str, Any]:
         """What decides the result (not where it is written, nor the bus it ran on: software in the
@@ -116,7 +116,7 @@ def _number_or_numbers(v: Any) -> bool:
 
 
 def _identity(spec: RunSpec) -> dict[str, Any]:
-    """What a run.json's results record of the spec they ran (tools/hil.py: its config, labels)."""
+    """What a run.json's results record of the spec they ran (tools/run/hil.py: its config, labels)."""
     drives = (DriveModel(**spec.drives) if spec.drives else DriveModel()).to_dict()
     return {"method": spec.method, "duration_s": spec.duration_s, "controller_args": list(spec.controller_args),
             "uncertainty": spec.uncertainty, "drives": drives, **spec.labels}
@@ -180,7 +180,7 @@ def kept_run(out: Path, spec: RunSpec) -> tuple[dict[str, Any] | None, str]:
 
 def execute(spec_d: dict[str, Any], spin_us: float = LOCKSTEP_SPIN_US) -> dict[str, Any]:
     """One run (in this process: a thread of `armctl study`, or a Dask worker). Returns run.json.
-    spin_us: a lockstep run's polling (tools/hil.py lockstep_spin_us), which never changes a result."""
+    spin_us: a lockstep run's polling (tools/run/hil.py lockstep_spin_us), which never changes a result."""
     spec = spec_from_dict(spec_d)
     out = Path(spec.out)
     key = spec.key()
@@ -255,7 +255,7 @@ def _design_lanes(specs: list[RunSpec], jobs: int) -> list[int]:
 def run_all(specs: list[RunSpec], jobs: int = 1, cluster: Cluster | None = None,
             progress: Callable[[RunSpec, dict[str, Any]], None] | None = None) -> list[dict[str, Any]]:
     """Every spec's run.json, in the specs' order. Local: `jobs` threads, each run in a run slot.
-    cluster: a Dask scheduler (tools/cluster.py); each run is one task on a worker (the workers see this
+    cluster: a Dask scheduler (tools/run/cluster.py); each run is one task on a worker (the workers see this
     checkout at the same path, and the out folders on a shared file system)."""
     if not specs:
         return []

@@ -10,12 +10,12 @@ from pathlib import Path
 from typing import Any
 
 from gen.lib.atomic_output import write_json_atomic, write_text_atomic
-from tools.code_identity import code_identity
+from tools.build.code_identity import code_identity
 from gen.lib.paths import REPO
 
 RECORD = REPO / "tools" / "studies" / "paper.headline.json"
 README = REPO / "README.md"
-BEGIN = "<!-- headline: tools/armctl study --record writes this table (tools/headline.py) -->"
+BEGIN = "<!-- headline: tools/armctl study --record writes this table (tools/study/headline.py) -->"
 END = "<!-- /headline -->"
 # What a run's record keeps: its verdict and the numbers the tables and the slice test compare.
 RUN_FIELDS = ("result", "steps", "tracking_max_abs_rad", "tracking_rms_rad", "estimation_error_rms",
@@ -27,7 +27,7 @@ class HeadlineError(RuntimeError):
 
 
 def record_of(study: dict[str, Any]) -> dict[str, Any]:
-    """What summary_table needs (tools/report.py) and the runs' own numbers."""
+    """What summary_table needs (tools/study/report.py) and the runs' own numbers."""
     return {"config": study["config"], "code": code_identity(), "seeds": study["seeds"],
             "duration_s": study["duration_s"], "methods": study["methods"], "bus": study.get("bus"),
             "arm": {"name": study["arm"]["name"], "n_joints": study["arm"]["n_joints"]},
@@ -38,7 +38,7 @@ def record_of(study: dict[str, Any]) -> dict[str, Any]:
 
 
 def render(record: dict[str, Any]) -> str:
-    from tools.report import summary_table
+    from tools.study.report import summary_table
 
     return "```\n" + summary_table(record) + "\n```"
 

@@ -1,7 +1,7 @@
 """Locks where two armctl commands share a file: an flock on a lock file, held for the block and
 released when it ends or its process dies (so a killed command never leaves a stale lock).
 
-Used for a build folder (tools/build.py), the kept tuning (tools/study.py) and a study's --out.
+Used for a build folder (tools/build/__init__.py), the kept tuning (tools/study/__init__.py) and a study's --out.
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ that is (runs/bench/study.json).
 
 The runs are a study's: pd and tde (gains, so no design is built inside the timing; both run the
 whole trajectory), the realistic scenario (drives and bus timing emulated), distinct seeds, each
-in its own run slot, through tools/runner.py exactly as `armctl study` runs them; the wall time
+in its own run slot, through tools/run/runner.py exactly as `armctl study` runs them; the wall time
 covers them all, start-up and analysis included.
 """
 
@@ -16,11 +16,11 @@ from pathlib import Path
 from typing import Any
 
 from gen.lib.atomic_output import write_json_atomic
-from tools.arm import DEFAULT_ARM
-from tools.runner import run_all
+from tools.build.arm import DEFAULT_ARM
+from tools.run.runner import run_all
 from tools.study import DEFAULT_CONFIG, setup_for
-from tools.study_config import load
-from tools.tuning import trial_spec
+from tools.study.config import load
+from tools.study.tuning import trial_spec
 
 
 def _throughput(bus: str, jobs: int, n_runs: int, duration: float, tmp: Path) -> dict[str, float]:
@@ -49,7 +49,7 @@ def bench_study(out: Path, quick: bool = False) -> dict[str, Any]:
     duration = 0.5 if quick else 5.0
     counts = {"sil": 4 if quick else 48, "udp": 4 if quick else 12}  # SIL runs are ~10x shorter: more of them
     result: dict[str, Any] = {"what": (f"runs of {duration:g} s (+ 0.5 s hold), pd and tde alternating (wn 40 rad/s), "
-                                       f"scenario realistic, through tools/runner.py as a study runs them: "
+                                       f"scenario realistic, through tools/run/runner.py as a study runs them: "
                                        f"{counts['sil']} in software in the loop, {counts['udp']} in lockstep HIL "
                                        "over UDP"),
                               "quick": quick, "trajectory_s": duration, "buses": {}}

@@ -1,6 +1,6 @@
 """`armctl study`: every method, tuned alike, in every scenario, on the same trajectory and seeds;
 statistics over the seeds, paired comparisons, the report.
-`armctl tune`: the tuning alone (tools/tuning.py), kept for later studies."""
+`armctl tune`: the tuning alone (tools/study/tuning.py), kept for later studies."""
 
 from __future__ import annotations
 
@@ -18,21 +18,21 @@ from tqdm import tqdm
 
 from gen.lib import toml_input
 from gen.arm import DEFAULT_DESIGN
-from tools.arm import (DEFAULT_ARM, ArmChoiceError, ArmRef, add_arm_arguments, arm_build_dir, arm_from_args,
+from tools.build.arm import (DEFAULT_ARM, ArmChoiceError, ArmRef, add_arm_arguments, arm_build_dir, arm_from_args,
                        arm_info, build_arm, print_arm_warnings, reference_for)
-from tools import procs
-from tools.cluster import Cluster, add_cluster_arguments, cluster_from_args
-from tools.code_identity import code_identity
+from tools.run import procs
+from tools.run.cluster import Cluster, add_cluster_arguments, cluster_from_args
+from tools.build.code_identity import code_identity
 from gen.lib.atomic_output import write_json_atomic
-from tools.hil import SIL
-from tools.locks import LockHeld, flocked
+from tools.run.hil import SIL
+from gen.lib.locks import LockHeld, flocked
 from gen.lib.outdir import OutDirError, check_out_dir
 from gen.lib.paths import REPO
-from tools.runner import METRICS, RunSpec, run_all
-from tools.slots import default_jobs
-from tools.stats import paired, summary
-from tools.study_config import METHODS, StudyConfig, StudyConfigError, Trajectory, for_arm, load
-from tools.tuning import REFUSED_SCORE, TuneSetup, batch_size, storage_url, trial_spec, tune_method
+from tools.run.runner import METRICS, RunSpec, run_all
+from tools.run.slots import default_jobs
+from tools.study.stats import paired, summary
+from tools.study.config import METHODS, StudyConfig, StudyConfigError, Trajectory, for_arm, load
+from tools.study.tuning import REFUSED_SCORE, TuneSetup, batch_size, storage_url, trial_spec, tune_method
 
 DEFAULT_CONFIG = REPO / "tools" / "studies" / "paper.toml"
 BASELINES = ("tde", "usde-smc", "pd", "pm-paper-weights", "pm-paper", "gh2")
@@ -102,7 +102,7 @@ def trajectory_for(info: dict[str, Any], traj: Trajectory, what: str, bdir: Path
     """The config's trajectory on this arm when the config gives one for it (by name, or for any
     arm), else the arm's own reference (arm.json; `speedup` times its frequencies). Either way
     clipped to the joint ranges and, given the build folder, fitted to the arm's torque limits with
-    the scenarios' friction (tools/arm.py reference_for). Controller arguments, the trajectory used
+    the scenarios' friction (tools/build/arm.py reference_for). Controller arguments, the trajectory used
     (amplitudes, frequencies, where from), and what was changed."""
     notes: list[str] = []
     if traj.arm is not None and traj.arm != info["name"]:
@@ -265,7 +265,7 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
     stale = sorted(f"{m} in {s}" for s in tuning for m, rec in tuning[s].items() if rec.get("code") != code_identity())
     if stale:
         notes.append(f"the kept tuning of {', '.join(stale)} was made with other firmware or simulator code "
-                     f"(tools/code_identity.py); `armctl study --retune` tunes again")
+                     f"(tools/build/code_identity.py); `armctl study --retune` tunes again")
     for n in notes:
         print(f"armctl study: {n}", file=sys.stderr)
     paper_text = None if Path(info["design_config"]).resolve() == DEFAULT_DESIGN.resolve() else DEFAULT_DESIGN.read_text()
@@ -318,7 +318,7 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
                       for s in scen_names},
     }
     write_json_atomic(out / "study.json", study)
-    from tools.report import write_report  # matplotlib: only when there is a report to draw
+    from tools.study.report import write_report  # matplotlib: only when there is a report to draw
 
     write_report(out, study)
     return study
@@ -532,7 +532,7 @@ def cmd_study(ns: argparse.Namespace) -> int:
                           scenarios=scenarios, arm=arm, jobs=ns.jobs, cluster=cluster, retune=ns.retune,
                           trials=ns.trials, bus=ns.bus, confirm=ns.confirm)
     if ns.record:
-        from tools import headline
+        from tools.study import headline
 
         headline.write(study)
         print(f"armctl study: the headline recorded in {headline.RECORD} and README.md's result tables")
@@ -578,7 +578,7 @@ def cmd_tune(ns: argparse.Namespace) -> int:
                   f"({rec['trials_run']} of at most {rec['cap']} trials)  {json.dumps(rec['knobs'])}"
                   + (f"  ({rec['edge_note']})" if rec["edge_note"] else "")
                   + (f"  validation: {rec['validation']['note']}" if rec.get("validation") else ""))
-    from tools.report import colour_of, convergence_figure
+    from tools.study.report import colour_of, convergence_figure
 
     colour = colour_of({"methods": cfg.methods})
     for s, recs in result.items():

@@ -27,12 +27,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from tools import procs
-from tools.cluster import Cluster
-from tools.code_identity import code_identity
-from tools.design_knobs import design_text
-from tools.runner import RunSpec, run_all
-from tools.study_config import KNOB_FLOOR, METHODS, Scenario, Space, StudyConfig, gain_args
+from tools.run import procs
+from tools.run.cluster import Cluster
+from tools.build.code_identity import code_identity
+from tools.study.design_knobs import design_text
+from tools.run.runner import RunSpec, run_all
+from tools.study.config import KNOB_FLOOR, METHODS, Scenario, Space, StudyConfig, gain_args
 
 FAILED_SCORE = 1e3  # rad: what a trial with a run that failed, diverged or hit its torque limit scores at least
 ACHIEVED_CAP = 30.0   # rad: one joint's error in a failed run counts at most this much (so a failed trial < 3000)
@@ -50,7 +50,7 @@ class TuneSetup:
     out: Path
     jobs: int = 1
     cluster: Cluster | None = None
-    bus: str = "sil"                  # every run's bus (tools/hil.py --bus)
+    bus: str = "sil"                  # every run's bus (tools/run/hil.py --bus)
 
 
 def objective(results: list[dict[str, Any]]) -> tuple[float, str]:
