@@ -36,8 +36,8 @@ def synth_to_dir(config: Path, out: Path) -> dict[str, Any]:
     # Imported here, not at module level: armctl builds its parser without paying for cvxpy.
     from gen.lib.atomic_output import write_files_atomically
     from gen.synth.config import load_config
-    from gen.synth.emit import fixed_header, float_header
-    from gen.synth.manifest import FIXED_HEADER, FLOAT_HEADER, build
+    from gen.synth.emit import design_file, fixed_header, float_header
+    from gen.synth.manifest import DESIGN_FILE, FIXED_HEADER, FLOAT_HEADER, build
     from gen.synth.pipeline import synthesize
 
     cfg = load_config(config)
@@ -51,6 +51,8 @@ def synth_to_dir(config: Path, out: Path) -> dict[str, Any]:
     }
     manifest = build(design, run)
     files = {FLOAT_HEADER: float_header(manifest), FIXED_HEADER: fixed_header(manifest)}
+    if manifest["structure"]["per_joint"]:  # the only kind a firmware runs (firmware/core/include/arm/pm.h)
+        files[DESIGN_FILE] = design_file(manifest)
     manifest["run"]["timings_s"]["total_in_process_s"] = time.perf_counter() - t0
     files["manifest.json"] = json.dumps(manifest, indent=1, allow_nan=False) + "\n"
     write_files_atomically(out, files)

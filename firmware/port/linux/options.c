@@ -39,6 +39,8 @@ void options_usage(const char *prog)
            "  --rate HZ               control rate                    [1000]\n"
            "  --method NAME           %s [pd]\n"
            "  --numeric float|fixed   pm, pm-paper, gh2: float32 or int32 Q-format blocks [float]\n"
+           "  --design-file FILE      pm, pm-paper, gh2: run this design (gen.synth's pm_design.txt)\n"
+           "                          instead of the built-in one              [built-in]\n"
            "  --tde-cutoff HZ         tde: low-pass on the estimate   [50]\n"
            "  --usde-k S              usde-smc: filter time constant  [0.01]\n"
            "  --smc-lambda X --smc-eta X --smc-phi X --smc-ks X  usde-smc sliding mode [20 1 0.05 20]\n"
@@ -239,6 +241,9 @@ int options_parse(int argc, char **argv, const arm_robot_model_t *model, options
                 snprintf(err, errcap, "--numeric: '%s' is not float or fixed", v);
                 rc = -1;
             }
+        } else if (strcmp(a, "--design-file") == 0) {
+            rc = design_file_load(v, &opt->design, err, errcap);
+            if (rc == 0) opt->ctl.design = &opt->design.d;
         } else if (strcmp(a, "--tde-cutoff") == 0) {
             rc = parse_double(a, v, 0.1, 1e5, &d, err, errcap);
             opt->ctl.tde_cutoff_hz = (float)d;
@@ -344,6 +349,11 @@ int options_parse(int argc, char **argv, const arm_robot_model_t *model, options
         return -1;
     }
     opt->ref_given = ref_amp_given;
+    if (opt->ctl.design == &opt->design.d && arm_pm_check_design(opt->ctl.design, (float)opt->rate_hz) != 0) {
+        snprintf(err, errcap, "--design-file %s: loop_rate_hz: the design was discretised for %g Hz, this run's --rate is %g Hz",
+                 opt->design.path, (double)opt->design.d.loop_rate_hz, opt->rate_hz);
+        return -1;
+    }
     const float default_period = opt->ctl.period_s;
     opt->ctl.period_s = (float)(1.0 / opt->rate_hz);
     if (!rate_limit_given) {

@@ -6,6 +6,7 @@
 
 #include "arm/can_bus.h"
 #include "arm/controller.h"
+#include "design_file.h"
 #include "rt.h"
 
 typedef enum { MODE_LOCKSTEP = 0, MODE_REALTIME } run_mode_t;
@@ -23,6 +24,7 @@ typedef struct {
     double lockstep_timeout_s; /* lockstep: wall time to wait for a period's states */
     double spin_us;            /* poll this long for a frame before sleeping in ppoll */
     arm_ctl_config_t ctl;
+    design_file_t design; /* --design-file: ctl.design points here; else the built-in design */
     rt_options_t rt; /* --rt-priority, --cpu (rt.h) */
     double ref_hold_s;               /* --ref-hold: settle on the start pose first */
     int ref_given;                   /* 1: --ref-amp/--ref-freq replace the default reference */
