@@ -31,7 +31,7 @@ from tools import procs
 from tools.cluster import Cluster
 from tools.code_identity import code_identity
 from tools.design_knobs import design_text
-from tools.runner import RunSpec, run_all
+from tools.runner import SYNTH_LOCK, RunSpec, run_all
 from tools.study_config import KNOB_FLOOR, METHODS, Scenario, Space, StudyConfig, gain_args
 
 FAILED_SCORE = 1e3  # rad: what a trial with a run that failed, diverged or hit its torque limit scores at least
@@ -110,7 +110,7 @@ def design_check(text: str) -> str:
     from gen.synth.lmi import SynthesisError
     from gen.synth.pipeline import synthesize
 
-    with tempfile.NamedTemporaryFile("w", suffix=".toml") as fh:
+    with tempfile.NamedTemporaryFile("w", suffix=".toml") as fh, SYNTH_LOCK:
         fh.write(text)
         fh.flush()
         try:
