@@ -24,6 +24,7 @@ import shutil
 import sys
 import threading
 import warnings
+from collections import OrderedDict
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field
@@ -49,6 +50,26 @@ SIL_DESIGNS = BUILD / "sil-designs"  # designs synthesised in-process for softwa
 # One synthesis at a time in this process: runs execute in threads, and cvxpy (its expression ids
 # and canonicalisation caches) and warnings.catch_warnings are not thread-safe.
 SYNTH_LOCK = threading.Lock()
+_DESIGNS: OrderedDict[str, Any] = OrderedDict()  # the last designs synthesised, by their expanded inputs
+_KEEP_DESIGNS = 16
+
+
+def synthesize_cached(cfg: Any) -> Any:
+    """gen.synth's synthesize(cfg), remembering the last few designs: a tuning checks a trial's
+    design (tools/tuning.py design_check) and then its software-in-the-loop runs emit the same one,
+    so it is solved once. The key is the config's fully expanded inputs (what the manifest records
+    and hashes), so equal keys are the same design. Call with SYNTH_LOCK held."""
+    from gen.synth.pipeline import synthesize
+
+    key = json.dumps(cfg.to_json(), sort_keys=True)
+    if key in _DESIGNS:
+        _DESIGNS.move_to_end(key)
+        return _DESIGNS[key]
+    design = synthesize(cfg)
+    _DESIGNS[key] = design
+    while len(_DESIGNS) > _KEEP_DESIGNS:
+        _DESIGNS.popitem(last=False)
+    return design
 
 
 @dataclass(frozen=True)
@@ -135,7 +156,7 @@ def sil_design(base: ArmRef, design_text: str, n_joints: int) -> Path:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                synth_to_dir(config, folder)
+                synth_to_dir(config, folder, synthesize_cached)
         except (ConfigError, SynthesisError, ValueError, ArithmeticError) as exc:
             raise BuildError(f"armctl: synthesis of {config} refused it: {str(exc).splitlines()[0][:300]}") from None
     return folder
