@@ -60,9 +60,9 @@ static float output_f(const sys_f_t *s, const float *x, const float v[2])
     return acc;
 }
 
-static void update_f(const sys_f_t *s, float *x, const float v[2])
+static void update_f(const sys_f_t *s, float x[ARM_PM_NX_MAX], const float v[2])
 {
-    float next[ARM_PM_EST_NX_MAX > ARM_PM_CTL_NX_MAX ? ARM_PM_EST_NX_MAX : ARM_PM_CTL_NX_MAX];
+    float next[ARM_PM_NX_MAX] = {0.0f}; /* states past nx stay 0 */
     for (int i = 0; i < s->nx; ++i) {
         float acc = s->b[i * 2] * v[0] + s->b[i * 2 + 1] * v[1];
         for (int j = 0; j < s->nx; ++j) {
@@ -70,7 +70,7 @@ static void update_f(const sys_f_t *s, float *x, const float v[2])
         }
         next[i] = acc;
     }
-    memcpy(x, next, (size_t)s->nx * sizeof(next[0]));
+    memcpy(x, next, sizeof(next));
 }
 
 static void im_update_f(const arm_pm_design_t *d, float x[2], float u)
@@ -124,9 +124,9 @@ static int32_t output_q(const sys_q_t *s, const int32_t *x, const int32_t v[2])
     return round_shift(acc, s->acc_u_shift);
 }
 
-static void update_q(const sys_q_t *s, int32_t *x, const int32_t v[2])
+static void update_q(const sys_q_t *s, int32_t x[ARM_PM_NX_MAX], const int32_t v[2])
 {
-    int32_t next[ARM_PM_EST_NX_MAX > ARM_PM_CTL_NX_MAX ? ARM_PM_EST_NX_MAX : ARM_PM_CTL_NX_MAX];
+    int32_t next[ARM_PM_NX_MAX] = {0};
     for (int i = 0; i < s->nx; ++i) {
         int64_t acc = (int64_t)s->b[i * 2] * v[0] + (int64_t)s->b[i * 2 + 1] * v[1];
         for (int j = 0; j < s->nx; ++j) {
@@ -134,7 +134,7 @@ static void update_q(const sys_q_t *s, int32_t *x, const int32_t v[2])
         }
         next[i] = round_shift(acc, s->acc_x_shift);
     }
-    memcpy(x, next, (size_t)s->nx * sizeof(next[0]));
+    memcpy(x, next, sizeof(next));
 }
 
 static void im_update_q(const arm_pm_design_t *d, int32_t x[2], int32_t u)

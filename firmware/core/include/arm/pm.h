@@ -35,6 +35,9 @@
 #else
 #define ARM_PM_CTL_NX_MAX ARM_PM_NX_MIN_MAX
 #endif
+/* Every state array holds the larger: an update copies whole arrays (a fixed-size copy; one of a
+ * design's own length is a memcpy call on the MCU). */
+#define ARM_PM_NX_MAX (ARM_PM_EST_NX_MAX > ARM_PM_CTL_NX_MAX ? ARM_PM_EST_NX_MAX : ARM_PM_CTL_NX_MAX)
 
 /* One per-joint design: exactly the numbers of pm_design_float.h and pm_design_fixed.h that the
  * firmware runs. Tables are row-major with the design's own dimensions (A nx x nx, B nx x 2,
@@ -74,16 +77,16 @@ typedef struct {
     int primed; /* the internal model starts at the first measurement, as the header says */
     union {
         struct {
-            float est[ARM_N_JOINTS][ARM_PM_EST_NX_MAX];
-            float ctl[ARM_N_JOINTS][ARM_PM_CTL_NX_MAX];
+            float est[ARM_N_JOINTS][ARM_PM_NX_MAX];
+            float ctl[ARM_N_JOINTS][ARM_PM_NX_MAX];
             float im[ARM_N_JOINTS][2];
             float v[ARM_N_JOINTS][2]; /* the estimator's input this period */
             float y[ARM_N_JOINTS][2];
             float u_o[ARM_N_JOINTS];
         } f;
         struct {
-            int32_t est[ARM_N_JOINTS][ARM_PM_EST_NX_MAX];
-            int32_t ctl[ARM_N_JOINTS][ARM_PM_CTL_NX_MAX];
+            int32_t est[ARM_N_JOINTS][ARM_PM_NX_MAX];
+            int32_t ctl[ARM_N_JOINTS][ARM_PM_NX_MAX];
             int32_t im[ARM_N_JOINTS][2];
             int32_t v[ARM_N_JOINTS][2];
             int32_t y[ARM_N_JOINTS][2];
