@@ -826,7 +826,7 @@ def prepare(af: ArmFile, design: Path | None) -> Prepared:  # noqa: C901 - one p
                                   f"leaves it (the tightest: {names[limiting]}); --design gen/configs/paper.toml "
                                   "for the paper's weights")}
     info["design_config"] = info["design"]["config"]
-    return Prepared(xml, info, _design_for(design_text, n, template))
+    return Prepared(xml, info, design_for(design_text, n, template))
 
 
 def auto_bandwidth(inertia_at_home: Any, torque_limits: list[float]) -> tuple[float, int]:
@@ -1022,7 +1022,7 @@ def _design(path: Path) -> tuple[dict[str, Any], str, float]:
     return doc, text, float(rate)
 
 
-def _design_for(text: str, n: int, path: Path) -> str:
+def design_for(text: str, n: int, path: Path) -> str:
     """The design config with arm.n_joints = n (its weights are one joint's, applied to every joint)."""
     out, count = re.subn(r"(?m)^(\s*n_joints\s*=\s*)\d+", lambda mm: f"{mm.group(1)}{n}", text, count=1)
     if count != 1:

@@ -12,6 +12,7 @@ import json
 import platform
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -30,18 +31,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="print nothing on success")
 
 
-def synth_to_dir(config: Path, out: Path) -> dict[str, Any]:
-    """Load, design, verify, emit. Raises ConfigError / SynthesisError before writing anything."""
+def synth_to_dir(config: Path, out: Path, synthesize: Callable[[Any], Any] | None = None) -> dict[str, Any]:
+    """Load, design, verify, emit. Raises ConfigError / SynthesisError before writing anything.
+    synthesize: gen.synth.pipeline.synthesize (the default) or a cache of it."""
     t0 = time.perf_counter()
     # Imported here, not at module level: armctl builds its parser without paying for cvxpy.
     from gen.lib.atomic_output import write_files_atomically
     from gen.synth.config import load_config
-    from gen.synth.emit import fixed_header, float_header
-    from gen.synth.manifest import FIXED_HEADER, FLOAT_HEADER, build
-    from gen.synth.pipeline import synthesize
+    from gen.synth.emit import design_file, fixed_header, float_header
+    from gen.synth.manifest import DESIGN_FILE, FIXED_HEADER, FLOAT_HEADER, build
+    from gen.synth.pipeline import synthesize as pipeline_synthesize
 
     cfg = load_config(config)
-    design = synthesize(cfg)
+    design = (synthesize or pipeline_synthesize)(cfg)
     run = {
         "note": "not covered by content_hash",
         "config_file": str(config),
@@ -51,6 +53,8 @@ def synth_to_dir(config: Path, out: Path) -> dict[str, Any]:
     }
     manifest = build(design, run)
     files = {FLOAT_HEADER: float_header(manifest), FIXED_HEADER: fixed_header(manifest)}
+    if manifest["structure"]["per_joint"]:  # the only kind a firmware runs (firmware/core/include/arm/pm.h)
+        files[DESIGN_FILE] = design_file(manifest)
     manifest["run"]["timings_s"]["total_in_process_s"] = time.perf_counter() - t0
     files["manifest.json"] = json.dumps(manifest, indent=1, allow_nan=False) + "\n"
     write_files_atomically(out, files)

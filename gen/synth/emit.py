@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from gen.synth.manifest import FIXED_HEADER, FLOAT_HEADER
+from gen.synth.manifest import DESIGN_FILE, FIXED_HEADER, FLOAT_HEADER
 
 _UNUSED = """#ifndef ARM_DESIGN_UNUSED
 #if defined(__GNUC__) || defined(__clang__)
@@ -131,13 +131,21 @@ def _bound_q(values: list[float], frac: int) -> int:
     return int(np.floor(max(values) * 2.0**frac)) if values else 0
 
 
+def _limits_q(fp: dict[str, Any]) -> dict[str, int]:
+    """The saturation limits in Q(Y_FRAC): the declared input ranges and the internal model's."""
+    yf, rng, im_max = fp["Y_FRAC"], fp["declared_ranges"], fp["internal_model_state_max"]
+    return {"range_e_max_q": int(np.floor(rng["e_max"] * 2.0**yf)),
+            "range_e_dot_max_q": int(np.floor(rng["e_dot_max"] * 2.0**yf)),
+            "im_e_max_q": int(np.floor(im_max[0] * 2.0**yf)),
+            "im_e_dot_max_q": int(np.floor(im_max[1] * 2.0**yf))}
+
+
 def fixed_header(m: dict[str, Any]) -> str:
     fp = m["fixed_point"]
     fe, fc, fi = fp["estimator"], fp["controller"], fp["internal_model"]
     yf = fp["Y_FRAC"]
     rng = fp["declared_ranges"]
-    e_max_q, ed_max_q = int(np.floor(rng["e_max"] * 2.0**yf)), int(np.floor(rng["e_dot_max"] * 2.0**yf))
-    im_max = fp["internal_model_state_max"]
+    lim = _limits_q(fp)
     est_xb, est_ub = _bound_q(fe["state_bound"], fe["X_FRAC"]), _bound_q(fe["output_bound"], fe["U_FRAC"])
     ctl_xb, ctl_ub = _bound_q(fc["state_bound"], fc["X_FRAC"]), _bound_q(fc["output_bound"], fc["U_FRAC"])
     parts = [
@@ -204,10 +212,10 @@ def fixed_header(m: dict[str, Any]) -> str:
 /* declared input ranges (real units, and saturation limits in Q(ARM_Y_FRAC)) */
 #define ARM_RANGE_E_MAX {_f32(rng['e_max'])}
 #define ARM_RANGE_E_DOT_MAX {_f32(rng['e_dot_max'])}
-#define ARM_RANGE_E_MAX_Q INT32_C({e_max_q})
-#define ARM_RANGE_E_DOT_MAX_Q INT32_C({ed_max_q})
-#define ARM_IM_E_MAX_Q INT32_C({int(np.floor(im_max[0] * 2.0**yf))})
-#define ARM_IM_E_DOT_MAX_Q INT32_C({int(np.floor(im_max[1] * 2.0**yf))})
+#define ARM_RANGE_E_MAX_Q INT32_C({lim['range_e_max_q']})
+#define ARM_RANGE_E_DOT_MAX_Q INT32_C({lim['range_e_dot_max_q']})
+#define ARM_IM_E_MAX_Q INT32_C({lim['im_e_max_q']})
+#define ARM_IM_E_DOT_MAX_Q INT32_C({lim['im_e_dot_max_q']})
 
 /* proven bounds: largest |state| and |output| in their Q formats, and accumulator bits */
 #define ARM_EST_X_BOUND_Q INT32_C({est_xb})
@@ -232,3 +240,53 @@ def fixed_header(m: dict[str, Any]) -> str:
         "\n#endif /* PM_DESIGN_FIXED_H */\n",
     ]
     return "".join(parts)
+
+
+DESIGN_FILE_FORMAT = "arm-pm-design 1"
+
+
+def _hex32(x: float) -> str:
+    """The float32 value the headers' decimal literal compiles to, as a C99 hex float (exact)."""
+    v = float(np.float32(x))
+    if not np.isfinite(v):
+        raise ValueError(f"non-finite value {x!r} cannot be emitted")
+    return v.hex()
+
+
+def design_file(m: dict[str, Any]) -> str:
+    """The numbers of both headers as `key value...` lines in a fixed order (the Linux port's
+    --design-file reads exactly this: firmware/port/linux/design_file.c). Floats are the float32
+    values of the float header in C99 hex (strtof reads them back exactly), integers the fixed
+    header's, so a design loaded from it runs bit for bit like the same design compiled in."""
+    if not m["structure"]["per_joint"]:
+        raise ValueError("a design file holds a per-joint design (structure per_joint); this one is coupled")
+    e, c, im = m["estimator"]["discrete"], m["controller"]["discrete"], m["internal_model"]["discrete"]
+    fp = m["fixed_point"]
+    fe, fc, fi = fp["estimator"], fp["controller"], fp["internal_model"]
+
+    def flat(M: list[list[Any]]) -> list[Any]:
+        return [v for row in M for v in row]
+
+    rows: list[tuple[str, list[str]]] = [
+        ("hash", [m["content_hash"][:16]]),
+        ("n_joints", [str(m["structure"]["n_joints"])]),
+        ("loop_rate_hz", [repr(m["loop_rate_hz"])]),
+        ("est_nx", [str(e["n_states"])]),
+        ("ctl_nx", [str(c["n_states"])]),
+    ]
+    for prefix, sys in (("est", e), ("ctl", c)):
+        rows += [(f"{prefix}_{k.lower()}", [_hex32(v) for v in flat(sys[k])]) for k in "ABCD"]
+    rows += [("im_a", [_hex32(v) for v in flat(im["A"])]), ("im_b", [_hex32(v) for v in flat(im["B"])])]
+    rows += [("y_frac", [str(fp["Y_FRAC"])]), ("est_u_frac", [str(fe["U_FRAC"])]),
+             ("ctl_u_frac", [str(fc["U_FRAC"])]),
+             ("est_acc_x_shift", [str(fe["ACC_X_SHIFT"])]), ("est_acc_u_shift", [str(fe["ACC_U_SHIFT"])]),
+             ("ctl_acc_x_shift", [str(fc["ACC_X_SHIFT"])]), ("ctl_acc_u_shift", [str(fc["ACC_U_SHIFT"])]),
+             ("im_acc_x_shift", [str(fi["ACC_X_SHIFT"])])]
+    rows += [(k, [_i32(v)]) for k, v in _limits_q(fp).items()]
+    for prefix, fx in (("est", fe), ("ctl", fc)):
+        rows += [(f"{prefix}_{k.lower()}_q", [_i32(v) for v in flat(fx[f"{k}_Q"])]) for k in "ABCD"]
+    rows += [("im_a_q", [_i32(v) for v in flat(fi["A_Q"])]), ("im_b_q", [_i32(v) for v in flat(fi["B_Q"])])]
+    head = (f"# {DESIGN_FILE} - generated by gen.synth (armctl synth). Do not edit.\n"
+            f"# The numbers of {FLOAT_HEADER} and {FIXED_HEADER} (same hash), tables row-major; for\n"
+            "# arm_controller / arm_sil --design-file. Manifest content hash: sha256:" + m["content_hash"] + "\n")
+    return head + DESIGN_FILE_FORMAT + "\n" + "".join(f"{k} {' '.join(v)}\n" for k, v in rows) + "end\n"

@@ -23,6 +23,7 @@ SCHEMA = "armctl-synth-manifest/1"
 UNHASHED = ("content_hash", "run")
 FLOAT_HEADER = "pm_design_float.h"
 FIXED_HEADER = "pm_design_fixed.h"
+DESIGN_FILE = "pm_design.txt"  # the headers' numbers as text, for a firmware that loads its design (--design-file)
 
 
 def clean(obj: Any) -> Any:

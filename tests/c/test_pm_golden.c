@@ -34,7 +34,7 @@ int main(int argc, char **argv)
     for (int s = 0; s < 3; ++s) {
         for (int numeric = 0; numeric < 2; ++numeric) {
             static arm_pm_t pm;
-            arm_pm_init(&pm, numeric ? ARM_NUMERIC_FIXED : ARM_NUMERIC_FLOAT, structures[s]);
+            arm_pm_init(&pm, &arm_pm_builtin_design, numeric ? ARM_NUMERIC_FIXED : ARM_NUMERIC_FLOAT, structures[s]);
             const int col = 3 + 4 * s + 2 * numeric;
             double scale[2] = {0.0, 0.0};
             for (size_t k = 0; k < steps; ++k) {

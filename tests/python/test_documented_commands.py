@@ -195,7 +195,7 @@ def test_demo_on_another_arm(tmp_path: Path) -> None:
 def test_synth(tmp_path: Path) -> None:
     r = armctl("synth", "--config", str(REPO / "gen" / "configs" / "paper.toml"), "--out", str(tmp_path))
     assert r.returncode == 0, r.stdout + r.stderr
-    assert {"manifest.json", "pm_design_float.h", "pm_design_fixed.h"} <= {p.name for p in tmp_path.iterdir()}
+    assert {"manifest.json", "pm_design_float.h", "pm_design_fixed.h", "pm_design.txt"} <= {p.name for p in tmp_path.iterdir()}
 
 
 @pytest.mark.parametrize("args", [["--preset", "debug"], ["--preset", "release"], ["--target", "host"],

@@ -37,7 +37,8 @@ def manifest(out: Path) -> dict[str, Any]:
 
 
 def test_outputs_and_manifest_fields(out: Path, manifest: dict[str, Any]) -> None:
-    assert sorted(p.name for p in out.iterdir()) == ["manifest.json", "pm_design_fixed.h", "pm_design_float.h"]
+    assert sorted(p.name for p in out.iterdir()) == ["manifest.json", "pm_design.txt", "pm_design_fixed.h",
+                                                     "pm_design_float.h"]
     assert not list(out.parent.glob(".design.synth-*"))  # temp dir cleaned up
     for kind in ("estimator", "controller"):
         assert {"gamma_opt", "gamma_design", "continuous", "discrete", "subproblems"} <= set(manifest[kind])
@@ -62,6 +63,33 @@ def test_content_hash_covers_the_design_and_matches_the_headers(out: Path, manif
     rerun = json.loads(json.dumps(manifest))
     rerun["run"]["timings_s"] = {}  # wall times are outside the hash
     assert content_hash(rerun) == manifest["content_hash"]
+
+
+def test_design_file_holds_exactly_the_headers_numbers(out: Path) -> None:
+    """pm_design.txt (what --design-file loads) against the headers as C reads them: every float
+    the float32 value the header's literal compiles to, every integer the same."""
+    from gen.design_headers import parse
+
+    mf, af = parse(out / "pm_design_float.h")
+    mq, aq = parse(out / "pm_design_fixed.h")
+    lines = [ln.split() for ln in (out / "pm_design.txt").read_text().splitlines() if ln and not ln.startswith("#")]
+    assert lines[0] == ["arm-pm-design", "1"] and lines[-1] == ["end"]
+    f = {ln[0]: ln[1:] for ln in lines[1:-1]}
+    assert f'#define ARM_DESIGN_HASH "{f["hash"][0]}"' in (out / "pm_design_float.h").read_text()
+    assert (int(f["n_joints"][0]), float(f["loop_rate_hz"][0])) == (mf["ARM_DESIGN_N_JOINTS"], mf["ARM_LOOP_RATE_HZ"])
+    assert (int(f["est_nx"][0]), int(f["ctl_nx"][0])) == (mf["ARM_EST_NX"], mf["ARM_CTL_NX"])
+    for name, arr in af.items():  # ARM_EST_A -> est_a
+        got = np.array([float.fromhex(v) for v in f[name[4:].lower()]], dtype=np.float32)
+        assert np.array_equal(got.view(np.uint32), arr.ravel().astype(np.float32).view(np.uint32)), name
+    for name, arr in aq.items():  # ARM_EST_A_Q -> est_a_q
+        assert [int(v) for v in f[name[4:].lower()]] == arr.ravel().tolist(), name
+    for key, macro in (("y_frac", "ARM_Y_FRAC"), ("est_u_frac", "ARM_EST_U_FRAC"), ("ctl_u_frac", "ARM_CTL_U_FRAC"),
+                       ("est_acc_x_shift", "ARM_EST_ACC_X_SHIFT"), ("est_acc_u_shift", "ARM_EST_ACC_U_SHIFT"),
+                       ("ctl_acc_x_shift", "ARM_CTL_ACC_X_SHIFT"), ("ctl_acc_u_shift", "ARM_CTL_ACC_U_SHIFT"),
+                       ("im_acc_x_shift", "ARM_IM_ACC_X_SHIFT"), ("range_e_max_q", "ARM_RANGE_E_MAX_Q"),
+                       ("range_e_dot_max_q", "ARM_RANGE_E_DOT_MAX_Q"), ("im_e_max_q", "ARM_IM_E_MAX_Q"),
+                       ("im_e_dot_max_q", "ARM_IM_E_DOT_MAX_Q")):
+        assert f[key] == [str(mq[macro])], key
 
 
 def test_failed_emission_leaves_no_partial_header(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

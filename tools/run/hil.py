@@ -79,6 +79,10 @@ class HilOptions:
     compress_capture: bool = False
     # Lockstep over a bus: each side polls this long before it sleeps (lockstep_spin_us).
     spin_us: float = LOCKSTEP_SPIN_US
+    # A design loaded at run time (the controller's --design-file: gen.synth's pm_design.txt)
+    # instead of the build's own, and what run.json records as its design (default: the build's).
+    design_file: Path | None = None
+    design_record: dict[str, Any] | None = None
 
 
 class HilError(RuntimeError):
@@ -494,7 +498,8 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
                 "--duration", f"{opt.duration_s:g}", "--method", opt.method, "--mode", opt.mode,
                 "--summary", str(opt.out / "controller_summary.json"), *([] if sil else spin_args(opt.mode, opt.spin_us)),
                 *(["--cpu", str(realtime_cpu(opt))] if opt.mode == "realtime" else []),
-                *reference_args(info, opt.controller_args), *opt.controller_args]
+                *reference_args(info, opt.controller_args),
+                *(["--design-file", str(opt.design_file)] if opt.design_file is not None else []), *opt.controller_args]
     if sil:
         exit_codes, wall, sim_scheduling = _run_sil(opt, sil_exe, ctl_args[1:], sim_args[1:], log_path)
     else:
@@ -512,7 +517,7 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
               "joint_names": [j["name"] for j in info["joints"]],
               "arm": {"name": info["name"], "model": info["model"], "arm_file": info["arm_file"],
                       "model_hash": info["model_hash"], "n_joints": info["n_joints"], "warnings": info["warnings"]},
-              "design": info.get("design"),
+              "design": opt.design_record if opt.design_file is not None else info.get("design"),
               "ref_hold_s": _arg_value(opt.controller_args, "--ref-hold", CONTROLLER_DEFAULT_HOLD_S),
               "rate_hz": _arg_value(opt.controller_args, "--rate", info["loop_rate_hz"]),
               "controller_args": list(opt.controller_args),

@@ -4,7 +4,9 @@ A run is a RunSpec: everything that decides its result (the arm, the design when
 arm's own, the method and its arguments, the scenario, the seed). The same spec gives the same
 run.json in lockstep, whichever worker runs it and whatever else runs beside it: each run holds a
 run slot (tools/run/slots.py) for its own bus and telemetry ports, and a design other than the arm's
-is built in a build folder of that slot.
+is built in a build folder of that slot, except in software in the loop: there it is synthesised
+in this process (once per design, in a folder under build/sil-designs) and the arm's own arm_sil
+loads it at run time (--design-file), so a tuning builds no firmware per design.
 
 A finished run's folder holds its run.json and, written last, spec.json: the spec and the
 checksum of that run.json. A resumed study reuses it only when both are there, the spec is this
@@ -20,6 +22,9 @@ import json
 import os
 import shutil
 import sys
+import threading
+import warnings
+from collections import OrderedDict
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field
@@ -29,7 +34,8 @@ from typing import Any
 from host_sim.drive_model import DriveModel
 from tools.run import procs
 from tools.build.arm import HIL_TARGETS, ArmChoiceError, targets_for, ArmRef, arm_build_dir, arm_info, build_arm
-from tools.build import build_lock
+from tools.build import BuildError, build_lock
+from gen.lib.locks import flocked
 from tools.run.cluster import Cluster
 from gen.lib.paths import BUILD
 from gen.lib.atomic_output import write_json_atomic, write_text_atomic
@@ -40,6 +46,30 @@ from tools.run.slots import Slot, acquire_slot
 METRICS = {"linf": "tracking_max_abs_rad", "rms": "tracking_rms_rad", "est": "estimation_error_rms",
            "power": "torque_power_w"}
 DONE = "spec.json"  # written last in a run's folder: the run is done
+SIL_DESIGNS = BUILD / "sil-designs"  # designs synthesised in-process for software-in-the-loop runs
+# One synthesis at a time in this process: runs execute in threads, and cvxpy (its expression ids
+# and canonicalisation caches) and warnings.catch_warnings are not thread-safe.
+SYNTH_LOCK = threading.Lock()
+_DESIGNS: OrderedDict[str, Any] = OrderedDict()  # the last designs synthesised, by their expanded inputs
+_KEEP_DESIGNS = 16
+
+
+def synthesize_cached(cfg: Any) -> Any:
+    """gen.synth's synthesize(cfg), remembering the last few designs: a tuning checks a trial's
+    design (tools/study/tuning.py design_check) and then its software-in-the-loop runs emit the same one,
+    so it is solved once. The key is the config's fully expanded inputs (what the manifest records
+    and hashes), so equal keys are the same design. Call with SYNTH_LOCK held."""
+    from gen.synth.pipeline import synthesize
+
+    key = json.dumps(cfg.to_json(), sort_keys=True)
+    if key in _DESIGNS:
+        _DESIGNS.move_to_end(key)
+        return _DESIGNS[key]
+    design = synthesize(cfg)
+    _DESIGNS[key] = design
+    while len(_DESIGNS) > _KEEP_DESIGNS:
+        _DESIGNS.popitem(last=False)
+    return design
 
 
 @dataclass(frozen=True)
@@ -99,6 +129,37 @@ def slot_arm(base: ArmRef, slot: int, design_text: str) -> ArmRef:
     if not path.exists() or path.read_text() != design_text:
         write_text_atomic(path, design_text)
     return ArmRef(base.model, base.arm_file, path)
+
+
+def sil_design(base: ArmRef, design_text: str, n_joints: int) -> Path:
+    """The folder holding this design synthesised for the arm (gen.synth's pm_design.txt and
+    manifest.json, from the design.toml a slot build would synthesise: the same design hash),
+    made once per design text and arm: the seeds of a trial share it. A design the synthesis
+    refuses raises BuildError, as its slot build would."""
+    from gen.arm import design_for
+    from gen.synth.cli import synth_to_dir
+    from gen.synth.config import ConfigError
+    from gen.synth.lmi import SynthesisError
+    from gen.synth.manifest import DESIGN_FILE
+
+    digest = hashlib.sha256(design_text.encode()).hexdigest()[:16]
+    folder = SIL_DESIGNS / (base.key() if not base.is_default else "default") / digest
+    config = folder / "design.toml"
+    text = design_for(design_text, n_joints, config)
+    with SYNTH_LOCK, flocked(folder.with_name(f"{digest}.lock")):  # and armctl processes sharing build/
+        try:
+            if config.read_text() == text and (folder / DESIGN_FILE).exists() and (folder / "manifest.json").exists():
+                return folder
+        except OSError:
+            pass
+        write_text_atomic(config, text)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                synth_to_dir(config, folder, synthesize_cached)
+        except (ConfigError, SynthesisError, ValueError, ArithmeticError) as exc:
+            raise BuildError(f"armctl: synthesis of {config} refused it: {str(exc).splitlines()[0][:300]}") from None
+    return folder
 
 
 def prepare_build(arm: ArmRef) -> Path:
@@ -195,11 +256,17 @@ def execute(spec_d: dict[str, Any], spin_us: float = LOCKSTEP_SPIN_US) -> dict[s
     if out.exists():
         shutil.rmtree(out)
     out.mkdir(parents=True)
-    prefer = (lambda i: slot_has_design(spec.arm(), i, spec.design_text)) if spec.design_text is not None else None
+    slot_build = spec.design_text is not None and spec.bus != SIL
+    prefer = (lambda i: slot_has_design(spec.arm(), i, spec.design_text)) if slot_build else None
     with acquire_slot(prefer=prefer, quiet_ports=spec.bus != SIL) as slot:
         arm = spec.arm()
         try:
-            if spec.design_text is not None:
+            if spec.design_text is not None and not slot_build:
+                # software in the loop: the arm's own build loads the design at run time
+                bdir = prepare_build(arm)
+                design = sil_design(arm, spec.design_text, arm_info(bdir)["n_joints"])
+                run = _run(spec, arm, slot, out, spin_us, design)
+            elif spec.design_text is not None:
                 arm = slot_arm(arm, slot.index, spec.design_text)
                 # held through the run: its binaries are this build's (a checkout shared between
                 # hosts has slot i of each host in the same folder)
@@ -222,14 +289,21 @@ def execute(spec_d: dict[str, Any], spin_us: float = LOCKSTEP_SPIN_US) -> dict[s
     return json.loads(raw)  # what a resumed study reads back, exactly
 
 
-def _run(spec: RunSpec, arm: ArmRef, slot: Slot, out: Path, spin_us: float) -> dict[str, Any]:
+def _run(spec: RunSpec, arm: ArmRef, slot: Slot, out: Path, spin_us: float,
+         design: Path | None = None) -> dict[str, Any]:
+    """design: a sil_design folder, loaded at run time (else the build's own design)."""
+    from gen.synth.manifest import DESIGN_FILE
+
+    loaded = {} if design is None else {
+        "design_file": design / DESIGN_FILE,
+        "design_record": {"config": str(design / "design.toml"), "why": "loaded at run time (--design-file)"}}
     return run_hil(HilOptions(out=out, duration_s=spec.duration_s, method=spec.method, arm=arm,
                               controller_args=spec.controller_args, uncertainty=spec.uncertainty,
                               drives=DriveModel(**spec.drives) if spec.drives else DriveModel(),
                               bus_timing=spec.bus_timing, can_port=slot.can_port, lcm_port=slot.lcm_port,
                               labels=dict(spec.labels), bus=spec.bus,
                               # the runs that keep their telemetry keep their bus too (gzip: 0.6 MB a 10 s run)
-                              capture=spec.keep_log, compress_capture=True, spin_us=spin_us))
+                              capture=spec.keep_log, compress_capture=True, spin_us=spin_us, **loaded))
 
 
 def spec_digest(spec: RunSpec) -> str:
@@ -259,8 +333,9 @@ def run_all(specs: list[RunSpec], jobs: int = 1, cluster: Cluster | None = None,
     checkout at the same path, and the out folders on a shared file system)."""
     if not specs:
         return []
-    # The arms' own builds first, once each (a design of a run's own is built in its slot).
-    for arm in {s.arm() for s in specs if s.design_text is None}:
+    # The arms' own builds first, once each (a design of a run's own is built in its slot, except
+    # in software in the loop, which runs it on the arm's own build).
+    for arm in {s.arm() for s in specs if s.design_text is None or s.bus == SIL}:
         prepare_build(arm)
     results: list[dict[str, Any] | None] = [None] * len(specs)
     if cluster is not None:

@@ -31,7 +31,7 @@ from tools.run import procs
 from tools.run.cluster import Cluster
 from tools.build.code_identity import code_identity
 from tools.study.design_knobs import design_text
-from tools.run.runner import RunSpec, run_all
+from tools.run.runner import SYNTH_LOCK, RunSpec, run_all, synthesize_cached
 from tools.study.config import KNOB_FLOOR, METHODS, Scenario, Space, StudyConfig, gain_args
 
 FAILED_SCORE = 1e3  # rad: what a trial with a run that failed, diverged or hit its torque limit scores at least
@@ -108,15 +108,14 @@ def design_check(text: str) -> str:
     """'' if the synthesis accepts this design, else why not (in-process: about 0.1 s)."""
     from gen.synth.config import ConfigError, load_config
     from gen.synth.lmi import SynthesisError
-    from gen.synth.pipeline import synthesize
 
-    with tempfile.NamedTemporaryFile("w", suffix=".toml") as fh:
+    with tempfile.NamedTemporaryFile("w", suffix=".toml") as fh, SYNTH_LOCK:
         fh.write(text)
         fh.flush()
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                synthesize(load_config(Path(fh.name)))
+                synthesize_cached(load_config(Path(fh.name)))  # its SIL runs reuse the design
         except (ConfigError, SynthesisError, ValueError, ArithmeticError) as exc:
             return f"synthesis refused it: {str(exc).splitlines()[0][:300]}"
     return ""

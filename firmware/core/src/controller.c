@@ -32,6 +32,7 @@ void arm_ctl_default_config(const arm_robot_model_t *model, arm_ctl_config_t *cf
     cfg->kp = (float)ARM_P_CONTROLLER_KP_DEFAULT;
     cfg->kd = (float)ARM_P_CONTROLLER_KD_DEFAULT;
     cfg->numeric = ARM_NUMERIC_FLOAT;
+    cfg->design = &arm_pm_builtin_design;
     cfg->tde_cutoff_hz = (float)ARM_P_CONTROLLER_TDE_CUTOFF_DEFAULT;
     cfg->usde_k = (float)ARM_P_CONTROLLER_USDE_K_DEFAULT;
     cfg->smc_lambda = (float)ARM_P_CONTROLLER_SMC_LAMBDA_DEFAULT;
@@ -83,7 +84,10 @@ arm_ctl_init_result_t arm_ctl_init(arm_ctl_t *ctl, const arm_robot_model_t *mode
           isfinite(cfg->smc_eta) && isfinite(cfg->smc_phi) && isfinite(cfg->smc_ks))) {
         return ARM_CTL_BAD_GAIN;
     }
-    if (ops->uses_design && arm_pm_check_design(1.0f / cfg->period_s) != 0) {
+    if (ops->uses_design && arm_pm_design_fits(cfg->design) != 0) {
+        return ARM_CTL_BAD_DESIGN;
+    }
+    if (ops->uses_design && arm_pm_check_design(cfg->design, 1.0f / cfg->period_s) != 0) {
         return ARM_CTL_BAD_DESIGN_RATE;
     }
     for (int i = 0; i < ARM_N_JOINTS; ++i) {
@@ -348,6 +352,8 @@ const char *arm_ctl_init_result_str(arm_ctl_init_result_t r)
     case ARM_CTL_BAD_DESIGN_RATE:
         return "the loop rate differs from the rate the design was discretised for "
                "(pm_design_float.h ARM_LOOP_RATE_HZ): re-run armctl synth for this rate";
+    case ARM_CTL_BAD_DESIGN:
+        return "the design does not fit this firmware (joint count, state dimensions or formats)";
     case ARM_CTL_BAD_NUMERIC: return "numeric must be float or fixed";
     case ARM_CTL_BAD_RANGE: return "each joint's range must have q_min < q_max";
     case ARM_CTL_BAD_VELOCITY_LIMIT: return "velocity limits must be > 0";

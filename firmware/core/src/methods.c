@@ -24,9 +24,9 @@ static void no_update(arm_ctl_t *ctl, const float acc[ARM_N_JOINTS], uint32_t ho
     (void)hold_mask;
 }
 
-static void pm_init(arm_ctl_t *ctl) { arm_pm_init(&ctl->m.pm, ctl->cfg.numeric, ARM_PM_DECOUPLED); }
-static void pm_paper_init(arm_ctl_t *ctl) { arm_pm_init(&ctl->m.pm, ctl->cfg.numeric, ARM_PM_PAPER); }
-static void gh2_init(arm_ctl_t *ctl) { arm_pm_init(&ctl->m.pm, ctl->cfg.numeric, ARM_PM_NO_ESTIMATOR); }
+static void pm_init(arm_ctl_t *ctl) { arm_pm_init(&ctl->m.pm, ctl->cfg.design, ctl->cfg.numeric, ARM_PM_DECOUPLED); }
+static void pm_paper_init(arm_ctl_t *ctl) { arm_pm_init(&ctl->m.pm, ctl->cfg.design, ctl->cfg.numeric, ARM_PM_PAPER); }
+static void gh2_init(arm_ctl_t *ctl) { arm_pm_init(&ctl->m.pm, ctl->cfg.design, ctl->cfg.numeric, ARM_PM_NO_ESTIMATOR); }
 
 static void pm_output(arm_ctl_t *ctl, arm_ctl_output_t *out)
 {

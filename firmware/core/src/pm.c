@@ -1,6 +1,7 @@
 #include "arm/pm.h"
 
 #include <math.h>
+#include <stddef.h>
 #include <string.h>
 
 /* Both headers define the same ARM_DESIGN_* macros; a mismatching pair is a macro redefinition,
@@ -10,54 +11,72 @@
 
 /* ---- float32 ----------------------------------------------------------------------------- */
 
-static float est_output_f(const float x[ARM_EST_NX], const float v[2])
+/* One system's tables and dimension: K's or C's, float or fixed (the same code runs both). */
+typedef struct {
+    int nx;
+    const float *a, *b, *c, *d;
+} sys_f_t;
+
+typedef struct {
+    int nx;
+    const int32_t *a, *b, *c, *d;
+    int acc_x_shift, acc_u_shift;
+} sys_q_t;
+
+static sys_f_t est_f(const arm_pm_design_t *d)
 {
-    float acc = ARM_EST_D[0][0] * v[0] + ARM_EST_D[0][1] * v[1];
-    for (int i = 0; i < ARM_EST_NX; ++i) {
-        acc += ARM_EST_C[0][i] * x[i];
+    const sys_f_t s = {d->est_nx, d->est_a, d->est_b, d->est_c, d->est_d};
+    return s;
+}
+
+static sys_f_t ctl_f(const arm_pm_design_t *d)
+{
+    const sys_f_t s = {d->ctl_nx, d->ctl_a, d->ctl_b, d->ctl_c, d->ctl_d};
+    return s;
+}
+
+static sys_q_t est_q(const arm_pm_design_t *d)
+{
+    const sys_q_t s = {d->est_nx, d->est_a_q, d->est_b_q, d->est_c_q, d->est_d_q,
+                       d->est_acc_x_shift, d->est_acc_u_shift};
+    return s;
+}
+
+static sys_q_t ctl_q(const arm_pm_design_t *d)
+{
+    const sys_q_t s = {d->ctl_nx, d->ctl_a_q, d->ctl_b_q, d->ctl_c_q, d->ctl_d_q,
+                       d->ctl_acc_x_shift, d->ctl_acc_u_shift};
+    return s;
+}
+
+/* ---- float32: D first, then C x in state order; B first, then A x (the headers' order) ---- */
+
+static float output_f(const sys_f_t *s, const float *x, const float v[2])
+{
+    float acc = s->d[0] * v[0] + s->d[1] * v[1];
+    for (int i = 0; i < s->nx; ++i) {
+        acc += s->c[i] * x[i];
     }
     return acc;
 }
 
-static float ctl_output_f(const float x[ARM_CTL_NX], const float y[2])
+static void update_f(const sys_f_t *s, float x[ARM_PM_NX_MAX], const float v[2])
 {
-    float acc = ARM_CTL_D[0][0] * y[0] + ARM_CTL_D[0][1] * y[1];
-    for (int i = 0; i < ARM_CTL_NX; ++i) {
-        acc += ARM_CTL_C[0][i] * x[i];
-    }
-    return acc;
-}
-
-static void est_update_f(float x[ARM_EST_NX], const float v[2])
-{
-    float next[ARM_EST_NX];
-    for (int i = 0; i < ARM_EST_NX; ++i) {
-        float acc = ARM_EST_B[i][0] * v[0] + ARM_EST_B[i][1] * v[1];
-        for (int j = 0; j < ARM_EST_NX; ++j) {
-            acc += ARM_EST_A[i][j] * x[j];
+    float next[ARM_PM_NX_MAX] = {0.0f}; /* states past nx stay 0 */
+    for (int i = 0; i < s->nx; ++i) {
+        float acc = s->b[i * 2] * v[0] + s->b[i * 2 + 1] * v[1];
+        for (int j = 0; j < s->nx; ++j) {
+            acc += s->a[i * s->nx + j] * x[j];
         }
         next[i] = acc;
     }
     memcpy(x, next, sizeof(next));
 }
 
-static void ctl_update_f(float x[ARM_CTL_NX], const float y[2])
+static void im_update_f(const arm_pm_design_t *d, float x[2], float u)
 {
-    float next[ARM_CTL_NX];
-    for (int i = 0; i < ARM_CTL_NX; ++i) {
-        float acc = ARM_CTL_B[i][0] * y[0] + ARM_CTL_B[i][1] * y[1];
-        for (int j = 0; j < ARM_CTL_NX; ++j) {
-            acc += ARM_CTL_A[i][j] * x[j];
-        }
-        next[i] = acc;
-    }
-    memcpy(x, next, sizeof(next));
-}
-
-static void im_update_f(float x[2], float u)
-{
-    const float x0 = ARM_IM_A[0][0] * x[0] + ARM_IM_A[0][1] * x[1] + ARM_IM_B[0][0] * u;
-    const float x1 = ARM_IM_A[1][0] * x[0] + ARM_IM_A[1][1] * x[1] + ARM_IM_B[1][0] * u;
+    const float x0 = d->im_a[0] * x[0] + d->im_a[1] * x[1] + d->im_b[0] * u;
+    const float x1 = d->im_a[2] * x[0] + d->im_a[3] * x[1] + d->im_b[1] * u;
     x[0] = x0;
     x[1] = x1;
 }
@@ -96,65 +115,45 @@ static float from_q(int32_t v, int frac)
     return (float)v / (float)(1LL << frac);
 }
 
-static int32_t est_output_q(const int32_t x[ARM_EST_NX], const int32_t v[2])
+static int32_t output_q(const sys_q_t *s, const int32_t *x, const int32_t v[2])
 {
-    int64_t acc = (int64_t)ARM_EST_D_Q[0][0] * v[0] + (int64_t)ARM_EST_D_Q[0][1] * v[1];
-    for (int i = 0; i < ARM_EST_NX; ++i) {
-        acc += (int64_t)ARM_EST_C_Q[0][i] * x[i];
+    int64_t acc = (int64_t)s->d[0] * v[0] + (int64_t)s->d[1] * v[1];
+    for (int i = 0; i < s->nx; ++i) {
+        acc += (int64_t)s->c[i] * x[i];
     }
-    return round_shift(acc, ARM_EST_ACC_U_SHIFT);
+    return round_shift(acc, s->acc_u_shift);
 }
 
-static int32_t ctl_output_q(const int32_t x[ARM_CTL_NX], const int32_t y[2])
+static void update_q(const sys_q_t *s, int32_t x[ARM_PM_NX_MAX], const int32_t v[2])
 {
-    int64_t acc = (int64_t)ARM_CTL_D_Q[0][0] * y[0] + (int64_t)ARM_CTL_D_Q[0][1] * y[1];
-    for (int i = 0; i < ARM_CTL_NX; ++i) {
-        acc += (int64_t)ARM_CTL_C_Q[0][i] * x[i];
-    }
-    return round_shift(acc, ARM_CTL_ACC_U_SHIFT);
-}
-
-static void est_update_q(int32_t x[ARM_EST_NX], const int32_t v[2])
-{
-    int32_t next[ARM_EST_NX];
-    for (int i = 0; i < ARM_EST_NX; ++i) {
-        int64_t acc = (int64_t)ARM_EST_B_Q[i][0] * v[0] + (int64_t)ARM_EST_B_Q[i][1] * v[1];
-        for (int j = 0; j < ARM_EST_NX; ++j) {
-            acc += (int64_t)ARM_EST_A_Q[i][j] * x[j];
+    int32_t next[ARM_PM_NX_MAX] = {0};
+    for (int i = 0; i < s->nx; ++i) {
+        int64_t acc = (int64_t)s->b[i * 2] * v[0] + (int64_t)s->b[i * 2 + 1] * v[1];
+        for (int j = 0; j < s->nx; ++j) {
+            acc += (int64_t)s->a[i * s->nx + j] * x[j];
         }
-        next[i] = round_shift(acc, ARM_EST_ACC_X_SHIFT);
+        next[i] = round_shift(acc, s->acc_x_shift);
     }
     memcpy(x, next, sizeof(next));
 }
 
-static void ctl_update_q(int32_t x[ARM_CTL_NX], const int32_t y[2])
+static void im_update_q(const arm_pm_design_t *d, int32_t x[2], int32_t u)
 {
-    int32_t next[ARM_CTL_NX];
-    for (int i = 0; i < ARM_CTL_NX; ++i) {
-        int64_t acc = (int64_t)ARM_CTL_B_Q[i][0] * y[0] + (int64_t)ARM_CTL_B_Q[i][1] * y[1];
-        for (int j = 0; j < ARM_CTL_NX; ++j) {
-            acc += (int64_t)ARM_CTL_A_Q[i][j] * x[j];
-        }
-        next[i] = round_shift(acc, ARM_CTL_ACC_X_SHIFT);
-    }
-    memcpy(x, next, sizeof(next));
-}
-
-static void im_update_q(int32_t x[2], int32_t u)
-{
-    const int64_t a0 = (int64_t)ARM_IM_A_Q[0][0] * x[0] + (int64_t)ARM_IM_A_Q[0][1] * x[1] +
-                       (int64_t)ARM_IM_B_Q[0][0] * u;
-    const int64_t a1 = (int64_t)ARM_IM_A_Q[1][0] * x[0] + (int64_t)ARM_IM_A_Q[1][1] * x[1] +
-                       (int64_t)ARM_IM_B_Q[1][0] * u;
-    x[0] = sat_range(round_shift(a0, ARM_IM_ACC_X_SHIFT), ARM_IM_E_MAX_Q);
-    x[1] = sat_range(round_shift(a1, ARM_IM_ACC_X_SHIFT), ARM_IM_E_DOT_MAX_Q);
+    const int64_t a0 = (int64_t)d->im_a_q[0] * x[0] + (int64_t)d->im_a_q[1] * x[1] +
+                       (int64_t)d->im_b_q[0] * u;
+    const int64_t a1 = (int64_t)d->im_a_q[2] * x[0] + (int64_t)d->im_a_q[3] * x[1] +
+                       (int64_t)d->im_b_q[1] * u;
+    x[0] = sat_range(round_shift(a0, d->im_acc_x_shift), d->im_e_max_q);
+    x[1] = sat_range(round_shift(a1, d->im_acc_x_shift), d->im_e_dot_max_q);
 }
 
 /* ---- interface ----------------------------------------------------------------------------- */
 
-void arm_pm_init(arm_pm_t *pm, arm_numeric_t numeric, arm_pm_structure_t structure)
+void arm_pm_init(arm_pm_t *pm, const arm_pm_design_t *design, arm_numeric_t numeric,
+                 arm_pm_structure_t structure)
 {
     memset(pm, 0, sizeof(*pm));
+    pm->d = design;
     pm->numeric = numeric;
     pm->structure = structure;
 }
@@ -162,8 +161,11 @@ void arm_pm_init(arm_pm_t *pm, arm_numeric_t numeric, arm_pm_structure_t structu
 void arm_pm_output(arm_pm_t *pm, const float e[ARM_N_JOINTS], const float e_dot[ARM_N_JOINTS],
                    float u_o[ARM_N_JOINTS], float w_hat[ARM_N_JOINTS])
 {
+    const arm_pm_design_t *d = pm->d;
     const int with_estimator = pm->structure != ARM_PM_NO_ESTIMATOR;
     const int decoupled = pm->structure == ARM_PM_DECOUPLED;
+    const sys_f_t ef = est_f(d), cf = ctl_f(d);
+    const sys_q_t eq = est_q(d), cq = ctl_q(d);
     for (int j = 0; j < ARM_N_JOINTS; ++j) {
         if (pm->numeric == ARM_NUMERIC_FLOAT) {
             float *y = pm->s.f.y[j];
@@ -174,25 +176,25 @@ void arm_pm_output(arm_pm_t *pm, const float e[ARM_N_JOINTS], const float e_dot[
                 pm->s.f.im[j][0] = y[0];
                 pm->s.f.im[j][1] = y[1];
             }
-            pm->s.f.u_o[j] = ctl_output_f(pm->s.f.ctl[j], y);
+            pm->s.f.u_o[j] = output_f(&cf, pm->s.f.ctl[j], y);
             v[0] = decoupled ? y[0] - pm->s.f.im[j][0] : y[0];
             v[1] = decoupled ? y[1] - pm->s.f.im[j][1] : y[1];
             u_o[j] = pm->s.f.u_o[j];
-            w_hat[j] = with_estimator ? est_output_f(pm->s.f.est[j], v) : 0.0f;
+            w_hat[j] = with_estimator ? output_f(&ef, pm->s.f.est[j], v) : 0.0f;
         } else {
             int32_t *y = pm->s.q.y[j];
             int32_t *v = pm->s.q.v[j];
-            y[0] = to_q(e[j], ARM_Y_FRAC, ARM_RANGE_E_MAX_Q);
-            y[1] = to_q(e_dot[j], ARM_Y_FRAC, ARM_RANGE_E_DOT_MAX_Q);
+            y[0] = to_q(e[j], d->y_frac, d->range_e_max_q);
+            y[1] = to_q(e_dot[j], d->y_frac, d->range_e_dot_max_q);
             if (!pm->primed) {
                 pm->s.q.im[j][0] = y[0];
                 pm->s.q.im[j][1] = y[1];
             }
-            pm->s.q.u_o[j] = ctl_output_q(pm->s.q.ctl[j], y);
-            v[0] = decoupled ? sat_range(y[0] - pm->s.q.im[j][0], ARM_RANGE_E_MAX_Q) : y[0];
-            v[1] = decoupled ? sat_range(y[1] - pm->s.q.im[j][1], ARM_RANGE_E_DOT_MAX_Q) : y[1];
-            u_o[j] = from_q(pm->s.q.u_o[j], ARM_CTL_U_FRAC);
-            w_hat[j] = with_estimator ? from_q(est_output_q(pm->s.q.est[j], v), ARM_EST_U_FRAC)
+            pm->s.q.u_o[j] = output_q(&cq, pm->s.q.ctl[j], y);
+            v[0] = decoupled ? sat_range(y[0] - pm->s.q.im[j][0], d->range_e_max_q) : y[0];
+            v[1] = decoupled ? sat_range(y[1] - pm->s.q.im[j][1], d->range_e_dot_max_q) : y[1];
+            u_o[j] = from_q(pm->s.q.u_o[j], d->ctl_u_frac);
+            w_hat[j] = with_estimator ? from_q(output_q(&eq, pm->s.q.est[j], v), d->est_u_frac)
                                       : 0.0f;
         }
     }
@@ -201,15 +203,18 @@ void arm_pm_output(arm_pm_t *pm, const float e[ARM_N_JOINTS], const float e_dot[
 
 void arm_pm_update(arm_pm_t *pm, uint32_t hold_mask)
 {
+    const arm_pm_design_t *d = pm->d;
+    const sys_f_t ef = est_f(d), cf = ctl_f(d);
+    const sys_q_t eq = est_q(d), cq = ctl_q(d);
     const int with_estimator = pm->structure != ARM_PM_NO_ESTIMATOR;
     const int decoupled = pm->structure == ARM_PM_DECOUPLED;
     for (int j = 0; j < ARM_N_JOINTS; ++j) {
         const int hold = (hold_mask >> j) & 1u;
         if (pm->numeric == ARM_NUMERIC_FLOAT) {
-            ctl_update_f(pm->s.f.ctl[j], pm->s.f.y[j]);
+            update_f(&cf, pm->s.f.ctl[j], pm->s.f.y[j]);
             if (with_estimator && !hold) {
-                est_update_f(pm->s.f.est[j], pm->s.f.v[j]);
-                if (decoupled) im_update_f(pm->s.f.im[j], pm->s.f.u_o[j]);
+                update_f(&ef, pm->s.f.est[j], pm->s.f.v[j]);
+                if (decoupled) im_update_f(d, pm->s.f.im[j], pm->s.f.u_o[j]);
             } else if (decoupled && hold) {
                 /* Anti-windup: while the limiter decides the torque, K is held and the internal
                  * model follows the measured error, so K does not learn the limiter as w. */
@@ -217,10 +222,10 @@ void arm_pm_update(arm_pm_t *pm, uint32_t hold_mask)
                 pm->s.f.im[j][1] = pm->s.f.y[j][1];
             }
         } else {
-            ctl_update_q(pm->s.q.ctl[j], pm->s.q.y[j]);
+            update_q(&cq, pm->s.q.ctl[j], pm->s.q.y[j]);
             if (with_estimator && !hold) {
-                est_update_q(pm->s.q.est[j], pm->s.q.v[j]);
-                if (decoupled) im_update_q(pm->s.q.im[j], pm->s.q.u_o[j]);
+                update_q(&eq, pm->s.q.est[j], pm->s.q.v[j]);
+                if (decoupled) im_update_q(d, pm->s.q.im[j], pm->s.q.u_o[j]);
             } else if (decoupled && hold) {
                 pm->s.q.im[j][0] = pm->s.q.y[j][0];
                 pm->s.q.im[j][1] = pm->s.q.y[j][1];
@@ -229,12 +234,56 @@ void arm_pm_update(arm_pm_t *pm, uint32_t hold_mask)
     }
 }
 
-const char *arm_pm_design_hash(void)
+int arm_pm_design_fits(const arm_pm_design_t *d)
 {
-    return ARM_DESIGN_HASH;
+    if (d == NULL || d->n_joints != ARM_N_JOINTS) return -1;
+    if (d->est_nx < 1 || d->est_nx > ARM_PM_EST_NX_MAX || d->ctl_nx < 1 || d->ctl_nx > ARM_PM_CTL_NX_MAX) return -1;
+    const void *const tables[] = {d->est_a, d->est_b, d->est_c, d->est_d, d->ctl_a, d->ctl_b, d->ctl_c,
+                                  d->ctl_d, d->im_a, d->im_b, d->est_a_q, d->est_b_q, d->est_c_q,
+                                  d->est_d_q, d->ctl_a_q, d->ctl_b_q, d->ctl_c_q, d->ctl_d_q,
+                                  d->im_a_q, d->im_b_q};
+    for (size_t i = 0; i < sizeof(tables) / sizeof(tables[0]); ++i) {
+        if (tables[i] == NULL) return -1;
+    }
+    /* 1LL << f and the rounding term 1 << (shift - 1) are defined for 0..62 */
+    const int bits[] = {d->y_frac, d->est_u_frac, d->ctl_u_frac, d->est_acc_x_shift, d->est_acc_u_shift,
+                        d->ctl_acc_x_shift, d->ctl_acc_u_shift, d->im_acc_x_shift};
+    for (size_t i = 0; i < sizeof(bits) / sizeof(bits[0]); ++i) {
+        if (bits[i] < 0 || bits[i] > 62) return -1;
+    }
+    return d->range_e_max_q > 0 && d->range_e_dot_max_q > 0 && d->im_e_max_q > 0 && d->im_e_dot_max_q > 0 ? 0 : -1;
 }
 
-int arm_pm_check_design(float loop_rate_hz)
+int arm_pm_check_design(const arm_pm_design_t *d, float loop_rate_hz)
 {
-    return fabsf(loop_rate_hz - (float)ARM_LOOP_RATE_HZ) <= 1e-3f * (float)ARM_LOOP_RATE_HZ ? 0 : -1;
+    return fabsf(loop_rate_hz - d->loop_rate_hz) <= 1e-3f * d->loop_rate_hz ? 0 : -1;
 }
+
+/* The built-in design: the generated tables themselves (no copy), read through the struct. */
+const arm_pm_design_t arm_pm_builtin_design = {
+    .hash = ARM_DESIGN_HASH,
+    .n_joints = ARM_DESIGN_N_JOINTS,
+    .loop_rate_hz = (float)ARM_LOOP_RATE_HZ,
+    .est_nx = ARM_EST_NX,
+    .ctl_nx = ARM_CTL_NX,
+    .est_a = &ARM_EST_A[0][0], .est_b = &ARM_EST_B[0][0], .est_c = &ARM_EST_C[0][0], .est_d = &ARM_EST_D[0][0],
+    .ctl_a = &ARM_CTL_A[0][0], .ctl_b = &ARM_CTL_B[0][0], .ctl_c = &ARM_CTL_C[0][0], .ctl_d = &ARM_CTL_D[0][0],
+    .im_a = &ARM_IM_A[0][0], .im_b = &ARM_IM_B[0][0],
+    .est_a_q = &ARM_EST_A_Q[0][0], .est_b_q = &ARM_EST_B_Q[0][0], .est_c_q = &ARM_EST_C_Q[0][0],
+    .est_d_q = &ARM_EST_D_Q[0][0],
+    .ctl_a_q = &ARM_CTL_A_Q[0][0], .ctl_b_q = &ARM_CTL_B_Q[0][0], .ctl_c_q = &ARM_CTL_C_Q[0][0],
+    .ctl_d_q = &ARM_CTL_D_Q[0][0],
+    .im_a_q = &ARM_IM_A_Q[0][0], .im_b_q = &ARM_IM_B_Q[0][0],
+    .y_frac = ARM_Y_FRAC,
+    .est_u_frac = ARM_EST_U_FRAC,
+    .ctl_u_frac = ARM_CTL_U_FRAC,
+    .est_acc_x_shift = ARM_EST_ACC_X_SHIFT,
+    .est_acc_u_shift = ARM_EST_ACC_U_SHIFT,
+    .ctl_acc_x_shift = ARM_CTL_ACC_X_SHIFT,
+    .ctl_acc_u_shift = ARM_CTL_ACC_U_SHIFT,
+    .im_acc_x_shift = ARM_IM_ACC_X_SHIFT,
+    .range_e_max_q = ARM_RANGE_E_MAX_Q,
+    .range_e_dot_max_q = ARM_RANGE_E_DOT_MAX_Q,
+    .im_e_max_q = ARM_IM_E_MAX_Q,
+    .im_e_dot_max_q = ARM_IM_E_DOT_MAX_Q,
+};

@@ -124,6 +124,16 @@ static int opt_lcm_url(void *t, void *c, const argv_opt_t *o, const char *v, cha
     return check_lcm_url(v, err, errcap);
 }
 
+static int opt_design_file(void *t, void *c, const argv_opt_t *o, const char *v, char *err, unsigned long errcap)
+{
+    options_t *opt = t;
+    (void)c;
+    (void)o;
+    if (design_file_load(v, &opt->design, err, errcap) != 0) return -1;
+    opt->ctl.design = &opt->design.d;
+    return 0;
+}
+
 static int opt_method(void *t, void *c, const argv_opt_t *o, const char *v, char *err, unsigned long errcap)
 {
     options_t *opt = t;
@@ -221,6 +231,11 @@ int options_parse(int argc, char **argv, const arm_robot_model_t *model, options
         return -1;
     }
     opt->ref_given = given[ARGV_OPT_REF_AMP];
+    if (opt->ctl.design == &opt->design.d && arm_pm_check_design(opt->ctl.design, (float)opt->rate_hz) != 0) {
+        snprintf(err, errcap, "--design-file %s: loop_rate_hz: the design was discretised for %g Hz, this run's --rate is %g Hz",
+                 opt->design.path, (double)opt->design.d.loop_rate_hz, opt->rate_hz);
+        return -1;
+    }
     /* The margin and the mismatch fraction are per arm: in the joints' units here (the defaults
      * give what arm_ctl_default_config gave). */
     arm_ctl_joint_range(model, (float)opt->position_margin_rad, opt->ctl.q_min, opt->ctl.q_max);

@@ -6,6 +6,7 @@
 
 #include "arm/can_bus.h"
 #include "arm/controller.h"
+#include "design_file.h"
 #include "rt.h"
 
 typedef enum { MODE_LOCKSTEP = 0, MODE_REALTIME } run_mode_t;
@@ -26,6 +27,7 @@ typedef struct {
     arm_ctl_config_t ctl;
     double position_margin_rad; /* --position-margin: ctl's q_min, q_max are the model's widened by it */
     double torque_mismatch;     /* --torque-mismatch: ctl's limits, a fraction of each torque limit */
+    design_file_t design; /* --design-file: ctl.design points here; else the built-in design */
     rt_options_t rt; /* --rt-priority, --cpu (rt.h) */
     double ref_hold_s;               /* --ref-hold: settle on the start pose first */
     int ref_given;                   /* 1: --ref-amp/--ref-freq replace the default reference */

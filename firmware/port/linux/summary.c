@@ -25,7 +25,7 @@ int summary_write(const char *path, const options_t *opt, const run_report_t *r,
     fprintf(f, "  \"rate_hz\": %.17g,\n  \"steps_requested\": %u,\n  \"steps_done\": %u,\n  \"bus_periods\": %u,\n",
             opt->rate_hz, opt->steps, r->steps_done, r->bus_periods);
     fprintf(f, "  \"ref_hold_s\": %.17g,\n  \"design_hash\": \"%s\",\n", opt->ref_hold_s,
-            arm_pm_design_hash());
+            opt->ctl.design->hash);
     fprintf(f, "  \"final_state\": \"%s\",\n  \"final_fault\": \"%s\",\n",
             arm_state_str(r->final_state), arm_fault_str(r->final_fault));
     fprintf(f, "  \"wall_s\": %.6f,\n  \"boot_s\": %.6f,\n  \"overruns\": %llu,\n", r->wall_s,

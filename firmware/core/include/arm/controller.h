@@ -59,6 +59,7 @@ typedef enum {
 typedef struct {
     arm_method_t method;
     arm_numeric_t numeric; /* pm, pm-paper, gh2: float32 or int32 fixed-point blocks */
+    const arm_pm_design_t *design; /* pm, pm-paper, gh2: K and C (default &arm_pm_builtin_design) */
     float period_s;
     float kp; /* 1/s^2, pd and tde */
     float kd; /* 1/s, pd and tde */
@@ -140,6 +141,7 @@ typedef enum {
     ARM_CTL_BAD_FOLLOWING_LIMIT,
     ARM_CTL_BAD_MISMATCH_LIMIT,  /* torque_mismatch_limit or torque_mismatch_periods */
     ARM_CTL_BAD_STEP_TOLERANCE,
+    ARM_CTL_BAD_DESIGN,          /* the design does not fit this firmware (arm_pm_design_fits) */
 } arm_ctl_init_result_t;
 
 /* Fills cfg with the defaults for the model (the numbers are the registry's,
