@@ -36,7 +36,7 @@ def small_config(dirpath: Path, seeds: int = 2, methods: str = SMALL["methods"],
     text = DEFAULT_CONFIG.read_text()
     text = re.sub(r"(?m)^methods = .*$", f"methods = {methods}", text)
     text = re.sub(r"(?m)^scenarios = .*$", f"scenarios = {scenarios}", text)
-    text = re.sub(r"(?m)^seeds = 5 .*$", f"seeds = {seeds}", text)
+    text = re.sub(r"(?m)^seeds = \d+ .*$", f"seeds = {seeds}", text)
     for key, value in (("cap", 2), ("batch", 2), ("widen", 0)):  # (a line may end in a comment)
         text, n = re.subn(rf"(?m)^{key} = \d+(\s*#.*)?$", f"{key} = {value}", text)
         assert n == 1, f"the default config's [tuning] {key} line"
@@ -293,7 +293,8 @@ def test_a_killed_process_ends_the_run_in_a_named_state(tmp_path: Path, controll
     (("wn = [2.0, 300.0]", "wn = []"), "tuning.space.pm.wn"),
     (("zeta = [1.0, 2.0]", "zeta = [0.5, 2.0]"), "tuning.space.usde-smc.zeta"),
     (("H = [0.05, 5.0]", "H = [5.0, 0.05]"), "tuning.space.pm.H"),
-    (("cap = 48", "cap = 0"), "tuning.cap"),
+    (("cap = 100", "cap = 0"), "tuning.cap"),
+    (("study_tuning_cap = 24", "study_tuning_cap = 0"), "study.study_tuning_cap"),
     (("seeds = [1001, 1002, 1003, 1004]", "seeds = [1, 1002]"), "tuning.seeds"),
     (("validation_seeds = [2001, 2002]", "validation_seeds = [1001]"), "tuning.validation_seeds"),
     (('scenarios = ["ideal",', 'scenarios = ["windy",'), "study.scenarios"),
@@ -339,6 +340,38 @@ def test_the_kept_tuning_serves_this_checkout(tmp_path: Path) -> None:
     assert moved != setup.base_design  # the design's header comment names the checkout's path ...
     setup.base_design = moved
     assert tuning_key(cfg, info, setup, "ideal", "pm") == kept["ideal"]["pm"]["key"]  # ... and the key ignores it
+
+
+def test_a_study_reuses_a_longer_kept_tuning_and_tunes_what_is_missing_with_its_own_cap(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """`armctl tune` tunes to [tuning] cap; a study takes any kept tuning of at least
+    study_tuning_cap trials and tunes only what is missing, with study_tuning_cap (a new arm's study
+    then finishes in minutes). tune_method is replaced: only the choice of what to tune is tested."""
+    import tools.study as study_mod
+    from tools.build.arm import DEFAULT_ARM, build_arm
+    from tools.study import keep_tuning, setup_for, tuned, tuning_file, tuning_key
+
+    build_arm("release", DEFAULT_ARM)
+    cfg_path = tmp_path / "paper.toml"
+    cfg_path.write_text(DEFAULT_CONFIG.read_text().replace("study_tuning_cap = 24", "study_tuning_cap = 3"))
+    cfg = load(cfg_path)
+    assert (cfg.cap, cfg.study_cap) == (100, 3)
+    setup, info, _ = setup_for(cfg, DEFAULT_ARM, tmp_path / "tune", 1, None)
+    path = tuning_file(cfg, DEFAULT_ARM)
+    keep_tuning(path, "ideal", "pm", {"key": tuning_key(cfg, info, setup, "ideal", "pm"), "cap": 100,
+                                      "knobs": {"wn": 1.0}, "trials_run": 100}, {})
+    asked: list[tuple[str, int | None]] = []
+
+    def fake_tune(setup_, scenario, method, trials=None, progress=None, key=""):  # noqa: ANN001, ANN202
+        asked.append((method, trials))
+        return {"cap": trials, "trials_run": trials, "knobs": {"wn": 2.0}}
+
+    monkeypatch.setattr(study_mod, "tune_method", fake_tune)
+    got = tuned(cfg, DEFAULT_ARM, setup, info, ["ideal"], ["pm", "tde"], in_study=True)
+    assert asked == [("tde", 3)] and got["ideal"]["pm"]["knobs"] == {"wn": 1.0}
+    asked.clear()
+    got = tuned(cfg, DEFAULT_ARM, setup, info, ["ideal"], ["pm", "tde"])  # armctl tune: the config's cap
+    assert asked == [("tde", 100)] and got["ideal"]["pm"]["cap"] == 100
 
 
 def test_a_failed_trial_scores_by_how_much_it_ran() -> None:
@@ -563,7 +596,7 @@ def test_a_study_on_a_seven_joint_arm_runs_every_scenario(tmp_path: Path) -> Non
 
     text = DEFAULT_CONFIG.read_text()
     text = re.sub(r"(?m)^methods = .*$", 'methods = ["pm-paper-weights", "pd"]', text)
-    text = re.sub(r"(?m)^seeds = 5 .*$", "seeds = 1", text)
+    text = re.sub(r"(?m)^seeds = \d+ .*$", "seeds = 1", text)
     text = with_tuning(text, duration_s=0.5, cap=2, batch=2, widen=0)
     cfg_path = tmp_path / "seven.toml"
     cfg_path.write_text(text)

@@ -189,10 +189,13 @@ def keep_tuning(path: Path, scenario: str, method: str, rec: dict[str, Any], com
 
 
 def tuned(cfg: StudyConfig, arm: ArmRef, setup: TuneSetup, info: dict[str, Any], scenarios: list[str],
-          methods: list[str], *, retune: bool = False, trials: int | None = None) -> dict[str, dict[str, Any]]:
+          methods: list[str], *, retune: bool = False, trials: int | None = None,
+          in_study: bool = False) -> dict[str, dict[str, Any]]:
     """The tuning of every tuned method in every scenario: the kept one when it was made for the
     same arm, scenario and tuning settings, else tuned now (and kept, method by method, so an
-    interrupted tuning resumes)."""
+    interrupted tuning resumes). `armctl tune` wants the config's cap (or --trials) exactly; a
+    study takes any kept tuning of at least its cap, and tunes what is missing with
+    `study_tuning_cap` trials (or --trials), so that a study on a new arm finishes in minutes."""
     path = tuning_file(cfg, arm)
     doc = _read_tuning(path)
     out: dict[str, dict[str, Any]] = {s: {} for s in scenarios}
@@ -205,27 +208,28 @@ def tuned(cfg: StudyConfig, arm: ArmRef, setup: TuneSetup, info: dict[str, Any],
             scen = doc["scenarios"].get(s)
             rec = scen.get(m) if isinstance(scen, dict) else None
             rec = rec if isinstance(rec, dict) else None
-            cap = trials or cfg.cap
-            if rec and rec.get("key") == key and rec.get("cap") == cap and not retune:
+            cap = trials or (cfg.study_cap if in_study else cfg.cap)
+            long_enough = isinstance(rec.get("cap"), int) and rec["cap"] >= cap if in_study and rec else False
+            if rec and rec.get("key") == key and (rec.get("cap") == cap or long_enough) and not retune:
                 out[s][m] = {**rec, "source": f"tuned earlier, kept in {path}"}
             else:
                 todo.append((s, m, key, "retune asked for" if retune and rec else
                              "no tuning kept for this arm, scenario and settings" if not rec or rec.get("key") != key
                              else f"the kept tuning had a cap of {rec.get('cap')} trials"))
     if todo:
-        cap = trials or cfg.cap
+        cap = trials or (cfg.study_cap if in_study else cfg.cap)
         print(f"armctl: tuning {len(todo)} method/scenario pairs ({', '.join(f'{m} in {s}' for s, m, _, _ in todo)}): "
               f"{todo[0][3]}; each to convergence (1 % over {cfg.plateau} trials) or at most {cap} trials; Optuna "
               f"storage {storage_url(setup.out)}", file=sys.stderr)
         bar = tqdm(total=cap * len(todo), desc="tune", unit="trial")
         for s, m, key, _ in todo:
             bar.set_postfix_str(f"{m} / {s}")
-            rec = tune_method(setup, cfg.scenarios[s], m, trials, progress=lambda: bar.update(1), key=key)
+            rec = tune_method(setup, cfg.scenarios[s], m, cap, progress=lambda: bar.update(1), key=key)
             bar.update(cap - rec["trials_run"])  # a converged tuning ends before its cap
             rec["key"] = key
             rec["code"] = code_identity()
             keep_tuning(path, s, m, rec, {"arm": {"name": info["name"], "model_hash": info["model_hash"]},
-                                          "procedure": procedure(cfg, trials, setup.jobs)})
+                                          "procedure": procedure(cfg, cap, setup.jobs)})
             out[s][m] = {**rec, "source": f"tuned now, kept in {path}"}
         bar.close()
     return out
@@ -245,7 +249,7 @@ def procedure(cfg: StudyConfig, trials: int | None = None, jobs: int | None = No
             f"value at the edge of its range widens that range tenfold in a new round (at most {cfg.widen}). The "
             f"pick must also run ok on the held-out validation seed(s) {cfg.validation_seeds}, else the next best "
             f"(of the best {cfg.validation_tries}) is taken. pm, pm-paper and gh2 are tuned through their synthesis "
-            f"weights (each candidate synthesised and built); pm-paper-weights is the paper's own weights, not tuned.")
+            f"weights (each candidate synthesised: loaded at run time in SIL, built into the firmware over a CAN bus); pm-paper-weights is the paper's own weights, not tuned.")
 
 
 def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration_s: float | None = None,
@@ -257,7 +261,7 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
     seed_list = cfg.seed_list(seeds)
     setup, info, notes = setup_for(cfg, arm, out / "tuning", jobs, cluster, bus)
     cfg = setup.cfg  # the scenarios' per-joint values on this arm
-    tuning = tuned(cfg, arm, setup, info, scen_names, methods, retune=retune, trials=trials)
+    tuning = tuned(cfg, arm, setup, info, scen_names, methods, retune=retune, trials=trials, in_study=True)
     duration = duration_s or cfg.duration_s
     traj_args, traj_used, traj_notes = trajectory_for(info, cfg.trajectory, "trajectory", arm_build_dir("release", arm),
                                                       scenario_friction(cfg))

@@ -126,6 +126,7 @@ class StudyConfig:
     tuning_trajectory: Trajectory
     tuning_objective: str
     cap: int                      # at most this many trials per method and scenario (every round), the same for all
+    study_cap: int                # the cap when a study must tune first (study_tuning_cap, never above cap)
     plateau: int                  # converged: the best improved by no more than `tolerance` over this many trials
     tolerance: float              # relative (0.01: 1 %)
     batch: int                    # trials asked of the optimiser at once (at most --jobs)
@@ -334,7 +335,7 @@ def load(path: Path) -> StudyConfig:
         data = toml_input.loads(path.read_text())
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise StudyConfigError(f"{path}: {exc}") from exc
-    known = {"description", "duration_s", "hold_s", "seed", "seeds", "methods", "scenarios", "trajectory",
+    known = {"description", "duration_s", "hold_s", "seed", "seeds", "methods", "scenarios", "trajectory", "study_tuning_cap",
              "scenario", "tuning"}
     unknown = set(data) - known
     if unknown:
@@ -393,6 +394,7 @@ def load(path: Path) -> StudyConfig:
         tuning_trajectory=_trajectory(tuning, "tuning"),
         tuning_objective=str(tuning.get("objective", "")),
         cap=_whole(tuning, "cap", "tuning", 1, 100000, 400),
+        study_cap=min(_whole(data, "study_tuning_cap", "study", 1, 100000, 400), _whole(tuning, "cap", "tuning", 1, 100000, 400)),
         plateau=_whole(tuning, "plateau", "tuning", 1, 100000, 50),
         tolerance=_number(tuning, "tolerance", "tuning", 0.0, 1.0, 0.01),
         batch=_whole(tuning, "batch", "tuning", 1, 64, 4),

@@ -19,6 +19,7 @@ Usage (from firmware/port/cortex_m/CMakeLists.txt):
 from __future__ import annotations
 
 import argparse
+import bisect
 import json
 import re
 import subprocess
@@ -27,7 +28,7 @@ from pathlib import Path
 
 FUNC_RE = re.compile(r"^([0-9a-f]+) <([^>]+)>:$")
 INSN_RE = re.compile(r"^\s*([0-9a-f]+):\s+(?:[0-9a-f]{4}\s?){1,2}\s+(\S+)\s*(.*)$")
-TARGET_RE = re.compile(r"^[0-9a-f]+ <([^>+]+)>$")
+TARGET_RE = re.compile(r"^([0-9a-f]+) <[^>]+>$")
 BRANCH_RE = re.compile(r"^b(?:eq|ne|cs|hs|cc|lo|mi|pl|vs|vc|hi|ls|ge|lt|gt|le|al)?(?:\.w|\.n)?$")
 
 # Hardware-stacked exception frame: 8 words; with the FPU's lazy context 26 words (+ alignment).
@@ -69,6 +70,17 @@ def reglist_count(ops: str) -> int:
 def disassemble(objdump: str, elf: Path) -> dict[str, dict]:
     out = subprocess.run([objdump, "-d", "--no-show-raw-insn", str(elf)], capture_output=True,
                          text=True, check=True).stdout
+    # A target is resolved by its address, never by objdump's label: the label is the nearest
+    # symbol, which may be an absolute one such as the linker script's _stack_size = 0x2000 when a
+    # branch inside a function lands on that address.
+    starts = sorted((int(m.group(1), 16), m.group(2)) for m in map(FUNC_RE.match, out.splitlines()) if m)
+    addrs = [a for a, _ in starts]
+
+    def owner(addr: int) -> tuple[str, bool] | None:
+        """The function that holds addr, and whether addr is its entry."""
+        i = bisect.bisect_right(addrs, addr) - 1
+        return (starts[i][1], starts[i][0] == addr) if i >= 0 else None
+
     funcs: dict[str, dict] = {}
     cur: dict | None = None
     for line in out.splitlines():
@@ -95,14 +107,14 @@ def disassemble(objdump: str, elf: Path) -> dict[str, dict]:
             cur["prologue"] += int(re.search(r"#(\d+)", args).group(1))
         elif op.startswith("str") and re.search(r"\[sp, #-(\d+)\]!", args):
             cur["prologue"] += int(re.search(r"\[sp, #-(\d+)\]!", args).group(1))
-        if op in ("bl", "blx") and TARGET_RE.match(args):
-            cur["calls"].add(TARGET_RE.match(args).group(1))
+        t = TARGET_RE.match(args)
+        target = owner(int(t.group(1), 16)) if t else None
+        if op in ("bl", "blx") and target:
+            cur["calls"].add(target[0])
         elif op == "blx":
             cur["indirect"] = True  # blx rN
-        elif BRANCH_RE.match(op) and TARGET_RE.match(args):
-            callee = TARGET_RE.match(args).group(1)
-            if callee != cur["name"]:
-                cur["calls"].add(callee)  # tail call
+        elif BRANCH_RE.match(op) and target and target[0] != cur["name"]:
+            cur["calls"].add(target[0])  # tail call (into another function)
     return funcs
 
 
