@@ -128,6 +128,27 @@ def safe_extract(tf: tarfile.TarFile, dest: Path) -> None:
     tf.extractall(dest)
 
 
+def _fresh_apt(tmp: Path, sources: list[tuple[str, str]]) -> Path:
+    """An empty apt state below a fresh `tmp`, knowing only `sources`: nothing of the host's apt is read or changed."""
+    shutil.rmtree(tmp, ignore_errors=True)
+    apt = tmp / "apt"
+    for d in ("state/lists/partial", "cache/archives/partial", "etc/sources.list.d"):
+        (apt / d).mkdir(parents=True)
+    (apt / "state" / "status").touch()
+    (apt / "etc" / "none.list").touch()
+    for name, text in sources:
+        (apt / "etc" / "sources.list.d" / name).write_text(text)
+    return apt
+
+
+def _publish(tmp: Path, out: Path, versions: dict[str, str]) -> dict[str, str]:
+    """Stamps `tmp` and puts it at `out` in one rename, so an interrupted fetch never leaves a stamped half."""
+    (tmp / STAMP).write_text(json.dumps(versions, indent=2) + "\n")
+    shutil.rmtree(out, ignore_errors=True)
+    tmp.rename(out)
+    return versions
+
+
 def fetch(out: Path) -> dict[str, str]:
     stamp = out / STAMP
     if stamp.exists():
@@ -135,14 +156,7 @@ def fetch(out: Path) -> dict[str, str]:
     if shutil.which("apt-get") is None or shutil.which("dpkg") is None:
         raise SystemExit("fetch_aarch64_deps: needs apt-get and dpkg (a Debian machine)")
     tmp = out.with_name(out.name + ".partial")
-    shutil.rmtree(tmp, ignore_errors=True)
-    apt = tmp / "apt"
-    for d in ("state/lists/partial", "cache/archives/partial", "etc/sources.list.d"):
-        (apt / d).mkdir(parents=True)
-    (apt / "state" / "status").touch()
-    (apt / "etc" / "none.list").touch()
-    for name, text in _system_sources():
-        (apt / "etc" / "sources.list.d" / name).write_text(text)
+    apt = _fresh_apt(tmp, _system_sources())
 
     _apt(apt, "update")
     debs = tmp / "debs"
@@ -173,10 +187,7 @@ def fetch(out: Path) -> dict[str, str]:
     shutil.rmtree(apt)
     shutil.rmtree(debs)
     shutil.rmtree(src)
-    (tmp / STAMP).write_text(json.dumps(versions, indent=2) + "\n")
-    shutil.rmtree(out, ignore_errors=True)
-    tmp.rename(out)
-    return versions
+    return _publish(tmp, out, versions)
 
 
 def fetch_qemu(out: Path) -> dict[str, str]:
@@ -186,14 +197,7 @@ def fetch_qemu(out: Path) -> dict[str, str]:
     host = subprocess.run(["dpkg", "--print-architecture"], capture_output=True, text=True,
                           check=True).stdout.strip()
     tmp = out.with_name(out.name + ".partial")
-    shutil.rmtree(tmp, ignore_errors=True)
-    apt = tmp / "apt"
-    for d in ("state/lists/partial", "cache/archives/partial", "etc/sources.list.d"):
-        (apt / d).mkdir(parents=True)
-    (apt / "state" / "status").touch()
-    (apt / "etc" / "none.list").touch()
-    for name, text in _backports_sources():
-        (apt / "etc" / "sources.list.d" / name).write_text(text)
+    apt = _fresh_apt(tmp, _backports_sources())
     _apt(apt, "update", arch=host)
     debs = tmp / "debs"
     debs.mkdir()
@@ -208,10 +212,7 @@ def fetch_qemu(out: Path) -> dict[str, str]:
     versions = {"qemu-user": deb.name.split("_")[1].replace("%3a", ":")}
     for d in (apt, debs, root):
         shutil.rmtree(d)
-    (tmp / STAMP).write_text(json.dumps(versions, indent=2) + "\n")
-    shutil.rmtree(out, ignore_errors=True)
-    tmp.rename(out)
-    return versions
+    return _publish(tmp, out, versions)
 
 
 def main() -> int:

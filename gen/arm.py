@@ -867,6 +867,18 @@ def _inertia_carrier(m: mujoco.MjModel, i: int) -> str:
         ("" if beyond >= LIGHT_LINK_KG else "; no link beyond it")
 
 
+def inverse_forces(models: tuple[mujoco.MjModel, ...], q: np.ndarray, qd: np.ndarray,
+                   qdd: np.ndarray) -> list[np.ndarray]:
+    """mj_inverse of each model at the one state (q, qd, qdd): the generalised forces each needs."""
+    out = []
+    for m in models:
+        d = mujoco.MjData(m)
+        d.qpos[:], d.qvel[:], d.qacc[:] = q, qd, qdd
+        mujoco.mj_inverse(m, d)
+        out.append(d.qfrc_inverse.copy())
+    return out
+
+
 def _inverse_dynamics_difference(a: mujoco.MjModel, b: mujoco.MjModel, samples: int = 20) -> float:
     """The largest relative difference of two models' rigid-body inverse dynamics (constraints
     and springs off) over random states: what writing the model to XML cost."""
@@ -877,12 +889,7 @@ def _inverse_dynamics_difference(a: mujoco.MjModel, b: mujoco.MjModel, samples: 
     try:
         for _ in range(samples):
             q, qd, qdd = rng.uniform(-3, 3, a.nv), rng.uniform(-2, 2, a.nv), rng.uniform(-5, 5, a.nv)
-            out = []
-            for m in (a, b):
-                d = mujoco.MjData(m)
-                d.qpos[:], d.qvel[:], d.qacc[:] = q, qd, qdd
-                mujoco.mj_inverse(m, d)
-                out.append(d.qfrc_inverse.copy())
+            out = inverse_forces((a, b), q, qd, qdd)
             scale = np.max(np.abs(out[0])) + 1e-9
             worst = max(worst, float(np.max(np.abs(out[0] - out[1])) / scale))
     finally:

@@ -105,13 +105,9 @@ def run(ns: argparse.Namespace) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     formulas = (lib.__doc__ or "").split("\n\n", 1)[1]  # the library's: what is counted, and how
-    p = argparse.ArgumentParser(prog="armctl busload", description=__doc__ + "\n\n" + formulas,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
-    add_arguments(p)
-    p.set_defaults(command="busload", run=run)
-    from tools.cli import run_command
+    from tools.cli import run_alone
 
-    return run_command(p.parse_args(argv))
+    return run_alone("busload", __doc__ + "\n\n" + formulas, add_arguments, run, argv)
 
 
 if __name__ == "__main__":

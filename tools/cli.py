@@ -77,6 +77,17 @@ def run_command(ns: argparse.Namespace) -> int:
         return code
 
 
+def run_alone(command: str, description: str | None, add_arguments: Callable[[argparse.ArgumentParser], None],
+              run: Callable[[argparse.Namespace], int], argv: list[str] | None) -> int:
+    """A command's module run as a script (`python -m tools.<command>`): its own parser, then the
+    same exit-code map as under armctl."""
+    p = argparse.ArgumentParser(prog=f"armctl {command}", description=description,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_arguments(p)
+    p.set_defaults(command=command, run=run)
+    return run_command(p.parse_args(argv))
+
+
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="armctl", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)

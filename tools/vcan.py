@@ -186,13 +186,9 @@ def run(ns: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="armctl vcan", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
-    add_arguments(p)
-    p.set_defaults(command="vcan", run=run)
-    from tools.cli import run_command
+    from tools.cli import run_alone
 
-    return run_command(p.parse_args(argv))
+    return run_alone("vcan", __doc__, add_arguments, run, argv)
 
 
 if __name__ == "__main__":

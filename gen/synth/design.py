@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -23,6 +23,8 @@ from gen.synth.plants import GeneralizedPlant, controller_plant, double_integrat
 from gen.synth.recover import Recovered, recover_and_reduce
 from gen.synth.ss import StateSpace, static_gain
 from gen.synth.verify import gh2_norm, hinf_norm, sweep_peak
+
+_Chosen = TypeVar("_Chosen")
 
 NORM_RTOL = 1e-6  # the verified norm may exceed the LMI gamma by solver round-off only
 
@@ -79,6 +81,47 @@ def _rule_text(kind: str, res: LadderResult[Any], rate: int, delay: int) -> str:
         "of actuation delay"
     )
     return text + (f"; rejected below it: {'; '.join(below)}" if below else "")
+
+
+def _accepted(kind: str, res: LadderResult[_Chosen], cfg: DesignConfig) -> _Chosen:
+    """What the ladder's accepted rung made; no accepted rung refuses the design, naming the last reason."""
+    if res.chosen is None:
+        raise DesignRefused(
+            f"{kind}: no rung of design.backoff_ladder is stable with margin at {cfg.loop_rate_hz} Hz "
+            f"(last: {res.rungs[-1].reason}); extend the ladder or raise the loop rate"
+        )
+    return res.chosen
+
+
+def _backed_off(
+    kind: str,
+    plant: GeneralizedPlant,
+    opt: LmiSolution,
+    res: LadderResult[Any],
+    loops: str,
+    cfg: DesignConfig,
+    rec: Recovered,
+    verification: dict[str, Any],
+    degeneracy: Degeneracy | None = None,
+) -> Synthesised:
+    """The record of a full-order LMI design backed off to the ladder's accepted rung; `loops` names the
+    loops its rung was judged on, `verification` the verified norms (the rung's gamma is added to it)."""
+    assert res.rung is not None
+    return Synthesised(
+        kind=kind,
+        plant=plant,
+        gamma_opt=opt.gamma,
+        gamma_opt_status=opt.status,
+        gamma_design=res.rung.gamma,
+        rule=_rule_text(loops, res, cfg.loop_rate_hz, cfg.delay_margin_samples),
+        system=rec.reduced,
+        full_order_poles=[complex(p) for p in np.linalg.eigvals(rec.full.A)],
+        residualised_poles=rec.residualised_poles,
+        i_minus_xy_singular_values=rec.i_minus_xy_singular_values,
+        rungs=res.rungs,
+        verification={**verification, "lmi_gamma": res.rung.gamma, "within_bound": True},
+        degeneracy=degeneracy,
+    )
 
 
 def _controller(Po: GeneralizedPlant, cfg: DesignConfig, m: int) -> Synthesised:
@@ -141,28 +184,8 @@ def _controller(Po: GeneralizedPlant, cfg: DesignConfig, m: int) -> Synthesised:
 
     assert opt is not None  # only the degenerate case tolerates a failed min-gamma solve
     res = walk_ladder(opt.gamma, cfg.backoff_ladder, attempt)
-    if res.chosen is None:
-        raise DesignRefused(
-            f"controller: no rung of design.backoff_ladder is stable with margin at {cfg.loop_rate_hz} Hz "
-            f"(last: {res.rungs[-1].reason}); extend the ladder or raise the loop rate"
-        )
-    rec, norm = res.chosen
-    assert res.rung is not None
-    return Synthesised(
-        kind="controller",
-        plant=Po,
-        gamma_opt=opt.gamma,
-        gamma_opt_status=opt.status,
-        gamma_design=res.rung.gamma,
-        rule=_rule_text("controller", res, cfg.loop_rate_hz, delay),
-        system=rec.reduced,
-        full_order_poles=[complex(p) for p in np.linalg.eigvals(rec.full.A)],
-        residualised_poles=rec.residualised_poles,
-        i_minus_xy_singular_values=rec.i_minus_xy_singular_values,
-        rungs=res.rungs,
-        verification={"gh2_norm": norm, "lmi_gamma": res.rung.gamma, "within_bound": True},
-        degeneracy=deg,
-    )
+    rec, norm = _accepted("controller", res, cfg)
+    return _backed_off("controller", Po, opt, res, "controller", cfg, rec, {"gh2_norm": norm}, deg)
 
 
 def _estimator(Pf: GeneralizedPlant, C: StateSpace, cfg: DesignConfig, m: int) -> Synthesised:
@@ -187,33 +210,13 @@ def _estimator(Pf: GeneralizedPlant, C: StateSpace, cfg: DesignConfig, m: int) -
         return ((rec, norm, w_peak, sweep_peak(loop)[0]) if ok else None), Rung(rel, gamma, ok, reason, checks)
 
     res = walk_ladder(opt.gamma, cfg.backoff_ladder, attempt)
-    if res.chosen is None:
-        raise DesignRefused(
-            f"estimator: no rung of design.backoff_ladder is stable with margin at {cfg.loop_rate_hz} Hz "
-            f"(last: {res.rungs[-1].reason}); extend the ladder or raise the loop rate"
-        )
-    rec, norm, w_peak, sweep = res.chosen
-    assert res.rung is not None
-    return Synthesised(
-        kind="estimator",
-        plant=Pf,
-        gamma_opt=opt.gamma,
-        gamma_opt_status=opt.status,
-        gamma_design=res.rung.gamma,
-        rule=_rule_text("combined (decoupled and paper)", res, cfg.loop_rate_hz, delay),
-        system=rec.reduced,
-        full_order_poles=[complex(p) for p in np.linalg.eigvals(rec.full.A)],
-        residualised_poles=rec.residualised_poles,
-        i_minus_xy_singular_values=rec.i_minus_xy_singular_values,
-        rungs=res.rungs,
-        verification={
-            "hinf_norm": norm,
-            "hinf_peak_rad_s": w_peak if np.isfinite(w_peak) else None,
-            "hinf_sweep_lower_bound": sweep,
-            "lmi_gamma": res.rung.gamma,
-            "within_bound": True,
-        },
-    )
+    rec, norm, w_peak, sweep = _accepted("estimator", res, cfg)
+    verification = {
+        "hinf_norm": norm,
+        "hinf_peak_rad_s": w_peak if np.isfinite(w_peak) else None,
+        "hinf_sweep_lower_bound": sweep,
+    }
+    return _backed_off("estimator", Pf, opt, res, "combined (decoupled and paper)", cfg, rec, verification)
 
 
 def subproblem_plants(cfg: DesignConfig, joints: tuple[int, ...], rows: tuple[int, ...]) -> tuple[GeneralizedPlant, GeneralizedPlant]:

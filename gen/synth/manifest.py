@@ -89,6 +89,27 @@ def _emitted(e: Emitted) -> dict[str, Any]:
     }
 
 
+def _system(
+    theorem: str,
+    signals: str,
+    gamma: dict[str, float],
+    subproblems: list[dict[str, Any]],
+    emitted: Emitted,
+    **between: Any,
+) -> dict[str, Any]:
+    """The manifest's entry for the estimator or the controller (`between` goes after the gammas,
+    where readers of earlier manifests find the controller's `degenerate`)."""
+    return {
+        "theorem": theorem,
+        "signals": signals,
+        "gamma_opt": gamma["gamma_opt"],
+        "gamma_design": gamma["gamma_design"],
+        **between,
+        "subproblems": subproblems,
+        **_emitted(emitted),
+    }
+
+
 def build(d: Design, run: dict[str, Any]) -> dict[str, Any]:
     cfg = d.cfg
     g = d.gamma
@@ -121,23 +142,21 @@ def build(d: Design, run: dict[str, Any]) -> dict[str, Any]:
         },
         "loop_rate_hz": cfg.loop_rate_hz,
         "loop_period_s": cfg.period_s,
-        "estimator": {
-            "theorem": "Theorem 1, LMIs (3.14) ((3.16) if F is biproper), plant P_f (3.10)",
-            "signals": io + "; output w_hat",
-            "gamma_opt": g["estimator"]["gamma_opt"],
-            "gamma_design": g["estimator"]["gamma_design"],
-            "subproblems": est_subs,
-            **_emitted(d.estimator),
-        },
-        "controller": {
-            "theorem": "Theorem 3, LMIs (3.22), plant P_o (3.18)",
-            "signals": io + "; output u_o",
-            "gamma_opt": g["controller"]["gamma_opt"],
-            "gamma_design": g["controller"]["gamma_design"],
-            "degenerate": degenerate,
-            "subproblems": ctl_subs,
-            **_emitted(d.controller),
-        },
+        "estimator": _system(
+            "Theorem 1, LMIs (3.14) ((3.16) if F is biproper), plant P_f (3.10)",
+            io + "; output w_hat",
+            g["estimator"],
+            est_subs,
+            d.estimator,
+        ),
+        "controller": _system(
+            "Theorem 3, LMIs (3.22), plant P_o (3.18)",
+            io + "; output u_o",
+            g["controller"],
+            ctl_subs,
+            d.controller,
+            degenerate=degenerate,
+        ),
         "internal_model": {
             "description": "one joint's double integrator e_ddot = u_o, state [e, e_dot]; the decoupled structure feeds K with y - x_m",
             **_emitted(d.internal_model),

@@ -8,23 +8,26 @@
 static int g_checks_passed;
 static int g_checks_failed;
 
+/* Counts one check; a failure is reported as file:line and the condition's text, then `tail`. */
+static inline int check_record(int ok, const char *file, int line, const char *cond, const char *tail)
+{
+    if (ok) {
+        ++g_checks_passed;
+        return 1;
+    }
+    ++g_checks_failed;
+    fprintf(stderr, "%s:%d: CHECK failed: %s%s", file, line, cond, tail);
+    return 0;
+}
+
 #define CHECK(cond)                                                                     \
     do {                                                                                \
-        if (cond) {                                                                     \
-            ++g_checks_passed;                                                          \
-        } else {                                                                        \
-            ++g_checks_failed;                                                          \
-            fprintf(stderr, "%s:%d: CHECK failed: %s\n", __FILE__, __LINE__, #cond);   \
-        }                                                                               \
+        (void)check_record((cond) ? 1 : 0, __FILE__, __LINE__, #cond, "\n");           \
     } while (0)
 
 #define CHECK_MSG(cond, ...)                                                            \
     do {                                                                                \
-        if (cond) {                                                                     \
-            ++g_checks_passed;                                                          \
-        } else {                                                                        \
-            ++g_checks_failed;                                                          \
-            fprintf(stderr, "%s:%d: CHECK failed: %s: ", __FILE__, __LINE__, #cond);   \
+        if (!check_record((cond) ? 1 : 0, __FILE__, __LINE__, #cond, ": ")) {           \
             fprintf(stderr, __VA_ARGS__);                                               \
             fputc('\n', stderr);                                                        \
         }                                                                               \

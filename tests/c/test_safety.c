@@ -8,6 +8,14 @@
 
 #define ALL ((uint32_t)((1u << ARM_N_JOINTS) - 1u))
 
+/* A controller under test, the input it is fed and its last output. */
+typedef struct {
+    arm_ctl_t ctl;
+    arm_ctl_config_t cfg;
+    arm_ctl_input_t in;
+    arm_ctl_output_t out;
+} rig_t;
+
 static void home_input(arm_ctl_input_t *in)
 {
     memset(in, 0, sizeof(*in));
@@ -19,107 +27,104 @@ static void home_input(arm_ctl_input_t *in)
 }
 
 /* One period with drives that do as told: they report the torque commanded last period. */
-static void step(arm_ctl_t *ctl, arm_ctl_input_t *in, arm_ctl_output_t *out)
+static void step(rig_t *r)
 {
-    arm_ctl_step(ctl, in, out);
-    memcpy(in->tau_measured, out->tau, sizeof(in->tau_measured));
+    arm_ctl_step(&r->ctl, &r->in, &r->out);
+    memcpy(r->in.tau_measured, r->out.tau, sizeof(r->in.tau_measured));
 }
 
-static void start(arm_ctl_t *ctl, arm_ctl_config_t *cfg)
+/* The controller on r->cfg (as the test set it), the arm at home, then `periods` periods. */
+static void run_from_home(rig_t *r, int periods)
 {
-    arm_ctl_default_config(&ARM_ROBOT_MODEL, cfg);
-    CHECK(arm_ctl_init(ctl, &ARM_ROBOT_MODEL, cfg) == ARM_CTL_OK);
+    CHECK(arm_ctl_init(&r->ctl, &ARM_ROBOT_MODEL, &r->cfg) == ARM_CTL_OK);
+    home_input(&r->in);
+    for (int k = 0; k < periods; ++k) step(r);
+}
+
+/* The same on the default configuration. */
+static void run_default_from_home(rig_t *r, int periods)
+{
+    arm_ctl_default_config(&ARM_ROBOT_MODEL, &r->cfg);
+    run_from_home(r, periods);
+}
+
+static void check_zero_torque(const rig_t *r)
+{
+    for (int j = 0; j < ARM_N_JOINTS; ++j) CHECK(r->out.tau[j] == 0.0f);
 }
 
 static void test_starts_in_init_with_zero_torque(void)
 {
-    arm_ctl_t ctl;
-    arm_ctl_config_t cfg;
-    arm_ctl_input_t in;
-    arm_ctl_output_t out;
-    start(&ctl, &cfg);
-    home_input(&in);
-    in.fresh_mask = 0u;
-    step(&ctl, &in, &out);
-    CHECK(out.state == ARM_STATE_INIT);
-    for (int j = 0; j < ARM_N_JOINTS; ++j) CHECK(out.tau[j] == 0.0f);
-    in.fresh_mask = ALL;
-    step(&ctl, &in, &out);
-    CHECK(out.state == ARM_STATE_RUNNING);
+    rig_t r;
+    run_default_from_home(&r, 0);
+    r.in.fresh_mask = 0u;
+    step(&r);
+    CHECK(r.out.state == ARM_STATE_INIT);
+    check_zero_torque(&r);
+    r.in.fresh_mask = ALL;
+    step(&r);
+    CHECK(r.out.state == ARM_STATE_RUNNING);
 }
 
 static void test_nan_input_gives_safe_stop_and_zero_torque(void)
 {
-    arm_ctl_t ctl;
-    arm_ctl_config_t cfg;
-    arm_ctl_input_t in;
-    arm_ctl_output_t out;
-    start(&ctl, &cfg);
-    home_input(&in);
-    for (int k = 0; k < 50; ++k) step(&ctl, &in, &out);
-    CHECK(out.state == ARM_STATE_RUNNING);
-    CHECK(fabsf(out.tau[1]) > 1.0f); /* holding the shoulder against gravity */
-    in.qd[2] = NAN;
-    step(&ctl, &in, &out);
-    CHECK(out.state == ARM_STATE_FAULT);
-    CHECK(out.fault == ARM_FAULT_NONFINITE_INPUT);
-    for (int j = 0; j < ARM_N_JOINTS; ++j) CHECK(out.tau[j] == 0.0f);
+    rig_t r;
+    run_default_from_home(&r, 50);
+    CHECK(r.out.state == ARM_STATE_RUNNING);
+    CHECK(fabsf(r.out.tau[1]) > 1.0f); /* holding the shoulder against gravity */
+    r.in.qd[2] = NAN;
+    step(&r);
+    CHECK(r.out.state == ARM_STATE_FAULT);
+    CHECK(r.out.fault == ARM_FAULT_NONFINITE_INPUT);
+    check_zero_torque(&r);
     /* Latched: good input afterwards does not restart the arm. */
-    in.qd[2] = 0.0f;
-    step(&ctl, &in, &out);
-    CHECK(out.state == ARM_STATE_SAFE_STOP);
-    CHECK(out.fault == ARM_FAULT_NONFINITE_INPUT);
-    for (int j = 0; j < ARM_N_JOINTS; ++j) CHECK(out.tau[j] == 0.0f);
+    r.in.qd[2] = 0.0f;
+    step(&r);
+    CHECK(r.out.state == ARM_STATE_SAFE_STOP);
+    CHECK(r.out.fault == ARM_FAULT_NONFINITE_INPUT);
+    check_zero_torque(&r);
 }
 
 static void test_torque_and_rate_limits(void)
 {
-    arm_ctl_t ctl;
-    arm_ctl_config_t cfg;
-    arm_ctl_input_t in;
-    arm_ctl_output_t out;
-    arm_ctl_default_config(&ARM_ROBOT_MODEL, &cfg);
-    cfg.checks &= ~ARM_CHECK_FOLLOWING_ERROR; /* the huge error below is the point here */
-    CHECK(arm_ctl_init(&ctl, &ARM_ROBOT_MODEL, &cfg) == ARM_CTL_OK);
-    home_input(&in);
-    in.q_d[3] += 10.0f; /* a huge error demands far more than the wrist's 28 Nm */
+    rig_t r;
+    arm_ctl_default_config(&ARM_ROBOT_MODEL, &r.cfg);
+    r.cfg.checks &= ~ARM_CHECK_FOLLOWING_ERROR; /* the huge error below is the point here */
+    run_from_home(&r, 0);
+    r.in.q_d[3] += 10.0f; /* a huge error demands far more than the wrist's 28 Nm */
     float prev[ARM_N_JOINTS] = {0};
     for (int k = 0; k < 100; ++k) {
-        step(&ctl, &in, &out);
+        step(&r);
         for (int j = 0; j < ARM_N_JOINTS; ++j) {
-            CHECK(fabsf(out.tau[j]) <= cfg.torque_limit[j]);
-            CHECK(fabsf(out.tau[j] - prev[j]) <= cfg.torque_rate_limit[j] * (1.0f + 1e-6f));
-            prev[j] = out.tau[j];
+            CHECK(fabsf(r.out.tau[j]) <= r.cfg.torque_limit[j]);
+            CHECK(fabsf(r.out.tau[j] - prev[j]) <= r.cfg.torque_rate_limit[j] * (1.0f + 1e-6f));
+            prev[j] = r.out.tau[j];
         }
     }
-    CHECK(fabsf(out.tau[3]) == cfg.torque_limit[3]);
-    CHECK((out.saturated_mask & (1u << 3)) != 0u);
-    CHECK(out.state == ARM_STATE_RUNNING);
+    CHECK(fabsf(r.out.tau[3]) == r.cfg.torque_limit[3]);
+    CHECK((r.out.saturated_mask & (1u << 3)) != 0u);
+    CHECK(r.out.state == ARM_STATE_RUNNING);
 }
 
 static void test_watchdog_trips_after_configured_stale_periods(void)
 {
-    arm_ctl_t ctl;
-    arm_ctl_config_t cfg;
-    arm_ctl_input_t in;
-    arm_ctl_output_t out;
-    arm_ctl_default_config(&ARM_ROBOT_MODEL, &cfg);
-    cfg.watchdog_periods = 4u;
-    cfg.safe_stop_mode = ARM_SAFE_STOP_DAMPING;
-    cfg.safe_stop_damping = 2.0f;
-    CHECK(arm_ctl_init(&ctl, &ARM_ROBOT_MODEL, &cfg) == ARM_CTL_OK);
-    home_input(&in);
-    in.qd[0] = 0.5f;
-    step(&ctl, &in, &out);
-    in.fresh_mask = ALL & ~(1u << 4); /* drive 5 goes quiet */
-    for (uint32_t k = 0; k < cfg.watchdog_periods; ++k) {
-        step(&ctl, &in, &out);
-        CHECK(out.state == ARM_STATE_RUNNING); /* within the watchdog: last state is held */
+    rig_t r;
+    arm_ctl_default_config(&ARM_ROBOT_MODEL, &r.cfg);
+    r.cfg.watchdog_periods = 4u;
+    r.cfg.safe_stop_mode = ARM_SAFE_STOP_DAMPING;
+    r.cfg.safe_stop_damping = 2.0f;
+    run_from_home(&r, 0);
+    r.in.qd[0] = 0.5f;
+    step(&r);
+    r.in.fresh_mask = ALL & ~(1u << 4); /* drive 5 goes quiet */
+    for (uint32_t k = 0; k < r.cfg.watchdog_periods; ++k) {
+        step(&r);
+        CHECK(r.out.state == ARM_STATE_RUNNING); /* within the watchdog: last state is held */
     }
-    step(&ctl, &in, &out);
-    CHECK(out.state == ARM_STATE_FAULT);
-    CHECK(out.fault == ARM_FAULT_STALE_INPUT);
-    CHECK(fabsf(out.tau[0] - (-2.0f * 0.5f)) < 1e-6f); /* damping safe stop uses the last qd */
+    step(&r);
+    CHECK(r.out.state == ARM_STATE_FAULT);
+    CHECK(r.out.fault == ARM_FAULT_STALE_INPUT);
+    CHECK(fabsf(r.out.tau[0] - (-2.0f * 0.5f)) < 1e-6f); /* damping safe stop uses the last qd */
 }
 
 static void test_bad_config_refused(void)
@@ -141,39 +146,29 @@ static void test_bad_config_refused(void)
 
 static void test_external_fault_latches(void)
 {
-    arm_ctl_t ctl;
-    arm_ctl_config_t cfg;
-    arm_ctl_input_t in;
-    arm_ctl_output_t out;
-    start(&ctl, &cfg);
-    home_input(&in);
-    step(&ctl, &in, &out);
-    arm_ctl_external_fault(&ctl);
-    step(&ctl, &in, &out);
-    CHECK(out.state == ARM_STATE_FAULT && out.fault == ARM_FAULT_EXTERNAL);
-    for (int j = 0; j < ARM_N_JOINTS; ++j) CHECK(out.tau[j] == 0.0f);
+    rig_t r;
+    run_default_from_home(&r, 1);
+    arm_ctl_external_fault(&r.ctl);
+    step(&r);
+    CHECK(r.out.state == ARM_STATE_FAULT && r.out.fault == ARM_FAULT_EXTERNAL);
+    check_zero_torque(&r);
 }
 
 /* Runs the arm at its home pose for a while, then applies `spoil` to one period's input: the
  * next output must be that fault, on that joint, with zero torque. */
 static void expect_fault(void (*spoil)(arm_ctl_input_t *), arm_fault_t fault, int joint, uint32_t periods)
 {
-    arm_ctl_t ctl;
-    arm_ctl_config_t cfg;
-    arm_ctl_input_t in;
-    arm_ctl_output_t out;
-    start(&ctl, &cfg);
-    home_input(&in);
-    for (int k = 0; k < 20; ++k) step(&ctl, &in, &out);
-    CHECK(out.state == ARM_STATE_RUNNING);
+    rig_t r;
+    run_default_from_home(&r, 20);
+    CHECK(r.out.state == ARM_STATE_RUNNING);
     for (uint32_t k = 0; k < periods; ++k) {
-        spoil(&in);
-        step(&ctl, &in, &out);
-        if (k + 1u < periods) CHECK(out.state == ARM_STATE_RUNNING); /* tolerated so far */
+        spoil(&r.in);
+        step(&r);
+        if (k + 1u < periods) CHECK(r.out.state == ARM_STATE_RUNNING); /* tolerated so far */
     }
-    CHECK_MSG(out.state == ARM_STATE_FAULT && out.fault == fault && out.fault_joint == joint,
-              "state %d fault %s joint %d", (int)out.state, arm_fault_str(out.fault), out.fault_joint);
-    for (int j = 0; j < ARM_N_JOINTS; ++j) CHECK(out.tau[j] == 0.0f);
+    CHECK_MSG(r.out.state == ARM_STATE_FAULT && r.out.fault == fault && r.out.fault_joint == joint,
+              "state %d fault %s joint %d", (int)r.out.state, arm_fault_str(r.out.fault), r.out.fault_joint);
+    check_zero_torque(&r);
 }
 
 static void spoof_position(arm_ctl_input_t *in) { in->q[2] = 2147.0f; }               /* INT32_MAX urad */
@@ -193,32 +188,26 @@ static void test_plausibility_faults_name_the_joint(void)
 
 static void test_plausible_motion_and_disabled_checks_pass(void)
 {
-    arm_ctl_t ctl;
-    arm_ctl_config_t cfg;
-    arm_ctl_input_t in;
-    arm_ctl_output_t out;
-    start(&ctl, &cfg);
-    home_input(&in);
+    rig_t r;
+    run_default_from_home(&r, 0);
     for (int k = 0; k < 1000; ++k) { /* 1 rad/s on every joint for 1 s, consistent steps, inside the ranges */
         for (int j = 0; j < ARM_N_JOINTS; ++j) {
-            in.qd[j] = 1.0f;
-            in.q[j] += 0.001f;
-            in.q_d[j] = in.q[j] + 0.01f;
+            r.in.qd[j] = 1.0f;
+            r.in.q[j] += 0.001f;
+            r.in.q_d[j] = r.in.q[j] + 0.01f;
         }
-        step(&ctl, &in, &out);
+        step(&r);
     }
-    CHECK(out.state == ARM_STATE_RUNNING);
-    arm_ctl_default_config(&ARM_ROBOT_MODEL, &cfg);
-    cfg.checks = 0u;
-    CHECK(arm_ctl_init(&ctl, &ARM_ROBOT_MODEL, &cfg) == ARM_CTL_OK);
-    home_input(&in);
-    step(&ctl, &in, &out);
-    spoof_velocity(&in);
-    step(&ctl, &in, &out);
-    CHECK(out.state == ARM_STATE_RUNNING); /* off is off */
-    arm_ctl_default_config(&ARM_ROBOT_MODEL, &cfg);
-    cfg.following_error_limit[0] = 0.0f;
-    CHECK(arm_ctl_init(&ctl, &ARM_ROBOT_MODEL, &cfg) == ARM_CTL_BAD_FOLLOWING_LIMIT);
+    CHECK(r.out.state == ARM_STATE_RUNNING);
+    arm_ctl_default_config(&ARM_ROBOT_MODEL, &r.cfg);
+    r.cfg.checks = 0u;
+    run_from_home(&r, 1);
+    spoof_velocity(&r.in);
+    step(&r);
+    CHECK(r.out.state == ARM_STATE_RUNNING); /* off is off */
+    arm_ctl_default_config(&ARM_ROBOT_MODEL, &r.cfg);
+    r.cfg.following_error_limit[0] = 0.0f;
+    CHECK(arm_ctl_init(&r.ctl, &ARM_ROBOT_MODEL, &r.cfg) == ARM_CTL_BAD_FOLLOWING_LIMIT);
 }
 
 /* Each refused limit has its own result, and its text names the setting that is wrong. */

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from gen import arm as gen_arm
-from gen.arm import ArmError, clip_amplitude, load_arm_file, prepare
+from gen.arm import ArmError, clip_amplitude, inverse_forces, load_arm_file, prepare
 from gen.robot_model import extract, nominal_for_inverse
 from tools.build.arm import ArmChoiceError, reference_for
 
@@ -98,12 +98,7 @@ def test_robosuite_ur5e_fixed_base_bodies_are_fused_and_the_dynamics_kept() -> N
         nominal_for_inverse(m_)
     for _ in range(20):
         q, qd, qdd = rng.uniform(-2, 2, 6), rng.uniform(-1, 1, 6), rng.uniform(-3, 3, 6)
-        out = []
-        for m_ in (m0, m):
-            d = mujoco.MjData(m_)
-            d.qpos[:], d.qvel[:], d.qacc[:] = q, qd, qdd
-            mujoco.mj_inverse(m_, d)
-            out.append(d.qfrc_inverse.copy())
+        out = inverse_forces((m0, m), q, qd, qdd)
         assert np.allclose(out[0], out[1], rtol=1e-4, atol=1e-4 * np.max(np.abs(out[0])))
 
 

@@ -17,6 +17,7 @@ import pytest
 
 from study_configs import with_tuning
 from gen.lib.paths import REPO
+from tools.run.procs import communicate_or_kill
 
 ARMCTL = str(REPO / "tools" / "armctl")
 
@@ -83,11 +84,7 @@ def armctl(*args: str, timeout: float = 900.0) -> subprocess.CompletedProcess[st
         out, err = p.communicate(timeout=timeout)
     except subprocess.TimeoutExpired:
         p.send_signal(signal.SIGTERM)
-        try:
-            out, err = p.communicate(timeout=60)
-        except subprocess.TimeoutExpired:
-            p.kill()
-            out, err = p.communicate()
+        out, err = communicate_or_kill(p, 60)
         raise AssertionError(f"armctl {' '.join(args)}: no end after {timeout:g} s\n{out}\n{err[-3000:]}") from None
     return subprocess.CompletedProcess(p.args, p.returncode, out, err)
 

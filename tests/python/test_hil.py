@@ -80,20 +80,29 @@ def test_telemetry_log_is_complete_and_recomputes_the_table(short_run: tuple[Pat
     assert len(log["ARM_SIM"].messages) == run["results"]["simulated_periods"]
 
 
-def test_controller_safe_stops_when_the_simulator_dies(controller_bin: Path, bus_spec: str) -> None:
+def _kill_one_side(controller_bin: Path, bus_spec: str, kill: str, *sim_args: str,
+                   summary: Path | None = None) -> tuple[int, float, str, list]:
+    """Simulator and controller on a recorded bus; once both run, `kill` ("simulator" or
+    "controller") is killed: the other's exit code, seconds to exit and stderr, and every frame."""
     rec = BusRecorder(bus_spec)
-    sim = start_sim(bus_spec)
+    sim = start_sim(bus_spec, *sim_args, summary=summary)
     ctl = start_controller(controller_bin, bus_spec, "--duration", "600")
+    victim, survivor = (sim, ctl) if kill == "simulator" else (ctl, sim)
     try:
         time.sleep(3.0)  # booted and running
         assert ctl.poll() is None and sim.poll() is None
-        sim.kill()
-        code, seconds, err = wait_exit(ctl, timeout=10)
+        victim.kill()
+        code, seconds, err = wait_exit(survivor, timeout=10)
     finally:
         for p in (sim, ctl):
             if p.poll() is None:
                 p.kill()
         frames = rec.close()
+    return code, seconds, err, frames
+
+
+def test_controller_safe_stops_when_the_simulator_dies(controller_bin: Path, bus_spec: str) -> None:
+    code, seconds, err, frames = _kill_one_side(controller_bin, bus_spec, "simulator")
     assert code == 4, err
     # Killed mid-period, the simulator may have sent some drives' states already: the message names
     # exactly the ones missing.
@@ -109,18 +118,8 @@ def test_controller_safe_stops_when_the_simulator_dies(controller_bin: Path, bus
 
 def test_simulator_faults_the_drives_when_the_controller_dies(controller_bin: Path, bus_spec: str,
                                                               tmp_path: Path) -> None:
-    rec = BusRecorder(bus_spec)
-    sim = start_sim(bus_spec, "--idle-timeout", "0.5", summary=tmp_path / "sim.json")
-    ctl = start_controller(controller_bin, bus_spec, "--duration", "600")
-    try:
-        time.sleep(3.0)
-        ctl.kill()
-        code, seconds, err = wait_exit(sim, timeout=10)
-    finally:
-        for p in (sim, ctl):
-            if p.poll() is None:
-                p.kill()
-        frames = rec.close()
+    code, seconds, err, frames = _kill_one_side(controller_bin, bus_spec, "controller", "--idle-timeout", "0.5",
+                                                summary=tmp_path / "sim.json")
     assert code == 3, err
     assert "controller silent" in err
     emcy = {f.arbitration_id for f in frames if 0x81 <= f.arbitration_id <= 0x86}

@@ -39,6 +39,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from tools.run import procs
+
 HISTMAX_US = 20000  # cyclictest histogram range (1 us buckets); beyond it: overflows
 
 
@@ -219,11 +221,7 @@ def measure(out: Path, duration_s: float, rate_hz: float, rt_priority: int, cpu:
             time.sleep(0.02)
         if proc.poll() is None:
             proc.send_signal(signal.SIGINT)
-        try:
-            stdout, stderr = proc.communicate(timeout=30)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            stdout, stderr = proc.communicate()
+        stdout, stderr = procs.communicate_or_kill(proc, 30)
         (out / "cyclictest.txt").write_text(stdout + stderr)
         parsed = parse_cyclictest(stdout)
         if proc.returncode not in (0, -signal.SIGINT) or not parsed["histogram_us"]:

@@ -55,6 +55,16 @@ def _dies_with_parent(parent: int, then: Callable[[], None] | None) -> Callable[
     return setup
 
 
+def communicate_or_kill(p: subprocess.Popen[Any], timeout: float) -> tuple[Any, Any]:
+    """p's (stdout, stderr) once it has ended: within timeout on its own, else after a SIGKILL
+    (which it cannot ignore, so this always returns)."""
+    try:
+        return p.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        p.kill()
+        return p.communicate()
+
+
 def forget(p: subprocess.Popen[Any]) -> None:
     with _lock:
         _live[:] = [(r, q) for r, q in _live if q is not p]

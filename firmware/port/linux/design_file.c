@@ -67,6 +67,18 @@ static char *token(reader_t *r)
     return p;
 }
 
+/* Value i of the n a field must have, or NULL with the shortfall reported. */
+static const char *value(reader_t *r, const char *field, int n, int i)
+{
+    const char *t = token(r);
+    if (t == NULL) {
+        char d[64];
+        snprintf(d, sizeof(d), "%d values expected, found %d", n, i);
+        (void)fail(r, "%s", field, d);
+    }
+    return t;
+}
+
 static int no_more(reader_t *r, const char *field, int n)
 {
     if (token(r) != NULL) {
@@ -81,16 +93,13 @@ static int read_ints(reader_t *r, const char *field, int n, long long lo, long l
 {
     if (next_line(r, field) != 0) return -1;
     for (int i = 0; i < n; ++i) {
-        const char *t = token(r);
-        char d[160];
-        if (t == NULL) {
-            snprintf(d, sizeof(d), "%d values expected, found %d", n, i);
-            return fail(r, "%s", field, d);
-        }
+        const char *t = value(r, field, n, i);
+        if (t == NULL) return -1;
         char *end = NULL;
         errno = 0;
         const long long v = strtoll(t, &end, 10);
         if (errno != 0 || end == t || *end != '\0' || v < lo || v > hi) {
+            char d[160];
             snprintf(d, sizeof(d), "value %d '%.40s' is not an integer in [%lld, %lld]", i + 1, t, lo, hi);
             return fail(r, "%s", field, d);
         }
@@ -111,15 +120,12 @@ static int read_floats(reader_t *r, const char *field, int n, float *out)
 {
     if (next_line(r, field) != 0) return -1;
     for (int i = 0; i < n; ++i) {
-        const char *t = token(r);
-        char d[160];
-        if (t == NULL) {
-            snprintf(d, sizeof(d), "%d values expected, found %d", n, i);
-            return fail(r, "%s", field, d);
-        }
+        const char *t = value(r, field, n, i);
+        if (t == NULL) return -1;
         char *end = NULL;
         const float v = strtof(t, &end); /* C99 hex floats are read exactly */
         if (end == t || *end != '\0' || !isfinite(v)) {
+            char d[160];
             snprintf(d, sizeof(d), "value %d '%.40s' is not a finite number", i + 1, t);
             return fail(r, "%s", field, d);
         }

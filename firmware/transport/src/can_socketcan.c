@@ -364,6 +364,19 @@ static int try_read_one(arm_can_socketcan_t *bus, arm_can_frame_t *f)
     }
 }
 
+typedef struct {
+    arm_can_socketcan_t *bus;
+    arm_can_frame_t *f;
+} read_ctx_t;
+
+static int try_read_ctx(void *ctx)
+{
+    const read_ctx_t *c = ctx;
+    return try_read_one(c->bus, c->f);
+}
+
+_Static_assert(ARM_CAN_SOCKETCAN_E_IO == ARM_FD_E_IO, "arm_fd_recv's socket error is this transport's");
+
 int arm_can_socketcan_recv(arm_can_socketcan_t *bus, arm_can_frame_t *f, int timeout_us)
 {
     if (bus == NULL || f == NULL) {
@@ -372,38 +385,9 @@ int arm_can_socketcan_recv(arm_can_socketcan_t *bus, arm_can_frame_t *f, int tim
     if (bus->fd < 0) {
         return ARM_CAN_SOCKETCAN_E_CLOSED;
     }
-    const int64_t deadline = arm_deadline_ns(timeout_us);
-    int skipped = 0;
-    for (;;) {
-        const int rc = try_read_one(bus, f);
-        if (rc == 1 || rc < 0) {
-            return rc;
-        }
-        if (rc == 2) {
-            if (++skipped >= ARM_CAN_SOCKETCAN_MAX_SKIP) {
-                return 0;
-            }
-            continue;
-        }
-        short revents = 0;
-        const int w = arm_fd_wait(bus->fd, deadline, &revents);
-        if (w < 0) {
-            bus->rx_errors++;
-            return ARM_CAN_SOCKETCAN_E_IO;
-        }
-        if (w == 0) {
-            return 0;
-        }
-        if ((revents & (POLLERR | POLLHUP | POLLNVAL)) != 0 && (revents & POLLIN) == 0) {
-            /* e.g. the interface went down: report instead of spinning until the deadline */
-            int soerr = 0;
-            socklen_t len = (socklen_t)sizeof soerr;
-            (void)getsockopt(bus->fd, SOL_SOCKET, SO_ERROR, &soerr, &len);
-            errno = soerr != 0 ? soerr : EIO;
-            bus->rx_errors++;
-            return ARM_CAN_SOCKETCAN_E_IO;
-        }
-    }
+    /* An interface gone down polls as an error with nothing to read: reported, not waited out. */
+    read_ctx_t ctx = {bus, f};
+    return arm_fd_recv(bus->fd, timeout_us, ARM_CAN_SOCKETCAN_MAX_SKIP, 1, &bus->rx_errors, try_read_ctx, &ctx);
 }
 
 void arm_can_socketcan_close(arm_can_socketcan_t *bus)

@@ -364,6 +364,20 @@ static int try_read_one(arm_can_udp_t *bus, arm_can_frame_t *f, double *timestam
     return 1;
 }
 
+typedef struct {
+    arm_can_udp_t *bus;
+    arm_can_frame_t *f;
+    double *timestamp;
+} read_ctx_t;
+
+static int try_read_ctx(void *ctx)
+{
+    const read_ctx_t *c = ctx;
+    return try_read_one(c->bus, c->f, c->timestamp);
+}
+
+_Static_assert(ARM_CAN_UDP_E_IO == ARM_FD_E_IO, "arm_fd_recv's socket error is this transport's");
+
 int arm_can_udp_recv(arm_can_udp_t *bus, arm_can_frame_t *f, double *timestamp, int timeout_us)
 {
     if (bus == NULL || f == NULL) {
@@ -372,31 +386,9 @@ int arm_can_udp_recv(arm_can_udp_t *bus, arm_can_frame_t *f, double *timestamp, 
     if (bus->fd < 0) {
         return ARM_CAN_UDP_E_CLOSED;
     }
-    const int64_t deadline = arm_deadline_ns(timeout_us);
-    int skipped = 0;
-    for (;;) {
-        /* Drain first: queued datagrams are served without a poll syscall, even at timeout 0. */
-        const int rc = try_read_one(bus, f, timestamp);
-        if (rc == 1 || rc < 0) {
-            return rc;
-        }
-        if (rc == 2) {
-            if (++skipped >= ARM_CAN_UDP_MAX_SKIP) {
-                return 0;
-            }
-            continue;
-        }
-        short revents = 0;
-        const int w = arm_fd_wait(bus->fd, deadline, &revents);
-        if (w < 0) {
-            bus->rx_errors++;
-            return ARM_CAN_UDP_E_IO;
-        }
-        if (w == 0) {
-            return 0;
-        }
-        /* readable (or error pending): the next try_read_one sorts it out */
-    }
+    /* An error pending on the socket is left to the next recvmmsg, which reports it. */
+    read_ctx_t ctx = {bus, f, timestamp};
+    return arm_fd_recv(bus->fd, timeout_us, ARM_CAN_UDP_MAX_SKIP, 0, &bus->rx_errors, try_read_ctx, &ctx);
 }
 
 void arm_can_udp_close(arm_can_udp_t *bus)

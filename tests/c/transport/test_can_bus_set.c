@@ -14,13 +14,19 @@ static int add(arm_can_bus_set_config_t *c, const char *arg, char *err, size_t c
     return arm_can_bus_set_add(c, arg, N, "--bus", err, cap);
 }
 
+/* A fresh configuration of bus a and, unless NULL, bus b, both of which must be accepted. */
+static void config_of(arm_can_bus_set_config_t *c, const char *a, const char *b, char *err, size_t cap)
+{
+    arm_can_bus_set_config_init(c);
+    CHECK(add(c, a, err, cap) == 0);
+    if (b != NULL) CHECK(add(c, b, err, cap) == 0);
+}
+
 static void test_two_buses(void)
 {
     char err[300];
     arm_can_bus_set_config_t c;
-    arm_can_bus_set_config_init(&c);
-    CHECK(add(&c, "socketcan:can0@1-3", err, sizeof err) == 0);
-    CHECK(add(&c, "socketcan:can1@4,5,6", err, sizeof err) == 0);
+    config_of(&c, "socketcan:can0@1-3", "socketcan:can1@4,5,6", err, sizeof err);
     CHECK(c.n == 2u);
     CHECK(strcmp(c.spec[0], "socketcan:can0") == 0 && strcmp(c.spec[1], "socketcan:can1") == 0);
     CHECK(c.drive_mask[0] == 0x07u && c.drive_mask[1] == 0x38u);
@@ -59,9 +65,7 @@ static void expect_check_error(const char *a, const char *b, const char *needle)
 {
     char err[300] = "";
     arm_can_bus_set_config_t c;
-    arm_can_bus_set_config_init(&c);
-    CHECK(add(&c, a, err, sizeof err) == 0);
-    if (b != NULL) CHECK(add(&c, b, err, sizeof err) == 0);
+    config_of(&c, a, b, err, sizeof err);
     CHECK(arm_can_bus_set_check(&c, N, "--bus", err, sizeof err) == -1);
     CHECK_MSG(strncmp(err, "--bus: ", 7) == 0 && strstr(err, needle) != NULL, "'%s' lacks '%s'", err, needle);
 }
@@ -108,9 +112,7 @@ static void test_live_two_udp_buses(void)
 {
     char err[300];
     arm_can_bus_set_config_t c;
-    arm_can_bus_set_config_init(&c);
-    CHECK(add(&c, "udp:239.74.163.2:43191@1-3", err, sizeof err) == 0);
-    CHECK(add(&c, "udp:239.74.163.2:43192@4-6", err, sizeof err) == 0);
+    config_of(&c, "udp:239.74.163.2:43191@1-3", "udp:239.74.163.2:43192@4-6", err, sizeof err);
     static arm_can_bus_set_t tx, rx;
     if (arm_can_bus_set_open(&tx, &c, err, sizeof err) != 0 || arm_can_bus_set_open(&rx, &c, err, sizeof err) != 0) {
         CHECK_MSG(0, "open: %s", err);
@@ -161,9 +163,7 @@ static void test_in_process_bus(void)
 {
     char err[300];
     arm_can_bus_set_config_t c;
-    arm_can_bus_set_config_init(&c);
-    CHECK(add(&c, "mem:0@1-3", err, sizeof err) == 0);
-    CHECK(add(&c, "mem:1@4-6", err, sizeof err) == 0);
+    config_of(&c, "mem:0@1-3", "mem:1@4-6", err, sizeof err);
     CHECK(add(&c, "mem:1@4-6", err, sizeof err) != 0 && strstr(err, "twice") != NULL);
     arm_can_mem_reset();
     static arm_can_bus_set_t master, drives;

@@ -16,4 +16,20 @@ int64_t arm_deadline_ns(int timeout_us);
  * (errno set). */
 int arm_fd_wait(int fd, int64_t deadline_ns, short *revents);
 
+/* A socket transport's one non-blocking read attempt: ARM_FD_READ_FRAME with a frame,
+ * ARM_FD_READ_NONE when nothing is queued, ARM_FD_READ_SKIPPED for a frame it could not decode
+ * (counted by it), or its own error code (< 0, counted by it). */
+typedef int (*arm_fd_try_read_t)(void *ctx);
+enum { ARM_FD_READ_NONE = 0, ARM_FD_READ_FRAME = 1, ARM_FD_READ_SKIPPED = 2 };
+#define ARM_FD_E_IO (-1) /* what arm_fd_recv returns when the socket fails; each transport's E_IO */
+
+/* The receive loop of the socket transports: try_read first (queued frames are served without a
+ * poll syscall, even at timeout_us 0), then waits on fd until timeout_us from now (< 0: no limit)
+ * between attempts. Returns 1 with a frame, 0 at the deadline or after max_skip skipped frames,
+ * try_read's error as is, or ARM_FD_E_IO with *rx_errors counted when the wait fails or, with
+ * error_without_data, when fd reports an error or hang-up and nothing to read (errno from
+ * SO_ERROR, else EIO) instead of spinning until the deadline. */
+int arm_fd_recv(int fd, int timeout_us, int max_skip, int error_without_data, uint64_t *rx_errors,
+                arm_fd_try_read_t try_read, void *ctx);
+
 #endif
