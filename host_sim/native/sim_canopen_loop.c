@@ -214,13 +214,30 @@ static void run(co_sim_t *s)
         }
         now = mono_ns();
         int stopped = 0;
-        if (rc == 1) {
+        /* SYNC and NMT go on every bus, and sockets keep no order between buses: what is already
+         * queued on the others up to their own SYNC (this period's RPDOs) was sent first; their
+         * SYNC and what follows it come after this frame. */
+        static arm_can_frame_t later[ARM_CAN_BUS_SET_MAX][64];
+        unsigned n_later[ARM_CAN_BUS_SET_MAX] = {0};
+        if (rc == 1 && (f.id == COB_SYNC || f.id == COB_NMT) && s->set.n > 1u) {
+            for (unsigned i = 0; i < s->set.n && !stopped; ++i) {
+                arm_can_frame_t g;
+                while (i != bus && n_later[i] < 64u && !stopped && arm_can_bus_recv(&s->set.bus[i], &g, 0) == 1) {
+                    if (n_later[i] > 0u || g.id == COB_SYNC || g.id == COB_NMT) later[i][n_later[i]++] = g;
+                    else stopped = on_frame(s, &g, i, now);
+                }
+            }
+        }
+        if (rc == 1 && !stopped) {
             const uint64_t before = rep->frames_rx;
             stopped = on_frame(s, &f, bus, now);
             if (rep->frames_rx != before) {
                 last_rx = now;
                 booted = 1;
             }
+        }
+        for (unsigned i = 0; i < s->set.n; ++i) {
+            for (unsigned k = 0; k < n_later[i] && !stopped; ++k) stopped = on_frame(s, &later[i][k], i, now);
         }
         tick_all(s, now);
         if (stopped) return; /* the master stopped every drive */

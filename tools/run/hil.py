@@ -269,9 +269,13 @@ def bus_args(kind: str, can_port: int, topology: list[busload.Bus]) -> list[str]
     return out
 
 
-def topology_load_pct(topology: list[busload.Bus],
-                      rate_hz: float = param_default("controller", "rate")) -> dict[str, float]:
-    """Worst-case load of each bus of the topology at the loop rate (tools/armctl busload)."""
+def topology_load_pct(topology: list[busload.Bus], rate_hz: float = param_default("controller", "rate"),
+                      protocol: str = DEFAULT_PROTOCOL) -> dict[str, float]:
+    """Worst-case load of each bus of the topology at the loop rate (tools/armctl busload; CANopen:
+    busload.canopen_load from the contract's PDO mapping)."""
+    if protocol == "canopen":
+        return {b.name: round(busload.canopen_load(b, len(b.drives), rate_hz, constant("heartbeat-ms")) * 100.0, 2)
+                for b in topology}
     loads = busload.compute(topology, rate_hz, constant("heartbeat-ms"), busload.default_protocol(),
                             max(d for b in topology for d in b.drives))
     return {bl.bus.name: round(bl.load * 100.0, 2) for bl in loads}
@@ -582,7 +586,8 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
         "topology": {"file": str(opt.topology) if opt.topology else "the arm's wiring (arm.json)",
                      "buses": [{"name": b.name, "spec": spec.rpartition("@")[0], "kind": b.describe(),
                                 "drives": b.drives} for b, spec in zip(topology, buses)]},
-        "bus_load_pct": topology_load_pct(topology, info["loop_rate_hz"]),
+        "bus_load_pct": topology_load_pct(topology, _arg_value(opt.controller_args, "--rate", info["loop_rate_hz"]),
+                                          opt.protocol),
         "lcm_url": url, "wall_s": wall, "simulator_scheduling": sim_scheduling,
         # the simulator's speed: simulated seconds per wall second after boot, and its CPU time
         # per period (arm_sim measures both)

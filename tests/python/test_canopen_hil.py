@@ -1,0 +1,147 @@
+"""armctl hil over CANopen CiA 402 (issue #23): the controller boots the emulated drives over SDO
+and runs them on SYNC PDOs, in software in the loop (arm_sil, mostly) and in lockstep over UDP.
+run.json names the protocol and lists every SDO write per node; the profile's units (per-mille of
+rated torque, increments through encoder and gear) give the arm protocol's tracking within their
+quanta; a drive that faults or never answers is a named fault, a safe state and a verdict that
+is not ok."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from tools.hil import DEFAULT_PROTOCOL, HilOptions, run_hil
+
+DURATION_S = 3.0
+
+
+def _run(tmp: Path, preset: str, protocol: str, method: str = "tde", bus: str = "sil",
+         duration: float = DURATION_S, **kw) -> dict:
+    return run_hil(HilOptions(out=tmp / f"{protocol}-{method}-{bus}", duration_s=duration, method=method,
+                              preset=preset, bus=bus, protocol=protocol, **kw))
+
+
+def test_default_protocol_is_the_arm_protocol() -> None:
+    assert DEFAULT_PROTOCOL == "arm"  # the product's default; one definition (tools/hil.py)
+
+
+def test_canopen_sil_run_is_ok_and_records_the_boot(tmp_path: Path, controller_bin: Path) -> None:
+    preset = controller_bin.parent.parent.name
+    run = _run(tmp_path, preset, "canopen", "pm")
+    assert run["results"]["result"] == "ok", run["results"]["verdict_reasons"]
+    assert run["results"]["protocol"] == "canopen" and run["environment"]["protocol"] == "canopen"
+    co = run["environment"]["canopen"]
+    assert co["fault"]["code"] == "none" and co["boot_s"] > 0.0
+    writes = co["sdo_writes"]
+    assert sorted(writes, key=int) == [str(n) for n in range(1, 7)]
+    for node, ws in writes.items():
+        objs = [w["object"] for w in ws]
+        # the contract's sequence: RPDO1 invalid, mapping, type, valid ... mode 10, enable
+        assert objs[0] == "0x1400:01" and ws[0]["value"] == 0x80000200 + int(node)
+        assert {"0x1600:01", "0x1A00:01", "0x1A01:01", "0x1006:00", "0x1017:00", "0x1016:01"} <= set(objs)
+        assert [w["value"] for w in ws if w["object"] == "0x6060:00"] == [10]
+        assert [w["value"] for w in ws if w["object"] == "0x6040:00"][-3:] == [0x06, 0x07, 0x0F]
+        rated = [w["value"] for w in ws if w["object"] == "0x6076:00"]
+        # the arm's rule: rated torque = the joint's torque limit, written where it differs from 150 N m
+        assert rated == ([] if int(node) <= 3 else [28000]), (node, rated)
+
+
+def test_canopen_sil_equals_lockstep_udp(tmp_path: Path, controller_bin: Path) -> None:
+    """The same run over the in-process bus and over UDP between two processes: the same results.
+    On one bus: over two UDP buses the sockets keep no order between buses, and the emulated
+    drives' SYNC handling does not yet restore it as arm_sim's own protocol does (left undone)."""
+    preset = controller_bin.parent.parent.name
+    topo = tmp_path / "one_bus.toml"
+    topo.write_text('[[bus]]\nname = "can0"\nkind = "fd"\nnominal = "1M"\ndata = "5M"\ndrives = [1, 2, 3, 4, 5, 6]\n')
+    for method in ("pm", "tde"):
+        sil = _run(tmp_path, preset, "canopen", method, "sil", duration=0.5, topology=topo)
+        udp = _run(tmp_path, preset, "canopen", method, "udp", duration=0.5, topology=topo)
+        differ = {k: (sil["results"].get(k), udp["results"].get(k)) for k in set(sil["results"]) | set(udp["results"])
+                  if sil["results"].get(k) != udp["results"].get(k)}
+        assert not differ, f"{method}: {differ}"
+        assert sil["environment"]["canopen"]["sdo_writes"] == udp["environment"]["canopen"]["sdo_writes"]
+
+
+def test_units_rated_150_nm_2_19_increments_gear_101_track_as_si(tmp_path: Path, controller_bin: Path) -> None:
+    """Every drive configured with 0x6076 = 150 N m, 0x608F.1 = 2^19 and 0x6091 = 101:1 (the wrists'
+    28 N m limit then has a 0.15 N m quantum, 5.4x the rule's) tracks as the arm protocol (SI
+    floats) within the quanta.
+
+    The bound: a joint's position quantum is 2 pi / (2^19 * 101) = 1.19e-7 rad (6.8e-6 deg), the
+    velocity's 1.19e-7 rad/s; the torque's 0.15 N m, so a command is off by at most 0.075 N m. On a
+    joint whose mass-matrix diagonal is at least its rotor armature (0.1 kg m^2) that is at most
+    0.75 rad/s^2 of unmodelled acceleration; tde's estimator takes it as part of w and cancels it
+    one period later, so each period adds at most a T^2 / 2 = 0.75 * 1e-6 / 2 = 3.75e-7 rad before
+    it is cancelled, and the error it leaves does not accumulate past the estimator's lag (at most
+    a few periods): 5 periods' worth, 1.9e-6 rad. The CiA 402 synchronous RPDO's extra period (a
+    torque applied at the next SYNC) is common to both configurations of the canopen run and not
+    a unit; against the arm protocol it is measured here as at most 0.01 deg on this method. The
+    bound per joint is therefore 0.01 deg + 5 x 6.8e-6 deg + 1.1e-4 deg, well below a units error:
+    a wrong gear or encoder scales the position by 101x or 2^k, a wrong rated torque the torque by
+    5.4x on the wrists, each a fault or degrees of error."""
+    preset = controller_bin.parent.parent.name
+    drives = tmp_path / "drives150.toml"
+    drives.write_text('eds = "%s"\nheartbeat_ms = 100\nconsumer_ms = 300\nmaster_id = 127\n\n[defaults]\n'
+                      'rated_torque_nm = 150\nencoder_increments = 524288\ngear = [101, 1]\n'
+                      % (Path(__file__).resolve().parents[2] / "firmware" / "protocol" / "cia402_servo.eds"))
+    si = _run(tmp_path, preset, "arm", "tde")
+    co = _run(tmp_path, preset, "canopen", "tde", drive_config=drives)
+    assert si["results"]["result"] == "ok" and co["results"]["result"] == "ok", co["results"]["verdict_reasons"]
+    assert all("0x6076:00" not in [w["object"] for w in ws] for ws in co["environment"]["canopen"]["sdo_writes"].values())
+    pos_q_deg = math.degrees(2 * math.pi / (2 ** 19 * 101))
+    bound = 0.01 + 5 * pos_q_deg + math.degrees(5 * 3.75e-7)
+    for name, a, b in zip(si["results"]["joint_names"], si["results"]["tracking_max_abs_deg"],
+                          co["results"]["tracking_max_abs_deg"]):
+        assert abs(a - b) <= bound, f"{name}: arm {a:.5f} deg, canopen at 150 N m {b:.5f} deg (bound {bound:.5f})"
+
+
+@pytest.mark.parametrize("topology,method,rate", [("buses_classic.toml", "tde", 500), ("buses.toml", "pm", 1000)])
+def test_classic_and_fd_topologies_run_ok(tmp_path: Path, controller_bin: Path, topology: str, method: str,
+                                          rate: int) -> None:
+    """Classic CAN at the rate its load check accepts (two 1 Mbit/s buses of three drives at 500 Hz;
+    pm's design is discretised for 1 kHz, so tde), and CAN FD at 1 kHz."""
+    preset = controller_bin.parent.parent.name
+    topo = Path(__file__).resolve().parents[2] / "firmware" / "protocol" / topology
+    run = _run(tmp_path, preset, "canopen", method, topology=topo, duration=1.0,
+               controller_args=("--rate", str(rate)))
+    assert run["results"]["result"] == "ok", run["results"]["verdict_reasons"]
+    loads = run["environment"]["bus_load_pct"]
+    assert len(loads) == 2 and all(0.0 < v <= 70.0 for v in loads.values()), loads
+
+
+def test_overcurrent_emcy_is_a_named_fault_and_a_safe_stop(tmp_path: Path, controller_bin: Path) -> None:
+    preset = controller_bin.parent.parent.name
+    run = _run(tmp_path, preset, "canopen", "pm", sim_args=("--inject-overcurrent", "3:1.0"), duration=2.0)
+    r = run["results"]
+    assert r["result"] != "ok"
+    assert any("drive 3 reports a fault (EMCY 0x2310)" in p for p in r["problems"]), r["problems"]
+    assert r["final_state"] in ("safe_stop", "fault"), r["final_state"]
+    assert run["environment"]["exit_codes"]["sil"] != 0
+
+
+def test_drives_that_never_answer_fail_the_boot_by_name(tmp_path: Path, controller_bin: Path, bus_spec: str) -> None:
+    """arm_controller --protocol canopen on a bus with no drive: no_answer, exit 3, nothing enabled."""
+    exe = controller_bin.parent / "arm_controller"
+    summary = tmp_path / "summary.json"
+    p = subprocess.run([str(exe), "--bus", bus_spec, "--protocol", "canopen", "--mode", "lockstep",
+                        "--duration", "0.1", "--boot-timeout", "2", "--summary", str(summary)],
+                       capture_output=True, text=True, timeout=60)
+    assert p.returncode == 3, p.stderr
+    import json
+
+    s = json.loads(summary.read_text())
+    assert s["protocol"] == "canopen" and s["canopen"]["fault"]["code"] == "no_answer", s["canopen"]
+    assert "no_answer" in s["reason"] and s["canopen"]["fault"]["index"] == 0x1000
+
+
+def test_node_and_rpdo_options_are_checked(controller_bin: Path) -> None:
+    exe = controller_bin.parent / "arm_controller"
+    for args, want in ((["--node", "1"], "one per joint"),
+                       (["--protocol", "canopen", "--node", "2"], "drive number 1"),
+                       (["--protocol", "canopen", "--rpdo-type", "250"], "transmission type"),
+                       (["--protocol", "canopen", "--node", "1,gear=101"], "field gear")):
+        p = subprocess.run([str(exe), *args], capture_output=True, text=True, timeout=30)
+        assert p.returncode == 2 and want in p.stderr, (args, p.stderr)
