@@ -26,6 +26,8 @@ struct co_sim {
     double w[SIM_MAX_JOINTS];
     uint16_t last_emcy[SIM_MAX_JOINTS];
     int64_t t0;
+    uint64_t syncs[ARM_CAN_BUS_SET_MAX]; /* SYNCs handled per bus */
+    unsigned held[ARM_CAN_BUS_SET_MAX];  /* a SYNC that came before its period's lead SYNC */
     int synced; /* a SYNC came: the next one ends a period */
     int ended; /* stepped (sim_co_service): the master stopped every drive */
 };
@@ -123,12 +125,37 @@ static void advance(co_sim_t *s)
 /* A SYNC ends the period since the last one: the arm moves first, under the torques in effect
  * during it (a synchronous RPDO's from the last SYNC on, an event-driven one's from its arrival),
  * then each node takes its synchronous RPDOs and samples the state for its TPDOs. */
+static void sync_nodes(co_sim_t *s, unsigned bus);
+
 static void on_sync(co_sim_t *s, unsigned bus)
 {
-    if ((int)bus == s->bus_of[0]) {
-        if (s->synced) advance(s);
-        s->synced = 1;
+    /* Every bus's SYNC of a period follows the first joint's bus's, which moves the arm. Sockets
+     * keep no order between buses: another bus's SYNC that comes first waits for it. */
+    const unsigned lead_bus = (unsigned)s->bus_of[0];
+    if (bus != lead_bus) {
+        if (s->syncs[bus] >= s->syncs[lead_bus] && s->held[bus] == 0u) {
+            s->held[bus] = 1u; /* restored, not an error: the controller sent the lead SYNC first */
+            return;
+        }
+        s->syncs[bus]++;
+        sync_nodes(s, bus);
+        return;
     }
+    s->syncs[bus]++;
+    if (s->synced) advance(s);
+    s->synced = 1;
+    sync_nodes(s, bus);
+    for (unsigned b = 0; b < s->set.n; ++b) {
+        if (b != lead_bus && s->held[b] != 0u) {
+            s->held[b] = 0u;
+            s->syncs[b]++;
+            sync_nodes(s, b);
+        }
+    }
+}
+
+static void sync_nodes(co_sim_t *s, unsigned bus)
+{
     const double *q = s->arm->data->qpos, *qd = s->arm->data->qvel;
     for (int j = 0; j < s->n; ++j) {
         if (s->bus_of[j] != (int)bus) continue;
