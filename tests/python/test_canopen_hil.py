@@ -142,3 +142,27 @@ def test_node_and_rpdo_options_are_checked(controller_bin: Path) -> None:
                        (["--protocol", "canopen", "--node", "1,gear=101"], "field gear")):
         p = subprocess.run([str(exe), *args], capture_output=True, text=True, timeout=30)
         assert p.returncode == 2 and want in p.stderr, (args, p.stderr)
+
+
+def test_armctl_hil_protocol_canopen_through_the_cli(tmp_path: Path, controller_bin: Path) -> None:
+    """As a user types it: --protocol canopen, --drive-config, --rate, on the classic topology."""
+    import json
+
+    repo = Path(__file__).resolve().parents[2]
+    drives = tmp_path / "drives.toml"
+    drives.write_text((repo / "firmware" / "protocol" / "drives.toml").read_text().replace(
+        'eds = "cia402_servo.eds"', f'eds = "{repo / "firmware" / "protocol" / "cia402_servo.eds"}"'))
+    out = tmp_path / "run"
+    p = subprocess.run([str(repo / "tools" / "armctl"), "hil", "--bus", "sil", "--protocol", "canopen",
+                        "--drive-config", str(drives), "--topology", str(repo / "firmware" / "protocol" /
+                                                                        "buses_classic.toml"),
+                        "--rate", "500", "--method", "tde", "--duration", "0.5", "--out", str(out)],
+                       capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stdout + p.stderr
+    run = json.loads((out / "run.json").read_text())
+    assert run["results"]["protocol"] == "canopen" and run["results"]["rate_hz"] == 500
+    assert run["environment"]["bus_load_pct"] == {"can0": 51.69, "can1": 51.69}
+    bad = subprocess.run([str(repo / "tools" / "armctl"), "hil", "--bus", "sil", "--drive-config", str(drives),
+                          "--duration", "0.1", "--out", str(tmp_path / "bad")], capture_output=True, text=True,
+                         timeout=600)
+    assert bad.returncode != 0 and "--drive-config" in bad.stderr, bad.stderr

@@ -87,6 +87,8 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
     h.add_argument("--protocol", choices=PROTOCOLS, default=DEFAULT_PROTOCOL,
                    help="what the drives speak: arm (this project's frames) or canopen (CiA 301/402 drives booted "
                         f"over SDO; README \"Real drives\") [{DEFAULT_PROTOCOL}]")
+    h.add_argument("--rate", type=float, default=None, metavar="HZ",
+                   help="the loop rate (the controller's --rate; a design is discretised for one rate) [the arm's]")
     h.add_argument("--drive-config", type=Path, default=None, metavar="FILE",
                    help="canopen: the CiA 402 drive configuration, a file like firmware/protocol/drives.toml "
                         "[the arm's: its arm file's `drives`, else that file]")
@@ -211,7 +213,7 @@ def run(ns: argparse.Namespace) -> int:
     for w in warnings:
         print(f"armctl hil: {w}", file=sys.stderr)
     ref = ("--ref-amp", ",".join(f"{a:g}" for a in amp), "--ref-freq", ",".join(f"{f:g}" for f in freq),
-           "--ref-hold", f"{ns.ref_hold:g}")
+           "--ref-hold", f"{ns.ref_hold:g}", *(("--rate", f"{ns.rate:g}") if ns.rate is not None else ()))
     result = run_hil(HilOptions(out=ns.out, duration_s=ns.duration, method=ns.method, mode=ns.mode, arm=arm,
                              bus=ns.bus, topology=ns.topology, bus_timing=ns.bus_timing, controller_args=ref,
                              capture=ns.capture,
