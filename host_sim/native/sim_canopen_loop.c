@@ -195,8 +195,10 @@ static int on_frame(co_sim_t *s, const arm_can_frame_t *f, unsigned bus, int64_t
         if (f->len <= 1u) on_sync(s, bus);
         else rep->rx_bad_frame++;
     } else {
-        if (f->id == COB_NMT && f->len == 2u && f->data[0] == 0x02u && s->synced && (int)bus == s->bus_of[0]) {
-            advance(s); /* NMT stop ends the last period, as the next SYNC would have */
+        if (f->id == COB_NMT && f->len == 2u && f->data[0] == 0x02u && s->synced) {
+            /* NMT stop (on whichever bus it is read first) ends the last period, as the next SYNC
+             * would have, before any drive stops applying its torque */
+            advance(s);
             s->synced = 0;
         }
         for (int j = 0; j < s->n; ++j) {

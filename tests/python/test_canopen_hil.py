@@ -166,3 +166,18 @@ def test_armctl_hil_protocol_canopen_through_the_cli(tmp_path: Path, controller_
                           "--duration", "0.1", "--out", str(tmp_path / "bad")], capture_output=True, text=True,
                          timeout=600)
     assert bad.returncode != 0 and "--drive-config" in bad.stderr, bad.stderr
+
+
+def test_a_study_scenario_chooses_the_protocol(tmp_path: Path) -> None:
+    from tools.runner import RunSpec
+    from tools.study_config import StudyConfigError, _scenario
+
+    sc = _scenario("co", {"protocol": "canopen"})
+    assert sc.protocol == "canopen" and sc.as_dict()["protocol"] == "canopen"
+    assert "protocol" not in _scenario("a", {}).as_dict()  # the arm protocol's tuning keys unchanged
+    for bad, want in (({"protocol": "ethercat"}, "not arm or canopen"),
+                      ({"protocol": "canopen", "bus_timing": True}, "no bus timing")):
+        with pytest.raises(StudyConfigError, match=want):
+            _scenario("x", bad)
+    base = dict(out="o", method="pm", duration_s=1.0, controller_args=(), uncertainty={})
+    assert "protocol" not in RunSpec(**base).key() and RunSpec(**base, protocol="canopen").key()["protocol"] == "canopen"
