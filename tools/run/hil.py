@@ -23,7 +23,7 @@ from host_sim.drive_model import DriveModel
 from host_sim.launch import sim_argv
 from gen.lib import busload
 from tools.build.arm import DEFAULT_ARM, ArmChoiceError, ArmRef, arm_build_dir, arm_info, prepared_model
-from gen.lib.params import constant, default as param_default
+from gen.lib.params import constant, default as param_default, param
 from gen.lib.paths import REPO, controller_binary, logger_binary
 from tools.run import procs as procs_mod
 from tools.run.run_analysis import analyse
@@ -40,9 +40,10 @@ LOCKSTEP_SPIN_US = 50
 
 
 # What the drives speak (README "Real drives"): this project's frames, or CANopen CiA 402. The one
-# definition of the default: every run passes --protocol to both programs.
+# definition of the default is the registry's (firmware/params/params.toml [hil.protocol]): every
+# run passes --protocol to both programs.
 PROTOCOLS = ("arm", "canopen")
-DEFAULT_PROTOCOL = "arm"
+DEFAULT_PROTOCOL: str = param("hil", "protocol").default
 
 
 @dataclass
