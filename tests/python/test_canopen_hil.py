@@ -181,3 +181,21 @@ def test_a_study_scenario_chooses_the_protocol(tmp_path: Path) -> None:
             _scenario("x", bad)
     base = dict(out="o", method="pm", duration_s=1.0, controller_args=(), uncertainty={})
     assert "protocol" not in RunSpec(**base).key() and RunSpec(**base, protocol="canopen").key()["protocol"] == "canopen"
+
+
+def test_readme_tracking_table_is_what_hil_gives(tmp_path: Path, controller_bin: Path) -> None:
+    """README "CiA 402 through armctl": each row is `tools/armctl hil --bus sil --protocol P
+    --duration 3 --method M` (the same runs, through run_hil), to the table's 0.01 deg."""
+    import re
+
+    preset = controller_bin.parent.parent.name
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    section = readme[readme.index("### CiA 402 through armctl"):readme.index("**Units.** Every drive")]
+    rows = re.findall(r"^\| (\S+) \| (arm|canopen) \| ([^|]+?) \| ([\d. ]+) \|$", section, re.M)
+    assert len(rows) == 12, rows
+    for method, protocol, result, figures in rows:
+        r = _run(tmp_path, preset, protocol, method)["results"]
+        assert result.split(" (")[0] == r["result"], (method, protocol, r["verdict_reasons"])
+        want = [float(x) for x in figures.split()]
+        assert all(abs(a - b) <= 0.0051 for a, b in zip(want, r["tracking_max_abs_deg"])), \
+            (method, protocol, r["tracking_max_abs_deg"])
