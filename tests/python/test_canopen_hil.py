@@ -95,18 +95,37 @@ def test_units_rated_150_nm_2_19_increments_gear_101_track_as_si(tmp_path: Path,
         assert abs(a - b) <= bound, f"{name}: arm {a:.5f} deg, canopen at 150 N m {b:.5f} deg (bound {bound:.5f})"
 
 
-@pytest.mark.parametrize("topology,method,rate", [("buses_classic.toml", "tde", 500), ("buses.toml", "pm", 1000)])
-def test_classic_and_fd_topologies_run_ok(tmp_path: Path, controller_bin: Path, topology: str, method: str,
-                                          rate: int) -> None:
-    """Classic CAN at the rate its load check accepts (two 1 Mbit/s buses of three drives at 500 Hz;
-    pm's design is discretised for 1 kHz, so tde), and CAN FD at 1 kHz."""
+@pytest.mark.parametrize("topology,drive_config,method", [
+    ("buses_classic.toml", "drives_classic.toml", "pm"),   # classic: three buses, TPDO2 every 2nd SYNC
+    ("buses.toml", None, "pm"),                            # CAN FD 1/5 Mbit/s: two buses
+])
+def test_classic_and_fd_topologies_run_ok(tmp_path: Path, controller_bin: Path, topology: str,
+                                          drive_config: str | None, method: str) -> None:
+    """Classic CAN and CAN FD at 1 kHz, each in a layout its load check accepts (within 70 %)."""
     preset = controller_bin.parent.parent.name
-    topo = Path(__file__).resolve().parents[2] / "firmware" / "protocol" / topology
-    run = _run(tmp_path, preset, "canopen", method, topology=topo, duration=1.0,
-               controller_args=("--rate", str(rate)))
+    proto = Path(__file__).resolve().parents[2] / "firmware" / "protocol"
+    run = _run(tmp_path, preset, "canopen", method, topology=proto / topology, duration=1.0,
+               drive_config=proto / drive_config if drive_config else None)
     assert run["results"]["result"] == "ok", run["results"]["verdict_reasons"]
     loads = run["environment"]["bus_load_pct"]
-    assert len(loads) == 2 and all(0.0 < v <= 70.0 for v in loads.values()), loads
+    assert len(loads) == (3 if drive_config else 2) and all(0.0 < v <= 70.0 for v in loads.values()), loads
+    if drive_config:
+        assert run["environment"]["canopen_transmission"]["tpdo2"] == 2
+        writes = run["environment"]["canopen"]["sdo_writes"]
+        assert all([w["value"] for w in ws if w["object"] == "0x1801:02"] == [2] for ws in writes.values())
+
+
+def test_tpdo2_every_2nd_sync_is_waited_for_when_due(tmp_path: Path, controller_bin: Path) -> None:
+    """With TPDO2 every 2nd SYNC the controller waits for it on its periods only: SIL and
+    lockstep over three UDP buses give the same results."""
+    preset = controller_bin.parent.parent.name
+    proto = Path(__file__).resolve().parents[2] / "firmware" / "protocol"
+    kw = dict(topology=proto / "buses_classic.toml", drive_config=proto / "drives_classic.toml", duration=0.5)
+    sil = _run(tmp_path, preset, "canopen", "tde", "sil", **kw)
+    udp = _run(tmp_path, preset, "canopen", "tde", "udp", **kw)
+    assert sil["results"]["result"] == "ok"
+    differ = {k for k in set(sil["results"]) | set(udp["results"]) if sil["results"].get(k) != udp["results"].get(k)}
+    assert not differ, differ
 
 
 def test_overcurrent_emcy_is_a_named_fault_and_a_safe_stop(tmp_path: Path, controller_bin: Path) -> None:
@@ -139,7 +158,9 @@ def test_node_and_rpdo_options_are_checked(controller_bin: Path) -> None:
     for args, want in ((["--node", "1"], "one per joint"),
                        (["--protocol", "canopen", "--node", "2"], "drive number 1"),
                        (["--protocol", "canopen", "--rpdo-type", "250"], "transmission type"),
-                       (["--protocol", "canopen", "--node", "1,gear=101"], "field gear")):
+                       (["--protocol", "canopen", "--node", "1,gear=101"], "field gear"),
+                       (["--protocol", "canopen", "--tpdo2-type", "254"], "--tpdo2-type"),
+                       (["--protocol", "canopen", "--tpdo2-type", "1.5"], "synchronous transmission type")):
         p = subprocess.run([str(exe), *args], capture_output=True, text=True, timeout=30)
         assert p.returncode == 2 and want in p.stderr, (args, p.stderr)
 
@@ -153,9 +174,11 @@ def test_armctl_hil_protocol_canopen_through_the_cli(tmp_path: Path, controller_
     drives.write_text((repo / "firmware" / "protocol" / "drives.toml").read_text().replace(
         'eds = "cia402_servo.eds"', f'eds = "{repo / "firmware" / "protocol" / "cia402_servo.eds"}"'))
     out = tmp_path / "run"
+    two = tmp_path / "two_buses.toml"  # classic at 500 Hz: two buses of three drives (51.7 % each)
+    two.write_text("".join(f'[[bus]]\nname = "can{b}"\nkind = "classic"\nnominal = "1M"\ndrives = {ds}\n\n'
+                           for b, ds in ((0, [1, 2, 3]), (1, [4, 5, 6]))))
     p = subprocess.run([str(repo / "tools" / "armctl"), "hil", "--bus", "sil", "--protocol", "canopen",
-                        "--drive-config", str(drives), "--topology", str(repo / "firmware" / "protocol" /
-                                                                        "buses_classic.toml"),
+                        "--drive-config", str(drives), "--topology", str(two),
                         "--rate", "500", "--method", "tde", "--duration", "0.5", "--out", str(out)],
                        capture_output=True, text=True, timeout=600)
     assert p.returncode == 0, p.stdout + p.stderr

@@ -552,6 +552,10 @@ def test_drive_config_rule_and_overrides(tmp_path: Path) -> None:
     ('[joint.j2]\nnode = 1\n', "node: node id 1 is used twice on bus can0"),
     ('[pdo]\nrpdo1 = ["0x6040:0:16"]\n', "pdo.rpdo1: the codec (firmware/canopen co_pdo.c) packs"),
     ('[joint.j3]\nrated_torque_nm = -1\n', "joint.j3.rated_torque_nm: expected a torque in N m"),
+    ('[pdo]\ntransmission = { tpdo1 = 2 }\n', "pdo.transmission.tpdo1: expected 1 (the joint state, every SYNC)"),
+    ('[pdo]\ntransmission = { tpdo2 = 254 }\n', "pdo.transmission.tpdo2: expected 1..240 (every n-th SYNC)"),
+    ('[pdo]\ntransmission = { rpdo1 = 250 }\n', "pdo.transmission.rpdo1: expected 1..240, 254 or 255"),
+    ('[pdo]\ntransmission = { tpdo3 = 1 }\n', "pdo.transmission: expected a table of rpdo1, tpdo1, tpdo2"),
 ])
 def test_drive_config_bad_input_is_one_line(tmp_path: Path, body: str, message: str) -> None:
     f = tmp_path / "drives.toml"
@@ -591,4 +595,10 @@ def test_readme_bus_load_table_is_what_busload_computes() -> None:
             cells = " / ".join(f"{100 * canopen_load(bus, n, rate):.1f}" for n in (1, 2, 3, 6)) + " %"
             assert cells in row, (label, rate, cells)
     assert canopen_drives_per_bus(classic, 1000) == 1 and canopen_drives_per_bus(classic, 500) == 4
+    # TPDO2 every 2nd SYNC (firmware/protocol/drives_classic.toml): two drives per classic bus at 1 kHz
+    every = {"tpdo2": 2}
+    row = next(ln for ln in readme.splitlines() if ln.startswith("| classic 1 Mbit/s, TPDO2 every 2nd SYNC |"))
+    cells = " / ".join(f"{100 * canopen_load(classic, n, 1000, every=every):.1f}" for n in (1, 2, 3, 6)) + " %"
+    assert cells in row, cells
+    assert canopen_drives_per_bus(classic, 1000, every=every) == 2
     assert canopen_drives_per_bus(fd, 1000) == 4 and canopen_drives_per_bus(fd, 500) == 8

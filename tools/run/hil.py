@@ -271,12 +271,12 @@ def bus_args(kind: str, can_port: int, topology: list[busload.Bus]) -> list[str]
 
 
 def topology_load_pct(topology: list[busload.Bus], rate_hz: float = param_default("controller", "rate"),
-                      protocol: str = DEFAULT_PROTOCOL) -> dict[str, float]:
+                      protocol: str = DEFAULT_PROTOCOL, every: dict[str, int] | None = None) -> dict[str, float]:
     """Worst-case load of each bus of the topology at the loop rate (tools/armctl busload; CANopen:
-    busload.canopen_load from the contract's PDO mapping)."""
+    busload.canopen_load from the contract's PDO mapping and the PDOs' transmission types)."""
     if protocol == "canopen":
-        return {b.name: round(busload.canopen_load(b, len(b.drives), rate_hz, constant("heartbeat-ms")) * 100.0, 2)
-                for b in topology}
+        return {b.name: round(busload.canopen_load(b, len(b.drives), rate_hz, constant("heartbeat-ms"), every) * 100.0,
+                              2) for b in topology}
     loads = busload.compute(topology, rate_hz, constant("heartbeat-ms"), busload.default_protocol(),
                             max(d for b in topology for d in b.drives))
     return {bl.bus.name: round(bl.load * 100.0, 2) for bl in loads}
@@ -468,8 +468,9 @@ def _wait_sil(opt: HilOptions, sil: subprocess.Popen[bytes], log: Any) -> None:
         raise HilError(f"arm_sil refused its arguments: {_last_line(opt.out / 'sil.log')}")
 
 
-def canopen_node_args(info: dict[str, Any], drive_config: Path | None) -> list[str]:
-    """arm_controller's --node per joint, in joint order, from the arm's drive table (gen/drives.py)."""
+def canopen_args(info: dict[str, Any], drive_config: Path | None) -> tuple[list[str], dict[str, int]]:
+    """arm_controller's --node per joint (joint order) and the PDOs' transmission types, from the
+    arm's drive table (gen/drives.py); and those types (for the bus load)."""
     from gen import drives as drives_mod
 
     try:
@@ -486,7 +487,10 @@ def canopen_node_args(info: dict[str, Any], drive_config: Path | None) -> list[s
         if "0x6091" in d.overrides:
             spec.append(f"gear={d.gear[0]}/{d.gear[1]}")
         args += ["--node", ",".join(spec)]
-    return args
+    t = cfg.transmission
+    args += [*(["--rpdo-type", str(t["rpdo1"])] if t["rpdo1"] != 1 else []),
+             *(["--tpdo2-type", str(t["tpdo2"])] if t["tpdo2"] != 1 else [])]
+    return args, t
 
 
 def canopen_record(controller: dict[str, Any]) -> dict[str, Any] | None:
@@ -521,7 +525,7 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
         raise HilError("--bus-timing: not with --protocol canopen (the emulated CiA 402 drives have no bus timing)")
     if opt.drive_config is not None and not canopen:
         raise HilError("--drive-config: a CiA 402 drive configuration, for --protocol canopen")
-    node_args = canopen_node_args(info, opt.drive_config) if canopen else []
+    node_args, transmission = canopen_args(info, opt.drive_config) if canopen else ([], None)
     topology = load_topology(opt.topology, info)
     substeps = sim_substeps(info, _arg_value(opt.controller_args, "--rate", info["loop_rate_hz"]))
     bus_kind, bus_why = resolve_bus(opt.bus, len(topology))
@@ -588,7 +592,8 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
                      "buses": [{"name": b.name, "spec": spec.rpartition("@")[0], "kind": b.describe(),
                                 "drives": b.drives} for b, spec in zip(topology, buses)]},
         "bus_load_pct": topology_load_pct(topology, _arg_value(opt.controller_args, "--rate", info["loop_rate_hz"]),
-                                          opt.protocol),
+                                          opt.protocol, transmission),
+        "canopen_transmission": transmission,
         "lcm_url": url, "wall_s": wall, "simulator_scheduling": sim_scheduling,
         # the simulator's speed: simulated seconds per wall second after boot, and its CPU time
         # per period (arm_sim measures both)

@@ -37,6 +37,10 @@ typedef struct {
     arm_co_units_t units[ARM_N_JOINTS];
     uint32_t tpdo1_mask, tpdo2_mask;
     int64_t next_heartbeat_ns;
+    /* TPDO2 every tpdo2_every-th SYNC (its transmission type); the joints whose TPDO2 has come */
+    uint32_t tpdo2_every;
+    uint32_t period;
+    uint32_t tpdo2_seen;
 } link_t;
 
 #define CANOPEN_MASTER_ID 0x7Fu
@@ -63,13 +67,19 @@ static int canopen_rx(link_t *l, const arm_can_frame_t *f)
     } else if (arm_co_unpack_tpdo2((uint8_t)node, f, &tq, &sw) == 0) {
         if (l->tpdo2_mask & (1u << j)) d->duplicate_mask |= 1u << j;
         l->tpdo2_mask |= 1u << j;
+        l->tpdo2_seen |= 1u << j;
         d->tau_measured[j] = arm_co_permille_to_torque(&l->units[j], tq);
         d->statusword[j] = sw;
     } else {
         d->rx.bad_length++;
         return 1;
     }
-    if ((l->tpdo1_mask & l->tpdo2_mask & (1u << j)) != 0u && (d->fresh_mask & (1u << j)) == 0u) {
+    /* TPDO2 of type n goes at every n-th SYNC after NMT start (the first SYNC is period 0): on the
+     * other periods the last one's torque and statusword stand; on its own it is waited for, so
+     * the state is the same however the frames interleave */
+    const int tpdo2_due = (l->period + 1u) % l->tpdo2_every == 0u;
+    const int tpdo2_ok = (l->tpdo2_mask & (1u << j)) != 0u || !tpdo2_due;
+    if ((l->tpdo1_mask & (1u << j)) != 0u && tpdo2_ok && (d->fresh_mask & (1u << j)) == 0u) {
         d->fresh_mask |= 1u << j;
         d->rx.state++;
     }
@@ -269,6 +279,7 @@ static int boot_canopen_run(link_t *l, const options_t *opt, const arm_robot_mod
         cfg.heartbeat_ms = CANOPEN_HEARTBEAT_MS;
         cfg.master_id = CANOPEN_MASTER_ID;
         cfg.rpdo1.trans = opt->rpdo_type;
+        cfg.tpdo2.trans = opt->tpdo2_type;
         for (int j = 0; j < ARM_N_JOINTS; ++j) {
             if (l->bus_of[j] != (int)b || cfg.n_nodes >= ARM_CO_BOOT_MAX_NODES) continue;
             arm_co_node_config_t *nc = &cfg.node[cfg.n_nodes++];
@@ -404,7 +415,7 @@ static int enable(link_t *l, loop_t *p, uint32_t k, uint32_t fresh)
         send_frame(l, (unsigned)l->bus_of[j], &f);
     }
     if (l->canopen) { /* the boot enabled them: tracking starts with the first whole state */
-        enabled = fresh;
+        enabled = fresh & l->tpdo2_seen;
     }
     if (enabled == ALL_JOINTS) {
         if (p->opt->ref_given) {
@@ -574,6 +585,7 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
     l.report = report;
     l.spin_ns = (int64_t)(opt->spin_us * 1e3);
     l.canopen = opt->protocol_canopen;
+    l.tpdo2_every = opt->tpdo2_type != 0u ? opt->tpdo2_type : 1u;
     p.opt = opt;
     p.telem = telem;
     p.report = report;
@@ -635,6 +647,7 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
         if (l.canopen) {
             sync.len = 0u; /* CiA 301 SYNC without a counter (0x1019 = 0) */
             l.tpdo1_mask = l.tpdo2_mask = 0u;
+            l.period = k;
             if (cycle_start >= l.next_heartbeat_ns) { /* the drives consume it (0x1016.1) */
                 const arm_can_frame_t hb = {.id = ARM_CO_COB_HEARTBEAT + CANOPEN_MASTER_ID, .len = 1u, .data = {0x05u}};
                 send_all(&l, &hb);

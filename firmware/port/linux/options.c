@@ -230,6 +230,19 @@ static int opt_rpdo_type(void *t, void *c, const argv_opt_t *o, const char *v, c
     return 0;
 }
 
+static int opt_tpdo2_type(void *t, void *c, const argv_opt_t *o, const char *v, char *err, unsigned long errcap)
+{
+    (void)c;
+    double d = 0.0;
+    if (argv_double(o->name, v, 1.0, 240.0, 0, &d, err, errcap) != 0) return -1;
+    if (d != floor(d)) {
+        snprintf(err, errcap, "%s '%s': a synchronous transmission type, 1..240 (every N-th SYNC)", o->name, v);
+        return -1;
+    }
+    ((options_t *)t)->tpdo2_type = (uint8_t)d;
+    return 0;
+}
+
 #define ROW(...) ARGV_ROW(options_t, __VA_ARGS__)
 static const argv_opt_t k_options[] = {ARM_CONTROLLER_OPTIONS(ROW, ARGV_SPECIAL_ROW)};
 enum { ARM_CONTROLLER_OPTIONS(ARGV_ID, ARGV_ID) ARGV_COUNT };

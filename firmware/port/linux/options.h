@@ -29,6 +29,7 @@ typedef struct {
      * built-in rule (node = drive number, rated torque = the joint's torque limit, EDS encoder/gear) */
     unsigned n_nodes;
     uint8_t rpdo_type;         /* --rpdo-type: RPDO1's transmission type [1] */
+    uint8_t tpdo2_type;        /* --tpdo2-type: TPDO2's, every N-th SYNC [1] */
     arm_co_node_config_t node[ARM_N_JOINTS];
     arm_ctl_config_t ctl;
     double position_margin_rad; /* --position-margin: ctl's q_min, q_max are the model's widened by it */
