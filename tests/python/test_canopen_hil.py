@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from tools.hil import DEFAULT_PROTOCOL, HilOptions, run_hil
+from tools.run.hil import DEFAULT_PROTOCOL, HilOptions, run_hil
 
 DURATION_S = 3.0
 
@@ -25,7 +25,7 @@ def _run(tmp: Path, preset: str, protocol: str, method: str = "tde", bus: str = 
 
 
 def test_default_protocol_is_the_arm_protocol() -> None:
-    assert DEFAULT_PROTOCOL == "arm"  # the product's default; one definition (tools/hil.py)
+    assert DEFAULT_PROTOCOL == "arm"  # the product's default; one definition (tools/run/hil.py)
 
 
 def test_canopen_sil_run_is_ok_and_records_the_boot(tmp_path: Path, controller_bin: Path) -> None:
@@ -192,8 +192,8 @@ def test_armctl_hil_protocol_canopen_through_the_cli(tmp_path: Path, controller_
 
 
 def test_a_study_scenario_chooses_the_protocol(tmp_path: Path) -> None:
-    from tools.runner import RunSpec
-    from tools.study_config import StudyConfigError, _scenario
+    from tools.run.runner import RunSpec
+    from tools.study.config import StudyConfigError, _scenario
 
     sc = _scenario("co", {"protocol": "canopen"})
     assert sc.protocol == "canopen" and sc.as_dict()["protocol"] == "canopen"

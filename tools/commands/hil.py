@@ -82,7 +82,7 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
                         "log format (canplayer, python-can's LogReader, cantools decode)")
     h.add_argument("--drives", choices=("ideal", "realistic"), default=param("hil", "drives").default,
                    help="the emulated drives' sensing and torque path (host_sim/README.md) [ideal]")
-    from tools.hil import DEFAULT_PROTOCOL, PROTOCOLS
+    from tools.run.hil import DEFAULT_PROTOCOL, PROTOCOLS
 
     h.add_argument("--protocol", choices=PROTOCOLS, default=DEFAULT_PROTOCOL,
                    help="what the drives speak: arm (this project's frames) or canopen (CiA 301/402 drives booted "

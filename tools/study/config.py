@@ -91,7 +91,7 @@ class Scenario:
     # turns them into the arm's values in `uncertainty`, and keeps them here for the report
     per_joint: dict[str, Any] = field(default_factory=dict)
     resolved: bool = False
-    protocol: str = "arm"  # what the drives speak (tools/hil.py PROTOCOLS); the arm protocol by default
+    protocol: str = "arm"  # what the drives speak (tools/run/hil.py PROTOCOLS); the arm protocol by default
 
     def as_dict(self) -> dict[str, Any]:
         """The scenario as it runs (what the tuning key and the report hold): only for an arm."""
