@@ -298,6 +298,13 @@ co_sim_t *sim_co_begin(const sim_config_t *cfg, const sim_co_config_t *co, sim_a
     sp->rep = rep;
     sp->n = arm->n;
     sp->t0 = mono_ns();
+    for (int j = sp->n; j < SIM_MAX_JOINTS; ++j) {
+        const sim_co_preset_t *own = &co->node_preset[j];
+        if (own->rated_torque_mnm || own->encoder_increments || own->gear_motor) {
+            snprintf(err, errcap, "--node %d: the arm has %d drives", j + 1, sp->n);
+            return NULL;
+        }
+    }
     for (int j = 0; j < sp->n; ++j) {
         sp->bus_of[j] = arm_can_bus_set_bus_of(&cfg->buses, (unsigned)j);
         if (sp->bus_of[j] < 0) {
@@ -305,7 +312,15 @@ co_sim_t *sim_co_begin(const sim_config_t *cfg, const sim_co_config_t *co, sim_a
             return NULL;
         }
         const uint8_t id = (uint8_t)(j + 1);
-        sim_co_node_init(&sp->node[j], id, &co->preset, arm->torque_limit[j],
+        sim_co_preset_t pre = co->preset;
+        const sim_co_preset_t *own = &co->node_preset[j];
+        if (own->rated_torque_mnm) pre.rated_torque_mnm = own->rated_torque_mnm;
+        if (own->encoder_increments) pre.encoder_increments = own->encoder_increments;
+        if (own->gear_motor) {
+            pre.gear_motor = own->gear_motor;
+            pre.gear_shaft = own->gear_shaft;
+        }
+        sim_co_node_init(&sp->node[j], id, &pre, arm->torque_limit[j],
                          co->overcurrent_node == id ? co->overcurrent_at_s : -1.0);
         sim_servo_init(&sp->servo[j]);
         sim_rng_seed(&sp->noise[j], arm->unc.seed ^ (0x9E3779B97F4A7C15ull * ((uint64_t)j + 1u)));

@@ -468,16 +468,17 @@ def _wait_sil(opt: HilOptions, sil: subprocess.Popen[bytes], log: Any) -> None:
         raise HilError(f"arm_sil refused its arguments: {_last_line(opt.out / 'sil.log')}")
 
 
-def canopen_args(info: dict[str, Any], drive_config: Path | None) -> tuple[list[str], dict[str, int]]:
-    """arm_controller's --node per joint (joint order) and the PDOs' transmission types, from the
-    arm's drive table (gen/drives.py); and those types (for the bus load)."""
+def canopen_args(info: dict[str, Any], drive_config: Path | None) -> tuple[list[str], list[str], dict[str, int]]:
+    """From the arm's drive table (gen/drives.py): arm_controller's --node per joint (joint order)
+    and the PDOs' transmission types; arm_sim's --node presets (the same specs: its drives start
+    with the table's scaling, as drives commissioned for this arm); and those types."""
     from gen import drives as drives_mod
 
     try:
         cfg = drives_mod.load(info, drive_config)
     except drives_mod.DrivesError as exc:
         raise HilError(f"drive configuration: {exc}") from None
-    args: list[str] = []
+    nodes: list[str] = []
     for d in sorted(cfg.drives, key=lambda d: d.drive):
         spec = [str(d.node)]
         if "0x6076" in d.overrides:
@@ -486,11 +487,12 @@ def canopen_args(info: dict[str, Any], drive_config: Path | None) -> tuple[list[
             spec.append(f"encoder={d.encoder_increments}")
         if "0x6091" in d.overrides:
             spec.append(f"gear={d.gear[0]}/{d.gear[1]}")
-        args += ["--node", ",".join(spec)]
+        nodes.append(",".join(spec))
+    node_args = [a for n in nodes for a in ("--node", n)]
     t = cfg.transmission
-    args += [*(["--rpdo-type", str(t["rpdo1"])] if t["rpdo1"] != 1 else []),
-             *(["--tpdo2-type", str(t["tpdo2"])] if t["tpdo2"] != 1 else [])]
-    return args, t
+    ctl = [*node_args, *(["--rpdo-type", str(t["rpdo1"])] if t["rpdo1"] != 1 else []),
+           *(["--tpdo2-type", str(t["tpdo2"])] if t["tpdo2"] != 1 else [])]
+    return ctl, node_args, t
 
 
 def canopen_record(controller: dict[str, Any]) -> dict[str, Any] | None:
@@ -525,7 +527,7 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
         raise HilError("--bus-timing: not with --protocol canopen (the emulated CiA 402 drives have no bus timing)")
     if opt.drive_config is not None and not canopen:
         raise HilError("--drive-config: a CiA 402 drive configuration, for --protocol canopen")
-    node_args, transmission = canopen_args(info, opt.drive_config) if canopen else ([], None)
+    node_args, sim_node_args, transmission = canopen_args(info, opt.drive_config) if canopen else ([], [], None)
     topology = load_topology(opt.topology, info)
     substeps = sim_substeps(info, _arg_value(opt.controller_args, "--rate", info["loop_rate_hz"]))
     bus_kind, bus_why = resolve_bus(opt.bus, len(topology))
@@ -553,7 +555,8 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
                         uncertainty=opt.uncertainty, timing=bus_timing_mode(opt.mode) if opt.bus_timing else "off",
                         phys=topology, model=prepared_model(bdir), drives=opt.drives,
                         extra=["--substeps", str(substeps), *([] if sil else sim_mode_args(opt.mode, opt.spin_us)),
-                               *capture_args(opt), "--protocol", opt.protocol, *opt.sim_args])
+                               *capture_args(opt), "--protocol", opt.protocol, *sim_node_args,
+                               *opt.sim_args])
     ctl_args = [*opt.controller_cmd_prefix, str(binary), *bus_argv, "--lcm-url", url,
                 "--duration", f"{opt.duration_s:g}", "--method", opt.method, "--mode", opt.mode,
                 "--summary", str(opt.out / "controller_summary.json"), *([] if sil else spin_args(opt.mode, opt.spin_us)),
