@@ -195,8 +195,8 @@ static int on_frame(co_sim_t *s, const arm_can_frame_t *f, unsigned bus, int64_t
         if (f->len <= 1u) on_sync(s, bus);
         else rep->rx_bad_frame++;
     } else {
-        if (f->id == COB_NMT && f->len == 2u && f->data[0] == 0x02u && s->synced) {
-            /* NMT stop (on whichever bus it is read first) ends the last period, as the next SYNC
+        if (f->id == COB_NMT && f->len == 2u && f->data[0] == 0x02u && f->data[1] == 0u && s->synced) {
+            /* NMT stop to all (on whichever bus it is read first) ends the last period, as the next SYNC
              * would have, before any drive stops applying its torque */
             advance(s);
             s->synced = 0;
