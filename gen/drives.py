@@ -19,7 +19,7 @@ import math
 import shlex
 import sys
 import tomllib
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +36,10 @@ CODEC_MAPPING = {
     "tpdo2": [(0x6077, 0, 16), (0x6041, 0, 16)],
 }
 U32_MAX = 0xFFFFFFFF
+# The contract's: every PDO on every SYNC. TPDO2 may come every n-th SYNC (the controller keeps its
+# torque and statusword in between); TPDO1, the joint state, must come every SYNC; RPDO1 may be
+# synchronous (1-240, at the next SYNC) or event-driven (254/255, at once).
+DEFAULT_TRANSMISSION = {"rpdo1": 1, "tpdo1": 1, "tpdo2": 1}
 
 
 class DrivesError(ValueError):
@@ -63,6 +67,8 @@ class DriveConfig:
     master_id: int
     cycle_us: int
     drives: list[Drive]
+    # [pdo] transmission: CiA 301 transmission type per PDO (1: every SYNC)
+    transmission: dict[str, int] = field(default_factory=lambda: dict(DEFAULT_TRANSMISSION))
 
     def boot_args(self, bus: str) -> list[str]:
         on_bus = [d for d in self.drives if d.bus == bus]
@@ -158,8 +164,17 @@ def load(arm: dict[str, Any], path: Path | None = None) -> DriveConfig:
     consumer = _uint(doc.get("consumer_ms", 300), f"{path}: consumer_ms", 0, 65535)
     master = _uint(doc.get("master_id", 127), f"{path}: master_id", 1, 127)
     pdo = doc.get("pdo", {})
-    if not isinstance(pdo, dict) or set(pdo) - set(CODEC_MAPPING):
-        raise DrivesError(f"{path}: pdo: expected a table of rpdo1, tpdo1, tpdo2")
+    if not isinstance(pdo, dict) or set(pdo) - set(CODEC_MAPPING) - {"transmission"}:
+        raise DrivesError(f"{path}: pdo: expected a table of rpdo1, tpdo1, tpdo2, transmission")
+    trans_v = pdo.get("transmission", {})
+    if not isinstance(trans_v, dict) or set(trans_v) - set(DEFAULT_TRANSMISSION):
+        raise DrivesError(f"{path}: pdo.transmission: expected a table of rpdo1, tpdo1, tpdo2 (CiA 301 types)")
+    transmission = {**DEFAULT_TRANSMISSION, **trans_v}
+    allowed = {"rpdo1": (set(range(1, 241)) | {254, 255}, "1..240, 254 or 255"), "tpdo1": ({1}, "1 (the joint "
+               "state, every SYNC)"), "tpdo2": (set(range(1, 241)), "1..240 (every n-th SYNC)")}
+    for name, v in transmission.items():
+        if isinstance(v, bool) or not isinstance(v, int) or v not in allowed[name][0]:
+            raise DrivesError(f"{path}: pdo.transmission.{name}: expected {allowed[name][1]}, got {v!r}")
     for name, want in CODEC_MAPPING.items():
         if name in pdo:
             got = _mapping(pdo[name], f"{path}: pdo.{name}")
@@ -223,7 +238,7 @@ def load(arm: dict[str, Any], path: Path | None = None) -> DriveConfig:
         if master in nodes:
             raise DrivesError(f"{path}: master_id: {master} is a drive's node id on bus {b}")
     rate = float(arm.get("loop_rate_hz", 1000.0))
-    return DriveConfig(str(path), str(eds), heartbeat, consumer, master, round(1e6 / rate), out)
+    return DriveConfig(str(path), str(eds), heartbeat, consumer, master, round(1e6 / rate), out, transmission)
 
 
 def main(argv: list[str] | None = None) -> int:

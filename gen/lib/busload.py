@@ -409,15 +409,26 @@ def _frame_s(n_bytes: int, bus: Bus) -> float:
     return nom / bus.nominal_bps + (dat / bus.data_bps if dat else 0.0)  # type: ignore[operator]
 
 
-def canopen_load(bus: Bus, n_drives: int, rate_hz: float, heartbeat_ms: float = 100.0) -> float:
-    """Worst-case load (fraction of bus time) of n_drives CiA 402 drives on one bus at rate_hz."""
-    period_s = n_drives * sum(_frame_s(n, bus) for n in CANOPEN_PDO_BYTES.values()) + _frame_s(0, bus)
+def _every(transmission_type: int) -> int:
+    """The SYNCs per frame of a PDO's CiA 301 transmission type: n for synchronous 1-240; an
+    event-driven (254/255) RPDO goes once a period, as the master sends it."""
+    return transmission_type if 1 <= transmission_type <= 240 else 1
+
+
+def canopen_load(bus: Bus, n_drives: int, rate_hz: float, heartbeat_ms: float = 100.0,
+                 every: dict[str, int] | None = None) -> float:
+    """Worst-case load (fraction of bus time) of n_drives CiA 402 drives on one bus at rate_hz;
+    every: the PDOs' transmission types (gen/drives.py [pdo] transmission; absent: 1, every SYNC)."""
+    every = every or {}
+    period_s = n_drives * sum(_frame_s(n, bus) / _every(every.get(name.lower(), 1))
+                              for name, n in CANOPEN_PDO_BYTES.items()) + _frame_s(0, bus)
     return period_s * rate_hz + n_drives * _frame_s(1, bus) / (heartbeat_ms * 1e-3)
 
 
-def canopen_drives_per_bus(bus: Bus, rate_hz: float, budget: float = 0.70, heartbeat_ms: float = 100.0) -> int:
+def canopen_drives_per_bus(bus: Bus, rate_hz: float, budget: float = 0.70, heartbeat_ms: float = 100.0,
+                           every: dict[str, int] | None = None) -> int:
     """The most drives one bus carries within the budget (0: not even one)."""
     n = 0
-    while n < 127 and canopen_load(bus, n + 1, rate_hz, heartbeat_ms) <= budget:
+    while n < 127 and canopen_load(bus, n + 1, rate_hz, heartbeat_ms, every) <= budget:
         n += 1
     return n

@@ -21,6 +21,7 @@
 #include "controller_loop.h"
 #include "lcm_sink.h"
 #include "options.h"
+#include "sim_canopen_loop.h"
 #include "sim_loop.h"
 #include "sim_options.h"
 #include "sim_summary.h"
@@ -44,6 +45,11 @@ static void on_mujoco_warning(const char *msg)
 static void drives_turn(void *sim)
 {
     (void)sim_service(sim);
+}
+
+static void canopen_drives_turn(void *sim)
+{
+    (void)sim_co_service(sim);
 }
 
 static int all_mem(const arm_can_bus_set_config_t *c, const char *who)
@@ -106,6 +112,12 @@ int main(int argc, char **argv)
     if (!all_mem(&opt.buses, "controller") || !all_mem(&so.cfg.buses, "simulator")) {
         return 2;
     }
+    const int canopen = so.protocol == SIM_PROTOCOL_CANOPEN;
+    if (canopen != (opt.protocol_canopen != 0)) {
+        fprintf(stderr, "arm_sil: --protocol: the controller speaks %s, the simulator's drives %s: give both the same\n",
+                opt.protocol_canopen ? "canopen" : "arm", canopen ? "canopen" : "arm");
+        return 2;
+    }
     mju_user_warning = on_mujoco_warning;
     static sim_arm_t arm;
     if (sim_arm_open(&arm, so.model, so.keyframe, so.substeps, &so.unc, err, sizeof(err)) != 0 ||
@@ -138,18 +150,23 @@ int main(int argc, char **argv)
     arm_can_mem_reset();
     arm_can_mem_set_opening_side(ARM_CAN_MEM_DRIVES);
     static sim_report_t srep;
-    sim_t *sim = sim_begin(&so.cfg, &arm, tel, &srep, err, sizeof(err));
-    if (sim == NULL) {
+    sim_t *sim = canopen ? NULL : sim_begin(&so.cfg, &arm, tel, &srep, err, sizeof(err));
+    co_sim_t *co_sim = canopen ? sim_co_begin(&so.cfg, &so.co, &arm, tel, &srep, err, sizeof(err)) : NULL;
+    if (sim == NULL && co_sim == NULL) {
         fprintf(stderr, "arm_sil: simulator: %s\n", err);
         return 1;
     }
     arm_can_mem_set_opening_side(ARM_CAN_MEM_MASTER);
-    arm_can_mem_set_idle_hook(drives_turn, sim);
+    if (canopen) arm_can_mem_set_idle_hook(canopen_drives_turn, co_sim);
+    else arm_can_mem_set_idle_hook(drives_turn, sim);
     static run_report_t report;
     controller_run(&opt, &ARM_ROBOT_MODEL, telem, &report);
-    (void)sim_service(sim); /* the controller's last frames: shutdown and NMT stop */
+    /* the controller's last frames: shutdown and NMT stop */
+    if (canopen) (void)sim_co_service(co_sim);
+    else (void)sim_service(sim);
     arm_can_mem_set_idle_hook(NULL, NULL);
-    sim_end(sim);
+    if (canopen) sim_co_end(co_sim);
+    else sim_end(sim);
     telemetry_stop(telem);
 
     int rc = (int)report.result;

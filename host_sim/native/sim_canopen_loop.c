@@ -11,7 +11,7 @@
 #define COB_NMT 0x000u
 #define STEPS_PER_SYNC_MAX 1000u /* 0x1006 beyond this many periods is clamped (a stall, not a cycle) */
 
-typedef struct {
+struct co_sim {
     const sim_config_t *cfg;
     sim_arm_t *arm;
     sim_telemetry_t *tel;
@@ -25,7 +25,12 @@ typedef struct {
     double tau[SIM_MAX_JOINTS];
     double w[SIM_MAX_JOINTS];
     uint16_t last_emcy[SIM_MAX_JOINTS];
-} co_sim_t;
+    int64_t t0;
+    uint64_t syncs[ARM_CAN_BUS_SET_MAX]; /* SYNCs handled per bus */
+    unsigned held[ARM_CAN_BUS_SET_MAX];  /* a SYNC that came before its period's lead SYNC */
+    int synced; /* a SYNC came: the next one ends a period */
+    int ended; /* stepped (sim_co_service): the master stopped every drive */
+};
 
 static int64_t mono_ns(void)
 {
@@ -117,7 +122,39 @@ static void advance(co_sim_t *s)
     }
 }
 
+/* A SYNC ends the period since the last one: the arm moves first, under the torques in effect
+ * during it (a synchronous RPDO's from the last SYNC on, an event-driven one's from its arrival),
+ * then each node takes its synchronous RPDOs and samples the state for its TPDOs. */
+static void sync_nodes(co_sim_t *s, unsigned bus);
+
 static void on_sync(co_sim_t *s, unsigned bus)
+{
+    /* Every bus's SYNC of a period follows the first joint's bus's, which moves the arm. Sockets
+     * keep no order between buses: another bus's SYNC that comes first waits for it. */
+    const unsigned lead_bus = (unsigned)s->bus_of[0];
+    if (bus != lead_bus) {
+        if (s->syncs[bus] >= s->syncs[lead_bus] && s->held[bus] == 0u) {
+            s->held[bus] = 1u; /* restored, not an error: the controller sent the lead SYNC first */
+            return;
+        }
+        s->syncs[bus]++;
+        sync_nodes(s, bus);
+        return;
+    }
+    s->syncs[bus]++;
+    if (s->synced) advance(s);
+    s->synced = 1;
+    sync_nodes(s, bus);
+    for (unsigned b = 0; b < s->set.n; ++b) {
+        if (b != lead_bus && s->held[b] != 0u) {
+            s->held[b] = 0u;
+            s->syncs[b]++;
+            sync_nodes(s, b);
+        }
+    }
+}
+
+static void sync_nodes(co_sim_t *s, unsigned bus)
 {
     const double *q = s->arm->data->qpos, *qd = s->arm->data->qvel;
     for (int j = 0; j < s->n; ++j) {
@@ -128,8 +165,7 @@ static void on_sync(co_sim_t *s, unsigned bus)
         }
         sim_co_node_on_sync(&s->node[j], qm, qdm, taum);
     }
-    flush(s); /* the TPDOs before the physics: they report the state at the SYNC */
-    if ((int)bus == s->bus_of[0]) advance(s);
+    flush(s);
 }
 
 static int all_stopped(const co_sim_t *s)
@@ -138,6 +174,45 @@ static int all_stopped(const co_sim_t *s)
         if (s->node[j].nmt != SIM_NMT_STATE_STOPPED) return 0;
     }
     return 1;
+}
+
+/* One frame from the bus: the master's (SYNC, NMT, SDO, RPDO, heartbeat) to the nodes on its bus;
+ * the drives' own, heard back, counted. 1 when the master has stopped every drive. */
+static int on_frame(co_sim_t *s, const arm_can_frame_t *f, unsigned bus, int64_t now)
+{
+    sim_report_t *rep = s->rep;
+    int own = 0;
+    for (int j = 0; j < s->n && !own; ++j) own = s->bus_of[j] == (int)bus && sim_co_node_sends(&s->node[j], f->id);
+    captured(s, bus, f);
+    if (own) {
+        rep->rx_foreign_drive++; /* a drive's frame heard back (UDP), or another node's */
+        return 0;
+    }
+    rep->frames_rx++;
+    if ((f->flags & (ARM_CAN_FLAG_RTR | ARM_CAN_FLAG_ERR | ARM_CAN_FLAG_EXT | ARM_CAN_FLAG_FD)) != 0u) {
+        rep->rx_bad_frame++; /* classic 11-bit data frames only */
+    } else if (f->id == COB_SYNC) {
+        if (f->len <= 1u) on_sync(s, bus);
+        else rep->rx_bad_frame++;
+    } else {
+        if (f->id == COB_NMT && f->len == 2u && f->data[0] == 0x02u && f->data[1] == 0u && s->synced) {
+            /* NMT stop to all (on whichever bus it is read first) ends the last period, as the next SYNC
+             * would have, before any drive stops applying its torque */
+            advance(s);
+            s->synced = 0;
+        }
+        for (int j = 0; j < s->n; ++j) {
+            if (s->bus_of[j] == (int)bus) sim_co_node_on_frame(&s->node[j], f, now);
+        }
+    }
+    return f->id == COB_NMT && all_stopped(s);
+}
+
+static void tick_all(co_sim_t *s, int64_t now)
+{
+    const double sim_s = (double)s->arm->step_count * s->arm->period;
+    for (int j = 0; j < s->n; ++j) sim_co_node_tick(&s->node[j], now, sim_s);
+    flush(s);
 }
 
 static void run(co_sim_t *s)
@@ -167,33 +242,34 @@ static void run(co_sim_t *s)
             return;
         }
         now = mono_ns();
-        if (rc == 1) {
-            int own = 0;
-            for (int j = 0; j < s->n && !own; ++j) own = s->bus_of[j] == (int)bus && sim_co_node_sends(&s->node[j], f.id);
-            if (own) {
-                rep->rx_foreign_drive++; /* a drive's frame heard back (UDP), or another node's */
-                captured(s, bus, &f);
-            } else {
-                rep->frames_rx++;
-                captured(s, bus, &f);
-                last_rx = now;
-                booted = 1;
-                if ((f.flags & (ARM_CAN_FLAG_RTR | ARM_CAN_FLAG_ERR | ARM_CAN_FLAG_EXT | ARM_CAN_FLAG_FD)) != 0u) {
-                    rep->rx_bad_frame++; /* classic 11-bit data frames only */
-                } else if (f.id == COB_SYNC) {
-                    if (f.len <= 1u) on_sync(s, bus);
-                    else rep->rx_bad_frame++;
-                } else {
-                    for (int j = 0; j < s->n; ++j) {
-                        if (s->bus_of[j] == (int)bus) sim_co_node_on_frame(&s->node[j], &f, now);
-                    }
+        int stopped = 0;
+        /* SYNC and NMT go on every bus, and sockets keep no order between buses: what is already
+         * queued on the others up to their own SYNC (this period's RPDOs) was sent first; their
+         * SYNC and what follows it come after this frame. */
+        static arm_can_frame_t later[ARM_CAN_BUS_SET_MAX][64];
+        unsigned n_later[ARM_CAN_BUS_SET_MAX] = {0};
+        if (rc == 1 && (f.id == COB_SYNC || f.id == COB_NMT) && s->set.n > 1u) {
+            for (unsigned i = 0; i < s->set.n && !stopped; ++i) {
+                arm_can_frame_t g;
+                while (i != bus && n_later[i] < 64u && !stopped && arm_can_bus_recv(&s->set.bus[i], &g, 0) == 1) {
+                    if (n_later[i] > 0u || g.id == COB_SYNC || g.id == COB_NMT) later[i][n_later[i]++] = g;
+                    else stopped = on_frame(s, &g, i, now);
                 }
             }
         }
-        const double sim_s = (double)s->arm->step_count * s->arm->period;
-        for (int j = 0; j < s->n; ++j) sim_co_node_tick(&s->node[j], now, sim_s);
-        flush(s);
-        if (rc == 1 && f.id == COB_NMT && all_stopped(s)) return; /* the master stopped every drive */
+        if (rc == 1 && !stopped) {
+            const uint64_t before = rep->frames_rx;
+            stopped = on_frame(s, &f, bus, now);
+            if (rep->frames_rx != before) {
+                last_rx = now;
+                booted = 1;
+            }
+        }
+        for (unsigned i = 0; i < s->set.n; ++i) {
+            for (unsigned k = 0; k < n_later[i] && !stopped; ++k) stopped = on_frame(s, &later[i][k], i, now);
+        }
+        tick_all(s, now);
+        if (stopped) return; /* the master stopped every drive */
         const double timeout = booted ? cfg->idle_timeout_s : cfg->boot_timeout_s;
         if ((double)(now - last_rx) * 1e-9 > timeout) {
             char why[160];
@@ -207,49 +283,91 @@ static void run(co_sim_t *s)
     }
 }
 
+static co_sim_t g_sim;
+
+co_sim_t *sim_co_begin(const sim_config_t *cfg, const sim_co_config_t *co, sim_arm_t *arm, sim_telemetry_t *tel,
+                       sim_report_t *rep, char *err, unsigned long errcap)
+{
+    co_sim_t *sp = &g_sim;
+    memset(sp, 0, sizeof(*sp));
+    memset(rep, 0, sizeof(*rep));
+    snprintf(rep->result, sizeof(rep->result), "ok");
+    sp->cfg = cfg;
+    sp->arm = arm;
+    sp->tel = tel;
+    sp->rep = rep;
+    sp->n = arm->n;
+    sp->t0 = mono_ns();
+    for (int j = sp->n; j < SIM_MAX_JOINTS; ++j) {
+        const sim_co_preset_t *own = &co->node_preset[j];
+        if (own->rated_torque_mnm || own->encoder_increments || own->gear_motor) {
+            snprintf(err, errcap, "--node %d: the arm has %d drives", j + 1, sp->n);
+            return NULL;
+        }
+    }
+    for (int j = 0; j < sp->n; ++j) {
+        sp->bus_of[j] = arm_can_bus_set_bus_of(&cfg->buses, (unsigned)j);
+        if (sp->bus_of[j] < 0) {
+            snprintf(err, errcap, "--bus: drive %d is on no bus", j + 1);
+            return NULL;
+        }
+        const uint8_t id = (uint8_t)(j + 1);
+        sim_co_preset_t pre = co->preset;
+        const sim_co_preset_t *own = &co->node_preset[j];
+        if (own->rated_torque_mnm) pre.rated_torque_mnm = own->rated_torque_mnm;
+        if (own->encoder_increments) pre.encoder_increments = own->encoder_increments;
+        if (own->gear_motor) {
+            pre.gear_motor = own->gear_motor;
+            pre.gear_shaft = own->gear_shaft;
+        }
+        sim_co_node_init(&sp->node[j], id, &pre, arm->torque_limit[j],
+                         co->overcurrent_node == id ? co->overcurrent_at_s : -1.0);
+        sim_servo_init(&sp->servo[j]);
+        sim_rng_seed(&sp->noise[j], arm->unc.seed ^ (0x9E3779B97F4A7C15ull * ((uint64_t)j + 1u)));
+    }
+    if (arm_can_bus_set_open(&sp->set, &cfg->buses, err, errcap) != 0) return NULL;
+    for (int j = 0; j < sp->n; ++j) sim_co_node_boot(&sp->node[j], sp->t0);
+    flush(sp);
+    char text[700];
+    snprintf(text, sizeof(text), "%d CANopen CiA 402 drives (nodes 1..%d) up on bus %s", sp->n, sp->n, cfg->bus_text);
+    sim_telemetry_event(tel, 0, "sim", "info", text);
+    return sp;
+}
+
+int sim_co_service(co_sim_t *s)
+{
+    arm_can_frame_t f;
+    unsigned bus = 0;
+    while (!s->ended && arm_can_bus_set_recv(&s->set, &f, &bus, 0) == 1) {
+        s->ended = on_frame(s, &f, bus, mono_ns());
+    }
+    if (!s->ended) tick_all(s, mono_ns());
+    return !s->ended;
+}
+
+void sim_co_end(co_sim_t *s)
+{
+    sim_report_t *rep = s->rep;
+    for (int j = 0; j < s->n; ++j) {
+        if (s->node[j].power == SIM_PS_FAULT) rep->drive_fault_mask |= 1u << j;
+    }
+    for (unsigned b = 0; b < s->set.n; ++b) {
+        rep->rx_undecodable += arm_can_bus_rx_undecodable(&s->set.bus[b]);
+        rep->rx_kernel_drops += arm_can_bus_rx_kernel_drops(&s->set.bus[b]);
+    }
+    rep->n_buses = s->set.n;
+    rep->wall_s = (double)(mono_ns() - s->t0) * 1e-9;
+    sim_telemetry_event(s->tel, s->arm->step_count, "sim", rep->reason[0] ? "fault" : "info",
+                        rep->reason[0] ? rep->reason : "stopped by the master (NMT stop)");
+    arm_can_bus_set_close(&s->set);
+}
+
 int sim_canopen_run(const sim_config_t *cfg, const sim_co_config_t *co, sim_arm_t *arm, sim_telemetry_t *tel,
                     sim_report_t *rep, char *err, unsigned long errcap)
 {
-    static co_sim_t s;
-    memset(&s, 0, sizeof(s));
-    memset(rep, 0, sizeof(*rep));
-    snprintf(rep->result, sizeof(rep->result), "ok");
-    s.cfg = cfg;
-    s.arm = arm;
-    s.tel = tel;
-    s.rep = rep;
-    s.n = arm->n;
-    const int64_t t0 = mono_ns();
-    for (int j = 0; j < s.n; ++j) {
-        s.bus_of[j] = arm_can_bus_set_bus_of(&cfg->buses, (unsigned)j);
-        if (s.bus_of[j] < 0) {
-            snprintf(err, errcap, "--bus: drive %d is on no bus", j + 1);
-            return -1;
-        }
-        const uint8_t id = (uint8_t)(j + 1);
-        sim_co_node_init(&s.node[j], id, &co->preset, arm->torque_limit[j],
-                         co->overcurrent_node == id ? co->overcurrent_at_s : -1.0);
-        sim_servo_init(&s.servo[j]);
-        sim_rng_seed(&s.noise[j], arm->unc.seed ^ (0x9E3779B97F4A7C15ull * ((uint64_t)j + 1u)));
-    }
-    if (arm_can_bus_set_open(&s.set, &cfg->buses, err, errcap) != 0) return -1;
-    for (int j = 0; j < s.n; ++j) sim_co_node_boot(&s.node[j], t0);
-    flush(&s);
-    char text[700];
-    snprintf(text, sizeof(text), "%d CANopen CiA 402 drives (nodes 1..%d) up on bus %s", s.n, s.n, cfg->bus_text);
-    sim_telemetry_event(tel, 0, "sim", "info", text);
-    run(&s);
-    for (int j = 0; j < s.n; ++j) {
-        if (s.node[j].power == SIM_PS_FAULT) rep->drive_fault_mask |= 1u << j;
-    }
-    for (unsigned b = 0; b < s.set.n; ++b) {
-        rep->rx_undecodable += arm_can_bus_rx_undecodable(&s.set.bus[b]);
-        rep->rx_kernel_drops += arm_can_bus_rx_kernel_drops(&s.set.bus[b]);
-    }
-    rep->n_buses = s.set.n;
-    rep->wall_s = (double)(mono_ns() - t0) * 1e-9;
-    sim_telemetry_event(tel, arm->step_count, "sim", rep->reason[0] ? "fault" : "info",
-                        rep->reason[0] ? rep->reason : "stopped by the master (NMT stop)");
-    arm_can_bus_set_close(&s.set);
+    co_sim_t *s = sim_co_begin(cfg, co, arm, tel, rep, err, errcap);
+    if (s == NULL) return -1;
+    run(s);
+    sim_co_end(s);
     return 0;
 }

@@ -1,3 +1,4 @@
+#define _GNU_SOURCE
 #include "sim_options.h"
 
 #include <errno.h>
@@ -181,6 +182,61 @@ static int sim_inject_overcurrent(void *t, void *c, const argv_opt_t *opt, const
     return 0;
 }
 
+static int node_u32(const char *s, uint32_t *out)
+{
+    char *end = NULL;
+    errno = 0;
+    const unsigned long long v = strtoull(s, &end, 10);
+    if (errno != 0 || end == s || *end != '\0' || s[0] == '-' || v < 1u || v > 0xFFFFFFFFull) return -1;
+    *out = (uint32_t)v;
+    return 0;
+}
+
+/* --node ID[,rated=mNm][,encoder=INC][,gear=M/S]: node ID's dictionary preset (arm_controller's
+ * --node syntax: the arm's drive table, python -m gen.drives). */
+static int sim_node(void *t, void *c, const argv_opt_t *opt, const char *v, char *err, unsigned long errcap)
+{
+    sim_options_t *o = t;
+    (void)c;
+    char buf[256];
+    if (strlen(v) >= sizeof(buf)) {
+        snprintf(err, errcap, "%s '%.40s...': too long", opt->name, v);
+        return -1;
+    }
+    strcpy(buf, v);
+    char *save = NULL;
+    char *tok = strtok_r(buf, ",", &save);
+    uint32_t id = 0;
+    if (tok == NULL || node_u32(tok, &id) != 0 || id > SIM_MAX_JOINTS) {
+        snprintf(err, errcap, "%s '%s': the node id must be a drive, 1..%d", opt->name, v, SIM_MAX_JOINTS);
+        return -1;
+    }
+    sim_co_preset_t *p = &o->co.node_preset[id - 1u];
+    while ((tok = strtok_r(NULL, ",", &save)) != NULL) {
+        char *eq = strchr(tok, '=');
+        char *slash = eq != NULL ? strchr(eq, '/') : NULL;
+        int bad = eq == NULL;
+        if (!bad) *eq = '\0';
+        if (bad) {
+        } else if (strcmp(tok, "rated") == 0) {
+            bad = node_u32(eq + 1, &p->rated_torque_mnm);
+        } else if (strcmp(tok, "encoder") == 0) {
+            bad = node_u32(eq + 1, &p->encoder_increments);
+        } else if (strcmp(tok, "gear") == 0 && slash != NULL) {
+            *slash = '\0';
+            bad = node_u32(eq + 1, &p->gear_motor) || node_u32(slash + 1, &p->gear_shaft);
+        } else {
+            bad = 1;
+        }
+        if (bad) {
+            snprintf(err, errcap, "%s '%s': expected ID[,rated=mNm][,encoder=INC][,gear=M/S], whole numbers >= 1",
+                     opt->name, v);
+            return -1;
+        }
+    }
+    return 0;
+}
+
 #define ROW(...) ARGV_ROW(sim_options_t, __VA_ARGS__)
 static const argv_opt_t k_options[] = {ARM_SIMULATOR_OPTIONS(ROW, ARGV_SPECIAL_ROW)};
 enum { ARM_SIMULATOR_OPTIONS(ARGV_ID, ARGV_ID) ARGV_COUNT };
@@ -206,7 +262,7 @@ int sim_options_parse(int argc, char **argv, sim_options_t *o, char *err, unsign
     }
     if (prc != 0) return -1;
     o->co_given = given[ARGV_OPT_RATED_TORQUE_MNM] || given[ARGV_OPT_ENCODER_INCREMENTS] || given[ARGV_OPT_OD_GEAR_RATIO] ||
-                  given[ARGV_OPT_INJECT_OVERCURRENT];
+                  given[ARGV_OPT_INJECT_OVERCURRENT] || given[ARGV_OPT_NODE];
     if (o->n_bus_args == 0u) {
         snprintf(o->bus_args[0], ARM_CAN_BUS_SPEC_MAX, "%s", ARM_P_SIMULATOR_BUS_DEFAULT);
         o->n_bus_args = 1u;

@@ -280,6 +280,17 @@ def test_arm_overrides_preset_the_scaling(rig: Rig) -> None:
     assert node.sdo[0x6091][1].raw == 50 and node.sdo[0x6091][2].raw == 1
 
 
+@pytest.mark.parametrize("rig", [["--rated-torque-mnm", "100000", "--node", "1,rated=28000,encoder=4096,gear=160/1",
+                                  "--node", "2,rated=5000"]], indirect=True)
+def test_a_nodes_own_preset_from_the_drive_table(rig: Rig) -> None:
+    """--node (the arm's drive table, as armctl hil passes it): node 1's own scaling over every
+    node's --rated-torque-mnm; node 2's preset is not node 1's."""
+    node = rig.node
+    assert node.sdo[0x6076].raw == 28000
+    assert node.sdo[0x608F][1].raw == 4096
+    assert node.sdo[0x6091][1].raw == 160 and node.sdo[0x6091][2].raw == 1
+
+
 def test_nmt_resets_restore_defaults(rig: Rig) -> None:
     node = rig.node
     bootups = _bootups(rig.net, node.id)
@@ -296,6 +307,9 @@ def test_nmt_resets_restore_defaults(rig: Rig) -> None:
 
 @pytest.mark.parametrize(("args", "needle"), [
     (["--protocol", "ethercat"], "--protocol: 'ethercat' is not arm or canopen"),
+    (["--node", "1,rated=5"], "only with --protocol canopen"),
+    (["--protocol", "canopen", "--node", "17"], "--node '17': the node id must be a drive, 1..16"),
+    (["--protocol", "canopen", "--node", "1,speed=3"], "--node '1,speed=3': expected ID[,rated=mNm]"),
     (["--od-gear-ratio", "50:1"], "only with --protocol canopen"),
     (["--protocol", "canopen", "--od-gear-ratio", "50:0"], "--od-gear-ratio: '50:0' is not MOTOR:SHAFT"),
     (["--protocol", "canopen", "--inject-overcurrent", "0:1"], "--inject-overcurrent: '0:1' is not NODE:TIME"),

@@ -439,6 +439,81 @@ def test_controller_runs_on_localnode_drives(build_dir: Path, udp_port: int, tmp
     assert sync_lengths == {0}  # CiA 301 SYNC without a counter
 
 
+def _controller_on_localnodes(build_dir: Path, port: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                              drives: dict[int, Cia402Drive], emcy_at: tuple[int, int, int] | None = None,
+                              duration: str = "0.5") -> tuple[subprocess.CompletedProcess[str], dict]:
+    """arm_controller --protocol canopen on six LocalNodes that answer each SYNC with TPDO1 and
+    TPDO2; emcy_at = (node, SYNC number, code): that node faults then (EMCY, statusword fault)."""
+    ctl = build_dir / "firmware" / "arm_controller"
+    if not ctl.exists():
+        pytest.skip(f"{ctl} not built")
+    net = _loopback_network(monkeypatch, port)
+    summary = tmp_path / "controller.json"
+    syncs = [0]
+    pending = {i: 0 for i in drives}  # the latest RPDO1 torque, applied at the next SYNC (type 1)
+    try:
+        for i, d in drives.items():
+            net.add_node(d.node)
+
+            def on_rpdo(can_id: int, data: bytes, ts: float, i: int = i) -> None:
+                pending[i] = struct.unpack("<Hh", data)[1]
+
+            net.subscribe(0x200 + i, on_rpdo)
+
+        def on_sync(can_id: int, data: bytes, ts: float) -> None:
+            syncs[0] += 1
+            for i, d in drives.items():
+                if d.node.nmt.state != "OPERATIONAL":
+                    continue
+                if emcy_at is not None and emcy_at[0] == i and syncs[0] == emcy_at[1]:
+                    d.sw = 0x0008  # fault, torque off
+                    net.send_message(0x080 + i, struct.pack("<HB5x", emcy_at[2], 0x11))
+                net.send_message(0x180 + i, struct.pack("<ii", 1000 * i, 0))
+                net.send_message(0x280 + i, struct.pack("<hH", 0 if d.sw & 0x08 else pending[i], d.sw))
+
+        net.subscribe(0x080, on_sync)
+        p = subprocess.run([str(ctl), "--protocol", "canopen", "--bus", f"udp:{GROUP}:{port}", "--mode", "lockstep",
+                            "--duration", duration, "--ref-hold", "0.1", "--lcm-url", "", "--boot-timeout", "5",
+                            "--summary", str(summary)], capture_output=True, text=True, timeout=300)
+    finally:
+        for d in drives.values():
+            d.node.nmt.stop_heartbeat()
+        net.disconnect()
+    return p, json.loads(summary.read_text())
+
+
+@pytest.mark.parametrize("bad,fault,index", [
+    ({"device_type": 0x00010191}, "wrong_value", 0x1000),   # a CiA 401 I/O module, not a servo drive
+    ({"reject_mode": True}, "sdo_abort", 0x6060),            # CST refused: abort 0x06090030
+])
+def test_controller_names_a_drive_it_cannot_configure(build_dir: Path, udp_port: int, tmp_path: Path,
+                                                      monkeypatch: pytest.MonkeyPatch, bad: dict, fault: str,
+                                                      index: int) -> None:
+    """Through the whole controller: node 3 is refused at boot, by name; no drive is left enabled
+    (the others are stopped), exit 3 (boot failed)."""
+    drives = {i: Cia402Drive(i, **(bad if i == 3 else {})) for i in range(1, 7)}
+    p, s = _controller_on_localnodes(build_dir, udp_port, tmp_path, monkeypatch, drives)
+    assert p.returncode == 3, p.stderr
+    f = s["canopen"]["fault"]
+    assert (f["code"], f["node"], f["index"]) == (fault, 3, index), f
+    assert s["reason"].startswith(f"boot: canopen: {fault}: node 3: 0x{index:04x}:00"), s["reason"]
+    if fault == "sdo_abort":
+        assert f["abort_code"] == 0x06090030
+    assert s["final_state"] == "init" and s["steps_done"] == 0
+    assert all(d.node.nmt.state == "STOPPED" for d in drives.values())  # NMT stop to every drive
+
+
+def test_controller_safe_stops_on_a_lost_heartbeat_emcy(build_dir: Path, udp_port: int, tmp_path: Path,
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Mid-run, drive 5's consumer misses the master's heartbeat (CiA 301: EMCY 0x8130, fault,
+    torque off): the controller names it, stops safely, exit 4."""
+    drives = {i: Cia402Drive(i) for i in range(1, 7)}
+    p, s = _controller_on_localnodes(build_dir, udp_port, tmp_path, monkeypatch, drives, emcy_at=(5, 150, 0x8130))
+    assert p.returncode == 4, p.stderr
+    assert "drive 5 reports a fault (EMCY 0x8130)" in s["reason"], s["reason"]
+    assert s["final_state"] in ("safe_stop", "fault") and 0 < s["steps_done"] < s["steps_requested"]
+
+
 def test_controller_protocol_option_is_checked(build_dir: Path) -> None:
     ctl = build_dir / "firmware" / "arm_controller"
     if not ctl.exists():
@@ -477,6 +552,10 @@ def test_drive_config_rule_and_overrides(tmp_path: Path) -> None:
     ('[joint.j2]\nnode = 1\n', "node: node id 1 is used twice on bus can0"),
     ('[pdo]\nrpdo1 = ["0x6040:0:16"]\n', "pdo.rpdo1: the codec (firmware/canopen co_pdo.c) packs"),
     ('[joint.j3]\nrated_torque_nm = -1\n', "joint.j3.rated_torque_nm: expected a torque in N m"),
+    ('[pdo]\ntransmission = { tpdo1 = 2 }\n', "pdo.transmission.tpdo1: expected 1 (the joint state, every SYNC)"),
+    ('[pdo]\ntransmission = { tpdo2 = 254 }\n', "pdo.transmission.tpdo2: expected 1..240 (every n-th SYNC)"),
+    ('[pdo]\ntransmission = { rpdo1 = 250 }\n', "pdo.transmission.rpdo1: expected 1..240, 254 or 255"),
+    ('[pdo]\ntransmission = { tpdo3 = 1 }\n', "pdo.transmission: expected a table of rpdo1, tpdo1, tpdo2"),
 ])
 def test_drive_config_bad_input_is_one_line(tmp_path: Path, body: str, message: str) -> None:
     f = tmp_path / "drives.toml"
@@ -516,4 +595,10 @@ def test_readme_bus_load_table_is_what_busload_computes() -> None:
             cells = " / ".join(f"{100 * canopen_load(bus, n, rate):.1f}" for n in (1, 2, 3, 6)) + " %"
             assert cells in row, (label, rate, cells)
     assert canopen_drives_per_bus(classic, 1000) == 1 and canopen_drives_per_bus(classic, 500) == 4
+    # TPDO2 every 2nd SYNC (firmware/protocol/drives_classic.toml): two drives per classic bus at 1 kHz
+    every = {"tpdo2": 2}
+    row = next(ln for ln in readme.splitlines() if ln.startswith("| classic 1 Mbit/s, TPDO2 every 2nd SYNC |"))
+    cells = " / ".join(f"{100 * canopen_load(classic, n, 1000, every=every):.1f}" for n in (1, 2, 3, 6)) + " %"
+    assert cells in row, cells
+    assert canopen_drives_per_bus(classic, 1000, every=every) == 2
     assert canopen_drives_per_bus(fd, 1000) == 4 and canopen_drives_per_bus(fd, 500) == 8

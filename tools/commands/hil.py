@@ -16,7 +16,7 @@ from tools.methods import method_names
 from tools.run.verdict import DEFAULT_MAX_ERROR_DEG, FOLLOWING_ERROR_STOP_DEG
 
 _PARSER: argparse.ArgumentParser | None = None  # hil's own, to read its arguments again for the VM
-PATH_OPTIONS = ("out", "topology", "model", "arm", "design", "config")  # dests whose values are paths
+PATH_OPTIONS = ("out", "topology", "model", "arm", "design", "config", "drive_config")  # dests whose values are paths
 
 
 def _float_list(text: str) -> list[float]:
@@ -82,6 +82,16 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
                         "log format (canplayer, python-can's LogReader, cantools decode)")
     h.add_argument("--drives", choices=("ideal", "realistic"), default=param("hil", "drives").default,
                    help="the emulated drives' sensing and torque path (host_sim/README.md) [ideal]")
+    from tools.run.hil import DEFAULT_PROTOCOL, PROTOCOLS
+
+    h.add_argument("--protocol", choices=PROTOCOLS, default=DEFAULT_PROTOCOL,
+                   help="what the drives speak: arm (this project's frames) or canopen (CiA 301/402 drives booted "
+                        f"over SDO; README \"Real drives\") [{DEFAULT_PROTOCOL}]")
+    h.add_argument("--rate", type=float, default=None, metavar="HZ",
+                   help="the loop rate (the controller's --rate; a design is discretised for one rate) [the arm's]")
+    h.add_argument("--drive-config", type=Path, default=None, metavar="FILE",
+                   help="canopen: the CiA 402 drive configuration, a file like firmware/protocol/drives.toml "
+                        "[the arm's: its arm file's `drives`, else that file]")
     add_arm_arguments(h)
     h.set_defaults(run=run)
     _PARSER = h
@@ -203,12 +213,13 @@ def run(ns: argparse.Namespace) -> int:
     for w in warnings:
         print(f"armctl hil: {w}", file=sys.stderr)
     ref = ("--ref-amp", ",".join(f"{a:g}" for a in amp), "--ref-freq", ",".join(f"{f:g}" for f in freq),
-           "--ref-hold", f"{ns.ref_hold:g}")
+           "--ref-hold", f"{ns.ref_hold:g}", *(("--rate", f"{ns.rate:g}") if ns.rate is not None else ()))
     result = run_hil(HilOptions(out=ns.out, duration_s=ns.duration, method=ns.method, mode=ns.mode, arm=arm,
                              bus=ns.bus, topology=ns.topology, bus_timing=ns.bus_timing, controller_args=ref,
                              capture=ns.capture,
                              bounds=Bounds(ns.max_error_deg, ns.max_saturated_fraction),
-                             drives=DRIVE_PRESETS[ns.drives], can_port=ns.can_port))
+                             drives=DRIVE_PRESETS[ns.drives], can_port=ns.can_port, protocol=ns.protocol,
+                             drive_config=ns.drive_config))
     print(f"bus: {result['environment']['bus_choice']}")
     for name, pct in result["environment"]["bus_load_pct"].items():
         if pct > 100.0:

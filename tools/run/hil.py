@@ -23,7 +23,7 @@ from host_sim.drive_model import DriveModel
 from host_sim.launch import sim_argv
 from gen.lib import busload
 from tools.build.arm import DEFAULT_ARM, ArmChoiceError, ArmRef, arm_build_dir, arm_info, prepared_model
-from gen.lib.params import constant, default as param_default
+from gen.lib.params import constant, default as param_default, param
 from gen.lib.paths import REPO, controller_binary, logger_binary
 from tools.run import procs as procs_mod
 from tools.run.run_analysis import analyse
@@ -37,6 +37,13 @@ CONTROLLER_DEFAULT_HOLD_S: float = param_default("controller", "ref-hold")
 # within tens of microseconds, sooner than a sleeping process is woken on a VM: measured on this
 # 2-core machine, 10-11x real time without, 11-14x with (host_sim/README.md).
 LOCKSTEP_SPIN_US = 50
+
+
+# What the drives speak (README "Real drives"): this project's frames, or CANopen CiA 402. The one
+# definition of the default is the registry's (firmware/params/params.toml [hil.protocol]): every
+# run passes --protocol to both programs.
+PROTOCOLS = ("arm", "canopen")
+DEFAULT_PROTOCOL: str = param("hil", "protocol").default
 
 
 @dataclass
@@ -83,6 +90,9 @@ class HilOptions:
     # instead of the build's own, and what run.json records as its design (default: the build's).
     design_file: Path | None = None
     design_record: dict[str, Any] | None = None
+    protocol: str = DEFAULT_PROTOCOL
+    # canopen: the arm's CiA 402 drive configuration (a drives.toml; None: the arm's, gen/drives.py)
+    drive_config: Path | None = None
 
 
 class HilError(RuntimeError):
@@ -260,9 +270,13 @@ def bus_args(kind: str, can_port: int, topology: list[busload.Bus]) -> list[str]
     return out
 
 
-def topology_load_pct(topology: list[busload.Bus],
-                      rate_hz: float = param_default("controller", "rate")) -> dict[str, float]:
-    """Worst-case load of each bus of the topology at the loop rate (tools/armctl busload)."""
+def topology_load_pct(topology: list[busload.Bus], rate_hz: float = param_default("controller", "rate"),
+                      protocol: str = DEFAULT_PROTOCOL, every: dict[str, int] | None = None) -> dict[str, float]:
+    """Worst-case load of each bus of the topology at the loop rate (tools/armctl busload; CANopen:
+    busload.canopen_load from the contract's PDO mapping and the PDOs' transmission types)."""
+    if protocol == "canopen":
+        return {b.name: round(busload.canopen_load(b, len(b.drives), rate_hz, constant("heartbeat-ms"), every) * 100.0,
+                              2) for b in topology}
     loads = busload.compute(topology, rate_hz, constant("heartbeat-ms"), busload.default_protocol(),
                             max(d for b in topology for d in b.drives))
     return {bl.bus.name: round(bl.load * 100.0, 2) for bl in loads}
@@ -454,6 +468,46 @@ def _wait_sil(opt: HilOptions, sil: subprocess.Popen[bytes], log: Any) -> None:
         raise HilError(f"arm_sil refused its arguments: {_last_line(opt.out / 'sil.log')}")
 
 
+def canopen_args(info: dict[str, Any], drive_config: Path | None) -> tuple[list[str], list[str], dict[str, int]]:
+    """From the arm's drive table (gen/drives.py): arm_controller's --node per joint (joint order)
+    and the PDOs' transmission types; arm_sim's --node presets (the same specs: its drives start
+    with the table's scaling, as drives commissioned for this arm); and those types."""
+    from gen import drives as drives_mod
+
+    try:
+        cfg = drives_mod.load(info, drive_config)
+    except drives_mod.DrivesError as exc:
+        raise HilError(f"drive configuration: {exc}") from None
+    nodes: list[str] = []
+    for d in sorted(cfg.drives, key=lambda d: d.drive):
+        spec = [str(d.node)]
+        if "0x6076" in d.overrides:
+            spec.append(f"rated={d.rated_torque_mnm}")
+        if "0x608F" in d.overrides:
+            spec.append(f"encoder={d.encoder_increments}")
+        if "0x6091" in d.overrides:
+            spec.append(f"gear={d.gear[0]}/{d.gear[1]}")
+        nodes.append(",".join(spec))
+    node_args = [a for n in nodes for a in ("--node", n)]
+    t = cfg.transmission
+    ctl = [*node_args, *(["--rpdo-type", str(t["rpdo1"])] if t["rpdo1"] != 1 else []),
+           *(["--tpdo2-type", str(t["tpdo2"])] if t["tpdo2"] != 1 else [])]
+    return ctl, node_args, t
+
+
+def canopen_record(controller: dict[str, Any]) -> dict[str, Any] | None:
+    """run.json's record of the CANopen boot: its time, first fault, and every SDO write per node."""
+    co = controller.get("canopen")
+    if co is None:
+        return None
+    per_node: dict[str, list[dict[str, Any]]] = {}
+    for w in co.get("sdo_writes", []):
+        per_node.setdefault(str(w["node"]), []).append(
+            {"object": f"0x{w['index']:04X}:{w['sub']:02X}", "index": w["index"], "sub": w["sub"],
+             "value": w["value"], "bytes": w["bytes"]})
+    return {"boot_s": co.get("boot_s"), "fault": co.get("fault"), "sdo_writes": per_node}
+
+
 def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
     started = datetime.now(timezone.utc)
     sil = opt.bus == SIL
@@ -466,6 +520,14 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
         info = arm_info(bdir)
     except ArmChoiceError as exc:
         raise HilError(str(exc)) from exc
+    if opt.protocol not in PROTOCOLS:
+        raise HilError(f"--protocol {opt.protocol}: expected one of {', '.join(PROTOCOLS)}")
+    canopen = opt.protocol == "canopen"
+    if canopen and opt.bus_timing:
+        raise HilError("--bus-timing: not with --protocol canopen (the emulated CiA 402 drives have no bus timing)")
+    if opt.drive_config is not None and not canopen:
+        raise HilError("--drive-config: a CiA 402 drive configuration, for --protocol canopen")
+    node_args, sim_node_args, transmission = canopen_args(info, opt.drive_config) if canopen else ([], [], None)
     topology = load_topology(opt.topology, info)
     substeps = sim_substeps(info, _arg_value(opt.controller_args, "--rate", info["loop_rate_hz"]))
     bus_kind, bus_why = resolve_bus(opt.bus, len(topology))
@@ -493,11 +555,13 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
                         uncertainty=opt.uncertainty, timing=bus_timing_mode(opt.mode) if opt.bus_timing else "off",
                         phys=topology, model=prepared_model(bdir), drives=opt.drives,
                         extra=["--substeps", str(substeps), *([] if sil else sim_mode_args(opt.mode, opt.spin_us)),
-                               *capture_args(opt), *opt.sim_args])
+                               *capture_args(opt), "--protocol", opt.protocol, *sim_node_args,
+                               *opt.sim_args])
     ctl_args = [*opt.controller_cmd_prefix, str(binary), *bus_argv, "--lcm-url", url,
                 "--duration", f"{opt.duration_s:g}", "--method", opt.method, "--mode", opt.mode,
                 "--summary", str(opt.out / "controller_summary.json"), *([] if sil else spin_args(opt.mode, opt.spin_us)),
                 *(["--cpu", str(realtime_cpu(opt))] if opt.mode == "realtime" else []),
+                "--protocol", opt.protocol, *node_args,
                 *reference_args(info, opt.controller_args),
                 *(["--design-file", str(opt.design_file)] if opt.design_file is not None else []), *opt.controller_args]
     if sil:
@@ -522,13 +586,17 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
               "rate_hz": _arg_value(opt.controller_args, "--rate", info["loop_rate_hz"]),
               "controller_args": list(opt.controller_args),
               "uncertainty": opt.uncertainty, "drives": opt.drives.to_dict(),
-              "bus_timing": bus_timing_mode(opt.mode) if opt.bus_timing else "off", **opt.labels}
+              "bus_timing": bus_timing_mode(opt.mode) if opt.bus_timing else "off", "protocol": opt.protocol,
+              **opt.labels}
     run = analyse(opt.out, controller, simulator, config, {
+        "protocol": opt.protocol, "canopen": canopen_record(controller),
         "bus": " ".join(buses), "bus_choice": f"{opt.bus} -> {bus_kind} ({bus_why})",
         "topology": {"file": str(opt.topology) if opt.topology else "the arm's wiring (arm.json)",
                      "buses": [{"name": b.name, "spec": spec.rpartition("@")[0], "kind": b.describe(),
                                 "drives": b.drives} for b, spec in zip(topology, buses)]},
-        "bus_load_pct": topology_load_pct(topology, info["loop_rate_hz"]),
+        "bus_load_pct": topology_load_pct(topology, _arg_value(opt.controller_args, "--rate", info["loop_rate_hz"]),
+                                          opt.protocol, transmission),
+        "canopen_transmission": transmission,
         "lcm_url": url, "wall_s": wall, "simulator_scheduling": sim_scheduling,
         # the simulator's speed: simulated seconds per wall second after boot, and its CPU time
         # per period (arm_sim measures both)

@@ -39,7 +39,7 @@ from gen.lib.locks import flocked
 from tools.run.cluster import Cluster
 from gen.lib.paths import BUILD
 from gen.lib.atomic_output import write_json_atomic, write_text_atomic
-from tools.run.hil import LOCKSTEP_SPIN_US, SIL, HilError, HilOptions, lockstep_spin_us, provenance, run_hil
+from tools.run.hil import DEFAULT_PROTOCOL, LOCKSTEP_SPIN_US, SIL, HilError, HilOptions, lockstep_spin_us, provenance, run_hil
 from tools.run.slots import Slot, acquire_slot
 
 # metric -> the run.json results field a study computes with (per joint, or one number for the arm)
@@ -89,13 +89,17 @@ class RunSpec:
     labels: dict[str, Any] = field(default_factory=dict)
     code: str = ""                     # tools/build/code_identity.py: a kept run of other code is run again
     bus: str = "udp"                   # tools/run/hil.py's --bus: sil (one process) or a CAN bus
+    protocol: str = DEFAULT_PROTOCOL   # what the drives speak (tools/run/hil.py PROTOCOLS)
 
     def key(self) -> dict[str, Any]:
         """What decides the result (not where it is written, nor the bus it ran on: software in the
-        loop and lockstep HIL give the same results, tests/python/test_sil.py)."""
+        loop and lockstep HIL give the same results, tests/python/test_sil.py). The default
+        protocol is left out, so the keys of runs kept before it existed still match."""
         d = asdict(self)
         for k in ("out", "keep_log", "labels", "bus"):
             d.pop(k)
+        if d["protocol"] == DEFAULT_PROTOCOL:
+            d.pop("protocol")
         return d
 
     def arm(self) -> ArmRef:
@@ -301,7 +305,7 @@ def _run(spec: RunSpec, arm: ArmRef, slot: Slot, out: Path, spin_us: float,
                               controller_args=spec.controller_args, uncertainty=spec.uncertainty,
                               drives=DriveModel(**spec.drives) if spec.drives else DriveModel(),
                               bus_timing=spec.bus_timing, can_port=slot.can_port, lcm_port=slot.lcm_port,
-                              labels=dict(spec.labels), bus=spec.bus,
+                              labels=dict(spec.labels), bus=spec.bus, protocol=spec.protocol,
                               # the runs that keep their telemetry keep their bus too (gzip: 0.6 MB a 10 s run)
                               capture=spec.keep_log, compress_capture=True, spin_us=spin_us, **loaded))
 

@@ -91,13 +91,16 @@ class Scenario:
     # turns them into the arm's values in `uncertainty`, and keeps them here for the report
     per_joint: dict[str, Any] = field(default_factory=dict)
     resolved: bool = False
+    protocol: str = "arm"  # what the drives speak (tools/run/hil.py PROTOCOLS); the arm protocol by default
 
     def as_dict(self) -> dict[str, Any]:
         """The scenario as it runs (what the tuning key and the report hold): only for an arm."""
         if self.per_joint and not self.resolved:
             raise RuntimeError(f"scenario.{self.name}: its per-joint values are for an arm: study_config.for_arm first")
-        return {"name": self.name, "description": self.description, "uncertainty": self.uncertainty,
-                "drives": self.drives.to_dict(), "bus_timing": self.bus_timing}
+        d = {"name": self.name, "description": self.description, "uncertainty": self.uncertainty,
+             "drives": self.drives.to_dict(), "bus_timing": self.bus_timing}
+        # only another protocol is recorded: the tuning keys of arm-protocol scenarios stay as they were
+        return d if self.protocol == "arm" else {**d, "protocol": self.protocol}
 
 
 @dataclass
@@ -192,10 +195,10 @@ def _scenario(name: str, d: Any) -> Scenario:
     where = f"scenario.{name}"
     if not isinstance(d, dict):
         raise StudyConfigError(f"{where}: expected a table")
-    unknown = set(d) - {"description", "uncertainty", "drives", "bus_timing"}
+    unknown = set(d) - {"description", "uncertainty", "drives", "bus_timing", "protocol"}
     if unknown:
         raise StudyConfigError(f"{where}: unknown field(s) {sorted(unknown)} (known: bus_timing, description, "
-                               "drives, uncertainty)")
+                               "drives, protocol, uncertainty)")
     unc = dict(_get(d, "uncertainty", where, dict, {}))
     if "seed" in unc:
         raise StudyConfigError(f"{where}.uncertainty.seed: the study's seeds set it")
@@ -216,7 +219,12 @@ def _scenario(name: str, d: Any) -> Scenario:
         except ValueError as exc:
             raise StudyConfigError(str(exc)) from exc
     bus_timing = _get(d, "bus_timing", where, bool, False)
-    return Scenario(name, str(d.get("description", "")), unc, drives, bus_timing, per_joint)
+    protocol = _get(d, "protocol", where, str, "arm")
+    if protocol not in ("arm", "canopen"):
+        raise StudyConfigError(f"{where}.protocol: '{protocol}' is not arm or canopen")
+    if protocol == "canopen" and bus_timing:
+        raise StudyConfigError(f"{where}: bus_timing with protocol canopen: the CiA 402 drives have no bus timing")
+    return Scenario(name, str(d.get("description", "")), unc, drives, bus_timing, per_joint, protocol=protocol)
 
 
 def _coefficients(v: Any, where: str) -> list[Any]:

@@ -155,7 +155,7 @@ def trial_spec(setup: TuneSetup, method: str, scenario: Scenario, knobs: dict[st
                    uncertainty={**scenario.uncertainty, "seed": seed}, drives=scenario.drives.to_dict(),
                    bus_timing=scenario.bus_timing, design_text=text, keep_log=keep_log,
                    labels={"method": method, "scenario": scenario.name, "seed": seed, "knobs": knobs},
-                   code=code_identity(), bus=setup.bus, **setup.arm_args)
+                   code=code_identity(), bus=setup.bus, protocol=scenario.protocol, **setup.arm_args)
 
 
 STORAGE = "optuna.db"  # in the tuning's output folder: optuna-dashboard sqlite:///.../optuna.db

@@ -14,9 +14,9 @@
 void arm_co_boot_default_config(arm_co_boot_config_t *cfg)
 {
     *cfg = (arm_co_boot_config_t){0};
-    cfg->rpdo1 = (arm_co_pdo_map_t){2u, {0x60400010u, 0x60710010u, 0u, 0u}};
-    cfg->tpdo1 = (arm_co_pdo_map_t){2u, {0x60640020u, 0x606C0020u, 0u, 0u}};
-    cfg->tpdo2 = (arm_co_pdo_map_t){2u, {0x60770010u, 0x60410010u, 0u, 0u}};
+    cfg->rpdo1 = (arm_co_pdo_map_t){2u, {0x60400010u, 0x60710010u, 0u, 0u}, 1u};
+    cfg->tpdo1 = (arm_co_pdo_map_t){2u, {0x60640020u, 0x606C0020u, 0u, 0u}, 1u};
+    cfg->tpdo2 = (arm_co_pdo_map_t){2u, {0x60770010u, 0x60410010u, 0u, 0u}, 1u};
     cfg->cycle_us = 1000u;
     cfg->heartbeat_ms = 100u;
     cfg->master_id = 0x7Fu;
@@ -57,7 +57,7 @@ static void add_pdo(arm_co_node_t *n, uint16_t comm, uint16_t map, uint32_t cob,
         add(n, ARM_CO_ACT_WRITE, map, (uint8_t)(i + 1u), 4u, m->entry[i], 0u);
     }
     add(n, ARM_CO_ACT_WRITE, map, 0u, 1u, m->n, 0u);
-    add(n, ARM_CO_ACT_WRITE, comm, 2u, 1u, 1u, 0u); /* transmission type 1: every SYNC */
+    add(n, ARM_CO_ACT_WRITE, comm, 2u, 1u, m->trans != 0u ? m->trans : 1u, 0u); /* [1: every SYNC] */
     add(n, ARM_CO_ACT_WRITE, comm, 1u, 4u, cob, 0u);
 }
 

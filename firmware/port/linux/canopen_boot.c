@@ -56,66 +56,6 @@ static int parse_u32(const char *s, uint32_t lo, uint32_t hi, uint32_t *out)
     return 0;
 }
 
-/* "ID[,key=value]..." into nc; -1 with a message naming the option's field. */
-static int parse_node(const char *arg, arm_co_node_config_t *nc, char *err, size_t cap)
-{
-    char buf[256];
-    if (strlen(arg) >= sizeof(buf)) {
-        snprintf(err, cap, "--node '%.40s...': too long", arg);
-        return -1;
-    }
-    strcpy(buf, arg);
-    *nc = (arm_co_node_config_t){0};
-    char *save = NULL;
-    char *tok = strtok_r(buf, ",", &save);
-    uint32_t v = 0;
-    if (tok == NULL || parse_u32(tok, 1u, 127u, &v) != 0) {
-        snprintf(err, cap, "--node '%s': the node id must be 1..127", arg);
-        return -1;
-    }
-    nc->node_id = (uint8_t)v;
-    while ((tok = strtok_r(NULL, ",", &save)) != NULL) {
-        char *eq = strchr(tok, '=');
-        if (eq == NULL) {
-            snprintf(err, cap, "--node '%s': '%s' is not key=value", arg, tok);
-            return -1;
-        }
-        *eq = '\0';
-        const char *val = eq + 1;
-        int bad = 0;
-        if (strcmp(tok, "rated") == 0) {
-            bad = parse_u32(val, 1u, UINT32_MAX, &nc->rated_torque_mnm);
-            nc->overrides |= ARM_CO_OVERRIDE_RATED;
-        } else if (strcmp(tok, "encoder") == 0) {
-            bad = parse_u32(val, 1u, UINT32_MAX, &nc->encoder_increments);
-            nc->overrides |= ARM_CO_OVERRIDE_ENCODER;
-        } else if (strcmp(tok, "gear") == 0) {
-            char *slash = strchr(val, '/');
-            if (slash == NULL) {
-                bad = -1;
-            } else {
-                *slash = '\0';
-                bad = parse_u32(val, 1u, UINT32_MAX, &nc->gear_motor_revs) ||
-                      parse_u32(slash + 1, 1u, UINT32_MAX, &nc->gear_shaft_revs);
-            }
-            nc->overrides |= ARM_CO_OVERRIDE_GEAR;
-        } else if (strcmp(tok, "vendor") == 0) {
-            bad = parse_u32(val, 0u, UINT32_MAX, &nc->vendor_id);
-        } else if (strcmp(tok, "product") == 0) {
-            bad = parse_u32(val, 0u, UINT32_MAX, &nc->product_code);
-        } else {
-            snprintf(err, cap, "--node '%s': unknown field '%s' (rated, encoder, gear, vendor, product)", arg, tok);
-            return -1;
-        }
-        if (bad) {
-            snprintf(err, cap, "--node '%s': field %s: expected %s", arg, tok,
-                     strcmp(tok, "gear") == 0 ? "MOTOR/SHAFT revolutions, both >= 1" : "an unsigned 32-bit number");
-            return -1;
-        }
-    }
-    return 0;
-}
-
 typedef struct {
     const char *bus;
     arm_co_boot_config_t cfg;
@@ -168,7 +108,7 @@ static int parse_args(int argc, char **argv, boot_options_t *o, char *err, size_
                 snprintf(err, cap, "--node: at most %u nodes on one bus", ARM_CO_BOOT_MAX_NODES);
                 return -1;
             }
-            if (parse_node(v, &o->cfg.node[o->cfg.n_nodes], err, cap) != 0) {
+            if (canopen_parse_node(v, &o->cfg.node[o->cfg.n_nodes], err, cap) != 0) {
                 return -1;
             }
             for (unsigned k = 0; k < o->cfg.n_nodes; ++k) {

@@ -1,7 +1,12 @@
 /* The CANopen master's faults as one line (canopen_text.h). */
+#define _POSIX_C_SOURCE 200809L
 #include "canopen_text.h"
 
+#include <errno.h>
+#include <stdint.h>
 #include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
 
 #include "arm/co_sdo.h"
 
@@ -39,3 +44,76 @@ void canopen_fault_text(const arm_co_fault_t *f, char *out, size_t cap)
         break;
     }
 }
+
+static int node_u32(const char *s, uint32_t lo, uint32_t hi, uint32_t *out)
+{
+    char *end = NULL;
+    errno = 0;
+    const unsigned long long v = strtoull(s, &end, 0);
+    if (errno != 0 || end == s || *end != '\0' || s[0] == '-' || v < lo || v > hi) {
+        return -1;
+    }
+    *out = (uint32_t)v;
+    return 0;
+}
+
+/* "ID[,key=value]..." into nc; -1 with a message naming the option's field. */
+int canopen_parse_node(const char *arg, arm_co_node_config_t *nc, char *err, size_t cap)
+{
+    char buf[256];
+    if (strlen(arg) >= sizeof(buf)) {
+        snprintf(err, cap, "--node '%.40s...': too long", arg);
+        return -1;
+    }
+    strcpy(buf, arg);
+    *nc = (arm_co_node_config_t){0};
+    char *save = NULL;
+    char *tok = strtok_r(buf, ",", &save);
+    uint32_t v = 0;
+    if (tok == NULL || node_u32(tok, 1u, 127u, &v) != 0) {
+        snprintf(err, cap, "--node '%s': the node id must be 1..127", arg);
+        return -1;
+    }
+    nc->node_id = (uint8_t)v;
+    while ((tok = strtok_r(NULL, ",", &save)) != NULL) {
+        char *eq = strchr(tok, '=');
+        if (eq == NULL) {
+            snprintf(err, cap, "--node '%s': '%s' is not key=value", arg, tok);
+            return -1;
+        }
+        *eq = '\0';
+        const char *val = eq + 1;
+        int bad = 0;
+        if (strcmp(tok, "rated") == 0) {
+            bad = node_u32(val, 1u, UINT32_MAX, &nc->rated_torque_mnm);
+            nc->overrides |= ARM_CO_OVERRIDE_RATED;
+        } else if (strcmp(tok, "encoder") == 0) {
+            bad = node_u32(val, 1u, UINT32_MAX, &nc->encoder_increments);
+            nc->overrides |= ARM_CO_OVERRIDE_ENCODER;
+        } else if (strcmp(tok, "gear") == 0) {
+            char *slash = strchr(val, '/');
+            if (slash == NULL) {
+                bad = -1;
+            } else {
+                *slash = '\0';
+                bad = node_u32(val, 1u, UINT32_MAX, &nc->gear_motor_revs) ||
+                      node_u32(slash + 1, 1u, UINT32_MAX, &nc->gear_shaft_revs);
+            }
+            nc->overrides |= ARM_CO_OVERRIDE_GEAR;
+        } else if (strcmp(tok, "vendor") == 0) {
+            bad = node_u32(val, 0u, UINT32_MAX, &nc->vendor_id);
+        } else if (strcmp(tok, "product") == 0) {
+            bad = node_u32(val, 0u, UINT32_MAX, &nc->product_code);
+        } else {
+            snprintf(err, cap, "--node '%s': unknown field '%s' (rated, encoder, gear, vendor, product)", arg, tok);
+            return -1;
+        }
+        if (bad) {
+            snprintf(err, cap, "--node '%s': field %s: expected %s", arg, tok,
+                     strcmp(tok, "gear") == 0 ? "MOTOR/SHAFT revolutions, both >= 1" : "an unsigned 32-bit number");
+            return -1;
+        }
+    }
+    return 0;
+}
+

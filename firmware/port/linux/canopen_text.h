@@ -9,4 +9,9 @@
 /* "node 2: 0x6060:00: SDO abort 0x06090030 (value range of parameter exceeded)" and the like. */
 void canopen_fault_text(const arm_co_fault_t *f, char *out, size_t cap);
 
+/* --node "ID[,rated=mNm][,encoder=INC][,gear=M/S][,vendor=X][,product=X]" into nc (the EDS
+ * defaults it overrides flagged); -1 with one line naming the field (arm_canopen_boot,
+ * arm_controller). */
+int canopen_parse_node(const char *arg, arm_co_node_config_t *nc, char *err, size_t cap);
+
 #endif

@@ -37,6 +37,10 @@ typedef struct {
     arm_co_units_t units[ARM_N_JOINTS];
     uint32_t tpdo1_mask, tpdo2_mask;
     int64_t next_heartbeat_ns;
+    /* TPDO2 every tpdo2_every-th SYNC (its transmission type); the joints whose TPDO2 has come */
+    uint32_t tpdo2_every;
+    uint32_t period;
+    uint32_t tpdo2_seen;
 } link_t;
 
 #define CANOPEN_MASTER_ID 0x7Fu
@@ -63,13 +67,19 @@ static int canopen_rx(link_t *l, const arm_can_frame_t *f)
     } else if (arm_co_unpack_tpdo2((uint8_t)node, f, &tq, &sw) == 0) {
         if (l->tpdo2_mask & (1u << j)) d->duplicate_mask |= 1u << j;
         l->tpdo2_mask |= 1u << j;
+        l->tpdo2_seen |= 1u << j;
         d->tau_measured[j] = arm_co_permille_to_torque(&l->units[j], tq);
         d->statusword[j] = sw;
     } else {
         d->rx.bad_length++;
         return 1;
     }
-    if ((l->tpdo1_mask & l->tpdo2_mask & (1u << j)) != 0u && (d->fresh_mask & (1u << j)) == 0u) {
+    /* TPDO2 of type n goes at every n-th SYNC after NMT start (the first SYNC is period 0): on the
+     * other periods the last one's torque and statusword stand; on its own it is waited for, so
+     * the state is the same however the frames interleave */
+    const int tpdo2_due = (l->period + 1u) % l->tpdo2_every == 0u;
+    const int tpdo2_ok = (l->tpdo2_mask & (1u << j)) != 0u || !tpdo2_due;
+    if ((l->tpdo1_mask & (1u << j)) != 0u && tpdo2_ok && (d->fresh_mask & (1u << j)) == 0u) {
         d->fresh_mask |= 1u << j;
         d->rx.state++;
     }
@@ -236,9 +246,30 @@ static int boot(link_t *l, const options_t *opt, const arm_robot_model_t *model,
 /* --protocol canopen: the CANopen master boots every bus's drives side by side (arm/co_boot.h),
  * to operation enabled in CST with zero torque. Node = drive number; rated torque = the joint's
  * torque limit (written where it differs from the EDS), encoder and gear the EDS's. */
+static arm_co_boot_t co[ARM_CAN_BUS_SET_MAX];
+
+static int boot_canopen_run(link_t *l, const options_t *opt, const arm_robot_model_t *model, telemetry_t *telem);
+
+/* The boot, and its record for the summary (run.json): each bus's SDO writes, the first fault. */
 static int boot_canopen(link_t *l, const options_t *opt, const arm_robot_model_t *model, telemetry_t *telem)
 {
-    static arm_co_boot_t co[ARM_CAN_BUS_SET_MAX];
+    memset(co, 0, sizeof(co));
+    const int64_t start = now_ns();
+    const int rc = boot_canopen_run(l, opt, model, telem);
+    run_report_t *r = l->report;
+    r->canopen = 1;
+    r->co_boot_s = (double)(now_ns() - start) * 1e-9;
+    for (unsigned b = 0; b < l->buses.n; ++b) {
+        for (unsigned i = 0; i < co[b].n_log && r->n_co_writes < ARM_CAN_BUS_SET_MAX * ARM_CO_BOOT_LOG_MAX; ++i) {
+            r->co_writes[r->n_co_writes++] = co[b].log[i];
+        }
+        if (r->co_fault.code == ARM_CO_FAULT_NONE) r->co_fault = co[b].fault;
+    }
+    return rc;
+}
+
+static int boot_canopen_run(link_t *l, const options_t *opt, const arm_robot_model_t *model, telemetry_t *telem)
+{
     const int64_t start = now_ns();
     const int64_t give_up = start + (int64_t)(opt->boot_timeout_s * 1e9);
     for (unsigned b = 0; b < l->buses.n; ++b) {
@@ -247,14 +278,31 @@ static int boot_canopen(link_t *l, const options_t *opt, const arm_robot_model_t
         cfg.cycle_us = (uint32_t)(1e6 / opt->rate_hz + 0.5);
         cfg.heartbeat_ms = CANOPEN_HEARTBEAT_MS;
         cfg.master_id = CANOPEN_MASTER_ID;
+        cfg.rpdo1.trans = opt->rpdo_type;
+        cfg.tpdo2.trans = opt->tpdo2_type;
         for (int j = 0; j < ARM_N_JOINTS; ++j) {
             if (l->bus_of[j] != (int)b || cfg.n_nodes >= ARM_CO_BOOT_MAX_NODES) continue;
-            const uint32_t rated = (uint32_t)(model->link[j].torque_limit * 1000.0f + 0.5f);
             arm_co_node_config_t *nc = &cfg.node[cfg.n_nodes++];
-            *nc = (arm_co_node_config_t){.node_id = (uint8_t)(j + 1), .rated_torque_mnm = rated};
-            nc->overrides = rated != ARM_CO_EDS_RATED_TORQUE_MNM ? ARM_CO_OVERRIDE_RATED : 0u;
-            (void)arm_co_units_init(&l->units[j], rated ? rated : 1u, ARM_CO_EDS_ENCODER_INCREMENTS,
-                                    ARM_CO_EDS_GEAR_MOTOR_REVS, ARM_CO_EDS_GEAR_SHAFT_REVS, 32767);
+            if (opt->n_nodes == ARM_N_JOINTS) { /* the arm's drive table (gen/drives.py) */
+                *nc = opt->node[j];
+            } else {
+                const uint32_t rated = (uint32_t)(model->link[j].torque_limit * 1000.0f + 0.5f);
+                *nc = (arm_co_node_config_t){.node_id = (uint8_t)(j + 1), .rated_torque_mnm = rated};
+                nc->overrides = rated != ARM_CO_EDS_RATED_TORQUE_MNM ? ARM_CO_OVERRIDE_RATED : 0u;
+            }
+            /* what the drive will use: the override where one is written, else the EDS's default */
+            const uint32_t rated = (nc->overrides & ARM_CO_OVERRIDE_RATED) ? nc->rated_torque_mnm
+                                                                           : ARM_CO_EDS_RATED_TORQUE_MNM;
+            const uint32_t enc = (nc->overrides & ARM_CO_OVERRIDE_ENCODER) ? nc->encoder_increments
+                                                                           : ARM_CO_EDS_ENCODER_INCREMENTS;
+            const int gear = (nc->overrides & ARM_CO_OVERRIDE_GEAR) != 0u;
+            if (arm_co_units_init(&l->units[j], rated, enc, gear ? nc->gear_motor_revs : ARM_CO_EDS_GEAR_MOTOR_REVS,
+                                  gear ? nc->gear_shaft_revs : ARM_CO_EDS_GEAR_SHAFT_REVS, 32767) != 0) {
+                snprintf(l->report->reason, sizeof(l->report->reason),
+                         "boot: canopen: node %u: rated torque %u mN m, encoder %u, gear: units out of range",
+                         nc->node_id, rated, enc);
+                return -1;
+            }
         }
         if (arm_co_boot_init(&co[b], &cfg, (uint64_t)(now_ns() / 1000)) != 0) {
             char text[200];
@@ -367,7 +415,7 @@ static int enable(link_t *l, loop_t *p, uint32_t k, uint32_t fresh)
         send_frame(l, (unsigned)l->bus_of[j], &f);
     }
     if (l->canopen) { /* the boot enabled them: tracking starts with the first whole state */
-        enabled = fresh;
+        enabled = fresh & l->tpdo2_seen;
     }
     if (enabled == ALL_JOINTS) {
         if (p->opt->ref_given) {
@@ -537,6 +585,7 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
     l.report = report;
     l.spin_ns = (int64_t)(opt->spin_us * 1e3);
     l.canopen = opt->protocol_canopen;
+    l.tpdo2_every = opt->tpdo2_type != 0u ? opt->tpdo2_type : 1u;
     p.opt = opt;
     p.telem = telem;
     p.report = report;
@@ -598,6 +647,7 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
         if (l.canopen) {
             sync.len = 0u; /* CiA 301 SYNC without a counter (0x1019 = 0) */
             l.tpdo1_mask = l.tpdo2_mask = 0u;
+            l.period = k;
             if (cycle_start >= l.next_heartbeat_ns) { /* the drives consume it (0x1016.1) */
                 const arm_can_frame_t hb = {.id = ARM_CO_COB_HEARTBEAT + CANOPEN_MASTER_ID, .len = 1u, .data = {0x05u}};
                 send_all(&l, &hb);

@@ -40,6 +40,12 @@ typedef struct {
     arm_state_t final_state;
     arm_fault_t final_fault;
     arm_rx_counters_t rx;
+    /* --protocol canopen: the boot's SDO writes (every bus, in order), its first fault, its time */
+    int canopen;
+    double co_boot_s;
+    arm_co_fault_t co_fault;
+    unsigned n_co_writes;
+    arm_co_write_t co_writes[ARM_CAN_BUS_SET_MAX * ARM_CO_BOOT_LOG_MAX];
 } run_report_t;
 
 void controller_run(const options_t *opt, const arm_robot_model_t *model, telemetry_t *telem,

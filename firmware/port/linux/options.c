@@ -11,6 +11,7 @@
 
 #include "arm/methods.h"
 #include "argv_table.h"
+#include "canopen_text.h"
 
 /* "pd | pm | ..." from the method table (arm/methods.h): the one list of methods. */
 static const char *method_list(const char *sep)
@@ -196,6 +197,52 @@ static int opt_rt(void *t, void *c, const argv_opt_t *o, const char *v, char *er
     return rt_option_parse(o->name, v, &((options_t *)t)->rt, err, errcap);
 }
 
+/* --node: the k-th is joint k's drive (gen/drives.py's table of the arm). */
+static int opt_node(void *t, void *c, const argv_opt_t *o, const char *v, char *err, unsigned long errcap)
+{
+    options_t *opt = t;
+    (void)c;
+    if (opt->n_nodes >= ARM_N_JOINTS) {
+        snprintf(err, errcap, "%s '%s': more than one per joint (%d joints)", o->name, v, ARM_N_JOINTS);
+        return -1;
+    }
+    if (canopen_parse_node(v, &opt->node[opt->n_nodes], err, errcap) != 0) return -1;
+    if (opt->node[opt->n_nodes].node_id != opt->n_nodes + 1u) {
+        /* heartbeats, EMCY and the PDOs' COB-IDs are matched to joints by the drive number */
+        snprintf(err, errcap, "%s '%s': joint %u's node id must be its drive number %u", o->name, v,
+                 opt->n_nodes + 1u, opt->n_nodes + 1u);
+        return -1;
+    }
+    opt->n_nodes++;
+    return 0;
+}
+
+static int opt_rpdo_type(void *t, void *c, const argv_opt_t *o, const char *v, char *err, unsigned long errcap)
+{
+    (void)c;
+    double d = 0.0;
+    if (argv_double(o->name, v, 1.0, 255.0, 0, &d, err, errcap) != 0) return -1;
+    if (d != floor(d) || (d > 240.0 && d < 254.0)) {
+        snprintf(err, errcap, "%s '%s': a CiA 301 transmission type, 1..240, 254 or 255", o->name, v);
+        return -1;
+    }
+    ((options_t *)t)->rpdo_type = (uint8_t)d;
+    return 0;
+}
+
+static int opt_tpdo2_type(void *t, void *c, const argv_opt_t *o, const char *v, char *err, unsigned long errcap)
+{
+    (void)c;
+    double d = 0.0;
+    if (argv_double(o->name, v, 1.0, 240.0, 0, &d, err, errcap) != 0) return -1;
+    if (d != floor(d)) {
+        snprintf(err, errcap, "%s '%s': a synchronous transmission type, 1..240 (every N-th SYNC)", o->name, v);
+        return -1;
+    }
+    ((options_t *)t)->tpdo2_type = (uint8_t)d;
+    return 0;
+}
+
 #define ROW(...) ARGV_ROW(options_t, __VA_ARGS__)
 static const argv_opt_t k_options[] = {ARM_CONTROLLER_OPTIONS(ROW, ARGV_SPECIAL_ROW)};
 enum { ARM_CONTROLLER_OPTIONS(ARGV_ID, ARGV_ID) ARGV_COUNT };
@@ -228,6 +275,11 @@ int options_parse(int argc, char **argv, const arm_robot_model_t *model, options
     }
     if (given[ARGV_OPT_REF_AMP] != given[ARGV_OPT_REF_FREQ]) {
         snprintf(err, errcap, "--ref-amp and --ref-freq go together (one was given without the other)");
+        return -1;
+    }
+    if (opt->n_nodes != 0u && (opt->n_nodes != ARM_N_JOINTS || !opt->protocol_canopen)) {
+        snprintf(err, errcap, "--node: %u given: one per joint (%d), with --protocol canopen", opt->n_nodes,
+                 ARM_N_JOINTS);
         return -1;
     }
     opt->ref_given = given[ARGV_OPT_REF_AMP];

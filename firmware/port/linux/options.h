@@ -5,6 +5,7 @@
 #include <stdint.h>
 
 #include "arm/can_bus.h"
+#include "arm/co_boot.h"
 #include "arm/controller.h"
 #include "design_file.h"
 #include "rt.h"
@@ -24,6 +25,12 @@ typedef struct {
     double lockstep_timeout_s; /* lockstep: wall time to wait for a period's states */
     double spin_us;            /* poll this long for a frame before sleeping in ppoll */
     int protocol_canopen;      /* --protocol canopen: CiA 301/402 drives (README: Real drives) */
+    /* --node, one per joint in joint order (gen/drives.py's table of the arm); n_nodes 0: the
+     * built-in rule (node = drive number, rated torque = the joint's torque limit, EDS encoder/gear) */
+    unsigned n_nodes;
+    uint8_t rpdo_type;         /* --rpdo-type: RPDO1's transmission type [1] */
+    uint8_t tpdo2_type;        /* --tpdo2-type: TPDO2's, every N-th SYNC [1] */
+    arm_co_node_config_t node[ARM_N_JOINTS];
     arm_ctl_config_t ctl;
     double position_margin_rad; /* --position-margin: ctl's q_min, q_max are the model's widened by it */
     double torque_mismatch;     /* --torque-mismatch: ctl's limits, a fraction of each torque limit */

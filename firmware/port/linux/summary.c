@@ -41,6 +41,20 @@ int summary_write(const char *path, const options_t *opt, const run_report_t *r,
             r->rx.foreign_master, r->rx.unknown_id, r->rx.bad_length, r->rx.wrong_counter,
             r->rx.bad_format, (unsigned long long)r->rx_wrong_bus, (unsigned long long)r->rx_undecodable,
             (unsigned long long)r->rx_kernel_drops, r->rx.sim_identity, r->rx.duplicate_state);
+    fprintf(f, "  \"protocol\": \"%s\",\n", opt->protocol_canopen ? "canopen" : "arm");
+    if (r->canopen) { /* the CANopen boot (arm_canopen_boot --json's sdo_writes and fault) */
+        const arm_co_fault_t *cf = &r->co_fault;
+        fprintf(f, "  \"canopen\": {\"boot_s\": %.6f, \"fault\": {\"code\": \"%s\", \"node\": %u, \"index\": %u, "
+                   "\"sub\": %u, \"abort_code\": %u, \"value\": %u, \"tries\": %u},\n    \"sdo_writes\": [",
+                r->co_boot_s, arm_co_fault_name(cf->code), cf->node, cf->index, cf->sub, cf->abort_code, cf->value,
+                cf->tries);
+        for (unsigned i = 0; i < r->n_co_writes; ++i) {
+            const arm_co_write_t *w = &r->co_writes[i];
+            fprintf(f, "%s\n      {\"node\": %u, \"index\": %u, \"sub\": %u, \"value\": %u, \"bytes\": %u}",
+                    i ? "," : "", w->node, w->index, w->sub, w->value, w->len);
+        }
+        fprintf(f, "\n    ]},\n");
+    }
     static const char *const names[TELEM_KIND_COUNT] = {"ARM_CTL", "ARM_TIMING", "ARM_EVENT"};
     fprintf(f, "  \"telemetry\": {\"dropped\": %llu, \"sent\": {",
             (unsigned long long)telemetry_dropped(telem));

@@ -47,6 +47,9 @@
 typedef struct {
     uint8_t n;                                  /* entries */
     uint32_t entry[ARM_CO_PDO_MAX_ENTRIES];     /* index << 16 | sub << 8 | bits */
+    /* CiA 301 transmission type (sub2): 1-240 synchronous (an RPDO takes effect at the next SYNC,
+     * a TPDO goes every n-th SYNC), 254/255 event-driven (an RPDO takes effect at once); 0: 1 */
+    uint8_t trans;
 } arm_co_pdo_map_t;
 
 typedef struct {
