@@ -57,6 +57,17 @@ class Drive:
     gear: tuple[int, int]   # 0x6091.1, .2
     overrides: list[str]    # objects written at boot because they differ from the EDS
 
+    def node_spec(self) -> str:
+        """The programs' --node value: ID, then only what the drive overrides of the EDS."""
+        spec = [str(self.node)]
+        if "0x6076" in self.overrides:
+            spec.append(f"rated={self.rated_torque_mnm}")
+        if "0x608F" in self.overrides:
+            spec.append(f"encoder={self.encoder_increments}")
+        if "0x6091" in self.overrides:
+            spec.append(f"gear={self.gear[0]}/{self.gear[1]}")
+        return ",".join(spec)
+
 
 @dataclass
 class DriveConfig:
@@ -78,14 +89,7 @@ class DriveConfig:
         args = ["--cycle-us", str(self.cycle_us), "--heartbeat-ms", str(self.heartbeat_ms),
                 "--consumer-ms", str(self.consumer_ms), "--master-id", str(self.master_id)]
         for d in on_bus:
-            spec = [str(d.node)]
-            if "0x6076" in d.overrides:
-                spec.append(f"rated={d.rated_torque_mnm}")
-            if "0x608F" in d.overrides:
-                spec.append(f"encoder={d.encoder_increments}")
-            if "0x6091" in d.overrides:
-                spec.append(f"gear={d.gear[0]}/{d.gear[1]}")
-            args += ["--node", ",".join(spec)]
+            args += ["--node", d.node_spec()]
         return args
 
 

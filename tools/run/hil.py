@@ -478,17 +478,7 @@ def canopen_args(info: dict[str, Any], drive_config: Path | None) -> tuple[list[
         cfg = drives_mod.load(info, drive_config)
     except drives_mod.DrivesError as exc:
         raise HilError(f"drive configuration: {exc}") from None
-    nodes: list[str] = []
-    for d in sorted(cfg.drives, key=lambda d: d.drive):
-        spec = [str(d.node)]
-        if "0x6076" in d.overrides:
-            spec.append(f"rated={d.rated_torque_mnm}")
-        if "0x608F" in d.overrides:
-            spec.append(f"encoder={d.encoder_increments}")
-        if "0x6091" in d.overrides:
-            spec.append(f"gear={d.gear[0]}/{d.gear[1]}")
-        nodes.append(",".join(spec))
-    node_args = [a for n in nodes for a in ("--node", n)]
+    node_args = [a for d in sorted(cfg.drives, key=lambda d: d.drive) for a in ("--node", d.node_spec())]
     t = cfg.transmission
     ctl = [*node_args, *(["--rpdo-type", str(t["rpdo1"])] if t["rpdo1"] != 1 else []),
            *(["--tpdo2-type", str(t["tpdo2"])] if t["tpdo2"] != 1 else [])]

@@ -44,18 +44,6 @@ static uint64_t mono_us(void)
     return (uint64_t)ts.tv_sec * 1000000u + (uint64_t)ts.tv_nsec / 1000u;
 }
 
-static int parse_u32(const char *s, uint32_t lo, uint32_t hi, uint32_t *out)
-{
-    char *end = NULL;
-    errno = 0;
-    const unsigned long long v = strtoull(s, &end, 0);
-    if (errno != 0 || end == s || *end != '\0' || s[0] == '-' || v < lo || v > hi) {
-        return -1;
-    }
-    *out = (uint32_t)v;
-    return 0;
-}
-
 typedef struct {
     const char *bus;
     arm_co_boot_config_t cfg;
@@ -119,29 +107,29 @@ static int parse_args(int argc, char **argv, boot_options_t *o, char *err, size_
             }
             o->cfg.n_nodes++;
         } else if (strcmp(a, "--cycle-us") == 0) {
-            bad = parse_u32(v, 1u, UINT32_MAX, &o->cfg.cycle_us);
+            bad = canopen_parse_u32(v, 1u, UINT32_MAX, &o->cfg.cycle_us);
         } else if (strcmp(a, "--heartbeat-ms") == 0) {
-            bad = parse_u32(v, 0u, 65535u, &x);
+            bad = canopen_parse_u32(v, 0u, 65535u, &x);
             o->cfg.heartbeat_ms = (uint16_t)x;
         } else if (strcmp(a, "--master-id") == 0) {
-            bad = parse_u32(v, 1u, 127u, &x);
+            bad = canopen_parse_u32(v, 1u, 127u, &x);
             o->cfg.master_id = (uint8_t)x;
         } else if (strcmp(a, "--consumer-ms") == 0) {
-            bad = parse_u32(v, 0u, 65535u, &x);
+            bad = canopen_parse_u32(v, 0u, 65535u, &x);
             o->cfg.consumer_ms = (uint16_t)x;
         } else if (strcmp(a, "--sdo-timeout-ms") == 0) {
-            bad = parse_u32(v, 1u, 60000u, &x);
+            bad = canopen_parse_u32(v, 1u, 60000u, &x);
             o->cfg.sdo_timeout_us = x * 1000u;
         } else if (strcmp(a, "--sdo-tries") == 0) {
-            bad = parse_u32(v, 1u, 20u, &x);
+            bad = canopen_parse_u32(v, 1u, 20u, &x);
             o->cfg.sdo_tries = (uint8_t)x;
         } else if (strcmp(a, "--state-timeout-ms") == 0) {
-            bad = parse_u32(v, 1u, 60000u, &x);
+            bad = canopen_parse_u32(v, 1u, 60000u, &x);
             o->cfg.state_timeout_us = x * 1000u;
         } else if (strcmp(a, "--period-us") == 0) {
-            bad = parse_u32(v, 100u, 1000000u, &o->period_us);
+            bad = canopen_parse_u32(v, 100u, 1000000u, &o->period_us);
         } else if (strcmp(a, "--hold-periods") == 0) {
-            bad = parse_u32(v, 0u, 1000000u, &o->hold_periods);
+            bad = canopen_parse_u32(v, 0u, 1000000u, &o->hold_periods);
         } else if (strcmp(a, "--hold-torque") == 0) {
             char *end = NULL;
             const double t = strtod(v, &end);
@@ -150,7 +138,7 @@ static int parse_args(int argc, char **argv, boot_options_t *o, char *err, size_
         } else if (strcmp(a, "--json") == 0) {
             o->json_path = v;
         } else if (strcmp(a, "--timeout-ms") == 0) {
-            bad = parse_u32(v, 1u, 3600000u, &o->timeout_ms);
+            bad = canopen_parse_u32(v, 1u, 3600000u, &o->timeout_ms);
         } else {
             snprintf(err, cap, "%s: unknown option (--help lists them)", a);
             return -1;

@@ -45,7 +45,7 @@ void canopen_fault_text(const arm_co_fault_t *f, char *out, size_t cap)
     }
 }
 
-static int node_u32(const char *s, uint32_t lo, uint32_t hi, uint32_t *out)
+int canopen_parse_u32(const char *s, uint32_t lo, uint32_t hi, uint32_t *out)
 {
     char *end = NULL;
     errno = 0;
@@ -70,7 +70,7 @@ int canopen_parse_node(const char *arg, arm_co_node_config_t *nc, char *err, siz
     char *save = NULL;
     char *tok = strtok_r(buf, ",", &save);
     uint32_t v = 0;
-    if (tok == NULL || node_u32(tok, 1u, 127u, &v) != 0) {
+    if (tok == NULL || canopen_parse_u32(tok, 1u, 127u, &v) != 0) {
         snprintf(err, cap, "--node '%s': the node id must be 1..127", arg);
         return -1;
     }
@@ -85,10 +85,10 @@ int canopen_parse_node(const char *arg, arm_co_node_config_t *nc, char *err, siz
         const char *val = eq + 1;
         int bad = 0;
         if (strcmp(tok, "rated") == 0) {
-            bad = node_u32(val, 1u, UINT32_MAX, &nc->rated_torque_mnm);
+            bad = canopen_parse_u32(val, 1u, UINT32_MAX, &nc->rated_torque_mnm);
             nc->overrides |= ARM_CO_OVERRIDE_RATED;
         } else if (strcmp(tok, "encoder") == 0) {
-            bad = node_u32(val, 1u, UINT32_MAX, &nc->encoder_increments);
+            bad = canopen_parse_u32(val, 1u, UINT32_MAX, &nc->encoder_increments);
             nc->overrides |= ARM_CO_OVERRIDE_ENCODER;
         } else if (strcmp(tok, "gear") == 0) {
             char *slash = strchr(val, '/');
@@ -96,14 +96,14 @@ int canopen_parse_node(const char *arg, arm_co_node_config_t *nc, char *err, siz
                 bad = -1;
             } else {
                 *slash = '\0';
-                bad = node_u32(val, 1u, UINT32_MAX, &nc->gear_motor_revs) ||
-                      node_u32(slash + 1, 1u, UINT32_MAX, &nc->gear_shaft_revs);
+                bad = canopen_parse_u32(val, 1u, UINT32_MAX, &nc->gear_motor_revs) ||
+                      canopen_parse_u32(slash + 1, 1u, UINT32_MAX, &nc->gear_shaft_revs);
             }
             nc->overrides |= ARM_CO_OVERRIDE_GEAR;
         } else if (strcmp(tok, "vendor") == 0) {
-            bad = node_u32(val, 0u, UINT32_MAX, &nc->vendor_id);
+            bad = canopen_parse_u32(val, 0u, UINT32_MAX, &nc->vendor_id);
         } else if (strcmp(tok, "product") == 0) {
-            bad = node_u32(val, 0u, UINT32_MAX, &nc->product_code);
+            bad = canopen_parse_u32(val, 0u, UINT32_MAX, &nc->product_code);
         } else {
             snprintf(err, cap, "--node '%s': unknown field '%s' (rated, encoder, gear, vendor, product)", arg, tok);
             return -1;

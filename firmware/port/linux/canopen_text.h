@@ -3,6 +3,7 @@
 #define ARM_CANOPEN_TEXT_H
 
 #include <stddef.h>
+#include <stdint.h>
 
 #include "arm/co_boot.h"
 
@@ -12,6 +13,9 @@ void canopen_fault_text(const arm_co_fault_t *f, char *out, size_t cap);
 /* --node "ID[,rated=mNm][,encoder=INC][,gear=M/S][,vendor=X][,product=X]" into nc (the EDS
  * defaults it overrides flagged); -1 with one line naming the field (arm_canopen_boot,
  * arm_controller). */
+/* A whole number in [lo, hi] (decimal or 0x hex, no sign); -1 otherwise. */
+int canopen_parse_u32(const char *s, uint32_t lo, uint32_t hi, uint32_t *out);
+
 int canopen_parse_node(const char *arg, arm_co_node_config_t *nc, char *err, size_t cap);
 
 #endif
