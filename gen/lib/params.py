@@ -6,6 +6,7 @@ option tables come from here."""
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, replace
 from functools import lru_cache
 from pathlib import Path
@@ -114,12 +115,33 @@ def _param(program: str, name: str, t: Any, where: str) -> Param:
 @lru_cache(maxsize=4)
 def _load(path: Path) -> tuple[dict[str, dict[str, Param]], dict[str, Any]]:
     doc = toml_loads(path.read_text())
+    constants = {name: t["value"] for name, t in doc.get("constant", {}).items()}
     out: dict[str, dict[str, Param]] = {}
     for program in PROGRAMS:
         table = doc.get(program, {})
-        out[program] = {name: _param(program, name, t, f"{path.name}: {program}.{name}") for name, t in table.items()}
-    constants = {name: t["value"] for name, t in doc.get("constant", {}).items()}
+        out[program] = {name: _param(program, name, _with_constants(t, constants, f"{path.name}: {program}.{name}"),
+                                     f"{path.name}: {program}.{name}") for name, t in table.items()}
     return out, constants
+
+
+def _with_constants(t: Any, constants: dict[str, Any], where: str) -> Any:
+    """A parameter's help and default text with {const:NAME} replaced by that constant's value: a
+    number a help text quotes is the constant's, never typed again."""
+    if not isinstance(t, dict):
+        return t
+
+    def fill(text: Any) -> Any:
+        if not isinstance(text, str):
+            return text
+
+        def value(m: re.Match[str]) -> str:
+            if m.group(1) not in constants:
+                raise RegistryError(f"{where}: {{const:{m.group(1)}}}: no [constant.{m.group(1)}]")
+            return f"{constants[m.group(1)]:g}" if isinstance(constants[m.group(1)], float) else str(constants[m.group(1)])
+
+        return re.sub(r"\{const:([a-z0-9-]+)\}", value, text)
+
+    return {**t, "help": fill(t.get("help")), "default": fill(t.get("default"))}
 
 
 def params(program: str, path: Path = REGISTRY) -> dict[str, Param]:

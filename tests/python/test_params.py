@@ -152,3 +152,19 @@ def test_the_defaults_the_readmes_prose_names_are_the_registrys() -> None:
             assert value in defaults[opt], f"{name}:{line}: {opt} {value:g}, the registry says {sorted(defaults[opt])}"
     # and the check bites: a stale mention is found
     assert prose_defaults("hold (`--ref-hold`, 0.7 s) first") == [(1, "--ref-hold", 0.7)]
+
+
+def test_a_number_a_help_text_quotes_is_the_constants(tmp_path: Path) -> None:
+    """{const:NAME} in a help or default text is the constant's value (the C usage text, the README
+    and armctl read the same), so the number is never typed twice; an unknown name is refused."""
+    from gen.lib.params import PROGRAMS, RegistryError, _load
+
+    for program in PROGRAMS:
+        for p in params(program).values():
+            assert "{const:" not in p.help and "{const:" not in str(p.default), (program, p.name)
+    assert f"GAIN {constant('safe-stop-damping-gain'):g} N m s/rad" in param("controller", "safe-stop").help
+    assert param("controller", "rt-priority").default.startswith(f"realtime: {constant('rt-priority')} ")
+    bad = tmp_path / "params.toml"
+    bad.write_text('[controller.x]\ntype = "float"\ndefault = 1.0\nhelp = "at most {const:nowhere}"\n')
+    with pytest.raises(RegistryError, match=r"\{const:nowhere\}: no \[constant.nowhere\]"):
+        _load(bad)

@@ -166,9 +166,9 @@ static int opt_safe_stop(void *t, void *c, const argv_opt_t *o, const char *v, c
     }
     if (strncmp(v, "damping", 7) == 0 && (v[7] == ':' || v[7] == '\0')) {
         opt->ctl.safe_stop_mode = ARM_SAFE_STOP_DAMPING;
-        opt->ctl.safe_stop_damping = 5.0f;
+        opt->ctl.safe_stop_damping = (float)ARM_P_SAFE_STOP_DAMPING_GAIN;
         if (v[7] == ':') {
-            if (argv_double("--safe-stop damping gain", v + 8, 0.0, 1e4, 0, &d, err, errcap) != 0) return -1;
+            if (argv_double("--safe-stop damping gain", v + 8, 0.0, ARM_P_SAFE_STOP_DAMPING_GAIN_MAX, 0, &d, err, errcap) != 0) return -1;
             opt->ctl.safe_stop_damping = (float)d;
         }
         return 0;

@@ -12,6 +12,8 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "arm_params.h"
+
 #if defined(__SANITIZE_ADDRESS__)
 #define RT_UNDER_ASAN 1
 #elif defined(__has_feature)
@@ -111,7 +113,7 @@ int rt_setup(const rt_options_t *o, int realtime, rt_status_t *st)
         add(st, "pinned to CPU %d", o->cpu);
     }
 
-    const int prio = o->rt_priority == RT_PRIORITY_AUTO ? (realtime ? RT_DEFAULT_PRIORITY : 0)
+    const int prio = o->rt_priority == RT_PRIORITY_AUTO ? (realtime ? ARM_P_RT_PRIORITY : 0)
                                                         : o->rt_priority;
     if (prio > 0) {
         const struct sched_param sp = {.sched_priority = prio};

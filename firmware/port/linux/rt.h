@@ -8,8 +8,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#define RT_PRIORITY_AUTO (-1) /* realtime mode: RT_DEFAULT_PRIORITY; lockstep: no SCHED_FIFO */
-#define RT_DEFAULT_PRIORITY 80 /* what cyclictest -p 80 measures against */
+#define RT_PRIORITY_AUTO (-1) /* realtime mode: the registry's rt-priority constant; lockstep: no SCHED_FIFO */
 #define RT_STACK_PREFAULT_BYTES (256u * 1024u)
 
 typedef struct {
