@@ -97,8 +97,16 @@ def parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from tools.run import procs
+
+    # First: a signal while the commands' modules import (a second or more on a loaded machine) is
+    # then a one-line exit (128 + N), not Python's default death or a traceback.
+    procs.install()
     argv = sys.argv[1:] if argv is None else list(argv)
-    ns = parser().parse_args(argv)
+    try:
+        ns = parser().parse_args(argv)
+    except procs.Interrupted as exc:
+        return exit_code(exc, argparse.Namespace(command=argv[0] if argv else "armctl"))
     ns.command_args = argv[argv.index(ns.command) + 1:]  # the command's own, as given (hil --bus vm passes them on)
     return run_command(ns)
 
