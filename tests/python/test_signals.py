@@ -59,5 +59,8 @@ def test_ctrl_c_before_any_child_is_a_one_line_exit(tmp_path: Path) -> None:
     time.sleep(1.5)  # into the imports or the solve
     p.send_signal(signal.SIGTERM)
     _, err = p.communicate(timeout=60)
-    assert p.returncode in (0, 128 + signal.SIGTERM), err  # 0: the synthesis was done before the signal
+    # 0: the synthesis was done before the signal; -SIGTERM: it was done and Python was ending (the
+    # interpreter restores the default handlers as it shuts down), with every output written
+    done = (tmp_path / "d" / "manifest.json").exists()
+    assert p.returncode in (0, 128 + signal.SIGTERM) or (p.returncode == -signal.SIGTERM and done), err
     assert "Traceback" not in err
