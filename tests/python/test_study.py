@@ -195,7 +195,10 @@ def test_a_study_stopped_by_a_signal_resumes_to_the_same_numbers(uninterrupted, 
         # --jobs 1: pm's nth run in flight (started, no run.json yet) once nth - 1 are done (pm's runs
         # last about 1.5 s; a 2-trial tuning's pd may stop in 0.2 s); a folder's mtime would not do,
         # since a run that is finishing touches its folder last
-        runs = list(out.glob("*/pm/seed-*"))
+        try:
+            runs = list(out.glob("*/pm/seed-*"))
+        except FileNotFoundError:  # armctl's check of --out makes the folder and removes it again
+            runs = []
         done = [r for r in runs if (r / "spec.json").exists()]
         flying = [r for r in runs if (r / "controller.log").exists() and not (r / "run.json").exists()]
         if len(done) >= nth - 1 and flying:
