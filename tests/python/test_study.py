@@ -301,7 +301,7 @@ def test_a_killed_process_ends_the_run_in_a_named_state(tmp_path: Path, controll
     (("wn = [2.0, 300.0]", "wn = []"), "tuning.space.pm.wn"),
     (("zeta = [1.0, 2.0]", "zeta = [0.5, 2.0]"), "tuning.space.usde-smc.zeta"),
     (("H = [0.05, 5.0]", "H = [5.0, 0.05]"), "tuning.space.pm.H"),
-    (("cap = 100", "cap = 0"), "tuning.cap"),
+    (("cap = 400", "cap = 0"), "tuning.cap"),
     (("study_tuning_cap = 24", "study_tuning_cap = 0"), "study.study_tuning_cap"),
     (("seeds = [1001, 1002, 1003, 1004]", "seeds = [1, 1002]"), "tuning.seeds"),
     (("validation_seeds = [2001, 2002]", "validation_seeds = [1001]"), "tuning.validation_seeds"),
@@ -352,7 +352,7 @@ def test_the_kept_tuning_serves_this_checkout(tmp_path: Path) -> None:
 
 def test_a_study_reuses_a_longer_kept_tuning_and_tunes_what_is_missing_with_its_own_cap(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """`armctl tune` tunes to [tuning] cap; a study takes any kept tuning of at least
+    """`armctl tune` tunes to [tuning] cap (400); a study takes any kept tuning of at least
     study_tuning_cap trials and tunes only what is missing, with study_tuning_cap (a new arm's study
     then finishes in minutes). tune_method is replaced: only the choice of what to tune is tested."""
     import tools.study as study_mod
@@ -363,10 +363,10 @@ def test_a_study_reuses_a_longer_kept_tuning_and_tunes_what_is_missing_with_its_
     cfg_path = tmp_path / "paper.toml"
     cfg_path.write_text(DEFAULT_CONFIG.read_text().replace("study_tuning_cap = 24", "study_tuning_cap = 3"))
     cfg = load(cfg_path)
-    assert (cfg.cap, cfg.study_cap) == (100, 3)
+    assert (cfg.cap, cfg.study_cap) == (400, 3)
     setup, info, _ = setup_for(cfg, DEFAULT_ARM, tmp_path / "tune", 1, None)
     path = tuning_file(cfg, DEFAULT_ARM)
-    keep_tuning(path, "ideal", "pm", {"key": tuning_key(cfg, info, setup, "ideal", "pm"), "cap": 100,
+    keep_tuning(path, "ideal", "pm", {"key": tuning_key(cfg, info, setup, "ideal", "pm"), "cap": cfg.cap,
                                       "knobs": {"wn": 1.0}, "trials_run": 100}, {})
     asked: list[tuple[str, int | None]] = []
 
@@ -379,7 +379,7 @@ def test_a_study_reuses_a_longer_kept_tuning_and_tunes_what_is_missing_with_its_
     assert asked == [("tde", 3)] and got["ideal"]["pm"]["knobs"] == {"wn": 1.0}
     asked.clear()
     got = tuned(cfg, DEFAULT_ARM, setup, info, ["ideal"], ["pm", "tde"])  # armctl tune: the config's cap
-    assert asked == [("tde", 100)] and got["ideal"]["pm"]["cap"] == 100
+    assert asked == [("tde", cfg.cap)] and got["ideal"]["pm"]["cap"] == cfg.cap
 
 
 def test_a_failed_trial_scores_by_how_much_it_ran() -> None:
