@@ -272,3 +272,60 @@ def test_readme_tracking_table_is_what_hil_gives(tmp_path: Path, controller_bin:
         want = [float(x) for x in figures.split()]
         assert all(abs(a - b) <= 0.0051 for a, b in zip(want, r["tracking_max_abs_deg"])), \
             (method, protocol, r["tracking_max_abs_deg"])
+
+
+def test_a_capture_decodes_in_si_units_with_the_runs_derived_dbc(tmp_path: Path, controller_bin: Path) -> None:
+    """Every frame of a CANopen run's capture decodes with the DBC the run wrote (gen/canopen_dbc.py,
+    from the drive table and the EDS); the first TPDO1 of each drive reads the arm's home pose in
+    rad, and every RPDO1's target torque is within the drive's rated torque in N m. A drive table
+    with another rated torque gives another scaling: the DBC follows the table."""
+    import can
+    import cantools
+
+    from gen import canopen_dbc, drives as drives_mod
+    from tools.build.arm import arm_info
+
+    preset = controller_bin.parent.parent.name
+    run = _run(tmp_path, preset, "canopen", "pm", duration=0.5, capture=True)
+    out = tmp_path / "canopen-pm-sil"
+    assert run["environment"]["dbc"] == str(out / "canopen.dbc")
+    db = cantools.database.load_file(out / "canopen.dbc")
+    info = arm_info(controller_bin.parent.parent)
+    home = [j["home"] for j in info["joints"]]
+    limits = [j["torque_limit"] for j in info["joints"]]
+    first: dict[int, float] = {}
+    names = set()
+    for frame in can.LogReader(out / "bus.log"):
+        msg = db.get_message_by_frame_id(frame.arbitration_id)  # KeyError: a frame the DBC does not know
+        names.add(msg.name.split("_node")[0])
+        if msg.name.startswith("TPDO1_node"):
+            first.setdefault(frame.arbitration_id - 0x180, msg.decode(frame.data)["position_actual_value"])
+        if msg.name.startswith("RPDO1_node"):
+            node = frame.arbitration_id - 0x200
+            assert abs(msg.decode(frame.data)["target_torque"]) <= limits[node - 1] + 1e-9
+    assert {"SYNC", "NMT", "TPDO1", "TPDO2", "RPDO1", "SDO_rx", "SDO_tx", "HEARTBEAT"} <= names, names
+    quantum = 2 * math.pi / (2 ** 19 * 101)
+    assert all(abs(first[n + 1] - home[n]) <= quantum for n in range(len(home))), (first, home)
+    table = tmp_path / "drives.toml"
+    table.write_text((Path(__file__).resolve().parents[2] / "firmware" / "protocol" / "drives.toml").read_text()
+                     .replace("[defaults]\n", "[defaults]\nrated_torque_nm = 300\n")
+                     .replace('eds = "cia402_servo.eds"', f'eds = "{Path(__file__).resolve().parents[2]}'
+                                                          '/firmware/protocol/cia402_servo.eds"'))
+    other = cantools.database.load_string(canopen_dbc.dbc_text(drives_mod.load(info, table)), database_format="dbc")
+    sig = other.get_message_by_name("RPDO1_node1").get_signal_by_name("target_torque")
+    assert sig.scale == 0.3 and sig.unit == "N.m"
+
+
+def test_canopen_dbc_command_writes_a_dbc_or_one_line(tmp_path: Path, controller_bin: Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    import cantools
+
+    from gen.canopen_dbc import main
+
+    arm_json = controller_bin.parent.parent / "generated" / "arm" / "arm.json"
+    assert main(["--arm-json", str(arm_json), "--out", str(tmp_path / "d.dbc")]) == 0
+    db = cantools.database.load_file(tmp_path / "d.dbc")
+    assert db.get_message_by_frame_id(0x181).name == "TPDO1_node1"
+    assert main(["--arm-json", str(tmp_path / "missing.json"), "--out", str(tmp_path / "e.dbc")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "missing.json" in err[0] and not (tmp_path / "e.dbc").exists()

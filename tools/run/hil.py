@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 
-from gen.lib.atomic_output import OutputError, write_json_atomic
+from gen.lib.atomic_output import OutputError, write_json_atomic, write_text_atomic
 from host_sim.drive_model import DriveModel
 from host_sim.launch import sim_argv
 from gen.lib import busload
@@ -294,6 +294,7 @@ def vcan_names(n: int) -> list[str]:
 
 SIL = "sil"  # --bus: software in the loop
 CAPTURE_FILE = "bus.log"  # a run's capture of its buses (candump -l format)
+CANOPEN_DBC_FILE = "canopen.dbc"  # a CANopen run's frames, derived from its drive table (gen/canopen_dbc.py)
 
 
 def bus_args(kind: str, can_port: int, topology: list[busload.Bus]) -> list[str]:
@@ -575,8 +576,16 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
             raise HilError(f"{exe} is missing: run tools/armctl build")
     opt.out.mkdir(parents=True, exist_ok=True)
     for stale in ("telemetry.lcmlog", "controller_summary.json", "sim_summary.json", "run.json", "uncertainty.json",
-                  CAPTURE_FILE, CAPTURE_FILE + ".gz"):
+                  CAPTURE_FILE, CAPTURE_FILE + ".gz", CANOPEN_DBC_FILE):
         (opt.out / stale).unlink(missing_ok=True)
+    if canopen:  # what decodes a capture of this run, in SI units (gen/canopen_dbc.py)
+        from gen import canopen_dbc, drives as drives_mod
+
+        try:
+            write_text_atomic(opt.out / CANOPEN_DBC_FILE,
+                              canopen_dbc.dbc_text(drives_mod.load(info, opt.drive_config)))
+        except (OutputError, canopen_dbc.DbcError) as exc:
+            raise HilError(str(exc)) from None
     buses = bus_args(bus_kind, can_port, topology)
     bus_argv = [a for spec in buses for a in ("--bus", spec)]
     url = "" if sil else f"udpm://239.255.76.67:{lcm_port}?ttl=0&recv_buf_size=8388608"
@@ -632,6 +641,7 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
         "bus_load_pct": topology_load_pct(topology, _arg_value(opt.controller_args, "--rate", info["loop_rate_hz"]),
                                           opt.protocol, transmission),
         "canopen_transmission": transmission,
+        "dbc": str(opt.out / CANOPEN_DBC_FILE) if canopen else str(busload.DEFAULT_DBC),
         "lcm_url": url, "wall_s": wall, "simulator_scheduling": sim_scheduling,
         # the simulator's speed: simulated seconds per wall second after boot, and its CPU time
         # per period (arm_sim measures both)
