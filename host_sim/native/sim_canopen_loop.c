@@ -121,9 +121,8 @@ static void advance(co_sim_t *s)
         sim_telemetry_truth(s->tel, s->arm->step_count - 1, s->arm->period, s->n, s->arm->data->qpos,
                             s->arm->data->qvel, s->tau, s->w, fault_bits(s));
         if (bad != 0) {
-            char why[200];
-            snprintf(why, sizeof(why), "the simulation diverged at joint %d (period %llu): drives faulted, torque off",
-                     bad, (unsigned long long)s->rep->periods);
+            char why[300];
+            sim_arm_diverged_text(s->arm, bad, (unsigned long long)s->rep->periods, why, sizeof(why));
             set_result(s->rep, "diverged", why);
             for (int j = 0; j < s->n; ++j) sim_co_node_fault(&s->node[j], 0xFF00u, 0x80u);
             break;
