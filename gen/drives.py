@@ -149,24 +149,15 @@ def drives_file_of(arm: dict[str, Any]) -> Path:
     return DEFAULT_DRIVES
 
 
-def load(arm: dict[str, Any], path: Path | None = None) -> DriveConfig:
-    """The drive configuration of the arm (arm.json as a dict), resolved and validated."""
-    path = path or drives_file_of(arm)
+def _read(path: Path) -> dict[str, Any]:
     try:
-        doc = toml_input.loads(path.read_text())
+        return toml_input.loads(path.read_text())
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise DrivesError(f"{path}: {exc}") from exc
-    unknown = set(doc) - TOP_FIELDS
-    if unknown:
-        raise DrivesError(f"{path}: unknown field(s) {', '.join(sorted(unknown))} (known: {', '.join(sorted(TOP_FIELDS))})")
-    eds_rel = doc.get("eds")
-    if not isinstance(eds_rel, str) or not eds_rel:
-        raise DrivesError(f"{path}: eds: expected the drives' EDS file, got {eds_rel!r}")
-    eds = Path(eds_rel) if Path(eds_rel).is_absolute() else (path.parent / eds_rel).resolve()
-    eds_def = eds_defaults(eds)
-    heartbeat = _uint(doc.get("heartbeat_ms", 100), f"{path}: heartbeat_ms", 0, 65535)
-    consumer = _uint(doc.get("consumer_ms", 300), f"{path}: consumer_ms", 0, 65535)
-    master = _uint(doc.get("master_id", 127), f"{path}: master_id", 1, 127)
+
+
+def _pdo(doc: dict[str, Any], path: Path) -> dict[str, int]:
+    """The table's [pdo]: its mapping checked against the codec's, and its transmission types."""
     pdo = doc.get("pdo", {})
     if not isinstance(pdo, dict) or set(pdo) - set(CODEC_MAPPING) - {"transmission"}:
         raise DrivesError(f"{path}: pdo: expected a table of rpdo1, tpdo1, tpdo2, transmission")
@@ -185,6 +176,31 @@ def load(arm: dict[str, Any], path: Path | None = None) -> DriveConfig:
             if got != want:
                 raise DrivesError(f"{path}: pdo.{name}: the codec (firmware/canopen co_pdo.c) packs {_fmt(want)}, "
                                   f"not {_fmt(got)}")
+    return transmission
+
+
+def load_transmission(path: Path | None = None) -> dict[str, int]:
+    """A drive table's PDO transmission types alone (armctl busload: what the load counts)."""
+    path = path or DEFAULT_DRIVES
+    return _pdo(_read(path), path)
+
+
+def load(arm: dict[str, Any], path: Path | None = None) -> DriveConfig:
+    """The drive configuration of the arm (arm.json as a dict), resolved and validated."""
+    path = path or drives_file_of(arm)
+    doc = _read(path)
+    unknown = set(doc) - TOP_FIELDS
+    if unknown:
+        raise DrivesError(f"{path}: unknown field(s) {', '.join(sorted(unknown))} (known: {', '.join(sorted(TOP_FIELDS))})")
+    eds_rel = doc.get("eds")
+    if not isinstance(eds_rel, str) or not eds_rel:
+        raise DrivesError(f"{path}: eds: expected the drives' EDS file, got {eds_rel!r}")
+    eds = Path(eds_rel) if Path(eds_rel).is_absolute() else (path.parent / eds_rel).resolve()
+    eds_def = eds_defaults(eds)
+    heartbeat = _uint(doc.get("heartbeat_ms", 100), f"{path}: heartbeat_ms", 0, 65535)
+    consumer = _uint(doc.get("consumer_ms", 300), f"{path}: consumer_ms", 0, 65535)
+    master = _uint(doc.get("master_id", 127), f"{path}: master_id", 1, 127)
+    transmission = _pdo(doc, path)
     defaults = doc.get("defaults", {})
     joints_tab = doc.get("joint", {})
     if not isinstance(defaults, dict) or not isinstance(joints_tab, dict):

@@ -43,6 +43,20 @@ def frame_times(bus: busload.Bus, proto: busload.Protocol) -> str:
     return ",".join(out)
 
 
+def canopen_frame_times(bus: busload.Bus) -> str:
+    """"ID:US,..." for the CiA 402 drives on this bus (node id = drive number; CiA 301's predefined
+    COB-IDs): SYNC, and per node TPDO1 0x180+n, RPDO1 0x200+n, TPDO2 0x280+n, EMCY 0x080+n and its
+    heartbeat 0x700+n, each its worst-case time (gen/lib/busload.py)."""
+    pdo_cob = {"TPDO1": 0x180, "RPDO1": 0x200, "TPDO2": 0x280}
+    times = {0x080: busload.canopen_frame_s(0, bus)}
+    for n in bus.drives:
+        for name, n_bytes in busload.CANOPEN_PDO_BYTES.items():
+            times[pdo_cob[name] + n] = busload.canopen_frame_s(n_bytes, bus)
+        times[0x080 + n] = busload.canopen_frame_s(8, bus)
+        times[0x700 + n] = busload.canopen_frame_s(1, bus)
+    return ",".join(f"{i}:{t * 1e6:.6f}" for i, t in sorted(times.items()))
+
+
 def uncertainty_args(unc: dict[str, Any] | UncertaintyConfig | None) -> list[str]:
     """arm_sim's uncertainty options; validated first (the message names the field)."""
     if unc is None:
@@ -58,23 +72,25 @@ def uncertainty_args(unc: dict[str, Any] | UncertaintyConfig | None) -> list[str
     return args
 
 
-def timing_args(mode: str, phys: list[busload.Bus], controller_latency_us: float = 0.0) -> list[str]:
-    """Bus timing emulation of these buses (one per --bus, in order), or nothing when off."""
+def timing_args(mode: str, phys: list[busload.Bus], controller_latency_us: float = 0.0,
+                canopen: bool = False) -> list[str]:
+    """Bus timing emulation of these buses (one per --bus, in order), or nothing when off; canopen:
+    of the CiA 402 drives' frames, else of the DBC's."""
     if mode not in TIMING_MODES:
         raise busload.ConfigError(f"bus timing '{mode}': expected one of {', '.join(TIMING_MODES)}")
     if mode == "off":
         return []
-    proto = busload.default_protocol()
     args = ["--bus-timing", mode, "--controller-latency-us", repr(float(controller_latency_us))]
     for i, b in enumerate(phys):
-        args += ["--frame-times", f"{i}={frame_times(b, proto)}", "--bus-label", f"{i}={b.describe()}"]
+        times = canopen_frame_times(b) if canopen else frame_times(b, busload.default_protocol())
+        args += ["--frame-times", f"{i}={times}", "--bus-label", f"{i}={b.describe()}"]
     return args
 
 
 def sim_argv(binary: Path, buses: list[str], *, lcm_url: str, summary: Path | None = None,
              uncertainty: dict[str, Any] | None = None, timing: str = "off", phys: list[busload.Bus] | None = None,
              controller_latency_us: float = 0.0, model: Path | None = None, drives: DriveModel | None = None,
-             extra: list[str] | None = None) -> list[str]:
+             extra: list[str] | None = None, canopen: bool = False) -> list[str]:
     argv = [str(binary), *[a for spec in buses for a in ("--bus", spec)], "--lcm-url", lcm_url]
     if summary is not None:
         argv += ["--summary", str(summary)]
@@ -82,5 +98,5 @@ def sim_argv(binary: Path, buses: list[str], *, lcm_url: str, summary: Path | No
         argv += ["--model", str(model)]
     argv += uncertainty_args(uncertainty)
     argv += (drives or DriveModel()).args()
-    argv += timing_args(timing, phys or [], controller_latency_us)
+    argv += timing_args(timing, phys or [], controller_latency_us, canopen)
     return argv + list(extra or [])

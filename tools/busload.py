@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 
 from gen.lib import busload as lib
-from gen.lib.params import constant, default
+from gen.lib.params import constant, default, param
 from gen.lib.busload import (DEFAULT_DBC, DEFAULT_TOPOLOGY, BusLoad, ConfigError, Protocol, drives_arg,
                              rate_arg, compute, even_split, load_topology, parse_bus, topology_drives)
 
@@ -38,8 +38,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--bus", action="append", default=[], metavar="SPEC",
                    help="[NAME=]fd:NOMINAL[/DATA]:DRIVES or [NAME=]classic:RATE:DRIVES, repeatable "
                         "[the buses of --topology]")
-    p.add_argument("--topology", type=Path, default=DEFAULT_TOPOLOGY,
-                   help="bus topology file used when no --bus is given [firmware/protocol/buses.toml]")
+    p.add_argument("--topology", type=Path, default=None,
+                   help="bus topology file used when no --bus is given [arm: firmware/protocol/buses.toml; "
+                        "canopen: the fewest classic 1 Mbit/s buses that fit]")
+    proto = param("hil", "protocol")
+    p.add_argument("--protocol", choices=("arm", "canopen"), default=proto.default,
+                   help="arm: the DBC's frames; canopen: the CiA 402 drives' SYNC, PDOs (the drive table's "
+                        f"mapping and transmission types) and heartbeats [{proto.default}]")
+    p.add_argument("--drive-config", type=Path, default=None, metavar="FILE",
+                   help="canopen: the drive table whose PDO transmission types count "
+                        "[firmware/protocol/drives.toml]")
     rate, budget, heartbeat = default("controller", "rate"), 100 * constant("bus-budget"), constant("heartbeat-ms")
     p.add_argument("--rate", type=float, default=rate, help=f"control loop rate, Hz [{rate:g}]")
     p.add_argument("--budget", type=float, default=budget, help=f"highest acceptable bus load, %% [{budget:g}]")
@@ -62,6 +70,11 @@ def run(ns: argparse.Namespace) -> int:
         raise ConfigError(f"--budget {ns.budget:g}: must be in (0, 100] %")
     if not ns.rate > 0 or not ns.heartbeat_ms > 0:
         raise ConfigError("--rate and --heartbeat-ms must be > 0")
+    if ns.protocol == "canopen":
+        return run_canopen(ns)
+    if ns.drive_config is not None:
+        raise ConfigError("--drive-config: the CiA 402 drive table, for --protocol canopen")
+    ns.topology = ns.topology or DEFAULT_TOPOLOGY
     proto = Protocol(ns.dbc)
     if ns.drives is not None and not 1 <= ns.drives <= proto.n_drives:
         raise ConfigError(f"--drives {ns.drives}: the DBC has drive slots 1..{proto.n_drives}")
@@ -101,6 +114,69 @@ def run(ns: argparse.Namespace) -> int:
                 break
     print(msg, file=sys.stderr)
     return EXIT_OVER_BUDGET
+
+
+def run_canopen(ns: argparse.Namespace) -> int:
+    """The CiA 402 drives' load: the buses given, else the fewest classic 1 Mbit/s buses that
+    carry them; above the budget, or when no wiring fits, exits 2 and says what does."""
+    from gen import drives as drives_mod
+
+    table = ns.drive_config or drives_mod.DEFAULT_DRIVES
+    try:
+        every = drives_mod.load_transmission(table)
+    except drives_mod.DrivesError as exc:
+        raise ConfigError(f"--drive-config: {exc}") from None
+    budget = ns.budget / 100.0
+    n_drives = ns.drives
+    if ns.bus:
+        buses = [parse_bus(s, i) for i, s in enumerate(ns.bus)]
+    elif ns.topology is not None:
+        buses = load_topology(ns.topology, n_drives or topology_drives(ns.topology))
+    else:
+        n_drives = n_drives or 6
+        fits = lib.canopen_wiring(n_drives, ns.rate, every, budget, ns.heartbeat_ms)
+        if fits is None:
+            print(f"armctl busload: {n_drives} CiA 402 drives at {ns.rate:g} Hz do not fit {lib.MAX_BUSES} classic "
+                  f"1 Mbit/s buses within {ns.budget:g}%; " + _classic_rates(n_drives, every, budget, ns.heartbeat_ms),
+                  file=sys.stderr)
+            return EXIT_OVER_BUDGET
+        buses = fits
+    n_drives = n_drives or max(d for b in buses for d in b.drives)
+    loads = lib.canopen_compute(buses, ns.rate, ns.heartbeat_ms, every, n_drives)
+    over = [bl for bl in loads if bl.load > budget]
+    max_rate = math.floor(min(bl.max_rate_hz(budget) for bl in loads))
+    if ns.json:
+        print(json.dumps({
+            "protocol": "canopen", "rate_hz": ns.rate, "budget": budget, "fits": not over, "max_rate_hz": max_rate,
+            "transmission": every,
+            "buses": [{"name": bl.bus.name, "kind": bl.bus.describe(), "drives": bl.bus.drives, "load": bl.load,
+                       "periodic_us": bl.periodic_s * 1e6, "max_rate_hz": math.floor(bl.max_rate_hz(budget)),
+                       "frames": [f.__dict__ for f in bl.frames]} for bl in loads]}, indent=2))
+    else:
+        print(f"CiA 402 drives, PDO transmission types {every} (drive table {table})")
+        print(report(loads, budget))
+    if not over:
+        if not ns.json:
+            print(f"fits: every bus within {ns.budget:g}% at {ns.rate:g} Hz (highest rate that fits: {max_rate} Hz)"
+                  + ("" if ns.bus or ns.topology else "; " + " ".join(
+                      f"--bus classic:{rate_arg(b)}:{drives_arg(b)}" for b in buses)))
+        return 0
+    worst = max(over, key=lambda bl: bl.load)
+    print(f"armctl busload: bus {worst.bus.name} ({worst.bus.describe()}) is at {worst.load * 100:.1f}% at "
+          f"{ns.rate:g} Hz, above the {ns.budget:g}% budget; the highest loop rate that fits is {max_rate} Hz; "
+          + _classic_rates(n_drives, every, budget, ns.heartbeat_ms), file=sys.stderr)
+    return EXIT_OVER_BUDGET
+
+
+def _classic_rates(n_drives: int, every: dict[str, int], budget: float, heartbeat_ms: float) -> str:
+    """The highest loop rate at which 1..MAX_BUSES classic 1 Mbit/s buses carry the drives."""
+    parts = []
+    for k in range(1, min(lib.MAX_BUSES, n_drives) + 1):
+        split = even_split(lib.CLASSIC_1M, n_drives, k)
+        rate = math.floor(min(bl.max_rate_hz(budget) for bl in lib.canopen_compute(split, 1.0, heartbeat_ms, every,
+                                                                                   n_drives)))
+        parts.append(f"{k} bus{'es' if k > 1 else ''} up to {rate} Hz")
+    return "classic 1 Mbit/s: " + ", ".join(parts)
 
 
 def main(argv: list[str] | None = None) -> int:

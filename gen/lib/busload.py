@@ -49,6 +49,7 @@ from gen.lib.paths import REPO
 
 DEFAULT_DBC = REPO / "firmware" / "protocol" / "arm_drives.dbc"
 DEFAULT_TOPOLOGY = REPO / "firmware" / "protocol" / "buses.toml"
+MAX_BUSES = 4  # the controller's bus limit: ARM_CAN_BUS_SET_MAX (firmware/transport/include/arm/can_bus.h)
 FD_LENGTHS = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)
 # CRC delimiter, ACK slot, ACK delimiter, EOF, intermission: never stuffed, always nominal rate
 TRAILER_BITS = 1 + 1 + 1 + 7 + 3
@@ -271,11 +272,11 @@ def default_wiring(n_drives: int, rate_hz: float = default("controller", "rate")
     limit). ConfigError if even 4 do not fit."""
     template = template or Bus("can0", True, 1e6, 5e6, [])
     proto = default_protocol()
-    for k in range(1, min(4, n_drives) + 1):
+    for k in range(1, min(MAX_BUSES, n_drives) + 1):
         split = even_split(template, n_drives, k)
         if all(bl.load <= budget for bl in compute(split, rate_hz, 100.0, proto, n_drives)):
             return split
-    raise ConfigError(f"{n_drives} drives at {rate_hz:g} Hz do not fit {min(4, n_drives)} "
+    raise ConfigError(f"{n_drives} drives at {rate_hz:g} Hz do not fit {min(MAX_BUSES, n_drives)} "
                       f"{template.describe()} buses within {budget * 100:g}%: give the arm file a wiring "
                       "(buses = ...) or a lower loop rate")
 
@@ -337,20 +338,7 @@ def compute(buses: list[Bus], rate_hz: float, heartbeat_ms: float, proto: Protoc
     """The load of each bus; drives 1..n_drives (default: the highest drive the buses name) must
     each be on exactly one bus, within the DBC's drive slots."""
     n = n_drives if n_drives is not None else max((d for b in buses for d in b.drives), default=0)
-    if not 1 <= n <= proto.n_drives:
-        raise ConfigError(f"{n} drives: the DBC has drive slots 1..{proto.n_drives}")
-    seen: dict[int, str] = {}
-    for b in buses:
-        for d in b.drives:
-            if not 1 <= d <= n:
-                raise ConfigError(f"bus {b.name}: drive {d} does not exist (drives 1..{n}; the DBC has slots "
-                                  f"1..{proto.n_drives})")
-            if d in seen:
-                raise ConfigError(f"drive {d} is on two buses ({seen[d]} and {b.name})")
-            seen[d] = b.name
-    missing = [d for d in range(1, n + 1) if d not in seen]
-    if missing:
-        raise ConfigError(f"drives {', '.join(map(str, missing))} are on no bus")
+    _check_drives(buses, n, proto.n_drives, "the DBC has drive slots")
     out = []
     for b in buses:
         bl = BusLoad(bus=b, rate_hz=rate_hz)
@@ -402,7 +390,8 @@ def phy_spec(b: Bus) -> str:
 CANOPEN_PDO_BYTES = {"RPDO1": 4, "TPDO1": 8, "TPDO2": 4}
 
 
-def _frame_s(n_bytes: int, bus: Bus) -> float:
+def canopen_frame_s(n_bytes: int, bus: Bus) -> float:
+    """One frame of n_bytes on this bus, worst case (classic, or FD with its bit-rate switch)."""
     if not bus.fd:
         return classic_frame_bits(n_bytes) / bus.nominal_bps
     nom, dat = fd_frame_bits(n_bytes, brs=bus.data_bps is not None)
@@ -415,14 +404,85 @@ def _every(transmission_type: int) -> int:
     return transmission_type if 1 <= transmission_type <= 240 else 1
 
 
+def _check_drives(buses: list[Bus], n: int, slots: int, what: str) -> None:
+    """Drives 1..n each on exactly one bus, within `slots` (the DBC's, or CANopen's node ids)."""
+    if not 1 <= n <= slots:
+        raise ConfigError(f"{n} drives: {what} 1..{slots}")
+    seen: dict[int, str] = {}
+    for b in buses:
+        for d in b.drives:
+            if not 1 <= d <= n:
+                raise ConfigError(f"bus {b.name}: drive {d} does not exist (drives 1..{n}; {what} 1..{slots})")
+            if d in seen:
+                raise ConfigError(f"drive {d} is on two buses ({seen[d]} and {b.name})")
+            seen[d] = b.name
+    missing = [d for d in range(1, n + 1) if d not in seen]
+    if missing:
+        raise ConfigError(f"drives {', '.join(map(str, missing))} are on no bus")
+
+
+def canopen_compute(buses: list[Bus], rate_hz: float, heartbeat_ms: float = 100.0,
+                    every: dict[str, int] | None = None, n_drives: int | None = None) -> list[BusLoad]:
+    """The load of each bus of CiA 402 drives: per period one SYNC, and per drive RPDO1, TPDO1 and
+    TPDO2, each once every `every[pdo]` SYNCs (their CiA 301 transmission types; absent: 1); a
+    heartbeat per drive every heartbeat_ms. Node ids are the drive numbers (1..127)."""
+    every = every or {}
+    n = n_drives if n_drives is not None else max((d for b in buses for d in b.drives), default=0)
+    _check_drives(buses, n, 127, "CANopen node ids")
+    out = []
+    for b in buses:
+        bl = BusLoad(bus=b, rate_hz=rate_hz)
+
+        def add(name: str, n_bytes: int, per_period: float, bus: Bus = b, load: BusLoad = bl) -> None:
+            nom, dat = ((classic_frame_bits(n_bytes), 0) if not bus.fd
+                        else fd_frame_bits(n_bytes, brs=bus.data_bps is not None))
+            t = canopen_frame_s(n_bytes, bus)
+            load.frames.append(FrameLoad(name, 1, per_period, nom, dat, t))
+            load.periodic_s += per_period * t
+
+        add("SYNC", 0, 1.0)
+        for d in b.drives:
+            for name, n_bytes in CANOPEN_PDO_BYTES.items():
+                add(f"{name} node {d}", n_bytes, 1.0 / _every(every.get(name.lower(), 1)))
+        for d in b.drives:
+            t = canopen_frame_s(1, b)
+            nom, dat = (classic_frame_bits(1), 0) if not b.fd else fd_frame_bits(1, brs=b.data_bps is not None)
+            bl.frames.append(FrameLoad(f"heartbeat node {d}", 1, 1.0 / (rate_hz * heartbeat_ms * 1e-3), nom, dat, t))
+            bl.background_load += t / (heartbeat_ms * 1e-3)
+        out.append(bl)
+    return out
+
+
 def canopen_load(bus: Bus, n_drives: int, rate_hz: float, heartbeat_ms: float = 100.0,
                  every: dict[str, int] | None = None) -> float:
     """Worst-case load (fraction of bus time) of n_drives CiA 402 drives on one bus at rate_hz;
     every: the PDOs' transmission types (gen/drives.py [pdo] transmission; absent: 1, every SYNC)."""
-    every = every or {}
-    period_s = n_drives * sum(_frame_s(n, bus) / _every(every.get(name.lower(), 1))
-                              for name, n in CANOPEN_PDO_BYTES.items()) + _frame_s(0, bus)
-    return period_s * rate_hz + n_drives * _frame_s(1, bus) / (heartbeat_ms * 1e-3)
+    one = Bus(bus.name, bus.fd, bus.nominal_bps, bus.data_bps, list(range(1, n_drives + 1)))
+    return canopen_compute([one], rate_hz, heartbeat_ms, every, n_drives)[0].load
+
+
+def canopen_drives_per_bus(bus: Bus, rate_hz: float, budget: float = 0.70, heartbeat_ms: float = 100.0,
+                           every: dict[str, int] | None = None) -> int:
+    """The most drives one bus carries within the budget (0: not even one)."""
+    n = 0
+    while n < 127 and canopen_load(bus, n + 1, rate_hz, heartbeat_ms, every) <= budget:
+        n += 1
+    return n
+
+
+CLASSIC_1M = Bus("can0", False, 1e6, None, [])  # the CiA 402 drives' default wire (issue #23: classic CAN)
+
+
+def canopen_wiring(n_drives: int, rate_hz: float, every: dict[str, int] | None = None,
+                   budget: float = constant("bus-budget"), heartbeat_ms: float = constant("heartbeat-ms"),
+                   template: Bus = CLASSIC_1M, max_buses: int = MAX_BUSES) -> list[Bus] | None:
+    """The fewest buses of the template's kind (classic 1 Mbit/s) that carry drives 1..n within
+    the budget at rate_hz, drives split evenly in order; None if even max_buses do not."""
+    for k in range(1, min(max_buses, n_drives) + 1):
+        split = even_split(template, n_drives, k)
+        if all(canopen_load(b, len(b.drives), rate_hz, heartbeat_ms, every) <= budget for b in split):
+            return split
+    return None
 
 
 def canopen_drives_per_bus(bus: Bus, rate_hz: float, budget: float = 0.70, heartbeat_ms: float = 100.0,

@@ -208,6 +208,14 @@ int sim_arm_step(sim_arm_t *a, const double *tau, const double *tau_commanded, d
     return d->warning[mjWARN_BADQACC].number != bad_before ? d->warning[mjWARN_BADQACC].lastinfo + 1 : 0;
 }
 
+void sim_arm_diverged_text(const sim_arm_t *a, int dof, unsigned long long periods, char *out, unsigned long cap)
+{
+    snprintf(out, cap,
+             "the simulation diverged at t = %.3f s (period %llu): MuJoCo found a NaN, infinite or huge "
+             "acceleration at joint %d and reset the arm; drives faulted, torque off",
+             (double)a->step_count * a->period, periods, dof);
+}
+
 void sim_arm_close(sim_arm_t *a)
 {
     if (a->data != NULL) mj_deleteData(a->data);

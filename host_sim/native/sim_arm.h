@@ -68,6 +68,8 @@ unsigned long long sim_file_hash(const char *path);
  * Returns 0, or the 1-based DOF whose acceleration MuJoCo found NaN, infinite or huge: the
  * simulation diverged, and MuJoCo has reset the arm to its initial state. */
 int sim_arm_step(sim_arm_t *a, const double *tau, const double *tau_commanded, double *w);
+/* The run's reason when sim_arm_step reported joint `dof` (1-based) diverged, after `periods`. */
+void sim_arm_diverged_text(const sim_arm_t *a, int dof, unsigned long long periods, char *out, unsigned long cap);
 void sim_arm_close(sim_arm_t *a);
 
 #endif

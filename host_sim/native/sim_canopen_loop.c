@@ -30,6 +30,15 @@ struct co_sim {
     unsigned held[ARM_CAN_BUS_SET_MAX];  /* a SYNC that came before its period's lead SYNC */
     int synced; /* a SYNC came: the next one ends a period */
     int ended; /* stepped (sim_co_service): the master stopped every drive */
+    /* Bus timing (--bus-timing virtual): per bus, when each frame of the period would end on it.
+     * A synchronous RPDO that would end after its period is held back and reaches its drive only
+     * after the next SYNC, as on a real bus: the drive then acts on it one SYNC later. */
+    int timed;
+    sim_timeline_t timing[ARM_CAN_BUS_SET_MAX];
+    double states_end; /* when the period's last TPDO ended, on any bus */
+    double last_cmd[ARM_CAN_BUS_SET_MAX]; /* when the period's last RPDO ended on each bus (0: none yet) */
+    arm_can_frame_t late[ARM_CAN_BUS_SET_MAX][SIM_MAX_JOINTS];
+    unsigned n_late[ARM_CAN_BUS_SET_MAX];
 };
 
 static int64_t mono_ns(void)
@@ -112,9 +121,8 @@ static void advance(co_sim_t *s)
         sim_telemetry_truth(s->tel, s->arm->step_count - 1, s->arm->period, s->n, s->arm->data->qpos,
                             s->arm->data->qvel, s->tau, s->w, fault_bits(s));
         if (bad != 0) {
-            char why[200];
-            snprintf(why, sizeof(why), "the simulation diverged at joint %d (period %llu): drives faulted, torque off",
-                     bad, (unsigned long long)s->rep->periods);
+            char why[300];
+            sim_arm_diverged_text(s->arm, bad, (unsigned long long)s->rep->periods, why, sizeof(why));
             set_result(s->rep, "diverged", why);
             for (int j = 0; j < s->n; ++j) sim_co_node_fault(&s->node[j], 0xFF00u, 0x80u);
             break;
@@ -144,6 +152,7 @@ static void on_sync(co_sim_t *s, unsigned bus)
     s->syncs[bus]++;
     if (s->synced) advance(s);
     s->synced = 1;
+    s->states_end = 0.0;
     sync_nodes(s, bus);
     for (unsigned b = 0; b < s->set.n; ++b) {
         if (b != lead_bus && s->held[b] != 0u) {
@@ -152,6 +161,38 @@ static void on_sync(co_sim_t *s, unsigned bus)
             sync_nodes(s, b);
         }
     }
+}
+
+/* Bus timing: this bus's SYNC at the period's start, then the TPDOs the nodes just queued, in id
+ * order once the SYNC has ended. */
+static void period_done(co_sim_t *s, unsigned bus)
+{
+    sim_bus_stats_t *st = &s->timing[bus].stats;
+    if (s->last_cmd[bus] <= 0.0) return;
+    st->periods++;
+    st->sync_to_last_cmd_sum_s += s->last_cmd[bus];
+    if (s->last_cmd[bus] > st->sync_to_last_cmd_max_s) st->sync_to_last_cmd_max_s = s->last_cmd[bus];
+    s->last_cmd[bus] = 0.0;
+}
+
+static void time_sync(co_sim_t *s, unsigned bus)
+{
+    sim_timeline_t *tl = &s->timing[bus];
+    period_done(s, bus);
+    sim_timeline_new_period(tl, s->arm->period);
+    const uint32_t sync_id = COB_SYNC;
+    double sync_end;
+    sim_timeline_transmit(tl, 0.0, &sync_id, 1u, &sync_end);
+    uint32_t ids[SIM_BATCH_MAX];
+    unsigned k = 0;
+    for (int j = 0; j < s->n; ++j) {
+        const sim_co_node_t *nd = &s->node[j];
+        if (s->bus_of[j] != (int)bus) continue;
+        for (unsigned i = 0; i < nd->n_out && k < SIM_BATCH_MAX; ++i) ids[k++] = nd->out[i].id;
+    }
+    double ends[SIM_BATCH_MAX];
+    sim_timeline_transmit(tl, sync_end, ids, k, ends);
+    for (unsigned i = 0; i < k; ++i) s->states_end = ends[i] > s->states_end ? ends[i] : s->states_end;
 }
 
 static void sync_nodes(co_sim_t *s, unsigned bus)
@@ -165,7 +206,44 @@ static void sync_nodes(co_sim_t *s, unsigned bus)
         }
         sim_co_node_on_sync(&s->node[j], qm, qdm, taum);
     }
+    if (s->timed) {
+        time_sync(s, bus);
+        for (unsigned i = 0; i < s->n_late[bus]; ++i) { /* last period's late RPDOs, after this SYNC */
+            for (int j = 0; j < s->n; ++j) {
+                if (s->bus_of[j] == (int)bus) sim_co_node_on_frame(&s->node[j], &s->late[bus][i], mono_ns());
+            }
+        }
+        s->n_late[bus] = 0u;
+    }
     flush(s);
+}
+
+/* Bus timing: an RPDO of a node on this bus, from the master, goes on the bus once every TPDO of
+ * the period has ended (plus the controller's latency); 1 if it would end after its period, when
+ * it is held back for the next SYNC. */
+static int rpdo_late(co_sim_t *s, const arm_can_frame_t *f, unsigned bus)
+{
+    int rpdo = 0;
+    for (int j = 0; j < s->n && !rpdo; ++j) {
+        rpdo = s->bus_of[j] == (int)bus && f->id == 0x200u + s->node[j].id;
+    }
+    if (!rpdo || !s->synced) return 0;
+    sim_timeline_t *tl = &s->timing[bus];
+    double end;
+    sim_timeline_transmit(tl, s->states_end + s->cfg->controller_latency_s, &f->id, 1u, &end);
+    if (end > s->last_cmd[bus]) s->last_cmd[bus] = end;
+    if (end <= s->arm->period || s->n_late[bus] >= SIM_MAX_JOINTS) return 0;
+    s->late[bus][s->n_late[bus]++] = *f;
+    s->rep->commands_late++;
+    if (++tl->stats.commands_late == 1u) { /* the first one says so; the count says the rest */
+        char src[24], text[200];
+        snprintf(src, sizeof(src), "bus%u", bus);
+        snprintf(text, sizeof(text), "bus timing: RPDO 0x%03x ended %.3f ms after its SYNC, after its %g ms period: "
+                 "its drive acts on it one SYNC late (bus overloaded?)", (unsigned)f->id, end * 1e3,
+                 s->arm->period * 1e3);
+        sim_telemetry_event(s->tel, s->arm->step_count, src, "warning", text);
+    }
+    return 1;
 }
 
 static int all_stopped(const co_sim_t *s)
@@ -201,6 +279,7 @@ static int on_frame(co_sim_t *s, const arm_can_frame_t *f, unsigned bus, int64_t
             advance(s);
             s->synced = 0;
         }
+        if (s->timed && rpdo_late(s, f, bus)) return 0;
         for (int j = 0; j < s->n; ++j) {
             if (s->bus_of[j] == (int)bus) sim_co_node_on_frame(&s->node[j], f, now);
         }
@@ -298,6 +377,8 @@ co_sim_t *sim_co_begin(const sim_config_t *cfg, const sim_co_config_t *co, sim_a
     sp->rep = rep;
     sp->n = arm->n;
     sp->t0 = mono_ns();
+    sp->timed = cfg->timing != SIM_TIMING_OFF;
+    memcpy(sp->timing, cfg->timelines, sizeof(sp->timing));
     for (int j = sp->n; j < SIM_MAX_JOINTS; ++j) {
         const sim_co_preset_t *own = &co->node_preset[j];
         if (own->rated_torque_mnm || own->encoder_increments || own->gear_motor) {
@@ -356,6 +437,10 @@ void sim_co_end(co_sim_t *s)
         rep->rx_kernel_drops += arm_can_bus_rx_kernel_drops(&s->set.bus[b]);
     }
     rep->n_buses = s->set.n;
+    for (unsigned b = 0; b < s->set.n; ++b) {
+        period_done(s, b);
+        rep->bus_stats[b] = s->timing[b].stats;
+    }
     rep->wall_s = (double)(mono_ns() - s->t0) * 1e-9;
     sim_telemetry_event(s->tel, s->arm->step_count, "sim", rep->reason[0] ? "fault" : "info",
                         rep->reason[0] ? rep->reason : "stopped by the master (NMT stop)");

@@ -356,10 +356,7 @@ static void diverged(sim_t *s, int dof)
 {
     if (strcmp(s->rep->result, "diverged") != 0) {
         char why[300];
-        snprintf(why, sizeof(why),
-                 "the simulation diverged at t = %.3f s (period %llu): MuJoCo found a NaN, infinite or huge "
-                 "acceleration at joint %d and reset the arm; drives faulted, torque off",
-                 (double)s->arm->step_count * s->arm->period, (unsigned long long)s->rep->periods, dof);
+        sim_arm_diverged_text(s->arm, dof, (unsigned long long)s->rep->periods, why, sizeof(why));
         set_result(s, "diverged", why);
         event(s, "sim", "fault", why);
     }

@@ -282,8 +282,9 @@ int sim_options_parse(int argc, char **argv, sim_options_t *o, char *err, unsign
                  "--protocol canopen");
         return -1;
     }
-    if (o->protocol == SIM_PROTOCOL_CANOPEN && c->timing != SIM_TIMING_OFF) {
-        snprintf(err, errcap, "--bus-timing: not with --protocol canopen (the master's clock sets the pace)");
+    if (o->protocol == SIM_PROTOCOL_CANOPEN && c->timing == SIM_TIMING_WALLCLOCK) {
+        snprintf(err, errcap, "--bus-timing wallclock: not with --protocol canopen (its drives' frames are timed "
+                 "virtually, in lockstep: --bus-timing virtual)");
         return -1;
     }
     if ((c->servo.motor_encoder_bits > 0) != (c->servo.gear_ratio > 0.0)) {

@@ -1,6 +1,7 @@
 """Bus timing emulation (host_sim/native/sim_bus_timing.c): frame lengths, arbitration, backlog,
 and what the arm feels of them, checked on the real arm_sim driven frame by frame (sim_master.py)
-and in whole HIL runs. The timeline's own arithmetic has a C unit test (tests/c/sim)."""
+and in whole HIL runs of the arm protocol (the CiA 402 drives' timing: test_canopen_hil.py). The
+timeline's own arithmetic has a C unit test (tests/c/sim)."""
 
 from __future__ import annotations
 
@@ -110,7 +111,7 @@ def test_hil_with_bus_timing_on_the_default_wiring(tmp_path: Path, controller_bi
     """Lockstep HIL over the two default buses with their timing emulated: every command ends
     inside its period, at the time busload computes (687.8 us; 882.8 us in the periods after a
     heartbeat round, whose three frames delay that SYNC by 3 x 65 us)."""
-    run = run_hil(HilOptions(out=tmp_path, duration_s=0.5, method="pm", bus="udp", bus_timing=True,
+    run = run_hil(HilOptions(protocol="arm", out=tmp_path, duration_s=0.5, method="pm", bus="udp", bus_timing=True,
                              preset=controller_bin.parent.parent.name))
     r, t = run["results"], run["transport"]
     assert r["result"] == "ok", r["problems"]
@@ -130,7 +131,7 @@ def test_hil_with_bus_timing_on_one_overloaded_bus_fails_and_says_why(tmp_path: 
     the drives never reach operation enabled and the controller gives up naming them."""
     topo = tmp_path / "one_bus.toml"
     topo.write_text('[[bus]]\nname = "can0"\nkind = "fd"\nnominal = "1M"\ndata = "5M"\ndrives = [1, 2, 3, 4, 5, 6]\n')
-    run = run_hil(HilOptions(out=tmp_path / "run", duration_s=0.5, bus="udp", bus_timing=True, topology=topo,
+    run = run_hil(HilOptions(protocol="arm", out=tmp_path / "run", duration_s=0.5, bus="udp", bus_timing=True, topology=topo,
                              preset=controller_bin.parent.parent.name))
     r, t = run["results"], run["transport"]
     assert r["result"] == "failed" and r["commands_late"] > 0 and t["bus_timing"][0]["commands_late"] > 0

@@ -10,6 +10,7 @@ import pytest
 from pathlib import Path
 
 from gen.lib import busload
+from gen.lib.paths import REPO
 from tools.busload import main as busload_main
 from gen.lib.busload import Bus, Protocol, classic_frame_bits, compute, fd_frame_bits
 
@@ -139,7 +140,8 @@ def test_fd_bus_without_data_rate(proto: Protocol) -> None:
 # ---- the command ----------------------------------------------------------------------------------
 
 def _run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
-    rc = busload_main(list(argv))
+    """armctl busload, of the arm protocol's DBC frames unless argv names a protocol."""
+    rc = busload_main(list(argv) if "--protocol" in argv else ["--protocol", "arm", *argv])
     out, err = capsys.readouterr()
     return rc, out, err
 
@@ -241,3 +243,35 @@ def test_topology_file_drives_the_default(capsys: pytest.CaptureFixture[str], tm
     bad = _topology(tmp_path, _bus())
     rc, _, err = _run(capsys, "--topology", str(bad), "--drives", "6")
     assert rc == 2 and "are on no bus" in err
+
+
+def test_canopen_default_is_the_fewest_classic_buses_that_fit(capsys: pytest.CaptureFixture[str]) -> None:
+    """The CiA 402 drives' default wire: six drives at 1 kHz with the drive table's TPDO2 every 2nd
+    SYNC take three classic 1 Mbit/s buses of two, 61.1 % each, and the check names them."""
+    rc, out, _ = _run(capsys, "--protocol", "canopen")
+    assert rc == 0 and out.count("load 61.1%") == 3, out
+    assert "--bus classic:1M:1-2 --bus classic:1M:3-4 --bus classic:1M:5-6" in out
+    assert "TPDO2 node 6                     1/2" in out
+
+
+def test_canopen_over_the_budget_says_what_fits(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    rc, _, err = _run(capsys, "--protocol", "canopen", "--bus", "classic:1M:1-3", "--drives", "3")
+    assert rc == 2 and "bus can0 (classic 1 Mbit/s) is at 88.9%" in err and "highest loop rate that fits is 786 Hz" in err
+    assert "2 buses up to 1145 Hz" in err, err
+    rc, _, err = _run(capsys, "--protocol", "canopen", "--drives", "9")
+    assert rc == 2 and "9 CiA 402 drives at 1000 Hz do not fit 4 classic 1 Mbit/s buses" in err, err
+    rc, out, _ = _run(capsys, "--protocol", "canopen", "--drives", "9", "--rate", "500")
+    assert rc == 0 and out.count("classic 1 Mbit/s, drives") == 3, out  # fewer buses at a lower rate
+    every_sync = tmp_path / "drives.toml"
+    every_sync.write_text((REPO / "firmware" / "protocol" / "drives.toml").read_text().replace("tpdo2 = 2", "tpdo2 = 1"))
+    rc, _, err = _run(capsys, "--protocol", "canopen", "--drive-config", str(every_sync))
+    assert rc == 2 and "6 CiA 402 drives at 1000 Hz do not fit 4 classic" in err, err
+    rc, _, err = _run(capsys, "--protocol", "arm", "--drive-config", str(every_sync))
+    assert rc == 2 and "--drive-config: the CiA 402 drive table, for --protocol canopen" in err
+
+
+def test_max_buses_is_the_controllers_limit() -> None:
+    from gen.lib.busload import MAX_BUSES
+
+    header = (REPO / "firmware" / "transport" / "include" / "arm" / "can_bus.h").read_text()
+    assert f"#define ARM_CAN_BUS_SET_MAX {MAX_BUSES}u" in header

@@ -24,8 +24,8 @@ def _run(tmp: Path, preset: str, protocol: str, method: str = "tde", bus: str = 
                               preset=preset, bus=bus, protocol=protocol, **kw))
 
 
-def test_default_protocol_is_the_arm_protocol() -> None:
-    assert DEFAULT_PROTOCOL == "arm"  # the product's default; one definition (tools/run/hil.py)
+def test_default_protocol_is_cia402() -> None:
+    assert DEFAULT_PROTOCOL == "canopen"  # the product's default; one definition (the registry's [hil.protocol])
 
 
 def test_canopen_sil_run_is_ok_and_records_the_boot(tmp_path: Path, controller_bin: Path) -> None:
@@ -95,32 +95,80 @@ def test_units_rated_150_nm_2_19_increments_gear_101_track_as_si(tmp_path: Path,
         assert abs(a - b) <= bound, f"{name}: arm {a:.5f} deg, canopen at 150 N m {b:.5f} deg (bound {bound:.5f})"
 
 
-@pytest.mark.parametrize("topology,drive_config,method", [
-    ("buses_classic.toml", "drives_classic.toml", "pm"),   # classic: three buses, TPDO2 every 2nd SYNC
-    ("buses.toml", None, "pm"),                            # CAN FD 1/5 Mbit/s: two buses
+@pytest.mark.parametrize("topology,method", [
+    (None, "pm"),          # the default: classic CAN, three 1 Mbit/s buses, TPDO2 every 2nd SYNC
+    ("buses.toml", "pm"),  # CAN FD 1/5 Mbit/s: two buses
 ])
-def test_classic_and_fd_topologies_run_ok(tmp_path: Path, controller_bin: Path, topology: str,
-                                          drive_config: str | None, method: str) -> None:
+def test_classic_and_fd_topologies_run_ok(tmp_path: Path, controller_bin: Path, topology: str | None,
+                                          method: str) -> None:
     """Classic CAN and CAN FD at 1 kHz, each in a layout its load check accepts (within 70 %)."""
     preset = controller_bin.parent.parent.name
     proto = Path(__file__).resolve().parents[2] / "firmware" / "protocol"
-    run = _run(tmp_path, preset, "canopen", method, topology=proto / topology, duration=1.0,
-               drive_config=proto / drive_config if drive_config else None)
+    run = _run(tmp_path, preset, "canopen", method, topology=proto / topology if topology else None, duration=1.0)
     assert run["results"]["result"] == "ok", run["results"]["verdict_reasons"]
-    loads = run["environment"]["bus_load_pct"]
-    assert len(loads) == (3 if drive_config else 2) and all(0.0 < v <= 70.0 for v in loads.values()), loads
-    if drive_config:
-        assert run["environment"]["canopen_transmission"]["tpdo2"] == 2
-        writes = run["environment"]["canopen"]["sdo_writes"]
-        assert all([w["value"] for w in ws if w["object"] == "0x1801:02"] == [2] for ws in writes.values())
+    env = run["environment"]
+    loads = env["bus_load_pct"]
+    assert len(loads) == (3 if topology is None else 2) and all(0.0 < v <= 70.0 for v in loads.values()), loads
+    assert env["canopen_transmission"]["tpdo2"] == 2  # the drive table's (firmware/protocol/drives.toml)
+    writes = env["canopen"]["sdo_writes"]
+    assert all([w["value"] for w in ws if w["object"] == "0x1801:02"] == [2] for ws in writes.values())
+    if topology is None:
+        assert [b["kind"] for b in env["topology"]["buses"]] == ["classic 1 Mbit/s"] * 3
+        assert [b["drives"] for b in env["topology"]["buses"]] == [[1, 2], [3, 4], [5, 6]]
+        assert env["topology"]["source"].startswith("classic CAN: the fewest 1 Mbit/s buses (3)")
+        assert loads == {"can0": 61.13, "can1": 61.13, "can2": 61.13}
+
+
+def test_a_user_arm_gets_its_classic_wiring_and_falls_back_to_fd_when_none_fits(tmp_path: Path) -> None:
+    """The wiring follows the arm's drive count and rate: 7 drives at 1 kHz need four classic buses
+    (2, 2, 2, 1); 9 fit no four, so the arm's CAN FD wiring is taken, and the run says why."""
+    from tools.run.hil import canopen_topology
+
+    def info(n: int) -> dict:
+        return {"n_joints": n, "buses": [{"name": "can0", "kind": "fd", "nominal": 1e6, "data": 5e6,
+                                          "drives": list(range(1, (n + 1) // 2 + 1))},
+                                         {"name": "can1", "kind": "fd", "nominal": 1e6, "data": 5e6,
+                                          "drives": list(range((n + 1) // 2 + 1, n + 1))}]}
+
+    every = {"rpdo1": 1, "tpdo1": 1, "tpdo2": 2}
+    buses, why = canopen_topology(None, info(7), 1000.0, every)
+    assert [b.drives for b in buses] == [[1, 2], [3, 4], [5, 6], [7]] and not buses[0].fd, why
+    buses, why = canopen_topology(None, info(9), 1000.0, every)
+    assert [b.drives for b in buses] == [[1, 2, 3, 4, 5], [6, 7, 8, 9]] and buses[0].fd
+    assert "do not fit 4 classic 1 Mbit/s buses" in why
+    buses, _ = canopen_topology(None, info(9), 500.0, every)
+    assert len(buses) == 3 and not buses[0].fd  # fewer at a lower rate
+
+
+def test_bus_timing_of_cia402_frames_counts_late_rpdos(tmp_path: Path, controller_bin: Path) -> None:
+    """--bus-timing with CANopen: on the default classic wiring every RPDO ends within its period
+    (SYNC 55 us + 2 TPDO1 + 2 TPDO2 + 2 RPDO1 = 705 us at most); three drives on one classic bus
+    (88.9 %) make the last RPDO end at 1030 us when TPDO2 is due: late, its drive acts on it one
+    SYNC later, and the run is not ok. SIL and lockstep over UDP give the same."""
+    preset = controller_bin.parent.parent.name
+    run = _run(tmp_path, preset, "canopen", "pm", duration=1.0, bus_timing=True)
+    assert run["results"]["result"] == "ok", run["results"]["verdict_reasons"]
+    timing = run["transport"]["bus_timing"]
+    assert len(timing) == 3 and all(t["commands_late"] == 0 and t["sync_to_last_cmd_max_us"] == 705.0
+                                    for t in timing), timing
+    topo = tmp_path / "two_buses.toml"
+    topo.write_text("".join(f'[[bus]]\nname = "can{i}"\nkind = "classic"\nnominal = "1M"\ndrives = {d}\n\n'
+                            for i, d in enumerate(([1, 2, 3], [4, 5, 6]))))
+    with pytest.raises(Exception, match="88.9 % at 1000 Hz .* above the 70 % budget"):
+        _run(tmp_path, preset, "canopen", "pm", duration=1.0, topology=topo)  # untimed: refused
+    over = _run(tmp_path, preset, "canopen", "pm", duration=1.0, topology=topo, bus_timing=True)
+    udp = _run(tmp_path, preset, "canopen", "pm", "udp", duration=1.0, topology=topo, bus_timing=True)
+    r = over["results"]
+    assert r["result"] == "commands-missed" and r["commands_late"] > 0, r["verdict_reasons"]
+    assert all(t["sync_to_last_cmd_max_us"] == 1030.0 for t in over["transport"]["bus_timing"])
+    assert udp["results"] == r
 
 
 def test_tpdo2_every_2nd_sync_is_waited_for_when_due(tmp_path: Path, controller_bin: Path) -> None:
     """With TPDO2 every 2nd SYNC the controller waits for it on its periods only: SIL and
     lockstep over three UDP buses give the same results."""
     preset = controller_bin.parent.parent.name
-    proto = Path(__file__).resolve().parents[2] / "firmware" / "protocol"
-    kw = dict(topology=proto / "buses_classic.toml", drive_config=proto / "drives_classic.toml", duration=0.5)
+    kw = dict(duration=0.5)  # the default wiring: three classic buses, the drive table's TPDO2 type 2
     sil = _run(tmp_path, preset, "canopen", "tde", "sil", **kw)
     udp = _run(tmp_path, preset, "canopen", "tde", "udp", **kw)
     assert sil["results"]["result"] == "ok"
@@ -151,6 +199,31 @@ def test_drives_that_never_answer_fail_the_boot_by_name(tmp_path: Path, controll
     s = json.loads(summary.read_text())
     assert s["protocol"] == "canopen" and s["canopen"]["fault"]["code"] == "no_answer", s["canopen"]
     assert "no_answer" in s["reason"] and s["canopen"]["fault"]["index"] == 0x1000
+
+
+def test_drives_that_come_up_after_the_controller_are_still_configured(tmp_path: Path, controller_bin: Path,
+                                                                       sim_exe: Path, bus_spec: str) -> None:
+    """The master asks a silent node again for the first half of --boot-timeout (a CiA 302 master
+    waits for its slaves' boot-up): the emulated drives started 1.5 s after the controller (as in
+    a slow VM, where they once missed the master's 3 tries) are configured and the run is ok."""
+    import json
+    import time
+
+    summary = tmp_path / "summary.json"
+    ctl = subprocess.Popen([str(controller_bin.parent / "arm_controller"), "--bus", bus_spec, "--protocol", "canopen",
+                            "--mode", "lockstep", "--duration", "0.2", "--ref-hold", "0.1", "--lcm-url", "",
+                            "--boot-timeout", "10", "--summary", str(summary)],
+                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        time.sleep(1.5)
+        sim = subprocess.run([str(sim_exe), "--protocol", "canopen", "--bus", bus_spec, "--lcm-url", "",
+                              "--boot-timeout", "10"], capture_output=True, text=True, timeout=60)
+        out, _ = ctl.communicate(timeout=60)
+    finally:
+        ctl.kill()
+    s = json.loads(summary.read_text())
+    assert ctl.returncode == 0 and s["canopen"]["fault"]["code"] == "none", (out, sim.stdout, sim.stderr)
+    assert s["canopen"]["boot_s"] > 1.5
 
 
 def test_node_and_rpdo_options_are_checked(controller_bin: Path) -> None:
@@ -184,8 +257,9 @@ def test_armctl_hil_protocol_canopen_through_the_cli(tmp_path: Path, controller_
     assert p.returncode == 0, p.stdout + p.stderr
     run = json.loads((out / "run.json").read_text())
     assert run["results"]["protocol"] == "canopen" and run["results"]["rate_hz"] == 500
-    assert run["environment"]["bus_load_pct"] == {"can0": 51.69, "can1": 51.69}
-    bad = subprocess.run([str(repo / "tools" / "armctl"), "hil", "--bus", "sil", "--drive-config", str(drives),
+    assert run["environment"]["bus_load_pct"] == {"can0": 44.57, "can1": 44.57}
+    bad = subprocess.run([str(repo / "tools" / "armctl"), "hil", "--bus", "sil", "--protocol", "arm",
+                          "--drive-config", str(drives),
                           "--duration", "0.1", "--out", str(tmp_path / "bad")], capture_output=True, text=True,
                          timeout=600)
     assert bad.returncode != 0 and "--drive-config" in bad.stderr, bad.stderr
@@ -198,12 +272,13 @@ def test_a_study_scenario_chooses_the_protocol(tmp_path: Path) -> None:
     sc = _scenario("co", {"protocol": "canopen"})
     assert sc.protocol == "canopen" and sc.as_dict()["protocol"] == "canopen"
     assert "protocol" not in _scenario("a", {}).as_dict()  # the arm protocol's tuning keys unchanged
-    for bad, want in (({"protocol": "ethercat"}, "not arm or canopen"),
-                      ({"protocol": "canopen", "bus_timing": True}, "no bus timing")):
-        with pytest.raises(StudyConfigError, match=want):
-            _scenario("x", bad)
+    assert _scenario("t", {"protocol": "canopen", "bus_timing": True}).bus_timing  # timed CiA 402 frames
+    with pytest.raises(StudyConfigError, match="not arm or canopen"):
+        _scenario("x", {"protocol": "ethercat"})
     base = dict(out="o", method="pm", duration_s=1.0, controller_args=(), uncertainty={})
-    assert "protocol" not in RunSpec(**base).key() and RunSpec(**base, protocol="canopen").key()["protocol"] == "canopen"
+    # the arm protocol's run keys are as they were before the protocol was a choice
+    assert "protocol" not in RunSpec(**base, protocol="arm").key()
+    assert RunSpec(**base).key()["protocol"] == RunSpec(**base, protocol="canopen").key()["protocol"] == "canopen"
 
 
 def test_readme_tracking_table_is_what_hil_gives(tmp_path: Path, controller_bin: Path) -> None:
@@ -222,3 +297,60 @@ def test_readme_tracking_table_is_what_hil_gives(tmp_path: Path, controller_bin:
         want = [float(x) for x in figures.split()]
         assert all(abs(a - b) <= 0.0051 for a, b in zip(want, r["tracking_max_abs_deg"])), \
             (method, protocol, r["tracking_max_abs_deg"])
+
+
+def test_a_capture_decodes_in_si_units_with_the_runs_derived_dbc(tmp_path: Path, controller_bin: Path) -> None:
+    """Every frame of a CANopen run's capture decodes with the DBC the run wrote (gen/canopen_dbc.py,
+    from the drive table and the EDS); the first TPDO1 of each drive reads the arm's home pose in
+    rad, and every RPDO1's target torque is within the drive's rated torque in N m. A drive table
+    with another rated torque gives another scaling: the DBC follows the table."""
+    import can
+    import cantools
+
+    from gen import canopen_dbc, drives as drives_mod
+    from tools.build.arm import arm_info
+
+    preset = controller_bin.parent.parent.name
+    run = _run(tmp_path, preset, "canopen", "pm", duration=0.5, capture=True)
+    out = tmp_path / "canopen-pm-sil"
+    assert run["environment"]["dbc"] == str(out / "canopen.dbc")
+    db = cantools.database.load_file(out / "canopen.dbc")
+    info = arm_info(controller_bin.parent.parent)
+    home = [j["home"] for j in info["joints"]]
+    limits = [j["torque_limit"] for j in info["joints"]]
+    first: dict[int, float] = {}
+    names = set()
+    for frame in can.LogReader(out / "bus.log"):
+        msg = db.get_message_by_frame_id(frame.arbitration_id)  # KeyError: a frame the DBC does not know
+        names.add(msg.name.split("_node")[0])
+        if msg.name.startswith("TPDO1_node"):
+            first.setdefault(frame.arbitration_id - 0x180, msg.decode(frame.data)["position_actual_value"])
+        if msg.name.startswith("RPDO1_node"):
+            node = frame.arbitration_id - 0x200
+            assert abs(msg.decode(frame.data)["target_torque"]) <= limits[node - 1] + 1e-9
+    assert {"SYNC", "NMT", "TPDO1", "TPDO2", "RPDO1", "SDO_rx", "SDO_tx", "HEARTBEAT"} <= names, names
+    quantum = 2 * math.pi / (2 ** 19 * 101)
+    assert all(abs(first[n + 1] - home[n]) <= quantum for n in range(len(home))), (first, home)
+    table = tmp_path / "drives.toml"
+    table.write_text((Path(__file__).resolve().parents[2] / "firmware" / "protocol" / "drives.toml").read_text()
+                     .replace("[defaults]\n", "[defaults]\nrated_torque_nm = 300\n")
+                     .replace('eds = "cia402_servo.eds"', f'eds = "{Path(__file__).resolve().parents[2]}'
+                                                          '/firmware/protocol/cia402_servo.eds"'))
+    other = cantools.database.load_string(canopen_dbc.dbc_text(drives_mod.load(info, table)), database_format="dbc")
+    sig = other.get_message_by_name("RPDO1_node1").get_signal_by_name("target_torque")
+    assert sig.scale == 0.3 and sig.unit == "N.m"
+
+
+def test_canopen_dbc_command_writes_a_dbc_or_one_line(tmp_path: Path, controller_bin: Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    import cantools
+
+    from gen.canopen_dbc import main
+
+    arm_json = controller_bin.parent.parent / "generated" / "arm" / "arm.json"
+    assert main(["--arm-json", str(arm_json), "--out", str(tmp_path / "d.dbc")]) == 0
+    db = cantools.database.load_file(tmp_path / "d.dbc")
+    assert db.get_message_by_frame_id(0x181).name == "TPDO1_node1"
+    assert main(["--arm-json", str(tmp_path / "missing.json"), "--out", str(tmp_path / "e.dbc")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "missing.json" in err[0] and not (tmp_path / "e.dbc").exists()

@@ -231,7 +231,8 @@ def test_bench(tmp_path: Path) -> None:
 def test_busload() -> None:
     r = armctl("busload")
     assert r.returncode == 0, r.stdout + r.stderr
-    r = armctl("busload", "--bus", "fd:1M/5M:1-6")
+    assert "--bus classic:1M:1-2 --bus classic:1M:3-4 --bus classic:1M:5-6" in r.stdout  # the CiA 402 drives'
+    r = armctl("busload", "--protocol", "arm", "--bus", "fd:1M/5M:1-6")
     assert r.returncode != 0 and "531" in r.stdout + r.stderr  # one FD bus: over budget, names the rate that fits
 
 

@@ -48,20 +48,34 @@ def test_every_period_is_accounted_for(short_run: tuple[Path, dict]) -> None:
     assert ctl["frames"]["rx_wrong_bus"] == 0 and sim["rx_wrong_bus"] == 0
 
 
-def test_default_run_uses_the_two_bus_topology(short_run: tuple[Path, dict]) -> None:
-    # firmware/protocol/buses.toml: can0 carries drives 1-3, can1 drives 4-6 (one UDP port each)
+def test_default_run_uses_three_classic_buses(short_run: tuple[Path, dict]) -> None:
+    # CiA 402 on classic CAN: can0 carries drives 1-2, can1 3-4, can2 5-6 (one UDP port each)
     out, run = short_run
+    assert run["environment"]["protocol"] == "canopen"
     topo = run["environment"]["topology"]
-    assert [b["drives"] for b in topo["buses"]] == [[1, 2, 3], [4, 5, 6]]
-    assert [b["name"] for b in topo["buses"]] == ["can0", "can1"]
+    assert [b["drives"] for b in topo["buses"]] == [[1, 2], [3, 4], [5, 6]]
+    assert [b["name"] for b in topo["buses"]] == ["can0", "can1", "can2"]
     specs = [b["spec"] for b in topo["buses"]]
     ports = [int(s.rpartition(":")[2]) for s in specs]
-    assert specs[0].startswith("udp:239.74.163.2:") and ports[1] == ports[0] + 1
-    assert run["environment"]["bus"] == f"{specs[0]}@1,2,3 {specs[1]}@4,5,6"
+    assert specs[0].startswith("udp:239.74.163.2:") and ports == [ports[0], ports[0] + 1, ports[0] + 2]
+    assert run["environment"]["bus"] == f"{specs[0]}@1,2 {specs[1]}@3,4 {specs[2]}@5,6"
     ctl = json.loads((out / "controller_summary.json").read_text())
     sim = json.loads((out / "sim_summary.json").read_text())
-    # SYNC goes on both buses, each command on its drive's bus (plus the two NMT frames per bus):
-    # per period the controller sends 2 SYNC + 6 CMD.
+    # SYNC goes on every bus, each RPDO on its drive's bus: per period the controller sends
+    # 3 SYNC + 6 RPDO1 (and the boot's SDO requests before).
+    assert ctl["frames"]["tx"] >= 9 * sim["periods"]
+
+
+def test_the_arm_protocol_runs_on_the_two_fd_buses(tmp_path: Path, controller_bin: Path) -> None:
+    # firmware/protocol/buses.toml: can0 carries drives 1-3, can1 drives 4-6
+    run = run_hil(HilOptions(out=tmp_path, duration_s=0.3, preset=controller_bin.parent.parent.name, protocol="arm"))
+    assert run["results"]["result"] == "ok", run["results"]["verdict_reasons"]
+    topo = run["environment"]["topology"]
+    assert [b["drives"] for b in topo["buses"]] == [[1, 2, 3], [4, 5, 6]]
+    assert [b["kind"] for b in topo["buses"]] == ["CAN FD 1 Mbit/s arbitration / 5 Mbit/s data"] * 2
+    ctl = json.loads((tmp_path / "controller_summary.json").read_text())
+    sim = json.loads((tmp_path / "sim_summary.json").read_text())
+    # per period 2 SYNC + 6 CMD (plus the two NMT frames per bus)
     assert ctl["frames"]["tx"] >= 8 * sim["periods"]
 
 

@@ -44,7 +44,8 @@ def _hostile_run(tmp_path: Path, port: int, make: "callable") -> dict:
     stop = threading.Event()
     t = _spoofer(f"udp:239.74.163.2:{port}", make, 1.0, stop)
     try:
-        return run_hil(HilOptions(out=tmp_path, duration_s=20.0, can_port=port))
+        # the arm protocol's frames are spoofed (its DBC's ids and layouts)
+        return run_hil(HilOptions(out=tmp_path, duration_s=20.0, can_port=port, protocol="arm"))
     finally:
         stop.set()
         t.join(5)
@@ -78,12 +79,14 @@ def test_spoofed_torque_commands_fault_the_drive_instead_of_being_clamped(tmp_pa
     run = _hostile_run(tmp_path, 45720, command)
     r = run["results"]
     assert r["result"] == "failed" and r["final_state"] in ("fault", "safe-stop"), r["verdict_reasons"]
-    sim = json.loads((tmp_path / "sim_summary.json").read_text())
-    assert 2 in r["drive_faults"] or sim["drive_fault_mask"] & 0b10, sim
     ctl = json.loads((tmp_path / "controller_summary.json").read_text())
     # the controller hears the foreign command too (only a master sends commands): it may name that
-    # before the drive's EMCY arrives; either is the named fault
+    # and stop the arm before the drive's EMCY arrives, or before the drive took the frame at all
+    # (seen on a loaded machine); either is the named fault, and no 2147 N m was ever applied
     assert "drive 2" in ctl["reason"] or "another master on the bus" in ctl["reason"], ctl["reason"]
+    if "another master on the bus" not in ctl["reason"]:
+        assert 2 in r["drive_faults"], r["drive_faults"]
+    assert r["max_abs_torque_nm"][1] < 1000.0, r["max_abs_torque_nm"]
 
 
 def test_garbage_datagrams_are_counted_and_change_nothing(tmp_path: Path) -> None:

@@ -99,9 +99,13 @@ def test_the_writer_on_a_read_only_disk_keeps_the_old_file(read_only_disk: Path)
     assert sorted(p.name for p in read_only_disk.iterdir()) == ["old.json"]
 
 
-def test_hil_on_a_full_disk_is_one_line_and_leaves_no_temporary_file(full_disk: Path) -> None:
-    r = armctl("hil", "--duration", "0.3", "--out", str(full_disk))
-    one_line_error(r, 1, f"cannot write {full_disk / 'run.json'}", "No space left on device")
+@pytest.mark.parametrize(("protocol", "first"), [("canopen", "canopen.dbc"), ("arm", "run.json")])
+def test_hil_on_a_full_disk_is_one_line_and_leaves_no_temporary_file(full_disk: Path, protocol: str,
+                                                                     first: str) -> None:
+    """The first file a run writes names the failure: a CANopen run's DBC, before it starts, or the
+    arm protocol's run.json after it."""
+    r = armctl("hil", "--protocol", protocol, "--duration", "0.3", "--out", str(full_disk))
+    one_line_error(r, 1, f"cannot write {full_disk / first}", "No space left on device")
     assert leftovers(full_disk) == []
     assert not (full_disk / "run.json").exists()
 

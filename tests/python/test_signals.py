@@ -28,7 +28,7 @@ def _children_of(out: Path) -> list[str]:
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT, signal.SIGHUP])
 def test_a_signal_to_armctl_stops_the_run_safely_and_leaves_nothing(tmp_path: Path, sig: signal.Signals) -> None:
     port = 45300 + 10 * int(sig)
-    rec = BusRecorder(f"udp:239.74.163.2:{port}")  # the first bus (drives 1-3)
+    rec = BusRecorder(f"udp:239.74.163.2:{port}")  # the first bus (CiA 402 on classic CAN: drives 1-2)
     out = tmp_path / "run"
     p = subprocess.Popen([ARMCTL, "hil", "--duration", "60", "--can-port", str(port), "--out", str(out)], cwd=REPO,
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -43,11 +43,11 @@ def test_a_signal_to_armctl_stops_the_run_safely_and_leaves_nothing(tmp_path: Pa
     run = json.loads((out / "run.json").read_text())
     assert run["results"]["result"] == "interrupted", run["results"]["verdict_reasons"]
     assert not _children_of(out)
-    # after the last torque command: shutdown (controlword 0x06, zero torque) and NMT stop on the bus
-    cmds = [f for f in frames if f.arbitration_id in CMD_IDS]
-    last = cmds[-3:]
-    assert all(int.from_bytes(f.data[0:2], "little") == 0x06 and int.from_bytes(f.data[2:6], "little") == 0
-               for f in last), [bytes(f.data).hex() for f in last]
+    # each drive's last command (RPDO1, COB-ID 0x200 + node, as the arm protocol's 0x200 + drive):
+    # shutdown (controlword 0x06) with zero torque, then NMT stop on the bus
+    last = {f.arbitration_id: f for f in frames if f.arbitration_id in CMD_IDS}
+    assert len(last) >= 2 and all(int.from_bytes(f.data[0:2], "little") == 0x06 and not any(f.data[2:6])
+                                  for f in last.values()), [bytes(f.data).hex() for f in last.values()]
     assert any(f.arbitration_id == 0x000 and f.data[0] == 0x02 for f in frames)
     assert "interrupted" in run["results"]["verdict_reasons"][0]
 

@@ -66,7 +66,7 @@ VM_SCRIPT = r"""#!/bin/sh
 OUT=$1; CTL=$2; PY=$3; UNIT=$4; SELFTEST=$5; PERIODS=$6; GARBAGE=$7; CTL_EXTRA=$8; BUSES=$9; BUSLOG=${10}
 # can-utils' canplayer reads a run's capture (armctl hil --capture: candump's log format), each
 # bus's lines printed as they would be sent (it needs AF_CAN even for that: here it has it)
-canplayer -I "$BUSLOG" -t stdout=can0 stdout=can1 > "$OUT/replay.log" 2> "$OUT/replay.err"; echo $? > "$OUT/replay.rc"
+canplayer -I "$BUSLOG" -t stdout=can0 stdout=can1 stdout=can2 stdout=can3 > "$OUT/replay.log" 2> "$OUT/replay.err"; echo $? > "$OUT/replay.rc"
 DURATION=$PERIODS
 "$UNIT" > "$OUT/unit.out" 2>&1; echo $? > "$OUT/unit.rc"
 "$SELFTEST" vcan0 > "$OUT/selftest.out" 2>&1; echo $? > "$OUT/selftest.rc"
@@ -203,7 +203,8 @@ def _rc(vm_run: dict, name: str) -> int:
 
 
 def test_canplayer_replays_a_capture(vm_run: dict) -> None:
-    """Every line of a run's capture (--capture) is a frame canplayer replays, on both buses."""
+    """Every line of a run's capture (--capture; a CiA 402 run's three classic buses) is a frame
+    canplayer replays, on every bus."""
     assert _rc(vm_run, "replay") == 0, vm_run["read"]("replay.err")
     capture = (vm_run["out"] / "sil" / "bus.log").read_text().splitlines()
     replayed = vm_run["read"]("replay.log").splitlines()
@@ -301,15 +302,17 @@ ARMCTL = str(REPO / "tools" / "armctl")
 def test_hil_in_the_vm_through_the_cli(tmp_path: Path) -> None:
     """The README's way to run HIL over real SocketCAN, as a user types it: armctl (bash, its
     bootstrap and the CLI) boots the VM and runs itself there with --bus vcan; here with a 7-DOF
-    arm from an arm file, whose wiring takes three buses (the default arm's two run in vm_run)."""
+    arm from an arm file, whose CiA 402 drives take four classic buses (2, 2, 2, 1), the most the
+    controller has; in the slow VM the drives come up after the controller, which waits for them."""
     _vm_or_skip()
     r = subprocess.run([ARMCTL, "hil", "--bus", "vm", "--arm", "tests/arms/panda.toml", "--duration", "0.3",
                         "--out", str(tmp_path)], cwd=REPO, capture_output=True, text=True, timeout=VM_TIMEOUT_S)
     assert r.returncode == 0, r.stdout + r.stderr
     run = json.loads((tmp_path / "run.json").read_text())
     assert run["results"]["result"] == "ok", run["results"]
-    assert run["environment"]["bus"].split() == ["socketcan:vcan0@1,2,3", "socketcan:vcan1@4,5",
-                                                 "socketcan:vcan2@6,7"]
+    assert run["environment"]["bus"].split() == ["socketcan:vcan0@1,2", "socketcan:vcan1@3,4",
+                                                 "socketcan:vcan2@5,6", "socketcan:vcan3@7"]
+    assert run["environment"]["protocol"] == "canopen" and run["environment"]["canopen"]["fault"]["code"] == "none"
     assert run["environment"]["bus_choice"].startswith("vcan -> vcan")
     assert len(run["results"]["tracking_max_abs_deg"]) == 7
 

@@ -163,7 +163,8 @@ def _sim_runs(bus: str, repeats: int, duration: float, tmp: Path) -> tuple[list[
     for i in tqdm(range(repeats + 1), desc=bus, unit="run"):
         profile = i == repeats  # the last run measures where the time goes (costs a little)
         d = tmp / f"{bus}-{i}"
-        run = run_hil(HilOptions(out=d, duration_s=duration, method="pm", bus=bus,
+        # the arm protocol: its simulator loop (sim_loop.c) is the one --profile breaks down
+        run = run_hil(HilOptions(out=d, duration_s=duration, method="pm", bus=bus, protocol="arm",
                                  sim_args=("--profile",) if profile else ()))
         if run["results"]["result"] != "ok":
             raise RuntimeError(f"bench run {i} ({bus}) failed: {run['results']['problems']}")

@@ -237,7 +237,9 @@ def run_fault(f: Fault, out: Path) -> dict[str, Any]:
         for t in threads:
             t.start()
         try:
-            run = run_hil(HilOptions(out=out, duration_s=8.0, method="pm", can_port=slot.can_port,
+            # the arm protocol's frames are what the injectors forge (its DBC); the CiA 402 drives'
+            # faults are tests/python/test_canopen_hil.py's and test_canopen_master.py's
+            run = run_hil(HilOptions(out=out, duration_s=8.0, method="pm", can_port=slot.can_port, protocol="arm",
                                      lcm_port=slot.lcm_port, sim_args=f.sim_args, mode=f.mode))
         finally:
             inj.stop_event.set()

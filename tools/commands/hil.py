@@ -57,7 +57,9 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
                         "firmware/protocol/buses.toml), else udp (one port per bus; says which); "
                         "vm: the whole run inside the qemu VM that has vcan0, vcan1")
     h.add_argument("--topology", type=Path, default=None,
-                   help="which drive is on which bus, and each bus's bit rates [firmware/protocol/buses.toml]")
+                   help="which drive is on which bus, and each bus's bit rates [canopen: the fewest classic 1 Mbit/s "
+                        "buses that carry the drives (else the arm's CAN FD wiring); arm: the arm's wiring, "
+                        "firmware/protocol/buses.toml for six drives]")
     h.add_argument("--bus-timing", action="store_true",
                    help="emulate the buses' bit timing in the simulator (frame lengths, arbitration by id): "
                         "commands act when their frames would end on the bus")
@@ -220,7 +222,7 @@ def run(ns: argparse.Namespace) -> int:
                              bounds=Bounds(ns.max_error_deg, ns.max_saturated_fraction),
                              drives=DRIVE_PRESETS[ns.drives], can_port=ns.can_port, protocol=ns.protocol,
                              drive_config=ns.drive_config))
-    print(f"bus: {result['environment']['bus_choice']}")
+    print(f"bus: {result['environment']['bus_choice']}; wiring: {result['environment']['topology']['source']}")
     for name, pct in result["environment"]["bus_load_pct"].items():
         if pct > 100.0:
             print(f"armctl hil: bus {name} needs {pct:g} % of its time at 1 kHz (tools/armctl busload): the "

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 
-from gen.lib.atomic_output import OutputError, write_json_atomic
+from gen.lib.atomic_output import OutputError, write_json_atomic, write_text_atomic
 from host_sim.drive_model import DriveModel
 from host_sim.launch import sim_argv
 from gen.lib import busload
@@ -228,6 +228,42 @@ def load_topology(path: Path | None, info: dict[str, Any]) -> list[busload.Bus]:
         raise HilError(f"bus topology: {exc}") from exc
 
 
+def canopen_topology(path: Path | None, info: dict[str, Any], rate_hz: float,
+                     transmission: dict[str, int], timed: bool = False) -> tuple[list[busload.Bus], str]:
+    """The CiA 402 drives' buses and where they come from. A topology file's, if its load (from the
+    drive table's PDOs and transmission types) is within the budget, or at any load with bus
+    timing (timed: what an overload does is then emulated); else classic CAN, the field's wire:
+    the fewest 1 Mbit/s buses that carry the arm's drives (busload.canopen_wiring); else, when
+    even the controller's limit of buses does not, the arm's CAN FD wiring (arm.json)."""
+    budget, hb = constant("bus-budget"), constant("heartbeat-ms")
+    n = info["n_joints"]
+    if path is not None:
+        topology = load_topology(path, info)
+        for b in topology:
+            load = busload.canopen_load(b, len(b.drives), rate_hz, hb, transmission)
+            if load > budget and not timed:
+                fits = busload.canopen_wiring(n, rate_hz, transmission)
+                raise HilError(f"--topology {path}: bus {b.name} ({b.describe()}, drives "
+                               f"{','.join(map(str, b.drives))}) would carry {100 * load:.1f} % at {rate_hz:g} Hz "
+                               f"with these CiA 402 PDOs, above the {100 * budget:g} % budget; "
+                               + (f"{len(fits)} classic 1 Mbit/s buses fit (omit --topology)" if fits else
+                                  "spread the drives over more buses, use CAN FD or a lower --rate")
+                               + " (with --bus-timing the overload is emulated instead)")
+        return topology, str(path)
+    classic = busload.canopen_wiring(n, rate_hz, transmission)
+    if classic is not None:
+        return classic, (f"classic CAN: the fewest 1 Mbit/s buses ({len(classic)}) that carry {n} CiA 402 drives "
+                         f"at {rate_hz:g} Hz within the {100 * budget:g} % budget (gen/lib/busload.py canopen_wiring)")
+    fd = load_topology(None, info)
+    worst = max(busload.canopen_load(b, len(b.drives), rate_hz, hb, transmission) for b in fd)
+    if worst > budget:
+        raise HilError(f"{n} CiA 402 drives at {rate_hz:g} Hz fit neither {busload.MAX_BUSES} classic 1 Mbit/s "
+                       f"buses nor the arm's CAN FD wiring ({100 * worst:.1f} %, budget {100 * budget:g} %): "
+                       "give --topology, a lower --rate, or a drive table with slower TPDO2 (transmission tpdo2 = n)")
+    return fd, (f"the arm's CAN FD wiring (arm.json): {n} CiA 402 drives at {rate_hz:g} Hz do not fit "
+                f"{busload.MAX_BUSES} classic 1 Mbit/s buses within the {100 * budget:g} % budget")
+
+
 def reference_args(info: dict[str, Any], controller_args: tuple[str, ...]) -> list[str]:
     """The arm's default reference (arm.json: inside the joint ranges), unless the run gives one."""
     if "--ref-amp" in controller_args:
@@ -258,6 +294,7 @@ def vcan_names(n: int) -> list[str]:
 
 SIL = "sil"  # --bus: software in the loop
 CAPTURE_FILE = "bus.log"  # a run's capture of its buses (candump -l format)
+CANOPEN_DBC_FILE = "canopen.dbc"  # a CANopen run's frames, derived from its drive table (gen/canopen_dbc.py)
 
 
 def bus_args(kind: str, can_port: int, topology: list[busload.Bus]) -> list[str]:
@@ -513,12 +550,21 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
     if opt.protocol not in PROTOCOLS:
         raise HilError(f"--protocol {opt.protocol}: expected one of {', '.join(PROTOCOLS)}")
     canopen = opt.protocol == "canopen"
-    if canopen and opt.bus_timing:
-        raise HilError("--bus-timing: not with --protocol canopen (the emulated CiA 402 drives have no bus timing)")
+    if canopen and opt.bus_timing and opt.mode != "lockstep":
+        raise HilError("--bus-timing with --protocol canopen: lockstep only (the CiA 402 drives' frames are timed "
+                       "virtually)")
     if opt.drive_config is not None and not canopen:
         raise HilError("--drive-config: a CiA 402 drive configuration, for --protocol canopen")
     node_args, sim_node_args, transmission = canopen_args(info, opt.drive_config) if canopen else ([], [], None)
-    topology = load_topology(opt.topology, info)
+    rate_hz = _arg_value(opt.controller_args, "--rate", info["loop_rate_hz"])
+    if canopen:
+        assert transmission is not None
+        if opt.bus_timing and transmission["rpdo1"] >= 254:
+            raise HilError(f"--bus-timing: RPDO1 is event-driven (transmission type {transmission['rpdo1']}); the "
+                           "bus timing of the CiA 402 drives models synchronous RPDOs (1-240)")
+        topology, wiring = canopen_topology(opt.topology, info, rate_hz, transmission, opt.bus_timing)
+    else:
+        topology, wiring = load_topology(opt.topology, info), str(opt.topology or "the arm's wiring (arm.json)")
     substeps = sim_substeps(info, _arg_value(opt.controller_args, "--rate", info["loop_rate_hz"]))
     bus_kind, bus_why = resolve_bus(opt.bus, len(topology))
     binary = opt.controller or controller_binary(bdir)
@@ -530,8 +576,16 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
             raise HilError(f"{exe} is missing: run tools/armctl build")
     opt.out.mkdir(parents=True, exist_ok=True)
     for stale in ("telemetry.lcmlog", "controller_summary.json", "sim_summary.json", "run.json", "uncertainty.json",
-                  CAPTURE_FILE, CAPTURE_FILE + ".gz"):
+                  CAPTURE_FILE, CAPTURE_FILE + ".gz", CANOPEN_DBC_FILE):
         (opt.out / stale).unlink(missing_ok=True)
+    if canopen:  # what decodes a capture of this run, in SI units (gen/canopen_dbc.py)
+        from gen import canopen_dbc, drives as drives_mod
+
+        try:
+            write_text_atomic(opt.out / CANOPEN_DBC_FILE,
+                              canopen_dbc.dbc_text(drives_mod.load(info, opt.drive_config)))
+        except (OutputError, canopen_dbc.DbcError) as exc:
+            raise HilError(str(exc)) from None
     buses = bus_args(bus_kind, can_port, topology)
     bus_argv = [a for spec in buses for a in ("--bus", spec)]
     url = "" if sil else f"udpm://239.255.76.67:{lcm_port}?ttl=0&recv_buf_size=8388608"
@@ -543,7 +597,7 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
             raise HilError(str(exc)) from None
     sim_args = sim_argv(sim_exe, buses, lcm_url=url, summary=opt.out / "sim_summary.json",
                         uncertainty=opt.uncertainty, timing=bus_timing_mode(opt.mode) if opt.bus_timing else "off",
-                        phys=topology, model=prepared_model(bdir), drives=opt.drives,
+                        phys=topology, model=prepared_model(bdir), drives=opt.drives, canopen=canopen,
                         extra=["--substeps", str(substeps), *([] if sil else sim_mode_args(opt.mode, opt.spin_us)),
                                *capture_args(opt), "--protocol", opt.protocol, *sim_node_args,
                                *opt.sim_args])
@@ -581,12 +635,13 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
     run = analyse(opt.out, controller, simulator, config, {
         "protocol": opt.protocol, "canopen": canopen_record(controller),
         "bus": " ".join(buses), "bus_choice": f"{opt.bus} -> {bus_kind} ({bus_why})",
-        "topology": {"file": str(opt.topology) if opt.topology else "the arm's wiring (arm.json)",
+        "topology": {"source": wiring,
                      "buses": [{"name": b.name, "spec": spec.rpartition("@")[0], "kind": b.describe(),
                                 "drives": b.drives} for b, spec in zip(topology, buses)]},
         "bus_load_pct": topology_load_pct(topology, _arg_value(opt.controller_args, "--rate", info["loop_rate_hz"]),
                                           opt.protocol, transmission),
         "canopen_transmission": transmission,
+        "dbc": str(opt.out / CANOPEN_DBC_FILE) if canopen else str(busload.DEFAULT_DBC),
         "lcm_url": url, "wall_s": wall, "simulator_scheduling": sim_scheduling,
         # the simulator's speed: simulated seconds per wall second after boot, and its CPU time
         # per period (arm_sim measures both)

@@ -53,6 +53,8 @@ SYNTH_LOCK = threading.Lock()
 _DESIGNS: OrderedDict[str, Any] = OrderedDict()  # the last designs synthesised, by their expanded inputs
 _KEEP_DESIGNS = 16
 
+UNKEYED_PROTOCOL = "arm"  # RunSpec.key leaves it out: runs kept before --protocol existed spoke it
+
 
 def synthesize_cached(cfg: Any) -> Any:
     """gen.synth's synthesize(cfg), remembering the last few designs: a tuning checks a trial's
@@ -93,12 +95,13 @@ class RunSpec:
 
     def key(self) -> dict[str, Any]:
         """What decides the result (not where it is written, nor the bus it ran on: software in the
-        loop and lockstep HIL give the same results, tests/python/test_sil.py). The default
-        protocol is left out, so the keys of runs kept before it existed still match."""
+        loop and lockstep HIL give the same results, tests/python/test_sil.py). The arm protocol,
+        the only one before the protocol was a choice, is left out, so the keys of runs kept then
+        still match."""
         d = asdict(self)
         for k in ("out", "keep_log", "labels", "bus"):
             d.pop(k)
-        if d["protocol"] == DEFAULT_PROTOCOL:
+        if d["protocol"] == UNKEYED_PROTOCOL:
             d.pop("protocol")
         return d
 

@@ -120,6 +120,7 @@ int arm_co_boot_init(arm_co_boot_t *b, const arm_co_boot_config_t *cfg, uint64_t
     b->n_log = 0u;
     b->next_heartbeat_us = now_us;
     b->heartbeat_due = 0u;
+    b->start_us = now_us;
     if (cfg->n_nodes == 0u || cfg->n_nodes > ARM_CO_BOOT_MAX_NODES) {
         return bad_config(b, 0u, cfg->n_nodes);
     }
@@ -253,9 +254,15 @@ static void step_node(arm_co_boot_t *b, uint8_t i, uint64_t now)
         if (n->sdo.status == ARM_CO_SDO_BUSY) {
             return;
         }
+        if (n->sdo.status == ARM_CO_SDO_TIMEOUT && !n->answered &&
+            now - b->start_us < b->cfg.presence_timeout_us) {
+            (void)arm_co_sdo_upload(&n->sdo, a->index, a->sub, now); /* not there yet: ask again */
+            return;
+        }
         if (!transfer_ok(b, n, a)) {
             return;
         }
+        n->answered = 1u;
         if (a->kind == ARM_CO_ACT_WRITE) {
             log_write(b, n, a);
         } else if (a->kind == ARM_CO_ACT_READ) {

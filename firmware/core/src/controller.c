@@ -53,6 +53,8 @@ void arm_ctl_default_config(const arm_robot_model_t *model, arm_ctl_config_t *cf
      * corrupted or spoofed state, a runaway joint or a drive that does not do as told do not. */
     cfg->step_tolerance = (float)ARM_P_CONTROLLER_STEP_TOLERANCE_DEFAULT;
     cfg->torque_mismatch_periods = 3u;
+    cfg->torque_report_lag_min = 1u;
+    cfg->torque_report_lag_max = 1u;
     arm_ctl_joint_range(model, (float)ARM_P_CONTROLLER_POSITION_MARGIN_DEFAULT, cfg->q_min, cfg->q_max);
     for (int i = 0; i < ARM_N_JOINTS; ++i) {
         cfg->velocity_limit[i] = (float)ARM_P_CONTROLLER_MAX_VELOCITY_DEFAULT;
@@ -100,7 +102,11 @@ arm_ctl_init_result_t arm_ctl_init(arm_ctl_t *ctl, const arm_robot_model_t *mode
         if (!(cfg->following_error_limit[i] > 0.0f)) return ARM_CTL_BAD_FOLLOWING_LIMIT;
         if (!(cfg->torque_mismatch_limit[i] > 0.0f)) return ARM_CTL_BAD_MISMATCH_LIMIT;
     }
-    if (cfg->torque_mismatch_periods < 1u) return ARM_CTL_BAD_MISMATCH_LIMIT;
+    if (cfg->torque_mismatch_periods < 1u || cfg->torque_report_lag_min < 1u ||
+        cfg->torque_report_lag_max < cfg->torque_report_lag_min ||
+        cfg->torque_report_lag_max > ARM_TORQUE_REPORT_LAG_MAX) {
+        return ARM_CTL_BAD_MISMATCH_LIMIT;
+    }
     if (!(cfg->step_tolerance > 0.0f)) return ARM_CTL_BAD_STEP_TOLERANCE;
     memset(ctl, 0, sizeof(*ctl));
     ctl->model = model;
@@ -176,8 +182,13 @@ static int plausible(arm_ctl_t *ctl, const arm_ctl_input_t *in)
                 return 0;
             }
         }
-        if ((c->checks & ARM_CHECK_TORQUE) && ctl->state == ARM_STATE_RUNNING) {
-            if (fabsf(in->tau_measured[i] - ctl->tau_prev[i]) > c->torque_mismatch_limit[i]) {
+        if ((c->checks & ARM_CHECK_TORQUE) && ctl->state == ARM_STATE_RUNNING &&
+            ctl->n_sent >= c->torque_report_lag_min) {
+            int near = 0; /* the report is one of the commands it may be reporting */
+            for (uint32_t k = c->torque_report_lag_min; k <= c->torque_report_lag_max && k <= ctl->n_sent; ++k) {
+                near |= fabsf(in->tau_measured[i] - ctl->tau_sent[k - 1u][i]) <= c->torque_mismatch_limit[i];
+            }
+            if (!near) {
                 if (++ctl->mismatch_periods[i] >= c->torque_mismatch_periods) {
                     latch_joint_fault(ctl, ARM_FAULT_TORQUE_MISMATCH, i, in->tau_measured[i]);
                     return 0;
@@ -293,6 +304,9 @@ void arm_ctl_step(arm_ctl_t *ctl, const arm_ctl_input_t *in, arm_ctl_output_t *o
     /* INIT commands zero torque: out->tau is already zero. */
 
     memcpy(ctl->tau_prev, out->tau, sizeof(ctl->tau_prev));
+    memmove(ctl->tau_sent[1], ctl->tau_sent[0], sizeof(ctl->tau_sent) - sizeof(ctl->tau_sent[0]));
+    memcpy(ctl->tau_sent[0], out->tau, sizeof(ctl->tau_sent[0]));
+    if (ctl->n_sent < ARM_TORQUE_REPORT_LAG_MAX) ctl->n_sent++;
     out->state = ctl->state;
     out->fault = ctl->fault;
     out->fault_joint = ctl->fault_joint;

@@ -278,6 +278,11 @@ static int boot_canopen_run(link_t *l, const options_t *opt, const arm_robot_mod
         cfg.cycle_us = (uint32_t)(1e6 / opt->rate_hz + 0.5);
         cfg.heartbeat_ms = CANOPEN_HEARTBEAT_MS;
         cfg.master_id = CANOPEN_MASTER_ID;
+        /* drives that come up after the controller (a slower process, a bus powered later) are
+         * waited for, as the arm protocol waits for their heartbeats: for the first half of the
+         * boot timeout, so that one that never comes is still named (no_answer, node, 0x1000) */
+        const double presence_s = 0.5 * opt->boot_timeout_s;
+        cfg.presence_timeout_us = (uint32_t)(presence_s < 4000.0 ? presence_s * 1e6 : 4e9);
         cfg.rpdo1.trans = opt->rpdo_type;
         cfg.tpdo2.trans = opt->tpdo2_type;
         for (int j = 0; j < ARM_N_JOINTS; ++j) {
@@ -602,7 +607,14 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
     }
     arm_bus_init(&l.drives);
 
-    const arm_ctl_init_result_t ir = arm_ctl_init(&p.ctl, model, &opt->ctl);
+    arm_ctl_config_t ctl_cfg = opt->ctl;
+    if (l.canopen) { /* CiA 301: a synchronous RPDO (1-240) acts at the next SYNC; a TPDO2 sent every
+                      * n-th SYNC stands for up to n - 1 periods after it (the core's torque check) */
+        ctl_cfg.torque_report_lag_min = opt->rpdo_type <= 240u ? 2u : 1u;
+        ctl_cfg.torque_report_lag_max = ctl_cfg.torque_report_lag_min + l.tpdo2_every - 1u;
+        if (ctl_cfg.torque_report_lag_max > ARM_TORQUE_REPORT_LAG_MAX) ctl_cfg.torque_report_lag_max = ARM_TORQUE_REPORT_LAG_MAX;
+    }
+    const arm_ctl_init_result_t ir = arm_ctl_init(&p.ctl, model, &ctl_cfg);
     if (ir != ARM_CTL_OK) {
         snprintf(report->reason, sizeof(report->reason), "controller config: %s", arm_ctl_init_result_str(ir));
         report->result = RUN_FAULT;

@@ -73,6 +73,11 @@ typedef struct {
     uint16_t consumer_ms;       /* 0x1016.1 low 16 bits: the drive's timeout for the master */
     uint32_t sdo_timeout_us;
     uint8_t sdo_tries;
+    /* A node that has not answered at all yet is asked its first question (0x1000) again, not
+     * failed, until this long after the boot began: a drive that powers up after the master (a
+     * slow one, or one whose bus comes up later) is still configured, as a CiA 302 master waits
+     * for its slaves' boot-up. 0: no wait, `sdo_tries` alone. */
+    uint32_t presence_timeout_us;
     uint32_t state_timeout_us;  /* per controlword step: the statusword must follow by then */
     uint8_t fault_reset;        /* 1: a drive in fault gets one fault reset (controlword 0x00, then
                                  * 0x80: bit 7's rising edge) before its failure is reported; 0: a
@@ -80,7 +85,7 @@ typedef struct {
 } arm_co_boot_config_t;
 
 /* The contract's defaults: RPDO1 6040+6071, TPDO1 6064+606C, TPDO2 6077+6041; 1 ms, 100 ms,
- * master 0x7F with 300 ms, SDO 50 ms x 3 tries, 500 ms per state. No nodes. */
+ * master 0x7F with 300 ms, SDO 50 ms x 3 tries, no presence wait, 500 ms per state. No nodes. */
 void arm_co_boot_default_config(arm_co_boot_config_t *cfg);
 
 typedef enum {
@@ -142,6 +147,7 @@ typedef struct {
     uint8_t control_phase;        /* CONTROL: 0 write cw, 1 read sw, 2 and 3 fault reset 0x00, 0x80 */
     uint8_t fault_resets;         /* fault resets done (at most one per node) */
     uint8_t cw_written;           /* CONTROL, QUIESCE: this action's controlword is out */
+    uint8_t answered;             /* an SDO transfer of this node has ended well: it is there */
     uint64_t control_deadline_us;
     uint16_t statusword;
     uint32_t identity[4];         /* 0x1018.1..4 as read */
@@ -158,6 +164,7 @@ typedef struct {
     uint8_t nmt_pending[ARM_CO_BOOT_MAX_NODES]; /* NMT frame queued for node i (command + 1) */
     uint64_t next_heartbeat_us;
     uint8_t heartbeat_due;
+    uint64_t start_us;             /* when the boot began (presence_timeout_us counts from it) */
 } arm_co_boot_t;
 
 /* Builds every node's sequence; -1 with fault ARM_CO_FAULT_BAD_CONFIG (node: the bad one) if a

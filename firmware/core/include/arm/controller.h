@@ -51,6 +51,8 @@ typedef enum {
 #define ARM_CHECK_TORQUE 0x10u
 #define ARM_CHECK_ALL 0x1Fu
 
+#define ARM_TORQUE_REPORT_LAG_MAX 4u /* the commands kept for the torque check (torque_report_lag_max) */
+
 typedef enum {
     ARM_SAFE_STOP_ZERO_TORQUE = 0,
     ARM_SAFE_STOP_DAMPING, /* tau = -damping * qd, clamped */
@@ -78,6 +80,12 @@ typedef struct {
     float following_error_limit[ARM_N_JOINTS]; /* rad */
     float torque_mismatch_limit[ARM_N_JOINTS]; /* Nm between reported and commanded torque */
     uint32_t torque_mismatch_periods;       /* consecutive periods of mismatch that make a fault */
+    /* Periods from a command to the drive's report of the torque it applied: a report matches if
+     * it is near any command of that window. 1..1 on the arm protocol (the state at SYNC k reports
+     * the command of period k - 1); the CANopen port widens it (a synchronous RPDO acts one SYNC
+     * later, a TPDO2 of every n-th SYNC reports up to n - 1 periods late). */
+    uint32_t torque_report_lag_min;
+    uint32_t torque_report_lag_max;         /* at most ARM_TORQUE_REPORT_LAG_MAX */
     arm_safe_stop_mode_t safe_stop_mode;
     float safe_stop_damping; /* Nm s/rad */
 } arm_ctl_config_t;
@@ -122,6 +130,8 @@ typedef struct {
     float last_q[ARM_N_JOINTS];
     float last_qd[ARM_N_JOINTS];
     float tau_prev[ARM_N_JOINTS];
+    float tau_sent[ARM_TORQUE_REPORT_LAG_MAX][ARM_N_JOINTS]; /* [k]: the command of k + 1 periods ago */
+    uint32_t n_sent;                        /* commands in tau_sent, at most ARM_TORQUE_REPORT_LAG_MAX */
     int have_last;                          /* last_q/last_qd hold a fresh sample of the last period */
     uint32_t mismatch_periods[ARM_N_JOINTS];
     int fault_joint;
