@@ -25,8 +25,8 @@ from cantools.database.conversion import BaseConversion
 from gen import drives as drives_mod
 from gen import eds as eds_mod
 from gen.lib.atomic_output import exit_on_output_error, write_text_atomic
+from gen.lib.cia402 import CODEC_MAPPING, PDO_COB
 
-PDO_COB = {"tpdo1": 0x180, "rpdo1": 0x200, "tpdo2": 0x280}
 POSITION_OBJECTS = {0x6064, 0x606C}  # increments, increments/s: at the joint through encoder and gear
 TORQUE_OBJECTS = {0x6071, 0x6077}    # per mille of the rated torque 0x6076
 
@@ -61,7 +61,7 @@ def build(cfg: drives_mod.DriveConfig) -> Database:
             Message(0x700 + cfg.master_id, "HEARTBEAT_master", 1, [_sig("nmt_state", 0, 8, False)], senders=["master"])]
     for d in sorted(cfg.drives, key=lambda x: x.node):
         n = d.node
-        for pdo, mapping in drives_mod.CODEC_MAPPING.items():
+        for pdo, mapping in CODEC_MAPPING.items():
             sigs, start = [], 0
             for index, sub, bits in mapping:
                 e = objects.get((index, sub))

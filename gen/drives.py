@@ -23,18 +23,13 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from gen.lib.cia402 import CODEC_MAPPING
 from gen.lib import toml_input
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_DRIVES = ROOT / "firmware" / "protocol" / "drives.toml"
 TOP_FIELDS = {"eds", "heartbeat_ms", "consumer_ms", "master_id", "defaults", "joint", "pdo"}
 JOINT_FIELDS = {"node", "encoder_increments", "gear", "rated_torque_nm"}
-# What the codec packs (firmware/canopen/include/arm/co_pdo.h): the contract's default mapping.
-CODEC_MAPPING = {
-    "rpdo1": [(0x6040, 0, 16), (0x6071, 0, 16)],
-    "tpdo1": [(0x6064, 0, 32), (0x606C, 0, 32)],
-    "tpdo2": [(0x6077, 0, 16), (0x6041, 0, 16)],
-}
 U32_MAX = 0xFFFFFFFF
 # The contract's: every PDO on every SYNC. TPDO2 may come every n-th SYNC (the controller keeps its
 # torque and statusword in between); TPDO1, the joint state, must come every SYNC; RPDO1 may be

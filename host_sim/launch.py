@@ -13,6 +13,7 @@ from typing import Any
 
 from host_sim.drive_model import DriveModel
 from host_sim.uncertainty import UncertaintyConfig
+from gen.lib.cia402 import PDO_COB, pdo_bytes
 from gen.lib import busload
 from gen.lib.paths import build_dir
 
@@ -47,11 +48,10 @@ def canopen_frame_times(bus: busload.Bus) -> str:
     """"ID:US,..." for the CiA 402 drives on this bus (node id = drive number; CiA 301's predefined
     COB-IDs): SYNC, and per node TPDO1 0x180+n, RPDO1 0x200+n, TPDO2 0x280+n, EMCY 0x080+n and its
     heartbeat 0x700+n, each its worst-case time (gen/lib/busload.py)."""
-    pdo_cob = {"TPDO1": 0x180, "RPDO1": 0x200, "TPDO2": 0x280}
     times = {0x080: busload.canopen_frame_s(0, bus)}
     for n in bus.drives:
-        for name, n_bytes in busload.CANOPEN_PDO_BYTES.items():
-            times[pdo_cob[name] + n] = busload.canopen_frame_s(n_bytes, bus)
+        for name, cob in PDO_COB.items():
+            times[cob + n] = busload.canopen_frame_s(pdo_bytes(name), bus)
         times[0x080 + n] = busload.canopen_frame_s(8, bus)
         times[0x700 + n] = busload.canopen_frame_s(1, bus)
     return ",".join(f"{i}:{t * 1e6:.6f}" for i, t in sorted(times.items()))

@@ -44,6 +44,7 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from gen.lib.cia402 import CODEC_MAPPING, pdo_bytes
 from gen.lib.params import constant, default
 from gen.lib.paths import REPO
 
@@ -387,7 +388,7 @@ def phy_spec(b: Bus) -> str:
 # The CiA 402 drives of issue #23 (README: Real drives, The CANopen master): per drive and period
 # RPDO1 (controlword + target torque), TPDO1 (position + velocity), TPDO2 (torque + statusword);
 # one SYNC (no counter) per bus and period; a 1-byte heartbeat per drive every heartbeat_ms.
-CANOPEN_PDO_BYTES = {"RPDO1": 4, "TPDO1": 8, "TPDO2": 4}
+CANOPEN_PDO_BYTES = {name.upper(): pdo_bytes(name) for name in CODEC_MAPPING}  # RPDO1 4, TPDO1 8, TPDO2 4
 
 
 def canopen_frame_s(n_bytes: int, bus: Bus) -> float:

@@ -4,6 +4,7 @@ same controller and drive code in one process, frames in memory, telemetry strai
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import platform
@@ -196,12 +197,18 @@ def _git(*args: str) -> str | None:
     return r.stdout if r.returncode == 0 else None
 
 
+@functools.cache
+def _checkout_state() -> tuple[str | None, str | None]:
+    """HEAD and the tracked files' status, once per process: its runs run the binaries it built
+    (tools/run/runner.py prepare_build), and two git calls cost 8 ms a run."""
+    return _git("rev-parse", "HEAD"), _git("status", "--porcelain", "--untracked-files=no")
+
+
 def provenance(started: datetime | None = None) -> dict[str, Any]:
     """When, from which code and on which machine a run was made (run.json `provenance`): a
     result can then be traced to its commit. `dirty`: tracked files differ from that commit
     (untracked ones, such as run folders, do not count); both null outside a git checkout."""
-    head = _git("rev-parse", "HEAD")
-    status = _git("status", "--porcelain", "--untracked-files=no")
+    head, status = _checkout_state()
     return {"date_utc": (started or datetime.now(timezone.utc)).isoformat(timespec="seconds"),
             "commit": head.strip() if head else None,
             "dirty": bool(status.strip()) if status is not None and head else None,

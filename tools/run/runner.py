@@ -169,8 +169,18 @@ def sil_design(base: ArmRef, design_text: str, n_joints: int) -> Path:
     return folder
 
 
+_BUILT: dict[ArmRef, Path] = {}
+_BUILT_LOCK = threading.Lock()
+
+
 def prepare_build(arm: ArmRef) -> Path:
-    return build_arm("release", arm, targets=HIL_TARGETS)
+    """The arm's release build, brought up to date once per process: every run of a tuning or a
+    study then runs the same binaries (a source edited meanwhile is the next command's), and a
+    run does not pay ninja's check of the whole tree (35 ms, a quarter of a 4 s SIL run)."""
+    with _BUILT_LOCK:
+        if arm not in _BUILT:
+            _BUILT[arm] = build_arm("release", arm, targets=HIL_TARGETS)
+        return _BUILT[arm]
 
 
 def _json(x: Any) -> Any:
