@@ -526,15 +526,22 @@ static void on_sync(sim_t *s, int counter, unsigned bus)
     publish_truth(s); /* the last period's truth, while the controller computes this one */
 }
 
-/* A SYNC on `bus` for the next period while this period's commands for drives on other buses
- * are still missing, and the drives on `bus` have theirs. Such commands may still be on their
- * way: a socket per bus (and, on vcan, a per-CPU receive backlog) does not keep the order between
- * buses, so the next SYNC on one bus can overtake the commands on another. Commands missing on
- * `bus` itself are really missing (one bus keeps its order). */
+/* A SYNC on `bus` for the next period, or the run's closing NMT stop, while this period's
+ * commands for drives on other buses are still missing, and the drives on `bus` have theirs. Such
+ * commands may still be on their way: a socket per bus (and, on vcan, a per-CPU receive backlog)
+ * does not keep the order between buses, so the next SYNC on one bus can overtake the commands on
+ * another; and an NMT stop that overtook the last period's commands stopped the drives on its bus
+ * before that period was applied (seen under load: the last period's truth then differed from
+ * software in the loop's). Commands missing on `bus` itself are really missing (one bus keeps its
+ * order). */
 static int holds_back(const sim_t *s, unsigned bus, const arm_can_frame_t *f)
 {
-    if (s->set.n < 2u || s->counter < 0 || f->len != 1u) return 0;
-    if (f->data[0] == s->counter && (s->synced & (1u << bus)) == 0u) return 0; /* this period's SYNC elsewhere */
+    if (s->set.n < 2u || s->counter < 0) return 0;
+    if (f->id == ARM_DRIVES_NMT_FRAME_ID) {
+        if (f->len != 2u || f->data[0] != SIM_NMT_STOP) return 0;
+    } else if (f->len != 1u || (f->data[0] == s->counter && (s->synced & (1u << bus)) == 0u)) {
+        return 0; /* a malformed SYNC, or this period's SYNC elsewhere */
+    }
     int mine = 1, others = 1;
     for (int j = 0; j < s->n; ++j) {
         const int got = (s->got_cmd & (1u << j)) != 0u;
@@ -709,7 +716,7 @@ static void run_loop(sim_t *s)
                 continue;
             }
         }
-        if (have && flag != 2 && f.id == sync_id && holds_back(s, bus, &f)) {
+        if (have && flag != 2 && (f.id == sync_id || f.id == nmt_id) && holds_back(s, bus, &f)) {
             int already = 0;
             for (unsigned i = 0; i < s->n_deferred; ++i) already |= s->deferred[i].bus == bus;
             if (!already) {
