@@ -34,6 +34,16 @@ def report(loads: list[BusLoad], budget: float) -> str:
     return "\n".join(lines)
 
 
+def json_doc(loads: list[BusLoad], rate_hz: float, budget: float, max_rate: int, **extra: object) -> str:
+    over = any(bl.load > budget for bl in loads)
+    return json.dumps({
+        **extra, "rate_hz": rate_hz, "budget": budget, "fits": not over, "max_rate_hz": max_rate,
+        "buses": [{"name": bl.bus.name, "kind": bl.bus.describe(), "drives": bl.bus.drives,
+                   "load": bl.load, "periodic_us": bl.periodic_s * 1e6,
+                   "max_rate_hz": math.floor(bl.max_rate_hz(budget)),
+                   "frames": [f.__dict__ for f in bl.frames]} for bl in loads]}, indent=2)
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--bus", action="append", default=[], metavar="SPEC",
                    help="[NAME=]fd:NOMINAL[/DATA]:DRIVES or [NAME=]classic:RATE:DRIVES, repeatable "
@@ -88,12 +98,7 @@ def run(ns: argparse.Namespace) -> int:
     over = [bl for bl in loads if bl.load > budget]
     max_rate = math.floor(min(bl.max_rate_hz(budget) for bl in loads))
     if ns.json:
-        print(json.dumps({
-            "rate_hz": ns.rate, "budget": budget, "fits": not over, "max_rate_hz": max_rate,
-            "buses": [{"name": bl.bus.name, "kind": bl.bus.describe(), "drives": bl.bus.drives,
-                       "load": bl.load, "periodic_us": bl.periodic_s * 1e6,
-                       "max_rate_hz": math.floor(bl.max_rate_hz(budget)),
-                       "frames": [f.__dict__ for f in bl.frames]} for bl in loads]}, indent=2))
+        print(json_doc(loads, ns.rate, budget, max_rate))
     else:
         print(report(loads, budget))
     if not over:
@@ -146,12 +151,7 @@ def run_canopen(ns: argparse.Namespace) -> int:
     over = [bl for bl in loads if bl.load > budget]
     max_rate = math.floor(min(bl.max_rate_hz(budget) for bl in loads))
     if ns.json:
-        print(json.dumps({
-            "protocol": "canopen", "rate_hz": ns.rate, "budget": budget, "fits": not over, "max_rate_hz": max_rate,
-            "transmission": every,
-            "buses": [{"name": bl.bus.name, "kind": bl.bus.describe(), "drives": bl.bus.drives, "load": bl.load,
-                       "periodic_us": bl.periodic_s * 1e6, "max_rate_hz": math.floor(bl.max_rate_hz(budget)),
-                       "frames": [f.__dict__ for f in bl.frames]} for bl in loads]}, indent=2))
+        print(json_doc(loads, ns.rate, budget, max_rate, protocol="canopen", transmission=every))
     else:
         print(f"CiA 402 drives, PDO transmission types {every} (drive table {table})")
         print(report(loads, budget))

@@ -433,25 +433,21 @@ def canopen_compute(buses: list[Bus], rate_hz: float, heartbeat_ms: float = 100.
     out = []
     for b in buses:
         bl = BusLoad(bus=b, rate_hz=rate_hz)
-
-        def add(name: str, n_bytes: int, per_period: float, bus: Bus = b, load: BusLoad = bl) -> None:
-            nom, dat = ((classic_frame_bits(n_bytes), 0) if not bus.fd
-                        else fd_frame_bits(n_bytes, brs=bus.data_bps is not None))
-            t = canopen_frame_s(n_bytes, bus)
-            load.frames.append(FrameLoad(name, 1, per_period, nom, dat, t))
-            load.periodic_s += per_period * t
-
-        add("SYNC", 0, 1.0)
-        for d in b.drives:
-            for name, n_bytes in CANOPEN_PDO_BYTES.items():
-                add(f"{name} node {d}", n_bytes, 1.0 / _every(every.get(name.lower(), 1)))
-        for d in b.drives:
-            t = canopen_frame_s(1, b)
-            nom, dat = (classic_frame_bits(1), 0) if not b.fd else fd_frame_bits(1, brs=b.data_bps is not None)
-            bl.frames.append(FrameLoad(f"heartbeat node {d}", 1, 1.0 / (rate_hz * heartbeat_ms * 1e-3), nom, dat, t))
-            bl.background_load += t / (heartbeat_ms * 1e-3)
+        periodic = [_canopen_frame("SYNC", 0, 1.0, b)] + [
+            _canopen_frame(f"{name} node {d}", n_bytes, 1.0 / _every(every.get(name.lower(), 1)), b)
+            for d in b.drives for name, n_bytes in CANOPEN_PDO_BYTES.items()]
+        heartbeats = [_canopen_frame(f"heartbeat node {d}", 1, 1.0 / (rate_hz * heartbeat_ms * 1e-3), b)
+                      for d in b.drives]
+        bl.frames = periodic + heartbeats
+        bl.periodic_s = sum(f.per_period * f.time_s for f in periodic)
+        bl.background_load = sum(f.time_s for f in heartbeats) / (heartbeat_ms * 1e-3)
         out.append(bl)
     return out
+
+
+def _canopen_frame(name: str, n_bytes: int, per_period: float, bus: Bus) -> FrameLoad:
+    nom, dat = (classic_frame_bits(n_bytes), 0) if not bus.fd else fd_frame_bits(n_bytes, brs=bus.data_bps is not None)
+    return FrameLoad(name, 1, per_period, nom, dat, canopen_frame_s(n_bytes, bus))
 
 
 def canopen_load(bus: Bus, n_drives: int, rate_hz: float, heartbeat_ms: float = 100.0,

@@ -512,10 +512,10 @@ def _wait_sil(opt: HilOptions, sil: subprocess.Popen[bytes], log: Any) -> None:
         raise HilError(f"arm_sil refused its arguments: {_last_line(opt.out / 'sil.log')}")
 
 
-def canopen_args(info: dict[str, Any], drive_config: Path | None) -> tuple[list[str], list[str], dict[str, int]]:
+def canopen_args(info: dict[str, Any], drive_config: Path | None) -> tuple[list[str], list[str], Any]:
     """From the arm's drive table (gen/drives.py): arm_controller's --node per joint (joint order)
     and the PDOs' transmission types; arm_sim's --node presets (the same specs: its drives start
-    with the table's scaling, as drives commissioned for this arm); and those types."""
+    with the table's scaling, as drives commissioned for this arm); and the table itself."""
     from gen import drives as drives_mod
 
     try:
@@ -526,7 +526,7 @@ def canopen_args(info: dict[str, Any], drive_config: Path | None) -> tuple[list[
     t = cfg.transmission
     ctl = [*node_args, *(["--rpdo-type", str(t["rpdo1"])] if t["rpdo1"] != 1 else []),
            *(["--tpdo2-type", str(t["tpdo2"])] if t["tpdo2"] != 1 else [])]
-    return ctl, node_args, t
+    return ctl, node_args, cfg
 
 
 def canopen_record(controller: dict[str, Any]) -> dict[str, Any] | None:
@@ -562,7 +562,8 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
                        "virtually)")
     if opt.drive_config is not None and not canopen:
         raise HilError("--drive-config: a CiA 402 drive configuration, for --protocol canopen")
-    node_args, sim_node_args, transmission = canopen_args(info, opt.drive_config) if canopen else ([], [], None)
+    node_args, sim_node_args, drive_table = canopen_args(info, opt.drive_config) if canopen else ([], [], None)
+    transmission = drive_table.transmission if drive_table is not None else None
     rate_hz = _arg_value(opt.controller_args, "--rate", info["loop_rate_hz"])
     if canopen:
         assert transmission is not None
@@ -572,7 +573,7 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
         topology, wiring = canopen_topology(opt.topology, info, rate_hz, transmission, opt.bus_timing)
     else:
         topology, wiring = load_topology(opt.topology, info), str(opt.topology or "the arm's wiring (arm.json)")
-    substeps = sim_substeps(info, _arg_value(opt.controller_args, "--rate", info["loop_rate_hz"]))
+    substeps = sim_substeps(info, rate_hz)
     bus_kind, bus_why = resolve_bus(opt.bus, len(topology))
     binary = opt.controller or controller_binary(bdir)
     logger_exe = logger_binary(bdir)
@@ -585,12 +586,11 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
     for stale in ("telemetry.lcmlog", "controller_summary.json", "sim_summary.json", "run.json", "uncertainty.json",
                   CAPTURE_FILE, CAPTURE_FILE + ".gz", CANOPEN_DBC_FILE):
         (opt.out / stale).unlink(missing_ok=True)
-    if canopen:  # what decodes a capture of this run, in SI units (gen/canopen_dbc.py)
-        from gen import canopen_dbc, drives as drives_mod
+    if drive_table is not None:  # what decodes a capture of this run, in SI units (gen/canopen_dbc.py)
+        from gen import canopen_dbc
 
         try:
-            write_text_atomic(opt.out / CANOPEN_DBC_FILE,
-                              canopen_dbc.dbc_text(drives_mod.load(info, opt.drive_config)))
+            write_text_atomic(opt.out / CANOPEN_DBC_FILE, canopen_dbc.dbc_text(drive_table))
         except (OutputError, canopen_dbc.DbcError) as exc:
             raise HilError(str(exc)) from None
     buses = bus_args(bus_kind, can_port, topology)
@@ -634,7 +634,7 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
                       "model_hash": info["model_hash"], "n_joints": info["n_joints"], "warnings": info["warnings"]},
               "design": opt.design_record if opt.design_file is not None else info.get("design"),
               "ref_hold_s": _arg_value(opt.controller_args, "--ref-hold", CONTROLLER_DEFAULT_HOLD_S),
-              "rate_hz": _arg_value(opt.controller_args, "--rate", info["loop_rate_hz"]),
+              "rate_hz": rate_hz,
               "controller_args": list(opt.controller_args),
               "uncertainty": opt.uncertainty, "drives": opt.drives.to_dict(),
               "bus_timing": bus_timing_mode(opt.mode) if opt.bus_timing else "off", "protocol": opt.protocol,
@@ -645,7 +645,7 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
         "topology": {"source": wiring,
                      "buses": [{"name": b.name, "spec": spec.rpartition("@")[0], "kind": b.describe(),
                                 "drives": b.drives} for b, spec in zip(topology, buses)]},
-        "bus_load_pct": topology_load_pct(topology, _arg_value(opt.controller_args, "--rate", info["loop_rate_hz"]),
+        "bus_load_pct": topology_load_pct(topology, rate_hz,
                                           opt.protocol, transmission),
         "canopen_transmission": transmission,
         "dbc": str(opt.out / CANOPEN_DBC_FILE) if canopen else str(busload.DEFAULT_DBC),
