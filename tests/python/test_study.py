@@ -356,7 +356,7 @@ def test_a_study_reuses_a_longer_kept_tuning_and_tunes_what_is_missing_with_its_
     """`armctl tune` tunes to [tuning] cap (400); a study takes any kept tuning of at least
     study_tuning_cap trials and tunes only what is missing, with study_tuning_cap (a new arm's study
     then finishes in minutes). tune_method is replaced: only the choice of what to tune is tested."""
-    import tools.study as study_mod
+    import tools.study.pairs as pairs_mod
     from tools.build.arm import DEFAULT_ARM, build_arm
     from tools.study import keep_tuning, setup_for, tuned, tuning_file, tuning_key
 
@@ -375,7 +375,7 @@ def test_a_study_reuses_a_longer_kept_tuning_and_tunes_what_is_missing_with_its_
         asked.append((method, trials))
         return {"cap": trials, "trials_run": trials, "knobs": {"wn": 2.0}}
 
-    monkeypatch.setattr(study_mod, "tune_method", fake_tune)
+    monkeypatch.setattr(pairs_mod, "tune_method", fake_tune)
     got = tuned(cfg, DEFAULT_ARM, setup, info, ["ideal"], ["pm", "tde"], in_study=True)
     assert asked == [("tde", 3)] and got["ideal"]["pm"]["knobs"] == {"wn": 1.0}
     asked.clear()
@@ -648,3 +648,19 @@ def test_a_list_for_another_arm_stops_the_study_before_any_run(tmp_path: Path) -
                       "{ torque_limit_fraction = f }, optionally with for_arm = { ARM = [...] }"], r.stderr
     assert "Traceback" not in r.stderr and not any(out.glob("*/*/seed-*"))
     assert "armctl study: panda: locked (not controlled): panda_finger_joint1" in r.stderr  # what the import assumed
+
+
+def test_a_study_confirms_its_designs_over_the_bus_with_the_files_its_sil_runs_loaded(tmp_path: Path) -> None:
+    """A SIL study's confirmation repeats a run of a tuned design (pm) and one of gains (pd) in
+    lockstep HIL over a bus; the design run loads the very file its SIL run loaded (no build of
+    its own), and every result is the same."""
+    cfg = load(small_config(tmp_path / "cfg", seeds=1, methods='["pm", "pd"]', scenarios='["ideal"]'))
+    study = run_study(cfg, tmp_path / "study", duration_s=0.3, jobs=2, confirm=2)
+    conf = study["confirmation"]
+    assert conf["all_match"] and [(r["method"], r["match"]) for r in conf["runs"]] == [("pm", True), ("pd", True)]
+    assert all(r["bus"].split(" ")[2] in ("udp", "vcan") for r in conf["runs"]), conf
+    sil = json.loads((tmp_path / "study" / "ideal" / "pm" / "seed-1" / "run.json").read_text())
+    bus = json.loads((tmp_path / "study" / "confirm" / "ideal" / "pm" / "seed-1" / "run.json").read_text())
+    assert bus["results"]["design"] == sil["results"]["design"]
+    assert bus["results"]["design"]["why"] == "loaded at run time (--design-file)"
+    assert sil["environment"]["bus_choice"].startswith("sil") and not bus["environment"]["bus_choice"].startswith("sil")

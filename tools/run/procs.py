@@ -30,13 +30,22 @@ _lock = threading.Lock()
 interrupted: int | None = None  # the signal that stopped this armctl, if one did
 
 
-def spawn(role: str, args: list[str], **kw: Any) -> subprocess.Popen[Any]:
+PARENT_PID_ENV = "ARM_PARENT_PID"  # firmware/port/linux/stop_signals.h ARM_PARENT_PID_ENV
+
+
+def spawn(role: str, args: list[str], watches_parent: bool = False, **kw: Any) -> subprocess.Popen[Any]:
     """Popen in a process group of its own, known to the signal handler until it has exited.
-    role: "controller", "simulator" or "logger"."""
+    role: "controller", "simulator" or "logger". watches_parent: the program asks for its SIGTERM
+    itself (PARENT_PID_ENV: arm_controller, arm_sim, arm_sil), so no Python runs between fork and
+    exec and subprocess can vfork (a fork of armctl, with the solver loaded, cost 20 ms a run)."""
     if interrupted is not None:
         raise InterruptedError(f"armctl was stopped by signal {interrupted}: not starting the {role}")
     kw.setdefault("process_group", 0)
-    kw["preexec_fn"] = _dies_with_parent(os.getpid(), kw.get("preexec_fn"))
+    if watches_parent and kw.get("preexec_fn") is None:
+        kw.pop("preexec_fn", None)
+        kw["env"] = {**(kw.get("env") or os.environ), PARENT_PID_ENV: str(os.getpid())}
+    else:
+        kw["preexec_fn"] = _dies_with_parent(os.getpid(), kw.get("preexec_fn"))
     p = subprocess.Popen(args, **kw)
     with _lock:
         _live.append((role, p))
@@ -55,6 +64,43 @@ def _dies_with_parent(parent: int, then: Callable[[], None] | None) -> Callable[
     return setup
 
 
+class _Process:
+    """A process of armctl's own (a multiprocessing worker), signalled as a child is. Its pool
+    reaps it: poll() only asks whether it is there."""
+
+    def __init__(self, pid: int) -> None:
+        self.pid = pid
+
+    def poll(self) -> int | None:
+        try:
+            os.kill(self.pid, 0)
+        except ProcessLookupError:
+            return 0
+        return None
+
+    def send_signal(self, sig: int) -> None:
+        try:
+            os.kill(self.pid, sig)
+        except ProcessLookupError:
+            pass
+
+
+def adopt(role: str, pid: int) -> Any:
+    """A worker process of armctl's own, known to the signal handler until forget()."""
+    p = _Process(pid)
+    with _lock:
+        _live.append((role, p))
+    return p
+
+
+def as_child_of(parent: int) -> None:
+    """In a forked worker: it stops its own runs on a signal, not its parent's children (the list
+    it inherited), and gets a SIGTERM when armctl dies."""
+    with _lock:
+        _live.clear()
+    _dies_with_parent(parent, None)()
+
+
 def communicate_or_kill(p: subprocess.Popen[Any], timeout: float) -> tuple[Any, Any]:
     """p's (stdout, stderr) once it has ended: within timeout on its own, else after a SIGKILL
     (which it cannot ignore, so this always returns)."""
@@ -65,7 +111,7 @@ def communicate_or_kill(p: subprocess.Popen[Any], timeout: float) -> tuple[Any, 
         return p.communicate()
 
 
-def forget(p: subprocess.Popen[Any]) -> None:
+def forget(p: Any) -> None:
     with _lock:
         _live[:] = [(r, q) for r, q in _live if q is not p]
 

@@ -92,6 +92,10 @@ class RunSpec:
     code: str = ""                     # tools/build/code_identity.py: a kept run of other code is run again
     bus: str = "udp"                   # tools/run/hil.py's --bus: sil (one process) or a CAN bus
     protocol: str = DEFAULT_PROTOCOL   # what the drives speak (tools/run/hil.py PROTOCOLS)
+    # design_text loaded at run time over a bus too (--design-file), not built into a run slot: a
+    # study's confirmation then runs the very file its software-in-the-loop run ran, so what it
+    # compares is the bus alone (tests/python/test_design_file.py: loaded and built give the same)
+    design_loaded: bool = False
 
     def key(self) -> dict[str, Any]:
         """What decides the result (not where it is written, nor the bus it ran on: software in the
@@ -99,7 +103,7 @@ class RunSpec:
         the only one before the protocol was a choice, is left out, so the keys of runs kept then
         still match."""
         d = asdict(self)
-        for k in ("out", "keep_log", "labels", "bus"):
+        for k in ("out", "keep_log", "labels", "bus", "design_loaded"):
             d.pop(k)
         if d["protocol"] == UNKEYED_PROTOCOL:
             d.pop("protocol")
@@ -273,13 +277,13 @@ def execute(spec_d: dict[str, Any], spin_us: float = LOCKSTEP_SPIN_US) -> dict[s
     if out.exists():
         shutil.rmtree(out)
     out.mkdir(parents=True)
-    slot_build = spec.design_text is not None and spec.bus != SIL
+    slot_build = spec.design_text is not None and spec.bus != SIL and not spec.design_loaded
     prefer = (lambda i: slot_has_design(spec.arm(), i, spec.design_text)) if slot_build else None
     with acquire_slot(prefer=prefer, quiet_ports=spec.bus != SIL) as slot:
         arm = spec.arm()
         try:
             if spec.design_text is not None and not slot_build:
-                # software in the loop: the arm's own build loads the design at run time
+                # the arm's own build loads the design at run time (software in the loop, design_loaded)
                 bdir = prepare_build(arm)
                 design = sil_design(arm, spec.design_text, arm_info(bdir)["n_joints"])
                 run = _run(spec, arm, slot, out, spin_us, design)
@@ -352,7 +356,7 @@ def run_all(specs: list[RunSpec], jobs: int = 1, cluster: Cluster | None = None,
         return []
     # The arms' own builds first, once each (a design of a run's own is built in its slot, except
     # in software in the loop, which runs it on the arm's own build).
-    for arm in {s.arm() for s in specs if s.design_text is None or s.bus == SIL}:
+    for arm in {s.arm() for s in specs if s.design_text is None or s.bus == SIL or s.design_loaded}:
         prepare_build(arm)
     results: list[dict[str, Any] | None] = [None] * len(specs)
     if cluster is not None:

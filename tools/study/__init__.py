@@ -32,7 +32,8 @@ from tools.run.runner import METRICS, RunSpec, run_all
 from tools.run.slots import default_jobs
 from tools.study.stats import paired, summary
 from tools.study.config import METHODS, StudyConfig, StudyConfigError, Trajectory, for_arm, load
-from tools.study.tuning import REFUSED_SCORE, TuneSetup, batch_size, storage_url, trial_spec, tune_method
+from tools.study.pairs import pair_workers, tune_pairs
+from tools.study.tuning import REFUSED_SCORE, TuneSetup, batch_size, storage_url, trial_spec
 
 DEFAULT_CONFIG = REPO / "tools" / "studies" / "paper.toml"
 BASELINES = ("tde", "usde-smc", "pd", "pm-paper-weights", "pm-paper", "gh2")
@@ -47,27 +48,23 @@ NOT_RESULTS = ("design",)
 
 def confirmation_sample(where: list[tuple[str, str, int]], count: int) -> list[int]:
     """Which runs a software-in-the-loop study repeats over the CAN bus: spread over the scenarios
-    and the methods (scenario i, method i + k), each on its first seed."""
+    and the methods (scenario i with method i + d, diagonal d = 0, 1, ...: every pair once), each
+    on its first seed."""
     scenarios = list(dict.fromkeys(s for s, _, _ in where))
     methods = list(dict.fromkeys(m for _, m, _ in where))
     first = {}
     for i, (s, m, _) in enumerate(where):
         first.setdefault((s, m), i)
-    picks: list[int] = []
-    for k in range(min(count, len(first))):
-        s = scenarios[k % len(scenarios)]
-        m = methods[(k + k // len(scenarios)) % len(methods)]
-        if (s, m) in first and first[(s, m)] not in picks:
-            picks.append(first[(s, m)])
-    return picks
+    order = [(scenarios[i], methods[(i + d) % len(methods)]) for d in range(len(methods)) for i in range(len(scenarios))]
+    return [first[pair] for pair in order if pair in first][:count]
 
 
 def confirm_over_bus(specs: list[RunSpec], runs: list[dict[str, Any]], where: list[tuple[str, str, int]],
                      picks: list[int], out: Path) -> dict[str, Any]:
-    """The picked runs again in lockstep HIL over a CAN bus; their results must equal the software-in-
-    the-loop runs' exactly."""
+    """The picked runs again in lockstep HIL over a CAN bus, a design of their own loaded from the
+    file their software-in-the-loop run loaded; their results must equal those runs' exactly."""
     again = [replace(specs[i], out=str(out / "confirm" / where[i][0] / where[i][1] / f"seed-{where[i][2]}"),
-                     bus=CONFIRM_BUS, keep_log=False) for i in picks]
+                     bus=CONFIRM_BUS, keep_log=False, design_loaded=True) for i in picks]
     bar = tqdm(total=len(again), desc="confirm over the bus", unit="run")
     hil = run_all(again, default_jobs("udp"), None, progress=lambda spec, run: bar.update(1))
     bar.close()
@@ -222,9 +219,12 @@ def tuned(cfg: StudyConfig, arm: ArmRef, setup: TuneSetup, info: dict[str, Any],
               f"{todo[0][3]}; each to convergence (1 % over {cfg.plateau} trials) or at most {cap} trials; Optuna "
               f"storage {storage_url(setup.out)}", file=sys.stderr)
         bar = tqdm(total=cap * len(todo), desc="tune", unit="trial")
-        for s, m, key, _ in todo:
-            bar.set_postfix_str(f"{m} / {s}")
-            rec = tune_method(setup, cfg.scenarios[s], m, cap, progress=lambda: bar.update(1), key=key)
+        workers = pair_workers(setup, len(todo))
+        if workers > 1:
+            bar.set_postfix_str(f"{workers} pairs at a time")
+        for s, m, key, rec in tune_pairs(setup, [(s, m, key) for s, m, key, _ in todo], cap,
+                                         progress=lambda: bar.update(1)):
+            bar.set_postfix_str(f"{m} / {s} done")
             bar.update(cap - rec["trials_run"])  # a converged tuning ends before its cap
             rec["key"] = key
             rec["code"] = code_identity()
@@ -232,7 +232,8 @@ def tuned(cfg: StudyConfig, arm: ArmRef, setup: TuneSetup, info: dict[str, Any],
                                           "procedure": procedure(cfg, cap, setup.jobs)})
             out[s][m] = {**rec, "source": f"tuned now, kept in {path}"}
         bar.close()
-    return out
+    # in the config's order, however the pairs finished
+    return {s: {m: out[s][m] for m in methods if m in out[s]} for s in scenarios}
 
 
 def procedure(cfg: StudyConfig, trials: int | None = None, jobs: int | None = None) -> str:

@@ -7,6 +7,7 @@ tracking errors in deg, study.json keeps the runs' radians."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Any
 
@@ -403,7 +404,40 @@ def _trajectory_lines(study: dict[str, Any]) -> list[str]:
             + "; ".join(f"{n} a {a:g} rad, f {f:g} Hz" for n, a, f in zip(names, t["amp"], t["freq_hz"])) + "."]
 
 
+def _scenario_figures(out: Path, study: dict[str, Any], scenario: str, kind: str) -> list[str]:
+    """One scenario's figures of one kind ("tuning", "distribution" or "time"): their file names."""
+    if kind == "tuning":
+        return [convergence_figure(out, scenario, study["scenarios"][scenario]["tuning"], colour_of(study))]
+    if kind == "distribution":
+        return [_distribution_figure(out, study, scenario)]
+    return _time_figures(out, study, scenario)
+
+
+FIGURE_KINDS = ("time", "distribution", "tuning")  # the slowest first: the workers end together
+
+
+def draw_figures(out: Path, study: dict[str, Any], jobs: int | None = None) -> dict[tuple[str, str], list[str]]:
+    """Every scenario's figures, drawn in `jobs` processes (default: every core this process may
+    use; matplotlib holds the GIL, and the figures were a third of a study's time): (scenario,
+    kind) -> file names. Each task gets its own scenario of the study alone."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    tasks = [(name, kind) for kind in FIGURE_KINDS for name in study["scenarios"]]
+    jobs = min(len(tasks), jobs or len(os.sched_getaffinity(0)))
+    if jobs <= 1:
+        return {(name, kind): _scenario_figures(out, study, name, kind) for name, kind in tasks}
+    # fork: the workers have matplotlib imported already, and need no importable __main__ (a
+    # forkserver or spawn would re-run the caller's script); the study's run threads have ended
+    ctx = multiprocessing.get_context("fork")
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
+        futs = {t: pool.submit(_scenario_figures, out, {**study, "scenarios": {t[0]: study["scenarios"][t[0]]}}, *t)
+                for t in tasks}
+        return {t: f.result() for t, f in futs.items()}
+
+
 def write_report(out: Path, study: dict[str, Any]) -> None:
+    figures = draw_figures(out, study)
     arm = study["arm"]
     n = arm["n_joints"]
     paper = arm["is_default"] and n == 6  # the paper's numbers are for its six-joint arm
@@ -433,7 +467,7 @@ def write_report(out: Path, study: dict[str, Any]) -> None:
             md += [f"One run again on its own (SEED: one of {study['seeds']}; the same run.json results):", "", "```sh",
                    *study["commands"][name].values(), "```", ""]
         md += ["The paper's claims, with this scenario's evidence:", ""] + _claims(sc) + [""]
-        tfig = convergence_figure(out, name, sc["tuning"], colour_of(study))
+        tfig = figures[name, "tuning"][0]
         md += ["### Tuning", "", _md_table(
             ["method", "knobs", "objective (sum L-inf, rad)", "trials", "validation", "source", "note"],
             [[m, f"`{ {k: (round(v, 4) if isinstance(v, float) else v) for k, v in r['knobs'].items()} }`",
@@ -463,9 +497,9 @@ def write_report(out: Path, study: dict[str, Any]) -> None:
                                *[_fmt(PAPER_TABLE2[m][j]) for m in ("pm", "tde", "usde-smc")]] for j in range(n)]), "",
                    f"Torque power, the paper: PM {PAPER_TABLE3['pm']} W, TDE {PAPER_TABLE3['tde']} W, EUSDE-SMC "
                    f"{PAPER_TABLE3['usde-smc']} W.", ""]
-        fig = _distribution_figure(out, study, name)
+        fig = figures[name, "distribution"][0]
         md += [f"![{fig}]({fig})", "", f"Time series, the first seed of `{name}`:", ""]
-        md += [f"![{f}]({f})" for f in _time_figures(out, study, name)] + [""]
+        md += [f"![{f}]({f})" for f in figures[name, "time"]] + [""]
     md += ["## Summary", "", "```", summary_table(study), "```", ""]
     write_text_atomic(out / "report.md", "\n".join(md))
     write_text_atomic(out / "summary.txt", summary_table(study) + "\n")

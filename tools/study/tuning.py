@@ -166,6 +166,14 @@ def storage_url(out: Path) -> str:
     return f"sqlite:///{(out / STORAGE).resolve()}"
 
 
+def open_storage(out: Path) -> Any:
+    """The tuning's Optuna storage. Pairs tuned side by side (tools/study/pairs.py) share its file:
+    a writer waits up to a minute for the other's transaction instead of SQLite's 5 s."""
+    import optuna
+
+    return optuna.storages.RDBStorage(storage_url(out), engine_kwargs={"connect_args": {"timeout": 60}})
+
+
 def batch_size(cfg: StudyConfig, jobs: int) -> int:
     """Trials asked at once: [tuning] batch, never more than --jobs."""
     return max(1, min(cfg.batch, jobs))
@@ -248,7 +256,7 @@ def tune_method(setup: TuneSetup, scenario: Scenario, method: str, trials: int |
     space: Space = cfg.spaces[method]
     cap = trials or cfg.cap
     batch = batch_size(cfg, setup.jobs)
-    storage = optuna.storages.RDBStorage(storage_url(setup.out))
+    storage = open_storage(setup.out)
     ranges = dict(space.ranges)
     rounds: list[dict[str, Any]] = []
     scores: list[float] = []  # every trial of every round, in order: the best-so-far curve's source
