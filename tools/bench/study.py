@@ -35,7 +35,7 @@ def _throughput(bus: str, jobs: int, n_runs: int, duration: float, tmp: Path) ->
     run_all(specs[:1], jobs)  # the builds, outside the timing
     (where / "0").rename(where / "warm")
     t0 = time.monotonic()
-    runs = run_all(specs, jobs)
+    runs = run_all(specs, jobs, forked=True)  # as run_study runs a study's runs
     wall = time.monotonic() - t0
     bad = [r["results"].get("result") for r in runs
            if r["results"].get("periods_running") != r["results"].get("trajectory_periods")]

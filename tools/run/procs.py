@@ -94,11 +94,23 @@ def adopt(role: str, pid: int) -> Any:
 
 
 def as_child_of(parent: int) -> None:
-    """In a forked worker: it stops its own runs on a signal, not its parent's children (the list
-    it inherited), and gets a SIGTERM when armctl dies."""
+    """In a forked worker (tools/run/workers.py): a process group of its own; on a signal it stops
+    its own runs, not its parent's children (the list it inherited), and notes the signal for the
+    code it runs to stop at its next check, never raising where it stands (a worker that waits
+    for work would die of it); a SIGTERM when armctl dies."""
+    os.setpgid(0, 0)
     with _lock:
         _live.clear()
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, _on_signal_in_worker)
     _dies_with_parent(parent, None)()
+
+
+def _on_signal_in_worker(signum: int, frame: Any) -> None:
+    global interrupted
+    first = interrupted is None
+    interrupted = interrupted or signum
+    _stop(signal.SIGTERM if first else signal.SIGKILL)
 
 
 def communicate_or_kill(p: subprocess.Popen[Any], timeout: float) -> tuple[Any, Any]:

@@ -288,7 +288,7 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
                 specs.append(spec)
                 where.append((s, m, seed))
     bar = tqdm(total=len(specs), desc="study", unit="run")
-    runs = run_all(specs, jobs, cluster, progress=lambda spec, run: bar.update(1))
+    runs = run_all(specs, jobs, cluster, progress=lambda spec, run: bar.update(1), forked=True)
     bar.close()
     if procs.interrupted is not None:  # the finished runs are kept: the same command resumes
         raise procs.Interrupted(procs.interrupted)

@@ -9,23 +9,22 @@ Optuna and analyses its runs, all Python, which one process runs on one core at 
 Software in the loop only: its runs never poll, so more runs than cores only share them; lockstep
 runs over a bus poll and slow each other down, and a Dask cluster has workers of its own.
 
-The workers are forks of armctl (the solver and Optuna imported once), each in a process group of
-its own: armctl hears a Ctrl-C alone and passes it on to them as to any child (tools/run/procs.py),
-and each stops its runs in order; a worker whose armctl died gets a SIGTERM (PR_SET_PDEATHSIG).
+The workers are forks of armctl (tools/run/workers.py: the solver and Optuna imported once), and
+armctl's signals reach them as any child: each stops its runs in order.
 """
 
 from __future__ import annotations
 
 import multiprocessing
-import os
 import signal
 from collections.abc import Callable, Iterator
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, wait
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
 from tools.run import procs
 from tools.run.hil import SIL
+from tools.run.workers import ForkedWorkers
 from tools.study.tuning import TuneSetup, open_storage, tune_method
 
 # What a worker inherits by fork: the setup, and a count of trials told by every worker.
@@ -38,11 +37,6 @@ def pair_workers(setup: TuneSetup, pairs: int) -> int:
     if setup.bus != SIL or setup.cluster is not None:
         return 1
     return max(1, min(setup.jobs, pairs))
-
-
-def _start_worker(parent: int) -> None:
-    os.setpgid(0, 0)
-    procs.as_child_of(parent)
 
 
 def _told() -> None:
@@ -74,45 +68,31 @@ def tune_pairs(setup: TuneSetup, pairs: list[tuple[str, str, str]], cap: int,
     import gen.synth.pipeline  # noqa: F401  (cvxpy: imported once, before the forks)
 
     open_storage(setup.out).engine.dispose()  # the tables made once: two workers would race to make them
-    ctx = multiprocessing.get_context("fork")
-    _SETUP, _TOLD = setup, ctx.Value("q", 0)
+    _SETUP, _TOLD = setup, multiprocessing.get_context("fork").Value("q", 0)
     shown = 0
     stopped: int | None = None
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_start_worker,
-                             initargs=(os.getpid(),)) as pool:
+    with ForkedWorkers(workers) as pool:
         futs = {pool.submit(_tune_pair, s, m, cap, key): (s, m, key) for s, m, key in pairs}
-        # the pool forks its workers at submit (its _processes: no public list of them)
-        adopted = [procs.adopt("worker", pid) for pid in pool._processes]
-        try:
-            pending = set(futs)
-            while pending:
-                done, pending = wait(pending, timeout=0.25, return_when=FIRST_COMPLETED)
-                if procs.interrupted is not None:  # the pairs not begun are not begun
-                    for f in pending:
-                        f.cancel()
-                for _ in range(_TOLD.value - shown):
-                    progress()
-                shown = _TOLD.value
-                for f in done:
-                    if f.cancelled():
-                        continue
-                    try:
-                        rec = f.result()
-                    except BrokenProcessPool:  # a worker killed (a second signal)
-                        stopped = stopped or procs.interrupted or 9
-                        continue
-                    if "interrupted" in rec:
-                        stopped = stopped or rec["interrupted"]
-                    else:
-                        yield (*futs[f], rec)
-        except BaseException:  # the consumer stopped, or a signal came before the workers were adopted
-            for f in futs:
-                f.cancel()
-            for w in adopted:
-                w.send_signal(signal.SIGTERM)  # each stops its runs in order; the pool then joins them
-            raise
-        finally:
-            for w in adopted:
-                procs.forget(w)
+        pending = set(futs)
+        while pending:
+            done, pending = wait(pending, timeout=0.25, return_when=FIRST_COMPLETED)
+            if procs.interrupted is not None:  # the pairs not begun are not begun
+                for f in pending:
+                    f.cancel()
+            for _ in range(_TOLD.value - shown):
+                progress()
+            shown = _TOLD.value
+            for f in done:
+                if f.cancelled():
+                    continue
+                try:
+                    rec = f.result()
+                except BrokenProcessPool:  # a worker killed (a second signal)
+                    stopped = stopped or procs.interrupted or signal.SIGKILL
+                    continue
+                if "interrupted" in rec:
+                    stopped = stopped or rec["interrupted"]
+                else:
+                    yield (*futs[f], rec)
     if stopped is not None or procs.interrupted is not None:
-        raise procs.Interrupted(procs.interrupted or stopped or 15)
+        raise procs.Interrupted(procs.interrupted or stopped or signal.SIGTERM)
