@@ -150,6 +150,7 @@ static void on_sync(co_sim_t *s, unsigned bus)
         return;
     }
     s->syncs[bus]++;
+    sim_debug_late_answer(s->cfg, s->syncs[bus] - 1u);
     if (s->synced) advance(s);
     s->synced = 1;
     s->states_end = 0.0;

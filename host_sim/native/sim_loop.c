@@ -441,6 +441,13 @@ static void sleep_until(int64_t t_ns)
     }
 }
 
+void sim_debug_late_answer(const sim_config_t *cfg, uint64_t period)
+{
+    if (cfg->late_answer_period >= 0 && (uint64_t)cfg->late_answer_period == period) {
+        sleep_until(mono_ns() + (int64_t)(cfg->late_answer_s * 1e9));
+    }
+}
+
 /* CANopen has one SYNC producer: on each bus the counter continues its sequence (mod 256). A SYNC
  * that does not is another master's (or a replay): every drive on that bus stops with an EMCY
  * rather than follow two masters; they still answer the period (faulted), so the controller hears why. */
@@ -471,6 +478,7 @@ static void on_sync(sim_t *s, int counter, unsigned bus)
         finish_period(s); /* commands missing: the drives count it, the arm still moves */
     }
     if (s->counter < 0) {
+        sim_debug_late_answer(s->cfg, s->rep->periods);
         s->counter = counter;
         s->got_cmd = 0u;
         s->synced = 0u;

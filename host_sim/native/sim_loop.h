@@ -37,6 +37,8 @@ typedef struct {
     sim_capture_t *capture;      /* every frame received or sent, candump's log format (NULL: none) */
     int lose_bus;                /* TEST HOOK: this bus sends nothing from period lose_bus_from on; -1: off */
     uint64_t lose_bus_from;
+    int64_t late_answer_period;  /* TEST HOOK: the drives answer this period's SYNC late; -1: off */
+    double late_answer_s;
 } sim_config_t;
 
 #define SIM_COST_BINS 5000u /* per-period CPU cost histogram, 1 us bins */
@@ -76,6 +78,10 @@ typedef struct {
 
 /* Set from a signal handler: the loop stops at its next frame or within 100 ms. */
 extern volatile sig_atomic_t sim_stop_requested;
+
+/* TEST HOOK (--debug-late-answer PERIOD:US): before the drives answer bus period `period`'s SYNC,
+ * the simulator stalls as a descheduled process would (both protocols' loops call it). */
+void sim_debug_late_answer(const sim_config_t *cfg, uint64_t period);
 
 typedef struct sim sim_t;
 

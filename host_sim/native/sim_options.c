@@ -148,6 +148,23 @@ static int sim_lose_bus(void *t, void *c, const argv_opt_t *opt, const char *v, 
     return 0;
 }
 
+static int sim_late_answer(void *t, void *c, const argv_opt_t *opt, const char *v, char *err, unsigned long errcap)
+{
+    sim_config_t *cfg = &((sim_options_t *)t)->cfg;
+    unsigned long long period = 0;
+    double us = 0.0;
+    char tail = 0;
+    (void)c;
+    if (sscanf(v, "%llu:%lf%c", &period, &us, &tail) != 2 || v[0] == '-' || period > INT64_MAX || !isfinite(us) ||
+        us < 0.0 || us > 1e7) {
+        snprintf(err, errcap, "%s: '%s' is not PERIOD:US (period >= 0, 0..1e7 us)", opt->name, v);
+        return -1;
+    }
+    cfg->late_answer_period = (int64_t)period;
+    cfg->late_answer_s = us * 1e-6;
+    return 0;
+}
+
 static int sim_gear_ratio(void *t, void *c, const argv_opt_t *opt, const char *v, char *err, unsigned long errcap)
 {
     sim_options_t *o = t;
@@ -251,6 +268,7 @@ int sim_options_parse(int argc, char **argv, sim_options_t *o, char *err, unsign
     sim_servo_config_default(&o->cfg.servo);
     argv_defaults(k_options, ARGV_COUNT, o);
     o->cfg.lose_bus = -1;
+    o->cfg.late_answer_period = -1;
     sim_config_t *c = &o->cfg;
     for (unsigned b = 0; b < ARM_CAN_BUS_SET_MAX; ++b) sim_timeline_init(&c->timelines[b]);
     unsigned frames_given = 0u;

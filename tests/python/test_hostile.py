@@ -20,17 +20,17 @@ from tools.run.hil import HilOptions, run_hil
 SYNC = 0x080
 
 
-def _spoofer(spec: str, make: "callable", after_s: float, stop: threading.Event) -> threading.Thread:
-    """After `after_s`, answers every SYNC on the bus at once with make(counter) frames."""
+def _spoofer(spec: str, answer: "callable", after_s: float, stop: threading.Event) -> threading.Thread:
+    """After `after_s`, answers every frame heard on the bus at once with answer(frame)'s frames."""
     def run() -> None:
         bus = open_bus(spec)
         t0 = time.monotonic()
         try:
             while not stop.is_set():
                 msg = bus.recv(0.05)
-                if msg is None or msg.arbitration_id != SYNC or time.monotonic() - t0 < after_s:
+                if msg is None or time.monotonic() - t0 < after_s:
                     continue
-                for m in make(msg.data[0]):
+                for m in answer(msg):
                     bus.send(m)
         finally:
             bus.shutdown()
@@ -40,12 +40,14 @@ def _spoofer(spec: str, make: "callable", after_s: float, stop: threading.Event)
     return t
 
 
-def _hostile_run(tmp_path: Path, port: int, make: "callable") -> dict:
+def _hostile_run(tmp_path: Path, port: int, make: "callable", protocol: str = "arm") -> dict:
+    """A run whose every SYNC the spoofer answers with make(the SYNC's counter) (arm protocol), or
+    whose every frame it answers with make(frame) (CANopen)."""
     stop = threading.Event()
-    t = _spoofer(f"udp:239.74.163.2:{port}", make, 1.0, stop)
+    answer = make if protocol == "canopen" else lambda m: make(m.data[0]) if m.arbitration_id == SYNC else []
+    t = _spoofer(f"udp:239.74.163.2:{port}", answer, 1.0, stop)
     try:
-        # the arm protocol's frames are spoofed (its DBC's ids and layouts)
-        return run_hil(HilOptions(out=tmp_path, duration_s=20.0, can_port=port, protocol="arm"))
+        return run_hil(HilOptions(out=tmp_path, duration_s=20.0, can_port=port, protocol=protocol))
     finally:
         stop.set()
         t.join(5)
@@ -67,6 +69,26 @@ def test_spoofed_joint_states_are_a_named_fault_not_ok(tmp_path: Path) -> None:
                                            or "position step" in reason)
     duplicate = "drive 1's state came twice for one SYNC" in reason
     assert implausible or duplicate, reason
+
+
+def test_a_replayed_canopen_state_is_a_second_node_on_the_id(tmp_path: Path) -> None:
+    """A node that answers every SYNC with drive 1's last TPDO1 (position and velocity, plausible:
+    one period old): a CANopen TPDO carries no SYNC counter, so only its number tells. One late
+    answer after a missing one is excused (test_timing.py); a second TPDO1 every period is not."""
+    last: dict[str, bytes] = {}
+
+    def replay(m: can.Message) -> list[can.Message]:
+        if m.arbitration_id == 0x181:
+            last.setdefault("tpdo1", bytes(m.data))
+        if m.arbitration_id != SYNC or "tpdo1" not in last:
+            return []
+        return [can.Message(arbitration_id=0x181, data=last.pop("tpdo1"), is_extended_id=False)]
+
+    run = _hostile_run(tmp_path, 45760, replay, protocol="canopen")
+    r = run["results"]
+    assert r["result"] == "failed" and r["final_state"] in ("fault", "safe-stop"), r["verdict_reasons"]
+    reason = json.loads((tmp_path / "controller_summary.json").read_text())["reason"]
+    assert "drive 1's state came twice for one SYNC" in reason, reason
 
 
 def test_spoofed_torque_commands_fault_the_drive_instead_of_being_clamped(tmp_path: Path) -> None:

@@ -80,6 +80,32 @@ def test_overruns_are_counted_when_every_step_is_forced_slow(tmp_path: Path, con
     assert run["environment"]["simulator_scheduling"] == f"{expected} on CPU {cpu}"
 
 
+LATE_PERIOD = 60  # the bus period whose SYNC the drives answer late (the simulator's test hook)
+
+
+@pytest.mark.parametrize("protocol", ["canopen", "arm"])
+@pytest.mark.parametrize("late_periods", [0.9, 1.4])
+def test_a_late_answer_is_counted_late_not_taken_for_another_node(tmp_path: Path, controller_bin: Path,
+                                                                  protocol: str, late_periods: float) -> None:
+    """A stalled simulator (a descheduled vCPU did it in CI) answers one SYNC after the controller
+    stopped waiting: its answers arrive before the next SYNC (0.9 periods late) or after it (1.4).
+    A CANopen TPDO carries no SYNC counter; the late one once passed for the next period's state,
+    and that period's own then for a second node on the drive's id, which stopped the run. Late
+    answers are counted late and the run goes on (the arm protocol tells them by their counter)."""
+    period_us = 1e6 / 200
+    run_hil(HilOptions(out=tmp_path, duration_s=0.6, mode="realtime", preset=controller_bin.parent.parent.name,
+                       protocol=protocol, controller_args=("--rate", "200", "--rt-priority", "0"),
+                       sim_args=("--debug-late-answer", f"{LATE_PERIOD}:{late_periods * period_us:.0f}")))
+    summary = json.loads((tmp_path / "controller_summary.json").read_text())
+    frames = summary["frames"]
+    assert "came twice" not in summary["reason"], summary["reason"]
+    assert frames["rx_duplicate_state"] == 0, frames
+    assert summary["bus_periods"] > LATE_PERIOD + 5, summary["reason"]  # it went on past the late period
+    # that SYNC's answer from every drive counted as late
+    n_drives = json.loads((tmp_path / "sim_summary.json").read_text())["n_drives"]
+    assert frames["rx_wrong_counter"] >= n_drives, frames
+
+
 def test_rt_options_are_validated(controller_bin: Path) -> None:
     for args, word in ((["--rt-priority", "150"], "--rt-priority"), (["--cpu", "-1"], "--cpu"),
                        (["--cpu", "1000"], "--cpu"), (["--debug-slow-step-us", "x"], "--debug-slow-step-us")):

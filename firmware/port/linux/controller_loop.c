@@ -36,6 +36,11 @@ typedef struct {
     int canopen;
     arm_co_units_t units[ARM_N_JOINTS];
     uint32_t tpdo1_mask, tpdo2_mask;
+    /* The joints whose TPDO1 (TPDO2) of the last period did not come: their answer to that SYNC may
+     * still arrive after this one's SYNC (a CANopen TPDO carries no SYNC counter), so one second
+     * TPDO this period is that late answer, not another node on their id */
+    uint32_t tpdo1_late, tpdo2_late;
+    int draining; /* reading what came before this period's SYNC: every TPDO then is late */
     int64_t next_heartbeat_ns;
     /* TPDO2 every tpdo2_every-th SYNC (its transmission type); the joints whose TPDO2 has come */
     uint32_t tpdo2_every;
@@ -45,6 +50,30 @@ typedef struct {
 
 #define CANOPEN_MASTER_ID 0x7Fu
 #define CANOPEN_HEARTBEAT_MS 100u
+
+/* Whether joint j's TPDO (of the kind `seen` records this period) is this period's answer. One read
+ * before this period's SYNC is late: counted as such, not used. A second one this period is
+ * either the real answer after a late one (the joint's last answer was missing: the late one is
+ * counted, this one stands) or another node on the bus using j's id (the port stops the arm). */
+static int tpdo_is_this_periods(link_t *l, uint32_t *seen, uint32_t *may_be_late, unsigned j)
+{
+    arm_drive_bus_t *d = &l->drives;
+    const uint32_t bit = 1u << j;
+    if (l->draining) {
+        d->rx.wrong_counter++;
+        return 0;
+    }
+    if ((*seen & bit) != 0u) {
+        if ((*may_be_late & bit) != 0u) {
+            *may_be_late &= ~bit;
+            d->rx.wrong_counter++;
+        } else {
+            d->duplicate_mask |= bit;
+        }
+    }
+    *seen |= bit;
+    return 1;
+}
 
 /* A CANopen drive's TPDO1 or TPDO2: its joint's state in SI units (arm/co_pdo.h); 1 if it was one.
  * The state is fresh once both came for this SYNC. */
@@ -60,13 +89,11 @@ static int canopen_rx(link_t *l, const arm_can_frame_t *f)
     int16_t tq;
     uint16_t sw;
     if (arm_co_unpack_tpdo1((uint8_t)node, f, &pos, &vel) == 0) {
-        if (l->tpdo1_mask & (1u << j)) d->duplicate_mask |= 1u << j;
-        l->tpdo1_mask |= 1u << j;
+        if (!tpdo_is_this_periods(l, &l->tpdo1_mask, &l->tpdo1_late, j)) return 1;
         d->q[j] = arm_co_increments_to_rad(&l->units[j], pos);
         d->qd[j] = arm_co_increments_to_rad(&l->units[j], vel);
     } else if (arm_co_unpack_tpdo2((uint8_t)node, f, &tq, &sw) == 0) {
-        if (l->tpdo2_mask & (1u << j)) d->duplicate_mask |= 1u << j;
-        l->tpdo2_mask |= 1u << j;
+        if (!tpdo_is_this_periods(l, &l->tpdo2_mask, &l->tpdo2_late, j)) return 1;
         l->tpdo2_seen |= 1u << j;
         d->tau_measured[j] = arm_co_permille_to_torque(&l->units[j], tq);
         d->statusword[j] = sw;
@@ -117,6 +144,19 @@ static int sender_joint(const arm_can_frame_t *f)
     return j;
 }
 
+static void dispatch(link_t *l, const arm_can_frame_t *f, unsigned bus)
+{
+    l->report->frames_rx++;
+    const int j = sender_joint(f);
+    if (j >= 0 && l->bus_of[j] != (int)bus) {
+        l->report->rx_wrong_bus++; /* drive j is not on this bus: not its frame */
+        return;
+    }
+    if (!l->canopen || !canopen_rx(l, f)) {
+        (void)arm_bus_handle_rx(&l->drives, f); /* heartbeats and EMCY: the same in both */
+    }
+}
+
 /* Receive and dispatch frames until done() reports every joint (e.g. this period's states) or the
  * deadline passes; done == NULL: until the deadline. */
 static void pump(link_t *l, int64_t deadline_ns, uint32_t (*done)(const arm_drive_bus_t *))
@@ -144,19 +184,30 @@ static void pump(link_t *l, int64_t deadline_ns, uint32_t (*done)(const arm_driv
             rc = arm_can_bus_set_recv(&l->buses, &f, &bus, (int)(left / 1000 + 1));
         }
         if (rc == 1) {
-            l->report->frames_rx++;
-            const int j = sender_joint(&f);
-            if (j >= 0 && l->bus_of[j] != (int)bus) {
-                l->report->rx_wrong_bus++; /* drive j is not on this bus: not its frame */
-                continue;
-            }
-            if (!l->canopen || !canopen_rx(l, &f)) {
-                (void)arm_bus_handle_rx(&l->drives, &f); /* heartbeats and EMCY: the same in both */
-            }
+            dispatch(l, &f, bus);
         } else if (rc < 0) {
             return;
         }
     }
+}
+
+/* At most this many frames queued before a SYNC are read before it goes out; a flood beyond it
+ * waits for the period's pump (the drives' answers are still told apart there). */
+#define DRAIN_MAX (4u * ARM_N_JOINTS)
+
+/* Before a period's SYNC: what is queued already came before it (the drives' late answers to
+ * earlier SYNCs, their heartbeats and EMCY). Read now, a late answer cannot pass for this
+ * period's: an arm-protocol state by its SYNC counter, a CANopen TPDO because it was read here. */
+static void drain(link_t *l)
+{
+    l->draining = 1;
+    for (unsigned i = 0; i < DRAIN_MAX; ++i) {
+        arm_can_frame_t f;
+        unsigned bus = 0u;
+        if (arm_can_bus_set_recv(&l->buses, &f, &bus, 0) != 1) break;
+        dispatch(l, &f, bus);
+    }
+    l->draining = 0;
 }
 
 static uint32_t states_done(const arm_drive_bus_t *b)
@@ -556,8 +607,34 @@ static int publish(loop_t *p, uint32_t k, int64_t wake_latency, int64_t compute,
     return -1;
 }
 
-/* A stop signal at a period boundary: zero torque with controlword shutdown, before the NMT stop. */
-static void stop_on_signal(link_t *l, loop_t *p)
+/* Bus period k begins: what came before its SYNC is read, then the SYNC goes out. */
+static void start_period(link_t *l, uint32_t k, int64_t now)
+{
+    arm_can_frame_t sync;
+    arm_bus_begin_period(&l->drives, k, &sync);
+    if (l->canopen) {
+        sync.len = 0u; /* CiA 301 SYNC without a counter (0x1019 = 0) */
+        const int tpdo2_was_due = k > 0u && k % l->tpdo2_every == 0u;
+        l->tpdo1_late = k > 0u ? ALL_JOINTS & ~l->tpdo1_mask : 0u;
+        l->tpdo2_late = tpdo2_was_due ? ALL_JOINTS & ~l->tpdo2_mask : 0u;
+        l->tpdo1_mask = l->tpdo2_mask = 0u;
+        l->period = k;
+        if (now >= l->next_heartbeat_ns) { /* the drives consume it (0x1016.1) */
+            const arm_can_frame_t hb = {.id = ARM_CO_COB_HEARTBEAT + CANOPEN_MASTER_ID, .len = 1u, .data = {0x05u}};
+            send_all(l, &hb);
+            l->next_heartbeat_ns = now + (int64_t)CANOPEN_HEARTBEAT_MS * 1000000LL;
+        }
+    }
+    drain(l);
+    send_all(l, &sync);
+    l->report->bus_periods = k + 1u;
+}
+
+/* A stop signal at a period boundary: zero torque with controlword shutdown, before the NMT stop.
+ * The commands go in a period of their own (k, not yet begun): the
+ * last period's commands are out already, and a second command for one SYNC is a second master
+ * to the drives (EMCY 0x8200). */
+static void stop_on_signal(link_t *l, loop_t *p, uint32_t k)
 {
     snprintf(p->report->reason, sizeof(p->report->reason),
              "stopped by signal %d after %u periods: zero torque, drives shut down and stopped",
@@ -566,6 +643,7 @@ static void stop_on_signal(link_t *l, loop_t *p)
     telemetry_event(p->telem, p->k_run, "fault", p->report->reason);
     p->out.state = ARM_STATE_SAFE_STOP;
     memset(p->out.tau, 0, sizeof(p->out.tau));
+    start_period(l, k, now_ns());
     send_commands(l, &p->out);
 }
 
@@ -649,25 +727,12 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
      * period: SYNC out, the drives' states in, then enable, or supervise, control and publish. */
     for (uint32_t k = 0; p.k_run < opt->steps; ++k) {
         if (controller_stop_signal != 0) {
-            stop_on_signal(&l, &p);
+            stop_on_signal(&l, &p, k);
             break;
         }
         const int64_t wake_latency = wait_for_period(&p);
         const int64_t cycle_start = now_ns();
-        arm_can_frame_t sync;
-        arm_bus_begin_period(&l.drives, k, &sync);
-        if (l.canopen) {
-            sync.len = 0u; /* CiA 301 SYNC without a counter (0x1019 = 0) */
-            l.tpdo1_mask = l.tpdo2_mask = 0u;
-            l.period = k;
-            if (cycle_start >= l.next_heartbeat_ns) { /* the drives consume it (0x1016.1) */
-                const arm_can_frame_t hb = {.id = ARM_CO_COB_HEARTBEAT + CANOPEN_MASTER_ID, .len = 1u, .data = {0x05u}};
-                send_all(&l, &hb);
-                l.next_heartbeat_ns = cycle_start + (int64_t)CANOPEN_HEARTBEAT_MS * 1000000LL;
-            }
-        }
-        send_all(&l, &sync);
-        report->bus_periods = k + 1u;
+        start_period(&l, k, cycle_start);
         const int64_t wait_until = opt->mode == MODE_REALTIME
                                        ? p.next_deadline + p.period_ns * 8 / 10
                                        : cycle_start + (int64_t)(opt->lockstep_timeout_s * 1e9);
