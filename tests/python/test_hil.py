@@ -284,7 +284,9 @@ def test_a_drive_frame_on_the_wrong_bus_is_counted_and_ignored(controller_bin: P
     assert s["result"] == 5 and s["final_state"] == "safe-stop" and "stopped by signal" in s["reason"]
     assert s["frames"]["rx_wrong_bus"] == injected
     # ignored: no extra state or heartbeat accepted, nothing else counted as bad (the stop comes
-    # at a period boundary: the last period's commands are the zero-torque shutdown)
-    assert s["frames"]["rx_state"] == 6 * sim_s["periods"]
+    # at a period boundary, in a period of its own: its SYNC and zero-torque shutdown commands; the
+    # controller reads no more states then)
+    assert s["bus_periods"] == sim_s["periods"]
+    assert s["frames"]["rx_state"] == 6 * (sim_s["periods"] - 1)
     assert s["frames"]["rx_wrong_counter"] == 0 and s["frames"]["rx_bad_length"] == 0
     assert sim_s["commands_missed"] == 0
