@@ -57,6 +57,32 @@ unsigned long long sim_file_hash(const char *path)
     return h;
 }
 
+/* Whether the nominal model's acceleration follows from the true arm's step without a forward pass
+ * of its own: the same links (no parametric error), an integrator that steps from the forward
+ * pass once (Euler, implicit, implicitfast: its M factor and accelerations survive the step; RK4
+ * runs four passes, and mj_step2 would not even use it), no springs (the nominal model has them off), and joint motors whose force is
+ * gain x control (so the commanded torque's force is known without MuJoCo's actuation stage). */
+static int w_from_true_arm(const sim_arm_t *a)
+{
+    const mjModel *m = a->model;
+    if (a->parametric || m->opt.integrator == mjINT_RK4 || (m->opt.disableflags & mjDSBL_ACTUATION) != 0) return 0;
+    for (int j = 0; j < m->njnt; ++j) {
+        if (m->jnt_stiffness[j] != 0.0 || m->jnt_actgravcomp[j]) return 0;
+    }
+    for (int t = 0; t < m->ntendon; ++t) {
+        if (m->tendon_stiffness[t] != 0.0) return 0;
+    }
+    for (int i = 0; i < m->nu; ++i) {
+        const int jnt = m->actuator_trnid[2 * i];
+        if (m->actuator_dyntype[i] != mjDYN_NONE || m->actuator_gaintype[i] != mjGAIN_FIXED ||
+            m->actuator_biastype[i] != mjBIAS_NONE || m->actuator_trntype[i] != mjTRN_JOINT ||
+            (m->jnt_type[jnt] != mjJNT_HINGE && m->jnt_type[jnt] != mjJNT_SLIDE)) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
 int sim_arm_open(sim_arm_t *a, const char *path, const char *keyframe, int substeps, const sim_uncertainty_t *u,
                  char *err, size_t errcap)
 {
@@ -100,6 +126,7 @@ int sim_arm_open(sim_arm_t *a, const char *path, const char *keyframe, int subst
         draw_knot(a, a->knots[1]);
     }
     perturb(a);
+    a->w_from_true_arm = w_from_true_arm(a);
     a->data = mj_makeData(a->model);
     a->nominal_data = mj_makeData(a->nominal);
     if (a->data == NULL || a->nominal_data == NULL) {
@@ -169,13 +196,52 @@ static void extra_force(sim_arm_t *a, double t, const double *bias, const double
     }
 }
 
-int sim_arm_step(sim_arm_t *a, const double *tau, const double *tau_commanded, double *w)
+/* MuJoCo's force on each dof from joint motors under `ctrl` (its fwdActuation for the motors
+ * w_from_true_arm admits: control and force clamped, per-joint actuator force limits). */
+static void motor_force(const mjModel *m, const double *ctrl, double *qfrc)
 {
-    const int bad_before = a->data->warning[mjWARN_BADQACC].number;
+    memset(qfrc, 0, (size_t)m->nv * sizeof(double));
+    const int clamp_ctrl = (m->opt.disableflags & mjDSBL_CLAMPCTRL) == 0;
+    for (int i = 0; i < m->nu; ++i) {
+        double c = ctrl[i];
+        if (clamp_ctrl && m->actuator_ctrllimited[i]) c = mju_clip(c, m->actuator_ctrlrange[2 * i], m->actuator_ctrlrange[2 * i + 1]);
+        double f = m->actuator_gainprm[i * mjNGAIN] * c;
+        if (m->actuator_forcelimited[i]) f = mju_clip(f, m->actuator_forcerange[2 * i], m->actuator_forcerange[2 * i + 1]);
+        qfrc[m->jnt_dofadr[m->actuator_trnid[2 * i]]] += m->actuator_gear[6 * i] * f;
+    }
+    for (int j = 0; j < m->njnt; ++j) {
+        if (m->jnt_actfrclimited[j]) {
+            const int v = m->jnt_dofadr[j];
+            qfrc[v] = mju_clip(qfrc[v], m->jnt_actfrcrange[2 * j], m->jnt_actfrcrange[2 * j + 1]);
+        }
+    }
+}
+
+/* w = nominal minus true acceleration at the step's start, from the true arm's step alone. The
+ * nominal model is the true one without constraints, springs (none here) and the added viscous
+ * friction, and without the extra force; so its acceleration is the true unconstrained one plus
+ * M^-1 (viscous qd - extra force + commanded motor force - applied motor force). */
+static void w_from_true_step(sim_arm_t *a, const double *tau_commanded, const double *qvel_start, double *w)
+{
+    const mjModel *m = a->model;
+    mjData *d = a->data;
+    double y[SIM_MAX_JOINTS], x[SIM_MAX_JOINTS];
+    motor_force(m, tau_commanded, y);
+    for (int v = 0; v < m->nv; ++v) {
+        y[v] += a->unc.viscous[v] * qvel_start[v] - d->qfrc_applied[v] - d->qfrc_actuator[v];
+    }
+    mj_solveM(m, d, x, y, 1);
+    for (int v = 0; v < m->nv; ++v) {
+        w[v] = d->qacc_smooth[v] + x[v] - d->qacc[v];
+    }
+}
+
+/* The first MuJoCo step of a period, and w from a forward pass of the nominal model. */
+static void nominal_step_start(sim_arm_t *a, const double *tau, const double *tau_commanded, double *w)
+{
     const int n = a->n;
     mjData *d = a->data;
     mjData *nd = a->nominal_data;
-    memcpy(d->ctrl, tau, (size_t)n * sizeof(double));
     memcpy(nd->qpos, d->qpos, (size_t)a->nominal->nq * sizeof(double));
     memcpy(nd->qvel, d->qvel, (size_t)n * sizeof(double));
     memcpy(nd->ctrl, tau_commanded != NULL ? tau_commanded : tau, (size_t)n * sizeof(double));
@@ -198,6 +264,29 @@ int sim_arm_step(sim_arm_t *a, const double *tau, const double *tau_commanded, d
     mj_step(a->model, d); /* qacc is the acceleration at the step's start */
     for (int j = 0; j < n; ++j) {
         w[j] = nd->qacc[j] - d->qacc[j];
+    }
+}
+
+int sim_arm_step(sim_arm_t *a, const double *tau, const double *tau_commanded, double *w)
+{
+    const int bad_before = a->data->warning[mjWARN_BADQACC].number;
+    const int n = a->n;
+    mjData *d = a->data;
+    memcpy(d->ctrl, tau, (size_t)n * sizeof(double));
+    if (a->w_from_true_arm) {
+        double qvel_start[SIM_MAX_JOINTS];
+        memcpy(qvel_start, d->qvel, (size_t)n * sizeof(double));
+        mj_step1(a->model, d); /* M and V of the arm at the step's start; the nominal model's too */
+        if (a->unc.paper_ratio != 0.0) {
+            mj_fullM(a->model, d, a->mass);
+            extra_force(a, (double)a->step_count * a->period, d->qfrc_bias, tau, d->qfrc_applied);
+        } else {
+            extra_force(a, 0.0, d->qfrc_bias, tau, d->qfrc_applied);
+        }
+        mj_step2(a->model, d);
+        w_from_true_step(a, tau_commanded != NULL ? tau_commanded : tau, qvel_start, w);
+    } else {
+        nominal_step_start(a, tau, tau_commanded, w);
     }
     for (int k = 1; k < a->substeps; ++k) { /* the rest of the period: the same torque, the force anew */
         extra_force(a, ((double)a->step_count + (double)k / a->substeps) * a->period, d->qfrc_bias, tau,

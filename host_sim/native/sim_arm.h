@@ -47,6 +47,10 @@ typedef struct {
     int64_t step_count;
     sim_uncertainty_t unc;
     int parametric;
+    /* w from the true arm's own step (its unconstrained acceleration and mass matrix) instead of
+     * a forward pass of the nominal model: the same quantity, when the two models differ only in
+     * what sim_arm_open checks (sim_arm.c: w_from_true_arm); about a fifth of a SIL period */
+    int w_from_true_arm;
     sim_rng_t rng;
     double knots[2][2 * SIM_MAX_JOINTS]; /* the random signal d (first n) and d' (last n) */
     int64_t knot_index;
