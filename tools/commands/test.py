@@ -31,7 +31,9 @@ def run(ns: argparse.Namespace) -> int:
     # As root on Debian, tools/armctl has installed every package: no test may skip for a missing one.
     if os.geteuid() == 0 and shutil.which("dpkg-query"):
         env["ARM_TEST_STRICT"] = "1"
-    r = subprocess.run([sys.executable, "-m", "pytest", "-q", "tests/python", *ns.pytest_args], cwd=REPO, env=env)
+    # the slowest tests named at the end: the suite's time is a target (README, issue 19)
+    r = subprocess.run([sys.executable, "-m", "pytest", "-q", "--durations=15", "tests/python", *ns.pytest_args],
+                       cwd=REPO, env=env)
     if r.returncode != 0:
         failed.append("pytest")
     if failed:
