@@ -332,3 +332,45 @@ def test_vcan_setup_run_and_up_in_the_vm() -> None:
     assert r.returncode == 0, r.stdout + r.stderr
     assert "procsub-ok" in r.stdout and "/proc/self/fd/1" in r.stdout and "to-stderr" in r.stderr
     assert "vcan5 up (mtu 72 = CAN FD, txqueuelen 1000)" in r.stdout and "vcan" in r.stdout.split("vcan5:")[-1]
+
+
+def test_a_boot_that_hangs_is_booted_again(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A boot that never starts the command (CI saw one spin for 7 min with an empty console) is
+    killed after BOOT_WAIT_S and the VM booted again. Here every boot but the last is cut short
+    (0.5 s: a boot takes seconds), so the command runs on the last one."""
+    _vm_or_skip()
+    import tools.vm.run as vm
+
+    monkeypatch.setattr(vm, "BOOT_WAIT_S", 0.5)
+    notes: list[str] = []
+    out = io.StringIO()
+    res = vm.run_in_vm(["echo", "ran"], cwd=REPO, stdout=out, stderr=out, timeout=VM_TIMEOUT_S, log=notes.append)
+    assert res.returncode == 0 and "ran" in out.getvalue(), (res, out.getvalue())
+    assert res.boots == vm.BOOT_ATTEMPTS, res
+    assert sum("booting it again" in n for n in notes) == vm.BOOT_ATTEMPTS - 1, notes
+
+
+def test_the_vm_dies_with_the_armctl_that_booted_it(tmp_path: Path) -> None:
+    """A SIGKILLed armctl (a CI timeout kills it so) left its qemu running at full CPU once: the
+    kernel now stops qemu when the thread that started it is gone."""
+    _vm_or_skip()
+    import signal
+    import time
+
+    marker = tmp_path / "marker"
+    code = ("import sys; from tools.vm.run import run_in_vm; "
+            f"run_in_vm(['sh', '-c', 'touch {marker}; sleep 600'], timeout=700)")
+    p = subprocess.Popen([sys.executable, "-c", code], cwd=REPO, env=env_with_repo(),
+                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + VM_TIMEOUT_S
+    while not marker.exists() and time.monotonic() < deadline and p.poll() is None:
+        time.sleep(0.2)
+    assert marker.exists(), "the command never started in the VM"
+    qemu = subprocess.run(["pgrep", "-P", str(p.pid), "-f", "qemu-system"], capture_output=True, text=True).stdout.split()
+    assert qemu, "no qemu child found"
+    p.send_signal(signal.SIGKILL)
+    p.wait()
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and Path(f"/proc/{qemu[0]}").exists():
+        time.sleep(0.2)
+    assert not Path(f"/proc/{qemu[0]}").exists(), f"qemu {qemu[0]} outlived its armctl"

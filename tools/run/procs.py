@@ -45,14 +45,14 @@ def spawn(role: str, args: list[str], watches_parent: bool = False, **kw: Any) -
         kw.pop("preexec_fn", None)
         kw["env"] = {**(kw.get("env") or os.environ), PARENT_PID_ENV: str(os.getpid())}
     else:
-        kw["preexec_fn"] = _dies_with_parent(os.getpid(), kw.get("preexec_fn"))
+        kw["preexec_fn"] = dies_with_parent(os.getpid(), kw.get("preexec_fn"))
     p = subprocess.Popen(args, **kw)
     with _lock:
         _live.append((role, p))
     return p
 
 
-def _dies_with_parent(parent: int, then: Callable[[], None] | None) -> Callable[[], None]:
+def dies_with_parent(parent: int, then: Callable[[], None] | None = None) -> Callable[[], None]:
     """A preexec_fn: SIGTERM to the child when armctl dies. The kernel sends it when the thread
     that forked the child ends, which is the thread that waits for it here (run_hil), so it comes
     no earlier than armctl's own end of the run. A parent already gone before the prctl: exit."""
@@ -103,7 +103,7 @@ def as_child_of(parent: int) -> None:
         _live.clear()
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         signal.signal(sig, _on_signal_in_worker)
-    _dies_with_parent(parent, None)()
+    dies_with_parent(parent)()
 
 
 def _on_signal_in_worker(signum: int, frame: Any) -> None:

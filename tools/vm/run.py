@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO, TextIO
 
+from tools.run import procs
 from tools.vm.image import CACHE, QEMU, Image, VmError, ensure_image
 
 MEMORY = "2G"
@@ -31,6 +32,13 @@ EXIT_TIMEOUT = 124
 EXIT_SETUP = 125
 VCAN_IFACES = ("vcan0", "vcan1", "vcan2", "vcan3")  # created in the VM before the command runs (MTU 72,
 # txqueuelen 1000): as many as the controller takes buses (4), so any arm's wiring runs on real SocketCAN
+
+# A boot that has not started the command by then hung (seen in CI: 7 min at full CPU with an empty
+# console; a boot takes 6-7 s on a quiet machine, 11-32 s under load, tools/vm/README.md): qemu is
+# killed and the VM booted again, at most BOOT_ATTEMPTS times in all, the last without this limit
+# (a boot merely slow still ends). Nothing of the command has run then, so booting again is safe.
+BOOT_WAIT_S = 90.0
+BOOT_ATTEMPTS = 3
 
 _ENV_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
@@ -43,6 +51,7 @@ class VmResult:
     total_s: float = 0.0    # qemu start -> qemu gone
     setup_s: float = 0.0    # image set-up before qemu started (0 when cached)
     timed_out: bool = False
+    boots: int = 0          # how many times qemu was started (more than 1: a boot hung)
     console_tail: list[str] = field(default_factory=list)
 
 
@@ -155,24 +164,40 @@ def run_in_vm(argv: Sequence[str], cwd: Path | str | None = None, env: Mapping[s
     res = VmResult(returncode=EXIT_SETUP, setup_s=round(setup_s, 2))
     t0 = time.monotonic()
     qemu_log = run_dir / "qemu.log"
-    with open(qemu_log, "wb") as qlog:
-        proc = subprocess.Popen(qemu_command(img, run_dir, console), stdin=subprocess.DEVNULL,
-                                stdout=qlog, stderr=subprocess.STDOUT)
     started = None
     try:
-        while proc.poll() is None:
+        while started is None and res.boots < BOOT_ATTEMPTS and not res.timed_out:
+            res.boots += 1
+            t_boot = time.monotonic()
+            with open(qemu_log, "wb") as qlog:  # the qemu dies with armctl, even a SIGKILLed one
+                proc = subprocess.Popen(qemu_command(img, run_dir, console), stdin=subprocess.DEVNULL,
+                                        stdout=qlog, stderr=subprocess.STDOUT,
+                                        preexec_fn=procs.dies_with_parent(os.getpid()))
+            try:
+                while proc.poll() is None:
+                    if started is None and (run_dir / "started").exists():
+                        started = time.monotonic()
+                    if time.monotonic() - t0 > timeout:
+                        res.timed_out = True
+                        proc.kill()
+                        break
+                    if started is None and time.monotonic() - t_boot > BOOT_WAIT_S and res.boots < BOOT_ATTEMPTS:
+                        proc.kill()
+                        log(f"armctl vcan: the VM had not started the command {BOOT_WAIT_S:g} s after boot "
+                            f"{res.boots} (a hung boot); booting it again")
+                        break
+                    time.sleep(0.1)
+                proc.wait()
+            finally:
+                if proc.poll() is None:
+                    proc.kill()
+                    proc.wait()
             if started is None and (run_dir / "started").exists():
                 started = time.monotonic()
-            if time.monotonic() - t0 > timeout:
-                res.timed_out = True
-                proc.kill()
-                break
-            time.sleep(0.1)
-        proc.wait()
+            if started is None and proc.returncode != 0 and not res.timed_out and res.boots < BOOT_ATTEMPTS:
+                continue  # killed as hung: the next boot
+            break
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
         for t in tails:
             t.finish()
     t_end = time.monotonic()
