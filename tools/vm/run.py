@@ -166,8 +166,10 @@ def run_in_vm(argv: Sequence[str], cwd: Path | str | None = None, env: Mapping[s
     qemu_log = run_dir / "qemu.log"
     started = None
     try:
-        while started is None and res.boots < BOOT_ATTEMPTS and not res.timed_out:
+        hung = True
+        while hung:
             res.boots += 1
+            hung = False
             t_boot = time.monotonic()
             with open(qemu_log, "wb") as qlog:  # the qemu dies with armctl, even a SIGKILLed one
                 proc = subprocess.Popen(qemu_command(img, run_dir, console), stdin=subprocess.DEVNULL,
@@ -185,6 +187,7 @@ def run_in_vm(argv: Sequence[str], cwd: Path | str | None = None, env: Mapping[s
                         proc.kill()
                         log(f"armctl vcan: the VM had not started the command {BOOT_WAIT_S:g} s after boot "
                             f"{res.boots} (a hung boot); booting it again")
+                        hung = True
                         break
                     time.sleep(0.1)
                 proc.wait()
@@ -192,11 +195,6 @@ def run_in_vm(argv: Sequence[str], cwd: Path | str | None = None, env: Mapping[s
                 if proc.poll() is None:
                     proc.kill()
                     proc.wait()
-            if started is None and (run_dir / "started").exists():
-                started = time.monotonic()
-            if started is None and proc.returncode != 0 and not res.timed_out and res.boots < BOOT_ATTEMPTS:
-                continue  # killed as hung: the next boot
-            break
     finally:
         for t in tails:
             t.finish()
