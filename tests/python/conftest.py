@@ -1,13 +1,18 @@
-"""Shared fixtures: the repo on sys.path, the built binaries, free ports for bus and telemetry."""
+"""Shared fixtures: the repo on sys.path, the built binaries, ports for bus and telemetry that no
+other test or run uses at the same time."""
 
 from __future__ import annotations
 
 import os
-import random
 import sys
+from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import pytest
+
+if TYPE_CHECKING:
+    from tools.run.slots import Slot
 
 REPO = Path(__file__).resolve().parents[2]
 if str(REPO) not in sys.path:
@@ -39,9 +44,22 @@ def sim_exe(controller_bin: Path) -> Path:
 
 
 @pytest.fixture()
-def bus_spec() -> str:
-    """A bus of its own per test, so tests and a running demo never hear each other."""
-    return f"udp:239.74.163.2:{random.randint(44000, 44999)}"
+def slot() -> Iterator[Slot]:
+    """A run slot held for the test (tools/run/slots.py): its bus ports (slot.can_port + 0..7) and
+    telemetry port are this test's alone, whatever else runs (armctl test runs tests side by side,
+    each HIL run takes a slot of its own, a user's demo may be running)."""
+    from tools.run.slots import acquire_slot
+
+    with acquire_slot(quiet_ports=True) as s:
+        yield s
+
+
+@pytest.fixture()
+def bus_spec(slot: Slot) -> str:
+    """A bus of its own per test (its slot's first port; + 1 is the test's too)."""
+    from tools.run.slots import CAN_GROUP
+
+    return f"udp:{CAN_GROUP}:{slot.can_port}"
 
 
 @pytest.hookimpl(hookwrapper=True)

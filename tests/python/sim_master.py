@@ -4,7 +4,7 @@ the CiA 402 enable sequence, commands) so a test can put exactly the frames it w
 
 from __future__ import annotations
 
-import random
+import contextlib
 import subprocess
 import threading
 import time
@@ -18,12 +18,9 @@ from gen import lcmtypes
 from host_sim.canbus import open_bus
 from host_sim.launch import sim_argv
 from host_sim.protocol import NMT_START, NMT_STOP, DriveProtocol
+from tools.run.slots import CAN_GROUP, LCM_GROUP, acquire_slot
 
 OP_ENABLED_MASK, OP_ENABLED = 0x006F, 0x0027
-
-
-def free_ports() -> tuple[int, int]:
-    return 2 * random.randint(22000, 22450), random.randint(7700, 7999)  # bus i on port + i
 
 
 @dataclass
@@ -37,13 +34,16 @@ class Truth:
 class SimMaster:
     def __init__(self, sim_exe: Path, drives_per_bus: list[list[int]], *, extra: list[str] | None = None,
                  timing: str = "off", phys: list | None = None, n: int = 6) -> None:
-        port, lcm_port = free_ports()
-        self.specs = [f"udp:239.74.163.2:{port + i}" for i in range(len(drives_per_bus))]
+        # a run slot's ports, held until stop(): no other test or run hears this bus or telemetry
+        self._slot = contextlib.ExitStack()
+        slot = self._slot.enter_context(acquire_slot(quiet_ports=True))
+        port, lcm_port = slot.can_port, slot.lcm_port
+        self.specs = [f"udp:{CAN_GROUP}:{port + i}" for i in range(len(drives_per_bus))]
         self.drives_per_bus = drives_per_bus
         self.bus_of = {d: i for i, ds in enumerate(drives_per_bus) for d in ds}
         self.proto = DriveProtocol(n)
         self.n = n
-        self.url = f"udpm://239.255.76.67:{lcm_port}?ttl=0"
+        self.url = f"udpm://{LCM_GROUP}:{lcm_port}?ttl=0"
         self.truth = Truth()
         self.events: list[str] = []
         self._lc = lcm.LCM(self.url)
@@ -143,4 +143,5 @@ class SimMaster:
             self._stop.set()
             for b in self.buses:
                 b.shutdown()
+            self._slot.close()
         return self.proc.returncode, err

@@ -9,7 +9,6 @@ The master does what the contract's boot sequence says (README "Real drives"): S
 from __future__ import annotations
 
 import json
-import random
 import socket
 import struct
 import subprocess
@@ -20,9 +19,14 @@ from pathlib import Path
 
 import pytest
 
+from tools.run.slots import CAN_GROUP, Slot
+
 canopen = pytest.importorskip("canopen")
 from canopen.profiles.p402 import BaseNode402  # noqa: E402
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError  # noqa: E402
+
+# armctl test runs these alone (no other test beside them): python-canopen's state and SDO timeouts are wall-clock
+pytestmark = pytest.mark.serial
 
 REPO = Path(__file__).resolve().parents[2]
 EDS = REPO / "firmware" / "protocol" / "cia402_servo.eds"
@@ -78,8 +82,9 @@ def _bootups(net: canopen.Network, node_id: int) -> list[float]:
     return seen
 
 
-def _start(sim_bin: Path, monkeypatch: pytest.MonkeyPatch, extra: list[str], summary: Path | None = None) -> Rig:
-    group, port = "239.74.163.2", random.randint(45000, 45999)
+def _start(sim_bin: Path, monkeypatch: pytest.MonkeyPatch, port: int, extra: list[str],
+           summary: Path | None = None) -> Rig:
+    group = CAN_GROUP
     if summary is not None:
         extra = [*extra, "--summary", str(summary)]
     net = _connect(monkeypatch, group, port)
@@ -157,9 +162,9 @@ def _stop(rig: Rig) -> tuple[int, str]:
 
 @pytest.fixture()
 def rig(sim_bin: Path, monkeypatch: pytest.MonkeyPatch, request: pytest.FixtureRequest,
-        tmp_path: Path) -> Iterator[Rig]:
+        tmp_path: Path, slot: Slot) -> Iterator[Rig]:
     extra = getattr(request, "param", [])
-    r = _start(sim_bin, monkeypatch, extra, tmp_path / "summary.json")
+    r = _start(sim_bin, monkeypatch, slot.can_port, extra, tmp_path / "summary.json")
     try:
         yield r
     finally:
@@ -320,9 +325,9 @@ def test_bad_canopen_options(sim_bin: Path, args: list[str], needle: str) -> Non
     assert p.returncode == 2 and needle in p.stderr and len(p.stderr.strip().splitlines()) == 1, p.stderr
 
 
-def test_nodes_on_a_second_bus(sim_bin: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_nodes_on_a_second_bus(sim_bin: Path, monkeypatch: pytest.MonkeyPatch, slot: Slot) -> None:
     """Today's wiring (buses.toml): drives 1-3 on one bus, 4-6 on another; node id = drive number."""
-    group, port = "239.74.163.2", 2 * random.randint(23000, 23499)
+    group, port = CAN_GROUP, slot.can_port
     net = _connect(monkeypatch, group, port + 1)
     node = BaseNode402(4, str(EDS))
     net.add_node(node)

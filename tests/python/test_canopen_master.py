@@ -26,6 +26,9 @@ from canopen.sdo import SdoAbortedError  # noqa: E402
 
 from gen import drives as gen_drives  # noqa: E402
 
+# armctl test runs these alone (no other test beside them): python-canopen drives answer within SDO timeouts
+pytestmark = pytest.mark.serial
+
 REPO = Path(__file__).resolve().parents[2]
 EDS = REPO / "firmware" / "protocol" / "cia402_servo.eds"
 GROUP = "239.74.163.2"
@@ -117,10 +120,8 @@ class Cia402Drive:
 
 
 @pytest.fixture()
-def udp_port() -> int:
-    import random
-
-    return random.randint(45000, 45999)
+def udp_port(slot) -> int:  # noqa: ANN001 - conftest's run slot: ports no other test uses meanwhile
+    return slot.can_port
 
 
 def _run(boot_bin: Path, port: int, args: list[str], drives: list[Cia402Drive], monkeypatch: pytest.MonkeyPatch,

@@ -13,9 +13,13 @@ from pathlib import Path
 
 import can
 import msgpack
+import pytest
 
 from host_sim.canbus import open_bus
 from tools.run.hil import HilOptions, run_hil
+
+# armctl test runs these alone (no other test beside them): attackers that answer frames in real time, racing the run
+pytestmark = pytest.mark.serial
 
 SYNC = 0x080
 

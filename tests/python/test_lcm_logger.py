@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import random
 import signal
 import subprocess
 import time
@@ -11,14 +10,19 @@ from pathlib import Path
 import lcm
 import pytest
 
+from tools.run.slots import LCM_GROUP, Slot
+
+# armctl test runs these alone (no other test beside them): a logger stalled and woken on the wall clock
+pytestmark = pytest.mark.serial
+
 N_MESSAGES = 3000
 
 
-def test_a_stalled_logger_loses_nothing_and_flushes_on_sigint(build_dir: Path, tmp_path: Path) -> None:
+def test_a_stalled_logger_loses_nothing_and_flushes_on_sigint(build_dir: Path, tmp_path: Path, slot: Slot) -> None:
     exe = build_dir / "tools" / "lcm_logger" / "arm_lcm_logger"
     if not exe.exists():
         pytest.skip(f"{exe} not built")
-    url = f"udpm://239.255.76.67:{random.randint(7700, 7999)}?ttl=0&recv_buf_size=8388608"
+    url = f"udpm://{LCM_GROUP}:{slot.lcm_port}?ttl=0&recv_buf_size=8388608"
     log_path = tmp_path / "t.lcmlog"
     proc = subprocess.Popen([str(exe), "--lcm-url", url, str(log_path)], stderr=subprocess.PIPE, text=True)
     try:

@@ -23,6 +23,9 @@ can = pytest.importorskip("can")
 msgpack = pytest.importorskip("msgpack")
 from can.interfaces.udp_multicast.utils import pack_message, unpack_message  # noqa: E402
 
+# armctl test runs these alone (no other test beside them): python-can peers with wall-clock deadlines
+pytestmark = pytest.mark.serial
+
 BUILD_DIR = Path(os.environ.get("ARM_BUILD_DIR", Path(__file__).resolve().parents[2] / "build" / "debug"))
 TOOL_DIR = BUILD_DIR / "tests" / "c" / "transport"
 TOOL = TOOL_DIR / "pycan_wire_tool"

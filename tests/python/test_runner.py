@@ -21,6 +21,7 @@ from tools.run.runner import RunSpec, execute, run_all
 from tools.run.slots import CAN_BASE, LCM_BASE, _lock_dir, acquire_slot
 
 
+@pytest.mark.serial  # alone: it expects the lowest free slot to stay free meanwhile
 def test_a_taken_slot_is_skipped_and_released_on_exit() -> None:
     with acquire_slot() as a:
         with acquire_slot() as b:
@@ -221,6 +222,7 @@ def test_cluster_certs_make_a_ca_and_refuse_to_overwrite(tmp_path: Path) -> None
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
 
 
+@pytest.mark.serial  # alone: it expects the lowest free slot to stay free meanwhile
 def test_a_slot_whose_ports_still_carry_traffic_is_passed_over() -> None:
     """An orphaned run (its armctl killed before the children followed) keeps sending on its slot's
     ports although the slot's lock is free: a new run must not take that slot."""

@@ -15,6 +15,9 @@ import pytest
 from hil_procs import BusRecorder
 from gen.lib.paths import REPO
 
+# armctl test runs these alone (no other test beside them): signals sent into a run at moments of the wall clock
+pytestmark = pytest.mark.serial
+
 ARMCTL = str(REPO / "tools" / "armctl")
 CMD_IDS = set(range(0x201, 0x207))
 

@@ -14,6 +14,9 @@ import pytest
 
 from sim_master import SimMaster
 
+# armctl test runs these alone (no other test beside them): frames timed by the wall clock around the simulator
+pytestmark = pytest.mark.serial
+
 UNKNOWN_ID = 0x555  # no message of the DBC: arm_sim counts it (rx_unknown_id) and goes on
 
 

@@ -25,6 +25,7 @@ from tools.run.hil import HilOptions, run_hil
 from gen.lib.paths import REPO
 from tools.study import DEFAULT_CONFIG, run_study
 from tools.study.config import METHODS, StudyConfigError, load
+from tools.run.slots import Slot
 from tools.run.telemetry_log import read_log
 
 SMALL = {"methods": '["pm", "pm-paper-weights", "tde"]', "scenarios": '["ideal", "realistic"]'}
@@ -267,12 +268,13 @@ def _kill_when_running(pattern: str, after_s: float) -> threading.Thread:
 
 
 @pytest.mark.parametrize("victim", ["simulator", "controller"])
-def test_a_killed_process_ends_the_run_in_a_named_state(tmp_path: Path, controller_bin: Path, victim: str) -> None:
-    port = 43900 if victim == "simulator" else 43910
+def test_a_killed_process_ends_the_run_in_a_named_state(tmp_path: Path, controller_bin: Path, victim: str,
+                                                        slot: Slot) -> None:
+    port = slot.can_port  # the killer's pattern names this run's processes alone
     pattern = f"arm_sim --bus udp:239.74.163.2:{port}" if victim == "simulator" else \
         f"arm_controller --bus udp:239.74.163.2:{port}"
     killer = _kill_when_running(pattern, after_s=2.5)
-    run = run_hil(HilOptions(out=tmp_path, duration_s=600.0, method="pm", can_port=port, lcm_port=7799,
+    run = run_hil(HilOptions(out=tmp_path, duration_s=600.0, method="pm", can_port=port, lcm_port=slot.lcm_port,
                              preset=controller_bin.parent.parent.name))
     killer.join(5)
     r = run["results"]

@@ -18,6 +18,9 @@ from tools.run.hil import HilOptions, run_hil
 from gen.lib.paths import REPO, env_with_repo
 from tools.bench.timing import parse_cyclictest
 
+# armctl test runs these alone (no other test beside them): realtime runs: their timing is what is measured
+pytestmark = pytest.mark.serial
+
 PCTS = ("p50", "p99", "p99.9", "max")
 
 

@@ -66,7 +66,7 @@ def per_rnea(exe: Path, variant: str, calls: int) -> float:
 
 def bench_step(out: Path, quick: bool = False) -> dict[str, Any]:
     """quick: pm only, 200 measured steps (a check that the benchmark runs, not a figure)."""
-    build("release")
+    build("release", targets=["bench_step"])  # not in `all` (tests/bench/CMakeLists.txt)
     exe = build_dir("release") / "tests" / "bench" / "bench_step"
     methods = ("pm",) if quick else METHODS
     steps = 200 if quick else STEPS

@@ -1,4 +1,10 @@
-"""armctl test: every test, ctest (ASan/UBSan build) and pytest."""
+"""armctl test: every test, ctest (ASan/UBSan build) and pytest.
+
+pytest runs in two passes: first every test not marked `serial`, side by side on every core
+(pytest-xdist, a test file to a worker: its module fixtures once, its own ports and folders), then
+the `serial` ones alone (each says why at its mark: realtime runs, the qemu VM, wall-clock
+deadlines). Side by side, tests hear nothing of each other: every bus and telemetry port a test
+or run uses comes from a run slot it holds (tools/run/slots.py, tests/python/conftest.py)."""
 
 from __future__ import annotations
 
@@ -12,14 +18,28 @@ from gen.lib.paths import REPO, build_dir, env_with_repo
 from tools.build import build
 from tools.commands import CommandError
 
+SLOWEST_SHOWN = 15  # the slowest tests named at the end of each pass: the suite's time is a target (README)
+NO_TESTS_COLLECTED = 5  # pytest's exit code when a pass selects nothing (e.g. `-k` names serial tests only)
+
 
 def add_subparser(sub: argparse._SubParsersAction) -> None:
     t = sub.add_parser("test", help="every test: ctest (ASan/UBSan build) and pytest")
-    t.add_argument("pytest_args", nargs="*", help="extra pytest arguments, e.g. -k hil")
+    t.add_argument("--workers", type=int, default=None,
+                   help="pytest workers for the tests that may share the cores [the cores this process may use]")
+    t.add_argument("pytest_args", nargs="*", help="extra pytest arguments for both passes, e.g. -k hil")
     t.set_defaults(run=run)
 
 
+def pytest_passes(workers: int) -> list[tuple[str, list[str]]]:
+    """(name, pytest arguments) of each pass: side by side on `workers` workers, then alone."""
+    shared = ["-m", "not serial", *(["-n", str(workers), "--dist", "loadfile"] if workers > 1 else [])]
+    return [("side by side", shared), ("alone", ["-m", "serial"])]
+
+
 def run(ns: argparse.Namespace) -> int:
+    workers = ns.workers if ns.workers is not None else len(os.sched_getaffinity(0))
+    if workers < 1:
+        raise CommandError(f"--workers: {workers} is not a worker count (1 or more)")
     build("debug")
     build("release")
     failed = []
@@ -31,11 +51,17 @@ def run(ns: argparse.Namespace) -> int:
     # As root on Debian, tools/armctl has installed every package: no test may skip for a missing one.
     if os.geteuid() == 0 and shutil.which("dpkg-query"):
         env["ARM_TEST_STRICT"] = "1"
-    # the slowest tests named at the end: the suite's time is a target (README, issue 19)
-    r = subprocess.run([sys.executable, "-m", "pytest", "-q", "--durations=15", "tests/python", *ns.pytest_args],
-                       cwd=REPO, env=env)
-    if r.returncode != 0:
-        failed.append("pytest")
+    ran = 0
+    for name, args in pytest_passes(workers):
+        print(f"armctl test: pytest, the tests run {name}", flush=True)
+        r = subprocess.run([sys.executable, "-m", "pytest", "-q", f"--durations={SLOWEST_SHOWN}", *args,
+                            "tests/python", *ns.pytest_args], cwd=REPO, env=env)
+        if r.returncode == 0:
+            ran += 1
+        elif r.returncode != NO_TESTS_COLLECTED:
+            failed.append(f"pytest ({name})")
+    if not ran and not failed:
+        failed.append("pytest (no test selected)")
     if failed:
         raise CommandError(f"FAILED ({', '.join(failed)})")
     print("armctl test: all passed")
