@@ -87,7 +87,8 @@ BAD_FIELDS = [
 ]
 
 
-@pytest.mark.parametrize("path,value,message", BAD_FIELDS, ids=[f"{p}={v!r}"[:60] for p, v, _ in BAD_FIELDS])
+@pytest.mark.parametrize("path,value,message", BAD_FIELDS,
+                         ids=[f"{p}=<deleted>" if v is _DELETE else f"{p}={v!r}"[:60] for p, v, _ in BAD_FIELDS])
 def test_bad_field_is_named(path: str, value: Any, message: str) -> None:
     doc = copy.deepcopy(paper_doc())
     _set(doc, path, value)
