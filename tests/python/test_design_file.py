@@ -16,7 +16,7 @@ import pytest
 from tools.build.arm import DEFAULT_ARM, arm_build_dir, arm_info, build_arm
 from tools.study.design_knobs import design_text
 from tools.run.hil import HilOptions, run_hil
-from tools.run.runner import RunSpec, SIL_DESIGNS, execute, slot_arm
+from tools.run.runner import RunSpec, SIL_DESIGNS, execute, slot_arm, slot_has_design
 from tools.run.slots import acquire_slot
 from tools.study import DEFAULT_CONFIG
 from tools.study.config import for_arm, load
@@ -98,6 +98,25 @@ def test_the_runner_s_sil_path_matches_the_slot_build(tmp_path: Path) -> None:
     made = (folder / "pm_design.txt").stat().st_mtime_ns
     execute(asdict(RunSpec(**{**asdict(spec), "out": str(tmp_path / "again"), "controller_args": HOLD})))
     assert (folder / "pm_design.txt").stat().st_mtime_ns == made
+
+
+def test_a_slot_built_design_is_recorded_the_same_whichever_slot_ran_it(tmp_path: Path) -> None:
+    """Over a bus a run of a design of its own is built into its run slot's folder; which slot it
+    gets depends on what runs beside it. run.json names the design by a copy kept by its content,
+    the same from every slot and never rewritten, not by the slot's file (which the slot's next
+    design overwrites). Found when the test suite first ran its tests side by side."""
+    bdir = build_arm("release", DEFAULT_ARM, targets=["arm_sil"])
+    base = (bdir / "generated" / "arm" / "design.toml").read_text()
+    text = design_text(base, {"form": "split", "wn": 21.0, "zeta": 0.9, "f_bw": 3.0, "H": 0.4})
+    spec = RunSpec(out="", method="pm", duration_s=0.3, controller_args=HOLD, uncertainty={}, design_text=text,
+                   bus="udp")
+    first = execute(asdict(RunSpec(**{**asdict(spec), "out": str(tmp_path / "a")})))
+    with acquire_slot(prefer=lambda i: slot_has_design(DEFAULT_ARM, i, text)):  # the slot that built it, held
+        second = execute(asdict(RunSpec(**{**asdict(spec), "out": str(tmp_path / "b")})))
+    assert first["environment"]["build"] != second["environment"]["build"]  # two slots' folders
+    a, b = first["results"]["design"], second["results"]["design"]
+    assert a == b and Path(a["config"]).read_text() == text, (a, b)
+    assert first["results"]["design_hash"] == second["results"]["design_hash"]
 
 
 def _bad_files(good: Path, tmp_path: Path) -> list[tuple[Path, str]]:

@@ -88,7 +88,8 @@ class HilOptions:
     # Lockstep over a bus: each side polls this long before it sleeps (lockstep_spin_us).
     spin_us: float = LOCKSTEP_SPIN_US
     # A design loaded at run time (the controller's --design-file: gen.synth's pm_design.txt)
-    # instead of the build's own, and what run.json records as its design (default: the build's).
+    # instead of the build's own; and what run.json records as its design (default: the build's
+    # own record, which names the config the build was made from).
     design_file: Path | None = None
     design_record: dict[str, Any] | None = None
     protocol: str = DEFAULT_PROTOCOL
@@ -646,7 +647,7 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
               "joint_names": [j["name"] for j in info["joints"]],
               "arm": {"name": info["name"], "model": info["model"], "arm_file": info["arm_file"],
                       "model_hash": info["model_hash"], "n_joints": info["n_joints"], "warnings": info["warnings"]},
-              "design": opt.design_record if opt.design_file is not None else info.get("design"),
+              "design": opt.design_record if opt.design_record is not None else info.get("design"),
               "ref_hold_s": _arg_value(opt.controller_args, "--ref-hold", CONTROLLER_DEFAULT_HOLD_S),
               "rate_hz": rate_hz,
               "controller_args": list(opt.controller_args),

@@ -133,6 +133,18 @@ def slot_has_design(base: ArmRef, slot: int, design_text: str) -> bool:
         return False
 
 
+def kept_design_copy(base: ArmRef, design_text: str) -> Path:
+    """A copy of the design a slot build ran, named by its content and never rewritten: what the
+    run records as its design. The slot's own file holds whichever design that slot built last,
+    and which slot a run gets depends on what else runs beside it."""
+    digest = hashlib.sha256(design_text.encode()).hexdigest()[:16]
+    path = _slot_design_path(base, 0).parent / "by-content" / f"{digest}.toml"
+    if not path.exists():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_text_atomic(path, design_text)
+    return path
+
+
 def slot_arm(base: ArmRef, slot: int, design_text: str) -> ArmRef:
     """The arm with this design, in the slot's own build folder: one design file per slot and
     arm, rewritten only when the design changes, so a slot rebuilds only what a new design
@@ -289,12 +301,14 @@ def execute(spec_d: dict[str, Any], spin_us: float = LOCKSTEP_SPIN_US) -> dict[s
                 design = sil_design(arm, spec.design_text, arm_info(bdir)["n_joints"])
                 run = _run(spec, arm, slot, out, spin_us, design)
             elif spec.design_text is not None:
+                record = {"config": str(kept_design_copy(arm, spec.design_text)),
+                          "why": "a design of its own, built into a run slot's folder"}
                 arm = slot_arm(arm, slot.index, spec.design_text)
                 # held through the run: its binaries are this build's (a checkout shared between
                 # hosts has slot i of each host in the same folder)
                 with build_lock(arm_build_dir("release", arm)):
                     build_arm("release", arm, targets=targets_for(spec.bus))
-                    run = _run(spec, arm, slot, out, spin_us)
+                    run = _run(spec, arm, slot, out, spin_us, record=record)
             else:
                 prepare_build(arm)  # a no-op when built (a Dask worker on another machine may not be)
                 run = _run(spec, arm, slot, out, spin_us)
@@ -318,11 +332,12 @@ def _not_run(signum: int) -> dict[str, Any]:
 
 
 def _run(spec: RunSpec, arm: ArmRef, slot: Slot, out: Path, spin_us: float,
-         design: Path | None = None) -> dict[str, Any]:
-    """design: a sil_design folder, loaded at run time (else the build's own design)."""
+         design: Path | None = None, record: dict[str, Any] | None = None) -> dict[str, Any]:
+    """design: a sil_design folder, loaded at run time (else the build's own design); record:
+    what run.json says of the build's own design (else the build's record)."""
     from gen.synth.manifest import DESIGN_FILE
 
-    loaded = {} if design is None else {
+    loaded = {"design_record": record} if design is None else {
         "design_file": design / DESIGN_FILE,
         "design_record": {"config": str(design / "design.toml"), "why": "loaded at run time (--design-file)"}}
     return run_hil(HilOptions(out=out, duration_s=spec.duration_s, method=spec.method, arm=arm,
