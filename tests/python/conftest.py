@@ -62,6 +62,14 @@ def bus_spec(slot: Slot) -> str:
     return f"udp:{CAN_GROUP}:{slot.can_port}"
 
 
+@pytest.hookimpl(trylast=True)  # after pytest's own reordering by fixture (a module's parametrized fixtures)
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The files marked `long` first, each file's tests kept together and in order: side by side
+    (armctl test), pytest-xdist hands out files in this order, and the pass ends when its last
+    file does."""
+    items.sort(key=lambda item: item.get_closest_marker("long") is None)
+
+
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]):  # noqa: ANN201 - pytest hook
     """Under `armctl test` as root on Debian (ARM_TEST_STRICT=1), armctl has installed every

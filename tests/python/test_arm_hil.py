@@ -15,6 +15,8 @@ from arm_models import ARMATURE, armature_variant, materials_variant
 from tools.build.arm import ArmRef, arm_build_dir
 from gen.lib.paths import BUILD, REPO
 
+pytestmark = pytest.mark.long  # minutes: seven arms synthesised and built
+
 ARMS = REPO / "tests" / "arms"
 MAX_ERROR_DEG = 5.0  # "pm tracks within a few degrees" (issue 12), on every joint of every arm
 

@@ -19,6 +19,8 @@ from study_configs import with_tuning
 from gen.lib.paths import REPO
 from tools.run.procs import communicate_or_kill
 
+pytestmark = pytest.mark.long  # minutes: every documented command
+
 ARMCTL = str(REPO / "tools" / "armctl")
 
 # Documented command -> the test that runs it through the CLI ("file::function"), or "CI".

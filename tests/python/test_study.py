@@ -28,6 +28,8 @@ from tools.study.config import METHODS, StudyConfigError, load
 from tools.run.slots import Slot
 from tools.run.telemetry_log import read_log
 
+pytestmark = pytest.mark.long  # minutes: studies over the bus, stopped and resumed
+
 SMALL = {"methods": '["pm", "pm-paper-weights", "tde"]', "scenarios": '["ideal", "realistic"]'}
 
 

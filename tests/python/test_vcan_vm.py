@@ -38,8 +38,10 @@ import pytest
 from host_sim.protocol import DBC_PATH
 from gen.lib.paths import REPO, env_with_repo
 
-# armctl test runs these alone (no other test beside them): the qemu guest runs on the wall clock of a shared core
-pytestmark = pytest.mark.serial
+pytestmark = pytest.mark.long  # minutes: five boots of the qemu VM
+
+# Not serial: the guest's runs are lockstep (no wall clock decides them) and qemu takes one core,
+# so these share the machine with one other test file; a boot that hangs is booted again.
 
 PERIODS = 300
 VM_TIMEOUT_S = 420.0  # generous: the whole module takes ~2-4 min on the 2-core CI machine
