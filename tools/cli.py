@@ -10,15 +10,27 @@ from collections.abc import Callable
 from gen.lib.paths import REPO
 
 
-def _commands() -> list:
-    """Every command module, in the order `armctl --help` lists them: each has add_subparser(sub)
-    and a run(ns) -> int that its parser names (set_defaults(run=...)); tools/commands/__init__.py."""
-    from tools import bench, busload, study, vcan
-    from tools.run import cluster
-    from tools.bench import faults, fuzz, timing
-    from tools.commands import build, demo, hil, setup, synth, test
+# Which module registers each command (its add_subparser), in the order `armctl --help` lists them.
+# `armctl CMD` imports CMD's module alone: a command pays for its own imports, not every command's
+# (MuJoCo, cvxpy, numpy: half a second here, tens of seconds inside the qemu VM). test_cli checks
+# this table against what the modules register.
+COMMAND_MODULES = {
+    "setup": "tools.commands.setup", "build": "tools.commands.build", "cluster-certs": "tools.run.cluster",
+    "timing": "tools.bench.timing", "hil": "tools.commands.hil", "demo": "tools.commands.demo",
+    "test": "tools.commands.test", "synth": "tools.commands.synth", "vcan": "tools.vcan",
+    "busload": "tools.busload", "study": "tools.study", "tune": "tools.study", "faults": "tools.bench.faults",
+    "fuzz": "tools.bench.fuzz", "bench": "tools.bench",
+}
 
-    return [setup, build, cluster, timing, hil, demo, test, synth, vcan, busload, study, faults, fuzz, bench]
+
+def _commands(command: str | None = None) -> list:
+    """The command modules, in the order `armctl --help` lists them (only `command`'s when it names
+    one): each has add_subparser(sub) and a run(ns) -> int that its parser names
+    (set_defaults(run=...)); tools/commands/__init__.py."""
+    import importlib
+
+    names = [COMMAND_MODULES[command]] if command in COMMAND_MODULES else list(dict.fromkeys(COMMAND_MODULES.values()))
+    return [importlib.import_module(name) for name in names]
 
 
 def _errors() -> list[tuple[tuple[type[BaseException], ...], int | Callable[[BaseException], int], str]]:
@@ -88,11 +100,13 @@ def run_alone(command: str, description: str | None, add_arguments: Callable[[ar
     return run_command(p.parse_args(argv))
 
 
-def parser() -> argparse.ArgumentParser:
+def parser(command: str | None = None) -> argparse.ArgumentParser:
+    """armctl's parser: every command's, or only `command`'s when it names one (its module alone is
+    imported; a module that registers more than one command, registers them all)."""
     p = argparse.ArgumentParser(prog="armctl", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
-    for command in _commands():
-        command.add_subparser(sub)
+    for module in _commands(command):
+        module.add_subparser(sub)
     return p
 
 
@@ -104,10 +118,9 @@ def main(argv: list[str] | None = None) -> int:
     procs.install()
     argv = sys.argv[1:] if argv is None else list(argv)
     try:
-        ns = parser().parse_args(argv)
+        ns = parser(argv[0] if argv else None).parse_args(argv)
     except procs.Interrupted as exc:
         return exit_code(exc, argparse.Namespace(command=argv[0] if argv else "armctl"))
-    ns.command_args = argv[argv.index(ns.command) + 1:]  # the command's own, as given (hil --bus vm passes them on)
     return run_command(ns)
 
 

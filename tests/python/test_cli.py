@@ -1,11 +1,10 @@
 """The CLI's one pattern (issue 20 item 5): every command module has add_subparser() and run(), one
-map in tools/cli.py turns a command's exception into its exit code and message, and `hil --bus vm`
-passes hil's own arguments on to the VM."""
+map in tools/cli.py turns a command's exception into its exit code and message, and a command
+imports its own module alone."""
 
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 import pytest
 
@@ -13,7 +12,6 @@ from tools import cli
 
 from tools.run import procs
 from tools.commands import CommandError, UsageError
-from tools.commands import hil as hil_command
 
 
 @pytest.fixture(autouse=True)
@@ -30,6 +28,32 @@ def test_every_command_is_a_module_with_add_subparser_and_run() -> None:
         assert callable(parser.get_default("run")), name
     for module in cli._commands():  # noqa: SLF001
         assert callable(module.add_subparser), module.__name__
+    assert list(cli.COMMAND_MODULES) == list(sub.choices)
+
+
+@pytest.mark.parametrize("command", list(cli.COMMAND_MODULES))
+def test_a_command_s_parser_is_its_module_s_alone(command: str) -> None:
+    """`armctl CMD` builds CMD's parser from CMD's module alone (what the table says), and parses
+    the same as the whole parser."""
+    p = cli.parser(command)
+    sub = next(a for a in p._actions if isinstance(a, argparse._SubParsersAction))  # noqa: SLF001
+    registered_by = {name for name, module in cli.COMMAND_MODULES.items() if module == cli.COMMAND_MODULES[command]}
+    assert set(sub.choices) == registered_by
+    whole = next(a for a in cli.parser()._actions if isinstance(a, argparse._SubParsersAction))  # noqa: SLF001
+    assert sub.choices[command].format_help() == whole.choices[command].format_help()
+
+
+def test_a_light_command_imports_no_heavy_module() -> None:
+    """`armctl vcan` (run inside the slow VM too) does not pay for MuJoCo, numpy or cvxpy."""
+    import subprocess
+    import sys
+
+    from gen.lib.paths import REPO, env_with_repo
+
+    code = ("import sys; from tools import cli; cli.parser('vcan'); "
+            "print(sorted(m for m in ('mujoco', 'numpy', 'cvxpy', 'scipy') if m in sys.modules))")
+    r = subprocess.run([sys.executable, "-c", code], cwd=REPO, env=env_with_repo(), capture_output=True, text=True)
+    assert r.returncode == 0 and r.stdout.strip() == "[]", r.stdout + r.stderr
 
 
 @pytest.mark.parametrize("args,code,message", [
@@ -103,54 +127,3 @@ def test_a_bug_keeps_its_traceback() -> None:
 
     with pytest.raises(ZeroDivisionError):
         cli.run_command(_ns("x", run=run))
-
-
-@pytest.fixture()
-def hil_parser() -> argparse.ArgumentParser:
-    cli.parser()  # makes hil's
-    assert hil_command._PARSER is not None  # noqa: SLF001
-    return hil_command._PARSER  # noqa: SLF001
-
-
-def test_hil_in_the_vm_gets_its_own_arguments(hil_parser: argparse.ArgumentParser, tmp_path: Path) -> None:
-    args = ["--duration", "2", "--bus", "vm", "--method", "lqr", "--out", "runs/x", "--ref-amp", "-0.1,0.2",
-            "--ref-freq", "0.5,0.5", "--bus-timing", "--top=buses.toml", "--model", "../arm.xml",
-            "--arm", "/abs/panda.toml", "--max-error-deg", "3", "--capture"]
-    assert hil_command.vm_argv(args, hil_parser, tmp_path) == [
-        "--duration", "2", "--bus", "vcan", "--method", "lqr", "--out", str(tmp_path / "runs" / "x"),
-        "--ref-amp", "-0.1,0.2", "--ref-freq", "0.5,0.5", "--bus-timing",
-        f"--top={tmp_path / 'buses.toml'}", "--model", str((tmp_path / ".." / "arm.xml").resolve()),
-        "--arm", "/abs/panda.toml", "--max-error-deg", "3", "--capture"]
-
-
-@pytest.mark.parametrize("given,inner", [
-    (["--bus=vm"], ["--bus=vcan"]),
-    (["--bus", "udp", "--bus", "vm"], ["--bus", "udp", "--bus", "vcan"]),
-    (["--design", "d"], ["--design", "/w/d"]),
-    (["--bus-timing", "--bus", "vm"], ["--bus-timing", "--bus", "vcan"]),
-    ([], []),
-])
-def test_hil_in_the_vm_rewrites_only_bus_and_paths(hil_parser: argparse.ArgumentParser, given: list[str],
-                                                   inner: list[str]) -> None:
-    assert hil_command.vm_argv(given, hil_parser, Path("/w")) == inner
-
-
-def test_hil_in_the_vm_reads_the_arguments_main_was_given(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
-    from tools.build import arm
-    from tools.vm import run as vm_run
-
-    seen: dict[str, object] = {}
-
-    class Done:
-        returncode = 7
-
-    def run_in_vm(argv: list[str], timeout: float, keep: bool) -> Done:
-        seen.update(argv=argv, timeout=timeout)
-        return Done()
-
-    monkeypatch.setattr(arm, "build_arm", lambda *a, **k: tmp_path)
-    monkeypatch.setattr(vm_run, "run_in_vm", run_in_vm)
-    monkeypatch.chdir(tmp_path)
-    assert cli.main(["hil", "--bus", "vm", "--duration", "1", "--out", "o"]) == 7
-    assert seen == {"argv": ["tools/armctl", "hil", "--bus", "vcan", "--duration", "1", "--out", str(tmp_path / "o")],
-                    "timeout": 4200.0}

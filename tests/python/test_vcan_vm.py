@@ -306,9 +306,10 @@ ARMCTL = str(REPO / "tools" / "armctl")
 
 
 def test_hil_in_the_vm_through_the_cli(tmp_path: Path) -> None:
-    """The README's way to run HIL over real SocketCAN, as a user types it: armctl (bash, its
-    bootstrap and the CLI) boots the VM and runs itself there with --bus vcan; here with a 7-DOF
-    arm from an arm file, whose CiA 402 drives take four classic buses (2, 2, 2, 1), the most the
+    """The README's way to run HIL over real SocketCAN, as a user types it: armctl builds and plans
+    the run here, boots the VM and starts the logger, the simulator and the controller there on
+    vcan0..vcan3 (tools/run/processes.py), then analyses what they wrote; here with a 7-DOF arm
+    from an arm file, whose CiA 402 drives take four classic buses (2, 2, 2, 1), the most the
     controller has; in the slow VM the drives come up after the controller, which waits for them."""
     _vm_or_skip()
     r = subprocess.run([ARMCTL, "hil", "--bus", "vm", "--arm", "tests/arms/panda.toml", "--duration", "0.3",
@@ -319,7 +320,8 @@ def test_hil_in_the_vm_through_the_cli(tmp_path: Path) -> None:
     assert run["environment"]["bus"].split() == ["socketcan:vcan0@1,2", "socketcan:vcan1@3,4",
                                                  "socketcan:vcan2@5,6", "socketcan:vcan3@7"]
     assert run["environment"]["protocol"] == "canopen" and run["environment"]["canopen"]["fault"]["code"] == "none"
-    assert run["environment"]["bus_choice"].startswith("vcan -> vcan")
+    assert run["environment"]["bus_choice"].startswith("vm -> vcan (inside the qemu VM")
+    assert run["environment"]["simulator_scheduling"].endswith("(in the VM)")
     assert len(run["results"]["tracking_max_abs_deg"]) == 7
 
 

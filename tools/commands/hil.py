@@ -1,5 +1,5 @@
 """armctl hil: one hardware-in-the-loop run; with --scenario, one run of a study on its own; with
---bus vm, the same run inside the qemu VM (tools/vm)."""
+--bus vm, the run's programs inside the qemu VM (tools/vm), on real SocketCAN buses."""
 
 from __future__ import annotations
 
@@ -15,9 +15,6 @@ from tools.commands import UsageError
 from tools.methods import method_names
 from tools.run.verdict import DEFAULT_MAX_ERROR_DEG, FOLLOWING_ERROR_STOP_DEG
 
-_PARSER: argparse.ArgumentParser | None = None  # hil's own, to read its arguments again for the VM
-PATH_OPTIONS = ("out", "topology", "model", "arm", "design", "config", "drive_config")  # dests whose values are paths
-
 
 def _float_list(text: str) -> list[float]:
     try:
@@ -30,7 +27,6 @@ def _float_list(text: str) -> list[float]:
 
 
 def add_subparser(sub: argparse._SubParsersAction) -> None:
-    global _PARSER
     from tools.study.config import METHODS as STUDY_METHODS
 
     h = sub.add_parser("hil", help="one hardware-in-the-loop run")
@@ -55,7 +51,8 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
     h.add_argument("--bus", choices=("auto", "udp", "vcan", "vm", "sil"), default="auto",
                    help="auto: vcan if this kernel has SocketCAN and vcan0, vcan1 (one per bus of "
                         "firmware/protocol/buses.toml), else udp (one port per bus; says which); "
-                        "vm: the whole run inside the qemu VM that has vcan0, vcan1")
+                        "vm: the logger, simulator and controller inside the qemu VM, on its vcan0..vcan3 (the "
+                        "build and the analysis here)")
     h.add_argument("--topology", type=Path, default=None,
                    help="which drive is on which bus, and each bus's bit rates [canopen: the fewest classic 1 Mbit/s "
                         "buses that carry the drives (else the arm's CAN FD wiring); arm: the arm's wiring, "
@@ -96,7 +93,6 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
                         "[the arm's: its arm file's `drives`, else that file]")
     add_arm_arguments(h)
     h.set_defaults(run=run)
-    _PARSER = h
 
 
 def _print_run(run: dict) -> None:
@@ -204,8 +200,6 @@ def run(ns: argparse.Namespace) -> int:
             raise UsageError(f"--topology: {exc}") from None
     if ns.can_port is not None and not 1024 <= ns.can_port <= 65532:
         raise UsageError(f"--can-port: must be in [1024, 65532], got {ns.can_port}")
-    if ns.bus == "vm":
-        return _in_vm(ns, arm)
     bdir = build_arm("release", arm)
     info = arm_info(bdir)
     amp, freq, warnings = reference_for(info, ns.ref_amp, ns.ref_freq, bdir)
@@ -229,55 +223,3 @@ def run(ns: argparse.Namespace) -> int:
                   "frames of a period do not fit in it" + (", so commands end late (--bus-timing)"
                                                            if ns.bus_timing else ""), file=sys.stderr)
     return _ended(result, ns.out)
-
-
-def _option(parser: argparse.ArgumentParser, name: str) -> argparse.Action | None:
-    """The action an option string names, as argparse reads it: exactly, or by a unique prefix."""
-    table = parser._option_string_actions  # noqa: SLF001 - argparse's own table of option strings
-    if name in table:
-        return table[name]
-    found = {id(a): a for s, a in table.items() if name.startswith("--") and s.startswith(name)}
-    return next(iter(found.values())) if len(found) == 1 else None
-
-
-def vm_argv(args: list[str], parser: argparse.ArgumentParser | None = None, cwd: Path | None = None) -> list[str]:
-    """hil's own arguments as given, for the same run inside the VM: --bus vm becomes --bus vcan,
-    and every path is made absolute (against cwd, this process's folder unless told)."""
-    parser = parser or _PARSER
-    assert parser is not None, "hil's parser is made by add_subparser"
-    base = Path.cwd() if cwd is None else cwd
-    out: list[str] = []
-    i = 0
-    while i < len(args):
-        tok = args[i]
-        i += 1
-        if tok == "--":
-            out += args[i - 1:]
-            break
-        name, eq, val = tok.partition("=") if tok.startswith("--") else (tok, "", "")
-        action = _option(parser, name) if tok.startswith("-") else None
-        if action is None or action.nargs == 0 or action.dest not in ("bus", *PATH_OPTIONS):
-            out.append(tok)
-            continue
-        if not eq:
-            if i >= len(args):
-                out.append(tok)
-                break
-            val = args[i]
-            i += 1
-        val = "vcan" if action.dest == "bus" and val == "vm" else (
-            str((base / val).resolve()) if action.dest in PATH_OPTIONS else val)
-        out += [f"{name}={val}"] if eq else [name, val]
-    return out
-
-
-def _in_vm(ns: argparse.Namespace, arm) -> int:  # noqa: ANN001 - tools.build.arm.ArmRef
-    """The same HIL run inside the qemu VM whose kernel has vcan0..vcan3 (tools/vm)."""
-    from tools.build.arm import build_arm
-    from tools.vm.run import run_in_vm
-
-    build_arm("release", arm)
-    inner = ["tools/armctl", "hil", *vm_argv(ns.command_args)]
-    print("armctl hil: running inside the qemu VM (software emulation: minutes, not seconds)")
-    ns.prefix = "armctl hil --bus vm"  # a VM that cannot run says so under this name
-    return run_in_vm(inner, timeout=3600.0 + 600.0 * ns.duration, keep=False).returncode

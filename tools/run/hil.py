@@ -8,8 +8,6 @@ import functools
 import json
 import os
 import platform
-import select
-import signal
 import socket
 import subprocess
 import time
@@ -27,8 +25,10 @@ from tools.build.arm import DEFAULT_ARM, ArmChoiceError, ArmRef, arm_build_dir, 
 from gen.lib.params import constant, default as param_default, param
 from gen.lib.paths import REPO, controller_binary, logger_binary
 from tools.run import procs as procs_mod
+from tools.run.processes import (LOGGER_READY_S, USAGE_ERROR, HilError, ProcessPlan, last_line, plan_json,
+                                 run_processes)
 from tools.run.run_analysis import analyse
-from tools.run.slots import acquire_slot
+from tools.run.slots import CAN_GROUP, LCM_GROUP, acquire_slot
 from tools.run.verdict import Bounds
 
 CONTROLLER_DEFAULT_HOLD_S: float = param_default("controller", "ref-hold")
@@ -55,6 +55,7 @@ class HilOptions:
     mode: str = "lockstep"
     preset: str = "release"
     # udp | vcan | auto (vcan if this kernel has SocketCAN and vcan0.., else udp) | sil (one process)
+    # | vm (the logger, simulator and controller inside the qemu VM, on its vcan buses)
     bus: str = "udp"
     can_port: int | None = None  # None: the run slot's (tools/run/slots.py): no concurrent run shares it; bus i: port + i
     # The arm (tools/build/arm.py: --model / --arm); its build folder holds the binaries and arm.json.
@@ -97,10 +98,6 @@ class HilOptions:
     drive_config: Path | None = None
 
 
-class HilError(RuntimeError):
-    pass
-
-
 
 
 def spin_args(mode: str, spin_us: float = LOCKSTEP_SPIN_US) -> list[str]:
@@ -125,62 +122,9 @@ def sim_mode_args(mode: str, spin_us: float = LOCKSTEP_SPIN_US) -> list[str]:
     return spin_args(mode, spin_us) + (["--reorder-wait-us", str(REALTIME_REORDER_WAIT_US)] if mode == "realtime" else [])
 
 
-def _logger_priority() -> None:
-    """Realtime runs: the logger mostly waits for messages, so a real-time priority costs the
-    others little and keeps a busy machine from delaying it (the kernel socket buffer is its
-    queue, seconds deep). Not in lockstep: there it would only preempt the run itself."""
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(10))
-    except (PermissionError, OSError):
-        pass  # not root: ordinary priority; any loss shows up as sequence gaps in run.json
-
-
-SIM_RT_PRIORITY = 70  # realtime runs: below the controller's loop (80) and above the logger (10)
-
-
 def realtime_cpu(opt: "HilOptions") -> int:
     """The CPU a realtime run's loop and simulator share (HilOptions.cpu; default the last one)."""
     return opt.cpu if opt.cpu is not None else (os.cpu_count() or 1) - 1
-
-
-def _simulator_realtime(cpu: int):  # noqa: ANN202 - a preexec_fn
-    """In a realtime run the simulator is the other half of the loop. It runs SCHED_FIFO below
-    the loop (at ordinary priority a 2-core machine delays it past the watchdog's 3 periods within
-    a second or two), on the loop's own CPU: this VM stops one vCPU now and then for 1-6 ms
-    (measured: a spinning process sees such gaps every few seconds, on one CPU at a time). Drives
-    on the other CPU would then fall silent while the loop runs, and the watchdog safe-stops it;
-    on one CPU a stall pauses the whole rig, and the loop counts the deadlines it missed."""
-    def setup() -> None:
-        try:
-            os.sched_setaffinity(0, {cpu})
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(SIM_RT_PRIORITY))
-        except (PermissionError, OSError):
-            pass  # not root: ordinary priority; run.json's environment says which
-    return setup
-
-
-def _scheduling(pid: int) -> str:
-    try:
-        policy = os.sched_getscheduler(pid)
-        prio = os.sched_getparam(pid).sched_priority
-    except OSError as exc:
-        return f"unknown ({exc.strerror})"
-    try:
-        cpus = ",".join(map(str, sorted(os.sched_getaffinity(pid))))
-    except OSError:
-        cpus = "?"
-    return (f"SCHED_FIFO {prio}" if policy == os.SCHED_FIFO else "SCHED_OTHER") + f" on CPU {cpus}"
-
-
-def _wait_for_logger(proc: subprocess.Popen[bytes], timeout: float = 10.0) -> None:
-    """The logger says "ready" on stdout once it receives (tools/lcm_logger)."""
-    assert proc.stdout is not None
-    ready, _, _ = select.select([proc.stdout], [], [], timeout)
-    line = proc.stdout.readline() if ready else b""
-    if b"ready" not in line:
-        proc.poll()
-        why = f"exited with {proc.returncode}" if proc.returncode is not None else f"not ready within {timeout:g} s"
-        raise HilError(f"the telemetry logger {why}; see logger.log")
 
 
 def _load_json(path: Path) -> dict[str, Any]:
@@ -301,6 +245,9 @@ def vcan_names(n: int) -> list[str]:
 
 
 SIL = "sil"  # --bus: software in the loop
+# --bus: the run's three programs inside the qemu VM (tools/vm), on its vcan buses; the host builds,
+# plans and analyses as for any run (tools/run/processes.py runs there)
+VM = "vm"
 CAPTURE_FILE = "bus.log"  # a run's capture of its buses (candump -l format)
 CANOPEN_DBC_FILE = "canopen.dbc"  # a CANopen run's frames, derived from its drive table (gen/canopen_dbc.py)
 
@@ -350,6 +297,13 @@ def resolve_bus(choice: str, n_buses: int = 1) -> tuple[str, str]:
 
     if choice in ("udp", SIL):
         return choice, "asked for" if choice == "udp" else "one process: the controller and the drives, frames in memory"
+    if choice == VM:
+        from tools.vm.run import VCAN_IFACES
+
+        if n_buses > len(VCAN_IFACES):
+            raise HilError(f"--bus vm: the topology has {n_buses} buses; the VM has {len(VCAN_IFACES)} "
+                           f"({', '.join(VCAN_IFACES)})")
+        return "vcan", f"inside the qemu VM, whose kernel has {', '.join(vcan_names(n_buses))} (tools/vm)"
     ok, why = kernel_has_can()
     names = vcan_names(n_buses)
     present = {i.get("name") for i in can_interfaces()} if ok else set()
@@ -362,10 +316,38 @@ def resolve_bus(choice: str, n_buses: int = 1) -> tuple[str, str]:
                            "to run inside the VM that has them)")
         return "vcan", "asked for"
     if choice != "auto":
-        raise HilError(f"--bus: unknown bus '{choice}' (auto, udp, vcan, vm, sil)")
+        raise HilError(f"--bus: unknown bus '{choice}' (auto, udp, vcan, {VM}, sil)")
     if has_vcan:
         return "vcan", f"this kernel has SocketCAN and {', '.join(names)}"
     return "udp", why or f"no {', '.join(missing)} interface"
+
+
+VM_SLOWDOWN = 100  # the VM emulates the machine: programs run 20-260x slower there (tools/vm/README.md)
+
+
+def _run_processes_in_vm(opt: HilOptions, plan: ProcessPlan) -> tuple[dict[str, int | None], float, str]:
+    """run_processes(plan), inside the VM: the plan and the result pass through the run's folder."""
+    import sys
+
+    from gen.lib.paths import env_with_repo
+    from tools.vm.run import run_in_vm
+
+    plan_file, result_file = opt.out / "vm_plan.json", opt.out / "vm_result.json"
+    result_file.unlink(missing_ok=True)
+    write_text_atomic(plan_file, plan_json(plan))
+    with open(opt.out / "vm.log", "w") as log:
+        res = run_in_vm([sys.executable, "-m", "tools.run.processes", str(plan_file), str(result_file)], cwd=REPO,
+                        env=env_with_repo(), timeout=plan.deadline_s + 600.0, stdout=log, stderr=log,
+                        log=lambda m: print(m, file=log, flush=True))
+    result = _load_json(result_file)
+    if res.timed_out or res.returncode != 0 or not result:
+        why = "timed out" if res.timed_out else f"exit {res.returncode}"
+        raise HilError(f"the run inside the VM ended without a result ({why}): {last_line(opt.out / 'vm.log')}; "
+                       f"see {opt.out / 'vm.log'}")
+    if "error" in result:
+        raise HilError(result["error"])
+    codes = {k: (None if v is None else int(v)) for k, v in result["exit_codes"].items()}
+    return codes, float(result["wall_s"]), f"{result['simulator_scheduling']} (in the VM)"
 
 
 def run_hil(opt: HilOptions) -> dict[str, Any]:
@@ -377,42 +359,6 @@ def run_hil(opt: HilOptions) -> dict[str, Any]:
         return _run_hil(opt, opt.can_port, opt.lcm_port)
     with acquire_slot(quiet_ports=True) as slot:
         return _run_hil(opt, opt.can_port or slot.can_port, opt.lcm_port or slot.lcm_port)
-
-
-USAGE_ERROR = 2  # the controller's and the simulator's exit code for a bad argument
-
-
-def _last_line(path: Path) -> str:
-    try:
-        lines = [ln for ln in path.read_text(errors="replace").splitlines() if ln.strip()]
-    except OSError:
-        return ""
-    return lines[-1][:400] if lines else ""
-
-
-def _wait_run(opt: HilOptions, ctl: subprocess.Popen[bytes], sim: subprocess.Popen[bytes], logs: dict[str, Any]) -> None:
-    """Until the controller and then the simulator have ended. A child that refuses its
-    arguments (exit 2) ends the run at once, with its message. Generous bounds: the run is
-    deterministic, not timed; they only bound a hung process. The controller ends first (or, when
-    the simulator died, within its lockstep timeout); the simulator follows on the controller's
-    NMT stop or after its idle timeout."""
-    deadline = time.monotonic() + 120.0 + 60.0 * opt.duration_s
-    while ctl.poll() is None:
-        if sim.poll() == USAGE_ERROR:
-            logs["simulator"].flush()
-            raise HilError(f"the simulator refused its arguments: {_last_line(opt.out / 'simulator.log')}")
-        if time.monotonic() > deadline:
-            ctl.kill()
-            raise HilError(f"{ctl.args[0]} did not finish in time; killed")
-        time.sleep(0.01)
-    if ctl.returncode == USAGE_ERROR:
-        logs["controller"].flush()
-        raise HilError(f"the controller refused its arguments: {_last_line(opt.out / 'controller.log')}")
-    try:
-        sim.wait(timeout=max(1.0, deadline - time.monotonic()))
-    except subprocess.TimeoutExpired:
-        sim.kill()
-        raise HilError(f"{sim.args[0]} did not finish in time; killed") from None
 
 
 def _run_sil(opt: HilOptions, exe: Path, ctl_args: list[str], sim_args: list[str],
@@ -434,55 +380,6 @@ def _run_sil(opt: HilOptions, exe: Path, ctl_args: list[str], sim_args: list[str
                 p.wait()
             procs_mod.forget(p)
     return {"sil": p.returncode}, time.monotonic() - t0, "one thread with the controller (software in the loop)"
-
-
-def _run_processes(opt: HilOptions, logger_exe: Path, url: str, log_path: Path, sim_args: list[str],
-                   ctl_args: list[str]) -> tuple[dict[str, int | None], float, str]:
-    """The logger, the simulator and the controller as processes on the bus."""
-    logs = {name: open(opt.out / f"{name}.log", "w") for name in ("controller", "simulator", "logger")}
-
-    # Not lcm-logger: its subscription queue of 30 messages drops telemetry whenever it falls
-    # behind for a moment (tools/lcm_logger/arm_lcm_logger.c).
-    try:
-        logger = procs_mod.spawn("logger", [str(logger_exe), "--lcm-url", url, str(log_path)],
-                                 stdout=subprocess.PIPE, stderr=logs["logger"],
-                                 preexec_fn=_logger_priority if opt.mode == "realtime" else None)
-    except InterruptedError as exc:
-        for f in logs.values():
-            f.close()
-        raise HilError(str(exc)) from None
-    procs: list[subprocess.Popen[bytes]] = [logger]
-    t0 = time.monotonic()
-    try:
-        _wait_for_logger(logger)
-        sim = procs_mod.spawn("simulator", sim_args, watches_parent=True, cwd=REPO, stdout=logs["simulator"],
-                              stderr=subprocess.STDOUT,
-            preexec_fn=_simulator_realtime(realtime_cpu(opt)) if opt.mode == "realtime" else None)
-        procs.append(sim)
-        sim_scheduling = _scheduling(sim.pid)
-        ctl = procs_mod.spawn("controller", ctl_args, watches_parent=True, stdout=logs["controller"],
-                              stderr=subprocess.STDOUT)
-        procs.append(ctl)
-        _wait_run(opt, ctl, sim, logs)
-        wall = time.monotonic() - t0
-    except InterruptedError as exc:
-        raise HilError(str(exc)) from None
-    finally:
-        for p in reversed(procs):
-            if p.poll() is None:
-                p.send_signal(signal.SIGINT)
-                try:
-                    p.wait(timeout=5)
-                except subprocess.TimeoutExpired:
-                    p.kill()
-                    p.wait()
-            procs_mod.forget(p)
-        for f in logs.values():
-            f.close()
-        if logger.stdout is not None:
-            logger.stdout.close()
-    return ({"controller": ctl.returncode, "simulator": sim.returncode, "logger": logger.returncode}, wall,
-            sim_scheduling)
 
 
 def capture_args(opt: HilOptions) -> list[str]:
@@ -524,7 +421,7 @@ def _wait_sil(opt: HilOptions, sil: subprocess.Popen[bytes], log: Any) -> None:
         raise HilError(f"{sil.args[0]} did not finish in time; killed")
     if sil.returncode == USAGE_ERROR:
         log.flush()
-        raise HilError(f"arm_sil refused its arguments: {_last_line(opt.out / 'sil.log')}")
+        raise HilError(f"arm_sil refused its arguments: {last_line(opt.out / 'sil.log')}")
 
 
 def canopen_args(info: dict[str, Any], drive_config: Path | None) -> tuple[list[str], list[str], Any]:
@@ -562,7 +459,7 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
     sil = opt.bus == SIL
     if sil and (opt.mode != "lockstep" or opt.controller_cmd_prefix or opt.controller is not None):
         raise HilError("--bus sil: software in the loop runs the arm's own controller build, in lockstep only")
-    for group in () if sil else ("239.255.76.67", "239.74.163.2"):
+    for group in () if sil or opt.bus == VM else (LCM_GROUP, CAN_GROUP):  # the VM routes its own (processes.py)
         check_loopback_route(group)
     bdir = arm_build_dir(opt.preset, opt.arm)
     try:
@@ -599,7 +496,7 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
             raise HilError(f"{exe} is missing: run tools/armctl build")
     opt.out.mkdir(parents=True, exist_ok=True)
     for stale in ("telemetry.lcmlog", "controller_summary.json", "sim_summary.json", "run.json", "uncertainty.json",
-                  CAPTURE_FILE, CAPTURE_FILE + ".gz", CANOPEN_DBC_FILE):
+                  CAPTURE_FILE, CAPTURE_FILE + ".gz", CANOPEN_DBC_FILE, "vm_plan.json", "vm_result.json", "vm.log"):
         (opt.out / stale).unlink(missing_ok=True)
     if drive_table is not None:  # what decodes a capture of this run, in SI units (gen/canopen_dbc.py)
         from gen import canopen_dbc
@@ -610,7 +507,7 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
             raise HilError(str(exc)) from None
     buses = bus_args(bus_kind, can_port, topology)
     bus_argv = [a for spec in buses for a in ("--bus", spec)]
-    url = "" if sil else f"udpm://239.255.76.67:{lcm_port}?ttl=0&recv_buf_size=8388608"
+    url = "" if sil else f"udpm://{LCM_GROUP}:{lcm_port}?ttl=0&recv_buf_size=8388608"
     log_path = opt.out / "telemetry.lcmlog"
     if opt.uncertainty is not None:
         try:
@@ -633,7 +530,14 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
     if sil:
         exit_codes, wall, sim_scheduling = _run_sil(opt, sil_exe, ctl_args[1:], sim_args[1:], log_path)
     else:
-        exit_codes, wall, sim_scheduling = _run_processes(opt, logger_exe, url, log_path, sim_args, ctl_args)
+        in_vm = opt.bus == VM
+        slowdown = VM_SLOWDOWN if in_vm else 1
+        plan = ProcessPlan(out=str(opt.out), mode=opt.mode, cpu=realtime_cpu(opt),
+                           deadline_s=(120.0 + 60.0 * opt.duration_s) * slowdown,
+                           logger=[str(logger_exe), "--lcm-url", url, str(log_path)], simulator=sim_args,
+                           controller=ctl_args, cwd=str(REPO), logger_ready_s=LOGGER_READY_S * slowdown,
+                           multicast_routes=(f"{LCM_GROUP}/32",) if in_vm else ())
+        exit_codes, wall, sim_scheduling = _run_processes_in_vm(opt, plan) if in_vm else run_processes(plan)
 
     # A process that died wrote no summary: the run still ends in a defined, named state and
     # the partial log is analysed.
