@@ -117,7 +117,7 @@ void sim_co_node_fault(sim_co_node_t *n, uint16_t emcy_code, uint8_t error_regis
 static void controlword(sim_co_node_t *n, uint16_t cw)
 {
     const sim_power_t before = n->power;
-    n->power = sim_cia402_next(n->power, cw, n->prev_cw);
+    n->power = sim_cia402_next(n->power, cw, n->prev_cw, (int16_t)sim_co_od_get(&n->od, 0x605Au, 0u));
     n->prev_cw = cw;
     if (before == SIM_PS_FAULT && n->power != SIM_PS_FAULT) { /* fault reset */
         set_error(n, 0u, 0u);
@@ -220,9 +220,10 @@ static void boot(sim_co_node_t *n, int64_t now_ns, int comm_only)
 {
     n->now_ns = now_ns;
     sim_co_od_reset(&n->od, n->id, comm_only);
+    /* each drive its own serial number, after either reset: 0x1018 is in the communication area */
+    sim_co_od_set(&n->od, 0x1018u, 4u, n->id);
     if (!comm_only) {
         apply_presets(n);
-        sim_co_od_set(&n->od, 0x1018u, 4u, n->id); /* each drive its own serial number */
         n->power = SIM_PS_SWITCH_ON_DISABLED; /* not ready to switch on passes at once: no self-test */
         n->prev_cw = 0u;
     }

@@ -12,17 +12,21 @@ void sim_drive_init(sim_drive_t *d, uint8_t node_id, double torque_limit, uint32
     d->power = SIM_PS_SWITCH_ON_DISABLED;
 }
 
-sim_power_t sim_cia402_next(sim_power_t state, uint16_t cw, uint16_t prev_cw)
+sim_power_t sim_cia402_next(sim_power_t state, uint16_t cw, uint16_t prev_cw, int32_t quick_stop_option)
 {
     if (state == SIM_PS_FAULT) {
         const int rising_reset = (cw & CW_FAULT_RESET) != 0u && (prev_cw & CW_FAULT_RESET) == 0u;
         return rising_reset ? SIM_PS_SWITCH_ON_DISABLED : state;
     }
-    if ((cw & 0x0082u) == 0x0000u) { /* disable voltage */
+    if ((cw & 0x0082u) == 0x0000u) { /* disable voltage (transitions 7, 9, 10, 12) */
         return SIM_PS_SWITCH_ON_DISABLED;
     }
-    if ((cw & 0x0086u) == 0x0002u) { /* quick stop: this drive stops at once, torque off */
-        return SIM_PS_SWITCH_ON_DISABLED;
+    if (state == SIM_PS_QUICK_STOP_ACTIVE) { /* left by disable voltage, above, or enable operation (16) */
+        return (cw & 0x008Fu) == 0x000Fu ? SIM_PS_OPERATION_ENABLED : state;
+    }
+    if ((cw & 0x0086u) == 0x0002u) { /* quick stop: this drive stops at once, torque off (7, 10, 11) */
+        const int stays = state == SIM_PS_OPERATION_ENABLED && quick_stop_option >= 5 && quick_stop_option <= 8;
+        return stays ? SIM_PS_QUICK_STOP_ACTIVE : SIM_PS_SWITCH_ON_DISABLED;
     }
     if ((cw & 0x0087u) == 0x0006u) { /* shutdown */
         return SIM_PS_READY_TO_SWITCH_ON;
@@ -34,8 +38,8 @@ sim_power_t sim_cia402_next(sim_power_t state, uint16_t cw, uint16_t prev_cw)
         }
         return state;
     }
-    if ((cw & 0x008Fu) == 0x000Fu) { /* enable operation */
-        if (state == SIM_PS_SWITCHED_ON || state == SIM_PS_OPERATION_ENABLED) {
+    if ((cw & 0x008Fu) == 0x000Fu) { /* enable operation (4); from ready to switch on, 3 then 4 */
+        if (state == SIM_PS_READY_TO_SWITCH_ON || state == SIM_PS_SWITCHED_ON || state == SIM_PS_OPERATION_ENABLED) {
             return SIM_PS_OPERATION_ENABLED;
         }
         return state;
@@ -60,7 +64,7 @@ void sim_drive_on_command(sim_drive_t *d, uint16_t controlword, double torque)
     if (d->nmt_state != SIM_NMT_STATE_OPERATIONAL) {
         return; /* PDOs are only processed in NMT operational */
     }
-    d->power = sim_cia402_next(d->power, controlword, d->controlword);
+    d->power = sim_cia402_next(d->power, controlword, d->controlword, SIM_QUICK_STOP_DISABLE);
     d->controlword = controlword;
     d->periods_without_command = 0u;
     d->commands_received++;

@@ -20,6 +20,7 @@ typedef enum {
     SIM_PS_READY_TO_SWITCH_ON = 0x0231,
     SIM_PS_SWITCHED_ON = 0x0233,
     SIM_PS_OPERATION_ENABLED = 0x0237,
+    SIM_PS_QUICK_STOP_ACTIVE = 0x0217,
     SIM_PS_FAULT = 0x0218,
 } sim_power_t;
 
@@ -55,8 +56,13 @@ typedef struct {
 } sim_drive_t;
 
 void sim_drive_init(sim_drive_t *d, uint8_t node_id, double torque_limit, uint32_t command_timeout_periods);
-/* The transition a controlword causes (CiA 402 device control, the subset drives use). */
-sim_power_t sim_cia402_next(sim_power_t state, uint16_t controlword, uint16_t prev_controlword);
+/* The transition a controlword causes (CiA 402 device control). quick_stop_option is 0x605A's
+ * value: 0-4 a quick stop from operation enabled ends in switch on disabled, 5-8 the drive stays
+ * in quick stop active (torque off either way: this drive stops at once). */
+sim_power_t sim_cia402_next(sim_power_t state, uint16_t controlword, uint16_t prev_controlword,
+                            int32_t quick_stop_option);
+/* 0x605A of a drive without the object (the arm protocol's): disable the drive function. */
+#define SIM_QUICK_STOP_DISABLE 0
 /* Returns 1 if the NMT state changed (the caller then sends a heartbeat). */
 int sim_drive_on_nmt(sim_drive_t *d, uint8_t command);
 void sim_drive_on_command(sim_drive_t *d, uint16_t controlword, double torque);

@@ -140,6 +140,47 @@ static void test_abort_expedited_and_retries(void)
     CHECK(c.status == ARM_CO_SDO_TIMEOUT && c.abort_code == ARM_CO_ABORT_TIMEOUT);
 }
 
+/* An answer that comes after its try timed out: the retry's twin answer, which the server sends
+ * too, must not fail the transfers that follow (seen with six python-canopen drives on a loaded
+ * machine: "master aborted the response with 0x05040001"). */
+static void test_a_late_answer_does_not_fail_the_next_transfer(void)
+{
+    arm_co_sdo_t c;
+    arm_can_frame_t tx, rx;
+    arm_co_sdo_init(&c, 3u, 1000u, 3u);
+    CHECK(arm_co_sdo_upload(&c, 0x1018u, 3u, 0u) == 0);
+    CHECK(arm_co_sdo_take_tx(&c, &tx) == 1 && tx.data[0] == 0x40u);
+    arm_co_sdo_tick(&c, 1000u); /* timed out: the retry */
+    CHECK(arm_co_sdo_take_tx(&c, &tx) == 1 && tx.data[0] == 0x40u && c.tries == 2u);
+    const uint8_t rev[8] = {0x43, 0x18, 0x10, 0x03, 0x07, 0x00, 0x00, 0x00};
+    rx = answer(3u, rev); /* the first request's late answer completes the transfer */
+    CHECK(arm_co_sdo_rx(&c, &rx, 1200u) == 1 && c.status == ARM_CO_SDO_DONE && arm_co_sdo_u32(&c) == 7u);
+    CHECK(arm_co_sdo_upload(&c, 0x1018u, 4u, 1300u) == 0);
+    (void)arm_co_sdo_take_tx(&c, &tx);
+    CHECK(arm_co_sdo_rx(&c, &rx, 1400u) == 1); /* the retry's twin, for 0x1018:03 */
+    CHECK(c.status == ARM_CO_SDO_BUSY && c.stale == 1u && arm_co_sdo_take_tx(&c, &tx) == 0);
+    const uint8_t dl[8] = {0x60, 0x60, 0x60, 0x00, 0, 0, 0, 0}; /* a download's late answer, too */
+    rx = answer(3u, dl);
+    CHECK(arm_co_sdo_rx(&c, &rx, 1450u) == 1 && c.status == ARM_CO_SDO_BUSY && c.stale == 2u);
+    const uint8_t serial[8] = {0x43, 0x18, 0x10, 0x04, 0x03, 0x00, 0x00, 0x00};
+    rx = answer(3u, serial);
+    CHECK(arm_co_sdo_rx(&c, &rx, 1500u) == 1 && c.status == ARM_CO_SDO_DONE && arm_co_sdo_u32(&c) == 3u);
+
+    /* a segmented upload whose initiate was retried: the twin initiate answer mid-transfer */
+    CHECK(arm_co_sdo_upload(&c, 0x1008u, 0u, 2000u) == 0);
+    (void)arm_co_sdo_take_tx(&c, &tx);
+    const uint8_t init[8] = {0x41, 0x08, 0x10, 0x00, 0x0B, 0x00, 0x00, 0x00};
+    rx = answer(3u, init);
+    CHECK(arm_co_sdo_rx(&c, &rx, 2100u) == 1 && arm_co_sdo_take_tx(&c, &tx) == 1 && tx.data[0] == 0x60u);
+    CHECK(arm_co_sdo_rx(&c, &rx, 2150u) == 1 && c.status == ARM_CO_SDO_BUSY && c.stale == 3u);
+    const uint8_t seg0[8] = {0x00, 'C', 'i', 'A', ' ', '4', '0', '2'};
+    rx = answer(3u, seg0);
+    CHECK(arm_co_sdo_rx(&c, &rx, 2200u) == 1 && c.status == ARM_CO_SDO_BUSY);
+    const uint8_t seg1[8] = {0x19, ' ', 's', 'v', 0, 0, 0, 0};
+    rx = answer(3u, seg1);
+    CHECK(arm_co_sdo_rx(&c, &rx, 2250u) == 1 && c.status == ARM_CO_SDO_DONE && c.len == 10u);
+}
+
 /* A scripted CiA 402 server for every node: expedited SDO only, statusword follows controlword. */
 typedef struct {
     uint16_t sw[128];
@@ -147,6 +188,7 @@ typedef struct {
     int32_t mode[128];
     uint32_t device_type;
     unsigned writes;
+    uint8_t identity_subs; /* 0x1018's highest sub-index (0: all four) */
 } server_t;
 
 static int serve(server_t *s, const arm_can_frame_t *req, arm_can_frame_t *resp)
@@ -171,6 +213,9 @@ static int serve(server_t *s, const arm_can_frame_t *req, arm_can_frame_t *resp)
             d[0] = 0x80u;
             d[4] = 0x22; d[5] = 0x00; d[6] = 0x00; d[7] = 0x08; /* 0x08000022 */
         }
+    } else if (index == 0x1018u && s->identity_subs != 0u && req->data[3] > s->identity_subs) {
+        d[0] = 0x80u;
+        d[4] = 0x11; d[5] = 0x00; d[6] = 0x09; d[7] = 0x06; /* 0x06090011: no such sub-index */
     } else {
         const uint32_t r = index == 0x1000u ? s->device_type : index == 0x6041u ? s->sw[node]
                          : index == 0x6061u ? (uint32_t)(uint8_t)s->mode[node] : 0x11u;
@@ -246,6 +291,23 @@ static void test_boot_sequence(void)
     CHECK(b.fault.code == ARM_CO_FAULT_WRONG_VALUE && b.fault.node == 1u && b.fault.index == 0x1000u &&
           b.fault.value == 0x00020191u && b.fault.expected == ARM_CO_DEVICE_TYPE);
 
+    /* CiA 301: 0x1018 sub 1 is mandatory, 2-4 are optional: a drive with sub 1 alone boots, its
+     * others recorded as 0; unless the configuration checks the product code */
+    memset(&s, 0, sizeof(s));
+    s.device_type = ARM_CO_DEVICE_TYPE;
+    s.identity_subs = 1u;
+    s.sw[1] = s.sw[2] = 0x40u;
+    CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
+    CHECK(run_boot(&b, &s, 1000u) == 0);
+    CHECK(b.node[0].identity[0] == 0x11u && b.node[0].identity[1] == 0u && b.node[0].identity[3] == 0u);
+    s.sw[1] = s.sw[2] = 0x40u;
+    cfg.node[0].product_code = 0x11u;
+    CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
+    CHECK(run_boot(&b, &s, 1000u) == -1);
+    CHECK(b.fault.code == ARM_CO_FAULT_SDO_ABORT && b.fault.node == 1u && b.fault.index == 0x1018u &&
+          b.fault.sub == 2u && b.fault.abort_code == 0x06090011u);
+    cfg.node[0].product_code = 0u;
+
     /* a node id twice is a bad configuration, before anything is sent */
     cfg.node[1].node_id = 1u;
     CHECK(arm_co_boot_init(&b, &cfg, 0u) == -1 && b.fault.code == ARM_CO_FAULT_BAD_CONFIG && b.fault.node == 1u);
@@ -309,6 +371,7 @@ int main(void)
     test_segmented_download();
     test_segmented_upload_and_toggle_error();
     test_abort_expedited_and_retries();
+    test_a_late_answer_does_not_fail_the_next_transfer();
     test_boot_sequence();
     test_units();
     test_pdo_codec();

@@ -67,6 +67,19 @@ int main(void)
     CHECK(arm_bus_handle_rx(&bus, &hb) == ARM_RX_HEARTBEAT);
     CHECK(bus.heartbeat_mask == (1u << 5) && bus.nmt_state[5] == ARM_NMT_STATE_OPERATIONAL);
 
+    /* EMCY: a fault, except 0x0000, CiA 301's "error reset or no error" */
+    arm_can_frame_t emcy;
+    memset(&emcy, 0, sizeof(emcy));
+    emcy.id = 0x82u;
+    emcy.len = 8u;
+    CHECK(arm_bus_handle_rx(&bus, &emcy) == ARM_RX_EMCY && bus.emcy_mask == 0u && bus.rx.emcy == 1u);
+    emcy.data[0] = 0x10u;
+    emcy.data[1] = 0x23u;
+    emcy.data[2] = 0x01u;
+    CHECK(arm_bus_handle_rx(&bus, &emcy) == ARM_RX_EMCY && bus.emcy_mask == (1u << 1));
+    CHECK(bus.last_emcy_code[1] == 0x2310u && bus.rx.emcy == 2u);
+    bus.emcy_mask = 0u;
+
     /* HIL: the simulator's SIM_IDENTITY (0x7F0) is read, and a malformed one is not believed. */
     arm_can_frame_t id;
     memset(&id, 0, sizeof(id));

@@ -296,6 +296,24 @@ def test_a_nodes_own_preset_from_the_drive_table(rig: Rig) -> None:
     assert node.sdo[0x6091][1].raw == 160 and node.sdo[0x6091][2].raw == 1
 
 
+def test_quick_stop_and_the_shortcut_to_operation_enabled_as_python_canopen_asks(rig: Rig) -> None:
+    """BaseNode402's QUICK STOP ACTIVE (0x605A's default, 6: stop, torque off, stay there) and back;
+    a raw controlword 0x0F from READY TO SWITCH ON is CiA 402's transitions 3 and 4."""
+    _configure(rig)
+    _run(rig)
+    node = rig.node
+    assert node.sdo[0x605A].raw == 6
+    node.state = "QUICK STOP ACTIVE"
+    assert node.sdo[0x6041].raw & 0x6F == 0x07 and _tpdo_value(rig, 2, "Torque actual value") == 0
+    node.state = "OPERATION ENABLED"
+    node.state = "READY TO SWITCH ON"
+    node.sdo[0x6040].raw = 0x0F
+    assert node.sdo[0x6041].raw & 0x6F == 0x27
+    node.sdo[0x605A].raw = 2  # 0-4: a quick stop ends in SWITCH ON DISABLED
+    node.sdo[0x6040].raw = 0x02
+    assert node.sdo[0x6041].raw & 0x4F == 0x40
+
+
 def test_nmt_resets_restore_defaults(rig: Rig) -> None:
     node = rig.node
     bootups = _bootups(rig.net, node.id)
@@ -304,6 +322,7 @@ def test_nmt_resets_restore_defaults(rig: Rig) -> None:
     node.nmt.state = "RESET COMMUNICATION"
     _until("the boot-up after reset communication", lambda: len(bootups) == 1)
     assert node.sdo[0x1017].raw == 0  # communication area: back to the EDS
+    assert node.sdo[0x1018][4].raw == node.id  # but the serial number stays the drive's own
     assert node.sdo[0x6072].raw == 500  # the profile area survives a communication reset
     node.nmt.state = "RESET"
     _until("the boot-up after reset node", lambda: len(bootups) == 2)

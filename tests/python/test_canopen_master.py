@@ -17,6 +17,7 @@ import socket
 import struct
 import subprocess
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -66,8 +67,10 @@ class Cia402Drive:
     """A LocalNode that behaves like the contract's drive, as far as the boot needs."""
 
     def __init__(self, node_id: int, reject_mode: bool = False, device_type: int | None = None,
-                 in_fault: bool = False, stuck_at: int | None = None) -> None:
-        self.node = canopen.LocalNode(node_id, str(EDS))
+                 in_fault: bool = False, stuck_at: int | None = None, eds: Path = EDS,
+                 late: tuple[int, int, float] | None = None) -> None:
+        self.node = canopen.LocalNode(node_id, str(eds))
+        self.late = late  # (index, sub, seconds): the first read of it is answered that late
         self.id = node_id
         self.reject_mode = reject_mode
         self.device_type = device_type
@@ -86,6 +89,9 @@ class Cia402Drive:
         return var.decode_raw(self.node.get_data(index, sub))
 
     def on_read(self, index: int, subindex: int, od) -> int | None:  # noqa: ANN001 - canopen's ODVariable
+        if self.late is not None and (index, subindex) == self.late[:2]:
+            time.sleep(self.late[2])  # the network's one receive thread: later requests wait too
+            self.late = None
         if index == 0x6041:
             return self.sw
         if index == 0x6061:
@@ -189,6 +195,45 @@ def test_boot_brings_every_node_to_operation_enabled(boot_bin: Path, udp_port: i
             assert (0x6076, 0) not in written and d.stored(0x6076) == 150000
         assert (0x608F, 1) not in written and (0x6091, 1) not in written
         assert [v for i, _, v in d.writes if i == 0x6040] == [0x06, 0x07, 0x0F]  # fresh: no 0x00 first
+
+
+def test_a_late_sdo_answer_and_its_retry_s_twin_do_not_fail_the_boot(boot_bin: Path, udp_port: int, tmp_path: Path,
+                                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    """Node 2 answers 0x1018:03 after the master's 300 ms timed out: the master asked again, takes
+    the late answer, and the retry's twin answer, which comes during the next transfer, is not that
+    transfer's (it once failed the boot: "master aborted the response with 0x05040001")."""
+    out = tmp_path / "boot.json"
+    drives = [Cia402Drive(1), Cia402Drive(2, late=(0x1018, 3, 0.45))]
+    p, _ = _run(boot_bin, udp_port, ["--node", "1", "--node", "2", "--json", str(out)], drives, monkeypatch)
+    assert p.returncode == 0, p.stderr
+    assert [n["identity"] for n in json.loads(out.read_text())["nodes"]][1][2] == drives[1].stored(0x1018, 3)
+
+
+def _eds_with_identity_sub1_only(tmp_path: Path) -> Path:
+    text = EDS.read_text()
+    for sub in (2, 3, 4):
+        start = text.index(f"[1018sub{sub}]")
+        text = text[:start] + text[text.index("\n\n", start) + 2:]
+    text = text.replace("[1018]\nParameterName=Identity object\nObjectType=0x9\nSubNumber=5",
+                        "[1018]\nParameterName=Identity object\nObjectType=0x9\nSubNumber=2")
+    start = text.index("[1018sub0]")
+    end = text.index("\n\n", start)
+    text = text[:start] + text[start:end].replace("DefaultValue=4", "DefaultValue=1") + text[end:]
+    path = tmp_path / "identity_sub1.eds"
+    path.write_text(text)
+    return path
+
+
+def test_a_drive_with_the_mandatory_identity_alone_boots(boot_bin: Path, udp_port: int, tmp_path: Path,
+                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    """CiA 301 makes 0x1018 sub 1 (vendor) mandatory and 2-4 optional: a drive without them boots,
+    the missing ones recorded as 0."""
+    out = tmp_path / "boot.json"
+    drive = Cia402Drive(1, eds=_eds_with_identity_sub1_only(tmp_path))
+    assert sorted(drive.node.object_dictionary[0x1018].subindices) == [0, 1]  # the drive really lacks them
+    p, _ = _run(boot_bin, udp_port, ["--node", "1", "--json", str(out)], [drive], monkeypatch)
+    assert p.returncode == 0, p.stderr
+    assert json.loads(out.read_text())["nodes"][0]["identity"] == [0, 0, 0, 0]
 
 
 def test_unsupported_mode_names_node_object_and_abort(boot_bin: Path, udp_port: int, tmp_path: Path,
@@ -444,7 +489,8 @@ def _controller_on_localnodes(build_dir: Path, port: int, tmp_path: Path, monkey
                               drives: dict[int, Cia402Drive], emcy_at: tuple[int, int, int] | None = None,
                               duration: str = "0.5") -> tuple[subprocess.CompletedProcess[str], dict]:
     """arm_controller --protocol canopen on six LocalNodes that answer each SYNC with TPDO1 and
-    TPDO2; emcy_at = (node, SYNC number, code): that node faults then (EMCY, statusword fault)."""
+    TPDO2; emcy_at = (node, SYNC number, code): that node sends that EMCY then, and faults (statusword
+    fault) unless the code is 0x0000, CiA 301's "error reset or no error"."""
     ctl = build_dir / "firmware" / "arm_controller"
     if not ctl.exists():
         pytest.skip(f"{ctl} not built")
@@ -467,7 +513,7 @@ def _controller_on_localnodes(build_dir: Path, port: int, tmp_path: Path, monkey
                 if d.node.nmt.state != "OPERATIONAL":
                     continue
                 if emcy_at is not None and emcy_at[0] == i and syncs[0] == emcy_at[1]:
-                    d.sw = 0x0008  # fault, torque off
+                    d.sw = 0x0008 if emcy_at[2] else d.sw  # fault, torque off
                     net.send_message(0x080 + i, struct.pack("<HB5x", emcy_at[2], 0x11))
                 net.send_message(0x180 + i, struct.pack("<ii", 1000 * i, 0))
                 net.send_message(0x280 + i, struct.pack("<hH", 0 if d.sw & 0x08 else pending[i], d.sw))
@@ -513,6 +559,16 @@ def test_controller_safe_stops_on_a_lost_heartbeat_emcy(build_dir: Path, udp_por
     assert p.returncode == 4, p.stderr
     assert "drive 5 reports a fault (EMCY 0x8130)" in s["reason"], s["reason"]
     assert s["final_state"] in ("safe_stop", "fault") and 0 < s["steps_done"] < s["steps_requested"]
+
+
+def test_an_error_reset_emcy_is_no_fault(build_dir: Path, udp_port: int, tmp_path: Path,
+                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    """EMCY 0x0000 ("error reset or no error", what python-canopen's EmcyProducer.reset sends)
+    mid-run: counted, and the run goes on to its end."""
+    drives = {i: Cia402Drive(i) for i in range(1, 7)}
+    p, s = _controller_on_localnodes(build_dir, udp_port, tmp_path, monkeypatch, drives, emcy_at=(2, 150, 0x0000))
+    assert p.returncode == 0, p.stderr + s.get("reason", "")
+    assert s["frames"]["rx_emcy"] == 1 and s["steps_done"] == s["steps_requested"]
 
 
 def test_controller_protocol_option_is_checked(build_dir: Path) -> None:

@@ -188,6 +188,13 @@ static int transfer_ok(arm_co_boot_t *b, arm_co_node_t *n, const arm_co_action_t
     return 0;
 }
 
+/* A recorded (unchecked) identity entry the drive does not have: its server said so. */
+static int identity_absent(const arm_co_node_t *n, const arm_co_action_t *a)
+{
+    return a->index == 0x1018u && a->sub >= 2u && n->sdo.status == ARM_CO_SDO_ABORTED && n->sdo.abort_by_server &&
+           (n->sdo.abort_code == ARM_CO_ABORT_NO_SUB || n->sdo.abort_code == ARM_CO_ABORT_NO_OBJECT);
+}
+
 static void log_value(arm_co_boot_t *b, const arm_co_node_t *n, uint16_t index, uint8_t sub, uint8_t len,
                       uint32_t value)
 {
@@ -259,14 +266,16 @@ static void step_node(arm_co_boot_t *b, uint8_t i, uint64_t now)
             (void)arm_co_sdo_upload(&n->sdo, a->index, a->sub, now); /* not there yet: ask again */
             return;
         }
-        if (!transfer_ok(b, n, a)) {
+        /* CiA 301 makes 0x1018.1 mandatory and 2-4 optional: one the drive lacks is recorded as 0 */
+        const int absent = a->kind == ARM_CO_ACT_READ && a->mask == 0u && identity_absent(n, a);
+        if (!absent && !transfer_ok(b, n, a)) {
             return;
         }
         n->answered = 1u;
         if (a->kind == ARM_CO_ACT_WRITE) {
             log_write(b, n, a);
         } else if (a->kind == ARM_CO_ACT_READ) {
-            const uint32_t v = arm_co_sdo_u32(&n->sdo);
+            const uint32_t v = absent ? 0u : arm_co_sdo_u32(&n->sdo);
             if (a->index == 0x1018u && a->sub >= 1u && a->sub <= 4u) {
                 n->identity[a->sub - 1u] = v;
             }

@@ -146,15 +146,26 @@ static int mux_matches(const arm_co_sdo_t *c, const uint8_t *d)
     return (uint16_t)(d[1] | (d[2] << 8)) == c->index && d[3] == c->sub;
 }
 
+/* An initiate answer (upload 2, download 3: they name their object) that is not the one awaited
+ * now: the answer to an earlier request that came after its try timed out, once the retry's own
+ * answer (or the next transfer) was under way. The server answers every request in order, so the
+ * awaited answer still comes; taking the late one for a wrong answer would fail a sound transfer. */
+static int stale_answer(arm_co_sdo_t *c, const uint8_t *d)
+{
+    const uint8_t cs = CS(d[0]);
+    const int awaited = !c->segmented && cs == (c->upload ? 2u : 3u) && mux_matches(c, d);
+    if ((cs == 2u || cs == 3u) && !awaited) {
+        c->stale++;
+        return 1;
+    }
+    return 0;
+}
+
 static void on_upload(arm_co_sdo_t *c, const uint8_t *d, uint64_t now_us)
 {
     const uint8_t cs = CS(d[0]);
     if (!c->segmented) {
         if (cs != 2u) {
-            client_abort(c, ARM_CO_ABORT_COMMAND);
-            return;
-        }
-        if (!mux_matches(c, d)) {
             client_abort(c, ARM_CO_ABORT_COMMAND);
             return;
         }
@@ -205,7 +216,7 @@ static void on_download(arm_co_sdo_t *c, const uint8_t *d, uint64_t now_us)
 {
     const uint8_t cs = CS(d[0]);
     if (!c->segmented) {
-        if (cs != 3u || !mux_matches(c, d)) {
+        if (cs != 3u) {
             client_abort(c, ARM_CO_ABORT_COMMAND);
             return;
         }
@@ -253,6 +264,9 @@ int arm_co_sdo_rx(arm_co_sdo_t *c, const arm_can_frame_t *f, uint64_t now_us)
         c->abort_code = get_u32(&d[4]);
         c->abort_by_server = 1u;
         c->status = ARM_CO_SDO_ABORTED;
+        return 1;
+    }
+    if (stale_answer(c, d)) {
         return 1;
     }
     if (c->upload) {

@@ -15,6 +15,9 @@
 #define k_cmd_id ARM_DRIVE_CMD_ID
 #define k_hb_id ARM_DRIVE_HEARTBEAT_ID
 #define k_emcy_id ARM_DRIVE_EMCY_ID
+/* CiA 301: emergency error code 0x0000 is "error reset or no error", a drive's all-clear after a
+ * fault reset (python-canopen's EmcyProducer.reset sends it): no fault. */
+#define EMCY_NO_ERROR 0x0000u
 
 static int index_of(const uint32_t *table, uint32_t id)
 {
@@ -151,7 +154,9 @@ arm_rx_kind_t arm_bus_handle_rx(arm_drive_bus_t *bus, const arm_can_frame_t *f)
             return ARM_RX_BAD_LENGTH;
         }
         bus->last_emcy_code[j] = (uint16_t)(f->data[0] | (uint16_t)(f->data[1] << 8));
-        bus->emcy_mask |= 1u << j;
+        if (bus->last_emcy_code[j] != EMCY_NO_ERROR) {
+            bus->emcy_mask |= 1u << j;
+        }
         bus->rx.emcy++;
         return ARM_RX_EMCY;
     }

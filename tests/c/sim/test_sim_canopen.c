@@ -203,9 +203,17 @@ static void sync_pdos_and_cst(void)
     sim_co_node_on_sync(&n, 0.0, 0.0, NAN);
     CHECK(fabs(sim_co_node_torque(&n) - 150.0) < 1e-12);
     CHECK(write(&n, 0x6076, 0, 1000u, 4u) == 0x08000022u); /* no new scaling while enabled */
-    rpdo(&n, 0x02, 200); /* quick stop */
+    rpdo(&n, 0x02, 200); /* quick stop: 0x605A's default (6) stays in quick stop active, torque off */
+    sim_co_node_on_sync(&n, 0.0, 0.0, NAN);
+    CHECK(n.power == SIM_PS_QUICK_STOP_ACTIVE && sim_co_node_torque(&n) == 0.0);
+    rpdo(&n, 0x0F, 200); /* enable operation: back (transition 16) */
+    sim_co_node_on_sync(&n, 0.0, 0.0, NAN);
+    CHECK(n.power == SIM_PS_OPERATION_ENABLED);
+    CHECK(write(&n, 0x605A, 0, 2u, 2u) == 0u); /* 0-4: a quick stop ends in switch on disabled */
+    rpdo(&n, 0x02, 200);
     sim_co_node_on_sync(&n, 0.0, 0.0, NAN);
     CHECK(n.power == SIM_PS_SWITCH_ON_DISABLED && sim_co_node_torque(&n) == 0.0);
+    CHECK(write(&n, 0x605A, 0, 9u, 2u) == 0x06090030u); /* beyond the EDS's range */
 }
 
 static void heartbeat_consumer_faults(void)
@@ -246,6 +254,7 @@ static void heartbeat_producer_and_resets(void)
     frame(&n, 0x000u, reset_comm, 2u, 0);
     CHECK(sent(&n, 0x703u, &f) == 1u && f->data[0] == 0x00u); /* boot-up */
     CHECK(sim_co_od_get(&n.od, 0x1017u, 0u) == 0u && sim_co_od_get(&n.od, 0x6076u, 0u) == 1000u);
+    CHECK(sim_co_od_get(&n.od, 0x1018u, 4u) == 3u); /* the serial number is the drive's own after it */
     const uint8_t reset_node[2] = {0x81, 0x00};
     frame(&n, 0x000u, reset_node, 2u, 0);
     CHECK(sim_co_od_get(&n.od, 0x6076u, 0u) == 150000u);

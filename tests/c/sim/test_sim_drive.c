@@ -16,14 +16,29 @@ static sim_drive_t enabled_drive(void)
 static void enable_sequence_reaches_operation_enabled(void)
 {
     sim_power_t s = SIM_PS_SWITCH_ON_DISABLED;
-    CHECK(sim_cia402_next(s, 0x0F, 0) == s); /* enable operation from disabled is not a transition */
-    s = sim_cia402_next(s, 0x06, 0);
+    CHECK(sim_cia402_next(s, 0x0F, 0, 0) == s); /* enable operation from disabled is not a transition */
+    s = sim_cia402_next(s, 0x06, 0, 0);
     CHECK(s == SIM_PS_READY_TO_SWITCH_ON);
-    s = sim_cia402_next(s, 0x07, 0x06);
+    s = sim_cia402_next(s, 0x07, 0x06, 0);
     CHECK(s == SIM_PS_SWITCHED_ON);
-    s = sim_cia402_next(s, 0x0F, 0x07);
+    s = sim_cia402_next(s, 0x0F, 0x07, 0);
     CHECK(s == SIM_PS_OPERATION_ENABLED);
     CHECK(((unsigned)s & 0x006Fu) == 0x0027u);
+    /* CiA 402: enable operation from ready to switch on is transitions 3 and 4 */
+    CHECK(sim_cia402_next(SIM_PS_READY_TO_SWITCH_ON, 0x0F, 0x06, 0) == SIM_PS_OPERATION_ENABLED);
+}
+
+static void quick_stop_ends_as_the_option_code_says(void)
+{
+    /* 0x605A 0-4: to switch on disabled; 5-8: quick stop active, left by enable operation or
+     * disable voltage and by nothing else */
+    CHECK(sim_cia402_next(SIM_PS_OPERATION_ENABLED, 0x02, 0x0F, 2) == SIM_PS_SWITCH_ON_DISABLED);
+    const sim_power_t q = sim_cia402_next(SIM_PS_OPERATION_ENABLED, 0x02, 0x0F, 6);
+    CHECK(q == SIM_PS_QUICK_STOP_ACTIVE && ((unsigned)q & 0x006Fu) == 0x0007u);
+    CHECK(sim_cia402_next(q, 0x06, 0x02, 6) == q && sim_cia402_next(q, 0x07, 0x02, 6) == q);
+    CHECK(sim_cia402_next(q, 0x0F, 0x02, 6) == SIM_PS_OPERATION_ENABLED);
+    CHECK(sim_cia402_next(q, 0x00, 0x02, 6) == SIM_PS_SWITCH_ON_DISABLED);
+    CHECK(sim_cia402_next(SIM_PS_SWITCHED_ON, 0x02, 0x07, 6) == SIM_PS_SWITCH_ON_DISABLED);
 }
 
 static void torque_only_in_operation_enabled_and_limited(void)
@@ -72,9 +87,9 @@ static void missing_commands_fault_the_drive_with_emcy(void)
 
 static void fault_reset_needs_a_rising_edge(void)
 {
-    CHECK(sim_cia402_next(SIM_PS_FAULT, 0x80, 0x80) == SIM_PS_FAULT);
-    CHECK(sim_cia402_next(SIM_PS_FAULT, 0x80, 0x00) == SIM_PS_SWITCH_ON_DISABLED);
-    CHECK(sim_cia402_next(SIM_PS_FAULT, 0x0F, 0x00) == SIM_PS_FAULT);
+    CHECK(sim_cia402_next(SIM_PS_FAULT, 0x80, 0x80, 0) == SIM_PS_FAULT);
+    CHECK(sim_cia402_next(SIM_PS_FAULT, 0x80, 0x00, 0) == SIM_PS_SWITCH_ON_DISABLED);
+    CHECK(sim_cia402_next(SIM_PS_FAULT, 0x0F, 0x00, 0) == SIM_PS_FAULT);
 }
 
 static void nmt_stop_removes_torque(void)
@@ -106,6 +121,7 @@ int main(void)
 {
     every_error_code_is_its_own();
     enable_sequence_reaches_operation_enabled();
+    quick_stop_ends_as_the_option_code_says();
     torque_only_in_operation_enabled_and_limited();
     a_command_above_the_limit_faults_the_drive();
     missing_commands_fault_the_drive_with_emcy();

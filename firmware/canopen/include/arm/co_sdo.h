@@ -60,6 +60,7 @@ typedef struct {
     uint32_t len;          /* download: bytes to send; upload: bytes received */
     uint32_t pos;          /* bytes moved so far in the segmented phase */
     uint64_t deadline_us;  /* the current request's answer is due by then */
+    uint32_t stale;        /* initiate answers to an earlier request (a retry's twin), ignored */
     uint8_t tx_pending;
     arm_can_frame_t tx;
 } arm_co_sdo_t;
