@@ -98,8 +98,6 @@ class HilOptions:
     drive_config: Path | None = None
 
 
-
-
 def spin_args(mode: str, spin_us: float = LOCKSTEP_SPIN_US) -> list[str]:
     return ["--spin-us", f"{spin_us:g}"] if mode == "lockstep" else []
 
@@ -322,7 +320,10 @@ def resolve_bus(choice: str, n_buses: int = 1) -> tuple[str, str]:
     return "udp", why or f"no {', '.join(missing)} interface"
 
 
-VM_SLOWDOWN = 100  # the VM emulates the machine: programs run 20-260x slower there (tools/vm/README.md)
+# Bounds of a hung process inside the VM, which emulates the machine: programs run 20-260x slower
+# there (tools/vm/README.md), so a period's work takes up to a quarter of a second.
+VM_DEADLINE_S = (3000.0, 600.0)  # + this per simulated second
+VM_LOGGER_READY_S = 120.0
 
 
 def _run_processes_in_vm(opt: HilOptions, plan: ProcessPlan) -> tuple[dict[str, int | None], float, str]:
@@ -531,11 +532,12 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
         exit_codes, wall, sim_scheduling = _run_sil(opt, sil_exe, ctl_args[1:], sim_args[1:], log_path)
     else:
         in_vm = opt.bus == VM
-        slowdown = VM_SLOWDOWN if in_vm else 1
+        base_s, per_s = VM_DEADLINE_S if in_vm else (120.0, 60.0)
         plan = ProcessPlan(out=str(opt.out), mode=opt.mode, cpu=realtime_cpu(opt),
-                           deadline_s=(120.0 + 60.0 * opt.duration_s) * slowdown,
+                           deadline_s=base_s + per_s * opt.duration_s,
                            logger=[str(logger_exe), "--lcm-url", url, str(log_path)], simulator=sim_args,
-                           controller=ctl_args, cwd=str(REPO), logger_ready_s=LOGGER_READY_S * slowdown,
+                           controller=ctl_args, cwd=str(REPO),
+                           logger_ready_s=VM_LOGGER_READY_S if in_vm else LOGGER_READY_S,
                            multicast_routes=(f"{LCM_GROUP}/32",) if in_vm else ())
         exit_codes, wall, sim_scheduling = _run_processes_in_vm(opt, plan) if in_vm else run_processes(plan)
 
