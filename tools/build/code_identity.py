@@ -12,8 +12,9 @@ from pathlib import Path
 from gen.lib.paths import REPO
 
 # What a run's result depends on; reporting, statistics and the CLI are not in it.
-SOURCES = ("firmware", "host_sim", "gen", "tools/lcm_logger", "tools/run/hil.py", "tools/run/run_analysis.py",
-           "tools/run/verdict.py", "tools/run/telemetry_log.py", "tools/build/arm.py", "CMakeLists.txt", "CMakePresets.json")
+SOURCES = ("firmware", "host_sim", "gen", "tools/lcm_logger", "tools/run/hil.py", "tools/run/processes.py",
+           "tools/run/run_analysis.py", "tools/run/verdict.py", "tools/run/telemetry_log.py", "tools/build/arm.py",
+           "CMakeLists.txt", "CMakePresets.json")
 SKIP_PARTS = {"__pycache__", ".pytest_cache"}
 # Documentation in those folders changes no result: a README edit must not mark a kept tuning stale.
 DOCS = (".md", ".txt", ".pyc")

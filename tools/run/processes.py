@@ -24,7 +24,7 @@ from tools.run import procs as procs_mod
 
 USAGE_ERROR = 2  # the controller's and the simulator's exit code for a bad argument
 SIM_RT_PRIORITY = 70  # realtime runs: below the controller's loop (80) and above the logger (10)
-LOGGER_READY_S = 10.0  # the logger says "ready" within this (on the host; the VM scales it)
+LOGGER_READY_S = 10.0  # the logger says "ready" within this on the host (the VM's: tools/run/hil.py)
 
 
 class HilError(RuntimeError):
