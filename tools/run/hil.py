@@ -248,6 +248,7 @@ SIL = "sil"  # --bus: software in the loop
 VM = "vm"
 CAPTURE_FILE = "bus.log"  # a run's capture of its buses (candump -l format)
 CANOPEN_DBC_FILE = "canopen.dbc"  # a CANopen run's frames, derived from its drive table (gen/canopen_dbc.py)
+VM_FILES = ("vm_plan.json", "vm_result.json", "vm.log")  # --bus vm: the plan in, the exit codes out, the VM's output
 
 
 def bus_args(kind: str, can_port: int, topology: list[busload.Bus]) -> list[str]:
@@ -333,18 +334,16 @@ def _run_processes_in_vm(opt: HilOptions, plan: ProcessPlan) -> tuple[dict[str, 
     from gen.lib.paths import env_with_repo
     from tools.vm.run import run_in_vm
 
-    plan_file, result_file = opt.out / "vm_plan.json", opt.out / "vm_result.json"
-    result_file.unlink(missing_ok=True)
+    plan_file, result_file, log_file = (opt.out / name for name in VM_FILES)
     write_text_atomic(plan_file, plan_json(plan))
-    with open(opt.out / "vm.log", "w") as log:
+    with open(log_file, "w") as log:
         res = run_in_vm([sys.executable, "-m", "tools.run.processes", str(plan_file), str(result_file)], cwd=REPO,
                         env=env_with_repo(), timeout=plan.deadline_s + 600.0, stdout=log, stderr=log,
                         log=lambda m: print(m, file=log, flush=True))
     result = _load_json(result_file)
     if res.timed_out or res.returncode != 0 or not result:
         why = "timed out" if res.timed_out else f"exit {res.returncode}"
-        raise HilError(f"the run inside the VM ended without a result ({why}): {last_line(opt.out / 'vm.log')}; "
-                       f"see {opt.out / 'vm.log'}")
+        raise HilError(f"the run inside the VM ended without a result ({why}): {last_line(log_file)}; see {log_file}")
     if "error" in result:
         raise HilError(result["error"])
     codes = {k: (None if v is None else int(v)) for k, v in result["exit_codes"].items()}
@@ -497,7 +496,7 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
             raise HilError(f"{exe} is missing: run tools/armctl build")
     opt.out.mkdir(parents=True, exist_ok=True)
     for stale in ("telemetry.lcmlog", "controller_summary.json", "sim_summary.json", "run.json", "uncertainty.json",
-                  CAPTURE_FILE, CAPTURE_FILE + ".gz", CANOPEN_DBC_FILE, "vm_plan.json", "vm_result.json", "vm.log"):
+                  CAPTURE_FILE, CAPTURE_FILE + ".gz", CANOPEN_DBC_FILE, *VM_FILES):
         (opt.out / stale).unlink(missing_ok=True)
     if drive_table is not None:  # what decodes a capture of this run, in SI units (gen/canopen_dbc.py)
         from gen import canopen_dbc
