@@ -43,7 +43,7 @@ EXERCISED: dict[str, str] = {
     "vcan status": "test_documented_commands.py::test_vcan_status_and_up",
     "vcan up": "test_documented_commands.py::test_vcan_status_and_up",
     "vcan setup": "test_vcan_vm.py::test_vcan_setup_run_and_up_in_the_vm",
-    "vcan run": "test_vcan_vm.py::test_vcan_setup_run_and_up_in_the_vm",
+    "vcan run": "test_vcan_vm.py::vm_run",  # the fixture: the VM run every test of that file reads
     "fuzz": "test_fuzz.py::test_every_harness_runs_clean",
     "faults": "test_faults.py::matrix",
     "cluster-certs": "test_runner.py::test_cluster_certs_make_a_ca_and_refuse_to_overwrite",
