@@ -2,9 +2,10 @@
 
 This machine's kernel has no CAN, so tools/vm boots Debian's kernel under qemu (software
 emulation), where vcan0 and vcan1 (CAN FD, MTU 72) exist, chroots into this very filesystem and runs
-VM_SCRIPT below. One boot serves the tests that read its results (software emulation: ~10 s to
-boot, far slower than the host):
+VM_SCRIPT below through `armctl vcan run`. One boot serves the tests that read its results
+(software emulation: ~10 s to boot, far slower than the host):
 
+0. what a command gets there: a normal /dev, and `armctl vcan up` creating an interface;
 1. the SocketCAN unit test again, now on a kernel that has AF_CAN, and the live transport selftest;
 2. `candump -L vcan0 vcan1` records both buses while `arm_controller` and `python -m host_sim`
    (arm_sim) run lockstep on the default topology (firmware/protocol/buses.toml): drives 1-3
@@ -300,7 +301,6 @@ def test_garbage_frames_are_counted_and_ignored(vm_run: dict) -> None:
     assert {k: sim[k] for k in want_sim} == want_sim
     # and changed nothing: every period's joint states arrived, no drive faulted
     assert ctl["rx_wrong_counter"] == 0 and sim["drive_faults"] == []
-
 
 
 def test_hil_in_the_vm_through_the_cli(tmp_path: Path) -> None:
