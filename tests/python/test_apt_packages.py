@@ -48,6 +48,7 @@ def _library(soname: str) -> str:
 REQUIRED: list[tuple[str, str]] = [
     ("every build: CMake, Ninja", _program("cmake")),
     ("every build: Ninja", _program("ninja")),
+    ("every build: the compiler cache the arm folders share", _program("ccache")),
     ("host C build: the C library to link (libc6-dev)", _print_file("gcc", "crt1.o")),
     ("host C build: libc.so", _print_file("gcc", "libc.so")),
     ("host C++ tests and benchmark: libstdc++", _print_file("g++", "libstdc++.so")),

@@ -112,6 +112,8 @@ def configure_fingerprint(preset: str, cache: dict[str, str] | None = None) -> d
         "toolchain_file": _file_digest(Path(toolchain)) if toolchain else "",
         "cmake": _first_line(["cmake", "--version"]),
         "python": sys.executable,
+        # the compiler launcher (CMakeLists.txt): a folder configured with ccache cannot build without it
+        "ccache": os.path.realpath(ccache) if (ccache := shutil.which("ccache")) else "missing",
         **{f"cache:{k}": v for k, v in sorted((cache or {}).items())},
     }
     for c in compilers:
