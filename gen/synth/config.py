@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from gen.lib import toml_input
+from gen.lib.one_line import one_line
 
 STRUCTURES = ("auto", "coupled")
 DEFAULT_LADDER = (1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2, 2e-2, 5e-2, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0)
@@ -28,7 +29,7 @@ class ConfigError(ValueError):
     def __init__(self, field: str, message: str) -> None:
         self.field = field
         self.message = message
-        super().__init__(f"{field}: {message}")
+        super().__init__(one_line(f"{field}: {message}"))
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,7 @@ from pathlib import Path
 import lcm
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from gen.synth.config import ConfigError, parse_config
@@ -72,6 +72,7 @@ BASE_DESIGN = parse_config(DESIGN)
 
 @SETTINGS
 @given(_mutations(DESIGN))
+@example(m=(("arm",), {"\n": None}))  # a key of the user's with a line break, found by hypothesis in CI
 def test_design_config_parser_raises_only_config_error(m: tuple) -> None:
     path, value = m
     try:
@@ -125,6 +126,7 @@ def load_text_of(text: str, where: Path | None = None) -> object:
 
 @SETTINGS
 @given(_mutations(STUDY))
+@example(m=(("scenario",), {"\n": False}))
 def test_study_config_loader_raises_only_study_config_error(tmp_path: Path, m: tuple) -> None:
     path, value = m
     doc = _mutate(STUDY, path, value)

@@ -161,10 +161,13 @@ def test_an_interrupted_study_resumes_and_redoes_only_what_is_missing(study: tup
 ARMCTL = str(REPO / "tools" / "armctl")
 
 
-def _study_cmd(cfg: Path, out: Path) -> list[str]:
-    # 15 s runs in lockstep HIL: about 1 s each, long enough to be stopped in the middle of one (in
-    # software in the loop they take 0.2 s); three processes a run, each of which must end with armctl
-    return [ARMCTL, "study", "--config", str(cfg), "--duration", "15", "--jobs", "1", "--bus", "udp", "--out", str(out)]
+def _study_cmd(out: Path) -> list[str]:
+    # The bundled arm's kept tuning of pd and usde-smc: nothing is tuned, and no design is built into a
+    # run slot (stopping a build is not what these tests do). 15 s runs in lockstep HIL: about 1.5 s
+    # each (in software in the loop 0.2 s), long enough to be stopped in the middle of one; three
+    # processes a run, each of which must end with armctl.
+    return [ARMCTL, "study", "--methods", "pd,usde-smc", "--scenarios", "ideal", "--seeds", "2", "--duration", "15",
+            "--jobs", "1", "--bus", "udp", "--out", str(out)]
 
 
 def _left_running(out: Path) -> list[str]:
@@ -174,37 +177,31 @@ def _left_running(out: Path) -> list[str]:
 
 
 @pytest.fixture(scope="module")
-def uninterrupted(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, subprocess.CompletedProcess[str], dict]:
-    """2 methods, 1 scenario, 2 seeds, run through once. Tuned first in software in the loop (the
-    tuning is kept beside the config, for every study of it): over the bus each trial's design
-    would be built into a run slot, and the tuning is not what these tests stop."""
-    base = tmp_path_factory.mktemp("resume")
-    cfg = small_config(base / "cfg", methods='["pm", "pd"]', scenarios='["ideal"]')
-    r = subprocess.run([ARMCTL, "tune", "--config", str(cfg), "--bus", "sil", "--out", str(base / "tune")], cwd=REPO,
-                       capture_output=True, text=True, timeout=900)
-    assert r.returncode == 0, r.stderr[-3000:]
-    r = subprocess.run(_study_cmd(cfg, base / "whole"), cwd=REPO, capture_output=True, text=True, timeout=900)
-    assert r.returncode in (0, 1) and (base / "whole" / "study.json").exists(), r.stderr[-3000:]
-    return cfg, r, json.loads((base / "whole" / "study.json").read_text())
+def uninterrupted(tmp_path_factory: pytest.TempPathFactory) -> tuple[subprocess.CompletedProcess[str], dict]:
+    """2 methods, 1 scenario, 2 seeds, run through once."""
+    whole = tmp_path_factory.mktemp("resume") / "whole"
+    r = subprocess.run(_study_cmd(whole), cwd=REPO, capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0 and (whole / "study.json").exists(), r.stderr[-3000:]
+    return r, json.loads((whole / "study.json").read_text())
 
 
 @pytest.mark.parametrize(("sig", "nth"), [(signal.SIGINT, 1), (signal.SIGKILL, 2)], ids=["SIGINT", "SIGKILL"])
 def test_a_study_stopped_by_a_signal_resumes_to_the_same_numbers(uninterrupted, tmp_path: Path,  # noqa: ANN001
                                                                  sig: signal.Signals, nth: int) -> None:
-    """Stopped in the middle of pm's nth run, then run again: the stopped run is not kept, is run
+    """Stopped in the middle of usde-smc's nth run, then run again: the stopped run is not kept, is run
     again, and study.json has the numbers of the study run through once; after SIGKILL, which
     armctl cannot catch, its controller, simulator and logger end too (PR_SET_PDEATHSIG)."""
-    cfg, whole, ref = uninterrupted
+    whole, ref = uninterrupted
     out = tmp_path / "study"
-    p = subprocess.Popen(_study_cmd(cfg, out), cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    p = subprocess.Popen(_study_cmd(out), cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 300
     stopped: Path | None = None
     while time.monotonic() < deadline and p.poll() is None and stopped is None:
-        # --jobs 1: pm's nth run in flight (started, no run.json yet) once nth - 1 are done (pm's runs
-        # last about 1.5 s; a 2-trial tuning's pd may stop in 0.2 s); a folder's mtime would not do,
-        # since a run that is finishing touches its folder last
+        # --jobs 1: usde-smc's nth run in flight (started, no run.json yet) once nth - 1 are done (its runs
+        # last about 1.5 s); a folder's mtime would not do, since a run that is finishing touches its
+        # folder last
         try:
-            runs = list(out.glob("*/pm/seed-*"))
+            runs = list(out.glob("*/usde-smc/seed-*"))
         except FileNotFoundError:  # armctl's check of --out makes the folder and removes it again
             runs = []
         done = [r for r in runs if (r / "spec.json").exists()]
@@ -224,7 +221,7 @@ def test_a_study_stopped_by_a_signal_resumes_to_the_same_numbers(uninterrupted, 
         time.sleep(0.1)
     assert not _left_running(out)
     assert not (stopped / "spec.json").exists()  # never taken for done
-    r = subprocess.run(_study_cmd(cfg, out), cwd=REPO, capture_output=True, text=True, timeout=900)
+    r = subprocess.run(_study_cmd(out), cwd=REPO, capture_output=True, text=True, timeout=900)
     assert r.returncode == whole.returncode, r.stderr[-3000:]
     assert f"{stopped}: running it again" in r.stderr
     again = json.loads((out / "study.json").read_text())

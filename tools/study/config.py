@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from gen.lib import toml_input
+from gen.lib.one_line import one_line
 from host_sim.drive_model import REALISTIC, DriveModel
 from host_sim.uncertainty import UncertaintyConfig
 
@@ -62,7 +63,8 @@ STUDY_PROTOCOL = "arm"
 
 
 class StudyConfigError(ValueError):
-    pass
+    def __init__(self, message: str) -> None:
+        super().__init__(one_line(message))
 
 
 @dataclass
