@@ -9,7 +9,6 @@ The master does what the contract's boot sequence says (README "Real drives"): S
 from __future__ import annotations
 
 import json
-import socket
 import struct
 import subprocess
 import time
@@ -24,6 +23,7 @@ from tools.run.slots import CAN_GROUP, Slot
 canopen = pytest.importorskip("canopen")
 from canopen.profiles.p402 import BaseNode402  # noqa: E402
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError  # noqa: E402
+from canopen_network import loopback_network  # noqa: E402
 
 # armctl test runs these alone (no other test beside them): python-canopen's state and SDO timeouts are wall-clock
 pytestmark = pytest.mark.serial
@@ -45,20 +45,6 @@ def sim_bin() -> Path:
     if not exe.exists():
         pytest.skip(f"{exe} not built (cmake --build build/debug --target arm_sim)")
     return exe
-
-
-def _connect(monkeypatch: pytest.MonkeyPatch, group: str, port: int) -> canopen.Network:
-    """python-canopen's Network on python-can's udp_multicast, joined on lo only (see
-    test_pycan_wire.py's _loopback_bus: INADDR_ANY means 127.0.0.1 while the bus is built)."""
-    net = canopen.Network()
-    lo_native = struct.unpack("@I", socket.inet_aton("127.0.0.1"))[0]
-    with monkeypatch.context() as m:
-        m.setattr(socket, "INADDR_ANY", lo_native)
-        net.connect(interface="udp_multicast", channel=group, port=port, hop_limit=0)
-    sock = net.bus._multicast._socket
-    sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
-    assert sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL) == 0
-    return net
 
 
 @dataclass
@@ -87,7 +73,7 @@ def _start(sim_bin: Path, monkeypatch: pytest.MonkeyPatch, port: int, extra: lis
     group = CAN_GROUP
     if summary is not None:
         extra = [*extra, "--summary", str(summary)]
-    net = _connect(monkeypatch, group, port)
+    net = loopback_network(monkeypatch, group, port)
     node = BaseNode402(1, str(EDS))
     # python-canopen's state-change timeouts are sized for a quiet host; this one is shared
     node.TIMEOUT_SWITCH_STATE_FINAL, node.TIMEOUT_SWITCH_STATE_SINGLE, node.TIMEOUT_CHECK_TPDO = 5.0, 2.0, 1.0
@@ -347,7 +333,7 @@ def test_bad_canopen_options(sim_bin: Path, args: list[str], needle: str) -> Non
 def test_nodes_on_a_second_bus(sim_bin: Path, monkeypatch: pytest.MonkeyPatch, slot: Slot) -> None:
     """Today's wiring (buses.toml): drives 1-3 on one bus, 4-6 on another; node id = drive number."""
     group, port = CAN_GROUP, slot.can_port
-    net = _connect(monkeypatch, group, port + 1)
+    net = loopback_network(monkeypatch, group, port + 1)
     node = BaseNode402(4, str(EDS))
     net.add_node(node)
     bootups = _bootups(net, 4)

@@ -13,7 +13,6 @@ from __future__ import annotations
 import json
 import math
 import re
-import socket
 import struct
 import subprocess
 import threading
@@ -24,6 +23,7 @@ import pytest
 
 canopen = pytest.importorskip("canopen")
 from canopen.sdo import SdoAbortedError  # noqa: E402
+from canopen_network import loopback_network  # noqa: E402
 
 from gen import drives as gen_drives  # noqa: E402
 
@@ -47,20 +47,6 @@ def boot_bin(build_dir: Path) -> Path:
     if not exe.exists():
         pytest.skip(f"{exe} not built (cmake --build build/debug --target arm_canopen_boot)")
     return exe
-
-
-def _loopback_network(monkeypatch: pytest.MonkeyPatch, port: int) -> "canopen.Network":
-    """python-canopen's Network on python-can's udp_multicast, confined to this host as
-    test_pycan_wire.py's _loopback_bus does: membership on 127.0.0.1, TTL 0, outgoing IF lo."""
-    lo_native = struct.unpack("@I", socket.inet_aton("127.0.0.1"))[0]
-    net = canopen.Network()
-    with monkeypatch.context() as m:
-        m.setattr(socket, "INADDR_ANY", lo_native)
-        net.connect(interface="udp_multicast", channel=GROUP, port=port, hop_limit=0)
-    sock = net.bus._multicast._socket
-    sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
-    assert sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL) == 0
-    return net
 
 
 class Cia402Drive:
@@ -132,7 +118,7 @@ def udp_port(slot) -> int:  # noqa: ANN001 - conftest's run slot: ports no other
 
 def _run(boot_bin: Path, port: int, args: list[str], drives: list[Cia402Drive], monkeypatch: pytest.MonkeyPatch,
          watch: list[int] | None = None) -> tuple[subprocess.CompletedProcess[str], list[bytes]]:
-    net = _loopback_network(monkeypatch, port)
+    net = loopback_network(monkeypatch, GROUP, port)
     seen: list[bytes] = []
     try:
         for d in drives:
@@ -344,7 +330,7 @@ def test_hold_packs_rpdo1_and_decodes_tpdos_in_si_units(boot_bin: Path, udp_port
     drive = Cia402Drive(4)
     pos, vel, tq = -12_345_678, 52_953_088, -250  # increments, increments/s (one joint rev/s), per-mille
     rpdo1: list[bytes] = []
-    net = _loopback_network(monkeypatch, udp_port)
+    net = loopback_network(monkeypatch, GROUP, udp_port)
     out = tmp_path / "boot.json"
     try:
         net.add_node(drive.node)
@@ -446,7 +432,7 @@ def test_controller_runs_on_localnode_drives(build_dir: Path, udp_port: int, tmp
     applied = {i: 0 for i in drives}
     rpdo_cw: set[int] = set()
     sync_lengths: set[int] = set()
-    net = _loopback_network(monkeypatch, udp_port)
+    net = loopback_network(monkeypatch, GROUP, udp_port)
     summary = tmp_path / "controller.json"
     try:
         for i, d in drives.items():
@@ -494,7 +480,7 @@ def _controller_on_localnodes(build_dir: Path, port: int, tmp_path: Path, monkey
     ctl = build_dir / "firmware" / "arm_controller"
     if not ctl.exists():
         pytest.skip(f"{ctl} not built")
-    net = _loopback_network(monkeypatch, port)
+    net = loopback_network(monkeypatch, GROUP, port)
     summary = tmp_path / "controller.json"
     syncs = [0]
     pending = {i: 0 for i in drives}  # the latest RPDO1 torque, applied at the next SYNC (type 1)
