@@ -11,13 +11,14 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from gen.synth.design import Synthesised
-from gen.synth.pipeline import Design, Emitted
-from gen.synth.ss import StateSpace
+if TYPE_CHECKING:  # names in annotations only: whoever just reads a design file does not import cvxpy (1.3 s)
+    from gen.synth.design import Synthesised
+    from gen.synth.pipeline import Design, Emitted
+    from gen.synth.ss import StateSpace
 
 SCHEMA = "armctl-synth-manifest/1"
 UNHASHED = ("content_hash", "run")

@@ -163,10 +163,10 @@ ARMCTL = str(REPO / "tools" / "armctl")
 
 def _study_cmd(out: Path) -> list[str]:
     # The bundled arm's kept tuning of pd and usde-smc: nothing is tuned, and no design is built into a
-    # run slot (stopping a build is not what these tests do). 15 s runs in lockstep HIL: 1.5 s to 3 s
-    # each (in software in the loop 0.2 s), long enough to be stopped in the middle of one; three
-    # processes a run, each of which must end with armctl.
-    return [ARMCTL, "study", "--methods", "pd,usde-smc", "--scenarios", "ideal", "--seeds", "2", "--duration", "15",
+    # run slot (stopping a build is not what these tests do). 8 s runs in lockstep HIL: at least 0.8 s
+    # each (about 10x real time at best; in software in the loop 0.1 s), long enough to be stopped
+    # in the middle of one; three processes a run, each of which must end with armctl.
+    return [ARMCTL, "study", "--methods", "pd,usde-smc", "--scenarios", "ideal", "--seeds", "2", "--duration", "8",
             "--jobs", "1", "--bus", "udp", "--out", str(out)]
 
 
@@ -198,7 +198,7 @@ def test_a_study_stopped_by_a_signal_resumes_to_the_same_numbers(uninterrupted, 
     stopped: Path | None = None
     while time.monotonic() < deadline and p.poll() is None and stopped is None:
         # --jobs 1: usde-smc's nth run in flight (started, no run.json yet) once nth - 1 are done (its runs
-        # last 1.5 s to 3 s); a folder's mtime would not do, since a run that is finishing touches its
+        # last 0.8 s to 2 s); a folder's mtime would not do, since a run that is finishing touches its
         # folder last
         try:
             runs = list(out.glob("*/usde-smc/seed-*"))

@@ -33,7 +33,10 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
 
 def pytest_passes(workers: int) -> list[tuple[str, list[str]]]:
     """(name, pytest arguments) of each pass: side by side on `workers` workers, then alone."""
-    shared = ["-m", "not serial", *(["-n", str(workers), "--dist", "loadfile"] if workers > 1 else [])]
+    # --no-loadscope-reorder: xdist would hand out the files with the most tests first; the suite's
+    # own order (tests/python/conftest.py: the long files first) is the one that ends the pass evenly
+    side = ["-n", str(workers), "--dist", "loadfile", "--no-loadscope-reorder"]
+    shared = ["-m", "not serial", *(side if workers > 1 else [])]
     return [("side by side", shared), ("alone", ["-m", "serial"])]
 
 
