@@ -110,9 +110,18 @@ class SimMaster:
         self.counter = (self.counter + 1) % 256
         return states
 
+    def wait_until_up(self, timeout: float = 20.0) -> None:
+        """Until the simulator says its drives are up: it opens its sockets before that, so a frame
+        sent earlier may reach no socket (a fixed sleep lost that race under a loaded machine)."""
+        end = time.monotonic() + timeout
+        while not any(" drives up on bus " in e for e in self.events):
+            assert self.proc.poll() is None, f"arm_sim exited with {self.proc.returncode} before its drives were up"
+            assert time.monotonic() < end, f"arm_sim's drives not up after {timeout} s"
+            time.sleep(0.01)
+
     def boot_and_enable(self) -> None:
         """NMT start, then the CiA 402 sequence with zero torque until every drive is enabled."""
-        time.sleep(0.3)  # the simulator's sockets are open
+        self.wait_until_up()
         self.nmt(NMT_START)
         for _ in range(10):
             cws = [0x06 if (sw & 0x4F) == 0x40 else 0x07 if (sw & OP_ENABLED_MASK) == 0x21 else 0x0F

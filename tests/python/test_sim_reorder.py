@@ -24,7 +24,7 @@ def test_a_sync_behind_a_full_other_bus_loses_no_frame(sim_exe: Path) -> None:
     flood = 300  # more than the 256 the SYNC path puts back: the rest wait in the socket
     m = SimMaster(sim_exe, [[1, 2, 3], [4, 5, 6]])
     try:
-        time.sleep(0.3)  # the simulator's sockets are open
+        m.wait_until_up()
         os.kill(m.proc.pid, signal.SIGSTOP)  # everything below is queued before it reads again
         try:
             for i in range(flood):

@@ -16,7 +16,8 @@ TESTS = REPO / "tests" / "python"
 def test_the_passes_split_the_suite_by_the_serial_mark() -> None:
     (first, shared), (second, alone) = pytest_passes(2)
     assert (first, second) == ("side by side", "alone")
-    assert shared[:2] == ["-m", "not serial"] and shared[2:] == ["-n", "2", "--dist", "loadfile", "--no-loadscope-reorder"]
+    assert shared[:2] == ["-m", "not serial"]
+    assert shared[2:] == ["-n", "2", "--dist", "loadfile", "--no-loadscope-reorder"]
     assert alone == ["-m", "serial"]
     assert pytest_passes(1)[0][1] == ["-m", "not serial"]  # one core: no workers, the same split
 
