@@ -137,11 +137,19 @@ def test_hil(tmp_path: Path) -> None:
 
 
 def test_study(tmp_path: Path) -> None:
+    """--no-figures: the report's tables alone, and no figure of an earlier study of its scenario
+    left beside them (another scenario's is not this study's to remove). The figures themselves:
+    test_demo and tests/python/test_study.py."""
+    for stale in ("fig_tuning_ideal.png", "fig_tracking_error_ideal.png", "fig_tuning_realistic.png"):
+        (tmp_path / stale).write_bytes(b"an earlier study's")
     r = armctl("study", "--duration", "0.2", "--methods", "pm,tde", "--scenarios", "ideal", "--seeds", "2",
-               "--jobs", "2", "--out", str(tmp_path))
+               "--jobs", "2", "--no-figures", "--out", str(tmp_path))
     assert r.returncode == 0, r.stdout + r.stderr
     study = json.loads((tmp_path / "study.json").read_text())
     assert set(study["scenarios"]["ideal"]["runs"]) == {"pm", "tde"} and study["seeds"] == [1, 2]
+    report = (tmp_path / "report.md").read_text()
+    assert "Figures: not drawn (`--no-figures`)." in report and "![" not in report and "### Verdict" in report
+    assert sorted(p.name for p in tmp_path.glob("*.png")) == ["fig_tuning_realistic.png"]
 
 
 def small_tuning_config(dirpath: Path) -> Path:
@@ -174,7 +182,7 @@ def test_tune_and_study_on_another_arm(tmp_path: Path) -> None:
     kept = Path(next(ln for ln in r.stdout.splitlines() if ln.startswith("tuning: ")).removeprefix("tuning: "))
     assert kept.is_relative_to(REPO / "build" / "arms") and kept.name == "tune7.paper.tuning.json"
     assert not (tmp_path / "paper.tuning.json").exists()  # never next to the config: that is the bundled arm's
-    r = armctl("study", *common, "--duration", "0.2", "--out", str(tmp_path / "study"))
+    r = armctl("study", *common, "--duration", "0.2", "--no-figures", "--out", str(tmp_path / "study"))
     assert r.returncode == 0, r.stdout + r.stderr
     study = json.loads((tmp_path / "study" / "study.json").read_text())
     sc = study["scenarios"]["ideal"]
@@ -184,7 +192,7 @@ def test_tune_and_study_on_another_arm(tmp_path: Path) -> None:
 
 def test_demo_on_another_arm(tmp_path: Path) -> None:
     r = armctl("demo", "--arm", str(REPO / "tests" / "arms" / "panda.toml"), "--duration", "0.2",
-               "--scenarios", "ideal", "--trials", "2", "--out", str(tmp_path))
+               "--scenarios", "ideal", "--trials", "2", "--no-figures", "--out", str(tmp_path))
     assert r.returncode == 0, r.stdout + r.stderr
     study = json.loads((tmp_path / "study.json").read_text())
     assert study["arm"]["name"] == "panda" and study["arm"]["n_joints"] == 7

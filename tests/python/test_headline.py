@@ -25,7 +25,7 @@ def test_the_readme_tables_are_the_record() -> None:
 def test_a_slice_of_the_record_reruns_bit_for_bit_at_head(tmp_path: Path, controller_bin: Path) -> None:
     scenario, methods = SLICE
     study = run_study(load(DEFAULT_CONFIG), tmp_path / "study", seeds=1, methods=list(methods),
-                      scenarios=[scenario], confirm=0)
+                      scenarios=[scenario], confirm=0, figures=False)
     assert study["duration_s"] == RECORD["duration_s"] and study["seeds"] == RECORD["seeds"][:1]
     for m in methods:
         again = headline.record_of(study)["scenarios"][scenario]["runs"][m][0]

@@ -95,7 +95,7 @@ def test_a_signal_stops_every_pair_and_the_same_command_finishes_the_tuning(tmp_
 def _study(out: Path) -> list[str]:
     # the bundled arm's kept tuning of pd and tde: nothing is tuned; 30 s runs take about 0.3 s in SIL
     return [sys.executable, "-m", "tools.cli", "study", "--methods", "pd,tde", "--scenarios", "ideal", "--seeds", "6",
-            "--duration", "30", "--jobs", "2", "--confirm", "0", "--out", str(out)]
+            "--duration", "30", "--jobs", "2", "--confirm", "0", "--no-figures", "--out", str(out)]
 
 
 def test_a_study_s_forked_runs_stop_on_a_signal_and_resume_to_the_same_numbers(tmp_path: Path) -> None:

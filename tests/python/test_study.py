@@ -122,7 +122,7 @@ def test_report_numbers_recompute_from_the_logs(study: tuple[Path, dict, Path]) 
 def test_same_numbers_whatever_jobs(study: tuple[Path, dict, Path], tmp_path: Path) -> None:
     """One job instead of two (the kept tuning, the same runs): identical statistics."""
     _, s2, cfg_path = study
-    s1 = run_study(load(cfg_path), tmp_path, duration_s=0.5, jobs=1)
+    s1 = run_study(load(cfg_path), tmp_path, duration_s=0.5, jobs=1, figures=False)
     for name in s2["scenarios"]:
         assert s1["scenarios"][name]["stats"] == s2["scenarios"][name]["stats"]
         assert s1["scenarios"][name]["pm_versus"] == s2["scenarios"][name]["pm_versus"]
@@ -152,7 +152,7 @@ def test_an_interrupted_study_resumes_and_redoes_only_what_is_missing(study: tup
     (lost / "run.json").unlink()
     kept = copy / "ideal" / "pm" / "seed-1" / "run.json"
     before = kept.stat().st_mtime_ns
-    again = run_study(load(cfg_path), copy, duration_s=0.5, jobs=2)
+    again = run_study(load(cfg_path), copy, duration_s=0.5, jobs=2, figures=False)
     assert kept.stat().st_mtime_ns == before  # not run again
     assert (lost / "run.json").exists()
     assert again["scenarios"]["realistic"]["stats"] == s["scenarios"]["realistic"]["stats"]
@@ -167,7 +167,7 @@ def _study_cmd(out: Path) -> list[str]:
     # each (about 10x real time at best; in software in the loop 0.1 s), long enough to be stopped
     # in the middle of one; three processes a run, each of which must end with armctl.
     return [ARMCTL, "study", "--methods", "pd,usde-smc", "--scenarios", "ideal", "--seeds", "2", "--duration", "8",
-            "--jobs", "1", "--bus", "udp", "--out", str(out)]
+            "--jobs", "1", "--bus", "udp", "--no-figures", "--out", str(out)]
 
 
 def _left_running(out: Path) -> list[str]:
@@ -665,7 +665,7 @@ def test_a_study_confirms_its_designs_over_the_bus_with_the_files_its_sil_runs_l
     lockstep HIL over a bus; the design run loads the very file its SIL run loaded (no build of
     its own), and every result is the same."""
     cfg = load(small_config(tmp_path / "cfg", seeds=1, methods='["pm", "pd"]', scenarios='["ideal"]'))
-    study = run_study(cfg, tmp_path / "study", duration_s=0.3, jobs=2, confirm=2)
+    study = run_study(cfg, tmp_path / "study", duration_s=0.3, jobs=2, confirm=2, figures=False)
     conf = study["confirmation"]
     assert conf["all_match"] and [(r["method"], r["match"]) for r in conf["runs"]] == [("pm", True), ("pd", True)]
     assert all(r["bus"].split(" ")[2] in ("udp", "vcan") for r in conf["runs"]), conf

@@ -20,7 +20,7 @@ def _armctl(*args: str) -> subprocess.CompletedProcess[str]:
 def test_a_study_run_by_hand_gives_its_results(tmp_path: Path) -> None:
     out = tmp_path / "study"
     r = _armctl("study", "--scenarios", "realistic", "--methods", "pd,pm-paper-weights", "--seeds", "1",
-                "--duration", "0.5", "--confirm", "0", "--out", str(out))
+                "--duration", "0.5", "--confirm", "0", "--no-figures", "--out", str(out))
     assert r.returncode in (0, 1), r.stderr
     study = json.loads((out / "study.json").read_text())
     seed = study["seeds"][0]

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from gen.lib.paths import REPO
 from tools.build.arm import add_arm_arguments
-from tools.study import BUSES as SIL_OR_BUS, DEFAULT_CONFIRM
+from tools.study import BUSES as SIL_OR_BUS, DEFAULT_CONFIRM, add_figures_argument
 
 
 def add_subparser(sub: argparse._SubParsersAction) -> None:
@@ -23,6 +23,7 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
                    help="with --bus sil: runs repeated over the CAN bus, checked bit for bit")
     d.add_argument("--trials", type=int, default=None,
                    help="tuning budget per method and scenario, for an arm without a kept tuning [the config's]")
+    add_figures_argument(d)
     add_arm_arguments(d)
     d.set_defaults(run=run, prefix="armctl study")  # its errors are the study's, as they always were
 

@@ -256,7 +256,8 @@ def procedure(cfg: StudyConfig, trials: int | None = None, jobs: int | None = No
 def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration_s: float | None = None,
               methods: list[str] | None = None, scenarios: list[str] | None = None, arm: ArmRef = DEFAULT_ARM,
               jobs: int = 1, cluster: Cluster | None = None, retune: bool = False,
-              trials: int | None = None, bus: str = SIL, confirm: int = DEFAULT_CONFIRM) -> dict[str, Any]:
+              trials: int | None = None, bus: str = SIL, confirm: int = DEFAULT_CONFIRM,
+              figures: bool = True) -> dict[str, Any]:
     methods = methods or cfg.methods
     scen_names = scenarios or list(cfg.scenarios)
     seed_list = cfg.seed_list(seeds)
@@ -323,9 +324,9 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
                       for s in scen_names},
     }
     write_json_atomic(out / "study.json", study)
-    from tools.study.report import write_report  # matplotlib: only when there is a report to draw
+    from tools.study.report import write_report
 
-    write_report(out, study)
+    write_report(out, study, figures=figures)
     return study
 
 
@@ -460,6 +461,13 @@ def add_study_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--confirm", type=int, default=DEFAULT_CONFIRM,
                    help=f"with --bus sil: repeat this many runs in lockstep HIL over the CAN bus and check that "
                         f"their results match bit for bit [{DEFAULT_CONFIRM}]")
+    add_figures_argument(p)
+
+
+def add_figures_argument(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--figures", action=argparse.BooleanOptionalAction, default=True,
+                   help="draw the report's figures, three to four a scenario at about a second of CPU each "
+                        "[yes]; --no-figures: the report's tables alone, for a sweep or a headless check")
 
 
 def add_tune_arguments(p: argparse.ArgumentParser) -> None:
@@ -535,7 +543,7 @@ def cmd_study(ns: argparse.Namespace) -> int:
         _hold_out(stack, ns.out)
         study = run_study(cfg, ns.out, seeds=ns.seeds, duration_s=ns.duration, methods=methods,
                           scenarios=scenarios, arm=arm, jobs=ns.jobs, cluster=cluster, retune=ns.retune,
-                          trials=ns.trials, bus=ns.bus, confirm=ns.confirm)
+                          trials=ns.trials, bus=ns.bus, confirm=ns.confirm, figures=ns.figures)
     if ns.record:
         from tools.study import headline
 
@@ -583,7 +591,7 @@ def cmd_tune(ns: argparse.Namespace) -> int:
                   f"({rec['trials_run']} of at most {rec['cap']} trials)  {json.dumps(rec['knobs'])}"
                   + (f"  ({rec['edge_note']})" if rec["edge_note"] else "")
                   + (f"  validation: {rec['validation']['note']}" if rec.get("validation") else ""))
-    from tools.study.report import colour_of, convergence_figure
+    from tools.study.figures import colour_of, convergence_figure
 
     colour = colour_of({"methods": cfg.methods})
     for s, recs in result.items():

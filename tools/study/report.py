@@ -1,26 +1,18 @@
 """The study's report: report.md (per scenario: every method's mean and 95 % interval over the
 seeds, PM against every other method on the same seeds, a verdict in words, the paper's claims
-checked), PNG figures named by scenario (distributions per method and joint; the paper's Figs.
-6-8 for the first seed of every scenario; one colour per method in every figure, runs that did not
-end ok marked), and summary.txt (the table the CLI prints). A person reads degrees: the tables give
-tracking errors in deg, study.json keeps the runs' radians."""
+checked, the figures of tools/study/figures.py) and summary.txt (the table the CLI prints). A
+person reads degrees: the tables give tracking errors in deg, study.json keeps the runs' radians."""
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Any
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from gen.lib.atomic_output import write_text_atomic  # noqa: E402
-from tools.run.telemetry_log import read_log  # noqa: E402
-from tools.run.verdict import FOLLOWING_ERROR_STOP_DEG, left_tracking_bound, stopped_by_following_error  # noqa: E402
-from gen.lib.params import default  # noqa: E402
+from gen.lib.atomic_output import write_text_atomic
+from tools.run.verdict import FOLLOWING_ERROR_STOP_DEG, left_tracking_bound, stopped_by_following_error
+from gen.lib.params import default
 
 # Kim & Kim 2024, Tables 1-3 (Table 1 from their simulation, Tables 2-3 from their experiment).
 PAPER_TABLE1 = {"usde-smc": [0.0292, 0.0950, 0.0320, 0.0462, 0.0157, 0.0157],
@@ -62,183 +54,6 @@ def _md_table(header: list[str], rows: list[list[str]]) -> str:
 def _p(c: dict[str, Any]) -> float | None:
     """The paired t-test's p: with 5 seeds Wilcoxon's cannot go below 0.0625 (both are in study.json)."""
     return c.get("t_test_p")
-
-
-def colour_of(study: dict[str, Any]) -> dict[str, Any]:
-    """One colour per method, the same in every figure (the config's method order)."""
-    cmap = plt.get_cmap("tab10")
-    return {m: cmap(i % 10) for i, m in enumerate(study["methods"])}
-
-
-def fig_name(kind: str, scenario: str) -> str:
-    """fig_KIND_SCENARIO.png, the scenario's name made a file name."""
-    return f"fig_{kind}_{''.join(c if c.isalnum() else '-' for c in scenario)}.png"
-
-
-def _series(run_dir: Path, hold: float) -> dict[str, np.ndarray]:
-    """One kept run's trajectory series (the figures plot a seed): its whole ARM_CTL and ARM_SIM."""
-    log = read_log(run_dir / "telemetry.lcmlog", channels=("ARM_CTL", "ARM_SIM"))
-    ctl, sim = log["ARM_CTL"].messages, log["ARM_SIM"].messages
-    ctl = ctl[(ctl.state == 1) & (ctl.t >= hold - 1e-9)]
-    w_hat = ctl.w_hat.astype(float)
-    # w_true of the period each controller message names (the last one logged for it), NaN if none
-    steps, last = np.unique(sim.step[::-1], return_index=True)
-    truth = sim.w_true[::-1][last].astype(float)
-    at = np.searchsorted(steps, ctl.bus_period)
-    found = (at < len(steps)) & (steps[np.minimum(at, max(len(steps) - 1, 0))] == ctl.bus_period) if len(steps) \
-        else np.zeros(len(ctl), bool)
-    w = np.full(w_hat.shape, np.nan)
-    w[found] = truth[at[found]]
-    return {"t": ctl.t - hold, "e": ctl.e.astype(float), "w": w, "w_hat": w_hat}
-
-
-def _time_figures(out: Path, study: dict[str, Any], scenario: str) -> list[str]:
-    """The paper's Figs. 6-8 for the first seed of one scenario: every method in its own colour, a
-    run the safety layer stopped drawn up to its stop and marked, a run with no trajectory named."""
-    hold, seed = study["hold_s"], study["seeds"][0]
-    n = study["arm"]["n_joints"]
-    colour = colour_of(study)
-    runs = study["scenarios"][scenario]["runs"]
-    series, empty = {}, []
-    for m in study["methods"]:
-        d = out / scenario / m / f"seed-{seed}"
-        got = _series(d, hold) if (d / "telemetry.lcmlog").exists() else None
-        if got is not None and len(got["t"]) >= 2:
-            series[m] = got
-        else:
-            empty.append(f"{m} ({runs[m][0].get('result') if runs.get(m) else 'not run'}: no trajectory)")
-    made: list[str] = []
-    if not series:
-        return made
-
-    def label(m: str) -> str:
-        r = runs[m][0].get("result") if runs.get(m) else None
-        return m if r == "ok" else f"{m} ({r})"
-
-    def finish(fig: Any, axes: Any, title: str, kind: str) -> None:
-        for m in series:
-            if runs.get(m) and runs[m][0].get("result") != "ok":  # where it stopped or ended badly
-                for ax in axes:
-                    ax.axvline(series[m]["t"][-1], color=colour[m], lw=0.8, ls=":")
-        axes[0].set_title(title + (f"; {', '.join(empty)}" if empty else ""), fontsize=9)
-        axes[-1].set_xlabel("t (s)")
-        made.append(_save(fig, out / fig_name(kind, scenario), tight=False))
-
-    if "pm" in series:
-        fig, axes = _joint_column(n)
-        for j in range(n):
-            axes[j].plot(series["pm"]["t"], series["pm"]["w"][:, j], lw=0.6, color=colour["pm"])
-            axes[j].set_ylabel(f"w{j + 1}")
-        finish(fig, axes, f"Total uncertainty w (rad/s^2) during the PM run, {scenario} (cf. the paper's Fig. 6)",
-               "uncertainty")
-    est = [m for m in ESTIMATING if m in series]
-    if est:
-        fig, axes = _joint_column(n)
-        for m in est:
-            for j in range(n):
-                axes[j].plot(series[m]["t"], series[m]["w"][:, j] - series[m]["w_hat"][:, j], lw=0.6,
-                             color=colour[m], label=label(m))
-        for j in range(n):
-            axes[j].set_ylabel(f"joint {j + 1}")
-        axes[0].legend(loc="upper right", fontsize=7, ncol=len(est))
-        finish(fig, axes, f"Estimation error w - w_hat (rad/s^2), {scenario} (cf. the paper's Fig. 7)",
-               "estimation_error")
-    # |e| on a log scale: methods whose errors differ a hundredfold all stay visible
-    fig, axes = _joint_column(n)
-    for m, sr in series.items():
-        for j in range(n):
-            axes[j].semilogy(sr["t"], np.maximum(np.degrees(np.abs(sr["e"][:, j])), 1e-6), lw=0.7,
-                             color=colour[m], label=label(m))
-    for j in range(n):
-        axes[j].set_ylabel(f"|e{j + 1}| (deg)")
-    axes[0].legend(loc="upper right", fontsize=7, ncol=min(len(series), 4))
-    finish(fig, axes, f"Tracking error |e|, {scenario} (cf. the paper's Fig. 8)", "tracking_error")
-    return made
-
-
-def _joint_column(n: int) -> tuple[Any, Any]:
-    """One panel a joint, stacked, on a shared time axis, laid out once and for all: tight_layout
-    measured every tick label again, 40 % of a time figure's cost, for margins these figures never
-    need to change (short labels, a one-line title)."""
-    fig, axes = plt.subplots(n, 1, figsize=(9, 11), sharex=True, squeeze=False)
-    fig.subplots_adjust(left=0.1, right=0.98, bottom=0.05, top=0.965, hspace=0.12)
-    return fig, axes[:, 0]
-
-
-def _save(fig: Any, path: Path, tight: bool = True) -> str:
-    if tight:
-        fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path.name
-
-
-def _distribution_figure(out: Path, study: dict[str, Any], scenario: str) -> str:
-    """Per joint, each method's L-infinity error over the seeds (a box in the method's colour, every
-    seed's point; a run that did not end ok is a red cross)."""
-    sc = study["scenarios"][scenario]
-    n, methods = study["arm"]["n_joints"], study["methods"]
-    colour = colour_of(study)
-    fig, axes = plt.subplots(1, n, figsize=(2.2 * n + 1, 4.2), sharey=False)
-    axes = np.atleast_1d(axes)
-    for j in range(n):
-        ax = axes[j]
-        data, bad = [], []
-        for m in methods:
-            vals = sc["stats"][m]["linf"]["per_joint"][j]["values"]
-            res = sc["stats"][m]["results"]
-            ok = [(v, r) for v, r in zip(vals, res) if v is not None and np.isfinite(v)]
-            data.append(np.degrees([v for v, _ in ok]))
-            bad.append(np.degrees([v for v, r in ok if r != "ok"]))
-        box = ax.boxplot(data, showfliers=False, patch_artist=True)
-        for patch, m in zip(box["boxes"], methods):
-            patch.set_facecolor(colour[m])
-            patch.set_alpha(0.5)
-        for i, (d, b) in enumerate(zip(data, bad)):
-            ax.scatter(np.full(len(d), i + 1.0), d, s=8, color="k", zorder=3)
-            ax.scatter(np.full(len(b), i + 1.0), b, s=30, color="red", marker="x", zorder=4)
-        if any(np.any(d > 0) for d in data):  # a scale of logs needs a value; no run may have measured
-            ax.set_yscale("log")
-        else:
-            ax.text(0.5, 0.5, "no run measured", ha="center", va="center", transform=ax.transAxes, fontsize=7)
-        ax.set_xticks(range(1, len(methods) + 1), methods, rotation=70, fontsize=7)
-        ax.set_title(study["arm"]["joint_names"][j], fontsize=8)
-    axes[0].set_ylabel("L-inf tracking error (deg), one point per seed")
-    fig.suptitle(f"{scenario}: {len(study['seeds'])} seed(s); red x: a run that did not end ok")
-    return _save(fig, out / fig_name("distribution", scenario))
-
-
-def convergence_figure(out: Path, scenario: str, recs: dict[str, dict[str, Any]], colour: dict[str, Any]) -> str:
-    """Each tuned method's best-so-far objective over its trials (log scale), in its colour; the
-    cap a dashed line; a converged method's end a dot, a capped one's a cross; round starts ticked."""
-    fig, ax = plt.subplots(figsize=(7.5, 4.2))
-    cap, lows = 0, []
-    for m, r in recs.items():
-        curve = np.asarray(r.get("best_so_far") or [], dtype=float)
-        if not curve.size:
-            continue
-        cap = max(cap, int(r.get("cap") or 0))
-        lows.append(curve.min())
-        x = np.arange(1, curve.size + 1)
-        c = colour.get(m)
-        status = r.get("status", "?")
-        ax.step(x, curve, where="post", color=c, label=f"{m}: {status}, {curve.size} of at most {r.get('cap')} "
-                                                         f"trials, best {curve[-1]:.4g}")
-        ax.scatter([x[-1]], [curve[-1]], color=c, marker="o" if status == "converged" else "x", s=40, zorder=3)
-        starts = np.cumsum([len(rd["trials"]) for rd in r.get("rounds", [])])[:-1]
-        for st in starts:
-            ax.axvline(st + 0.5, color=c, lw=0.6, ls=":")
-    if cap:
-        ax.axvline(cap, color="k", ls="--", lw=0.8, label=f"cap {cap}")
-    if lows and min(lows) > 0:
-        ax.set_yscale("log")
-    ax.axhline(1000.0, color="red", lw=0.6, ls="-.")  # at and above: no trial ended well (tools/study/tuning.py)
-    ax.set_xlabel("trial (every round, in order)")
-    ax.set_ylabel("best objective so far (sum L-inf, rad; >= 1000: failed)")
-    ax.set_title(f"{scenario}: tuning, best so far (o converged, x capped; dotted: a widening round starts)",
-                 fontsize=9)
-    ax.legend(fontsize=7)
-    return _save(fig, out / fig_name("tuning", scenario))
 
 
 def _tuning_status(r: dict[str, Any]) -> str:
@@ -414,40 +229,32 @@ def _trajectory_lines(study: dict[str, Any]) -> list[str]:
             + "; ".join(f"{n} a {a:g} rad, f {f:g} Hz" for n, a, f in zip(names, t["amp"], t["freq_hz"])) + "."]
 
 
-def _scenario_figures(out: Path, study: dict[str, Any], scenario: str, kind: str) -> list[str]:
-    """One scenario's figures of one kind ("tuning", "distribution" or "time"): their file names."""
-    if kind == "tuning":
-        return [convergence_figure(out, scenario, study["scenarios"][scenario]["tuning"], colour_of(study))]
-    if kind == "distribution":
-        return [_distribution_figure(out, study, scenario)]
-    return _time_figures(out, study, scenario)
+def fig_name(kind: str, scenario: str) -> str:
+    """fig_KIND_SCENARIO.png, the scenario's name made a file name."""
+    return f"fig_{kind}_{''.join(c if c.isalnum() else '-' for c in scenario)}.png"
 
 
-FIGURE_KINDS = ("time", "distribution", "tuning")  # the slowest first: the workers end together
+def _remove_figures(out: Path, scenarios: list[str]) -> None:
+    """A report without figures leaves none beside it of an earlier study of these scenarios in
+    the same folder: every figure there is the report's."""
+    for s in scenarios:
+        for f in out.glob(fig_name("*", s)):
+            f.unlink()
 
 
-def draw_figures(out: Path, study: dict[str, Any], jobs: int | None = None) -> dict[tuple[str, str], list[str]]:
-    """Every scenario's figures, drawn in `jobs` processes (default: every core this process may
-    use; matplotlib holds the GIL, and the figures were a third of a study's time): (scenario,
-    kind) -> file names. Each task gets its own scenario of the study alone."""
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
+def write_report(out: Path, study: dict[str, Any], figures: bool = True) -> None:
+    """report.md and summary.txt, and the figures unless `figures` is False (`--no-figures`)."""
+    if figures:
+        from tools.study.figures import draw_figures  # matplotlib: only when there are figures to draw
 
-    tasks = [(name, kind) for kind in FIGURE_KINDS for name in study["scenarios"]]
-    jobs = min(len(tasks), jobs or len(os.sched_getaffinity(0)))
-    if jobs <= 1:
-        return {(name, kind): _scenario_figures(out, study, name, kind) for name, kind in tasks}
-    # fork: the workers have matplotlib imported already, and need no importable __main__ (a
-    # forkserver or spawn would re-run the caller's script); the study's run threads have ended
-    ctx = multiprocessing.get_context("fork")
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
-        futs = {t: pool.submit(_scenario_figures, out, {**study, "scenarios": {t[0]: study["scenarios"][t[0]]}}, *t)
-                for t in tasks}
-        return {t: f.result() for t, f in futs.items()}
+        drawn = draw_figures(out, study)
+    else:
+        drawn = {}
+        _remove_figures(out, list(study["scenarios"]))
 
+    def images(name: str, kind: str) -> list[str]:
+        return [f"![{f}]({f})" for f in drawn.get((name, kind), [])]
 
-def write_report(out: Path, study: dict[str, Any]) -> None:
-    figures = draw_figures(out, study)
     arm = study["arm"]
     n = arm["n_joints"]
     paper = arm["is_default"] and n == 6  # the paper's numbers are for its six-joint arm
@@ -464,6 +271,7 @@ def write_report(out: Path, study: dict[str, Any]) -> None:
           "Wilcoxon's signed-rank p, which with 5 seeds cannot go below 0.0625).",
           "", *_trajectory_lines(study),
           "", f"Tuning: {study['tuning_procedure']}", "", *_confirmation(study),
+          *([] if figures else ["Figures: not drawn (`--no-figures`).", ""]),
           *(["Notes:", "", *[f"- {x}" for x in study.get("notes", [])], ""] if study.get("notes") else [])]
     for i, (name, sc) in enumerate(study["scenarios"].items()):
         d = sc["definition"]
@@ -477,7 +285,6 @@ def write_report(out: Path, study: dict[str, Any]) -> None:
             md += [f"One run again on its own (SEED: one of {study['seeds']}; the same run.json results):", "", "```sh",
                    *study["commands"][name].values(), "```", ""]
         md += ["The paper's claims, with this scenario's evidence:", ""] + _claims(sc) + [""]
-        tfig = figures[name, "tuning"][0]
         md += ["### Tuning", "", _md_table(
             ["method", "knobs", "objective (sum L-inf, rad)", "trials", "validation", "source", "note"],
             [[m, f"`{ {k: (round(v, 4) if isinstance(v, float) else v) for k, v in r['knobs'].items()} }`",
@@ -487,7 +294,7 @@ def write_report(out: Path, study: dict[str, Any]) -> None:
              for m, r in sc["tuning"].items()]), "",
             "pm-paper-weights: the paper's own weights (gen/configs/paper.toml), not tuned. Every trial is in "
             "study.json; the Optuna studies in the tuning's SQLite storage (optuna-dashboard opens it).", "",
-            f"![{tfig}]({tfig})", ""]
+            *images(name, "tuning"), ""]
         for metric in ("linf", "rms", "est", "power"):
             md += [f"### {METRIC_TEXT[metric]}", "", _stats_table(study, sc, metric, labels), "",
                    f"PM against each method (ratio of means PM/other, seeds PM lower, p):", "",
@@ -507,9 +314,9 @@ def write_report(out: Path, study: dict[str, Any]) -> None:
                                *[_fmt(PAPER_TABLE2[m][j]) for m in ("pm", "tde", "usde-smc")]] for j in range(n)]), "",
                    f"Torque power, the paper: PM {PAPER_TABLE3['pm']} W, TDE {PAPER_TABLE3['tde']} W, EUSDE-SMC "
                    f"{PAPER_TABLE3['usde-smc']} W.", ""]
-        fig = figures[name, "distribution"][0]
-        md += [f"![{fig}]({fig})", "", f"Time series, the first seed of `{name}`:", ""]
-        md += [f"![{f}]({f})" for f in figures[name, "time"]] + [""]
+        if figures:
+            md += [*images(name, "distribution"), "", f"Time series, the first seed of `{name}`:", "",
+                   *images(name, "time"), ""]
     md += ["## Summary", "", "```", summary_table(study), "```", ""]
     write_text_atomic(out / "report.md", "\n".join(md))
     write_text_atomic(out / "summary.txt", summary_table(study) + "\n")
