@@ -466,7 +466,7 @@ def add_study_arguments(p: argparse.ArgumentParser) -> None:
 
 def add_figures_argument(p: argparse.ArgumentParser) -> None:
     p.add_argument("--figures", action=argparse.BooleanOptionalAction, default=True,
-                   help="draw the report's figures, three to four a scenario at about a second of CPU each "
+                   help="draw the report's figures, up to five a scenario at about a second of CPU each "
                         "[yes]; --no-figures: the report's tables alone, for a sweep or a headless check")
 
 
