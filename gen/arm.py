@@ -34,6 +34,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from gen import drivetrain
 from gen.lib import toml_input
 from gen.lib.bounds import DEFAULT_MAX_ERROR_DEG
 from gen.lib.params import constant
@@ -68,7 +69,7 @@ MAX_NESTING = 256          # XML elements, and bodies below the world: deeper is
 FLOAT32_MAX = float(np.finfo(np.float32).max)  # the firmware computes in float32: every number it takes fits
 
 ARM_FILE_FIELDS = {"name", "model", "joints", "locked", "home", "keyframe", "torque_limits", "buses",
-                   "topology", "design", "contacts", "timestep", "drives"}
+                   "topology", "design", "contacts", "timestep", "drives", "drivetrain", "rated_payload_kg", "flange"}
 
 
 class ArmError(ValueError):
@@ -90,6 +91,9 @@ class ArmFile:
     design: Path | None = None
     contacts: bool = False
     timestep: str = "loop"
+    drivetrain: dict[str, Any] | None = None  # gen/drivetrain.py: per joint size, stiffness, damping, rotor inertia
+    rated_payload_kg: float = 0.0
+    flange: str | None = None                 # the site the payload hangs on
 
 
 def fnv1a64(data: bytes) -> int:
@@ -131,7 +135,11 @@ def _table_of_numbers(v: Any, where: str) -> dict[str, float]:
 def load_arm_file(path: Path | None, model: Path | None = None) -> ArmFile:
     """The arm file (TOML) validated field by field, or the defaults for a bare model."""
     if path is None:
-        return ArmFile(None, None, model or DEFAULT_MODEL)
+        if (model or DEFAULT_MODEL).resolve() == DEFAULT_MODEL.resolve():
+            # the bundled arm: its drive train and rated payload are cited in a file of their own
+            table, payload = drivetrain.load_bundled()
+            return ArmFile(None, None, DEFAULT_MODEL, drivetrain=table, rated_payload_kg=payload)
+        return ArmFile(None, None, model)
     try:
         doc = toml_input.loads(path.read_text())
     except (OSError, UnicodeDecodeError) as exc:
@@ -199,6 +207,19 @@ def load_arm_file(path: Path | None, model: Path | None = None) -> ArmFile:
             raise ArmError(f"arm file {path}: timestep: expected \"loop\" (the loop period) or \"model\" "
                            f"(the model's own, an integer fraction of the period), got {doc['timestep']!r}")
         af.timestep = doc["timestep"]
+    if "drivetrain" in doc:
+        try:
+            af.drivetrain = drivetrain.check_table(doc["drivetrain"], f"arm file {path}: drivetrain")
+        except drivetrain.DrivetrainError as exc:
+            raise ArmError(str(exc)) from exc
+    if "rated_payload_kg" in doc:
+        af.rated_payload_kg = _number(doc["rated_payload_kg"], f"arm file {path}: rated_payload_kg")
+        if af.rated_payload_kg < 0:
+            raise ArmError(f"arm file {path}: rated_payload_kg: must be >= 0 kg, got {af.rated_payload_kg:g}")
+    if "flange" in doc:
+        if not isinstance(doc["flange"], str) or not doc["flange"]:
+            raise ArmError(f"arm file {path}: flange: expected the name of a site on the last link")
+        af.flange = doc["flange"]
     return af
 
 
@@ -511,6 +532,7 @@ class Prepared:
     xml: str
     info: dict[str, Any]
     design_text: str
+    plant_xml: str  # the simulator's true arm, with its flexible joints (gen/drivetrain.py)
 
 
 def prepare(af: ArmFile, design: Path | None) -> Prepared:  # noqa: C901 - one pass over the model, step by step
@@ -741,6 +763,12 @@ def prepare(af: ArmFile, design: Path | None) -> Prepared:  # noqa: C901 - one p
     spec.modelname = armname
     m1 = _compile(spec, path, "preparing it")
     _check_float32(m1, path, names, limits, home)
+    try:
+        flange_body, flange_pos, flange_from = drivetrain.flange_site(m1, int(m1.jnt_bodyid[n - 1]), af.flange)
+    except drivetrain.DrivetrainError as exc:
+        raise ArmError(f"arm file {af.path}: {exc}") from exc
+    spec.body(mujoco.mj_id2name(m1, mujoco.mjtObj.mjOBJ_BODY, flange_body)).add_site(
+        name=drivetrain.PAYLOAD_SITE, pos=flange_pos)
     spec.add_key(name="home", qpos=home, ctrl=[0.0] * n)
     xml = spec.to_xml()
     try:
@@ -826,7 +854,14 @@ def prepare(af: ArmFile, design: Path | None) -> Prepared:  # noqa: C901 - one p
                                   f"leaves it (the tightest: {names[limiting]}); --design gen/configs/paper.toml "
                                   "for the paper's weights")}
     info["design_config"] = info["design"]["config"]
-    return Prepared(xml, info, design_for(design_text, n, template))
+    try:
+        info["drivetrain"] = drivetrain.resolve(af.drivetrain, f"arm file {af.path}: drivetrain" if af.path else
+                                                "drivetrain", m, names, home, [lim for lim, _ in limits], dt)
+    except drivetrain.DrivetrainError as exc:
+        raise ArmError(str(exc)) from exc
+    info["first_resonance_hz"] = drivetrain.first_resonance_hz(info["drivetrain"])
+    info["payload"] = {"rated_kg": af.rated_payload_kg, "at": flange_from}
+    return Prepared(xml, info, design_for(design_text, n, template), drivetrain.plant_xml(xml, info["drivetrain"]))
 
 
 def auto_bandwidth(inertia_at_home: Any, torque_limits: list[float]) -> tuple[float, int]:
@@ -1108,7 +1143,8 @@ def main(argv: list[str] | None = None) -> int:
     except ArmError as exc:
         print(f"gen.arm: {exc}", file=sys.stderr)
         return 2
-    files = {"arm.xml": prep.xml, "arm.json": json.dumps(prep.info, indent=1) + "\n", "design.toml": prep.design_text}
+    files = {"arm.xml": prep.xml, "arm.json": json.dumps(prep.info, indent=1) + "\n", "design.toml": prep.design_text,
+             "plant.xml": prep.plant_xml}
     try:
         write_files_atomically(ns.out, files)
     except OutputError as exc:
@@ -1120,6 +1156,8 @@ def main(argv: list[str] | None = None) -> int:
             deps.append(str(af.path.resolve()))
         if af.topology:
             deps.append(str(af.topology.resolve()))
+        if af.drivetrain is not None and af.path is None:  # the bundled arm's
+            deps.append(str(drivetrain.BUNDLED_DRIVETRAIN))
         from gen.lib.busload import DEFAULT_DBC
 
         deps += [str(DEFAULT_DBC), str(DEFAULT_TOPOLOGY)]  # the drive slots; the six-drive wiring

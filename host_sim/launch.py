@@ -57,8 +57,12 @@ def canopen_frame_times(bus: busload.Bus) -> str:
     return ",".join(f"{i}:{t * 1e6:.6f}" for i, t in sorted(times.items()))
 
 
-def uncertainty_args(unc: dict[str, Any] | UncertaintyConfig | None) -> list[str]:
-    """arm_sim's uncertainty options; validated first (the message names the field)."""
+PLANT_FILE = "plant.xml"  # beside the prepared arm.xml (gen/arm.py): the arm with flexible joints
+
+
+def uncertainty_args(unc: dict[str, Any] | UncertaintyConfig | None, model: Path | None = None) -> list[str]:
+    """arm_sim's uncertainty options; validated first (the message names the field). model: the
+    prepared arm.xml, whose plant.xml a flexible arm runs."""
     if unc is None:
         return []
     cfg = unc if isinstance(unc, UncertaintyConfig) else UncertaintyConfig.from_dict(unc)
@@ -69,6 +73,14 @@ def uncertainty_args(unc: dict[str, Any] | UncertaintyConfig | None) -> list[str
         args += ["--viscous", ",".join(repr(float(x)) for x in cfg.viscous)]
     if cfg.coulomb:
         args += ["--coulomb", ",".join(repr(float(x)) for x in cfg.coulomb)]
+    if cfg.flexible:
+        if model is None:
+            raise ValueError("uncertainty.flexible: the simulator's plant comes with the prepared arm (--model)")
+        args += ["--plant", str(model.parent / PLANT_FILE)]
+        if cfg.gear_stiffness_scale != 1.0:
+            args += ["--gear-stiffness-scale", repr(float(cfg.gear_stiffness_scale))]
+    if cfg.payload_kg and max(cfg.payload_kg) > 0:
+        args += ["--payload-kg", ",".join(repr(float(x)) for x in cfg.payload_kg)]
     return args
 
 
@@ -96,7 +108,7 @@ def sim_argv(binary: Path, buses: list[str], *, lcm_url: str, summary: Path | No
         argv += ["--summary", str(summary)]
     if model is not None:
         argv += ["--model", str(model)]
-    argv += uncertainty_args(uncertainty)
+    argv += uncertainty_args(uncertainty, model)
     argv += (drives or DriveModel()).args()
     argv += timing_args(timing, phys or [], controller_latency_us, canopen)
     return argv + list(extra or [])

@@ -30,10 +30,12 @@ def design_loop(P: GeneralizedPlant, K: StateSpace) -> StateSpace:
 
 
 def combined_loop(
-    plant: StateSpace, C: StateSpace, K: StateSpace | None, structure: str = "decoupled", delay: int = 0
+    plant: StateSpace, C: StateSpace, K: StateSpace | None, structure: str = "decoupled", delay: int = 0,
+    output: str = "e",
 ) -> StateSpace:
-    """w -> e of the whole loop. plant: [e; e_dot] driven by u (the same model serves as the
-    internal model). K = None closes the controller alone (w_hat = 0)."""
+    """w -> e of the whole loop (output "e"), or w -> -u, the control's answer to w (output "u": the
+    input's complementary sensitivity, whose bandwidth is the loop's). plant: [e; e_dot] driven by u
+    (the same model serves as the internal model). K = None closes the controller alone (w_hat = 0)."""
     if structure not in STRUCTURES:
         raise ValueError(f"structure must be one of {STRUCTURES}")
     m = plant.n_in
@@ -70,5 +72,5 @@ def combined_loop(
     A = np.vstack([r for r in rows if r.shape[0]]) if N else np.zeros((0, 0))
     Bw = np.zeros((N, m))
     Bw[: npl] = plant.B  # w is a physical torque error: it is never delayed
-    Ce = Sp[:m]
-    return StateSpace(A, Bw, Ce, np.zeros((m, m)))
+    Cout = -Su if output == "u" else Sp[:m]
+    return StateSpace(A, Bw, Cout, np.zeros((m, m)))

@@ -11,6 +11,7 @@ void sim_uncertainty_default(sim_uncertainty_t *u)
     memset(u, 0, sizeof(*u));
     u->seed = ARM_P_SIMULATOR_SEED_DEFAULT;
     u->paper_knot_s = ARM_P_SIMULATOR_PAPER_KNOT_S_DEFAULT;
+    u->gear_stiffness_scale = ARM_P_SIMULATOR_GEAR_STIFFNESS_SCALE_DEFAULT;
 }
 
 static void draw_knot(sim_arm_t *a, double *dst)
@@ -26,7 +27,7 @@ static void perturb(sim_arm_t *a)
 {
     mjModel *m = a->model;
     const sim_uncertainty_t *u = &a->unc;
-    for (int b = 1; b < m->nbody; ++b) {
+    for (int b = 1; b < a->nominal->nbody; ++b) { /* the arm's links (a plant's rotors come after them) */
         if (u->mass_error != 0.0) {
             m->body_mass[b] *= 1.0 + sim_rng_uniform(&a->rng, -u->mass_error, u->mass_error);
         }
@@ -65,7 +66,10 @@ unsigned long long sim_file_hash(const char *path)
 static int w_from_true_arm(const sim_arm_t *a)
 {
     const mjModel *m = a->model;
-    if (a->parametric || m->opt.integrator == mjINT_RK4 || (m->opt.disableflags & mjDSBL_ACTUATION) != 0) return 0;
+    if (a->nominal_differs || a->flexible || m->opt.integrator == mjINT_RK4 ||
+        (m->opt.disableflags & mjDSBL_ACTUATION) != 0) {
+        return 0;
+    }
     for (int j = 0; j < m->njnt; ++j) {
         if (m->jnt_stiffness[j] != 0.0 || m->jnt_actgravcomp[j]) return 0;
     }
@@ -83,26 +87,142 @@ static int w_from_true_arm(const sim_arm_t *a)
     return 1;
 }
 
-int sim_arm_open(sim_arm_t *a, const char *path, const char *keyframe, int substeps, const sim_uncertainty_t *u,
-                 char *err, size_t errcap)
+/* The plant's joints against the nominal model's: joint j's link is dof j and qpos j in both (the
+ * plant only adds rotors after the links), a hinge; its motor drives the link or a rotor of its own. */
+static int map_plant(sim_arm_t *a, const char *plant, char *err, size_t errcap)
+{
+    const mjModel *m = a->model, *nm = a->nominal;
+    int rotors = 0;
+    for (int j = 0; j < a->n; ++j) {
+        const char *name = mj_id2name(nm, mjOBJ_JOINT, nm->actuator_trnid[2 * j]);
+        const int link = name != NULL ? mj_name2id(m, mjOBJ_JOINT, name) : -1;
+        if (link < 0 || m->jnt_dofadr[link] != j || m->jnt_qposadr[link] != j || m->jnt_type[link] != mjJNT_HINGE) {
+            snprintf(err, errcap, "--plant: '%s' does not carry the arm's joint %d ('%s') as its hinge dof %d: make "
+                     "it from the same arm.xml (gen/drivetrain.py)", plant, j + 1, name != NULL ? name : "?", j);
+            return -1;
+        }
+        const int motor = m->actuator_trnid[2 * j];
+        if (m->actuator_trntype[j] != mjTRN_JOINT || m->jnt_type[motor] != mjJNT_HINGE) {
+            snprintf(err, errcap, "--plant: '%s': actuator %d is not a motor on a hinge", plant, j + 1);
+            return -1;
+        }
+        a->motor_dof[j] = m->jnt_dofadr[motor];
+        a->motor_qpos[j] = m->jnt_qposadr[motor];
+        rotors += motor != link;
+    }
+    if (m->nv != a->n + rotors || m->nq != m->nv) {
+        snprintf(err, errcap, "--plant: '%s' has %ld degrees of freedom: the arm's %d and one per rotor (%d)", plant,
+                 (long)m->nv, a->n, rotors);
+        return -1;
+    }
+    a->flexible = rotors;
+    return 0;
+}
+
+/* The payload, a solid sphere of PAYLOAD_RADIUS_M at the site "payload", merged into its body:
+ * mass, centre of mass and inertia about it (principal axes anew). */
+#define PAYLOAD_RADIUS_M 0.05
+static int add_payload(sim_arm_t *a, double kg, char *err, size_t errcap)
+{
+    mjModel *m = a->model;
+    const int site = mj_name2id(m, mjOBJ_SITE, "payload");
+    if (site < 0) {
+        snprintf(err, errcap, "--payload-kg: the model has no site 'payload' to hang it on (arm.xml has it when "
+                 "gen/arm.py prepared the arm)");
+        return -1;
+    }
+    const int b = m->site_bodyid[site];
+    const double m0 = m->body_mass[b], m1 = m0 + kg;
+    double c1[3], rot[9], i0[9] = {0}, itot[9] = {0};
+    for (int k = 0; k < 3; ++k) c1[k] = (m0 * m->body_ipos[3 * b + k] + kg * m->site_pos[3 * site + k]) / m1;
+    /* the body's inertia in its frame: R diag(I) R^T */
+    mju_quat2Mat(rot, m->body_iquat + 4 * b);
+    for (int r = 0; r < 3; ++r) {
+        for (int c = 0; c < 3; ++c) {
+            for (int k = 0; k < 3; ++k) i0[3 * r + c] += rot[3 * r + k] * m->body_inertia[3 * b + k] * rot[3 * c + k];
+        }
+    }
+    const double sphere = 0.4 * kg * PAYLOAD_RADIUS_M * PAYLOAD_RADIUS_M;
+    for (int r = 0; r < 3; ++r) {
+        for (int c = 0; c < 3; ++c) itot[3 * r + c] = i0[3 * r + c] + (r == c ? sphere : 0.0);
+    }
+    /* both masses moved to the common centre of mass (parallel axes) */
+    const double *at[2] = {m->body_ipos + 3 * b, m->site_pos + 3 * site};
+    const double mass[2] = {m0, kg};
+    for (int p = 0; p < 2; ++p) {
+        double dv[3];
+        for (int k = 0; k < 3; ++k) dv[k] = at[p][k] - c1[k];
+        const double d2 = dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2];
+        for (int r = 0; r < 3; ++r) {
+            for (int c = 0; c < 3; ++c) itot[3 * r + c] += mass[p] * ((r == c ? d2 : 0.0) - dv[r] * dv[c]);
+        }
+    }
+    double eigval[3], eigvec[9];
+    mju_eig3(eigval, eigvec, m->body_iquat + 4 * b, itot);
+    for (int k = 0; k < 3; ++k) {
+        m->body_inertia[3 * b + k] = eigval[k];
+        m->body_ipos[3 * b + k] = c1[k];
+    }
+    m->body_mass[b] = m1;
+    return 0;
+}
+
+/* The rigid links' static equilibrium at the keyframe: each rotor ahead of its link by the gear's
+ * wind-up under gravity, so the arm starts at rest, as a real one holding its pose does. */
+static void wind_up_gears(sim_arm_t *a)
+{
+    const mjModel *m = a->model;
+    mjData *d = a->data;
+    mj_forward(m, d);
+    for (int t = 0; t < m->ntendon; ++t) {
+        for (int w = m->tendon_adr[t]; w < m->tendon_adr[t] + m->tendon_num[t]; ++w) {
+            if (m->wrap_type[w] != mjWRAP_JOINT || m->tendon_stiffness[t] <= 0.0) continue;
+            for (int j = 0; j < a->n; ++j) {
+                if (a->motor_dof[j] != j && m->wrap_objid[w] == m->dof_jntid[a->motor_dof[j]]) {
+                    d->qpos[a->motor_qpos[j]] = d->qpos[j] + d->qfrc_bias[j] / m->tendon_stiffness[t];
+                }
+            }
+        }
+    }
+    mj_forward(m, d);
+}
+
+int sim_arm_open(sim_arm_t *a, const char *path, const char *plant, const char *keyframe, int substeps,
+                 const sim_uncertainty_t *u, char *err, size_t errcap)
 {
     memset(a, 0, sizeof(*a));
+    const int has_plant = plant != NULL && plant[0] != '\0';
+    const char *true_path = has_plant ? plant : path;
     char mjerr[500] = "";
-    a->model = mj_loadXML(path, NULL, mjerr, sizeof(mjerr));
-    a->nominal = a->model != NULL ? mj_loadXML(path, NULL, mjerr, sizeof(mjerr)) : NULL;
-    if (a->model == NULL || a->nominal == NULL) {
+    a->nominal = mj_loadXML(path, NULL, mjerr, sizeof(mjerr));
+    if (a->nominal == NULL) {
         snprintf(err, errcap, "--model: cannot load '%s': %s", path, mjerr);
         sim_arm_close(a);
         return -1;
     }
-    const long nu = (long)a->model->nu, nv = (long)a->model->nv;
-    if (nu < 1 || nu > SIM_MAX_JOINTS || nv != nu) {
-        snprintf(err, errcap, "--model: '%s' has %ld actuators and %ld degrees of freedom; the simulator "
-                 "drives 1..%d joints, one actuator each", path, nu, nv, SIM_MAX_JOINTS);
+    a->model = mj_loadXML(true_path, NULL, mjerr, sizeof(mjerr));
+    if (a->model == NULL) {
+        snprintf(err, errcap, "%s: cannot load '%s': %s", has_plant ? "--plant" : "--model", true_path, mjerr);
+        sim_arm_close(a);
+        return -1;
+    }
+    const long nu = (long)a->nominal->nu, nv = (long)a->nominal->nv;
+    if (nu < 1 || nu > SIM_MAX_JOINTS || nv != nu || a->model->nu != a->nominal->nu) {
+        snprintf(err, errcap, "--model: '%s' has %ld actuators and %ld degrees of freedom (its plant %ld actuators); "
+                 "the simulator drives 1..%d joints, one actuator each", path, nu, nv, (long)a->model->nu, SIM_MAX_JOINTS);
         sim_arm_close(a);
         return -1;
     }
     a->n = (int)nu;
+    if (map_plant(a, true_path, err, errcap) != 0) {
+        sim_arm_close(a);
+        return -1;
+    }
+    if (u->gear_stiffness_scale != 1.0 && a->flexible == 0) {
+        snprintf(err, errcap, "--gear-stiffness-scale: the arm '%s' has no flexible joint (give --plant)", true_path);
+        sim_arm_close(a);
+        return -1;
+    }
     a->unc = *u;
     a->substeps = substeps;
     a->period = a->model->opt.timestep * substeps;
@@ -112,20 +232,29 @@ int sim_arm_open(sim_arm_t *a, const char *path, const char *keyframe, int subst
     a->parametric = u->mass_error != 0.0 || u->inertia_error != 0.0 || u->com_error_m != 0.0;
     for (int j = 0; j < a->n; ++j) {
         a->torque_limit[j] = a->model->actuator_ctrlrange[2 * j + 1];
-        /* Joint friction the nominal model lacks, in MuJoCo's own terms: damping is integrated
-         * implicitly and frictionloss is a constraint (it sticks), both stable at a 1 ms step on
-         * a 1e-4 kg m^2 wrist, where an explicit -b qd - c tanh(qd / eps) blew up at b = 3. */
-        a->model->dof_damping[j] += u->viscous[j];
-        a->model->dof_frictionloss[j] += u->coulomb[j];
+        /* Joint friction the nominal model lacks, in MuJoCo's own terms and where the joint's own
+         * is (the motor's side): damping is integrated implicitly and frictionloss is a constraint
+         * (it sticks), both stable at a 1 ms step on a 1e-4 kg m^2 wrist, where an explicit
+         * -b qd - c tanh(qd / eps) blew up at b = 3. */
+        a->model->dof_damping[a->motor_dof[j]] += u->viscous[j];
+        a->model->dof_frictionloss[a->motor_dof[j]] += u->coulomb[j];
     }
-    /* The draws come in the order the Python simulator made them: the signal's first two knots,
-     * then the links' parametric errors (one seed, one arm). */
+    for (int t = 0; t < a->model->ntendon; ++t) a->model->tendon_stiffness[t] *= u->gear_stiffness_scale;
+    /* The draws come in a fixed order, each only when asked for: the signal's first two knots,
+     * the links' parametric errors, the payload (one seed, one arm). */
     sim_rng_seed(&a->rng, u->seed);
     if (u->paper_ratio != 0.0) {
         draw_knot(a, a->knots[0]);
         draw_knot(a, a->knots[1]);
     }
     perturb(a);
+    a->payload_kg = u->payload_kg[1] > u->payload_kg[0] ? sim_rng_uniform(&a->rng, u->payload_kg[0], u->payload_kg[1])
+                                                        : u->payload_kg[0];
+    if (a->payload_kg > 0.0 && add_payload(a, a->payload_kg, err, errcap) != 0) {
+        sim_arm_close(a);
+        return -1;
+    }
+    a->nominal_differs = a->parametric || a->payload_kg > 0.0;
     a->w_from_true_arm = w_from_true_arm(a);
     a->data = mj_makeData(a->model);
     a->nominal_data = mj_makeData(a->nominal);
@@ -134,15 +263,30 @@ int sim_arm_open(sim_arm_t *a, const char *path, const char *keyframe, int subst
         sim_arm_close(a);
         return -1;
     }
+    mj_setConst(a->model, a->data); /* the masses changed: what MuJoCo derived from them, anew */
     const int key = mj_name2id(a->model, mjOBJ_KEY, keyframe);
     if (key < 0) {
-        snprintf(err, errcap, "--model: '%s' has no keyframe '%s'", path, keyframe);
+        snprintf(err, errcap, "--model: '%s' has no keyframe '%s'", true_path, keyframe);
         sim_arm_close(a);
         return -1;
     }
     mj_resetDataKeyframe(a->model, a->data, key);
-    mj_forward(a->model, a->data);
+    if (a->flexible) {
+        wind_up_gears(a);
+    } else {
+        mj_forward(a->model, a->data);
+    }
     return 0;
+}
+
+double sim_arm_motor_q(const sim_arm_t *a, int j)
+{
+    return a->data->qpos[a->motor_qpos[j]];
+}
+
+double sim_arm_motor_qd(const sim_arm_t *a, int j)
+{
+    return a->data->qvel[a->motor_dof[j]];
 }
 
 /* d(t): 2n channels, linear between knots every knot_s seconds (time only moves forward). */
@@ -267,13 +411,52 @@ static void nominal_step_start(sim_arm_t *a, const double *tau, const double *ta
     }
 }
 
+/* The links' mass matrix: the plant's link block (with rotors the plant's is larger). */
+static void link_mass(sim_arm_t *a)
+{
+    const int n = a->n, nv = (int)a->model->nv;
+    if (nv == n) {
+        mj_fullM(a->model, a->data, a->mass);
+        return;
+    }
+    mj_fullM(a->model, a->data, a->mass_full);
+    for (int i = 0; i < n; ++i) memcpy(a->mass + i * n, a->mass_full + i * nv, (size_t)n * sizeof(double));
+}
+
+/* A period's first step of the arm with flexible joints: the paper's uncertainty acts on the links
+ * (their drive is the gear's spring and damper on a flexible joint, the motor on a rigid one); w
+ * from a forward pass of the nominal model at the step's start. */
+static void flexible_step_start(sim_arm_t *a, const double *tau, const double *tau_commanded, double *w)
+{
+    const int n = a->n;
+    mjData *d = a->data;
+    mjData *nd = a->nominal_data;
+    memcpy(nd->qpos, d->qpos, (size_t)n * sizeof(double));
+    memcpy(nd->qvel, d->qvel, (size_t)n * sizeof(double));
+    memcpy(nd->ctrl, tau_commanded != NULL ? tau_commanded : tau, (size_t)n * sizeof(double));
+    mj_forward(a->nominal, nd);
+    mj_step1(a->model, d); /* M, bias and the gears' forces at the step's start */
+    if (a->unc.paper_ratio != 0.0) {
+        double drive[SIM_MAX_JOINTS];
+        for (int j = 0; j < n; ++j) drive[j] = a->motor_dof[j] != j ? d->qfrc_passive[j] : tau[j];
+        link_mass(a);
+        extra_force(a, (double)a->step_count * a->period, d->qfrc_bias, drive, d->qfrc_applied);
+    }
+    mj_step2(a->model, d);
+    for (int j = 0; j < n; ++j) {
+        w[j] = nd->qacc[j] - d->qacc[j];
+    }
+}
+
 int sim_arm_step(sim_arm_t *a, const double *tau, const double *tau_commanded, double *w)
 {
     const int bad_before = a->data->warning[mjWARN_BADQACC].number;
     const int n = a->n;
     mjData *d = a->data;
     memcpy(d->ctrl, tau, (size_t)n * sizeof(double));
-    if (a->w_from_true_arm) {
+    if (a->flexible) {
+        flexible_step_start(a, tau, tau_commanded, w);
+    } else if (a->w_from_true_arm) {
         double qvel_start[SIM_MAX_JOINTS];
         memcpy(qvel_start, d->qvel, (size_t)n * sizeof(double));
         mj_step1(a->model, d); /* M and V of the arm at the step's start; the nominal model's too */
@@ -289,12 +472,20 @@ int sim_arm_step(sim_arm_t *a, const double *tau, const double *tau_commanded, d
         nominal_step_start(a, tau, tau_commanded, w);
     }
     for (int k = 1; k < a->substeps; ++k) { /* the rest of the period: the same torque, the force anew */
-        extra_force(a, ((double)a->step_count + (double)k / a->substeps) * a->period, d->qfrc_bias, tau,
+        double drive[SIM_MAX_JOINTS];
+        for (int j = 0; j < n; ++j) drive[j] = a->motor_dof[j] != j ? d->qfrc_passive[j] : tau[j];
+        extra_force(a, ((double)a->step_count + (double)k / a->substeps) * a->period, d->qfrc_bias, drive,
                     d->qfrc_applied);
         mj_step(a->model, d);
     }
     a->step_count++;
-    return d->warning[mjWARN_BADQACC].number != bad_before ? d->warning[mjWARN_BADQACC].lastinfo + 1 : 0;
+    if (d->warning[mjWARN_BADQACC].number == bad_before) return 0;
+    /* the dof MuJoCo named: a rotor's stands for its joint */
+    const int dof = d->warning[mjWARN_BADQACC].lastinfo;
+    for (int j = 0; j < n; ++j) {
+        if (a->motor_dof[j] == dof) return j + 1;
+    }
+    return dof < n ? dof + 1 : 1;
 }
 
 void sim_arm_diverged_text(const sim_arm_t *a, int dof, unsigned long long periods, char *out, unsigned long cap)

@@ -8,12 +8,17 @@
  * - parametric: link masses, inertias and centres of mass off from the nominal model (uniform in
  *   +-error, per link, seeded);
  * - joint friction the nominal model lacks: viscous b and Coulomb c added to the true model's
- *   joint damping and frictionloss (MuJoCo integrates them stably, and frictionloss sticks).
+ *   joint damping and frictionloss (MuJoCo integrates them stably, and frictionloss sticks);
+ * - flexible joints (a plant model, gen/drivetrain.py): each a rotor behind its gear, a torsional
+ *   spring and damper (a fixed tendon rotor - link), then the link; the motors drive the rotors,
+ *   the motor encoders read them; the gears' stiffness can be scaled;
+ * - a payload at the flange (the model's site "payload"), fixed or drawn by the seed.
  *
  * Each step returns w, the total uncertainty of e_ddot = u + w as the controller sees it: the
  * acceleration the firmware's nominal model predicts for the commanded torque minus the true one.
- * The nominal model is the same file with constraints (joint limits, frictionloss, contacts) and
- * springs off: rigid bodies, armature and damping, exactly what the firmware's RNEA has. */
+ * The nominal model is the arm's file (--model) with constraints (joint limits, frictionloss,
+ * contacts) and springs off: rigid bodies, armature and damping, exactly what the firmware's RNEA
+ * has. The true arm is the same file, or the plant (--plant): the same links, joints first. */
 #ifndef ARM_SIM_ARM_H
 #define ARM_SIM_ARM_H
 
@@ -35,10 +40,12 @@ typedef struct {
     double com_error_m;  /* metres, per link and axis */
     double viscous[SIM_MAX_JOINTS]; /* Nm s/rad per joint */
     double coulomb[SIM_MAX_JOINTS]; /* Nm per joint */
+    double gear_stiffness_scale;    /* the plant's gear stiffness times this */
+    double payload_kg[2];           /* at the flange: [m, m] fixed, [lo, hi] drawn; {0, 0}: none */
 } sim_uncertainty_t;
 
 typedef struct {
-    mjModel *model;   /* the true arm (perturbed) */
+    mjModel *model;   /* the true arm (the plant, perturbed) */
     mjData *data;
     mjModel *nominal; /* what the firmware's model was generated from */
     mjData *nominal_data;
@@ -47,6 +54,15 @@ typedef struct {
     int64_t step_count;
     sim_uncertainty_t unc;
     int parametric;
+    /* the nominal model is not the true arm's links: parametric error or a payload (w needs a
+     * forward pass of the nominal model) */
+    int nominal_differs;
+    /* per joint, the plant's dof and qpos of its motor: the rotor of a flexible joint, else the
+     * link's own (joint j's link is dof j and qpos j in both models) */
+    int motor_dof[SIM_MAX_JOINTS];
+    int motor_qpos[SIM_MAX_JOINTS];
+    int flexible;     /* joints with a rotor of their own */
+    double payload_kg;
     /* w from the true arm's own step (its unconstrained acceleration and mass matrix) instead of
      * a forward pass of the nominal model: the same quantity, when the two models differ only in
      * what sim_arm_open checks (sim_arm.c: w_from_true_arm); about a fifth of a SIL period */
@@ -54,17 +70,22 @@ typedef struct {
     sim_rng_t rng;
     double knots[2][2 * SIM_MAX_JOINTS]; /* the random signal d (first n) and d' (last n) */
     int64_t knot_index;
-    double mass[SIM_MAX_JOINTS * SIM_MAX_JOINTS];
+    double mass[SIM_MAX_JOINTS * SIM_MAX_JOINTS]; /* the links' mass matrix (the plant's link block) */
+    double mass_full[4 * SIM_MAX_JOINTS * SIM_MAX_JOINTS]; /* scratch: the plant's whole one */
     double torque_limit[SIM_MAX_JOINTS];
     int substeps;             /* MuJoCo steps per period (the model's timestep x substeps = period) */
     unsigned long long model_hash; /* FNV-1a 64 of the model file: announced at boot (SIM_IDENTITY) */
 } sim_arm_t;
 
 void sim_uncertainty_default(sim_uncertainty_t *u);
-/* Loads the model twice (true and nominal), draws the uncertainty, resets to the keyframe.
- * Returns 0, or -1 with a message naming the file or element in err. */
-int sim_arm_open(sim_arm_t *a, const char *path, const char *keyframe, int substeps, const sim_uncertainty_t *u,
-                 char *err, size_t errcap);
+/* Loads the nominal model (path) and the true arm (plant, or path again when plant is NULL or
+ * ""), draws the uncertainty, resets to the keyframe with every gear wound up against gravity.
+ * Returns 0, or -1 with a message naming the file, option or element in err. */
+int sim_arm_open(sim_arm_t *a, const char *path, const char *plant, const char *keyframe, int substeps,
+                 const sim_uncertainty_t *u, char *err, size_t errcap);
+/* Joint j's motor angle and speed, in joint units: its rotor's, or the link's on a rigid joint. */
+double sim_arm_motor_q(const sim_arm_t *a, int j);
+double sim_arm_motor_qd(const sim_arm_t *a, int j);
 /* FNV-1a 64 of a file's bytes (gen/arm.py's fnv1a64), or 0 if it cannot be read. */
 unsigned long long sim_file_hash(const char *path);
 /* One period under tau (the time average the joints feel); tau_commanded (may be NULL: tau) is

@@ -203,7 +203,8 @@ static void sync_nodes(co_sim_t *s, unsigned bus)
         if (s->bus_of[j] != (int)bus) continue;
         double qm = q[j], qdm = qd[j], taum = NAN;
         if (!sim_servo_is_ideal(&s->cfg->servo)) {
-            sim_servo_measure(&s->cfg->servo, &s->servo[j], &s->noise[j], q[j], qd[j], s->arm->period, &qm, &qdm, &taum);
+            sim_servo_measure(&s->cfg->servo, &s->servo[j], &s->noise[j], q[j], qd[j], sim_arm_motor_q(s->arm, j),
+                              sim_arm_motor_qd(s->arm, j), s->arm->period, &qm, &qdm, &taum);
         }
         sim_co_node_on_sync(&s->node[j], qm, qdm, taum);
     }

@@ -521,7 +521,8 @@ static void on_sync(sim_t *s, int counter, unsigned bus)
         arm_can_frame_t *f = &batch[k++];
         double qm = q[j], qdm = qd[j], taum = sim_drive_applied_torque(d);
         if (!sim_servo_is_ideal(&s->cfg->servo)) { /* what a real drive would measure and report */
-            sim_servo_measure(&s->cfg->servo, &s->servo[j], &s->noise[j], q[j], qd[j], s->arm->period, &qm, &qdm, &taum);
+            sim_servo_measure(&s->cfg->servo, &s->servo[j], &s->noise[j], q[j], qd[j], sim_arm_motor_q(s->arm, j),
+                              sim_arm_motor_qd(s->arm, j), s->arm->period, &qm, &qdm, &taum);
         }
         sim_make_state(j, qm, qdm, taum, (uint16_t)d->power, (uint8_t)counter, d->error_code, f);
         if (s->cfg->timing == SIM_TIMING_WALLCLOCK) { /* not before the frame would have ended on the bus */

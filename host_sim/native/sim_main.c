@@ -68,7 +68,7 @@ int main(int argc, char **argv)
     }
     mju_user_warning = on_mujoco_warning;
     static sim_arm_t arm;
-    if (sim_arm_open(&arm, o.model, o.keyframe, o.substeps, &o.unc, err, sizeof(err)) != 0) {
+    if (sim_arm_open(&arm, o.model, o.plant, o.keyframe, o.substeps, &o.unc, err, sizeof(err)) != 0) {
         fprintf(stderr, "arm_sim: %s\n", err);
         return 2;
     }

@@ -114,6 +114,26 @@ static int sim_coulomb(void *t, void *c, const argv_opt_t *opt, const char *v, c
                       &o->n_coulomb, err, errcap);
 }
 
+/* --payload-kg M or M,MAX: a fixed payload, or one drawn uniform in [M, MAX] by the seed. */
+static int sim_payload(void *t, void *c, const argv_opt_t *opt, const char *v, char *err, unsigned long errcap)
+{
+    sim_options_t *o = t;
+    double range[SIM_MAX_JOINTS];
+    int k = 0;
+    (void)c;
+    if (parse_list(opt->name, v, ARM_P_SIMULATOR_PAYLOAD_KG_MIN, ARM_P_SIMULATOR_PAYLOAD_KG_MAX, range, &k, err,
+                   errcap) != 0) {
+        return -1;
+    }
+    if (k > 2 || (k == 2 && range[1] < range[0])) {
+        snprintf(err, errcap, "%s: '%s' is not M or M,MAX with M <= MAX (kg)", opt->name, v);
+        return -1;
+    }
+    o->unc.payload_kg[0] = range[0];
+    o->unc.payload_kg[1] = k == 2 ? range[1] : range[0];
+    return 0;
+}
+
 /* The per-bus options, I=VALUE: --frame-times (the frame lengths of bus I) and --bus-label. */
 static int sim_bus_indexed(void *t, void *c, const argv_opt_t *opt, const char *v, char *err, unsigned long errcap)
 {

@@ -8,6 +8,7 @@
 
 typedef struct {
     char model[1024];
+    char plant[1024];    /* the true arm when it differs from the nominal model ("": the same) */
     char keyframe[64];
     char lcm_url[512];
     char summary[1024];

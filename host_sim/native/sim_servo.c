@@ -80,16 +80,19 @@ static double encoder_read(int bits, double ratio, double noise_counts, sim_rng_
 }
 
 void sim_servo_measure(const sim_servo_config_t *c, sim_servo_t *s, sim_rng_t *noise, double q, double qd,
-                       double period_s, double *q_out, double *qd_out, double *tau_out)
+                       double qm_true, double qmd_true, double period_s, double *q_out, double *qd_out,
+                       double *tau_out)
 {
     const double qj = c->encoder_bits > 0 ? encoder_read(c->encoder_bits, 1.0, c->position_noise_counts, noise, q) : q;
     /* The motor encoder counts turns from power-up, where the joint encoder gave the absolute
-     * position: modelled as already referenced (the gear rigid, no backlash or wind-up). */
+     * position: modelled as referenced to the rotor's angle then (no backlash; the gear's wind-up
+     * is the rotor's own, on a flexible joint). */
     const double qm = c->motor_encoder_bits > 0
-                          ? encoder_read(c->motor_encoder_bits, c->gear_ratio, c->position_noise_counts, noise, q)
-                          : q;
+                          ? encoder_read(c->motor_encoder_bits, c->gear_ratio, c->position_noise_counts, noise, qm_true)
+                          : qm_true;
     const double qv = c->velocity_source == SIM_ENCODER_MOTOR ? qm : qj;
-    double vm = qd;
+    /* the true velocity (no filter): the encoder's shaft's */
+    double vm = c->velocity_source == SIM_ENCODER_MOTOR ? qmd_true : qd;
     if (c->velocity_filter_hz > 0.0) {
         if (!s->primed) {
             s->v_filtered = qd; /* the drive has been running before the controller asks */

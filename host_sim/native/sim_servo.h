@@ -2,8 +2,8 @@
  *
  * - sensing: an absolute encoder of 2^bits counts per joint turn (quantised position, with
  *   Gaussian noise in counts before quantisation), optionally a second encoder on the motor,
- *   2^motor_bits counts per motor turn through a rigid gear of gear_ratio (so gear_ratio times
- *   finer at the joint), a velocity the drive estimates from one encoder's differences and
+ *   2^motor_bits counts per motor turn through the gear of gear_ratio (so gear_ratio times finer
+ *   at the joint; on a flexible joint it reads the rotor, not the link), a velocity the drive estimates from one encoder's differences and
  *   low-passes (first order, exact discretisation), and the measured torque with Gaussian noise;
  *   which encoder reports the position and which feeds the velocity is configured;
  * - actuation: a transport latency from the command's arrival to the current loop, and the
@@ -52,10 +52,11 @@ void sim_servo_init(sim_servo_t *s);
  * ripple at q. Advances the loop's state to the period's end. */
 double sim_servo_period_torque(const sim_servo_config_t *c, sim_servo_t *s, double command, double switch_s,
                                double period_s, double q);
-/* What the drive reports at a SYNC: position, velocity, torque, from the true q, qd and the
- * torque acting (the current loop's output). */
+/* What the drive reports at a SYNC: position, velocity, torque, from the true link angle q and
+ * speed qd, the motor's qm and qmd (in joint units: the rotor's on a flexible joint, else q and
+ * qd) and the torque acting (the current loop's output). */
 void sim_servo_measure(const sim_servo_config_t *c, sim_servo_t *s, sim_rng_t *noise, double q, double qd,
-                       double period_s, double *q_out, double *qd_out, double *tau_out);
+                       double qm, double qmd, double period_s, double *q_out, double *qd_out, double *tau_out);
 /* A standard normal value (Box-Muller on the stream's doubles). */
 double sim_rng_normal(sim_rng_t *r);
 

@@ -155,16 +155,27 @@ def table(result: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def _sim_runs(bus: str, repeats: int, duration: float, tmp: Path) -> tuple[list[dict[str, Any]], dict[str, float]]:
-    """The default run on this bus, repeated; one more with --profile (where a period's time goes)."""
+# The arm with flexible joints (gen/drivetrain.py) as a real one is run: its drives' velocity from
+# the motor encoder (collocated: the paper's weights and a PD on link sensors alone ring its gears),
+# and pd at the controller's default gains, whose bandwidth stays below the first resonance.
+FLEXIBLE = {"flexible": True}
+
+
+def _sim_runs(bus: str, repeats: int, duration: float, tmp: Path, flexible: bool = False,
+              label: str = "") -> tuple[list[dict[str, Any]], dict[str, float]]:
+    """The default run on this bus (or the flexible arm's, FLEXIBLE), repeated; one more with
+    --profile (where a period's time goes)."""
+    from host_sim.drive_model import REALISTIC, DriveModel
     from tools.run.hil import HilOptions, run_hil
 
     runs, breakdown = [], {}
-    for i in tqdm(range(repeats + 1), desc=bus, unit="run"):
+    for i in tqdm(range(repeats + 1), desc=label or bus, unit="run"):
         profile = i == repeats  # the last run measures where the time goes (costs a little)
-        d = tmp / f"{bus}-{i}"
+        d = tmp / f"{label or bus}-{i}"
         # the arm protocol: its simulator loop (sim_loop.c) is the one --profile breaks down
-        run = run_hil(HilOptions(out=d, duration_s=duration, method="pm", bus=bus, protocol="arm",
+        run = run_hil(HilOptions(out=d, duration_s=duration, method="pd" if flexible else "pm", bus=bus, protocol="arm",
+                                 uncertainty=FLEXIBLE if flexible else None,
+                                 drives=REALISTIC if flexible else DriveModel(),
                                  sim_args=("--profile",) if profile else ()))
         if run["results"]["result"] != "ok":
             raise RuntimeError(f"bench run {i} ({bus}) failed: {run['results']['problems']}")
@@ -178,22 +189,32 @@ def _sim_runs(bus: str, repeats: int, duration: float, tmp: Path) -> tuple[list[
     return runs, breakdown
 
 
-def bench_sim(out: Path, quick: bool = False) -> dict[str, Any]:
-    """The default run in software in the loop and in lockstep HIL, repeated; the per-period
-    breakdown of each; the bare-MuJoCo limit of a period."""
-    import statistics
+def _bare_mj_step_us(plant: bool) -> float:
+    """MuJoCo alone, mj_step on the arm (or its plant with flexible joints): the limit of a period."""
+    from host_sim.launch import PLANT_FILE, sim_binary
+    from tools.build.arm import prepared_model
 
-    from host_sim.launch import sim_binary
+    model = prepared_model(build_dir("release"))
+    argv = [str(sim_binary("release")), "--model", str(model), "--bench-mj-step", "20000"]
+    r = subprocess.run(argv + (["--plant", str(model.parent / PLANT_FILE)] if plant else []), capture_output=True,
+                       text=True, check=True)
+    return float(json.loads(r.stdout)["mj_step_ns"]) / 1e3
+
+
+def bench_sim(out: Path, quick: bool = False) -> dict[str, Any]:
+    """The default run in software in the loop (on the rigid arm and on the arm with flexible
+    joints) and in lockstep HIL, repeated; the per-period breakdown of each; the bare-MuJoCo limit
+    of a period on the same model."""
+    import statistics
 
     build("release")
     repeats, duration = (1, 1.0) if quick else (5, 10.0)
-    r = subprocess.run([str(sim_binary("release")), "--bench-mj-step", "20000"], capture_output=True, text=True,
-                       check=True)
-    mj_step_us = json.loads(r.stdout)["mj_step_ns"] / 1e3
+    bare = {False: _bare_mj_step_us(False), True: _bare_mj_step_us(True)}
     modes: dict[str, Any] = {}
     with tempfile.TemporaryDirectory() as tmp:
-        for bus in ("sil", "udp"):
-            runs, b = _sim_runs(bus, repeats, duration, Path(tmp))
+        for key, bus, flexible in (("sil", "sil", False), ("sil_flexible", "sil", True), ("udp", "udp", False)):
+            mj_step_us = bare[flexible]
+            runs, b = _sim_runs(bus, repeats, duration, Path(tmp), flexible, key)
             sim_side = sum(b[k] for k in ("physics", "bus_tx", "bus_rx", "telemetry"))
             cost = statistics.median(x["period_cost_us"]["mean"] for x in runs)
             factors = [x["realtime_factor"] for x in runs]
@@ -203,8 +224,9 @@ def bench_sim(out: Path, quick: bool = False) -> dict[str, Any]:
             rest = "controller_and_handoffs" if bus == "sil" else "drives_and_rest"
             breakdown = {**{k: b[k] for k in ("physics", "bus_tx", "bus_rx", "telemetry")},
                          rest: b["total"] - sim_side, "total": b["total"]}
-            modes[bus] = {
+            modes[key] = {
                 "runs": runs,
+                "bare_mj_step_us": mj_step_us,
                 "realtime_factor_median": statistics.median(factors),
                 "realtime_factor_min": min(factors),
                 "period_cost_us_mean_median": cost,
@@ -214,14 +236,17 @@ def bench_sim(out: Path, quick: bool = False) -> dict[str, Any]:
             }
     result = {
         "what": (f"the default run (pm, {duration:g} s after the 0.5 s hold), {repeats} time(s), in software in the "
-                 "loop (arm_sil: one thread, telemetry written to the log) and in lockstep HIL over UDP (arm_sim, "
-                 "arm_controller and the logger): the real-time factor after boot and the CPU time per period "
-                 "(in SIL the whole loop, over UDP the simulator's); one more run each with --profile breaks a "
-                 "period down (thread CPU time); bare mj_step: MuJoCo alone on the same model, the limit of a "
-                 "period"),
+                 "loop (arm_sil: one thread, telemetry written to the log; on the rigid arm, and on the arm with "
+                 "flexible joints, where pd runs at its default gains with realistic drives) and in lockstep HIL over UDP (arm_sim, arm_controller and the logger): the "
+                 "real-time factor after boot and the CPU time per period (in SIL the whole loop, over UDP the "
+                 "simulator's); one more run each with --profile breaks a period down (thread CPU time); bare "
+                 "mj_step: MuJoCo alone on the same model (the plant with flexible joints for those runs), the limit "
+                 "of a period"),
         "quick": quick,
-        "bare_mj_step_us": mj_step_us,
+        "bare_mj_step_us": bare[False],
+        "bare_mj_step_flexible_us": bare[True],
         "sil": modes["sil"],
+        "sil_flexible": modes["sil_flexible"],
         "lockstep_udp": modes["udp"],
         "sil_over_lockstep": modes["sil"]["realtime_factor_median"] / modes["udp"]["realtime_factor_median"],
     }
@@ -230,8 +255,10 @@ def bench_sim(out: Path, quick: bool = False) -> dict[str, Any]:
 
 
 def sim_table(r: dict[str, Any]) -> str:
-    lines = [f"bare mj_step on the same model: {r['bare_mj_step_us']:.2f} us (the limit of a period)"]
-    for key, name in (("sil", "software in the loop"), ("lockstep_udp", "lockstep HIL over UDP")):
+    lines = [f"bare mj_step on the same model: {r['bare_mj_step_us']:.2f} us, with flexible joints "
+             f"{r['bare_mj_step_flexible_us']:.2f} us (the limit of a period)"]
+    for key, name in (("sil", "software in the loop"), ("sil_flexible", "software in the loop, flexible joints"),
+                      ("lockstep_udp", "lockstep HIL over UDP")):
         m = r[key]
         lines.append(f"{name}: {m['realtime_factor_median']:.1f}x real time (median, min {m['realtime_factor_min']:.1f}x, "
                      f"{len(m['runs'])} run(s)); a period {m['period_cost_us_mean_median']:.2f} us = "

@@ -9,7 +9,9 @@ A second signal kills what is still alive.
 
 A SIGKILL of armctl cannot be caught, so each child also asks the kernel for a SIGTERM when
 armctl goes (PR_SET_PDEATHSIG): the controller then stops the arm as above and the others
-follow, instead of running on and taking the run slot's ports from a resumed study.
+follow. That takes them a while (the controller's safe stop), so each child also holds the run
+slot's lock (its file descriptor, inherited: tools/run/slots.py): the slot is free again only when
+the last process of the run on it has ended, never while one still uses its ports.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ _libc = ctypes.CDLL(None, use_errno=True)
 
 _live: list[tuple[str, subprocess.Popen[Any]]] = []
 _lock = threading.Lock()
+_held = threading.local()  # .fds: the run slot locks this thread holds (hold_for_children)
 interrupted: int | None = None  # the signal that stopped this armctl, if one did
 
 
@@ -41,6 +44,7 @@ def spawn(role: str, args: list[str], watches_parent: bool = False, **kw: Any) -
     if interrupted is not None:
         raise InterruptedError(f"armctl was stopped by signal {interrupted}: not starting the {role}")
     kw.setdefault("process_group", 0)
+    kw["pass_fds"] = (*kw.get("pass_fds", ()), *getattr(_held, "fds", ()))
     if watches_parent and kw.get("preexec_fn") is None:
         kw.pop("preexec_fn", None)
         kw["env"] = {**(kw.get("env") or os.environ), PARENT_PID_ENV: str(os.getpid())}
@@ -50,6 +54,16 @@ def spawn(role: str, args: list[str], watches_parent: bool = False, **kw: Any) -
     with _lock:
         _live.append((role, p))
     return p
+
+
+def hold_for_children(fd: int) -> None:
+    """Every child this thread spawns from now on holds fd (a run slot's lock) until it exits."""
+    os.set_inheritable(fd, True)
+    _held.fds = (*getattr(_held, "fds", ()), fd)
+
+
+def release_for_children(fd: int) -> None:
+    _held.fds = tuple(x for x in getattr(_held, "fds", ()) if x != fd)
 
 
 def dies_with_parent(parent: int, then: Callable[[], None] | None = None) -> Callable[[], None]:

@@ -402,8 +402,9 @@ def table(run: dict[str, Any]) -> str:
         est = r.get("estimation_error_rms")
         est_s = f"{est[i]:>14.4f}" if est else f"{'-':>14}"
         lines.append(f"{name:<14}{r['tracking_max_abs_deg'][i]:>15.4f}{r['tracking_rms_deg'][i]:>14.4f}{est_s}")
-    lines.append(f"result {r['result']}: method {r['method']}, controller {r['final_state']} after {r['steps']} of "
-                 f"{r['steps_requested']} periods")
+    # a run whose controller died has no final state nor step count: its result says so
+    lines.append(f"result {r['result']}: method {r.get('method', '?')}, controller {r.get('final_state', 'unknown')} "
+                 f"after {r.get('steps', '?')} of {r.get('steps_requested', '?')} periods")
     for why in r.get("verdict_reasons", []):
         lines.append(f"  {why}")
     cf, sf = t["controller_frames"], t["simulator_frames"]

@@ -60,7 +60,7 @@ UNKEYED_PROTOCOL = "arm"  # RunSpec.key leaves it out: runs kept before --protoc
 
 def synthesize_cached(cfg: Any) -> Any:
     """gen.synth's synthesize(cfg), remembering the last few designs: a tuning checks a trial's
-    design (tools/study/tuning.py design_check) and then its software-in-the-loop runs emit the same one,
+    design (tools/study/tuning.py synthesized) and then its software-in-the-loop runs emit the same one,
     so it is solved once. The key is the config's fully expanded inputs (what the manifest records
     and hashes), so equal keys are the same design. Call with SYNTH_LOCK held."""
     from gen.synth.pipeline import synthesize

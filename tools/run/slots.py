@@ -1,6 +1,9 @@
 """Run slots: each HIL run on this host holds one, and with it bus and telemetry ports no other
 run uses at the same time. Guaranteed, not random: a slot is an exclusive lock (flock) on a file
-in /run/lock (or the temp dir), held for the run and released when it ends or its process dies.
+in /run/lock (or the temp dir), held for the run by armctl and by every process it starts for the
+run (they inherit the lock's descriptor: tools/run/procs.py), so it is free again only when the
+last of them has ended: a run whose armctl was killed keeps its slot until its controller, which
+stops the arm first, has exited too.
 
 Slot i owns UDP ports CAN_BASE + 8 i .. + 3 (one per bus, up to four) and LCM_BASE + i, in ranges
 that tests which pick their own ports (44000-44999) never touch.
@@ -16,6 +19,8 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+
+from tools.run import procs
 
 MAX_SLOTS = 64
 CAN_BASE = 46000  # .. 46511
@@ -92,10 +97,12 @@ def acquire_slot(timeout_s: float = 600.0, prefer: Callable[[int], bool] | None 
                 fcntl.flock(fd, fcntl.LOCK_UN)
                 os.close(fd)
                 continue
+            procs.hold_for_children(fd)
             try:
                 yield Slot(i)
             finally:
-                fcntl.flock(fd, fcntl.LOCK_UN)
+                procs.release_for_children(fd)
+                # closed, not unlocked: an unlock would free the slot for children that hold it still
                 os.close(fd)
             return
         if time.monotonic() > deadline:

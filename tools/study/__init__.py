@@ -33,7 +33,7 @@ from tools.run.slots import default_jobs
 from tools.study.stats import paired, summary
 from tools.study.config import METHODS, StudyConfig, StudyConfigError, Trajectory, for_arm, load
 from tools.study.pairs import pair_workers, tune_pairs
-from tools.study.tuning import REFUSED_SCORE, TuneSetup, batch_size, storage_url, trial_spec
+from tools.study.tuning import REFUSED_SCORE, TuneSetup, batch_size, method_bandwidth, storage_url, trial_spec
 
 DEFAULT_CONFIG = REPO / "tools" / "studies" / "paper.toml"
 BASELINES = ("tde", "usde-smc", "pd", "pm-paper-weights", "pm-paper", "gh2")
@@ -139,7 +139,8 @@ def setup_for(cfg: StudyConfig, arm: ArmRef, out: Path, jobs: int, cluster: Clus
     traj_args, _, notes = trajectory_for(info, cfg.tuning_trajectory, "tuning trajectory", bdir,
                                          scenario_friction(cfg), TUNING_SPEEDUP)
     base = (bdir / "generated" / "arm" / "design.toml").read_text()
-    return TuneSetup(cfg, _arm_args(arm), base, traj_args, out, jobs, cluster, bus), info, notes
+    return TuneSetup(cfg, _arm_args(arm), base, traj_args, out, jobs, cluster, bus,
+                     resonance_hz=float(info["first_resonance_hz"]), period_s=1.0 / float(info["loop_rate_hz"])), info, notes
 
 
 def tuning_file(cfg: StudyConfig, arm: ArmRef, preset: str = "release") -> Path:
@@ -243,13 +244,17 @@ def procedure(cfg: StudyConfig, trials: int | None = None, jobs: int | None = No
             f"than {tol} over the last {cfg.plateau} trials (converged), or {trials or cfg.cap} trials (capped; "
             f"the same cap for every method, widening rounds included), in batches of {batch} (at most --jobs); "
             f"tuning seeds {cfg.tuning_seeds} and the tuning trajectory ({cfg.tuning_duration_s:g} s), never the "
-            f"study's; objective: {cfg.tuning_objective}; a trial with a run that failed, diverged or was "
+            f"study's; objective: {cfg.tuning_objective}; a candidate whose closed-loop bandwidth is not below the "
+            f"arm's first joint resonance is refused like a design the synthesis refuses (scoring "
+            f"{REFUSED_SCORE:g} plus its bandwidth over the resonance); a trial with a run that failed, diverged or was "
             f"torque-limited scores 1000 x (1 + the share of the trajectory not covered) plus the tracking error it "
             f"achieved, its share of time at the torque limit and its share of failed seeds (so failed trials rank, "
             f"always behind any that ended well; {REFUSED_SCORE:g} when the synthesis refused the weights); a best "
-            f"value at the edge of its range widens that range tenfold in a new round (at most {cfg.widen}). The "
-            f"pick must also run ok on the held-out validation seed(s) {cfg.validation_seeds}, else the next best "
-            f"(of the best {cfg.validation_tries}) is taken. pm, pm-paper and gh2 are tuned through their synthesis "
+            f"value at the edge of its range widens that range tenfold in a new round (at most {cfg.widen}; never past "
+            f"the arm's first resonance). The pick must have run ok on every tuning seed and must also run ok on the "
+            f"held-out validation seed(s) {cfg.validation_seeds}, there also with the gears {cfg.robust_stiffness} "
+            f"times as stiff (flexible scenarios) and the payload at both ends of its range (scenarios with one), "
+            f"else the next best (of the best {cfg.validation_tries}) is taken. pm, pm-paper and gh2 are tuned through their synthesis "
             f"weights (each candidate synthesised: loaded at run time in SIL, built into the firmware over a CAN bus); pm-paper-weights is the paper's own weights, not tuned.")
 
 
@@ -308,8 +313,11 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
         "description": cfg.description,
         "arm": {"name": info["name"], "model": info["model"], "arm_file": info["arm_file"],
                 "n_joints": info["n_joints"], "joint_names": [j["name"] for j in info["joints"]],
-                "model_hash": info["model_hash"], "is_default": arm.is_default, "buses": info["buses"]},
+                "model_hash": info["model_hash"], "is_default": arm.is_default, "buses": info["buses"],
+                "drivetrain": info["drivetrain"], "first_resonance_hz": info["first_resonance_hz"],
+                "payload": info["payload"]},
         "seeds": seed_list,
+        "rate_hz": info["loop_rate_hz"],
         "duration_s": duration,
         "hold_s": cfg.hold_s,
         "trajectory": traj_used,
@@ -323,6 +331,9 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
                                          tuning[s], per[s], methods, info["n_joints"])
                       for s in scen_names},
     }
+    for s in scen_names:  # each pick's closed-loop bandwidth, beside the arm's first resonance
+        study["scenarios"][s]["bandwidth_hz"] = {
+            m: method_bandwidth(setup, m, tuning[s][m]["knobs"] if m in tuning[s] else {}) for m in methods}
     write_json_atomic(out / "study.json", study)
     from tools.study.report import write_report
 

@@ -17,6 +17,7 @@ from typing import Any
 
 from gen.lib import toml_input
 from gen.lib.one_line import one_line
+from gen.lib.params import param
 from host_sim.drive_model import REALISTIC, DriveModel
 from host_sim.uncertainty import UncertaintyConfig
 
@@ -56,10 +57,15 @@ KNOB_FLOOR = {("usde-smc", "zeta"): USDE_SMC_MIN_ZETA}
 MAX_JOINTS = 16
 DRIVE_PRESETS = {"ideal": DriveModel(), "realistic": REALISTIC}
 
-# A scenario's drives speak this unless it says `protocol = "canopen"`: the arm protocol, not
-# armctl hil's default (CiA 402), because the scenarios emulate the bus's timing (bus_timing), which
-# the emulated CiA 402 drives do not model; its tuning keys leave it out.
-STUDY_PROTOCOL = "arm"
+# A scenario's drives speak this unless it says `protocol = "arm"`: CiA 402, what every real drive
+# and armctl hil speak, with its units and per-mille torque resolution; its tuning keys leave it out.
+STUDY_PROTOCOL = "canopen"
+PROTOCOLS = ("arm", "canopen")
+# A search range's top may be the arm's first joint resonance (arm.json first_resonance_hz, in
+# rad/s): no gain is searched past what the gears let a real arm take, and no widening passes it.
+FIRST_RESONANCE = "first_resonance"
+# A scenario's payload: "rated" is uniform from 0 to the arm's rated payload (arm.json), per seed.
+RATED = "rated"
 
 
 class StudyConfigError(ValueError):
@@ -112,12 +118,28 @@ class Scenario:
 
 @dataclass
 class Space:
-    """One method's search space: log-uniform ranges, and categorical choices."""
+    """One method's search space: log-uniform ranges, and categorical choices. A range whose top
+    is the arm's first resonance is in `to_resonance` until for_arm() makes it a number and a
+    ceiling that widening never passes."""
     ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
     choices: dict[str, list[str]] = field(default_factory=dict)
+    to_resonance: set[str] = field(default_factory=set)
+    ceilings: dict[str, float] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
+        if self.to_resonance:
+            raise RuntimeError(f"the range of {sorted(self.to_resonance)} reaches the arm's first resonance: "
+                               "study_config.for_arm first")
         return {**{k: list(v) for k, v in self.ranges.items()}, **self.choices}
+
+    def for_resonance(self, omega: float) -> "Space":
+        ranges = dict(self.ranges)
+        for k in self.to_resonance:
+            if not ranges[k][0] < omega:
+                raise StudyConfigError(f"tuning.space: {k}'s range [{ranges[k][0]:g}, {FIRST_RESONANCE}] is empty on "
+                                       f"this arm, whose first resonance is {omega:g} rad/s")
+            ranges[k] = (ranges[k][0], omega)
+        return replace(self, ranges=ranges, to_resonance=set(), ceilings={k: omega for k in self.to_resonance})
 
 
 @dataclass
@@ -144,6 +166,7 @@ class StudyConfig:
     startup: int                  # TPE's random trials before it models (per round)
     validation_seeds: list[int]   # a pick must run ok on each (held out: neither tuned on nor the study's)
     validation_tries: int         # the best this many trials are tried in turn on the validation seeds
+    robust_stiffness: list[float]  # a pick must also run ok with the gears this stiff (flexible scenarios)
     spaces: dict[str, Space]
     tuning_file: Path             # the tuning record (for the bundled arm; other arms: their build folder)
     raw: dict[str, Any] = field(default_factory=dict)
@@ -210,6 +233,8 @@ def _scenario(name: str, d: Any) -> Scenario:
     if "seed" in unc:
         raise StudyConfigError(f"{where}.uncertainty.seed: the study's seeds set it")
     per_joint = {k: _per_joint(unc.pop(k), f"{where}.uncertainty.{k}") for k in PER_JOINT_FIELDS if k in unc}
+    if unc.get("payload_kg") == RATED:
+        per_joint["payload_kg"] = unc.pop("payload_kg")
     try:
         UncertaintyConfig.from_dict({**unc, "seed": 0}, f"{where}.uncertainty")
     except (TypeError, ValueError) as exc:
@@ -227,8 +252,8 @@ def _scenario(name: str, d: Any) -> Scenario:
             raise StudyConfigError(str(exc)) from exc
     bus_timing = _get(d, "bus_timing", where, bool, False)
     protocol = _get(d, "protocol", where, str, STUDY_PROTOCOL)
-    if protocol not in ("arm", "canopen"):
-        raise StudyConfigError(f"{where}.protocol: '{protocol}' is not arm or canopen")
+    if protocol not in PROTOCOLS:
+        raise StudyConfigError(f"{where}.protocol: '{protocol}' is not {' or '.join(PROTOCOLS)}")
     return Scenario(name, str(d.get("description", "")), unc, drives, bus_timing, per_joint, protocol=protocol)
 
 
@@ -292,9 +317,12 @@ def for_arm(cfg: "StudyConfig", info: dict[str, Any]) -> "StudyConfig":
     for name, sc in cfg.scenarios.items():
         unc = dict(sc.uncertainty)
         for k, spec in sc.per_joint.items():
-            unc[k] = _values_for_arm(spec, info, f"scenario.{name}.uncertainty.{k}")
+            unc[k] = ([0.0, float(info["payload"]["rated_kg"])] if spec == RATED else
+                      _values_for_arm(spec, info, f"scenario.{name}.uncertainty.{k}"))
         scenarios[name] = replace(sc, uncertainty=unc, resolved=True)
-    return replace(cfg, scenarios=scenarios)
+    omega = 2.0 * math.pi * float(info["first_resonance_hz"])
+    spaces = {m: sp.for_resonance(omega) for m, sp in cfg.spaces.items()}
+    return replace(cfg, scenarios=scenarios, spaces=spaces)
 
 
 def _space(method: str, d: Any) -> Space:
@@ -322,10 +350,16 @@ def _space(method: str, d: Any) -> Space:
                 raise StudyConfigError(f"{where}.form: a list of \"single\" and/or \"split\", got {v!r}")
             sp.choices["form"] = list(v)
             continue
+        to_resonance = isinstance(v, list) and len(v) == 2 and v[1] == FIRST_RESONANCE
+        if to_resonance:
+            v = [v[0], math.inf]
         if (not isinstance(v, list) or len(v) != 2 or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
-                                                              and math.isfinite(x) and x > 0 for x in v) or not v[0] < v[1]):
-            raise StudyConfigError(f"{where}.{k}: expected [low, high] with 0 < low < high (searched on a log scale), "
-                                   f"got {v!r}")
+                                                              and x > 0 for x in v) or not math.isfinite(v[0])
+                or not v[0] < v[1] or (math.isinf(v[1]) and not to_resonance)):
+            raise StudyConfigError(f"{where}.{k}: expected [low, high] with 0 < low < high (searched on a log scale; "
+                                   f"high may be \"{FIRST_RESONANCE}\", the arm's, in rad/s), got {v!r}")
+        if to_resonance:
+            sp.to_resonance.add(k)
         floor = KNOB_FLOOR.get((method, k))
         if floor is not None and v[0] < floor:
             raise StudyConfigError(f"{where}.{k}: its structure reaches no lower than {floor:g} "
@@ -367,7 +401,7 @@ def load(path: Path) -> StudyConfig:
         raise StudyConfigError(f"study.scenarios: {missing or 'none'} not defined (defined: {', '.join(scenarios)})")
     tuning = _get(data, "tuning", "study", dict)
     t_known = {"seeds", "duration_s", "amp", "freq_hz", "arm", "objective", "cap", "plateau", "tolerance", "batch",
-               "widen", "startup", "validation_seeds", "validation_tries", "file", "space"}
+               "widen", "startup", "validation_seeds", "validation_tries", "robust_stiffness", "file", "space"}
     t_unknown = set(tuning) - t_known
     if t_unknown:
         raise StudyConfigError(f"tuning: unknown field(s) {sorted(t_unknown)} (known: {', '.join(sorted(t_known))})")
@@ -415,10 +449,24 @@ def load(path: Path) -> StudyConfig:
         startup=_whole(tuning, "startup", "tuning", 1, 10000, 8),
         validation_seeds=list(vseeds),
         validation_tries=_whole(tuning, "validation_tries", "tuning", 1, 1000, 5),
+        robust_stiffness=_stiffness_scales(tuning.get("robust_stiffness", [])),
         spaces=spaces,
         tuning_file=path.parent / file_name,
         raw=data,
     )
+
+
+def _stiffness_scales(v: Any) -> list[float]:
+    """[tuning] robust_stiffness: the gear stiffness scales a pick must also run ok at."""
+    p = param("simulator", "gear-stiffness-scale")
+    if not isinstance(v, list) or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
+        raise StudyConfigError(f"tuning.robust_stiffness: a list of gear stiffness scales, got {v!r}")
+    for i, x in enumerate(v):
+        try:
+            p.check(x, f"tuning.robust_stiffness[{i}]")
+        except ValueError as exc:
+            raise StudyConfigError(str(exc)) from exc
+    return [float(x) for x in v]
 
 
 def usde_smc_gains(wn: float, zeta: float) -> tuple[float, float]:

@@ -17,13 +17,28 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from tools.run.telemetry_log import read_log  # noqa: E402
+from tools.study.config import METHODS  # noqa: E402
 from tools.study.report import ESTIMATING, fig_name  # noqa: E402
 
 
+ENVELOPE_S = 0.1  # the tracking figure draws each method's max |e| over this trailing window
+
+
 def colour_of(study: dict[str, Any]) -> dict[str, Any]:
-    """One colour per method, the same in every figure (the config's method order)."""
+    """One colour per method, the same in every figure of every study: by its place in the table
+    of study methods (tools/study/config.py METHODS), whichever of them a study runs."""
     cmap = plt.get_cmap("tab10")
-    return {m: cmap(i % 10) for i, m in enumerate(study["methods"])}
+    order = list(METHODS)
+    return {m: cmap((order.index(m) if m in order else len(order) + i) % 10) for i, m in enumerate(study["methods"])}
+
+
+def envelope(x: np.ndarray, window: int) -> np.ndarray:
+    """max |x| over the trailing `window` samples: a band of sensor noise around zero becomes one
+    line at its height, and lines of methods that differ stay apart."""
+    from scipy.ndimage import maximum_filter1d
+
+    w = max(1, min(window, len(x)))
+    return maximum_filter1d(np.abs(x), size=w, origin=(w - 1) // 2, mode="nearest")
 
 
 def _series(run_dir: Path, hold: float) -> dict[str, np.ndarray]:
@@ -66,11 +81,13 @@ def _time_figures(out: Path, study: dict[str, Any], scenario: str) -> list[str]:
         r = runs[m][0].get("result") if runs.get(m) else None
         return m if r == "ok" else f"{m} ({r})"
 
-    def finish(fig: Any, axes: Any, title: str, kind: str) -> None:
+    def finish(fig: Any, axes: Any, title: str, kind: str, at: Any = None) -> None:
         for m in series:
             if runs.get(m) and runs[m][0].get("result") != "ok":  # where it stopped or ended badly
-                for ax in axes:
+                for j, ax in enumerate(axes):
                     ax.axvline(series[m]["t"][-1], color=colour[m], lw=0.8, ls=":")
+                    if at is not None:  # and a cross on its line, where it ended
+                        ax.plot([series[m]["t"][-1]], [at(m, j)], marker="X", ms=8, color=colour[m], mec="k", zorder=5)
         axes[0].set_title(title + (f"; {', '.join(empty)}" if empty else ""), fontsize=9)
         axes[-1].set_xlabel("t (s)")
         made.append(_save(fig, out / fig_name(kind, scenario), tight=False))
@@ -94,16 +111,19 @@ def _time_figures(out: Path, study: dict[str, Any], scenario: str) -> list[str]:
         axes[0].legend(loc="upper right", fontsize=7, ncol=len(est))
         finish(fig, axes, f"Estimation error w - w_hat (rad/s^2), {scenario} (cf. the paper's Fig. 7)",
                "estimation_error")
-    # |e| on a log scale: methods whose errors differ a hundredfold all stay visible
+    # the envelope of |e| on a log scale: methods whose errors differ a hundredfold all stay visible,
+    # and none dissolves into a band of noise that crosses zero
     fig, axes = _joint_column(n)
+    env = {m: np.maximum(np.degrees(np.stack([envelope(sr["e"][:, j], int(ENVELOPE_S * study.get("rate_hz", 1000.0)))
+                                              for j in range(n)], axis=1)), 1e-6) for m, sr in series.items()}
     for m, sr in series.items():
         for j in range(n):
-            axes[j].semilogy(sr["t"], np.maximum(np.degrees(np.abs(sr["e"][:, j])), 1e-6), lw=0.7,
-                             color=colour[m], label=label(m))
+            axes[j].semilogy(sr["t"], env[m][:, j], lw=1.0, color=colour[m], label=label(m))
     for j in range(n):
         axes[j].set_ylabel(f"|e{j + 1}| (deg)")
     axes[0].legend(loc="upper right", fontsize=7, ncol=min(len(series), 4))
-    finish(fig, axes, f"Tracking error |e|, {scenario} (cf. the paper's Fig. 8)", "tracking_error")
+    finish(fig, axes, f"Tracking error: max |e| over {ENVELOPE_S * 1e3:g} ms, {scenario} (cf. the paper's Fig. 8); "
+           "x: where a run that did not end ok stopped", "tracking_error", at=lambda m, j: env[m][-1, j])
     return made
 
 

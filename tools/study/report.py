@@ -229,6 +229,40 @@ def _trajectory_lines(study: dict[str, Any]) -> list[str]:
             + "; ".join(f"{n} a {a:g} rad, f {f:g} Hz" for n, a, f in zip(names, t["amp"], t["freq_hz"])) + "."]
 
 
+def _drivetrain_lines(study: dict[str, Any]) -> list[str]:
+    """The arm's joints as the simulator makes them (gen/drivetrain.py), and each one's first
+    resonance at home: what bounds the gains a real arm survives."""
+    arm = study["arm"]
+    dt = arm.get("drivetrain")
+    if not dt:
+        return []
+    rows = [[j["name"], str(j["size"]), f"{j['stiffness']:.3g}", f"{j['damping']:.3g}", f"{j['rotor_inertia']:.3g}",
+             f"{j['link_inertia_at_home']:.3g}", f"{j['resonance_locked_hz']:.1f}",
+             f"{j['resonance_free_hz']:.1f}" if j["resonance_free_hz"] is not None else "-",
+             "flexible" if j["flexible"] else f"rigid: {j['rigid_because']}"] for j in dt]
+    pay = arm.get("payload") or {}
+    return ["## The arm's joints", "",
+            "Each joint of the flexible scenarios is a rotor behind its gear, a strain-wave gear's spring and damper, "
+            "then the link (gen/drivetrain.py); the controller's nominal model stays rigid. First resonances at the "
+            "home pose, each joint on its own (the others held): motor locked sqrt(K / J_link), motor free "
+            "sqrt(K (1 / J_link + 1 / J_rotor)).", "",
+            _md_table(["joint", "gear size", "stiffness (N m/rad)", "damping (N m s/rad)", "rotor inertia (kg m^2)",
+                       "link inertia at home (kg m^2)", "resonance, motor locked (Hz)", "motor free (Hz)", "simulated"],
+                      rows), "",
+            f"The arm's first resonance: {arm['first_resonance_hz']:.1f} Hz ({2 * np.pi * arm['first_resonance_hz']:.0f} "
+            "rad/s). Every tuned pick's closed-loop bandwidth is kept below it (each scenario's tuning table). Rated "
+            f"payload {pay.get('rated_kg', 0):g} kg, at {pay.get('at', '-')}.", ""]
+
+
+def _bandwidth_cell(sc: dict[str, Any], m: str, resonance: float | None) -> str:
+    bw = (sc.get("bandwidth_hz") or {}).get(m)
+    if bw is None:
+        return "-"
+    if not resonance:
+        return f"{bw:.3g} Hz"
+    return f"{bw:.3g} Hz ({bw / resonance:.2f}x the first resonance)"
+
+
 def fig_name(kind: str, scenario: str) -> str:
     """fig_KIND_SCENARIO.png, the scenario's name made a file name."""
     return f"fig_{kind}_{''.join(c if c.isalnum() else '-' for c in scenario)}.png"
@@ -272,7 +306,8 @@ def write_report(out: Path, study: dict[str, Any], figures: bool = True) -> None
           "", *_trajectory_lines(study),
           "", f"Tuning: {study['tuning_procedure']}", "", *_confirmation(study),
           *([] if figures else ["Figures: not drawn (`--no-figures`).", ""]),
-          *(["Notes:", "", *[f"- {x}" for x in study.get("notes", [])], ""] if study.get("notes") else [])]
+          *(["Notes:", "", *[f"- {x}" for x in study.get("notes", [])], ""] if study.get("notes") else []),
+          *_drivetrain_lines(study)]
     for i, (name, sc) in enumerate(study["scenarios"].items()):
         d = sc["definition"]
         md += [f"## Scenario `{name}`", "", d["description"], "",
@@ -285,14 +320,17 @@ def write_report(out: Path, study: dict[str, Any], figures: bool = True) -> None
             md += [f"One run again on its own (SEED: one of {study['seeds']}; the same run.json results):", "", "```sh",
                    *study["commands"][name].values(), "```", ""]
         md += ["The paper's claims, with this scenario's evidence:", ""] + _claims(sc) + [""]
+        resonance = arm.get("first_resonance_hz")
         md += ["### Tuning", "", _md_table(
-            ["method", "knobs", "objective (sum L-inf, rad)", "trials", "validation", "source", "note"],
+            ["method", "knobs", "closed-loop bandwidth", "objective (worst seed's sum L-inf, rad)", "trials",
+             "validation", "source", "note"],
             [[m, f"`{ {k: (round(v, 4) if isinstance(v, float) else v) for k, v in r['knobs'].items()} }`",
-              _fmt(r["objective"]), _tuning_status(r), (r.get("validation") or {}).get("note", "-"),
-              r.get("source", ""),
+              _bandwidth_cell(sc, m, resonance), _fmt(r["objective"]), _tuning_status(r),
+              (r.get("validation") or {}).get("note", "-"), r.get("source", ""),
               r.get("edge_note") or (f"no trial ended well; the best: {r['failed']}" if r.get("failed") else "")]
              for m, r in sc["tuning"].items()]), "",
-            "pm-paper-weights: the paper's own weights (gen/configs/paper.toml), not tuned. Every trial is in "
+            "pm-paper-weights: the paper's own weights (gen/configs/paper.toml), not tuned; its closed-loop "
+            f"bandwidth: {_bandwidth_cell(sc, 'pm-paper-weights', resonance)}. Every trial is in "
             "study.json; the Optuna studies in the tuning's SQLite storage (optuna-dashboard opens it).", "",
             *images(name, "tuning"), ""]
         for metric in ("linf", "rms", "est", "power"):

@@ -3,8 +3,10 @@ trajectory for each method, per scenario.
 
 A trial is a set of knobs: a method's gains (pd, tde, usde-smc), or its synthesis weights (pm,
 pm-paper, gh2: each candidate is synthesised, refused designs score REFUSED_SCORE, and accepted
-ones are built into the firmware the trial runs). Its score is the objective over the tuning
-seeds (no ties: a failed trial scores by what it achieved).
+ones are built into the firmware the trial runs). A candidate whose closed-loop bandwidth
+(tools/study/bandwidth.py) is not below the arm's first joint resonance is refused too: no real
+arm survives it. Its score is the objective over the tuning seeds, the worst seed's (no ties: a
+failed trial scores by what it achieved).
 
 Each method and scenario runs until its best has improved by no more than [tuning] tolerance
 (1 %) over its last `plateau` trials, or until `cap` trials, the same cap for every method.
@@ -32,6 +34,7 @@ from tools.run.cluster import Cluster
 from tools.build.code_identity import code_identity
 from tools.study.design_knobs import design_text
 from tools.run.runner import SYNTH_LOCK, RunSpec, run_all, synthesize_cached
+from tools.study import bandwidth
 from tools.study.config import KNOB_FLOOR, METHODS, Scenario, Space, StudyConfig, gain_args
 
 FAILED_SCORE = 1e3  # rad: what a trial with a run that failed, diverged or hit its torque limit scores at least
@@ -51,13 +54,16 @@ class TuneSetup:
     jobs: int = 1
     cluster: Cluster | None = None
     bus: str = "sil"                  # every run's bus (tools/run/hil.py --bus)
+    resonance_hz: float = float("inf")  # the arm's first joint resonance: every pick's bandwidth stays below it
+    period_s: float = 1e-3            # the loop period
 
 
 def objective(results: list[dict[str, Any]]) -> tuple[float, str]:
     """A trial's score over its tuning seeds, lower is better, never tied unless the runs are.
 
-    Every seed's run ended well (ok, or tracking bound exceeded): the mean over the seeds of the
-    sum over joints of the L-infinity tracking error (rad), the paper's Table 2 measure.
+    Every seed's run ended well (ok, or tracking bound exceeded): the worst seed's sum over joints
+    of the L-infinity tracking error (rad), the paper's Table 2 measure: gains that hold on most
+    seeds but not all (at the edge of stability) lose to gains that hold on all.
 
     Otherwise (failed, diverged, torque-limited, ...) the trial scores by what it achieved:
         FAILED_SCORE * (1 + the mean share of the trajectory the runs did not cover)
@@ -68,7 +74,7 @@ def objective(results: list[dict[str, Any]]) -> tuple[float, str]:
     at most ~3 * FAILED_SCORE (a synthesis refusal, REFUSED_SCORE, scores more), and a trial that
     ran longer, tracked better or sat at its limit less scores better."""
     if results and all(_ended_well(r.get("results", {})) for r in results):
-        return sum(sum(r["results"]["tracking_max_abs_rad"]) for r in results) / len(results), ""
+        return max(sum(r["results"]["tracking_max_abs_rad"]) for r in results), ""
     res_all = [r.get("results", {}) for r in results]
     n = max(1, len(res_all))
     uncovered = sum(1.0 - _covered(res) for res in res_all) / n
@@ -104,8 +110,9 @@ def _covered(res: dict[str, Any]) -> float:
     return max(0.0, min(1.0, have / want))
 
 
-def design_check(text: str) -> str:
-    """'' if the synthesis accepts this design, else why not (in-process: about 0.1 s)."""
+def synthesized(text: str) -> tuple[Any, str]:
+    """The design the synthesis makes of this config, or None and why it refused it (in-process:
+    about 0.1 s)."""
     from gen.synth.config import ConfigError, load_config
     from gen.synth.lmi import SynthesisError
 
@@ -115,10 +122,43 @@ def design_check(text: str) -> str:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                synthesize_cached(load_config(Path(fh.name)))  # its SIL runs reuse the design
+                return synthesize_cached(load_config(Path(fh.name))), ""  # its SIL runs reuse the design
         except (ConfigError, SynthesisError, ValueError, ArithmeticError) as exc:
-            return f"synthesis refused it: {str(exc).splitlines()[0][:300]}"
-    return ""
+            return None, f"synthesis refused it: {str(exc).splitlines()[0][:300]}"
+
+
+def controller_values(method: str, knobs: dict[str, Any]) -> dict[str, float]:
+    """A gain method's firmware options for these knobs ({"kp": .., "kd": .., ...})."""
+    args = gain_args(method, knobs)
+    return {args[i][2:].replace("-", "_"): float(args[i + 1]) for i in range(0, len(args), 2)}
+
+
+def method_bandwidth(setup: TuneSetup, method: str, knobs: dict[str, Any]) -> float | None:
+    """A study method's closed-loop bandwidth (Hz) with these knobs; an untuned one's with its fixed
+    weights (the arm's design config); None when the synthesis refuses the design."""
+    if METHODS[method][1] is None:
+        design, _ = synthesized(setup.base_design)
+        return None if design is None else bandwidth.bandwidth_hz(
+            bandwidth.method_loop(METHODS[method][0], {}, design, setup.period_s), setup.period_s)
+    return candidate_check(setup, method, knobs)[1]
+
+
+def candidate_check(setup: TuneSetup, method: str, knobs: dict[str, Any]) -> tuple[str, float | None]:
+    """('', its closed-loop bandwidth in Hz) for a candidate the tuning may run, else (why not, the
+    bandwidth when it has one): the synthesis refused its weights, or its bandwidth is not below
+    the arm's first resonance."""
+    design = None
+    if METHODS[method][1] == "design":
+        design, why = synthesized(design_text(setup.base_design, knobs, with_estimator=method != "gh2"))
+        if design is None:
+            return why, None
+    bw = bandwidth.bandwidth_hz(bandwidth.method_loop(
+        METHODS[method][0], controller_values(method, knobs) if design is None else {}, design, setup.period_s),
+        setup.period_s)
+    if not bw < setup.resonance_hz:
+        return (f"its closed-loop bandwidth {bw:.3g} Hz is not below the arm's first resonance "
+                f"{setup.resonance_hz:.3g} Hz"), bw
+    return "", bw
 
 
 def _suggest(trial: Any, ranges: dict[str, tuple[float, float]], choices: dict[str, list[str]]) -> dict[str, Any]:
@@ -140,8 +180,10 @@ def _sampler_seed(*parts: Any) -> int:
 
 
 def trial_spec(setup: TuneSetup, method: str, scenario: Scenario, knobs: dict[str, Any], seed: int, out: Path,
-               duration_s: float, trajectory_args: list[str], keep_log: bool) -> RunSpec:
-    """The run of one method with these knobs (tuning or the study itself)."""
+               duration_s: float, trajectory_args: list[str], keep_log: bool,
+               overrides: dict[str, Any] | None = None) -> RunSpec:
+    """The run of one method with these knobs (tuning or the study itself); overrides: uncertainty
+    fields changed from the scenario's (the robust pick's variants)."""
     if scenario.per_joint and not scenario.resolved:  # it would run without its per-joint values
         raise RuntimeError(f"scenario {scenario.name}: per-joint values not made for the arm (study.setup_for)")
     firmware, how = METHODS[method]
@@ -152,7 +194,8 @@ def trial_spec(setup: TuneSetup, method: str, scenario: Scenario, knobs: dict[st
     elif how == "design":
         text = design_text(setup.base_design, knobs, with_estimator=method != "gh2")
     return RunSpec(out=str(out), method=firmware, duration_s=duration_s, controller_args=tuple(args),
-                   uncertainty={**scenario.uncertainty, "seed": seed}, drives=scenario.drives.to_dict(),
+                   uncertainty={**scenario.uncertainty, **(overrides or {}), "seed": seed},
+                   drives=scenario.drives.to_dict(),
                    bus_timing=scenario.bus_timing, design_text=text, keep_log=keep_log,
                    labels={"method": method, "scenario": scenario.name, "seed": seed, "knobs": knobs},
                    code=code_identity(), bus=setup.bus, protocol=scenario.protocol, **setup.arm_args)
@@ -196,11 +239,14 @@ def plateaued(curve: list[float], since: int, plateau: int, tolerance: float) ->
     return before - curve[-1] <= tolerance * abs(before)
 
 
-def _edges(method: str, recorded: list[dict[str, Any]], ranges: dict[str, tuple[float, float]]) -> dict[str, str]:
-    """The knobs whose best value (of these trials) sits at an edge of its range it may widen past."""
+def _edges(method: str, recorded: list[dict[str, Any]], ranges: dict[str, tuple[float, float]],
+           ceilings: dict[str, float]) -> dict[str, str]:
+    """The knobs whose best value (of these trials) sits at an edge of its range it may widen past
+    (never below a structure's floor, never above the arm's first resonance)."""
     top = min(recorded, key=lambda x: x["objective"])
     return {k: e for k, (lo, hi) in ranges.items() if (e := _at_edge(top["knobs"][k], lo, hi))
-            and not (e == "low" and KNOB_FLOOR.get((method, k)) == lo)}
+            and not (e == "low" and KNOB_FLOOR.get((method, k)) == lo)
+            and not (e == "high" and ceilings.get(k) == hi)}
 
 
 def _record_of(t: Any) -> dict[str, Any] | None:
@@ -209,19 +255,27 @@ def _record_of(t: Any) -> dict[str, Any] | None:
 
 
 def _trial_runs(setup: TuneSetup, method: str, scenario: Scenario, knob_sets: list[dict[str, Any]],
-                seeds: list[int], names: list[str]) -> list[tuple[float, str, list[dict[str, Any]]]]:
-    """Every knob set run on every seed (refused designs not run): (score, why, runs) each."""
+                seeds: list[int], names: list[str], variants: list[dict[str, Any]] | None = None) -> list[
+        tuple[float, str, list[dict[str, Any]], float | None]]:
+    """Every knob set run on every seed (refused candidates not run): (score, why, runs, bandwidth)
+    each, the runs of every variant of the scenario in turn (variants: uncertainty overrides, by
+    default the scenario as it is)."""
+    variants = variants or [{}]
     specs: list[RunSpec] = []
-    refused: dict[int, str] = {}
+    refused: dict[int, tuple[str, float | None]] = {}
+    bws: dict[int, float | None] = {}
     for i, knobs in enumerate(knob_sets):
-        if METHODS[method][1] == "design":
-            why = design_check(design_text(setup.base_design, knobs, with_estimator=method != "gh2"))
-            if why:
-                refused[i] = why
-                continue
-        for s in seeds:
-            specs.append(trial_spec(setup, method, scenario, knobs, s, setup.out / scenario.name / method / f"{names[i]}-s{s}",
-                                    setup.cfg.tuning_duration_s, setup.trajectory_args, keep_log=False))
+        why, bws[i] = candidate_check(setup, method, knobs)
+        if why:
+            refused[i] = (why, bws[i])
+            continue
+        for v, over in enumerate(variants):
+            for s in seeds:
+                tag = "" if not over else "-" + "-".join(f"{k}{x}" for k, x in sorted(over.items()))
+                specs.append(trial_spec(setup, method, scenario, knobs, s,
+                                        setup.out / scenario.name / method / f"{names[i]}-s{s}{tag}",
+                                        setup.cfg.tuning_duration_s, setup.trajectory_args, keep_log=False,
+                                        overrides=over))
     runs = run_all(specs, setup.jobs, setup.cluster)
     if procs.interrupted is not None:  # the methods tuned so far are kept
         raise procs.Interrupted(procs.interrupted)
@@ -229,11 +283,14 @@ def _trial_runs(setup: TuneSetup, method: str, scenario: Scenario, knob_sets: li
     out = []
     for i in range(len(knob_sets)):
         if i in refused:
-            out.append((REFUSED_SCORE, refused[i], []))
+            why, bw = refused[i]
+            # ranked among themselves: the nearer the resonance, the nearer a candidate that may run
+            score = REFUSED_SCORE + (bw / setup.resonance_hz if bw is not None and setup.resonance_hz > 0 else 1e3)
+            out.append((score, why, [], bw))
         else:
-            per_seed = [next(it) for _ in seeds]
+            per_seed = [next(it) for _ in seeds * len(variants)]
             score, why = objective(per_seed)
-            out.append((score, why, per_seed))
+            out.append((score, why, per_seed, bws[i]))
     return out
 
 
@@ -286,10 +343,10 @@ def tune_method(setup: TuneSetup, scenario: Scenario, method: str, trials: int |
             asked = [study.ask() for _ in range(min(batch, cap - len(scores)))]
             knob_sets = [_suggest(t, ranges, space.choices) for t in asked]
             names = [f"r{rnd}-t{len(recorded) + i:03d}" for i in range(len(asked))]
-            for t, knobs, (score, why, per_seed) in zip(asked, knob_sets, _trial_runs(
+            for t, knobs, (score, why, per_seed, bw) in zip(asked, knob_sets, _trial_runs(
                     setup, method, scenario, knob_sets, cfg.tuning_seeds, names)):
                 rec = {"trial": len(recorded), "round": rnd, "knobs": knobs, "objective": score, "failed": why or None,
-                       "runs": _run_summary(cfg.tuning_seeds, per_seed)}
+                       "bandwidth_hz": bw, "runs": _run_summary(cfg.tuning_seeds, per_seed)}
                 t.set_user_attr("record", json.dumps(rec))
                 study.tell(t, score)
                 recorded.append(rec)
@@ -297,12 +354,12 @@ def tune_method(setup: TuneSetup, scenario: Scenario, method: str, trials: int |
                 if progress:
                     progress()
             converged = plateaued(best_so_far(scores), since, cfg.plateau, cfg.tolerance)
-            if rnd < cfg.widen and len(recorded) >= cfg.plateau and _edges(method, recorded, ranges):
+            if rnd < cfg.widen and len(recorded) >= cfg.plateau and _edges(method, recorded, ranges, space.ceilings):
                 break  # its best sits at an edge after `plateau` trials: widen now, within the same cap
         if not recorded:
             break
         top = min(recorded, key=lambda x: x["objective"])
-        edges = _edges(method, recorded, ranges)
+        edges = _edges(method, recorded, ranges, space.ceilings)
         rounds.append({"round": rnd, "ranges": {k: list(v) for k, v in ranges.items()}, "trials": recorded,
                        "best": top, "at_edge": edges, "converged": converged, "storage_study": name})
         if best is None or top["objective"] <= best["objective"]:
@@ -330,45 +387,70 @@ def tune_method(setup: TuneSetup, scenario: Scenario, method: str, trials: int |
             "trials_run": len(scores), "best_so_far": best_so_far(scores), "best_by_objective": best,
             "rounds": rounds, "knobs": pick["knobs"], "objective": pick["objective"],
             "failed": pick["failed"], "edge_note": note, "validation": validation,
+            "bandwidth_hz": pick.get("bandwidth_hz"), "resonance_hz": setup.resonance_hz,
             "storage": storage_url(setup.out),
             "design_text": design_text(setup.base_design, pick["knobs"], with_estimator=method != "gh2")
             if METHODS[method][1] == "design" else None}
 
 
 def _tried_text(x: dict[str, Any]) -> str:
-    return f"round {x['round']} trial {x['trial']}: {', '.join(map(str, x['results']))}"
+    where = f" ({'; '.join(x['failed_in'])})" if x.get("failed_in") else ""
+    return f"round {x['round']} trial {x['trial']}: {', '.join(map(str, x['results']))}{where}"
+
+
+def robust_variants(cfg: StudyConfig, scenario: Scenario) -> list[dict[str, Any]]:
+    """The scenario as it is, then every corner a pick must also run ok in: each gear stiffness of
+    [tuning] robust_stiffness (a flexible scenario) with each end of the payload's range (a
+    scenario with a drawn payload)."""
+    unc = scenario.uncertainty
+    stiff = [{"gear_stiffness_scale": k} for k in cfg.robust_stiffness] if unc.get("flexible") else [{}]
+    pk = unc.get("payload_kg") or []
+    loads = [{"payload_kg": [x]} for x in dict.fromkeys(pk)] if len(pk) == 2 and pk[1] > pk[0] else [{}]
+    corners = [{**a, **b} for a in stiff for b in loads]
+    return [{}] + [c for c in corners if c]
+
+
+def _variant_text(v: dict[str, Any]) -> str:
+    return ", ".join(f"gears x{x}" if k == "gear_stiffness_scale" else f"payload {x[0]:g} kg" for k, x in v.items()) \
+        or "as the scenario is"
 
 
 def validate(setup: TuneSetup, scenario: Scenario, method: str, trials: list[dict[str, Any]],
              best: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
-    """The pick: the best trial that also runs ok on every validation seed, trying the best
-    [tuning] validation_tries trials (distinct knobs, ended well on the tuning seeds) in turn;
-    none does: the best by objective, and the record says so."""
+    """The pick: the best trial that ran ok on every tuning seed and also runs ok on every
+    validation seed, in the scenario as it is and in every robust corner (robust_variants),
+    trying the best [tuning] validation_tries such trials (distinct knobs) in turn; none does: the
+    best by objective, and the record says so."""
     cfg = setup.cfg
     seeds = cfg.validation_seeds
+    variants = robust_variants(cfg, scenario)
     if not seeds:
         return best, {"seeds": [], "note": "no validation seeds: the best by objective"}
     seen: set[str] = set()
     ranked = []
     for t in sorted(trials, key=lambda x: x["objective"]):
         k = json.dumps(t["knobs"], sort_keys=True)
-        if t["objective"] < FAILED_SCORE and k not in seen:
+        if t["objective"] < FAILED_SCORE and all(r["result"] == "ok" for r in t["runs"]) and k not in seen:
             seen.add(k)
             ranked.append(t)
     tried = []
     for rank, t in enumerate(ranked[:cfg.validation_tries]):
-        (_, why, runs), = _trial_runs(setup, method, scenario, [t["knobs"]], seeds,
-                                      [f"validate-r{t.get('round', 0)}-t{t['trial']:03d}"])
+        (_, why, runs, _), = _trial_runs(setup, method, scenario, [t["knobs"]], seeds,
+                                         [f"validate-r{t.get('round', 0)}-t{t['trial']:03d}"], variants)
         results = [r["results"].get("result") for r in runs] or ["refused"]
         ok = bool(runs) and all(x == "ok" for x in results)
+        failed_in = sorted({_variant_text(v) for i, v in enumerate(variants)
+                            for r in results[i * len(seeds):(i + 1) * len(seeds)] if r != "ok"})
         tried.append({"rank": rank, "round": t.get("round", 0), "trial": t["trial"], "objective": t["objective"],
-                      "results": results, "ok": ok, "runs": _run_summary(seeds, runs)})
+                      "results": results, "ok": ok, "failed_in": failed_in,
+                      "runs": _run_summary([s for _ in variants for s in seeds], runs)})
         if ok:
-            note = ("the best by objective ran ok on every validation seed" if rank == 0 else
-                    f"the best {rank} trial(s) by objective did not run ok on every validation seed "
+            note = ("the best by objective ran ok on every validation seed and robust corner" if rank == 0 else
+                    f"the best {rank} trial(s) by objective did not run ok on every validation seed and robust corner "
                     f"({'; '.join(_tried_text(x) for x in tried[:-1])}); "
                     f"picked the next best, round {t.get('round', 0)} trial {t['trial']}")
-            return t, {"seeds": seeds, "picked_rank": rank, "tried": tried, "note": note}
-    note = (f"none of the best {len(tried)} trial(s) ran ok on every validation seed {seeds}: kept the best by "
-            "objective" if tried else "no trial ended well on the tuning seeds: nothing to validate; kept the best")
-    return best, {"seeds": seeds, "picked_rank": None, "tried": tried, "note": note}
+            return t, {"seeds": seeds, "variants": variants, "picked_rank": rank, "tried": tried, "note": note}
+    note = (f"none of the best {len(tried)} trial(s) ran ok on every validation seed {seeds} and robust corner: "
+            "kept the best by objective, which is not robust" if tried else
+            "no trial ran ok on every tuning seed: nothing to validate; kept the best by objective, which is not robust")
+    return best, {"seeds": seeds, "variants": variants, "picked_rank": None, "tried": tried, "note": note}

@@ -26,7 +26,7 @@ static int open_arm(sim_arm_t *a, const case_t *c)
         u.coulomb[j] = c->coulomb;
     }
     char err[600];
-    if (sim_arm_open(a, ARM_TEST_MODEL, "home", 1, &u, err, sizeof(err)) != 0) {
+    if (sim_arm_open(a, ARM_TEST_MODEL, NULL, "home", 1, &u, err, sizeof(err)) != 0) {
         CHECK_MSG(0, "%s", err);
         return -1;
     }
@@ -73,7 +73,7 @@ static void parametric_error_takes_the_nominal_forward_pass(void)
     u.mass_error = 0.1;
     sim_arm_t a;
     char err[600];
-    CHECK(sim_arm_open(&a, ARM_TEST_MODEL, "home", 1, &u, err, sizeof(err)) == 0);
+    CHECK(sim_arm_open(&a, ARM_TEST_MODEL, NULL, "home", 1, &u, err, sizeof(err)) == 0);
     CHECK(!a.w_from_true_arm); /* other links: the nominal model's M is not the true one's */
     sim_arm_close(&a);
 }

@@ -23,7 +23,7 @@ static void ideal_drive_acts_at_once_and_reports_the_truth(void)
     double q, qd, tau;
     sim_rng_t r;
     sim_rng_seed(&r, 1);
-    sim_servo_measure(&c, &s, &r, 0.123456789, -0.5, T, &q, &qd, &tau);
+    sim_servo_measure(&c, &s, &r, 0.123456789, -0.5, 0.123456789, -0.5, T, &q, &qd, &tau);
     CHECK(q == 0.123456789 && qd == -0.5 && tau == 10.0);
 }
 
@@ -79,15 +79,15 @@ static void encoder_quantises_and_velocity_comes_from_differences(void)
     sim_rng_t r;
     sim_rng_seed(&r, 1);
     double q, qd, tau;
-    sim_servo_measure(&c, &s, &r, 10.4 * count, 0.7, T, &q, &qd, &tau);
+    sim_servo_measure(&c, &s, &r, 10.4 * count, 0.7, 10.4 * count, 0.7, T, &q, &qd, &tau);
     CHECK(near(q, 10.0 * count, 1e-15) && qd == 0.7); /* the first sample: no difference yet */
-    sim_servo_measure(&c, &s, &r, 13.6 * count, 0.7, T, &q, &qd, &tau);
+    sim_servo_measure(&c, &s, &r, 13.6 * count, 0.7, 13.6 * count, 0.7, T, &q, &qd, &tau);
     CHECK(near(q, 14.0 * count, 1e-15));
     CHECK(near(qd, 4.0 * count / T, 1e-9));
     c.velocity_filter_hz = 100.0; /* low-passed: a step of the raw estimate moves it by 1 - e^(-2 pi f T) */
     sim_servo_init(&s);
-    sim_servo_measure(&c, &s, &r, 0.0, 0.0, T, &q, &qd, &tau);
-    sim_servo_measure(&c, &s, &r, 5.0 * count, 0.0, T, &q, &qd, &tau);
+    sim_servo_measure(&c, &s, &r, 0.0, 0.0, 0.0, 0.0, T, &q, &qd, &tau);
+    sim_servo_measure(&c, &s, &r, 5.0 * count, 0.0, 5.0 * count, 0.0, T, &q, &qd, &tau);
     CHECK(near(qd, (1.0 - exp(-2.0 * PI * 100.0 * T)) * 5.0 * count / T, 1e-9));
 }
 
@@ -106,17 +106,42 @@ static void motor_encoder_is_gear_ratio_times_finer(void)
     sim_rng_seed(&r, 1);
     double q, qd, tau;
     const double q0 = 10.4 * joint_count; /* 1040 motor counts */
-    sim_servo_measure(&c, &s, &r, q0, 0.0, T, &q, &qd, &tau);
+    sim_servo_measure(&c, &s, &r, q0, 0.0, q0, 0.0, T, &q, &qd, &tau);
     CHECK(near(q, 10.0 * joint_count, 1e-15)); /* the position still from the joint encoder */
     c.velocity_source = SIM_ENCODER_MOTOR;
     sim_servo_init(&s);
-    sim_servo_measure(&c, &s, &r, q0, 0.0, T, &q, &qd, &tau);
-    sim_servo_measure(&c, &s, &r, q0 + 3.3 * motor_count, 0.0, T, &q, &qd, &tau);
+    sim_servo_measure(&c, &s, &r, q0, 0.0, q0, 0.0, T, &q, &qd, &tau);
+    sim_servo_measure(&c, &s, &r, q0 + 3.3 * motor_count, 0.0, q0 + 3.3 * motor_count, 0.0, T, &q, &qd, &tau);
     CHECK(near(qd, 3.0 * motor_count / T, 1e-9)); /* a move the joint encoder does not see */
     CHECK(near(q, 10.0 * joint_count, 1e-15));
     c.position_source = SIM_ENCODER_MOTOR;
-    sim_servo_measure(&c, &s, &r, q0 + 3.6 * motor_count, 0.0, T, &q, &qd, &tau);
+    sim_servo_measure(&c, &s, &r, q0 + 3.6 * motor_count, 0.0, q0 + 3.6 * motor_count, 0.0, T, &q, &qd, &tau);
     CHECK(near(q, q0 + 4.0 * motor_count, 1e-12));
+}
+
+/* On a flexible joint the motor encoder reads the rotor, wound up ahead of the link: the joint
+ * encoder the link. */
+static void motor_encoder_reads_the_rotor(void)
+{
+    sim_servo_config_t c;
+    sim_servo_config_default(&c);
+    c.encoder_bits = 19;
+    c.motor_encoder_bits = 17;
+    c.gear_ratio = 101.0;
+    c.velocity_filter_hz = 1e9;
+    sim_servo_t s;
+    sim_servo_init(&s);
+    sim_rng_t r;
+    sim_rng_seed(&r, 1);
+    double q, qd, tau;
+    const double link = 0.5, rotor = 0.5 + 2e-3; /* 2 mrad of wind-up: 4.2 motor turns' counts */
+    const double joint_count = 2.0 * PI / 524288.0, motor_count = 2.0 * PI / (131072.0 * 101.0);
+    sim_servo_measure(&c, &s, &r, link, 0.0, rotor, 0.0, T, &q, &qd, &tau);
+    CHECK(near(q, floor(link / joint_count + 0.5) * joint_count, 1e-15));
+    c.position_source = SIM_ENCODER_MOTOR;
+    sim_servo_measure(&c, &s, &r, link, 0.0, rotor, 0.0, T, &q, &qd, &tau);
+    CHECK(near(q, floor(rotor / motor_count + 0.5) * motor_count, 1e-15));
+    CHECK(fabs(q - link) > 1e-3);
 }
 
 /* The velocity's noise at rest, sigma over n periods, for one drive and seed. */
@@ -129,7 +154,7 @@ static double velocity_sigma(const sim_servo_config_t *c, unsigned long long see
     double q, qd, tau, sq = 0.0;
     const int n = 20000;
     for (int i = 0; i <= n; ++i) {
-        sim_servo_measure(c, &s, &r, 0.3, 0.0, T, &q, &qd, &tau);
+        sim_servo_measure(c, &s, &r, 0.3, 0.0, 0.3, 0.0, T, &q, &qd, &tau);
         if (i > 0) sq += qd * qd;
     }
     return sqrt(sq / n);
@@ -177,6 +202,7 @@ int main(void)
     ripple_scales_the_torque_with_position();
     encoder_quantises_and_velocity_comes_from_differences();
     motor_encoder_is_gear_ratio_times_finer();
+    motor_encoder_reads_the_rotor();
     velocity_from_the_motor_encoder_is_quieter();
     noise_is_seeded_and_has_its_sigma();
     TEST_MAIN_END();
