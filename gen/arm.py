@@ -759,6 +759,10 @@ def prepare(af: ArmFile, design: Path | None) -> Prepared:  # noqa: C901 - one p
             warnings.append(f"timestep: the model's {model_dt:g} s replaced by the loop period {period:g} s "
                             "(arm file timestep = \"model\" keeps it when it divides the period)")
     spec.option.timestep = dt
+    try:
+        drivetrain.set_rotor_inertia(spec, af.drivetrain, names, _drivetrain_where(af))
+    except drivetrain.DrivetrainError as exc:
+        raise ArmError(str(exc)) from exc
     spec.compiler.fusestatic = True
     spec.modelname = armname
     m1 = _compile(spec, path, "preparing it")
@@ -855,13 +859,17 @@ def prepare(af: ArmFile, design: Path | None) -> Prepared:  # noqa: C901 - one p
                                   "for the paper's weights")}
     info["design_config"] = info["design"]["config"]
     try:
-        info["drivetrain"] = drivetrain.resolve(af.drivetrain, f"arm file {af.path}: drivetrain" if af.path else
-                                                "drivetrain", m, names, home, [lim for lim, _ in limits], dt)
+        info["drivetrain"] = drivetrain.resolve(af.drivetrain, _drivetrain_where(af), m, names, home,
+                                                [lim for lim, _ in limits], dt)
     except drivetrain.DrivetrainError as exc:
         raise ArmError(str(exc)) from exc
     info["first_resonance_hz"] = drivetrain.first_resonance_hz(info["drivetrain"])
     info["payload"] = {"rated_kg": af.rated_payload_kg, "at": flange_from}
     return Prepared(xml, info, design_for(design_text, n, template), drivetrain.plant_xml(xml, info["drivetrain"]))
+
+
+def _drivetrain_where(af: ArmFile) -> str:
+    return f"arm file {af.path}: drivetrain" if af.path else f"{drivetrain.BUNDLED_DRIVETRAIN}: drivetrain"
 
 
 def auto_bandwidth(inertia_at_home: Any, torque_limits: list[float]) -> tuple[float, int]:

@@ -150,7 +150,7 @@ def resolve(table: dict[str, Any] | None, where: str, m: mujoco.MjModel, names: 
         if s is not None and int(s) not in SIZES:
             raise DrivetrainError(f"{where}.size.{name}: {s:g} is not a size of the preset "
                                   f"({', '.join(str(g.size) for g in HARMONIC_SIZES)})")
-    given = {k: ([None] * n if k not in t else _per_joint(t[k], names, f"{where}.{k}"))
+    given = {k: ([None] * n if k not in t else _per_joint(t[k], names, f"{where}.{k}", positive=k != "damping"))
              for k in ("stiffness", "damping", "rotor_inertia")}
     ratio = t.get("damping_ratio", DAMPING_RATIO)
     if isinstance(ratio, bool) or not isinstance(ratio, (int, float)) or not 0 < ratio <= 2:
@@ -161,7 +161,7 @@ def resolve(table: dict[str, Any] | None, where: str, m: mujoco.MjModel, names: 
     for j, name in enumerate(names):
         gear = SIZES[int(sizes[j])] if sizes[j] is not None else size_for(torque_limits[j])
         k = given["stiffness"][j] or gear.k[1]
-        rotor = given["rotor_inertia"][j] or float(m.dof_armature[j])
+        rotor = float(m.dof_armature[j])  # the arm file's rotor_inertia is the armature already (set_rotor_inertia)
         jl = float(link[j])
         # the two-mass mode: the link and the rotor on the gear's spring (the reduced inertia)
         reduced = jl * rotor / (jl + rotor) if rotor > 0 else jl
@@ -187,6 +187,15 @@ def resolve(table: dict[str, Any] | None, where: str, m: mujoco.MjModel, names: 
             "flexible": why_rigid is None, "rigid_because": why_rigid,
         })
     return out
+
+
+def set_rotor_inertia(spec: mujoco.MjSpec, table: dict[str, Any] | None, names: list[str], where: str) -> None:
+    """The arm file's rotor inertias as the joints' armature: the nominal model knows the motor's
+    datasheet, as the firmware's model of a user's arm would."""
+    if table and "rotor_inertia" in table:
+        for name, v in zip(names, _per_joint(table["rotor_inertia"], names, f"{where}.rotor_inertia")):
+            if v is not None:
+                spec.joint(name).armature = v
 
 
 def first_resonance_hz(drivetrain: list[dict[str, Any]]) -> float:
@@ -234,9 +243,11 @@ def plant_xml(arm_xml: str, drivetrain: list[dict[str, Any]]) -> str:
         tendon.wrap_joint(link.name, -1.0)
         acts[j["name"]].target = rotor.name
         rotors.append(j["name"])
-    for key in spec.keys:  # the rotors start where their links are; the simulator adds the gear's wind-up
-        qpos = list(key.qpos)
-        key.qpos = qpos + [qpos[[j["name"] for j in drivetrain].index(r)] for r in rotors]
+    rigid = mujoco.MjModel.from_xml_string(arm_xml)  # its keyframes in full (the file may leave qpos0 out)
+    names = [j["name"] for j in drivetrain]
+    for k, key in enumerate(spec.keys):  # the rotors start where their links are; the simulator adds the wind-up
+        qpos = [float(x) for x in rigid.key_qpos[k]]
+        key.qpos = qpos + [qpos[names.index(r)] for r in rotors]
     return spec.to_xml()
 
 

@@ -271,11 +271,11 @@ def test_arm_file_names_joints_torque_limits_and_wiring(tmp_path: Path) -> None:
         prepare(load_arm_file(bad), DESIGN)
 
 
-def test_cli_writes_the_three_files_and_a_depfile(tmp_path: Path) -> None:
+def test_cli_writes_the_four_files_and_a_depfile(tmp_path: Path) -> None:
     out = tmp_path / "out"
     dep = tmp_path / "arm.d"
     assert gen_arm.main(["--model", str(UR5E), "--out", str(out), "--depfile", str(dep)]) == 0
-    assert sorted(x.name for x in out.iterdir()) == ["arm.json", "arm.xml", "design.toml"]
+    assert sorted(x.name for x in out.iterdir()) == ["arm.json", "arm.xml", "design.toml", "plant.xml"]
     info = json.loads((out / "arm.json").read_text())
     assert info["model_hash"] == f"{gen_arm.fnv1a64((out / 'arm.xml').read_bytes()):016x}"
     assert str(UR5E.resolve()) in dep.read_text() and str(DESIGN.resolve()) in dep.read_text()

@@ -674,3 +674,40 @@ def test_a_study_confirms_its_designs_over_the_bus_with_the_files_its_sil_runs_l
     assert bus["results"]["design"] == sil["results"]["design"]
     assert bus["results"]["design"]["why"] == "loaded at run time (--design-file)"
     assert sil["environment"]["bus_choice"].startswith("sil") and not bus["environment"]["bus_choice"].startswith("sil")
+
+
+def _quick_study_cmd(out: Path) -> list[str]:
+    """A study of seconds that ends in lockstep runs over the bus: pd (the kept tuning) in software
+    in the loop, then one run repeated over UDP to confirm it."""
+    return [ARMCTL, "study", "--methods", "pd", "--scenarios", "ideal", "--seeds", "1", "--duration", "1",
+            "--confirm", "1", "--no-figures", "--out", str(out)]
+
+
+KILLS = 10
+
+
+def test_a_study_killed_at_any_moment_and_resumed_at_once_ends_with_the_same_numbers(tmp_path: Path) -> None:
+    """SIGKILL at KILLS moments spread over the study (its software-in-the-loop runs, the runs that
+    confirm them over the bus, the report), each followed at once by the same command: every
+    resumed study exits 0 with the numbers of one run through. A killed run's processes stop the
+    arm first and hold their run slot until they have (tools/run/slots.py), so the resumed run
+    never shares their ports."""
+    whole = tmp_path / "whole"
+    t0 = time.monotonic()
+    r = subprocess.run(_quick_study_cmd(whole), cwd=REPO, capture_output=True, text=True, timeout=600)
+    span = time.monotonic() - t0
+    assert r.returncode == 0, r.stderr[-3000:]
+    ref = json.loads((whole / "study.json").read_text())
+    for i in range(KILLS):
+        out = tmp_path / f"killed-{i}"
+        p = subprocess.Popen(_quick_study_cmd(out), cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        time.sleep(span * (0.1 + 0.85 * i / (KILLS - 1)))
+        p.kill()
+        p.wait()
+        again = subprocess.run(_quick_study_cmd(out), cwd=REPO, capture_output=True, text=True, timeout=600)
+        assert again.returncode == 0, f"kill {i} at {span * (0.1 + 0.85 * i / (KILLS - 1)):.2f} s: " + again.stderr[-2000:]
+        got = json.loads((out / "study.json").read_text())
+        for name, sc in ref["scenarios"].items():
+            for part in ("runs", "stats"):
+                assert got["scenarios"][name][part] == sc[part], (i, name, part)
+        assert got["confirmation"]["all_match"], i

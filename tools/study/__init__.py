@@ -9,6 +9,8 @@ import hashlib
 import json
 import os
 import sys
+import time
+from datetime import datetime, timezone
 from contextlib import ExitStack
 from dataclasses import replace
 from pathlib import Path
@@ -31,7 +33,7 @@ from gen.lib.paths import REPO
 from tools.run.runner import METRICS, RunSpec, run_all
 from tools.run.slots import default_jobs
 from tools.study.stats import paired, summary
-from tools.study.config import METHODS, StudyConfig, StudyConfigError, Trajectory, for_arm, load
+from tools.study.config import METHODS, PROTOCOLS, StudyConfig, StudyConfigError, Trajectory, for_arm, load
 from tools.study.pairs import pair_workers, tune_pairs
 from tools.study.tuning import REFUSED_SCORE, TuneSetup, batch_size, method_bandwidth, storage_url, trial_spec
 
@@ -186,6 +188,14 @@ def keep_tuning(path: Path, scenario: str, method: str, rec: dict[str, Any], com
         write_json_atomic(path, doc)
 
 
+def keep_tuning_time(path: Path, record: dict[str, Any]) -> None:
+    """The last tuning's time into the kept tuning file (under its lock, as keep_tuning)."""
+    with flocked(path.with_name(f".{path.name}.lock")):
+        doc = _read_tuning(path)
+        doc["last_tuning"] = record
+        write_json_atomic(path, doc)
+
+
 def tuned(cfg: StudyConfig, arm: ArmRef, setup: TuneSetup, info: dict[str, Any], scenarios: list[str],
           methods: list[str], *, retune: bool = False, trials: int | None = None,
           in_study: bool = False) -> dict[str, dict[str, Any]]:
@@ -220,6 +230,7 @@ def tuned(cfg: StudyConfig, arm: ArmRef, setup: TuneSetup, info: dict[str, Any],
               f"{todo[0][3]}; each to convergence (1 % over {cfg.plateau} trials) or at most {cap} trials; Optuna "
               f"storage {storage_url(setup.out)}", file=sys.stderr)
         bar = tqdm(total=cap * len(todo), desc="tune", unit="trial")
+        started = time.monotonic()
         workers = pair_workers(setup, len(todo))
         if workers > 1:
             bar.set_postfix_str(f"{workers} pairs at a time")
@@ -233,6 +244,11 @@ def tuned(cfg: StudyConfig, arm: ArmRef, setup: TuneSetup, info: dict[str, Any],
                                           "procedure": procedure(cfg, cap, setup.jobs)})
             out[s][m] = {**rec, "source": f"tuned now, kept in {path}"}
         bar.close()
+        # the tuning's own record of how long it took, and where: what the docs quote
+        keep_tuning_time(path, {"wall_s": round(time.monotonic() - started, 1), "pairs": len(todo),
+                                "trials": sum(out[s][m]["trials_run"] for s, m, _, _ in todo),
+                                "jobs": setup.jobs, "cpus": os.cpu_count(),
+                                "when": datetime.now(timezone.utc).isoformat(timespec="seconds")})
     # in the config's order, however the pairs finished
     return {s: {m: out[s][m] for m in methods if m in out[s]} for s in scenarios}
 
@@ -262,7 +278,9 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
               methods: list[str] | None = None, scenarios: list[str] | None = None, arm: ArmRef = DEFAULT_ARM,
               jobs: int = 1, cluster: Cluster | None = None, retune: bool = False,
               trials: int | None = None, bus: str = SIL, confirm: int = DEFAULT_CONFIRM,
-              figures: bool = True) -> dict[str, Any]:
+              figures: bool = True, protocol: str | None = None) -> dict[str, Any]:
+    """protocol: every scenario's runs over this drive protocol instead of its own, with the picks
+    tuned on its own (what the protocol alone changes)."""
     methods = methods or cfg.methods
     scen_names = scenarios or list(cfg.scenarios)
     seed_list = cfg.seed_list(seeds)
@@ -283,7 +301,7 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
     specs: list[RunSpec] = []
     where: list[tuple[str, str, int]] = []
     for s in scen_names:
-        scen = cfg.scenarios[s]
+        scen = cfg.scenarios[s] if protocol is None else replace(cfg.scenarios[s], protocol=protocol)
         for m in methods:
             knobs = tuning[s][m]["knobs"] if m in tuning[s] else {}
             for i, seed in enumerate(seed_list):
@@ -325,6 +343,7 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
         "notes": notes,
         "tuning_procedure": procedure(cfg, trials, jobs),
         "bus": bus,
+        "protocol": protocol,  # None: each scenario's own (its definition says which)
         "confirmation": confirmation,
         "commands": commands,
         "scenarios": {s: scenario_result({**cfg.scenarios[s].as_dict(), "per_joint_from": cfg.scenarios[s].per_joint},
@@ -469,6 +488,9 @@ def add_study_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--record", action="store_true",
                    help="the default study only: keep its results as the headline (tools/studies/paper.headline.json) "
                         "and write the README's result tables from them")
+    p.add_argument("--protocol", choices=PROTOCOLS, default=None,
+                   help="run every scenario over this drive protocol, with the picks tuned on the scenario's own: "
+                        "what the protocol alone changes [each scenario's: CiA 402]")
     p.add_argument("--confirm", type=int, default=DEFAULT_CONFIRM,
                    help=f"with --bus sil: repeat this many runs in lockstep HIL over the CAN bus and check that "
                         f"their results match bit for bit [{DEFAULT_CONFIRM}]")
@@ -547,14 +569,14 @@ def cmd_study(ns: argparse.Namespace) -> int:
         raise StudyConfigError(f"--confirm: must be in [0, 1000], got {ns.confirm}")
     cfg, arm, methods, scenarios, cluster = _common(ns)
     if ns.record and (cfg.path.resolve() != DEFAULT_CONFIG.resolve() or not arm.is_default or ns.seeds or
-                      ns.duration or methods or scenarios or ns.trials):
+                      ns.duration or methods or scenarios or ns.trials or ns.protocol):
         raise StudyConfigError("--record: the headline is the default study as it stands (no --config, "
-                               "--model/--arm, --seeds, --duration, --methods, --scenarios or --trials)")
+                               "--model/--arm, --seeds, --duration, --methods, --scenarios, --trials or --protocol)")
     with ExitStack() as stack:
         _hold_out(stack, ns.out)
         study = run_study(cfg, ns.out, seeds=ns.seeds, duration_s=ns.duration, methods=methods,
                           scenarios=scenarios, arm=arm, jobs=ns.jobs, cluster=cluster, retune=ns.retune,
-                          trials=ns.trials, bus=ns.bus, confirm=ns.confirm, figures=ns.figures)
+                          trials=ns.trials, bus=ns.bus, confirm=ns.confirm, figures=ns.figures, protocol=ns.protocol)
     if ns.record:
         from tools.study import headline
 

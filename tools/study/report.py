@@ -13,6 +13,10 @@ import numpy as np
 from gen.lib.atomic_output import write_text_atomic
 from tools.run.verdict import FOLLOWING_ERROR_STOP_DEG, left_tracking_bound, stopped_by_following_error
 from gen.lib.params import default
+from tools.study.config import STUDY_PROTOCOL
+
+PROTOCOL_TEXT = {"canopen": "CiA 402 (per-mille torque of the rated torque, positions in encoder increments)",
+                 "arm": "the arm protocol (torques in micro-newton-metres, CAN FD state frames)"}
 
 # Kim & Kim 2024, Tables 1-3 (Table 1 from their simulation, Tables 2-3 from their experiment).
 PAPER_TABLE1 = {"usde-smc": [0.0292, 0.0950, 0.0320, 0.0462, 0.0157, 0.0157],
@@ -311,8 +315,10 @@ def write_report(out: Path, study: dict[str, Any], figures: bool = True) -> None
     for i, (name, sc) in enumerate(study["scenarios"].items()):
         d = sc["definition"]
         md += [f"## Scenario `{name}`", "", d["description"], "",
-               f"Uncertainty `{d['uncertainty']}`; drives `{d['drives']}`; bus timing "
-               f"{'emulated' if d['bus_timing'] else 'not emulated'}.", "",
+               f"Uncertainty `{d['uncertainty']}`; drives `{d['drives']}`, speaking "
+               f"{PROTOCOL_TEXT[study.get('protocol') or d.get('protocol', STUDY_PROTOCOL)]}"
+               + (" (every scenario's runs, with the picks tuned on its own protocol)" if study.get("protocol") else "")
+               + f"; bus timing {'emulated' if d['bus_timing'] else 'not emulated'}.", "",
                *([f"Per-joint values on this arm from the config's `{d['per_joint_from']}`.", ""]
                  if d.get("per_joint_from") else []), "### Verdict", ""]
         md += _verdict(study, sc, labels) + [""]
