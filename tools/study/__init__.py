@@ -161,7 +161,7 @@ def tuning_key(cfg: StudyConfig, info: dict[str, Any], setup: TuneSetup, scenari
     # the design's values, not its text (its header comment names the checkout's path); the
     # scenario with its per-joint values on this arm (setup_for)
     doc = {"arm": info["model_hash"], "design": toml_input.loads(setup.base_design),
-           "scenario": setup.cfg.scenarios[scenario].as_dict(), "space": cfg.spaces[method].as_dict(), "tuning": t,
+           "scenario": setup.cfg.scenarios[scenario].as_dict(), "space": setup.cfg.spaces[method].as_dict(), "tuning": t,
            "trajectory": setup.trajectory_args, "hold_s": cfg.hold_s}
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:16]
 
