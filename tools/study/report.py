@@ -258,6 +258,39 @@ def _drivetrain_lines(study: dict[str, Any]) -> list[str]:
             f"payload {pay.get('rated_kg', 0):g} kg, at {pay.get('at', '-')}.", ""]
 
 
+def recommendation(study: dict[str, Any], name: str) -> str:
+    """Which method to pick in one scenario, and by how much it wins, in words: among the methods
+    whose every run ended ok, the lowest mean over the seeds of the sum over joints of the
+    L-infinity tracking error, against the next best and against PM on the same seeds."""
+    from tools.study.stats import paired
+
+    sc = study["scenarios"][name]
+    total = {m: sc["stats"][m]["linf"]["total"] for m in study["methods"]}
+    clean = [m for m in study["methods"] if all(r == "ok" for r in sc["stats"][m]["results"])
+             and total[m]["mean"] is not None]
+    others = [m for m in study["methods"] if m not in clean]
+    why_not = f" ({', '.join(f'{m}: not every run ended ok' for m in others)})" if others else ""
+    if not clean:
+        return f"- `{name}`: no method ran ok on every seed{why_not}."
+    ranked = sorted(clean, key=lambda m: total[m]["mean"])
+    best = ranked[0]
+
+    def against(m: str) -> str:
+        c = paired(total[best]["values"], total[m]["values"])
+        p = f", p {c['t_test_p']:.2g}" if c.get("t_test_p") is not None else ""
+        return f"{c['ratio_of_means']:.2f}x {m}'s (lower on {c['a_lower']}/{c['n']} seeds{p})"
+
+    bw = (sc.get("bandwidth_hz") or {}).get(best)
+    res = study["arm"].get("first_resonance_hz")
+    band = f"; its closed-loop bandwidth {bw:.3g} Hz, {bw / res:.2f}x the first resonance" if bw and res else ""
+    cmp = [against(m) for m in ranked[1:2]] + ([against("pm")] if best != "pm" and "pm" in clean[1:] and
+                                               ranked[1] != "pm" else [])
+    return (f"- `{name}`: pick **{best}**: its L-infinity tracking error summed over the joints is "
+            f"{np.degrees(total[best]['mean']):.3g} deg on average over {total[best]['n']} seeds"
+            + (", " + " and ".join(cmp) if cmp else "") + f"{band}. Every run ended ok for "
+            f"{', '.join(ranked)}{why_not}.")
+
+
 def _bandwidth_cell(sc: dict[str, Any], m: str, resonance: float | None) -> str:
     bw = (sc.get("bandwidth_hz") or {}).get(m)
     if bw is None:
@@ -311,7 +344,12 @@ def write_report(out: Path, study: dict[str, Any], figures: bool = True) -> None
           "", f"Tuning: {study['tuning_procedure']}", "", *_confirmation(study),
           *([] if figures else ["Figures: not drawn (`--no-figures`).", ""]),
           *(["Notes:", "", *[f"- {x}" for x in study.get("notes", [])], ""] if study.get("notes") else []),
-          *_drivetrain_lines(study)]
+          *_drivetrain_lines(study),
+          "## What to pick", "",
+          "Per scenario, the method with the lowest mean tracking error (the sum over joints of the L-infinity "
+          "error, the tuning's objective) among those whose every run ended ok, against the next best and PM on the "
+          "same seeds (paired t-test):", "",
+          *[recommendation(study, name) for name in study["scenarios"]], ""]
     for i, (name, sc) in enumerate(study["scenarios"].items()):
         d = sc["definition"]
         md += [f"## Scenario `{name}`", "", d["description"], "",
