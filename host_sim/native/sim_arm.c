@@ -87,6 +87,30 @@ static int w_from_true_arm(const sim_arm_t *a)
     return 1;
 }
 
+/* Whether, on the arm with flexible joints, the nominal model's acceleration follows from the
+ * plant's own step: the same links (no parametric error, no payload), so the plant's link block
+ * of M and its links' bias forces are the nominal model's, less the armature the nominal model
+ * gives the links (the plant's rotors carry it); and a nominal model of plain joint motors, no
+ * tendons, no gravity compensation and no fluid forces, so its forward pass adds nothing else. */
+static int w_from_flexible_plant(const sim_arm_t *a)
+{
+    const mjModel *nm = a->nominal;
+    if (!a->flexible || a->nominal_differs || nm->ntendon != 0 || nm->opt.density != 0.0 || nm->opt.viscosity != 0.0 ||
+        (nm->opt.disableflags & mjDSBL_ACTUATION) != 0) {
+        return 0;
+    }
+    for (int j = 0; j < nm->njnt; ++j) {
+        if (nm->jnt_actgravcomp[j]) return 0;
+    }
+    for (int i = 0; i < nm->nu; ++i) {
+        if (nm->actuator_dyntype[i] != mjDYN_NONE || nm->actuator_gaintype[i] != mjGAIN_FIXED ||
+            nm->actuator_biastype[i] != mjBIAS_NONE || nm->actuator_trntype[i] != mjTRN_JOINT) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
 /* The plant's joints against the nominal model's: joint j's link is dof j and qpos j in both (the
  * plant only adds rotors after the links), a hinge; its motor drives the link or a rotor of its own. */
 static int map_plant(sim_arm_t *a, const char *plant, char *err, size_t errcap)
@@ -256,6 +280,7 @@ int sim_arm_open(sim_arm_t *a, const char *path, const char *plant, const char *
     }
     a->nominal_differs = a->parametric || a->payload_kg > 0.0;
     a->w_from_true_arm = w_from_true_arm(a);
+    a->w_from_plant = w_from_flexible_plant(a);
     a->data = mj_makeData(a->model);
     a->nominal_data = mj_makeData(a->nominal);
     if (a->data == NULL || a->nominal_data == NULL) {
@@ -423,28 +448,52 @@ static void link_mass(sim_arm_t *a)
     for (int i = 0; i < n; ++i) memcpy(a->mass + i * n, a->mass_full + i * nv, (size_t)n * sizeof(double));
 }
 
+/* The nominal model's acceleration under the commanded torque, from the plant at the step's start
+ * (after mj_step1; w_from_flexible_plant says when it is the nominal model's forward pass's): its
+ * links' M (a->mass, link_mass) with the links' armature, their bias, the nominal damping. */
+static void nominal_acc_from_plant(const sim_arm_t *a, const double *commanded, const double *qvel_start, double *acc)
+{
+    const int n = a->n;
+    const mjModel *nm = a->nominal;
+    double mass[SIM_MAX_JOINTS * SIM_MAX_JOINTS], force[SIM_MAX_JOINTS], rhs[SIM_MAX_JOINTS];
+    memcpy(mass, a->mass, (size_t)(n * n) * sizeof(double));
+    for (int j = 0; j < n; ++j) mass[j * n + j] += nm->dof_armature[j] - a->model->dof_armature[j];
+    motor_force(nm, commanded, force);
+    for (int j = 0; j < n; ++j) rhs[j] = force[j] - a->data->qfrc_bias[j] - nm->dof_damping[j] * qvel_start[j];
+    mju_cholFactor(mass, n, 0.0);
+    mju_cholSolve(acc, mass, rhs, n);
+}
+
 /* A period's first step of the arm with flexible joints: the paper's uncertainty acts on the links
  * (their drive is the gear's spring and damper on a flexible joint, the motor on a rigid one); w
- * from a forward pass of the nominal model at the step's start. */
+ * from the plant's own step where it can (w_from_plant), else from a forward pass of the nominal
+ * model at the step's start. */
 static void flexible_step_start(sim_arm_t *a, const double *tau, const double *tau_commanded, double *w)
 {
     const int n = a->n;
     mjData *d = a->data;
     mjData *nd = a->nominal_data;
-    memcpy(nd->qpos, d->qpos, (size_t)n * sizeof(double));
-    memcpy(nd->qvel, d->qvel, (size_t)n * sizeof(double));
-    memcpy(nd->ctrl, tau_commanded != NULL ? tau_commanded : tau, (size_t)n * sizeof(double));
-    mj_forward(a->nominal, nd);
+    const double *commanded = tau_commanded != NULL ? tau_commanded : tau;
+    double nominal[SIM_MAX_JOINTS], qvel_start[SIM_MAX_JOINTS];
+    if (!a->w_from_plant) {
+        memcpy(nd->qpos, d->qpos, (size_t)n * sizeof(double));
+        memcpy(nd->qvel, d->qvel, (size_t)n * sizeof(double));
+        memcpy(nd->ctrl, commanded, (size_t)n * sizeof(double));
+        mj_forward(a->nominal, nd);
+        memcpy(nominal, nd->qacc, (size_t)n * sizeof(double));
+    }
+    memcpy(qvel_start, d->qvel, (size_t)n * sizeof(double));
     mj_step1(a->model, d); /* M, bias and the gears' forces at the step's start */
+    if (a->unc.paper_ratio != 0.0 || a->w_from_plant) link_mass(a);
+    if (a->w_from_plant) nominal_acc_from_plant(a, commanded, qvel_start, nominal);
     if (a->unc.paper_ratio != 0.0) {
         double drive[SIM_MAX_JOINTS];
         for (int j = 0; j < n; ++j) drive[j] = a->motor_dof[j] != j ? d->qfrc_passive[j] : tau[j];
-        link_mass(a);
         extra_force(a, (double)a->step_count * a->period, d->qfrc_bias, drive, d->qfrc_applied);
     }
     mj_step2(a->model, d);
     for (int j = 0; j < n; ++j) {
-        w[j] = nd->qacc[j] - d->qacc[j];
+        w[j] = nominal[j] - d->qacc[j];
     }
 }
 

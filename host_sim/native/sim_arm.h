@@ -67,6 +67,8 @@ typedef struct {
      * a forward pass of the nominal model: the same quantity, when the two models differ only in
      * what sim_arm_open checks (sim_arm.c: w_from_true_arm); about a fifth of a SIL period */
     int w_from_true_arm;
+    /* the same on the arm with flexible joints: from the plant's links (sim_arm.c: w_from_flexible_plant) */
+    int w_from_plant;
     sim_rng_t rng;
     double knots[2][2 * SIM_MAX_JOINTS]; /* the random signal d (first n) and d' (last n) */
     int64_t knot_index;

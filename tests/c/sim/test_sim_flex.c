@@ -3,7 +3,9 @@
  *   g(q) / K, so motor torques equal to gravity's hold the arm where it is;
  * - the motor encoder's angle is the rotor's, and a softer gear winds up further;
  * - a payload at the flange adds exactly its weight's torques, m J_p^T g, where the model's site
- *   'payload' is; a drawn one lies in its range and differs between seeds. */
+ *   'payload' is; a drawn one lies in its range and differs between seeds;
+ * - w from the plant's own step equals w from a forward pass of the nominal model, to rounding,
+ *   under the paper's uncertainty, friction and torques beyond the range. */
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -121,11 +123,49 @@ static void payload_adds_its_weight(void)
     sim_arm_close(&s2);
 }
 
+static void w_from_the_plant_is_the_nominal_forward_pass(void)
+{
+    sim_uncertainty_t u;
+    sim_uncertainty_default(&u);
+    u.paper_ratio = 0.3;
+    for (int j = 0; j < SIM_MAX_JOINTS; ++j) {
+        u.viscous[j] = 0.5;
+        u.coulomb[j] = 2.0;
+    }
+    sim_arm_t fast, slow;
+    char err[600];
+    if (sim_arm_open(&fast, ARM_TEST_MODEL, ARM_TEST_PLANT, "home", 1, &u, err, sizeof(err)) != 0 ||
+        sim_arm_open(&slow, ARM_TEST_MODEL, ARM_TEST_PLANT, "home", 1, &u, err, sizeof(err)) != 0) {
+        CHECK_MSG(0, "%s", err);
+        return;
+    }
+    CHECK_MSG(fast.w_from_plant, "the bundled arm's plant qualifies");
+    slow.w_from_plant = 0;
+    double worst = 0.0;
+    int same = 1;
+    for (int k = 0; k < 3000 && same; ++k) {
+        double tau[SIM_MAX_JOINTS], cmd[SIM_MAX_JOINTS], wf[SIM_MAX_JOINTS], ws[SIM_MAX_JOINTS];
+        for (int j = 0; j < fast.n; ++j) {
+            tau[j] = 1.2 * fast.torque_limit[j] * sin(2.0 * 3.14159265358979 * (0.7 + 0.3 * j) * k * fast.period);
+            cmd[j] = 0.9 * tau[j];
+        }
+        CHECK(sim_arm_step(&fast, tau, cmd, wf) == sim_arm_step(&slow, tau, cmd, ws));
+        same = memcmp(fast.data->qpos, slow.data->qpos, (size_t)fast.model->nq * sizeof(double)) == 0;
+        for (int j = 0; j < fast.n; ++j) worst = fmax(worst, fabs(wf[j] - ws[j]) / (1.0 + fabs(ws[j])));
+    }
+    CHECK_MSG(same, "the plant moved differently");
+    CHECK_MSG(worst < 1e-9, "w differs by %.3g (relative)", worst);
+    printf("flexible plant: w from its own step agrees to %.2g (relative) over 3 s\n", worst);
+    sim_arm_close(&fast);
+    sim_arm_close(&slow);
+}
+
 int main(void)
 {
     starts_at_rest_and_gravity_holds_it();
     softer_gears_wind_up_further();
     rigid_arm_has_its_motors_on_its_links();
     payload_adds_its_weight();
+    w_from_the_plant_is_the_nominal_forward_pass();
     TEST_MAIN_END();
 }
