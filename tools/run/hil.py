@@ -248,6 +248,7 @@ SIL = "sil"  # --bus: software in the loop
 VM = "vm"
 CAPTURE_FILE = "bus.log"  # a run's capture of its buses (candump -l format)
 CANOPEN_DBC_FILE = "canopen.dbc"  # a CANopen run's frames, derived from its drive table (gen/canopen_dbc.py)
+CANOPEN_OD_FILE = "canopen_od.txt"  # the emulated drives' dictionary, from the drive table's EDS/DCF (gen/eds.py)
 VM_FILES = ("vm_plan.json", "vm_result.json", "vm.log")  # --bus vm: the plan in, the exit codes out, the VM's output
 
 
@@ -496,15 +497,20 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
             raise HilError(f"{exe} is missing: run tools/armctl build")
     opt.out.mkdir(parents=True, exist_ok=True)
     for stale in ("telemetry.lcmlog", "controller_summary.json", "sim_summary.json", "run.json", "uncertainty.json",
-                  CAPTURE_FILE, CAPTURE_FILE + ".gz", CANOPEN_DBC_FILE, *VM_FILES):
+                  CAPTURE_FILE, CAPTURE_FILE + ".gz", CANOPEN_DBC_FILE, CANOPEN_OD_FILE, *VM_FILES):
         (opt.out / stale).unlink(missing_ok=True)
     if drive_table is not None:  # what decodes a capture of this run, in SI units (gen/canopen_dbc.py)
         from gen import canopen_dbc
+        from gen import eds as eds_mod
 
         try:
             write_text_atomic(opt.out / CANOPEN_DBC_FILE, canopen_dbc.dbc_text(drive_table))
-        except (OutputError, canopen_dbc.DbcError) as exc:
+            # the emulated drives are the drive table's drives: their dictionary from its EDS or DCF
+            od_table = eds_mod.table_text(eds_mod.load(Path(drive_table.eds)))
+            write_text_atomic(opt.out / CANOPEN_OD_FILE, od_table)
+        except (OutputError, canopen_dbc.DbcError, eds_mod.EdsError) as exc:
             raise HilError(str(exc)) from None
+        sim_node_args = [*sim_node_args, "--od", str(opt.out / CANOPEN_OD_FILE)]
     buses = bus_args(bus_kind, can_port, topology)
     bus_argv = [a for spec in buses for a in ("--bus", spec)]
     url = "" if sil else f"udpm://{LCM_GROUP}:{lcm_port}?ttl=0&recv_buf_size=8388608"
@@ -561,6 +567,9 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
               **opt.labels}
     run = analyse(opt.out, controller, simulator, config, {
         "protocol": opt.protocol, "canopen": canopen_record(controller),
+        # what the drive table fills for its drive's file, and what the boot skips (gen/drive_check.py)
+        "canopen_drive_notes": sorted({f"{Path(drive_table.eds).name}: {n}" for d in drive_table.drives
+                                       for n in d.notes}) if drive_table is not None else [],
         "bus": " ".join(buses), "bus_choice": f"{opt.bus} -> {bus_kind} ({bus_why})",
         "topology": {"source": wiring,
                      "buses": [{"name": b.name, "spec": spec.rpartition("@")[0], "kind": b.describe(),
