@@ -174,13 +174,18 @@ def _check_mapping(d: Dictionary, r: Report, name: str) -> None:
         r.problems.append(f"{name.upper()}: {bits} bits, more than a CAN frame's 64")
 
 
+def _text(value: object) -> str:
+    return "/".join(map(str, value)) if isinstance(value, tuple) else str(value)
+
+
 def _unit(d: Dictionary, r: Report, index: int, label: str, field_name: str, given: object, subs: int) -> None:
     entries = [d.get(index, s) for s in (range(1, subs + 1) if subs else (0,))]
     if entries[0] is None:
         if given is None:
             r.problems.append(f"0x{index:04X} ({label}): not in the file, and the drive table gives no {field_name}")
         else:
-            r.notes.append(f"0x{index:04X} ({label}): not in the file: the drive table's {field_name} {given} is used")
+            r.notes.append(f"0x{index:04X} ({label}): not in the file: the drive table's {field_name} {_text(given)} "
+                           "is used")
         return
     values = [e.value(0) if e is not None else 1 for e in entries]
     file_value = values[0] if subs == 0 else tuple(values)
@@ -189,8 +194,8 @@ def _unit(d: Dictionary, r: Report, index: int, label: str, field_name: str, giv
         want = given if subs == 0 else ((given, 1) if isinstance(given, int) else given)
         same = want == file_value if subs == 0 else want[0] * file_value[1] == want[1] * file_value[0]  # type: ignore[index]
         if not same and configured:
-            r.problems.append(f"0x{index:04X} ({label}): the DCF configures {file_value}, the drive table says {given}: "
-                              "the boot would stop")
+            r.problems.append(f"0x{index:04X} ({label}): the DCF configures {_text(file_value)}, the drive table says "
+                              f"{_text(given)}: the boot would stop")
 
 
 def check(d: Dictionary, plan: Plan | None = None) -> Report:
@@ -201,13 +206,13 @@ def check(d: Dictionary, plan: Plan | None = None) -> Report:
     if dev is None:
         r.problems.append("0x1000 (device type): not in the file (CiA 301 makes it mandatory)")
     elif isinstance(dev.default, int) and dev.default != 0 and dev.default & 0xFFFF != PROFILE:
-        r.problems.append(f"0x1000 (device type): {dev.default:#010x}: profile {dev.default & 0xFFFF:#06x}, not CiA 402 "
-                          f"({PROFILE:#06x})")
+        r.problems.append(f"0x1000 (device type): 0x{dev.default:08X}: profile 0x{dev.default & 0xFFFF:04X}, not CiA "
+                          f"402 (0x{PROFILE:04X})")
     if d.get(0x1018, 1) is None:
         r.problems.append("0x1018:01 (vendor id): not in the file (CiA 301 makes it mandatory)")
     modes = d.get(0x6502)
     if modes is not None and isinstance(modes.default, int) and not modes.default >> (CST_MODE - 1) & 1:
-        r.problems.append(f"0x6502 (supported drive modes) = {modes.default:#010x} ({modes_text(modes.default)}): no "
+        r.problems.append(f"0x6502 (supported drive modes) = 0x{modes.default:08X} ({modes_text(modes.default)}): no "
                           f"cyclic synchronous torque (mode {CST_MODE}, bit 9), which this controller needs")
     elif modes is None:
         r.notes.append("0x6502 (supported drive modes): not in the file: the mode write shows whether CST is there")

@@ -21,6 +21,7 @@ import math
 import shlex
 import sys
 import tomllib
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -132,6 +133,52 @@ def _fmt(m: list[tuple[int, int, int]]) -> str:
     return ", ".join(f"0x{i:04X}:{s}:{b}" for i, s, b in m)
 
 
+def _units(get: Callable[[str], tuple[Any, str]], torque_limit: float | None) -> tuple[int | None, int | None,
+                                                                                      tuple[int, int] | None]:
+    """The units a table gives (None where it gives none): rated torque in mN m, encoder increments
+    per motor revolution, gear. get(key) -> (value or None, where it is, for an error)."""
+    enc_v, w = get("encoder_increments")
+    enc = None if enc_v is None else _uint(enc_v, w)
+    gear_v, w = get("gear")
+    gear = None
+    if gear_v is not None:
+        if not isinstance(gear_v, list) or len(gear_v) != 2:
+            raise DrivesError(f"{w}: expected [motor revolutions, shaft revolutions], got {gear_v!r}")
+        gear = (_uint(gear_v[0], w), _uint(gear_v[1], w))
+    rated_v, w = get("rated_torque_nm")
+    if rated_v == JOINT_TORQUE_LIMIT:
+        rated_v = torque_limit
+    if rated_v is None:
+        return None, enc, gear
+    if isinstance(rated_v, bool) or not isinstance(rated_v, (int, float)) or not math.isfinite(rated_v) \
+            or not 0.001 <= rated_v <= U32_MAX / 1000:
+        raise DrivesError(f"{w}: expected a torque in N m, 0.001..{U32_MAX / 1000:g} (or \"{JOINT_TORQUE_LIMIT}\"), "
+                          f"got {rated_v!r}")
+    return round(rated_v * 1000), enc, gear
+
+
+def table_plan(path: Path) -> tuple[drive_check.Plan, Path]:
+    """A drive table's boot plan for any of its drives, from its top-level fields and [defaults]
+    alone (no arm: armctl drive check), and the drive file it names."""
+    doc = _read(path)
+    defaults = doc.get("defaults", {})
+    if not isinstance(defaults, dict) or set(defaults) - JOINT_FIELDS:
+        raise DrivesError(f"{path}: defaults: expected a table of {', '.join(sorted(JOINT_FIELDS))}")
+
+    def get(key: str) -> tuple[Any, str]:
+        return defaults.get(key), f"{path}: defaults.{key}"
+
+    rated, enc, gear = _units(get, None)
+    node = _uint(defaults.get("node", 1), f"{path}: defaults.node", 1, 127)
+    eds_rel = doc.get("eds")
+    eds = Path(str(eds_rel)) if eds_rel and Path(str(eds_rel)).is_absolute() else path.parent / str(eds_rel or "")
+    plan = drive_check.Plan(node=node, heartbeat_ms=_uint(doc.get("heartbeat_ms", 100), f"{path}: heartbeat_ms", 0, 65535),
+                            consumer_ms=_uint(doc.get("consumer_ms", 300), f"{path}: consumer_ms", 0, 65535),
+                            master_id=_uint(doc.get("master_id", 127), f"{path}: master_id", 1, 127),
+                            transmission=_pdo(doc, path), rated_mnm=rated, encoder=enc, gear=gear)
+    return plan, eds.resolve()
+
+
 def drives_file_of(arm: dict[str, Any]) -> Path:
     """The arm file's `drives` field, else the default file."""
     arm_file = arm.get("arm_file")
@@ -237,25 +284,7 @@ def load(arm: dict[str, Any], path: Path | None = None) -> DriveConfig:
 
         node_v, w = get("node")
         node = _uint(num if node_v is None else node_v, w, 1, 127)
-        given: list[str] = []
-        enc_v, w = get("encoder_increments")
-        enc = None if enc_v is None else _uint(enc_v, w)
-        gear_v, w = get("gear")
-        gear = None
-        if gear_v is not None:
-            if not isinstance(gear_v, list) or len(gear_v) != 2:
-                raise DrivesError(f"{w}: expected [motor revolutions, shaft revolutions], got {gear_v!r}")
-            gear = (_uint(gear_v[0], w), _uint(gear_v[1], w))
-        rated_v, w = get("rated_torque_nm")
-        rated = None
-        if rated_v == JOINT_TORQUE_LIMIT:
-            rated_v = j["torque_limit"]
-        if rated_v is not None:
-            if isinstance(rated_v, bool) or not isinstance(rated_v, (int, float)) or not math.isfinite(rated_v) \
-                    or not 0.001 <= rated_v <= U32_MAX / 1000:
-                raise DrivesError(f"{w}: expected a torque in N m, 0.001..{U32_MAX / 1000:g} (or "
-                                  f"\"{JOINT_TORQUE_LIMIT}\"), got {rated_v!r}")
-            rated = round(rated_v * 1000)
+        rated, enc, gear = _units(get, j["torque_limit"])
         given = [o for o, v in (("0x6076", rated), ("0x608F", enc), ("0x6091", gear)) if v is not None]
         plan = drive_check.Plan(node=node, cycle_us=cycle_us, heartbeat_ms=heartbeat, consumer_ms=consumer,
                                 master_id=master, transmission=transmission, rated_mnm=rated, encoder=enc, gear=gear)

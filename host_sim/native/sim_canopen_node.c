@@ -177,10 +177,10 @@ static uint32_t check_pdo_write(const sim_co_node_t *n, uint16_t index, uint8_t 
                 return SIM_CO_ABORT_RANGE;
             }
         }
-        if (sub == 2u) {
-            const int sync = v >= 1u && v <= 240u;
-            if (!(sync || (rcomm && v >= 254u))) return SIM_CO_ABORT_RANGE; /* TPDOs: synchronous only */
-        }
+        /* CiA 301: 0 acyclic, 1-240 every n-th SYNC, 241-253 reserved, 254/255 event-driven. A TPDO
+         * of type 0, 254 or 255 is taken, as the drive's file allows, but not sent: this drive sends
+         * its TPDOs on SYNC only */
+        if (sub == 2u && v > 240u && v < 254u) return SIM_CO_ABORT_RANGE;
         return 0u;
     }
     const int rmap = pdo_of(index, RPDO_MAP, &k), tmap = !rmap && pdo_of(index, TPDO_MAP, &k);

@@ -12,13 +12,18 @@ A value the file gives none of reads 0 (a drive always has one)."""
 
 from __future__ import annotations
 
+import json
+import struct
+import subprocess
 import threading
 import time
 from pathlib import Path
 
 import canopen
+import pytest
 from canopen.objectdictionary import ODVariable
 from canopen.sdo import SdoAbortedError
+from canopen_network import loopback_network
 
 RPDO_MAP, TPDO_MAP = range(0x1600, 0x1800), range(0x1A00, 0x1C00)
 
@@ -135,3 +140,47 @@ class FileDrive:
         with self.lock:
             self.writes.append((index, subindex, value))
 
+
+
+def controller_on_localnodes(ctl: Path, group: str, port: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                             drives: dict[int, FileDrive], emcy_at: tuple[int, int, int] | None = None,
+                             duration: str = "0.5", args: list[str] | None = None,
+                             positions: dict[int, int] | None = None) -> tuple[subprocess.CompletedProcess[str], dict]:
+    """arm_controller --protocol canopen (extra args) on LocalNodes that answer each SYNC with
+    TPDO1 (position: positions[node], else 1000 x node increments; velocity 0) and TPDO2 (the torque
+    of the RPDO1 the drive applied at that SYNC, CiA 301's synchronous RPDO); emcy_at = (node, SYNC
+    number, code): that node sends that EMCY then, and faults (statusword fault) unless the code is
+    0x0000, CiA 301's "error reset or no error". The process and its summary."""
+    net = loopback_network(monkeypatch, group, port)
+    summary = tmp_path / "controller.json"
+    syncs = [0]
+    pending = {i: 0 for i in drives}  # the latest RPDO1 torque, applied at the next SYNC (type 1)
+    try:
+        for i, d in drives.items():
+            net.add_node(d.node)
+
+            def on_rpdo(can_id: int, data: bytes, ts: float, i: int = i) -> None:
+                pending[i] = struct.unpack("<Hh", data)[1]
+
+            net.subscribe(0x200 + i, on_rpdo)
+
+        def on_sync(can_id: int, data: bytes, ts: float) -> None:
+            syncs[0] += 1
+            for i, d in drives.items():
+                if d.node.nmt.state != "OPERATIONAL":
+                    continue
+                if emcy_at is not None and emcy_at[0] == i and syncs[0] == emcy_at[1]:
+                    d.sw = 0x0008 if emcy_at[2] else d.sw  # fault, torque off
+                    net.send_message(0x080 + i, struct.pack("<HB5x", emcy_at[2], 0x11))
+                net.send_message(0x180 + i, struct.pack("<ii", (positions or {}).get(i, 1000 * i), 0))
+                net.send_message(0x280 + i, struct.pack("<hH", 0 if d.sw & 0x08 else pending[i], d.sw))
+
+        net.subscribe(0x080, on_sync)
+        p = subprocess.run([str(ctl), "--protocol", "canopen", "--bus", f"udp:{group}:{port}", "--mode", "lockstep",
+                            "--duration", duration, "--ref-hold", "0.1", "--lcm-url", "", "--boot-timeout", "5",
+                            "--summary", str(summary), *(args or [])], capture_output=True, text=True, timeout=300)
+    finally:
+        for d in drives.values():
+            d.node.nmt.stop_heartbeat()
+        net.disconnect()
+    return p, json.loads(summary.read_text())

@@ -23,7 +23,7 @@ import pytest
 canopen = pytest.importorskip("canopen")
 from canopen.sdo import SdoAbortedError  # noqa: E402
 from canopen_network import loopback_network  # noqa: E402
-from cia402_localnode import FileDrive  # noqa: E402
+from cia402_localnode import FileDrive, controller_on_localnodes  # noqa: E402
 
 from gen import drives as gen_drives  # noqa: E402
 
@@ -421,47 +421,12 @@ def test_controller_runs_on_localnode_drives(build_dir: Path, udp_port: int, tmp
 
 
 def _controller_on_localnodes(build_dir: Path, port: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
-                              drives: dict[int, Cia402Drive], emcy_at: tuple[int, int, int] | None = None,
+                              drives: dict[int, FileDrive], emcy_at: tuple[int, int, int] | None = None,
                               duration: str = "0.5") -> tuple[subprocess.CompletedProcess[str], dict]:
-    """arm_controller --protocol canopen on six LocalNodes that answer each SYNC with TPDO1 and
-    TPDO2; emcy_at = (node, SYNC number, code): that node sends that EMCY then, and faults (statusword
-    fault) unless the code is 0x0000, CiA 301's "error reset or no error"."""
     ctl = build_dir / "firmware" / "arm_controller"
     if not ctl.exists():
         pytest.skip(f"{ctl} not built")
-    net = loopback_network(monkeypatch, GROUP, port)
-    summary = tmp_path / "controller.json"
-    syncs = [0]
-    pending = {i: 0 for i in drives}  # the latest RPDO1 torque, applied at the next SYNC (type 1)
-    try:
-        for i, d in drives.items():
-            net.add_node(d.node)
-
-            def on_rpdo(can_id: int, data: bytes, ts: float, i: int = i) -> None:
-                pending[i] = struct.unpack("<Hh", data)[1]
-
-            net.subscribe(0x200 + i, on_rpdo)
-
-        def on_sync(can_id: int, data: bytes, ts: float) -> None:
-            syncs[0] += 1
-            for i, d in drives.items():
-                if d.node.nmt.state != "OPERATIONAL":
-                    continue
-                if emcy_at is not None and emcy_at[0] == i and syncs[0] == emcy_at[1]:
-                    d.sw = 0x0008 if emcy_at[2] else d.sw  # fault, torque off
-                    net.send_message(0x080 + i, struct.pack("<HB5x", emcy_at[2], 0x11))
-                net.send_message(0x180 + i, struct.pack("<ii", 1000 * i, 0))
-                net.send_message(0x280 + i, struct.pack("<hH", 0 if d.sw & 0x08 else pending[i], d.sw))
-
-        net.subscribe(0x080, on_sync)
-        p = subprocess.run([str(ctl), "--protocol", "canopen", "--bus", f"udp:{GROUP}:{port}", "--mode", "lockstep",
-                            "--duration", duration, "--ref-hold", "0.1", "--lcm-url", "", "--boot-timeout", "5",
-                            "--summary", str(summary)], capture_output=True, text=True, timeout=300)
-    finally:
-        for d in drives.values():
-            d.node.nmt.stop_heartbeat()
-        net.disconnect()
-    return p, json.loads(summary.read_text())
+    return controller_on_localnodes(ctl, GROUP, port, tmp_path, monkeypatch, drives, emcy_at=emcy_at, duration=duration)
 
 
 @pytest.mark.parametrize("bad,fault,index", [

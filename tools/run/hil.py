@@ -443,7 +443,8 @@ def canopen_args(info: dict[str, Any], drive_config: Path | None) -> tuple[list[
 
 
 def canopen_record(controller: dict[str, Any]) -> dict[str, Any] | None:
-    """run.json's record of the CANopen boot: its time, first fault, and every SDO write per node."""
+    """run.json's record of the CANopen boot: its time, first fault, every SDO write per node, and
+    each joint's drive's units as the boot read them."""
     co = controller.get("canopen")
     if co is None:
         return None
@@ -452,7 +453,8 @@ def canopen_record(controller: dict[str, Any]) -> dict[str, Any] | None:
         per_node.setdefault(str(w["node"]), []).append(
             {"object": f"0x{w['index']:04X}:{w['sub']:02X}", "index": w["index"], "sub": w["sub"],
              "value": w["value"], "bytes": w["bytes"]})
-    return {"boot_s": co.get("boot_s"), "fault": co.get("fault"), "sdo_writes": per_node}
+    return {"boot_s": co.get("boot_s"), "fault": co.get("fault"), "sdo_writes": per_node,
+            "units": co.get("units")}
 
 
 def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:

@@ -92,6 +92,10 @@ static int canopen_rx(link_t *l, const arm_can_frame_t *f)
         if (!tpdo_is_this_periods(l, &l->tpdo1_mask, &l->tpdo1_late, j)) return 1;
         d->q[j] = arm_co_increments_to_rad(&l->units[j], pos);
         d->qd[j] = arm_co_increments_to_rad(&l->units[j], vel);
+        if ((l->report->co_q_seen & (1u << j)) == 0u) { /* the units' first use, for the summary */
+            l->report->co_q_seen |= 1u << j;
+            l->report->co_q_first[j] = d->q[j];
+        }
     } else if (arm_co_unpack_tpdo2((uint8_t)node, f, &tq, &sw) == 0) {
         if (!tpdo_is_this_periods(l, &l->tpdo2_mask, &l->tpdo2_late, j)) return 1;
         l->tpdo2_seen |= 1u << j;
@@ -372,6 +376,7 @@ static int boot_canopen_run(link_t *l, const options_t *opt, const arm_robot_mod
         if (!running) {
             for (int j = 0; j < ARM_N_JOINTS; ++j) { /* each joint's units: its drive's, as the boot read them */
                 const arm_co_boot_t *cb = &co[l->bus_of[j]];
+                l->report->co_units[j] = cb->node[co_slot[j]].units;
                 if (arm_co_boot_units(cb, co_slot[j], &l->units[j]) != 0) {
                     snprintf(l->report->reason, sizeof(l->report->reason),
                              "boot: canopen: node %u: its units (rated torque, encoder, gear) cannot be built",

@@ -155,7 +155,9 @@ static void mapping_rules(void)
     CHECK(write(&n, 0x1A00, 0, 9u, 1u) == 0x06090030u);
     CHECK(write(&n, 0x1A00, 1, 0x60410010u, 4u) == 0u);
     CHECK(write(&n, 0x1A00, 0, 1u, 1u) == 0u);
-    CHECK(write(&n, 0x1800, 2, 0xFFu, 1u) == 0x06090030u);      /* TPDOs: synchronous only */
+    CHECK(write(&n, 0x1800, 2, 0xF1u, 1u) == 0x06090030u);      /* 241-253: reserved */
+    CHECK(write(&n, 0x1800, 2, 0xFFu, 1u) == 0u);               /* event-driven: taken (sent on SYNC only) */
+    CHECK(write(&n, 0x1800, 2, 1u, 1u) == 0u);
     CHECK(write(&n, 0x1800, 1, 0x183u, 4u) == 0u);
     CHECK(n.tpdo[0].valid && n.tpdo[0].n == 1u && n.tpdo[0].len == 2u);
     CHECK(write(&n, 0x1600, 1, 0x60410010u, 4u) == 0x08000022u); /* RPDO1 valid */
