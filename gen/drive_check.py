@@ -39,7 +39,8 @@ NEEDS = [
     Need("0x1018.1", REQUIRED, "vendor id (checked when the drive table names one)"),
     Need("0x1018.2-4", READ_IF_PRESENT, "product code, revision, serial: recorded"),
     Need("0x6502", READ_IF_PRESENT, "supported drive modes: bit 9 (cyclic synchronous torque) must be set"),
-    Need("0x6076", TABLE, "rated torque, mN m: the unit of 0x6071/0x6077 (per-mille of it); never written"),
+    Need("0x6076", TABLE, "rated torque (mN m, or the drive table's torque_unit): 0x6071/0x6077 are per-mille of "
+         "it; never written"),
     Need("0x608F.1-2", TABLE, "encoder increments per motor revolutions; never written"),
     Need("0x6091.1-2", TABLE, "gear ratio, motor per shaft revolutions; never written"),
     Need("0x6072", READ_IF_PRESENT, "max torque, per-mille: the target torque is saturated to it"),
@@ -64,7 +65,7 @@ class Plan:
     master_id: int = 127
     transmission: dict[str, int] = field(default_factory=lambda: {"rpdo1": 1, "tpdo1": 1, "tpdo2": 1})
     # the drive table's units (None: not given): the boot compares the drive's objects with them
-    rated_mnm: int | None = None
+    rated: int | None = None  # 0x6076 in the drive's torque unit (mN m, CiA 402's, unless the table names another)
     encoder: int | None = None
     gear: tuple[int, int] | None = None
 
@@ -216,7 +217,7 @@ def check(d: Dictionary, plan: Plan | None = None) -> Report:
                           f"cyclic synchronous torque (mode {CST_MODE}, bit 9), which this controller needs")
     elif modes is None:
         r.notes.append("0x6502 (supported drive modes): not in the file: the mode write shows whether CST is there")
-    _unit(d, r, 0x6076, "rated torque", "rated_torque_nm", None if p.rated_mnm is None else p.rated_mnm, 0)
+    _unit(d, r, 0x6076, "rated torque", "rated_torque_nm", p.rated, 0)
     _unit(d, r, 0x608F, "encoder increments", "encoder_increments", p.encoder, 2)
     _unit(d, r, 0x6091, "gear ratio", "gear", p.gear, 2)
     if d.get(0x6072) is None:

@@ -34,7 +34,9 @@ from gen.lib import toml_input
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_DRIVES = ROOT / "firmware" / "protocol" / "drives.toml"
 TOP_FIELDS = {"eds", "heartbeat_ms", "consumer_ms", "master_id", "defaults", "joint", "pdo"}
-JOINT_FIELDS = {"node", "encoder_increments", "gear", "rated_torque_nm"}
+JOINT_FIELDS = {"node", "encoder_increments", "gear", "rated_torque_nm", "torque_unit"}
+# 0x6076's unit, per N m: CiA 402 says mN m; maxon's EPOS4 gives µN m (its firmware specification)
+TORQUE_UNITS = {"mNm": 1000, "uNm": 1000000}
 JOINT_TORQUE_LIMIT = "joint_torque_limit"  # rated_torque_nm: the joint's torque limit (arm.json)
 U32_MAX = 0xFFFFFFFF
 # The contract's: every PDO on every SYNC. TPDO2 may come every n-th SYNC (the controller keeps its
@@ -53,23 +55,26 @@ class Drive:
     drive: int              # the drive's number, 1..n (buses.toml)
     bus: str
     node: int
-    rated_torque_mnm: int   # 0x6076: the table's, else the file's
+    rated_torque_mnm: float  # 0x6076 in mN m: the table's, else the file's
     encoder_increments: int  # 0x608F.1 increments per 0x608F.2 motor revolutions: the table's, else the file's
     gear: tuple[int, int]   # 0x6091.1, .2: the table's, else the file's
     given: list[str]        # the objects the table gives: the boot compares the drive's with them
     notes: list[str] = field(default_factory=list)  # what the table fills, what the boot skips
     encoder_revs: int = 1   # 0x608F.2 (the table gives increments per one revolution)
+    torque_unit: str = "mNm"  # 0x6076's unit (TORQUE_UNITS)
 
     def node_spec(self) -> str:
         """The programs' --node value: ID, then what the table gives (arm_controller and
         arm_canopen_boot check the drive against it; arm_sim commissions its drive with it)."""
         spec = [str(self.node)]
-        if "0x6076" in self.given:
-            spec.append(f"rated={self.rated_torque_mnm}")
+        if "0x6076" in self.given:  # in the drive's own unit
+            spec.append(f"rated={round(self.rated_torque_mnm * TORQUE_UNITS[self.torque_unit] / 1000)}")
         if "0x608F" in self.given:
             spec.append(f"encoder={self.encoder_increments}")
         if "0x6091" in self.given:
             spec.append(f"gear={self.gear[0]}/{self.gear[1]}")
+        if self.torque_unit != "mNm":
+            spec.append(f"torque_unit={self.torque_unit}")
         return ",".join(spec)
 
 
@@ -98,8 +103,8 @@ class DriveConfig:
 
 
 def file_units(d: eds_mod.Dictionary) -> dict[str, Any]:
-    """The file's rated torque (mN m), encoder increments per motor revolution and gear, where it
-    has them (a DCF's ParameterValue over the DefaultValue); None where it has not."""
+    """The file's rated torque (in the drive's unit), encoder increments per motor revolutions and
+    gear, where it has them (a DCF's ParameterValue over the DefaultValue); None where it has not."""
     def num(index: int, sub: int) -> int | None:
         e = d.get(index, sub)
         return int(e.value(0)) if e is not None and isinstance(e.default, int) else None
@@ -133,10 +138,15 @@ def _fmt(m: list[tuple[int, int, int]]) -> str:
     return ", ".join(f"0x{i:04X}:{s}:{b}" for i, s, b in m)
 
 
-def _units(get: Callable[[str], tuple[Any, str]], torque_limit: float | None) -> tuple[int | None, int | None,
-                                                                                      tuple[int, int] | None]:
-    """The units a table gives (None where it gives none): rated torque in mN m, encoder increments
-    per motor revolution, gear. get(key) -> (value or None, where it is, for an error)."""
+def _units(get: Callable[[str], tuple[Any, str]], torque_limit: float | None) -> tuple[float | None, int | None,
+                                                                                      tuple[int, int] | None, str]:
+    """The units a table gives (None where it gives none): rated torque in N m, encoder increments
+    per motor revolution, gear, and 0x6076's unit. get(key) -> (value or None, where it is)."""
+    unit, w = get("torque_unit")
+    if unit is None:
+        unit = "mNm"
+    if unit not in TORQUE_UNITS:
+        raise DrivesError(f"{w}: expected one of {', '.join(TORQUE_UNITS)} (0x6076's unit), got {unit!r}")
     enc_v, w = get("encoder_increments")
     enc = None if enc_v is None else _uint(enc_v, w)
     gear_v, w = get("gear")
@@ -149,12 +159,18 @@ def _units(get: Callable[[str], tuple[Any, str]], torque_limit: float | None) ->
     if rated_v == JOINT_TORQUE_LIMIT:
         rated_v = torque_limit
     if rated_v is None:
-        return None, enc, gear
+        return None, enc, gear, unit
+    top = U32_MAX / TORQUE_UNITS[unit]
     if isinstance(rated_v, bool) or not isinstance(rated_v, (int, float)) or not math.isfinite(rated_v) \
-            or not 0.001 <= rated_v <= U32_MAX / 1000:
-        raise DrivesError(f"{w}: expected a torque in N m, 0.001..{U32_MAX / 1000:g} (or \"{JOINT_TORQUE_LIMIT}\"), "
-                          f"got {rated_v!r}")
-    return round(rated_v * 1000), enc, gear
+            or not 1 / TORQUE_UNITS[unit] <= rated_v <= top:
+        raise DrivesError(f"{w}: expected a torque in N m, {1 / TORQUE_UNITS[unit]:g}..{top:g} (or "
+                          f"\"{JOINT_TORQUE_LIMIT}\"), got {rated_v!r}")
+    return float(rated_v), enc, gear, unit
+
+
+def _in_unit(rated_nm: float | None, unit: str) -> int | None:
+    """A rated torque in N m as the drive's 0x6076 holds it."""
+    return None if rated_nm is None else round(rated_nm * TORQUE_UNITS[unit])
 
 
 def table_plan(path: Path) -> tuple[drive_check.Plan, Path]:
@@ -168,14 +184,14 @@ def table_plan(path: Path) -> tuple[drive_check.Plan, Path]:
     def get(key: str) -> tuple[Any, str]:
         return defaults.get(key), f"{path}: defaults.{key}"
 
-    rated, enc, gear = _units(get, None)
+    rated, enc, gear, unit = _units(get, None)
     node = _uint(defaults.get("node", 1), f"{path}: defaults.node", 1, 127)
     eds_rel = doc.get("eds")
     eds = Path(str(eds_rel)) if eds_rel and Path(str(eds_rel)).is_absolute() else path.parent / str(eds_rel or "")
     plan = drive_check.Plan(node=node, heartbeat_ms=_uint(doc.get("heartbeat_ms", 100), f"{path}: heartbeat_ms", 0, 65535),
                             consumer_ms=_uint(doc.get("consumer_ms", 300), f"{path}: consumer_ms", 0, 65535),
                             master_id=_uint(doc.get("master_id", 127), f"{path}: master_id", 1, 127),
-                            transmission=_pdo(doc, path), rated_mnm=rated, encoder=enc, gear=gear)
+                            transmission=_pdo(doc, path), rated=_in_unit(rated, unit), encoder=enc, gear=gear)
     return plan, eds.resolve()
 
 
@@ -284,18 +300,20 @@ def load(arm: dict[str, Any], path: Path | None = None) -> DriveConfig:
 
         node_v, w = get("node")
         node = _uint(num if node_v is None else node_v, w, 1, 127)
-        rated, enc, gear = _units(get, j["torque_limit"])
+        rated, enc, gear, unit = _units(get, j["torque_limit"])
         given = [o for o, v in (("0x6076", rated), ("0x608F", enc), ("0x6091", gear)) if v is not None]
         plan = drive_check.Plan(node=node, cycle_us=cycle_us, heartbeat_ms=heartbeat, consumer_ms=consumer,
-                                master_id=master, transmission=transmission, rated_mnm=rated, encoder=enc, gear=gear)
+                                master_id=master, transmission=transmission, rated=_in_unit(rated, unit), encoder=enc,
+                                gear=gear)
         report = drive_check.check(dictionary, plan)
         if not report.ok:
             raise DrivesError(f"{path}: joint {name} (node {node}): {eds.name}: {report.problems[0]}")
         if num not in bus_of:
             raise DrivesError(f"arm.json: drive {num} (joint {name}) is on no bus")
-        out.append(Drive(name, num, bus_of[num], node, rated if rated is not None else units["rated"],
+        rated_mnm = rated * 1000 if rated is not None else units["rated"] * 1000 / TORQUE_UNITS[unit]
+        out.append(Drive(name, num, bus_of[num], node, rated_mnm,
                          enc if enc is not None else units["encoder"], gear if gear is not None else units["gear"],
-                         given, report.notes, 1 if enc is not None else units["encoder_revs"]))
+                         given, report.notes, 1 if enc is not None else units["encoder_revs"], unit))
     for b in {d.bus for d in out}:
         nodes = [d.node for d in out if d.bus == b]
         dup = sorted({n for n in nodes if nodes.count(n) > 1})

@@ -397,6 +397,7 @@ co_sim_t *sim_co_begin(const sim_config_t *cfg, const sim_co_config_t *co, sim_a
         sim_co_preset_t pre = co->preset;
         const sim_co_preset_t *own = &co->node_preset[j];
         if (own->rated_torque_mnm) pre.rated_torque_mnm = own->rated_torque_mnm;
+        if (own->torque_units_per_nm) pre.torque_units_per_nm = own->torque_units_per_nm;
         if (own->encoder_increments) pre.encoder_increments = own->encoder_increments;
         if (own->gear_motor) {
             pre.gear_motor = own->gear_motor;

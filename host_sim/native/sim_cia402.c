@@ -26,7 +26,7 @@ int sim_cia402_scale(const sim_co_od_t *od, const sim_co_preset_t *own, sim_cia4
     const double rated = value_or(od, 0x6076u, 0u, own->rated_torque_mnm);
     const int ok = inc > 0.0 && revs > 0.0 && motor > 0.0 && shaft > 0.0 && rated > 0.0;
     sc->inc_per_rad = ok ? inc / revs * motor / shaft / TWO_PI : 0.0;
-    sc->rated_nm = ok ? rated * 1e-3 : 0.0;
+    sc->rated_nm = ok ? rated / (own->torque_units_per_nm != 0u ? (double)own->torque_units_per_nm : 1000.0) : 0.0;
     return ok ? 0 : -1;
 }
 

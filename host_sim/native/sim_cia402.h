@@ -18,11 +18,12 @@ typedef struct {
     uint32_t rated_torque_mnm;   /* 0x6076 */
     uint32_t encoder_increments; /* 0x608F.1 */
     uint32_t gear_motor, gear_shaft; /* 0x6091.1, .2 */
+    uint32_t torque_units_per_nm;    /* 0x6076's unit: 1000 mN m (CiA 402's; 0 means it), 1000000 µN m */
 } sim_co_preset_t;
 
 typedef struct {
     double inc_per_rad; /* position encoder increments per joint radian */
-    double rated_nm;    /* 0x6076 in N m */
+    double rated_nm;    /* 0x6076 in N m (through its unit) */
 } sim_cia402_scale_t;
 
 /* Mode 0 always; 1..16 if 0x6502 has bit mode - 1 (CiA 402: bit 9 is CST), or, without 0x6502,

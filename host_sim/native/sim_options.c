@@ -224,7 +224,7 @@ static int sim_od(void *t, void *c, const argv_opt_t *opt, const char *v, char *
     return 0;
 }
 
-/* --node ID[,rated=mNm][,encoder=INC][,gear=M/S]: node ID's dictionary preset (arm_controller's
+/* --node ID[,rated=N][,encoder=INC][,gear=M/S][,torque_unit=U]: node ID's dictionary preset (arm_controller's
  * --node syntax: the arm's drive table, python -m gen.drives). */
 static int sim_node(void *t, void *c, const argv_opt_t *opt, const char *v, char *err, unsigned long errcap)
 {
@@ -254,6 +254,9 @@ static int sim_node(void *t, void *c, const argv_opt_t *opt, const char *v, char
             bad = node_u32(eq + 1, &p->rated_torque_mnm);
         } else if (strcmp(tok, "encoder") == 0) {
             bad = node_u32(eq + 1, &p->encoder_increments);
+        } else if (strcmp(tok, "torque_unit") == 0) {
+            bad = strcmp(eq + 1, "mNm") != 0 && strcmp(eq + 1, "uNm") != 0;
+            p->torque_units_per_nm = strcmp(eq + 1, "uNm") == 0 ? 1000000u : 1000u;
         } else if (strcmp(tok, "gear") == 0 && slash != NULL) {
             *slash = '\0';
             bad = node_u32(eq + 1, &p->gear_motor) || node_u32(slash + 1, &p->gear_shaft);
@@ -261,8 +264,8 @@ static int sim_node(void *t, void *c, const argv_opt_t *opt, const char *v, char
             bad = 1;
         }
         if (bad) {
-            snprintf(err, errcap, "%s '%s': expected ID[,rated=mNm][,encoder=INC][,gear=M/S], whole numbers >= 1",
-                     opt->name, v);
+            snprintf(err, errcap, "%s '%s': expected ID[,rated=N][,encoder=INC][,gear=M/S][,torque_unit=mNm|uNm], "
+                     "whole numbers >= 1", opt->name, v);
             return -1;
         }
     }

@@ -329,7 +329,7 @@ static void test_boot_sequence(void)
     cfg.n_nodes = 2u;
     cfg.node[0] = (arm_co_node_config_t){.node_id = 1u};
     cfg.node[1] = (arm_co_node_config_t){.node_id = 2u, .expect = ARM_CO_EXPECT_RATED | ARM_CO_EXPECT_GEAR,
-                                         .rated_torque_mnm = 28000u, .gear_motor_revs = 160u, .gear_shaft_revs = 1u};
+                                         .rated_torque = 28000u, .gear_motor_revs = 160u, .gear_shaft_revs = 1u};
     server_init(&s);
     s.d[2].rated = 28000u;
     s.d[2].gear_m = 160u;
@@ -407,8 +407,10 @@ static void test_optional_objects(void)
     static server_t s;
     arm_co_boot_default_config(&cfg);
     cfg.n_nodes = 1u;
+    /* an EPOS4 as its DCF says: no 0x1006, 0x608F, 0x6091; 0x6076 in µN m (maxon's unit) */
     cfg.node[0] = (arm_co_node_config_t){.node_id = 4u, .expect = ARM_CO_EXPECT_ENCODER | ARM_CO_EXPECT_GEAR,
-                                         .encoder_increments = 3200u, .gear_motor_revs = 26u, .gear_shaft_revs = 1u};
+                                         .encoder_increments = 3200u, .gear_motor_revs = 26u, .gear_shaft_revs = 1u,
+                                         .torque_units_per_nm = 1000000u};
     server_init(&s);
     s.d[4].lacks = LACKS_1006 | LACKS_1016 | LACKS_608F | LACKS_6091 | LACKS_6072 | LACKS_6502;
     s.d[4].rated = 512871u;
@@ -420,11 +422,12 @@ static void test_optional_objects(void)
                         ARM_CO_ABSENT_6072 | ARM_CO_ABSENT_6502));
     CHECK(writes_of(&b, 4u, 0x1006u) == 0u && writes_of(&b, 4u, 0x1016u) == 0u && writes_of(&b, 4u, 0x1017u) == 1u);
     CHECK_MSG(b.n_log == 26u, "%u writes", b.n_log);
-    CHECK(n->units.from_table == (ARM_CO_EXPECT_ENCODER | ARM_CO_EXPECT_GEAR) && n->units.rated_torque_mnm == 512871u);
+    CHECK(n->units.from_table == (ARM_CO_EXPECT_ENCODER | ARM_CO_EXPECT_GEAR) && n->units.rated_torque == 512871u);
     CHECK(n->units.max_torque_permille == 32767u);
     arm_co_units_t u;
     CHECK(arm_co_boot_units(&b, 0u, &u) == 0);
     CHECK(fabsf(arm_co_increments_to_rad(&u, 3200) - (float)(6.283185307179586 / 26.0)) < 1e-6f);
+    CHECK(fabsf(arm_co_permille_to_torque(&u, 1000) - 0.512871f) < 1e-6f); /* 512871 µN m */
 
     /* without the drive table's encoder, a drive that lacks 0x608F cannot be scaled: named */
     cfg.node[0].expect = ARM_CO_EXPECT_GEAR;
@@ -483,9 +486,9 @@ static void test_units_and_modes_refused(void)
 static void test_units(void)
 {
     arm_co_units_t u;
-    CHECK(arm_co_units_init(&u, 150000u, 1u << 19, 1u, 101u, 1u, 32767) == 0);
-    CHECK(arm_co_units_init(&u, 0u, 1u << 19, 1u, 101u, 1u, 32767) == -1);
-    CHECK(arm_co_units_init(&u, 150000u, 1u << 19, 1u, 101u, 1u, 32767) == 0);
+    CHECK(arm_co_units_init(&u, 150000u, 1000u, 1u << 19, 1u, 101u, 1u, 32767) == 0);
+    CHECK(arm_co_units_init(&u, 0u, 1000u, 1u << 19, 1u, 101u, 1u, 32767) == -1);
+    CHECK(arm_co_units_init(&u, 150000u, 1000u, 1u << 19, 1u, 101u, 1u, 32767) == 0);
     const float quantum_nm = 0.15f;
     const double quantum_rad = 2.0 * 3.14159265358979323846 / (524288.0 * 101.0);
     double worst_tau = 0.0, worst_q = 0.0;
@@ -505,7 +508,7 @@ static void test_units(void)
     CHECK(arm_co_torque_to_permille(&u, 1e9f) == 32767 && arm_co_torque_to_permille(&u, -1e9f) == -32767);
     CHECK(arm_co_torque_to_permille(&u, NAN) == 0 && arm_co_torque_to_permille(&u, INFINITY) == 0);
     CHECK(arm_co_increments_to_rad(&u, 524288 * 101) > 6.2831f && arm_co_increments_to_rad(&u, 524288 * 101) < 6.2832f);
-    CHECK(arm_co_units_init(&u, 1000000u, 1u << 19, 1u, 101u, 1u, 1000) == 0); /* 1000 N m: 1 N m per-mille */
+    CHECK(arm_co_units_init(&u, 1000000u, 1000u, 1u << 19, 1u, 101u, 1u, 1000) == 0); /* 1000 N m: 1 N m per-mille */
     CHECK(arm_co_torque_to_permille(&u, 2.5f) == 3 && arm_co_torque_to_permille(&u, -2.5f) == -3); /* halves away */
     CHECK(arm_co_torque_to_permille(&u, 5000.0f) == 1000); /* max_permille */
 }
@@ -527,7 +530,7 @@ static void test_pdo_codec(void)
     uint16_t sw = 0;
     CHECK(arm_co_unpack_tpdo2(3u, &t2, &tq, &sw) == 0 && tq == -1000 && sw == 0x0227u);
     arm_co_units_t u;
-    CHECK(arm_co_units_init(&u, 150000u, 1u << 19, 1u, 101u, 1u, 32767) == 0);
+    CHECK(arm_co_units_init(&u, 150000u, 1000u, 1u << 19, 1u, 101u, 1u, 32767) == 0);
     float q, qd, tau;
     arm_co_state_si(&u, pos, vel, tq, &q, &qd, &tau);
     CHECK(fabsf(tau + 150.0f) < 1e-4f && q > 0.0f && qd < 0.0f);

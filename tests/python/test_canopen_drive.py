@@ -319,7 +319,7 @@ def test_nmt_resets_restore_defaults(rig: Rig) -> None:
     (["--protocol", "ethercat"], "--protocol: 'ethercat' is not arm or canopen"),
     (["--node", "1,rated=5"], "only with --protocol canopen"),
     (["--protocol", "canopen", "--node", "17"], "--node '17': the node id must be a drive, 1..16"),
-    (["--protocol", "canopen", "--node", "1,speed=3"], "--node '1,speed=3': expected ID[,rated=mNm]"),
+    (["--protocol", "canopen", "--node", "1,speed=3"], "--node '1,speed=3': expected ID[,rated=N]"),
     (["--od-gear-ratio", "50:1"], "only with --protocol canopen"),
     (["--protocol", "canopen", "--od-gear-ratio", "50:0"], "--od-gear-ratio: '50:0' is not MOTOR:SHAFT"),
     (["--protocol", "canopen", "--inject-overcurrent", "0:1"], "--inject-overcurrent: '0:1' is not NODE:TIME"),

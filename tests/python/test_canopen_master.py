@@ -98,7 +98,8 @@ def test_boot_brings_every_node_to_operation_enabled(boot_bin: Path, udp_port: i
     assert [(n["node"], n["state"], n["statusword"] & 0x6F) for n in result["nodes"]] == \
         [(i, "operation_enabled", 0x27) for i in (1, 2, 3)]
     assert result["nodes"][0]["identity"][1] == drives[0].stored(0x1018, 2)  # product code, from the EDS
-    assert [n["units"]["rated_torque_mnm"] for n in result["nodes"]] == [150000, 150000, 28000]  # read, not written
+    assert [(n["units"]["rated_torque"], n["units"]["torque_units_per_nm"]) for n in result["nodes"]] == \
+        [(150000, 1000), (150000, 1000), (28000, 1000)]  # read, not written
     assert all(n["units"]["gear"] == [101, 1] and n["absent"] == "" for n in result["nodes"])
     assert [(w["node"], w["index"], w["sub"], w["value"]) for w in result["sdo_writes"] if w["node"] == 1] == \
         [(1, i, s, v) for i, s, v in drives[0].writes]

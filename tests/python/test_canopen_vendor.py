@@ -48,11 +48,15 @@ SOME_UNITS = {"rated_torque_nm": 1.0, "encoder_increments": 4096, "gear": [1, 1]
 
 @dataclass(frozen=True)
 class Units:
-    rated_mnm: int
-    increments: int  # per encoder_revs motor revolutions
+    rated: int          # 0x6076, in the drive's unit
+    units_per_nm: int   # that unit: 1000 mN m (CiA 402), 1000000 µN m (the drive table's torque_unit)
+    increments: int     # per encoder_revs motor revolutions
     revs: int
     gear: tuple[int, int]
     max_permille: int
+
+    def rated_nm(self) -> float:
+        return self.rated / self.units_per_nm
 
     def rad_per_increment(self) -> float:
         return TWO_PI * self.revs * self.gear[1] / (self.increments * self.gear[0])
@@ -70,10 +74,12 @@ def _units(name: str) -> Units:
     """What the file says each unit is, the drive table standing in where the file lacks one."""
     od = canopen.import_od(str(DRIVES / name), 1)
     table = gen_drives.table_plan(DRIVES / CST[name])[0]
+    unit = gen_drives.toml_input.loads((DRIVES / CST[name]).read_text()).get("defaults", {}).get("torque_unit", "mNm")
     inc, revs = _value(od, 0x608F, 1), _value(od, 0x608F, 2)
     motor, shaft = _value(od, 0x6091, 1), _value(od, 0x6091, 2)
     max_torque = _value(od, 0x6072)
-    return Units(rated_mnm=_value(od, 0x6076) if 0x6076 in od else table.rated_mnm,
+    return Units(rated=_value(od, 0x6076) if 0x6076 in od else table.rated,
+                 units_per_nm=gen_drives.TORQUE_UNITS[unit],
                  increments=inc if inc is not None else table.encoder, revs=revs or 1,
                  gear=(motor, shaft or 1) if motor is not None else table.gear,
                  max_permille=min(max_torque, 32767) if max_torque is not None else 32767)
@@ -165,14 +171,14 @@ def test_master_boots_the_vendor_drive_and_decodes_its_units(name: str, boot_bin
     absent = {f"0x{i:04X}" for i in (0x1006, 0x1016, 0x1017, 0x6502, 0x6076, 0x608F, 0x6091, 0x6072) if not d.has(i)}
     for node, drive in zip(result["nodes"], drives):
         got = node["units"]
-        assert (got["rated_torque_mnm"], got["encoder_increments"], got["encoder_revs"], tuple(got["gear"]),
-                got["max_torque_permille"]) == (units.rated_mnm, units.increments, units.revs, units.gear,
-                                                units.max_permille)
+        assert (got["rated_torque"], got["torque_units_per_nm"], got["encoder_increments"], got["encoder_revs"],
+                tuple(got["gear"]), got["max_torque_permille"]) == (units.rated, units.units_per_nm, units.increments,
+                                                                    units.revs, units.gear, units.max_permille)
         assert set(node["absent"].split()) == absent
         hold = node["hold"]
         assert hold["tpdo1"] >= 10 and hold["tpdo2"] >= 10
         assert hold["q_rad"] == pytest.approx(TWO_PI * units.gear[1] / units.gear[0], rel=1e-6)  # 2 pi / gear
-        assert hold["tau_nm"] == pytest.approx(500 * units.rated_mnm / 1e6, rel=1e-6)
+        assert hold["tau_nm"] == pytest.approx(0.5 * units.rated_nm(), rel=1e-6)  # 500 per-mille
         written = {(i, s) for i, s, _ in drive.writes}
         assert not written & {(0x6076, 0), (0x608F, 1), (0x608F, 2), (0x6091, 1), (0x6091, 2)}  # read only
         assert not any(i in (0x1006, 0x1016, 0x1017) and not d.has(i) for i, _ in written)  # skipped where absent
@@ -254,8 +260,8 @@ def test_controller_runs_on_the_vendor_drives(name: str, build_dir: Path, udp_po
     assert s["canopen"]["fault"]["code"] == "none", s["reason"]
     assert p.returncode == 0 and s["final_state"] == "running", s["reason"]
     for u in s["canopen"]["units"]:
-        assert (u["rated_torque_mnm"], u["encoder_increments"], tuple(u["gear"])) == (units.rated_mnm, units.increments,
-                                                                                      units.gear)
+        assert (u["rated_torque"], u["torque_units_per_nm"], u["encoder_increments"], tuple(u["gear"])) == \
+            (units.rated, units.units_per_nm, units.increments, units.gear)
     assert s["canopen"]["q_first_rad"] == pytest.approx([TWO_PI / 4 * units.gear[1] / units.gear[0]] * 6, rel=1e-6)
     assert all(d.sw & 0x6F == 0x27 and d.stored(0x6060) == 10 for d in drives.values())
 
@@ -341,7 +347,7 @@ def test_python_canopen_boots_our_emulated_drive_of_the_file(name: str, build_di
     def master(node: BaseNode402, net: canopen.Network) -> None:
         node.nmt.state = "PRE-OPERATIONAL"
         assert node.sdo[0x1000].raw & 0xFFFF == 0x0192
-        for index, sub, want in ((0x6076, None, units.rated_mnm), (0x608F, 1, units.increments),
+        for index, sub, want in ((0x6076, None, units.rated), (0x608F, 1, units.increments),
                                  (0x6091, 1, units.gear[0])):
             if d.has(index):  # the file's object, as the file says
                 assert (node.sdo[index] if sub is None else node.sdo[index][sub]).raw == want

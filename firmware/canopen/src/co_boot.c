@@ -310,8 +310,9 @@ static int settle_units(arm_co_boot_t *b, arm_co_node_t *n, const arm_co_action_
         return -1;
     }
     uint32_t one = 1u;
-    if (settle(b, n, a, 0x6076u, ARM_CO_SLOT_RATED, ARM_CO_SLOT_NONE, ARM_CO_EXPECT_RATED, nc->rated_torque_mnm, 1u,
-               &u->rated_torque_mnm, &one) != 0 ||
+    u->torque_units_per_nm = nc->torque_units_per_nm != 0u ? nc->torque_units_per_nm : 1000u;
+    if (settle(b, n, a, 0x6076u, ARM_CO_SLOT_RATED, ARM_CO_SLOT_NONE, ARM_CO_EXPECT_RATED, nc->rated_torque, 1u,
+               &u->rated_torque, &one) != 0 ||
         settle(b, n, a, 0x608Fu, ARM_CO_SLOT_ENCODER, ARM_CO_SLOT_ENCODER_REVS, ARM_CO_EXPECT_ENCODER,
                nc->encoder_increments, 1u, &u->encoder_increments, &u->encoder_revs) != 0 ||
         settle(b, n, a, 0x6091u, ARM_CO_SLOT_GEAR_MOTOR, ARM_CO_SLOT_GEAR_SHAFT, ARM_CO_EXPECT_GEAR, nc->gear_motor_revs,
@@ -333,8 +334,8 @@ int arm_co_boot_units(const arm_co_boot_t *b, unsigned i, arm_co_units_t *u)
         return -1;
     }
     const arm_co_drive_units_t *d = &b->node[i].units;
-    return arm_co_units_init(u, d->rated_torque_mnm, d->encoder_increments, d->encoder_revs, d->gear_motor_revs,
-                             d->gear_shaft_revs, (int16_t)d->max_torque_permille);
+    return arm_co_units_init(u, d->rated_torque, d->torque_units_per_nm, d->encoder_increments, d->encoder_revs,
+                             d->gear_motor_revs, d->gear_shaft_revs, (int16_t)d->max_torque_permille);
 }
 
 static void log_value(arm_co_boot_t *b, const arm_co_node_t *n, uint16_t index, uint8_t sub, uint8_t len,

@@ -19,14 +19,16 @@
 #include "json_file.h"
 
 static const char k_usage[] =
-    "usage: arm_canopen_boot --bus SPEC --node ID[,rated=mNm][,encoder=INC][,gear=M/S][,vendor=X][,product=X]...\n"
+    "usage: arm_canopen_boot --bus SPEC --node ID[,rated=N][,encoder=INC][,gear=M/S][,torque_unit=mNm|uNm]\n"
+    "         [,vendor=X][,product=X]...\n"
     "         [--cycle-us N] [--heartbeat-ms N] [--master-id N] [--consumer-ms N] [--sdo-timeout-ms N]\n"
     "         [--sdo-tries N] [--state-timeout-ms N] [--period-us N] [--timeout-ms N] [--json FILE]\n"
     "         [--hold-periods N] [--hold-torque NM] [--fault-reset]\n"
     "  --bus SPEC         udp | udp:GROUP:PORT | socketcan:IFACE (the drives' bus)\n"
     "  --node ...         a node to configure (repeatable): its id and the units the drive table gives, which\n"
-    "                     the drive's must equal (0x6076 rated torque mN m, 0x608F.1 increments per motor\n"
-    "                     rev, 0x6091 gear; read, never written; they stand in where the drive lacks one)\n"
+    "                     the drive's must equal (0x6076 rated torque, in mN m or the torque_unit's, 0x608F.1\n"
+    "                     increments per motor rev, 0x6091 gear; read, never written; they stand in where the\n"
+    "                     drive lacks one)\n"
     "  --cycle-us         0x1006 communication cycle period [1000]\n"
     "  --heartbeat-ms     0x1017 producer heartbeat of the drives [100]\n"
     "  --master-id        the master's node id (its heartbeat, 0x1016.1) [127]\n"
@@ -291,9 +293,11 @@ static int write_json(const char *path, const arm_co_boot_t *b, const hold_state
         fprintf(f, ", \"absent\": \"%s\"", absent);
         if (n->state == ARM_CO_NODE_ENABLED) {
             const arm_co_drive_units_t *u = &n->units;
-            fprintf(f, ", \"units\": {\"rated_torque_mnm\": %u, \"encoder_increments\": %u, \"encoder_revs\": %u, "
+            fprintf(f, ", \"units\": {\"rated_torque\": %u, \"torque_units_per_nm\": %u, \"encoder_increments\": %u, "
+                       "\"encoder_revs\": %u, "
                        "\"gear\": [%u, %u], \"max_torque_permille\": %u, \"modes\": %u, \"from_table\": %u}",
-                    u->rated_torque_mnm, u->encoder_increments, u->encoder_revs, u->gear_motor_revs, u->gear_shaft_revs,
+                    u->rated_torque, u->torque_units_per_nm, u->encoder_increments, u->encoder_revs, u->gear_motor_revs,
+                    u->gear_shaft_revs,
                     u->max_torque_permille, u->modes, u->from_table);
         }
         if (hold_periods > 0u) {
@@ -421,8 +425,9 @@ int main(int argc, char **argv)
                "serial 0x%08X)\n", boot.cfg.node[i].node_id, n->statusword, n->identity[0], n->identity[1],
                n->identity[2], n->identity[3]);
         const arm_co_drive_units_t *u = &n->units;
-        printf("node %u: units: rated torque %u mN m%s, encoder %u/%u increments per motor revolution%s, gear %u/%u%s, "
-               "max torque %u per-mille\n", boot.cfg.node[i].node_id, u->rated_torque_mnm,
+        printf("node %u: units: rated torque %u %s%s, encoder %u/%u increments per motor revolution%s, gear %u/%u%s, "
+               "max torque %u per-mille\n", boot.cfg.node[i].node_id, u->rated_torque,
+               u->torque_units_per_nm == 1000u ? "mN m" : u->torque_units_per_nm == 1000000u ? "uN m" : "units",
                (u->from_table & ARM_CO_EXPECT_RATED) ? " (drive table)" : "", u->encoder_increments, u->encoder_revs,
                (u->from_table & ARM_CO_EXPECT_ENCODER) ? " (drive table)" : "", u->gear_motor_revs, u->gear_shaft_revs,
                (u->from_table & ARM_CO_EXPECT_GEAR) ? " (drive table)" : "", u->max_torque_permille);

@@ -30,7 +30,7 @@ void canopen_modes_text(uint32_t modes, char *out, size_t cap)
 /* The unit object's name, and the drive table field that gives it. */
 static void unit_names(uint16_t index, const char **what, const char **field)
 {
-    *what = index == 0x6076u ? "rated torque (mN m)" : index == 0x608Fu ? "encoder increments per motor revolutions"
+    *what = index == 0x6076u ? "rated torque" : index == 0x608Fu ? "encoder increments per motor revolutions"
           : index == 0x6091u ? "gear ratio (motor per shaft revolutions)" : "max torque (per-mille)";
     *field = index == 0x6076u ? "rated_torque_nm" : index == 0x608Fu ? "encoder_increments" : "gear";
 }
@@ -160,7 +160,7 @@ int canopen_parse_node(const char *arg, arm_co_node_config_t *nc, char *err, siz
         const char *val = eq + 1;
         int bad = 0;
         if (strcmp(tok, "rated") == 0) {
-            bad = canopen_parse_u32(val, 1u, UINT32_MAX, &nc->rated_torque_mnm);
+            bad = canopen_parse_u32(val, 1u, UINT32_MAX, &nc->rated_torque);
             nc->expect |= ARM_CO_EXPECT_RATED;
         } else if (strcmp(tok, "encoder") == 0) {
             bad = canopen_parse_u32(val, 1u, UINT32_MAX, &nc->encoder_increments);
@@ -175,17 +175,23 @@ int canopen_parse_node(const char *arg, arm_co_node_config_t *nc, char *err, siz
                       canopen_parse_u32(slash + 1, 1u, UINT32_MAX, &nc->gear_shaft_revs);
             }
             nc->expect |= ARM_CO_EXPECT_GEAR;
+        } else if (strcmp(tok, "torque_unit") == 0) {
+            bad = strcmp(val, "mNm") != 0 && strcmp(val, "uNm") != 0;
+            nc->torque_units_per_nm = strcmp(val, "uNm") == 0 ? 1000000u : 1000u;
         } else if (strcmp(tok, "vendor") == 0) {
             bad = canopen_parse_u32(val, 0u, UINT32_MAX, &nc->vendor_id);
         } else if (strcmp(tok, "product") == 0) {
             bad = canopen_parse_u32(val, 0u, UINT32_MAX, &nc->product_code);
         } else {
-            snprintf(err, cap, "--node '%s': unknown field '%s' (rated, encoder, gear, vendor, product)", arg, tok);
+            snprintf(err, cap, "--node '%s': unknown field '%s' (rated, encoder, gear, torque_unit, vendor, product)", arg,
+                     tok);
             return -1;
         }
         if (bad) {
             snprintf(err, cap, "--node '%s': field %s: expected %s", arg, tok,
-                     strcmp(tok, "gear") == 0 ? "MOTOR/SHAFT revolutions, both >= 1" : "an unsigned 32-bit number");
+                     strcmp(tok, "gear") == 0          ? "MOTOR/SHAFT revolutions, both >= 1"
+                     : strcmp(tok, "torque_unit") == 0 ? "mNm or uNm"
+                                                       : "an unsigned 32-bit number");
             return -1;
         }
     }

@@ -56,9 +56,11 @@ int summary_write(const char *path, const options_t *opt, const run_report_t *r,
         fprintf(f, "\n    ],\n    \"units\": [");
         for (unsigned j = 0; j < ARM_N_JOINTS; ++j) { /* each drive's, read at boot (from_table: the table's) */
             const arm_co_drive_units_t *u = &r->co_units[j];
-            fprintf(f, "%s\n      {\"rated_torque_mnm\": %u, \"encoder_increments\": %u, \"encoder_revs\": %u, "
+            fprintf(f, "%s\n      {\"rated_torque\": %u, \"torque_units_per_nm\": %u, \"encoder_increments\": %u, "
+                       "\"encoder_revs\": %u, "
                        "\"gear\": [%u, %u], \"max_torque_permille\": %u, \"modes\": %u, \"from_table\": %u}",
-                    j ? "," : "", u->rated_torque_mnm, u->encoder_increments, u->encoder_revs, u->gear_motor_revs,
+                    j ? "," : "", u->rated_torque, u->torque_units_per_nm, u->encoder_increments, u->encoder_revs,
+                    u->gear_motor_revs,
                     u->gear_shaft_revs, u->max_torque_permille, u->modes, u->from_table);
         }
         fprintf(f, "\n    ],\n    \"q_first_rad\": [");

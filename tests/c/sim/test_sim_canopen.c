@@ -76,7 +76,7 @@ static void boot_up_and_defaults(void)
     CHECK(sim_co_od_get(&n.od, 0x1401u, 1u) == 0x80000303u);         /* RPDO2 invalid */
     CHECK(sim_co_od_get(&n.od, 0x6076u, 0u) == 150000u);
     CHECK(sim_co_od_get(&n.od, 0x608Fu, 1u) == 524288u && sim_co_od_get(&n.od, 0x6091u, 1u) == 101u);
-    const sim_co_preset_t p = {28000u, 4096u, 50u, 1u};
+    const sim_co_preset_t p = {28000u, 4096u, 50u, 1u, 0u};
     CHECK(init(&n, 3, &p, 28.0) == 0);
     sim_co_node_boot(&n, 0);
     CHECK(sim_co_od_get(&n.od, 0x6076u, 0u) == 28000u && sim_co_od_get(&n.od, 0x608Fu, 1u) == 4096u);

@@ -72,7 +72,10 @@ typedef struct {
 typedef struct {
     uint8_t node_id;             /* 1..127 */
     uint8_t expect;              /* ARM_CO_EXPECT_*: which of the three below the drive table gives */
-    uint32_t rated_torque_mnm;   /* 0x6076 */
+    uint32_t rated_torque;       /* 0x6076, in the drive's torque unit */
+    /* 0x6076's unit, per N m: 1000 (mN m, CiA 402's; 0 means it) or 1000000 (µN m, as maxon's EPOS4
+     * gives it: its firmware specification) */
+    uint32_t torque_units_per_nm;
     uint32_t encoder_increments; /* 0x608F.1 (per motor revolution) */
     uint32_t gear_motor_revs;    /* 0x6091.1 */
     uint32_t gear_shaft_revs;    /* 0x6091.2 */
@@ -175,7 +178,8 @@ typedef struct {
 /* A node's units as the boot settled them: the drive's objects, or the drive table's value of one
  * the drive lacks (from_table). */
 typedef struct {
-    uint32_t rated_torque_mnm;       /* 0x6076 */
+    uint32_t rated_torque;           /* 0x6076, in the drive's unit */
+    uint32_t torque_units_per_nm;    /* that unit: 1000 mN m, 1000000 µN m */
     uint32_t encoder_increments;     /* 0x608F.1 */
     uint32_t encoder_revs;           /* 0x608F.2 */
     uint32_t gear_motor_revs, gear_shaft_revs; /* 0x6091.1, .2 */
