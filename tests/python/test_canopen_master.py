@@ -556,3 +556,13 @@ def test_readme_bus_load_table_is_what_busload_computes() -> None:
     assert cells in row, cells
     assert canopen_drives_per_bus(classic, 1000, every=every) == 2
     assert canopen_drives_per_bus(fd, 1000) == 4 and canopen_drives_per_bus(fd, 500) == 8
+
+
+def test_a_unit_the_drive_reports_as_zero_is_named(boot_bin: Path, udp_port: int,
+                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    """No unit can be made of a gear of 101/0: refused before anything is written, the value named."""
+    drive = Cia402Drive(3, commissioned={(0x6091, 2): 0})
+    p, _ = _run(boot_bin, udp_port, ["--node", "3"], [drive], monkeypatch)
+    assert p.returncode == 1 and drive.writes == []
+    assert p.stderr.strip().splitlines() == ["arm_canopen_boot: bad_units: node 3: 0x6091 gear ratio (motor per shaft "
+                                             "revolutions): the drive has 101/0, from which no unit can be made"], p.stderr

@@ -454,7 +454,7 @@ def canopen_record(controller: dict[str, Any]) -> dict[str, Any] | None:
             {"object": f"0x{w['index']:04X}:{w['sub']:02X}", "index": w["index"], "sub": w["sub"],
              "value": w["value"], "bytes": w["bytes"]})
     return {"boot_s": co.get("boot_s"), "fault": co.get("fault"), "sdo_writes": per_node,
-            "units": co.get("units")}
+            "units": co.get("units"), "q_first_rad": co.get("q_first_rad")}
 
 
 def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:

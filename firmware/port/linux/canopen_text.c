@@ -35,10 +35,10 @@ static void unit_names(uint16_t index, const char **what, const char **field)
     *field = index == 0x6076u ? "rated_torque_nm" : index == 0x608Fu ? "encoder_increments" : "gear";
 }
 
-/* "2000/1", or "2000" for a plain value. */
-static void ratio_text(uint32_t num, uint32_t den, char *out, size_t cap)
+/* "2000/1" for a ratio (0x608F, 0x6091), "150000" for a plain value. */
+static void ratio_text(uint16_t index, uint32_t num, uint32_t den, char *out, size_t cap)
 {
-    if (den != 0u) {
+    if (index == 0x608Fu || index == 0x6091u) {
         snprintf(out, cap, "%u/%u", num, den);
     } else {
         snprintf(out, cap, "%u", num);
@@ -86,8 +86,8 @@ void canopen_fault_text(const arm_co_fault_t *f, char *out, size_t cap)
         break;
     case ARM_CO_FAULT_UNITS_MISMATCH:
         unit_names(f->index, &what, &field);
-        ratio_text(f->value, f->value_den, a, sizeof(a));
-        ratio_text(f->expected, f->expected_den, b, sizeof(b));
+        ratio_text(f->index, f->value, f->value_den, a, sizeof(a));
+        ratio_text(f->index, f->expected, f->expected_den, b, sizeof(b));
         snprintf(out, cap, "node %u: 0x%04X %s: the drive has %s, the drive table says %s (%s)", f->node, f->index,
                  what, a, b, field);
         break;
@@ -98,7 +98,7 @@ void canopen_fault_text(const arm_co_fault_t *f, char *out, size_t cap)
         break;
     case ARM_CO_FAULT_BAD_UNITS:
         unit_names(f->index, &what, &field);
-        ratio_text(f->value, f->value_den, a, sizeof(a));
+        ratio_text(f->index, f->value, f->value_den, a, sizeof(a));
         snprintf(out, cap, "node %u: 0x%04X %s: the drive has %s, from which no unit can be made", f->node, f->index,
                  what, a);
         break;

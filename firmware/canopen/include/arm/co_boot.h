@@ -131,7 +131,7 @@ typedef struct {
     uint32_t abort_code;
     uint32_t value;
     uint32_t expected;
-    uint32_t value_den, expected_den; /* a ratio's second term (0x608F.2, 0x6091.2); 0: not a ratio */
+    uint32_t value_den, expected_den; /* a ratio's second term (0x608F.2, 0x6091.2) */
     uint32_t modes;                   /* NO_CST: 0x6502 as read */
     uint8_t has_modes;                /* NO_CST: 0x6502 was read (else the drive has none) */
     uint8_t tries;
