@@ -23,7 +23,7 @@ from tools.run.slots import CAN_GROUP, Slot
 canopen = pytest.importorskip("canopen")
 from canopen.profiles.p402 import BaseNode402  # noqa: E402
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError  # noqa: E402
-from canopen_network import loopback_network  # noqa: E402
+from canopen_network import loopback_network, stop_nodes_and_wait  # noqa: E402
 
 # armctl test runs these alone (no other test beside them): python-canopen's state and SDO timeouts are wall-clock
 pytestmark = pytest.mark.serial
@@ -347,12 +347,5 @@ def test_nodes_on_a_second_bus(sim_bin: Path, monkeypatch: pytest.MonkeyPatch, s
         with pytest.raises(SdoCommunicationError):  # nodes 1-3 are not on this bus: nobody answers
             net.add_node(BaseNode402(1, str(EDS))).sdo[0x1000].raw
     finally:
-        net.nmt.state = "STOPPED"  # this bus's nodes; the others then stop on their idle timeout
-        try:
-            _, err = proc.communicate(timeout=15)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.communicate()
-            net.disconnect()
+        err = stop_nodes_and_wait(net, proc)  # this bus's nodes; the others then stop on their idle timeout
     assert proc.returncode == 3 and "master silent" in err  # bus 0 never heard a master

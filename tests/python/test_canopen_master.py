@@ -41,14 +41,6 @@ PDOS = {  # communication, mapping, COB-ID base, the contract's mapping
 }
 
 
-@pytest.fixture(scope="module")
-def boot_bin(build_dir: Path) -> Path:
-    exe = build_dir / "firmware" / "arm_canopen_boot"
-    if not exe.exists():
-        pytest.skip(f"{exe} not built (cmake --build build/debug --target arm_canopen_boot)")
-    return exe
-
-
 def Cia402Drive(node_id: int, eds: Path = EDS, **kw: Any) -> FileDrive:  # noqa: N802 - reads as the drive it makes
     """A drive of the project's own EDS, or of eds (tests/python/cia402_localnode.py)."""
     return FileDrive(node_id, eds, **kw)

@@ -26,7 +26,7 @@ import pytest
 canopen = pytest.importorskip("canopen")
 from canopen.profiles.p402 import BaseNode402  # noqa: E402
 from canopen.sdo.exceptions import SdoAbortedError  # noqa: E402
-from canopen_network import loopback_network  # noqa: E402
+from canopen_network import loopback_network, stop_nodes_and_wait  # noqa: E402
 from cia402_localnode import FileDrive, controller_on_localnodes  # noqa: E402
 
 from gen import drives as gen_drives  # noqa: E402
@@ -88,14 +88,6 @@ def _units(name: str) -> Units:
 def _arm(n: int) -> dict:
     return {"joints": [{"name": f"j{i + 1}", "torque_limit": 150.0} for i in range(n)],
             "buses": [{"name": "can0", "drives": list(range(1, n + 1))}], "loop_rate_hz": 1000.0}
-
-
-@pytest.fixture(scope="module")
-def boot_bin(build_dir: Path) -> Path:
-    exe = build_dir / "firmware" / "arm_canopen_boot"
-    if not exe.exists():
-        pytest.skip(f"{exe} not built (cmake --build build/debug --target arm_canopen_boot)")
-    return exe
 
 
 @pytest.fixture()
@@ -295,14 +287,7 @@ def _emulate(name: str, sim: Path, port: int, tmp_path: Path, monkeypatch: pytes
         master(node, net)
     finally:
         net.sync.stop()
-        net.nmt.state = "STOPPED"  # every node: the end of the run
-        try:
-            _, err = proc.communicate(timeout=15)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.communicate()
-            net.disconnect()
+        err = stop_nodes_and_wait(net, proc)
     return proc.returncode, err
 
 
