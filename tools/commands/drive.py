@@ -17,6 +17,7 @@ from tools.commands import UsageError
 def add_subparser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("drive", help="check a CiA 402 drive's EDS/DCF before you buy or wire it",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.set_defaults(run=run)
     actions = p.add_subparsers(dest="action", required=True, metavar="ACTION")
     c = actions.add_parser("check", help="can this controller run the drive FILE describes? (exit 0 yes, 2 no)",
                            description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
