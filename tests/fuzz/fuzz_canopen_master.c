@@ -9,6 +9,7 @@
 #include <string.h>
 
 #include "arm/co_boot.h"
+#include "arm/co_pdo.h"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
@@ -62,5 +63,9 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     if (b.n_log > ARM_CO_BOOT_LOG_MAX) abort();
     if (rc == -1 && b.fault.code == ARM_CO_FAULT_NONE) abort();
     if (rc == 0 && (b.node[0].state != ARM_CO_NODE_ENABLED || b.node[1].state != ARM_CO_NODE_ENABLED)) abort();
+    for (unsigned i = 0; rc == 0 && i < 2u; ++i) { /* an enabled drive's units were settled: never a 0 */
+        arm_co_units_t u;
+        if (arm_co_boot_units(&b, i, &u) != 0) abort();
+    }
     return 0;
 }
