@@ -136,7 +136,7 @@ def _check_write(d: Dictionary, r: Report, index: int, sub: int, size: int, valu
         r.problems.append(f"{where}: not in the file; the master writes it")
         return False
     if not e.writable:
-        r.problems.append(f"{where}: access {e.access_raw}; the master writes {value:#x}")
+        r.problems.append(f"{where}: access {e.access_raw}; the master writes 0x{value:X}")
         return False
     if e.type.size != size:
         r.problems.append(f"{where}: the file says {e.type.name}, the master writes {size} bytes (CiA 301's type)")

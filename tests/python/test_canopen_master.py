@@ -558,3 +558,31 @@ def test_a_unit_the_drive_reports_as_zero_is_named(boot_bin: Path, udp_port: int
     assert p.returncode == 1 and drive.writes == []
     assert p.stderr.strip().splitlines() == ["arm_canopen_boot: bad_units: node 3: 0x6091 gear ratio (motor per shaft "
                                              "revolutions): the drive has 101/0, from which no unit can be made"], p.stderr
+
+
+@pytest.mark.parametrize("edit, message", [
+    (("[1017]\nParameterName=Producer heartbeat time\nObjectType=0x7\nDataType=0x0006\nAccessType=rw\nDefaultValue=0\n",
+      "[1017]\nParameterName=Producer heartbeat time\nObjectType=0x7\nDataType=0x0006\nAccessType=rw\nDefaultValue=0\n"
+      "HighLimit=50\n"), "0x1017:00 (producer heartbeat): the master writes 100, above its HighLimit 50"),
+    (("[1006]\nParameterName=Communication cycle period\nObjectType=0x7\nDataType=0x0007\nAccessType=rw",
+      "[1006]\nParameterName=Communication cycle period\nObjectType=0x7\nDataType=0x0007\nAccessType=ro"),
+     "0x1006:00 (communication cycle period): access ro; the master writes 0x3E8"),
+    (("[1017]\nParameterName=Producer heartbeat time\nObjectType=0x7\nDataType=0x0006",
+      "[1017]\nParameterName=Producer heartbeat time\nObjectType=0x7\nDataType=0x0007"),
+     "0x1017:00 (producer heartbeat): the file says UNSIGNED32, the master writes 2 bytes (CiA 301's type)"),
+    (("[6077]\nParameterName=Torque actual value\nObjectType=0x7\nDataType=0x0003\nAccessType=ro\nDefaultValue=0\n"
+      "PDOMapping=1", "[6077]\nParameterName=Torque actual value\nObjectType=0x7\nDataType=0x0003\nAccessType=ro\n"
+      "DefaultValue=0\nPDOMapping=0"), "0x6077:00 in TPDO2: PDOMapping=0 in the file; the master maps it"),
+])
+def test_a_value_the_drive_cannot_take_is_named_before_the_boot(tmp_path: Path, edit: tuple[str, str],
+                                                                message: str) -> None:
+    """Every value the boot writes is checked against the drive's file first: access, type, limits,
+    mapping rules (gen/drive_check.py); the drive table is refused in one line, no frame sent."""
+    text = EDS.read_text()
+    assert edit[0] in text
+    (tmp_path / "drive.eds").write_text(text.replace(edit[0], edit[1]))
+    table = tmp_path / "drives.toml"
+    table.write_text('eds = "drive.eds"\n')
+    with pytest.raises(gen_drives.DrivesError) as exc:
+        gen_drives.load(_arm(1), table)
+    assert str(exc.value) == f"{table}: joint j1 (node 1): drive.eds: {message}"

@@ -43,7 +43,9 @@ CST = {"python_canopen_e35.eds": "python_canopen_e35.toml", "maxon_epos4_50_15.d
 # no CST: the modes each file's 0x6502 lists, and units for the boot to get that far
 NO_CST = {"technosoft_ipos.eds": "pp, pv, hm, ip, manufacturer-specific", "pilz_prbt.dcf": "pp, vl, ip",
           "ros2_canopen_cia402_slave.eds": "pp, pv, hm, csp"}
-SOME_UNITS = {"rated_torque_nm": 1.0, "encoder_increments": 4096, "gear": [1, 1]}
+# The rated torque in N m, as the vendor states it: CiA 402's mN m for the e35 (310); maxon's EPOS4
+# gives µN m (512871: the EC 90 flat's nominal 0.513 N m), which its drive table has to say.
+RATED_NM = {"python_canopen_e35.eds": 0.310, "maxon_epos4_50_15.dcf": 0.512871}
 
 
 @dataclass(frozen=True)
@@ -54,9 +56,6 @@ class Units:
     revs: int
     gear: tuple[int, int]
     max_permille: int
-
-    def rated_nm(self) -> float:
-        return self.rated / self.units_per_nm
 
     def rad_per_increment(self) -> float:
         return TWO_PI * self.revs * self.gear[1] / (self.increments * self.gear[0])
@@ -170,7 +169,7 @@ def test_master_boots_the_vendor_drive_and_decodes_its_units(name: str, boot_bin
         hold = node["hold"]
         assert hold["tpdo1"] >= 10 and hold["tpdo2"] >= 10
         assert hold["q_rad"] == pytest.approx(TWO_PI * units.gear[1] / units.gear[0], rel=1e-6)  # 2 pi / gear
-        assert hold["tau_nm"] == pytest.approx(0.5 * units.rated_nm(), rel=1e-6)  # 500 per-mille
+        assert hold["tau_nm"] == pytest.approx(0.5 * RATED_NM[name], rel=1e-6)  # 500 per-mille
         written = {(i, s) for i, s, _ in drive.writes}
         assert not written & {(0x6076, 0), (0x608F, 1), (0x608F, 2), (0x6091, 1), (0x6091, 2)}  # read only
         assert not any(i in (0x1006, 0x1016, 0x1017) and not d.has(i) for i, _ in written)  # skipped where absent
