@@ -41,7 +41,7 @@ def _signal_name(text: str) -> str:
 
 def _scaling(index: int, d: drives_mod.Drive) -> tuple[float, str | None]:
     if index in POSITION_OBJECTS:
-        rad = 2.0 * math.pi * d.gear[1] / (d.encoder_increments * d.gear[0])
+        rad = 2.0 * math.pi * d.gear[1] * d.encoder_revs / (d.encoder_increments * d.gear[0])
         return rad, "rad" if index == 0x6064 else "rad/s"
     if index in TORQUE_OBJECTS:
         return d.rated_torque_mnm / 1e6, "N.m"
@@ -68,7 +68,7 @@ def build(cfg: drives_mod.DriveConfig) -> Database:
                 if e is None:
                     raise DbcError(f"{cfg.eds}: PDO {pdo} maps 0x{index:04X}:{sub:02X}, which the EDS does not define")
                 scale, unit = _scaling(index, d)
-                sigs.append(_sig(_signal_name(e.name), start, bits, eds_mod.TYPES[e.dtype][2], scale, unit))
+                sigs.append(_sig(_signal_name(e.name), start, bits, e.type.kind == "int", scale, unit))
                 start += bits
             msgs.append(Message(PDO_COB[pdo] + n, f"{pdo.upper()}_node{n}", start // 8, sigs,
                                 senders=["master" if pdo.startswith("r") else f"node{n}"],

@@ -4,32 +4,40 @@
     python -m gen.drives --arm-json build/debug/generated/arm/arm.json            # the table, JSON
     python -m gen.drives --arm-json ... --boot-args can0                          # one bus's options
 
-Rule (README: Real drives, The CANopen master): a joint's field is its [joint.NAME] value, else
-[defaults], else node = the drive's number, rated_torque_nm = the joint's torque limit (arm.json),
-encoder and gear = the EDS defaults. An override is written at boot only where it differs from the
-EDS. Bad input: one line naming the file and the field, exit 2.
+Rule (docs/drives-bring-up.md): a joint's field is its [joint.NAME] value, else [defaults], else
+node = the drive's number. Units (rated torque, encoder, gear) are the drive's: the master reads
+0x6076, 0x608F and 0x6091 at boot and never writes them; what the table gives is compared with them
+(a mismatch stops the boot), and fills what the drive lacks. rated_torque_nm = "joint_torque_limit"
+is the joint's torque limit from arm.json (the emulated drives, commissioned for this arm). The
+drive's EDS or DCF is checked against the boot before it starts (gen/drive_check.py). Bad input:
+one line naming the file and the field, exit 2.
 """
 
 from __future__ import annotations
 
 import argparse
-import configparser
 import json
 import math
 import shlex
 import sys
 import tomllib
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from gen import drive_check
+from gen import eds as eds_mod
 from gen.lib.cia402 import CODEC_MAPPING
 from gen.lib import toml_input
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_DRIVES = ROOT / "firmware" / "protocol" / "drives.toml"
 TOP_FIELDS = {"eds", "heartbeat_ms", "consumer_ms", "master_id", "defaults", "joint", "pdo"}
-JOINT_FIELDS = {"node", "encoder_increments", "gear", "rated_torque_nm"}
+JOINT_FIELDS = {"node", "encoder_increments", "gear", "rated_torque_nm", "torque_unit"}
+# 0x6076's unit, per N m: CiA 402 says mN m; maxon's EPOS4 gives µN m (its firmware specification)
+TORQUE_UNITS = {"mNm": 1000, "uNm": 1000000}
+JOINT_TORQUE_LIMIT = "joint_torque_limit"  # rated_torque_nm: the joint's torque limit (arm.json)
 U32_MAX = 0xFFFFFFFF
 # The contract's: every PDO on every SYNC. TPDO2 may come every n-th SYNC (the controller keeps its
 # torque and statusword in between); TPDO1, the joint state, must come every SYNC; RPDO1 may be
@@ -47,20 +55,26 @@ class Drive:
     drive: int              # the drive's number, 1..n (buses.toml)
     bus: str
     node: int
-    rated_torque_mnm: int   # 0x6076
-    encoder_increments: int  # 0x608F.1
-    gear: tuple[int, int]   # 0x6091.1, .2
-    overrides: list[str]    # objects written at boot because they differ from the EDS
+    rated_torque_mnm: float  # 0x6076 in mN m: the table's, else the file's
+    encoder_increments: int  # 0x608F.1 increments per 0x608F.2 motor revolutions: the table's, else the file's
+    gear: tuple[int, int]   # 0x6091.1, .2: the table's, else the file's
+    given: list[str]        # the objects the table gives: the boot compares the drive's with them
+    notes: list[str] = field(default_factory=list)  # what the table fills, what the boot skips
+    encoder_revs: int = 1   # 0x608F.2 (the table gives increments per one revolution)
+    torque_unit: str = "mNm"  # 0x6076's unit (TORQUE_UNITS)
 
     def node_spec(self) -> str:
-        """The programs' --node value: ID, then only what the drive overrides of the EDS."""
+        """The programs' --node value: ID, then what the table gives (arm_controller and
+        arm_canopen_boot check the drive against it; arm_sim commissions its drive with it)."""
         spec = [str(self.node)]
-        if "0x6076" in self.overrides:
-            spec.append(f"rated={self.rated_torque_mnm}")
-        if "0x608F" in self.overrides:
+        if "0x6076" in self.given:  # in the drive's own unit
+            spec.append(f"rated={round(self.rated_torque_mnm * TORQUE_UNITS[self.torque_unit] / 1000)}")
+        if "0x608F" in self.given:
             spec.append(f"encoder={self.encoder_increments}")
-        if "0x6091" in self.overrides:
+        if "0x6091" in self.given:
             spec.append(f"gear={self.gear[0]}/{self.gear[1]}")
+        if self.torque_unit != "mNm":
+            spec.append(f"torque_unit={self.torque_unit}")
         return ",".join(spec)
 
 
@@ -88,20 +102,17 @@ class DriveConfig:
         return args
 
 
-def eds_defaults(path: Path) -> dict[str, int]:
-    """The EDS's rated torque, encoder increments and gear (DefaultValue of 6076, 608Fsub1, 6091sub1/2)."""
-    cp = configparser.ConfigParser(interpolation=None, strict=False)
-    try:
-        if not cp.read(path):
-            raise DrivesError(f"{path}: cannot read the EDS")
-        out = {}
-        for key, (sec, fld) in {"rated": ("6076", "DefaultValue"), "encoder": ("608Fsub1", "DefaultValue"),
-                                "gear_motor": ("6091sub1", "DefaultValue"),
-                                "gear_shaft": ("6091sub2", "DefaultValue")}.items():
-            out[key] = int(cp[sec][fld], 0)
-        return out
-    except (configparser.Error, KeyError, ValueError) as exc:
-        raise DrivesError(f"{path}: not an EDS with 0x6076, 0x608F and 0x6091 defaults ({exc})") from exc
+def file_units(d: eds_mod.Dictionary) -> dict[str, Any]:
+    """The file's rated torque (in the drive's unit), encoder increments per motor revolutions and
+    gear, where it has them (a DCF's ParameterValue over the DefaultValue); None where it has not."""
+    def num(index: int, sub: int) -> int | None:
+        e = d.get(index, sub)
+        return int(e.value(0)) if e is not None and isinstance(e.default, int) else None
+
+    enc, revs = num(0x608F, 1), num(0x608F, 2)
+    motor, shaft = num(0x6091, 1), num(0x6091, 2)
+    return {"rated": num(0x6076, 0), "encoder": enc or None, "encoder_revs": revs or 1,
+            "gear": None if not motor else (motor, shaft or 1)}
 
 
 def _uint(v: Any, where: str, lo: int = 1, hi: int = U32_MAX) -> int:
@@ -125,6 +136,63 @@ def _mapping(v: Any, where: str) -> list[tuple[int, int, int]]:
 
 def _fmt(m: list[tuple[int, int, int]]) -> str:
     return ", ".join(f"0x{i:04X}:{s}:{b}" for i, s, b in m)
+
+
+def _units(get: Callable[[str], tuple[Any, str]], torque_limit: float | None) -> tuple[float | None, int | None,
+                                                                                      tuple[int, int] | None, str]:
+    """The units a table gives (None where it gives none): rated torque in N m, encoder increments
+    per motor revolution, gear, and 0x6076's unit. get(key) -> (value or None, where it is)."""
+    unit, w = get("torque_unit")
+    if unit is None:
+        unit = "mNm"
+    if unit not in TORQUE_UNITS:
+        raise DrivesError(f"{w}: expected one of {', '.join(TORQUE_UNITS)} (0x6076's unit), got {unit!r}")
+    enc_v, w = get("encoder_increments")
+    enc = None if enc_v is None else _uint(enc_v, w)
+    gear_v, w = get("gear")
+    gear = None
+    if gear_v is not None:
+        if not isinstance(gear_v, list) or len(gear_v) != 2:
+            raise DrivesError(f"{w}: expected [motor revolutions, shaft revolutions], got {gear_v!r}")
+        gear = (_uint(gear_v[0], w), _uint(gear_v[1], w))
+    rated_v, w = get("rated_torque_nm")
+    if rated_v == JOINT_TORQUE_LIMIT:
+        rated_v = torque_limit
+    if rated_v is None:
+        return None, enc, gear, unit
+    top = U32_MAX / TORQUE_UNITS[unit]
+    if isinstance(rated_v, bool) or not isinstance(rated_v, (int, float)) or not math.isfinite(rated_v) \
+            or not 1 / TORQUE_UNITS[unit] <= rated_v <= top:
+        raise DrivesError(f"{w}: expected a torque in N m, {1 / TORQUE_UNITS[unit]:g}..{top:g} (or "
+                          f"\"{JOINT_TORQUE_LIMIT}\"), got {rated_v!r}")
+    return float(rated_v), enc, gear, unit
+
+
+def _in_unit(rated_nm: float | None, unit: str) -> int | None:
+    """A rated torque in N m as the drive's 0x6076 holds it."""
+    return None if rated_nm is None else round(rated_nm * TORQUE_UNITS[unit])
+
+
+def table_plan(path: Path) -> tuple[drive_check.Plan, Path]:
+    """A drive table's boot plan for any of its drives, from its top-level fields and [defaults]
+    alone (no arm: armctl drive check), and the drive file it names."""
+    doc = _read(path)
+    defaults = doc.get("defaults", {})
+    if not isinstance(defaults, dict) or set(defaults) - JOINT_FIELDS:
+        raise DrivesError(f"{path}: defaults: expected a table of {', '.join(sorted(JOINT_FIELDS))}")
+
+    def get(key: str) -> tuple[Any, str]:
+        return defaults.get(key), f"{path}: defaults.{key}"
+
+    rated, enc, gear, unit = _units(get, None)
+    node = _uint(defaults.get("node", 1), f"{path}: defaults.node", 1, 127)
+    eds_rel = doc.get("eds")
+    eds = Path(str(eds_rel)) if eds_rel and Path(str(eds_rel)).is_absolute() else path.parent / str(eds_rel or "")
+    plan = drive_check.Plan(node=node, heartbeat_ms=_uint(doc.get("heartbeat_ms", 100), f"{path}: heartbeat_ms", 0, 65535),
+                            consumer_ms=_uint(doc.get("consumer_ms", 300), f"{path}: consumer_ms", 0, 65535),
+                            master_id=_uint(doc.get("master_id", 127), f"{path}: master_id", 1, 127),
+                            transmission=_pdo(doc, path), rated=_in_unit(rated, unit), encoder=enc, gear=gear)
+    return plan, eds.resolve()
 
 
 def drives_file_of(arm: dict[str, Any]) -> Path:
@@ -191,11 +259,16 @@ def load(arm: dict[str, Any], path: Path | None = None) -> DriveConfig:
     if not isinstance(eds_rel, str) or not eds_rel:
         raise DrivesError(f"{path}: eds: expected the drives' EDS file, got {eds_rel!r}")
     eds = Path(eds_rel) if Path(eds_rel).is_absolute() else (path.parent / eds_rel).resolve()
-    eds_def = eds_defaults(eds)
+    try:
+        dictionary = eds_mod.load(eds)
+    except eds_mod.EdsError as exc:
+        raise DrivesError(f"{path}: eds: {exc}") from None
+    units = file_units(dictionary)
     heartbeat = _uint(doc.get("heartbeat_ms", 100), f"{path}: heartbeat_ms", 0, 65535)
     consumer = _uint(doc.get("consumer_ms", 300), f"{path}: consumer_ms", 0, 65535)
     master = _uint(doc.get("master_id", 127), f"{path}: master_id", 1, 127)
     transmission = _pdo(doc, path)
+    cycle_us = round(1e6 / float(arm.get("loop_rate_hz", 1000.0)))
     defaults = doc.get("defaults", {})
     joints_tab = doc.get("joint", {})
     if not isinstance(defaults, dict) or not isinstance(joints_tab, dict):
@@ -218,33 +291,29 @@ def load(arm: dict[str, Any], path: Path | None = None) -> DriveConfig:
         t = joints_tab.get(name, {})
         src = f"joint.{name}" if name in joints_tab else "defaults"
 
-        def get(key: str, fallback: Any) -> tuple[Any, str]:
+        def get(key: str) -> tuple[Any, str]:
             if key in t:
                 return t[key], f"{path}: joint.{name}.{key}"
             if key in defaults:
                 return defaults[key], f"{path}: defaults.{key}"
-            return fallback, f"{path}: {src}.{key}"
+            return None, f"{path}: {src}.{key}"
 
-        node_v, w = get("node", num)
-        node = _uint(node_v, w, 1, 127)
-        enc_v, w = get("encoder_increments", eds_def["encoder"])
-        enc = _uint(enc_v, w)
-        gear_v, w = get("gear", [eds_def["gear_motor"], eds_def["gear_shaft"]])
-        if not isinstance(gear_v, list) or len(gear_v) != 2:
-            raise DrivesError(f"{w}: expected [motor revolutions, shaft revolutions], got {gear_v!r}")
-        gear = (_uint(gear_v[0], w), _uint(gear_v[1], w))
-        rated_v, w = get("rated_torque_nm", j["torque_limit"])
-        if isinstance(rated_v, bool) or not isinstance(rated_v, (int, float)) or not math.isfinite(rated_v) \
-                or not 0.001 <= rated_v <= U32_MAX / 1000:
-            raise DrivesError(f"{w}: expected a torque in N m, 0.001..{U32_MAX / 1000:g}, got {rated_v!r}")
-        rated = round(rated_v * 1000)
-        overrides = ([o for o, differs in (("0x6076", rated != eds_def["rated"]),
-                                           ("0x608F", enc != eds_def["encoder"]),
-                                           ("0x6091", gear != (eds_def["gear_motor"], eds_def["gear_shaft"])))
-                      if differs])
+        node_v, w = get("node")
+        node = _uint(num if node_v is None else node_v, w, 1, 127)
+        rated, enc, gear, unit = _units(get, j["torque_limit"])
+        given = [o for o, v in (("0x6076", rated), ("0x608F", enc), ("0x6091", gear)) if v is not None]
+        plan = drive_check.Plan(node=node, cycle_us=cycle_us, heartbeat_ms=heartbeat, consumer_ms=consumer,
+                                master_id=master, transmission=transmission, rated=_in_unit(rated, unit), encoder=enc,
+                                gear=gear)
+        report = drive_check.check(dictionary, plan)
+        if not report.ok:
+            raise DrivesError(f"{path}: joint {name} (node {node}): {eds.name}: {report.problems[0]}")
         if num not in bus_of:
             raise DrivesError(f"arm.json: drive {num} (joint {name}) is on no bus")
-        out.append(Drive(name, num, bus_of[num], node, rated, enc, gear, overrides))
+        rated_mnm = rated * 1000 if rated is not None else units["rated"] * 1000 / TORQUE_UNITS[unit]
+        out.append(Drive(name, num, bus_of[num], node, rated_mnm,
+                         enc if enc is not None else units["encoder"], gear if gear is not None else units["gear"],
+                         given, report.notes, 1 if enc is not None else units["encoder_revs"], unit))
     for b in {d.bus for d in out}:
         nodes = [d.node for d in out if d.bus == b]
         dup = sorted({n for n in nodes if nodes.count(n) > 1})
@@ -252,8 +321,7 @@ def load(arm: dict[str, Any], path: Path | None = None) -> DriveConfig:
             raise DrivesError(f"{path}: node: node id {dup[0]} is used twice on bus {b}")
         if master in nodes:
             raise DrivesError(f"{path}: master_id: {master} is a drive's node id on bus {b}")
-    rate = float(arm.get("loop_rate_hz", 1000.0))
-    return DriveConfig(str(path), str(eds), heartbeat, consumer, master, round(1e6 / rate), out, transmission)
+    return DriveConfig(str(path), str(eds), heartbeat, consumer, master, cycle_us, out, transmission)
 
 
 def main(argv: list[str] | None = None) -> int:

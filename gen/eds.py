@@ -1,28 +1,65 @@
-"""Emit an EDS's object dictionary as a C table: `python -m gen.eds --eds F --out DIR`.
+"""Read a CANopen EDS or DCF (CiA 306) as a drive's object dictionary, and write it as the
+emulated drive's table: `python -m gen.eds --eds F --out DIR` (the build's compiled-in table, the
+project's own drive) or `--table FILE` (a table arm_sim loads with --od: any drive's file).
 
-The EDS (firmware/protocol/cia402_servo.eds) is the one definition of the emulated CiA 402
-drive's objects: index, sub-index, data type, access, default (a "$NODEID+" default is relative
-to the node id), limits, PDO mapping. The simulator's object dictionary (host_sim/native,
-sim_canopen_od.c) is this table plus each node's values; python-canopen reads the same file as a
-master. Parsed with configparser (the EDS is an INI file), so the build needs no CANopen stack.
-"""
+What a real file may hold, and how it is read:
+- every CiA 301 basic data type (0x0001-0x001B): booleans, integers of 8 to 64 bits, REAL32 and
+  REAL64, VISIBLE_STRING, OCTET_STRING, UNICODE_STRING, DOMAIN, TIME_OF_DAY, TIME_DIFFERENCE;
+- a DCF's ParameterValue (the configured value) over the DefaultValue;
+- `$NODEID` in a value or limit: `$NODEID`, `$NODEID+N` or `N+$NODEID`, relative to the node id;
+- ARRAY objects written whole (`CompactSubObj=N`, names from [XXXXName], values from [XXXXValue]);
+- objects the profiles make optional may be missing: the file lists what it has
+  ([MandatoryObjects], [OptionalObjects], [ManufacturerObjects]).
+A broken file (an unknown type, a broken $NODEID, a default PDO mapping longer than 64 bits, no
+[MandatoryObjects], a value its type cannot hold, ...) is one line naming the section and the key,
+exit 2. Parsed with configparser as python-canopen does (the file is an INI file)."""
 
 from __future__ import annotations
 
 import argparse
 import configparser
+import math
 import re
+import struct
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
-from gen.lib.atomic_output import exit_on_output_error, write_files_atomically
+from gen.lib.atomic_output import exit_on_output_error, write_files_atomically, write_text_atomic
+from gen.lib.one_line import one_line
 
-# CiA 301 data types this drive uses: code -> (C enum suffix, size in bytes, signed).
-TYPES = {0x0001: ("BOOL", 1, False), 0x0002: ("I8", 1, True), 0x0003: ("I16", 2, True),
-         0x0004: ("I32", 4, True), 0x0005: ("U8", 1, False), 0x0006: ("U16", 2, False),
-         0x0007: ("U32", 4, False), 0x0009: ("VSTRING", 0, False)}
+
+@dataclass(frozen=True)
+class DataType:
+    name: str
+    size: int   # bytes; 0: a string or domain (its length is its value's)
+    kind: str   # bool, int, uint, float, text (VISIBLE/UNICODE_STRING), bytes (OCTET_STRING, DOMAIN)
+
+
+# CiA 301 Table 44, the basic data types (0x000E and 0x0017 are reserved).
+TYPES: dict[int, DataType] = {
+    0x0001: DataType("BOOLEAN", 1, "bool"), 0x0002: DataType("INTEGER8", 1, "int"),
+    0x0003: DataType("INTEGER16", 2, "int"), 0x0004: DataType("INTEGER32", 4, "int"),
+    0x0005: DataType("UNSIGNED8", 1, "uint"), 0x0006: DataType("UNSIGNED16", 2, "uint"),
+    0x0007: DataType("UNSIGNED32", 4, "uint"), 0x0008: DataType("REAL32", 4, "float"),
+    0x0009: DataType("VISIBLE_STRING", 0, "text"), 0x000A: DataType("OCTET_STRING", 0, "bytes"),
+    0x000B: DataType("UNICODE_STRING", 0, "text"), 0x000C: DataType("TIME_OF_DAY", 6, "uint"),
+    0x000D: DataType("TIME_DIFFERENCE", 6, "uint"), 0x000F: DataType("DOMAIN", 0, "bytes"),
+    0x0010: DataType("INTEGER24", 3, "int"), 0x0011: DataType("REAL64", 8, "float"),
+    0x0012: DataType("INTEGER40", 5, "int"), 0x0013: DataType("INTEGER48", 6, "int"),
+    0x0014: DataType("INTEGER56", 7, "int"), 0x0015: DataType("INTEGER64", 8, "int"),
+    0x0016: DataType("UNSIGNED24", 3, "uint"), 0x0018: DataType("UNSIGNED40", 5, "uint"),
+    0x0019: DataType("UNSIGNED48", 6, "uint"), 0x001A: DataType("UNSIGNED56", 7, "uint"),
+    0x001B: DataType("UNSIGNED64", 8, "uint"),
+}
+# CiA 306 access types: rww/rwr are rw seen from the PDOs' side (mappable to an RPDO / a TPDO).
 ACCESS = {"ro": "RO", "rw": "RW", "wo": "WO", "const": "CONST", "rww": "RW", "rwr": "RW"}
+OBJECT_TYPES = {0x2: "DOMAIN", 0x5: "DEFTYPE", 0x6: "DEFSTRUCT", 0x7: "VAR", 0x8: "ARRAY", 0x9: "RECORD"}
+LISTS = ("MandatoryObjects", "OptionalObjects", "ManufacturerObjects")
+PDO_MAPPINGS = (range(0x1600, 0x1800), range(0x1A00, 0x1C00))
+MAX_PDO_BITS = 64  # a classic CAN frame's payload
+
+Value = int | float | str | bytes
 
 
 class EdsError(ValueError):
@@ -31,128 +68,352 @@ class EdsError(ValueError):
 
 @dataclass(frozen=True)
 class Entry:
+    """One variable: an object (VAR) or a sub-index of an ARRAY or RECORD."""
     index: int
     sub: int
     name: str
     dtype: int
-    access: str
-    default: int
+    access: str            # RO, RW, WO, CONST
+    access_raw: str        # as the file says (rww, rwr: which PDO direction it maps to)
+    default: Value         # ParameterValue if the file has one (a DCF), else DefaultValue; nodeid_rel: + node id
     nodeid_rel: bool
-    text: str
-    low: int | None
-    high: int | None
+    low: int | float | None
+    high: int | float | None
     pdo: bool
+    configured: bool       # the value is a DCF's ParameterValue
+
+    @property
+    def type(self) -> DataType:
+        return TYPES[self.dtype]
+
+    @property
+    def readable(self) -> bool:
+        return self.access != "WO"
+
+    @property
+    def writable(self) -> bool:
+        return self.access in ("RW", "WO")
+
+    def value(self, node_id: int) -> Value:
+        """The entry's value on node node_id."""
+        return self.default + node_id if self.nodeid_rel and isinstance(self.default, int) else self.default
+
+    def bits(self) -> int:
+        return 8 * self.type.size
+
+
+@dataclass
+class Dictionary:
+    """A drive's object dictionary as its EDS or DCF describes it."""
+    path: Path
+    entries: list[Entry]
+    object_names: dict[int, str]
+    listed: dict[str, set[int]]                  # [MandatoryObjects] ...: the indices each lists
+    device: dict[str, str] = field(default_factory=dict)  # [DeviceInfo]
+    node_id: int | None = None                   # a DCF's [DeviceComissioning] NodeID
+    _by_key: dict[tuple[int, int], Entry] = field(default_factory=dict, repr=False)
+
+    def __post_init__(self) -> None:
+        self._by_key = {(e.index, e.sub): e for e in self.entries}
+
+    def get(self, index: int, sub: int = 0) -> Entry | None:
+        return self._by_key.get((index, sub))
+
+    def has(self, index: int) -> bool:
+        return index in self.object_names
+
+    def subs(self, index: int) -> list[Entry]:
+        return [e for e in self.entries if e.index == index]
+
+
+def _where(section: str, key: str, text: str) -> str:
+    return one_line(f"[{section}] {key}={text}")
 
 
 def _int(section: str, key: str, text: str) -> int:
     t = text.strip()
     try:
-        return int(t, 0) if not re.fullmatch(r"0[0-9]+", t) else int(t, 8)
+        if re.fullmatch(r"[+-]?0[0-7]+", t):  # CiA 306: a leading 0 is octal
+            return int(t, 8)
+        return int(t, 0)
     except ValueError:
-        raise EdsError(f"[{section}] {key}={text!r} is not an integer") from None
+        raise EdsError(f"{_where(section, key, text)}: not an integer") from None
 
 
-def _entry(cp: configparser.ConfigParser, section: str, index: int, sub: int) -> Entry:
-    s = cp[section]
-    for key in ("ParameterName", "DataType", "AccessType"):
-        if key not in s:
-            raise EdsError(f"[{section}] has no {key}")
-    dtype = _int(section, "DataType", s["DataType"])
-    if dtype not in TYPES:
-        raise EdsError(f"[{section}] DataType={s['DataType']}: not one of the types this drive supports "
-                       f"({', '.join(f'0x{k:04X}' for k in TYPES)})")
-    access = s["AccessType"].strip().lower()
-    if access not in ACCESS:
-        raise EdsError(f"[{section}] AccessType={s['AccessType']!r}: expected ro, rw, wo or const")
-    raw = s.get("DefaultValue", "0").strip()
-    text, default, rel = "", 0, False
-    if dtype == 0x0009:
-        text = raw
+def _nodeid(section: str, key: str, text: str) -> tuple[str, bool]:
+    """A value without its $NODEID term, and whether it had one (the value is then node-relative)."""
+    if "$" not in text:
+        return text, False
+    t = text.replace(" ", "").replace("\t", "")
+    m = re.fullmatch(r"\$NODEID(?:\+(.+))?", t, re.IGNORECASE) or re.fullmatch(r"(.+)\+\$NODEID", t, re.IGNORECASE)
+    if m is None or (m.group(1) is not None and "$" in m.group(1)):
+        raise EdsError(f"{_where(section, key, text)}: a $NODEID value is $NODEID, $NODEID+N or N+$NODEID")
+    return m.group(1) or "0", True
+
+
+def _number(section: str, key: str, text: str, dtype: int) -> int | float:
+    """A number of type dtype: integers within the type's range (hex beyond a signed type's maximum
+    is its two's complement, as python-canopen reads limits), floats as written."""
+    t = TYPES[dtype]
+    if t.kind == "float":
+        try:
+            x = float(text)
+        except ValueError:
+            raise EdsError(f"{_where(section, key, text)}: not a {t.name} number") from None
+        if math.isnan(x) or (t.size == 4 and abs(x) > 3.4028235e38 and not math.isinf(x)):
+            raise EdsError(f"{_where(section, key, text)}: not a finite {t.name}")
+        return x
+    v = _int(section, key, text)
+    bits = 8 * t.size
+    if t.kind == "int":
+        if text.strip().lower().startswith("0x") and 1 << (bits - 1) <= v < 1 << bits:
+            v -= 1 << bits
+        lo, hi = -(1 << (bits - 1)), (1 << (bits - 1)) - 1
     else:
-        if raw.upper().startswith("$NODEID"):
-            rel, raw = True, raw[len("$NODEID"):].lstrip("+ ") or "0"
-        default = _int(section, "DefaultValue", raw) if raw else 0
-    low = _int(section, "LowLimit", s["LowLimit"]) if s.get("LowLimit", "").strip() else None
-    high = _int(section, "HighLimit", s["HighLimit"]) if s.get("HighLimit", "").strip() else None
-    pdo = s.get("PDOMapping", "0").strip() == "1"
-    return Entry(index, sub, s["ParameterName"].strip(), dtype, ACCESS[access], default, rel, text, low, high, pdo)
+        lo, hi = 0, (1 << bits) - 1 if t.kind != "bool" else 1
+    if not lo <= v <= hi:
+        raise EdsError(f"{_where(section, key, text)}: out of range for {t.name} ({lo}..{hi})")
+    return v
 
 
-def entries(eds: Path) -> list[Entry]:
-    """Every variable of the EDS (a compound object's sub-indices), sorted by index and sub-index."""
-    cp = configparser.ConfigParser(interpolation=None, strict=True)
-    cp.optionxform = str  # keys keep their case
-    try:
-        with eds.open(encoding="utf-8") as fh:
-            cp.read_file(fh)
-    except configparser.Error as exc:
-        raise EdsError(f"{eds}: {str(exc).splitlines()[0]}") from None
-    out: list[Entry] = []
-    for section in cp.sections():
-        m = re.fullmatch(r"([0-9A-Fa-f]{4})", section)
-        if not m:
+def _value(section: str, key: str, text: str, dtype: int) -> tuple[Value, bool]:
+    t = TYPES[dtype]
+    if t.kind == "text":
+        return text, False
+    if t.kind == "bytes":
+        try:
+            return bytes.fromhex(text), False
+        except ValueError:
+            if dtype == 0x000F:  # a DOMAIN's default is the tool's (python-canopen's datatypes.eds: "@ABCD")
+                return text.encode("utf-8"), False
+            raise EdsError(f"{_where(section, key, text)}: not hexadecimal bytes ({t.name})") from None
+    if text.strip() == "":
+        return (0.0 if t.kind == "float" else 0), False
+    raw, rel = _nodeid(section, key, text)
+    if rel and t.kind not in ("int", "uint"):
+        raise EdsError(f"{_where(section, key, text)}: $NODEID in a {t.name}")
+    return _number(section, key, raw, dtype), rel
+
+
+def _limit(section: str, key: str, text: str, dtype: int) -> int | float | None:
+    if text.strip() == "" or TYPES[dtype].kind in ("text", "bytes"):
+        return None
+    raw, _rel = _nodeid(section, key, text)  # a node-relative limit is taken at node 0: the widest
+    return _number(section, key, raw, dtype)
+
+
+class _File:
+    """The INI sections of one file, looked up without regard to case (CiA 306 names them
+    [1018sub1] or [1018Sub1]), every key a section has."""
+
+    def __init__(self, path: Path) -> None:
+        try:
+            data = path.read_bytes()
+        except OSError as exc:
+            raise EdsError(f"{path}: {exc.strerror or exc}") from None
+        try:
+            text = data.decode("utf-8")
+        except UnicodeDecodeError:
+            text = data.decode("cp1252", errors="replace")  # vendors' tools write Windows-1252
+        cp = configparser.RawConfigParser(inline_comment_prefixes=(";",), strict=True, interpolation=None)
+        cp.optionxform = str  # type: ignore[assignment,method-assign]  # keys keep their case
+        try:
+            cp.read_string(text, source=str(path))
+        except configparser.Error as exc:
+            raise EdsError(one_line(f"{path}: {str(exc).splitlines()[0]}")) from None
+        self.path = path
+        self.sections: dict[str, dict[str, str]] = {}
+        self.names: dict[str, str] = {}
+        for s in cp.sections():
+            if s.lower() in self.sections:
+                raise EdsError(one_line(f"{path}: section [{s}] appears twice"))
+            self.sections[s.lower()] = {k: v.strip() for k, v in cp[s].items()}
+            self.names[s.lower()] = s
+
+    def get(self, section: str) -> dict[str, str] | None:
+        return self.sections.get(section.lower())
+
+    def name(self, section: str) -> str:
+        return self.names.get(section.lower(), section)
+
+
+def _entry(f: _File, section: str, index: int, sub: int, s: dict[str, str], name: str | None = None,
+           value: str | None = None) -> Entry:
+    where = f.name(section)
+    for key in ("DataType", "AccessType"):
+        if key not in s:
+            raise EdsError(f"[{where}] has no {key}")
+    dtype = _int(where, "DataType", s["DataType"])
+    if dtype not in TYPES:
+        raise EdsError(f"{_where(where, 'DataType', s['DataType'])}: not a CiA 301 basic data type "
+                       f"(0x0001-0x001B; 0x000E and 0x0017 are reserved)")
+    access_raw = s["AccessType"].strip().lower()
+    if access_raw not in ACCESS:
+        raise EdsError(f"{_where(where, 'AccessType', s['AccessType'])}: expected ro, rw, wo, rww, rwr or const")
+    # an empty ParameterValue is a DCF's "not configured": the DefaultValue stands
+    configured = value is not None or s.get("ParameterValue", "") != ""
+    key = "ParameterValue" if configured else "DefaultValue"
+    text = value if value is not None else s.get(key, "")
+    default, rel = _value(where, key, text, dtype)
+    low = _limit(where, "LowLimit", s.get("LowLimit", ""), dtype)
+    high = _limit(where, "HighLimit", s.get("HighLimit", ""), dtype)
+    if low is not None and high is not None and low > high:
+        raise EdsError(f"[{where}] LowLimit={s['LowLimit']} is above HighLimit={s['HighLimit']}")
+    pdo = _int(where, "PDOMapping", s.get("PDOMapping", "0") or "0") != 0
+    return Entry(index, sub, one_line(name if name is not None else s.get("ParameterName", "")), dtype,
+                 ACCESS[access_raw], access_raw, default, rel, low, high, pdo, configured)
+
+
+def _lists(f: _File) -> dict[str, set[int]]:
+    out: dict[str, set[int]] = {}
+    for lst in LISTS:
+        s = f.get(lst)
+        if s is None:
+            if lst == "MandatoryObjects":
+                raise EdsError(f"{f.path}: no [MandatoryObjects] section (CiA 306: every EDS lists its mandatory "
+                               "objects, 0x1000, 0x1001 and 0x1018)")
+            out[lst] = set()
             continue
-        index = int(section, 16)
-        otype = _int(section, "ObjectType", cp[section].get("ObjectType", "0x7"))
-        if otype == 0x7:
-            out.append(_entry(cp, section, index, 0))
-            continue
-        if otype not in (0x8, 0x9):
-            raise EdsError(f"[{section}] ObjectType={otype:#x}: expected 0x7 (VAR), 0x8 (ARRAY) or 0x9 (RECORD)")
-        subs = [k for k in cp.sections() if re.fullmatch(rf"{section}sub[0-9A-Fa-f]+", k, re.IGNORECASE)]
-        if not subs:
-            raise EdsError(f"[{section}] is an ARRAY/RECORD with no [{section}subN] sections")
-        for k in subs:
-            out.append(_entry(cp, k, index, int(k[len(section) + 3:], 16)))
-    if not out:
-        raise EdsError(f"{eds}: no objects")
-    out.sort(key=lambda e: (e.index, e.sub))
-    for a, b in zip(out, out[1:]):
-        if (a.index, a.sub) == (b.index, b.sub):
-            raise EdsError(f"{eds}: object 0x{a.index:04X} sub {a.sub} defined twice")
+        # the entries, not SupportedObjects: vendors' files miscount it (python-canopen's e35.eds)
+        out[lst] = {_int(lst, k, v) for k, v in s.items() if k.isdigit()}
     return out
 
 
-def _c_str(s: str) -> str:
-    return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
+def _compact(f: _File, section: str, index: int, s: dict[str, str]) -> list[Entry]:
+    """An ARRAY written whole: sub 0 is its length, 1..N share the object's type and limits."""
+    where = f.name(section)
+    n = _int(where, "CompactSubObj", s["CompactSubObj"])
+    if not 1 <= n <= 254:
+        raise EdsError(f"{_where(where, 'CompactSubObj', s['CompactSubObj'])}: expected 1..254 sub-indices")
+    names = f.get(f"{section}Name") or {}
+    values = f.get(f"{section}Value") or {}
+    out = [Entry(index, 0, "Number of entries", 0x0005, "RO", "ro", n, False, None, None, False, False)]
+    base = s.get("ParameterName", "")
+    for k in range(1, n + 1):
+        name = names.get(str(k), f"{base}{k}")
+        out.append(_entry(f, section, index, k, s, name=name, value=values.get(str(k))))
+    return out
 
 
-def emit(es: list[Entry], eds_name: str) -> dict[str, str]:
-    head = f"/* Generated by gen/eds.py from {eds_name}. Do not edit. */\n"
-    types = "".join(f"    SIM_CO_T_{v[0]} = 0x{k:04X},\n" for k, v in TYPES.items())
-    h = [head, "#ifndef SIM_CO_OD_TABLE_H\n#define SIM_CO_OD_TABLE_H\n\n#include <stdint.h>\n\n",
-         f"#define SIM_CO_OD_N {len(es)}u\n\n",
-         "typedef enum {\n", types, "} sim_co_type_t;\n\n",
-         "typedef enum { SIM_CO_A_RO, SIM_CO_A_RW, SIM_CO_A_WO, SIM_CO_A_CONST } sim_co_access_t;\n\n",
-         "typedef struct {\n    uint16_t index;\n    uint8_t sub;\n    uint8_t size; /* bytes; 0: a string */\n"
-         "    sim_co_type_t type;\n    sim_co_access_t access;\n    uint8_t pdo_mappable;\n"
-         "    uint8_t nodeid_rel; /* the default plus the node id */\n    uint32_t def; /* raw bits */\n"
-         "    uint8_t has_low, has_high;\n    int64_t low, high;\n    const char *name;\n"
-         "    const char *text; /* a string's value */\n} sim_co_entry_t;\n\n",
-         "extern const sim_co_entry_t SIM_CO_OD[SIM_CO_OD_N];\n\n#endif\n"]
-    c = [head, '#include "sim_co_od_table.h"\n\n', "const sim_co_entry_t SIM_CO_OD[SIM_CO_OD_N] = {\n"]
-    for e in es:
-        t, size, _signed = TYPES[e.dtype]
-        c.append(f"    {{0x{e.index:04X}u, {e.sub}u, {size}u, SIM_CO_T_{t}, SIM_CO_A_{e.access}, {int(e.pdo)}u, "
-                 f"{int(e.nodeid_rel)}u, 0x{e.default & 0xFFFFFFFF:08X}u, {int(e.low is not None)}u, "
-                 f"{int(e.high is not None)}u, {e.low or 0}LL, {e.high or 0}LL, {_c_str(e.name)}, "
-                 f"{_c_str(e.text)}}},\n")
-    c.append("};\n")
-    return {"sim_co_od_table.h": "".join(h), "sim_co_od_table.c": "".join(c)}
+def _check_mappings(d: Dictionary, node_id: int) -> None:
+    for e in d.entries:
+        if e.sub != 0 or not any(e.index in r for r in PDO_MAPPINGS) or not isinstance(e.default, int):
+            continue
+        count = e.value(node_id)
+        entries = [d.get(e.index, k) for k in range(1, int(count) + 1)]
+        bits = sum(int(m.value(node_id)) & 0xFF for m in entries if m is not None and isinstance(m.default, int))
+        if bits > MAX_PDO_BITS:
+            raise EdsError(f"[{e.index:04X}] its mapping of {count} entries is {bits} bits, more than the "
+                           f"{MAX_PDO_BITS} of a CAN frame")
+
+
+def load(path: Path) -> Dictionary:
+    """Every object of the EDS or DCF, its entries sorted by index and sub-index."""
+    f = _File(path)
+    listed = _lists(f)
+    entries: list[Entry] = []
+    names: dict[int, str] = {}
+    for low, s in f.sections.items():
+        if not re.fullmatch(r"[0-9a-f]{4}", low):
+            continue
+        where = f.name(low)
+        index = int(low, 16)
+        otype = _int(where, "ObjectType", s.get("ObjectType", "0x7") or "0x7")
+        if otype not in OBJECT_TYPES:
+            raise EdsError(f"{_where(where, 'ObjectType', s['ObjectType'])}: expected one of "
+                           f"{', '.join(f'0x{k:X} ({v})' for k, v in OBJECT_TYPES.items())}")
+        names[index] = one_line(s.get("ParameterName", ""))
+        if otype in (0x2, 0x5, 0x7):
+            entries.append(_entry(f, low, index, 0, s))
+        elif "CompactSubObj" in s:  # CiA 306 says ARRAY; Lely's dcfgen writes it for records too
+            entries.extend(_compact(f, low, index, s))
+        else:
+            subs = sorted(k for k in f.sections if re.fullmatch(rf"{low}sub[0-9a-f]+", k))
+            if not subs:
+                raise EdsError(f"[{where}] is an ARRAY/RECORD with no [{where}subN] sections")
+            for k in subs:
+                entries.append(_entry(f, k, index, int(k[len(low) + 3:], 16), f.sections[k]))
+    if not entries:
+        raise EdsError(f"{path}: no objects")
+    dummies = f.get("DummyUsage") or {}
+    for k in range(1, 8):  # CiA 306: the dummy objects a mapping may name to skip bytes (an RPDO's padding)
+        if _int("DummyUsage", f"Dummy{k:04d}", dummies.get(f"Dummy{k:04d}", "0") or "0") and k not in names:
+            names[k] = f"Dummy{k:04d}"
+            entries.append(Entry(k, 0, names[k], k, "CONST", "const", 0, False, None, None, True, False))
+    entries.sort(key=lambda e: (e.index, e.sub))
+    for a, b in zip(entries, entries[1:]):
+        if (a.index, a.sub) == (b.index, b.sub):
+            raise EdsError(f"{path}: object 0x{a.index:04X} sub {a.sub} is defined twice")
+    commissioning = f.get("DeviceComissioning") or {}
+    node_id = None
+    if commissioning.get("NodeID", "").strip():
+        node_id = _int("DeviceComissioning", "NodeID", commissioning["NodeID"])
+    d = Dictionary(path, entries, names, listed, dict(f.get("DeviceInfo") or {}), node_id)
+    _check_mappings(d, node_id or 1)
+    return d
+
+
+def entries(path: Path) -> list[Entry]:
+    """Every variable of the file, sorted by index and sub-index."""
+    return load(path).entries
+
+
+# ---- the emulated drive's table (arm_sim --od, host_sim/native/sim_canopen_od.c) --------------
+TABLE_MAGIC = "arm_sim od 1"
+KIND_CODE = {"bool": 0, "int": 1, "uint": 2, "float": 3, "text": 4, "bytes": 5}  # sim_co_kind_t
+ACCESS_CODE = {"ro": 0, "rw": 1, "wo": 2, "const": 3, "rww": 4, "rwr": 5}       # sim_co_access_t
+
+
+def _raw(e: Entry, v: Value) -> str:
+    """A value as the table keeps it: a number's bits (two's complement, IEEE 754) in hex, a
+    string's bytes in hex ('-' for none)."""
+    t = e.type
+    if t.kind in ("text", "bytes"):
+        b = v.encode("utf-8") if isinstance(v, str) else bytes(v)  # type: ignore[arg-type]
+        return b.hex() or "-"
+    if t.kind == "float":
+        fmt = "<f" if t.size == 4 else "<d"
+        return f"{int.from_bytes(struct.pack(fmt, float(v)), 'little'):x}"  # type: ignore[arg-type]
+    return f"{int(v) & ((1 << (8 * t.size)) - 1):x}"  # type: ignore[arg-type]
+
+
+def table_text(d: Dictionary) -> str:
+    """The table arm_sim reads (host_sim/native/sim_canopen_od.c): one line per entry, sorted:
+    index, sub, data type, its kind and size, access, PDO mapping, node-relative, value, low and
+    high limit ('-': none), numbers hex. A node-relative value is kept without the node id."""
+    lines = [f"{TABLE_MAGIC} {len(d.entries)}"]
+    for e in d.entries:
+        lo = "-" if e.low is None else _raw(e, e.low)
+        hi = "-" if e.high is None else _raw(e, e.high)
+        lines.append(f"{e.index:x} {e.sub:x} {e.dtype:x} {KIND_CODE[e.type.kind]} {e.type.size} "
+                     f"{ACCESS_CODE[e.access_raw]} {int(e.pdo)} {int(e.nodeid_rel)} {_raw(e, e.default)} {lo} {hi}")
+    return "\n".join(lines) + "\n"
+
+
+def builtin_c(d: Dictionary) -> dict[str, str]:
+    """The project's own drive's table compiled into arm_sim (its default without --od)."""
+    head = f"/* Generated by gen/eds.py from {d.path.name}. Do not edit. */\n"
+    body = "".join(f'    "{line}\\n"\n' for line in table_text(d).splitlines())
+    return {"sim_co_od_builtin.c": f"{head}#include \"sim_canopen_od.h\"\n\nconst char SIM_CO_OD_BUILTIN[] =\n{body};\n"}
 
 
 @exit_on_output_error("gen.eds")
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m gen.eds", description=__doc__)
-    ap.add_argument("--eds", type=Path, required=True)
-    ap.add_argument("--out", type=Path, required=True)
+    ap = argparse.ArgumentParser(prog="python -m gen.eds", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--eds", type=Path, required=True, help="the drive's EDS or DCF")
+    out = ap.add_mutually_exclusive_group(required=True)
+    out.add_argument("--out", type=Path, help="write DIR/sim_co_od_builtin.c (the build's own drive)")
+    out.add_argument("--table", type=Path, help="write the table arm_sim --od reads")
     ns = ap.parse_args(argv)
     try:
-        files = emit(entries(ns.eds), ns.eds.name)
-    except (EdsError, OSError) as exc:  # the EDS: missing, unreadable or wrong
+        d = load(ns.eds)
+    except EdsError as exc:
         print(f"gen.eds: {exc}", file=sys.stderr)
         return 2
-    write_files_atomically(ns.out, files)
+    if ns.out is not None:
+        write_files_atomically(ns.out, builtin_c(d))
+    else:
+        write_text_atomic(ns.table, table_text(d))
     return 0
 
 

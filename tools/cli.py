@@ -18,8 +18,8 @@ COMMAND_MODULES = {
     "setup": "tools.commands.setup", "build": "tools.commands.build", "cluster-certs": "tools.run.cluster",
     "timing": "tools.bench.timing", "hil": "tools.commands.hil", "demo": "tools.commands.demo",
     "test": "tools.commands.test", "synth": "tools.commands.synth", "vcan": "tools.vcan",
-    "busload": "tools.busload", "study": "tools.study", "tune": "tools.study", "faults": "tools.bench.faults",
-    "fuzz": "tools.bench.fuzz", "bench": "tools.bench",
+    "busload": "tools.busload", "drive": "tools.commands.drive", "study": "tools.study", "tune": "tools.study",
+    "faults": "tools.bench.faults", "fuzz": "tools.bench.fuzz", "bench": "tools.bench",
 }
 
 

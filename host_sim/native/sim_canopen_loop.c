@@ -398,13 +398,23 @@ co_sim_t *sim_co_begin(const sim_config_t *cfg, const sim_co_config_t *co, sim_a
         sim_co_preset_t pre = co->preset;
         const sim_co_preset_t *own = &co->node_preset[j];
         if (own->rated_torque_mnm) pre.rated_torque_mnm = own->rated_torque_mnm;
+        if (own->torque_units_per_nm) pre.torque_units_per_nm = own->torque_units_per_nm;
         if (own->encoder_increments) pre.encoder_increments = own->encoder_increments;
         if (own->gear_motor) {
             pre.gear_motor = own->gear_motor;
             pre.gear_shaft = own->gear_shaft;
         }
-        sim_co_node_init(&sp->node[j], id, &pre, arm->torque_limit[j],
-                         co->overcurrent_node == id ? co->overcurrent_at_s : -1.0);
+        const sim_co_table_t *table = co->table != NULL ? co->table : sim_co_table_builtin();
+        if (table == NULL) {
+            snprintf(err, errcap, "the build's own object dictionary table does not parse (gen/eds.py)");
+            return NULL;
+        }
+        char why[300];
+        if (sim_co_node_init(&sp->node[j], table, id, &pre, arm->torque_limit[j],
+                             co->overcurrent_node == id ? co->overcurrent_at_s : -1.0, why, sizeof(why)) != 0) {
+            snprintf(err, errcap, "--protocol canopen: %s", why);
+            return NULL;
+        }
         sim_servo_init(&sp->servo[j]);
         sim_rng_seed(&sp->noise[j], arm->unc.seed ^ (0x9E3779B97F4A7C15ull * ((uint64_t)j + 1u)));
     }

@@ -11,7 +11,8 @@
 typedef enum { SIM_PROTOCOL_ARM = 0, SIM_PROTOCOL_CANOPEN } sim_protocol_t;
 
 typedef struct {
-    sim_co_preset_t preset;  /* every node's: the options' (0: the EDS's defaults) */
+    const sim_co_table_t *table; /* --od: the drives' file as gen/eds.py's table (NULL: the build's own) */
+    sim_co_preset_t preset;  /* every node's: the options' (0: the file's) */
     /* --node: node i + 1's own, the arm's drive table (gen/drives.py), over `preset` (0: preset's) */
     sim_co_preset_t node_preset[SIM_MAX_JOINTS];
     int overcurrent_node;    /* TEST HOOK: this node trips 0x2310 (0: none) */

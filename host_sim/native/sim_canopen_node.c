@@ -1,6 +1,7 @@
 #include "sim_canopen_node.h"
 
 #include <math.h>
+#include <stdio.h>
 #include <string.h>
 
 #define COB_NMT 0x000u
@@ -43,7 +44,8 @@ static void heartbeat(sim_co_node_t *n)
 
 static void emcy(sim_co_node_t *n, uint16_t code)
 {
-    const uint8_t d[8] = {(uint8_t)code, (uint8_t)(code >> 8), (uint8_t)sim_co_od_get(&n->od, 0x1001u, 0u), 0, 0, 0, 0, 0};
+    const uint8_t d[8] = {(uint8_t)code, (uint8_t)(code >> 8), (uint8_t)sim_co_od_get(&n->od, 0x1001u, 0u), 0, 0, 0, 0,
+                          0};
     if (n->nmt == SIM_NMT_STATE_STOPPED) return; /* CiA 301: no EMCY in stopped */
     queue(n, COB_EMCY + n->id, d, 8u);
     n->emcy_sent++;
@@ -56,16 +58,24 @@ static void refresh(sim_co_node_t *n)
     sim_co_od_set(&n->od, 0x6061u, 0u, sim_co_od_get(&n->od, 0x6060u, 0u));
 }
 
+/* The mode the drive runs: 0x6061, or 0x6060 in a drive whose file lacks the display. */
+static int64_t mode_of(const sim_co_node_t *n)
+{
+    const uint16_t index = sim_co_od_has(&n->od, 0x6061u, 0u) ? 0x6061u : 0x6060u;
+    return sim_co_od_get_signed(&n->od, index, 0u);
+}
+
 /* ---- PDOs ---------------------------------------------------------------------------------- */
 static void parse_pdo(const sim_co_od_t *od, uint16_t comm, uint16_t map, sim_co_pdo_t *p)
 {
     memset(p, 0, sizeof(*p));
-    p->cob_id = sim_co_od_get(od, comm, 1u);
+    if (!sim_co_od_has(od, comm, 1u)) return; /* a PDO the drive does not have: never valid */
+    p->cob_id = (uint32_t)sim_co_od_get(od, comm, 1u);
     p->valid = (p->cob_id & COB_INVALID) == 0u;
     p->trans = (uint8_t)sim_co_od_get(od, comm, 2u);
-    const unsigned count = sim_co_od_get(od, map, 0u);
+    const unsigned count = (unsigned)sim_co_od_get(od, map, 0u);
     for (unsigned k = 0; k < count && k < SIM_CO_MAP_MAX; ++k) {
-        const uint32_t e = sim_co_od_get(od, map, (uint8_t)(k + 1u));
+        const uint32_t e = (uint32_t)sim_co_od_get(od, map, (uint8_t)(k + 1u));
         p->index[p->n] = (uint16_t)(e >> 16);
         p->sub[p->n] = (uint8_t)(e >> 8);
         p->bytes[p->n] = (uint8_t)((e & 0xFFu) / 8u);
@@ -83,16 +93,20 @@ static void parse_pdos(sim_co_node_t *n)
     }
 }
 
-/* A mapping entry (index << 16 | sub << 8 | bits): 0, or why it cannot be mapped. */
-static uint32_t check_entry(uint32_t e, int receive)
+/* A mapping entry (index << 16 | sub << 8 | bits): 0, or why the file says it cannot be mapped:
+ * PDOMapping=0, the wrong direction (an RPDO writes its objects, a TPDO reads them; rww maps to
+ * RPDOs only, rwr to TPDOs only, a dummy object only pads RPDOs), or not the object's whole size. */
+static uint32_t check_entry(const sim_co_od_t *od, uint32_t e, int receive)
 {
     if (e == 0u) return 0u;
     uint32_t ab = 0;
-    const int i = sim_co_od_find((uint16_t)(e >> 16), (uint8_t)(e >> 8), &ab);
+    const int i = sim_co_od_find(od, (uint16_t)(e >> 16), (uint8_t)(e >> 8), &ab);
     if (i < 0) return ab;
-    const sim_co_entry_t *x = &SIM_CO_OD[i];
-    const int readable = x->access != SIM_CO_A_WO, writable = x->access == SIM_CO_A_RW || x->access == SIM_CO_A_WO;
-    if (!x->pdo_mappable || (receive ? !writable : !readable) || (e & 0xFFu) != 8u * x->size) {
+    const sim_co_entry_t *x = &od->t->e[i];
+    const int dummy = x->index >= 1u && x->index <= 7u;
+    const int readable = !dummy && x->access != SIM_CO_A_WO && x->access != SIM_CO_A_RWW;
+    const int writable = dummy || x->access == SIM_CO_A_RW || x->access == SIM_CO_A_WO || x->access == SIM_CO_A_RWW;
+    if (!x->pdo || x->size == 0u || (receive ? !writable : !readable) || (e & 0xFFu) != 8u * x->size) {
         return SIM_CO_ABORT_NOT_MAPPABLE;
     }
     return 0u;
@@ -117,7 +131,9 @@ void sim_co_node_fault(sim_co_node_t *n, uint16_t emcy_code, uint8_t error_regis
 static void controlword(sim_co_node_t *n, uint16_t cw)
 {
     const sim_power_t before = n->power;
-    n->power = sim_cia402_next(n->power, cw, n->prev_cw, (int16_t)sim_co_od_get(&n->od, 0x605Au, 0u));
+    /* a drive without 0x605A takes CiA 402's default, 2: quick stop, then switch on disabled */
+    const int16_t qs = sim_co_od_has(&n->od, 0x605Au, 0u) ? (int16_t)sim_co_od_get_signed(&n->od, 0x605Au, 0u) : 2;
+    n->power = sim_cia402_next(n->power, cw, n->prev_cw, qs);
     n->prev_cw = cw;
     if (before == SIM_PS_FAULT && n->power != SIM_PS_FAULT) { /* fault reset */
         set_error(n, 0u, 0u);
@@ -134,7 +150,10 @@ static void took(sim_co_node_t *n, uint16_t index)
     if (index == 0x6060u) refresh(n);
     if (index == 0x1017u) n->hb_next_ns = now_ns;
     if (index == 0x1016u) n->hbc_armed = 0; /* from the producer's next heartbeat on */
-    if (index >= RPDO_COMM && index <= TPDO_MAP + SIM_CO_N_PDO) parse_pdos(n);
+    if ((index >= RPDO_COMM && index < RPDO_COMM + SIM_CO_N_PDO) || (index >= RPDO_MAP && index < RPDO_MAP + SIM_CO_N_PDO) ||
+        (index >= TPDO_COMM && index < TPDO_COMM + SIM_CO_N_PDO) || (index >= TPDO_MAP && index < TPDO_MAP + SIM_CO_N_PDO)) {
+        parse_pdos(n);
+    }
 }
 
 /* ---- object dictionary access (SDO) --------------------------------------------------------- */
@@ -145,12 +164,12 @@ static int pdo_of(uint16_t index, uint16_t base, unsigned *k)
     return 1;
 }
 
-static uint32_t check_pdo_write(const sim_co_node_t *n, uint16_t index, uint8_t sub, uint32_t v)
+static uint32_t check_pdo_write(const sim_co_node_t *n, uint16_t index, uint8_t sub, uint64_t v)
 {
     unsigned k = 0;
     const int rcomm = pdo_of(index, RPDO_COMM, &k), tcomm = !rcomm && pdo_of(index, TPDO_COMM, &k);
     if (rcomm || tcomm) {
-        const uint32_t cob = sim_co_od_get(&n->od, index, 1u);
+        const uint32_t cob = (uint32_t)sim_co_od_get(&n->od, index, 1u);
         if (sub == 1u) {
             if ((v & COB_FRAME) != 0u || (v & 0x7FFu) == 0u) return SIM_CO_ABORT_RANGE;
             /* CiA 301: a valid PDO's COB-ID may not change; invalidate it first */
@@ -158,10 +177,10 @@ static uint32_t check_pdo_write(const sim_co_node_t *n, uint16_t index, uint8_t 
                 return SIM_CO_ABORT_RANGE;
             }
         }
-        if (sub == 2u) {
-            const int sync = v >= 1u && v <= 240u;
-            if (!(sync || (rcomm && v >= 254u))) return SIM_CO_ABORT_RANGE; /* TPDOs: synchronous only */
-        }
+        /* CiA 301: 0 acyclic, 1-240 every n-th SYNC, 241-253 reserved, 254/255 event-driven. A TPDO
+         * of type 0, 254 or 255 is taken, as the drive's file allows, but not sent: this drive sends
+         * its TPDOs on SYNC only */
+        if (sub == 2u && v > 240u && v < 254u) return SIM_CO_ABORT_RANGE;
         return 0u;
     }
     const int rmap = pdo_of(index, RPDO_MAP, &k), tmap = !rmap && pdo_of(index, TPDO_MAP, &k);
@@ -170,17 +189,26 @@ static uint32_t check_pdo_write(const sim_co_node_t *n, uint16_t index, uint8_t 
     if ((sim_co_od_get(&n->od, comm, 1u) & COB_INVALID) == 0u) return SIM_CO_ABORT_STATE; /* the PDO is valid */
     if (sub != 0u) {
         if (sim_co_od_get(&n->od, index, 0u) != 0u) return SIM_CO_ABORT_STATE; /* count 0 first */
-        return check_entry(v, rmap);
+        return check_entry(&n->od, (uint32_t)v, rmap);
     }
+    if (v > SIM_CO_MAP_MAX) return SIM_CO_ABORT_PDO_LENGTH; /* more entries than 8 bytes hold */
     unsigned bits = 0;
     for (unsigned s = 1; s <= v; ++s) {
-        const uint32_t e = sim_co_od_get(&n->od, index, (uint8_t)s);
-        const uint32_t ab = check_entry(e, rmap);
+        if (!sim_co_od_has(&n->od, index, (uint8_t)s)) return SIM_CO_ABORT_RANGE; /* the file's mapping is shorter */
+        const uint32_t e = (uint32_t)sim_co_od_get(&n->od, index, (uint8_t)s);
+        const uint32_t ab = check_entry(&n->od, e, rmap);
         if (ab != 0u) return ab;
         if (e == 0u) return SIM_CO_ABORT_NOT_MAPPABLE;
         bits += e & 0xFFu;
     }
     return bits > 64u ? SIM_CO_ABORT_PDO_LENGTH : 0u;
+}
+
+uint32_t sim_co_node_exists(void *node, uint16_t index, uint8_t sub)
+{
+    const sim_co_node_t *n = node;
+    uint32_t ab = 0;
+    return sim_co_od_find(&n->od, index, sub, &ab) < 0 ? ab : 0u;
 }
 
 uint32_t sim_co_node_read(void *node, uint16_t index, uint8_t sub, uint8_t *buf, unsigned cap, unsigned *len)
@@ -192,12 +220,17 @@ uint32_t sim_co_node_read(void *node, uint16_t index, uint8_t sub, uint8_t *buf,
 uint32_t sim_co_node_write(void *node, uint16_t index, uint8_t sub, const uint8_t *data, unsigned len)
 {
     sim_co_node_t *n = node;
-    uint32_t v = 0;
-    uint32_t ab = sim_co_od_check_write(index, sub, data, len, &v);
-    if (ab == 0u) ab = check_pdo_write(n, index, sub, v);
-    if (ab == 0u && index == 0x6060u && !sim_cia402_mode_supported((int8_t)(uint8_t)v)) ab = SIM_CO_ABORT_RANGE;
-    if (ab == 0u && (index == 0x6076u || index == 0x608Fu || index == 0x6091u || index == 0x6060u) &&
-        n->power == SIM_PS_OPERATION_ENABLED) {
+    uint64_t v = 0;
+    int string = 0;
+    uint32_t ab = sim_co_od_check_write(&n->od, index, sub, data, len, &v, &string);
+    if (ab != 0u || string) return ab; /* a string is stored as it came: no drive behaviour hangs on one */
+    ab = check_pdo_write(n, index, sub, v);
+    const int scaling = index == 0x6076u || index == 0x608Fu || index == 0x6091u;
+    if (ab == 0u && index == 0x6060u && !sim_cia402_mode_supported(&n->od, (int8_t)(uint8_t)v)) ab = SIM_CO_ABORT_RANGE;
+    if (ab == 0u && scaling && sub <= 2u && v == 0u && (index == 0x6076u || sub >= 1u)) {
+        ab = SIM_CO_ABORT_RANGE; /* a unit of 0 would divide by it */
+    }
+    if (ab == 0u && (scaling || index == 0x6060u) && n->power == SIM_PS_OPERATION_ENABLED) {
         ab = SIM_CO_ABORT_STATE; /* no new scaling or mode while torque flows */
     }
     if (ab != 0u) return ab;
@@ -219,7 +252,7 @@ static void apply_presets(sim_co_node_t *n)
 static void boot(sim_co_node_t *n, int64_t now_ns, int comm_only)
 {
     n->now_ns = now_ns;
-    sim_co_od_reset(&n->od, n->id, comm_only);
+    sim_co_od_reset(&n->od, n->table, n->id, comm_only);
     /* each drive its own serial number, after either reset: 0x1018 is in the communication area */
     sim_co_od_set(&n->od, 0x1018u, 4u, n->id);
     if (!comm_only) {
@@ -238,14 +271,33 @@ static void boot(sim_co_node_t *n, int64_t now_ns, int comm_only)
     memset(n->tpdo_syncs, 0, sizeof(n->tpdo_syncs));
 }
 
-void sim_co_node_init(sim_co_node_t *n, uint8_t id, const sim_co_preset_t *preset, double limit_nm,
-                      double overcurrent_at_s)
+int sim_co_node_init(sim_co_node_t *n, const sim_co_table_t *table, uint8_t id, const sim_co_preset_t *preset,
+                     double limit_nm, double overcurrent_at_s, char *err, unsigned long errcap)
 {
     memset(n, 0, sizeof(*n));
+    n->table = table;
     n->id = id;
     n->preset = *preset;
     n->limit_nm = limit_nm;
     n->overcurrent_at_s = overcurrent_at_s;
+    static const uint16_t needed[] = {0x6040u, 0x6041u};
+    for (unsigned k = 0; k < sizeof(needed) / sizeof(needed[0]); ++k) {
+        uint32_t ab = 0;
+        if (sim_co_table_find(table, needed[k], 0u, &ab) < 0) {
+            snprintf(err, errcap, "node %u: the drive's file has no 0x%04X (CiA 402 %s): not a drive this simulator "
+                     "can emulate", id, needed[k], k == 0u ? "controlword" : "statusword");
+            return -1;
+        }
+    }
+    sim_co_od_reset(&n->od, table, id, 0);
+    apply_presets(n);
+    sim_cia402_scale_t sc;
+    if (sim_cia402_scale(&n->od, preset, &sc) != 0) {
+        snprintf(err, errcap, "node %u: no units: the drive's file lacks 0x608F, 0x6091 or 0x6076 (or holds 0) and the "
+                 "drive table (--node ID,encoder=,gear=,rated=) gives none", id);
+        return -1;
+    }
+    return 0;
 }
 
 void sim_co_node_boot(sim_co_node_t *n, int64_t now_ns)
@@ -282,7 +334,7 @@ static void apply_rpdo(sim_co_node_t *n, unsigned k)
         uint32_t v = 0;
         for (unsigned b = 0; b < p->bytes[e]; ++b) v |= (uint32_t)n->rpdo_data[k][off + b] << (8u * b);
         off += p->bytes[e];
-        if (p->index[e] == 0x6060u && !sim_cia402_mode_supported((int8_t)(uint8_t)v)) continue;
+        if (p->index[e] == 0x6060u && !sim_cia402_mode_supported(&n->od, (int8_t)(uint8_t)v)) continue;
         sim_co_od_set(&n->od, p->index[e], p->sub[e], v);
         took(n, p->index[e]);
     }
@@ -296,7 +348,7 @@ void sim_co_node_on_frame(sim_co_node_t *n, const arm_can_frame_t *f, int64_t no
         if (f->len == 2u && (f->data[1] == 0u || f->data[1] == n->id)) on_nmt(n, f->data[0], now_ns);
         return;
     }
-    const uint32_t hbc = sim_co_od_get(&n->od, 0x1016u, 1u);
+    const uint32_t hbc = (uint32_t)sim_co_od_get(&n->od, 0x1016u, 1u);
     const uint32_t producer = (hbc >> 16) & 0x7Fu;
     if (producer != 0u && f->id == COB_HEARTBEAT + producer && f->len >= 1u) {
         n->hbc_last_ns = now_ns;
@@ -305,7 +357,7 @@ void sim_co_node_on_frame(sim_co_node_t *n, const arm_can_frame_t *f, int64_t no
     }
     if (n->nmt == SIM_NMT_STATE_STOPPED) return; /* only NMT and heartbeats in stopped */
     if (f->id == COB_SDO_RX + n->id) {
-        const sim_co_sdo_access_t a = {sim_co_node_read, sim_co_node_write, n};
+        const sim_co_sdo_access_t a = {sim_co_node_read, sim_co_node_write, sim_co_node_exists, n};
         uint8_t resp[8];
         if (sim_co_sdo_on_request(&n->sdo, &a, f->data, f->len, resp)) queue(n, COB_SDO_TX + n->id, resp, 8u);
         return;
@@ -332,7 +384,7 @@ void sim_co_node_on_sync(sim_co_node_t *n, double q, double qd, double tau_measu
         if (n->rpdo_pending[k]) apply_rpdo(n, k);
     }
     sim_cia402_scale_t sc;
-    sim_cia402_scale(&n->od, &sc);
+    (void)sim_cia402_scale(&n->od, &n->preset, &sc);
     const double tau = isnan(tau_measured) ? sim_co_node_torque(n) : tau_measured;
     sim_co_od_set(&n->od, 0x6064u, 0u, (uint32_t)sim_cia402_increments(&sc, q));
     sim_co_od_set(&n->od, 0x606Cu, 0u, (uint32_t)sim_cia402_increments(&sc, qd));
@@ -345,7 +397,7 @@ void sim_co_node_on_sync(sim_co_node_t *n, double q, double qd, double tau_measu
         uint8_t d[8] = {0};
         unsigned off = 0;
         for (unsigned e = 0; e < p->n; ++e) {
-            const uint32_t v = sim_co_od_get(&n->od, p->index[e], p->sub[e]);
+            const uint64_t v = sim_co_od_get(&n->od, p->index[e], p->sub[e]);
             for (unsigned b = 0; b < p->bytes[e]; ++b) d[off + b] = (uint8_t)(v >> (8u * b));
             off += p->bytes[e];
         }
@@ -356,13 +408,13 @@ void sim_co_node_on_sync(sim_co_node_t *n, double q, double qd, double tau_measu
 void sim_co_node_tick(sim_co_node_t *n, int64_t now_ns, double sim_s)
 {
     n->now_ns = now_ns;
-    const uint32_t hb_ms = sim_co_od_get(&n->od, 0x1017u, 0u);
+    const uint32_t hb_ms = (uint32_t)sim_co_od_get(&n->od, 0x1017u, 0u);
     if (hb_ms != 0u && now_ns >= n->hb_next_ns) {
         heartbeat(n);
         n->hb_next_ns += (int64_t)hb_ms * 1000000;
         if (n->hb_next_ns < now_ns) n->hb_next_ns = now_ns + (int64_t)hb_ms * 1000000; /* no burst after a stall */
     }
-    const uint32_t hbc_ms = sim_co_od_get(&n->od, 0x1016u, 1u) & 0xFFFFu;
+    const uint32_t hbc_ms = (uint32_t)sim_co_od_get(&n->od, 0x1016u, 1u) & 0xFFFFu;
     if (n->hbc_armed && hbc_ms != 0u && now_ns - n->hbc_last_ns > (int64_t)hbc_ms * 1000000) {
         n->hbc_armed = 0; /* monitoring resumes with the producer's next heartbeat */
         sim_co_node_fault(n, SIM_CO_EMCY_HEARTBEAT, ERR_REG_COMMUNICATION);
@@ -378,7 +430,7 @@ int64_t sim_co_node_wait_ns(const sim_co_node_t *n, int64_t now_ns)
 {
     int64_t w = 50000000; /* 50 ms: the overcurrent hook and timers are checked at least this often */
     if (sim_co_od_get(&n->od, 0x1017u, 0u) != 0u && n->hb_next_ns - now_ns < w) w = n->hb_next_ns - now_ns;
-    const uint32_t hbc_ms = sim_co_od_get(&n->od, 0x1016u, 1u) & 0xFFFFu;
+    const uint32_t hbc_ms = (uint32_t)sim_co_od_get(&n->od, 0x1016u, 1u) & 0xFFFFu;
     if (n->hbc_armed && hbc_ms != 0u) {
         const int64_t left = n->hbc_last_ns + (int64_t)hbc_ms * 1000000 + 1000000 - now_ns;
         if (left < w) w = left;
@@ -389,11 +441,12 @@ int64_t sim_co_node_wait_ns(const sim_co_node_t *n, int64_t now_ns)
 double sim_co_node_torque(const sim_co_node_t *n)
 {
     if (n->power != SIM_PS_OPERATION_ENABLED || n->nmt != SIM_NMT_STATE_OPERATIONAL ||
-        sim_co_od_get_signed(&n->od, 0x6061u, 0u) != SIM_CIA402_MODE_CST) {
-        return 0.0;
+        mode_of(n) != SIM_CIA402_MODE_CST) {
+        return 0.0; /* another mode the drive offers: taken, but this emulation moves only in CST */
     }
     sim_cia402_scale_t sc;
-    sim_cia402_scale(&n->od, &sc);
-    return sim_cia402_target_nm(&sc, sim_co_od_get_signed(&n->od, 0x6071u, 0u), sim_co_od_get(&n->od, 0x6072u, 0u),
-                                n->limit_nm);
+    (void)sim_cia402_scale(&n->od, &n->preset, &sc);
+    /* without 0x6072 (max torque) the drive limits nothing but the joint's own torque */
+    const uint32_t max = sim_co_od_has(&n->od, 0x6072u, 0u) ? (uint32_t)sim_co_od_get(&n->od, 0x6072u, 0u) : 32767u;
+    return sim_cia402_target_nm(&sc, (int32_t)sim_co_od_get_signed(&n->od, 0x6071u, 0u), max, n->limit_nm);
 }

@@ -1,6 +1,8 @@
-/* One emulated drive as a CANopen CiA 402 slave (firmware/protocol/cia402_servo.eds): NMT, an SDO
- * server, heartbeat producer (0x1017) and consumer (0x1016), SYNC-driven PDOs that follow their
- * communication and mapping objects, EMCY, and the CiA 402 power state machine. No I/O: the loop
+/* One emulated drive as a CANopen CiA 402 slave, its objects those of an EDS or DCF (the build's
+ * own firmware/protocol/cia402_servo.eds, or any drive's file: arm_sim --od): NMT, an SDO server,
+ * heartbeat producer (0x1017) and consumer (0x1016) where the file has them, SYNC-driven PDOs that
+ * follow their communication and mapping objects and the file's mapping rules (which objects, in
+ * which direction, how many), EMCY, and the CiA 402 power state machine. No I/O: the loop
  * (sim_canopen_loop.c) hands it frames, SYNCs and the time, and sends what it queues in `out`. */
 #ifndef ARM_SIM_CANOPEN_NODE_H
 #define ARM_SIM_CANOPEN_NODE_H
@@ -13,20 +15,13 @@
 #include "sim_cia402.h"
 #include "sim_drive.h"
 
-#define SIM_CO_N_PDO 2u     /* RPDO1..2, TPDO1..2 */
+#define SIM_CO_N_PDO 4u     /* RPDO1..4, TPDO1..4 (those the file has) */
 #define SIM_CO_MAP_MAX 8u   /* entries per mapping */
 #define SIM_CO_OUT_MAX 16u  /* frames queued between two flushes */
 
 #define SIM_CO_EMCY_OVERCURRENT 0x2310u /* CiA 402: continuous overcurrent */
 #define SIM_CO_EMCY_HEARTBEAT 0x8130u   /* CiA 301: life guard / heartbeat error */
 #define SIM_CO_EMCY_RESET 0x0000u       /* CiA 301: error reset / no error */
-
-/* What the simulator presets from the arm instead of the EDS's defaults (0: the EDS's). */
-typedef struct {
-    uint32_t rated_torque_mnm;   /* 0x6076 */
-    uint32_t encoder_increments; /* 0x608F.1 */
-    uint32_t gear_motor, gear_shaft; /* 0x6091.1, .2 */
-} sim_co_preset_t;
 
 typedef struct {
     uint32_t cob_id;
@@ -44,6 +39,7 @@ typedef struct {
     uint8_t nmt; /* SIM_NMT_STATE_* */
     sim_co_od_t od;
     sim_co_sdo_t sdo;
+    const sim_co_table_t *table; /* the drive's file */
     sim_co_preset_t preset;
     double limit_nm;            /* the joint's torque limit: the drive gives no more */
     sim_power_t power;
@@ -64,8 +60,9 @@ typedef struct {
     uint64_t out_dropped;
 } sim_co_node_t;
 
-void sim_co_node_init(sim_co_node_t *n, uint8_t id, const sim_co_preset_t *preset, double limit_nm,
-                      double overcurrent_at_s);
+/* -1 with one line if the drive has no units (no 0x608F, 0x6091 or 0x6076 and no preset of it). */
+int sim_co_node_init(sim_co_node_t *n, const sim_co_table_t *table, uint8_t id, const sim_co_preset_t *preset,
+                     double limit_nm, double overcurrent_at_s, char *err, unsigned long errcap);
 /* Power-on or NMT reset node: every object to its default, boot-up heartbeat, pre-operational. */
 void sim_co_node_boot(sim_co_node_t *n, int64_t now_ns);
 /* 1 for a COB-ID this node sends (its own frames, heard back on a UDP bus). */
@@ -85,5 +82,6 @@ void sim_co_node_fault(sim_co_node_t *n, uint16_t emcy_code, uint8_t error_regis
 /* SDO access as the server uses it (exposed for the C tests). */
 uint32_t sim_co_node_read(void *node, uint16_t index, uint8_t sub, uint8_t *buf, unsigned cap, unsigned *len);
 uint32_t sim_co_node_write(void *node, uint16_t index, uint8_t sub, const uint8_t *data, unsigned len);
+uint32_t sim_co_node_exists(void *node, uint16_t index, uint8_t sub);
 
 #endif

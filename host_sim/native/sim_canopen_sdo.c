@@ -96,8 +96,8 @@ static int initiate_download(sim_co_sdo_t *s, const sim_co_sdo_access_t *a, cons
         for (unsigned k = 0; k < 4u; ++k) size |= (unsigned)d[4 + k] << (8u * k);
         if (size > sizeof(s->buf)) return abort_with(s, index, sub, SIM_CO_ABORT_LENGTH, resp);
     }
-    uint32_t ab = 0;
-    if (sim_co_od_find(index, sub, &ab) < 0) return abort_with(s, index, sub, ab, resp);
+    const uint32_t ab = a->exists(a->ctx, index, sub);
+    if (ab != 0u) return abort_with(s, index, sub, ab, resp);
     s->state = SIM_SDO_DOWNLOAD;
     s->index = index;
     s->sub = sub;

@@ -12,6 +12,8 @@ typedef struct {
     /* 0 or an abort code; read fills buf (at most cap bytes) and len. */
     uint32_t (*read)(void *ctx, uint16_t index, uint8_t sub, uint8_t *buf, unsigned cap, unsigned *len);
     uint32_t (*write)(void *ctx, uint16_t index, uint8_t sub, const uint8_t *data, unsigned len);
+    /* 0 if (index, sub) exists, else the abort code: a segmented download is refused at its start */
+    uint32_t (*exists)(void *ctx, uint16_t index, uint8_t sub);
     void *ctx;
 } sim_co_sdo_access_t;
 

@@ -1,6 +1,8 @@
-/* The CiA 402 drive profile as the emulated CANopen drive applies it: which modes it runs, and the
- * profile's units from the object dictionary's scaling objects (0x608F encoder resolution, 0x6091
- * gear ratio, 0x6076 rated torque). The power state machine is sim_drive.c's sim_cia402_next. */
+/* The CiA 402 drive profile as the emulated CANopen drive applies it: which modes it takes (0x6502
+ * supported drive modes; it moves only in cyclic synchronous torque), and the profile's units from
+ * the dictionary's scaling objects (0x608F encoder resolution, 0x6091 gear ratio, 0x6076 rated
+ * torque), or, for a drive whose file lacks one, from the drive table's value of it (the drive's
+ * own setting that no object shows). The power state machine is sim_drive.c's sim_cia402_next. */
 #ifndef ARM_SIM_CIA402_H
 #define ARM_SIM_CIA402_H
 
@@ -9,15 +11,26 @@
 #include "sim_canopen_od.h"
 
 #define SIM_CIA402_MODE_NONE 0
-#define SIM_CIA402_MODE_CST 10 /* cyclic synchronous torque: the only mode this drive runs */
+#define SIM_CIA402_MODE_CST 10 /* cyclic synchronous torque: the only mode this drive moves in */
+
+/* What the simulator commissions a drive with (the drive table, arm_sim --node; 0: the file's). */
+typedef struct {
+    uint32_t rated_torque_mnm;   /* 0x6076 */
+    uint32_t encoder_increments; /* 0x608F.1 */
+    uint32_t gear_motor, gear_shaft; /* 0x6091.1, .2 */
+    uint32_t torque_units_per_nm;    /* 0x6076's unit: 1000 mN m (CiA 402's; 0 means it), 1000000 µN m */
+} sim_co_preset_t;
 
 typedef struct {
     double inc_per_rad; /* position encoder increments per joint radian */
-    double rated_nm;    /* 0x6076 in N m */
+    double rated_nm;    /* 0x6076 in N m (through its unit) */
 } sim_cia402_scale_t;
 
-int sim_cia402_mode_supported(int32_t mode);
-void sim_cia402_scale(const sim_co_od_t *od, sim_cia402_scale_t *sc);
+/* Mode 0 always; 1..16 if 0x6502 has bit mode - 1 (CiA 402: bit 9 is CST), or, without 0x6502,
+ * CST alone; no manufacturer-specific (negative) mode. */
+int sim_cia402_mode_supported(const sim_co_od_t *od, int64_t mode);
+/* -1 if the drive has no value for one of the three (neither an object nor the preset) or it is 0. */
+int sim_cia402_scale(const sim_co_od_t *od, const sim_co_preset_t *own, sim_cia402_scale_t *sc);
 /* Joint quantities in the profile's units, rounded to nearest and saturated to the type. */
 int32_t sim_cia402_increments(const sim_cia402_scale_t *sc, double rad);
 int16_t sim_cia402_permille(const sim_cia402_scale_t *sc, double nm);

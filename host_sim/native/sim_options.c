@@ -229,7 +229,22 @@ static int node_u32(const char *s, uint32_t *out)
     return 0;
 }
 
-/* --node ID[,rated=mNm][,encoder=INC][,gear=M/S]: node ID's dictionary preset (arm_controller's
+/* --od FILE: the drives' object dictionary, gen/eds.py's table of their EDS or DCF. */
+static int sim_od(void *t, void *c, const argv_opt_t *opt, const char *v, char *err, unsigned long errcap)
+{
+    static sim_co_table_t table;
+    sim_options_t *o = t;
+    (void)c;
+    char why[600];
+    if (sim_co_table_load(&table, v, why, sizeof(why)) != 0) {
+        snprintf(err, errcap, "%s: %s (python -m gen.eds --eds FILE --table OUT writes one)", opt->name, why);
+        return -1;
+    }
+    o->co.table = &table;
+    return 0;
+}
+
+/* --node ID[,rated=N][,encoder=INC][,gear=M/S][,torque_unit=U]: node ID's dictionary preset (arm_controller's
  * --node syntax: the arm's drive table, python -m gen.drives). */
 static int sim_node(void *t, void *c, const argv_opt_t *opt, const char *v, char *err, unsigned long errcap)
 {
@@ -259,6 +274,9 @@ static int sim_node(void *t, void *c, const argv_opt_t *opt, const char *v, char
             bad = node_u32(eq + 1, &p->rated_torque_mnm);
         } else if (strcmp(tok, "encoder") == 0) {
             bad = node_u32(eq + 1, &p->encoder_increments);
+        } else if (strcmp(tok, "torque_unit") == 0) {
+            bad = strcmp(eq + 1, "mNm") != 0 && strcmp(eq + 1, "uNm") != 0;
+            p->torque_units_per_nm = strcmp(eq + 1, "uNm") == 0 ? 1000000u : 1000u;
         } else if (strcmp(tok, "gear") == 0 && slash != NULL) {
             *slash = '\0';
             bad = node_u32(eq + 1, &p->gear_motor) || node_u32(slash + 1, &p->gear_shaft);
@@ -266,8 +284,8 @@ static int sim_node(void *t, void *c, const argv_opt_t *opt, const char *v, char
             bad = 1;
         }
         if (bad) {
-            snprintf(err, errcap, "%s '%s': expected ID[,rated=mNm][,encoder=INC][,gear=M/S], whole numbers >= 1",
-                     opt->name, v);
+            snprintf(err, errcap, "%s '%s': expected ID[,rated=N][,encoder=INC][,gear=M/S][,torque_unit=mNm|uNm], "
+                     "whole numbers >= 1", opt->name, v);
             return -1;
         }
     }
@@ -300,7 +318,7 @@ int sim_options_parse(int argc, char **argv, sim_options_t *o, char *err, unsign
     }
     if (prc != 0) return -1;
     o->co_given = given[ARGV_OPT_RATED_TORQUE_MNM] || given[ARGV_OPT_ENCODER_INCREMENTS] || given[ARGV_OPT_OD_GEAR_RATIO] ||
-                  given[ARGV_OPT_INJECT_OVERCURRENT] || given[ARGV_OPT_NODE];
+                  given[ARGV_OPT_INJECT_OVERCURRENT] || given[ARGV_OPT_NODE] || given[ARGV_OPT_OD];
     if (o->n_bus_args == 0u) {
         snprintf(o->bus_args[0], ARM_CAN_BUS_SPEC_MAX, "%s", ARM_P_SIMULATOR_BUS_DEFAULT);
         o->n_bus_args = 1u;
@@ -316,8 +334,8 @@ int sim_options_parse(int argc, char **argv, sim_options_t *o, char *err, unsign
         return -1;
     }
     if (o->co_given && o->protocol != SIM_PROTOCOL_CANOPEN) {
-        snprintf(err, errcap, "--rated-torque-mnm/--encoder-increments/--od-gear-ratio/--inject-overcurrent: only with "
-                 "--protocol canopen");
+        snprintf(err, errcap, "--od/--rated-torque-mnm/--encoder-increments/--od-gear-ratio/--node/--inject-overcurrent: "
+                 "only with --protocol canopen");
         return -1;
     }
     if (o->protocol == SIM_PROTOCOL_CANOPEN && c->timing == SIM_TIMING_WALLCLOCK) {

@@ -122,7 +122,7 @@ static void test_abort_expedited_and_retries(void)
     CHECK(arm_co_sdo_rx(&c, &rx, 1u) == 0 && c.status == ARM_CO_SDO_BUSY);
     rx = answer(3u, dev);
     CHECK(arm_co_sdo_rx(&c, &rx, 2u) == 1 && c.status == ARM_CO_SDO_DONE);
-    CHECK(arm_co_sdo_u32(&c) == ARM_CO_DEVICE_TYPE && c.len == 4u);
+    CHECK(arm_co_sdo_u32(&c) == 0x00020192u && c.len == 4u);
 
     /* no answer: the request goes out max_tries times, then abort 0x05040000 */
     CHECK(arm_co_sdo_upload(&c, 0x1018u, 1u, 100u) == 0);
@@ -181,15 +181,78 @@ static void test_a_late_answer_does_not_fail_the_next_transfer(void)
     CHECK(arm_co_sdo_rx(&c, &rx, 2250u) == 1 && c.status == ARM_CO_SDO_DONE && c.len == 10u);
 }
 
-/* A scripted CiA 402 server for every node: expedited SDO only, statusword follows controlword. */
+/* A scripted CiA 402 server for every node: expedited SDO only, statusword follows controlword;
+ * each node its own units and the optional objects it lacks (abort 0x06020000). */
+#define LACKS_1006 0x001u
+#define LACKS_1016 0x002u
+#define LACKS_1017 0x004u
+#define LACKS_6502 0x008u
+#define LACKS_6076 0x010u
+#define LACKS_608F 0x020u
+#define LACKS_6091 0x040u
+#define LACKS_6072 0x080u
+
 typedef struct {
-    uint16_t sw[128];
-    uint32_t cob_rpdo1[128];
-    int32_t mode[128];
-    uint32_t device_type;
+    uint16_t sw;
+    uint32_t cob_rpdo1;
+    int32_t mode;
+    unsigned lacks;      /* LACKS_* */
+    uint32_t modes;      /* 0x6502 */
+    uint32_t rated, enc, enc_revs, gear_m, gear_s, max_torque;
     unsigned writes;
+} drive_t;
+
+typedef struct {
+    drive_t d[128];
+    uint32_t device_type;
     uint8_t identity_subs; /* 0x1018's highest sub-index (0: all four) */
 } server_t;
+
+static void server_init(server_t *s)
+{
+    memset(s, 0, sizeof(*s));
+    s->device_type = 0x00020192u;
+    for (unsigned i = 0; i < 128u; ++i) {
+        s->d[i] = (drive_t){.sw = 0x40u, .modes = 0x000003A5u, .rated = 150000u, .enc = 524288u, .enc_revs = 1u,
+                            .gear_m = 101u, .gear_s = 1u, .max_torque = 1000u};
+    }
+}
+
+static unsigned lacks_bit(uint16_t index)
+{
+    switch (index) {
+    case 0x1006u: return LACKS_1006;
+    case 0x1016u: return LACKS_1016;
+    case 0x1017u: return LACKS_1017;
+    case 0x6502u: return LACKS_6502;
+    case 0x6076u: return LACKS_6076;
+    case 0x608Fu: return LACKS_608F;
+    case 0x6091u: return LACKS_6091;
+    case 0x6072u: return LACKS_6072;
+    default: return 0u;
+    }
+}
+
+static void put_abort(uint8_t d[8], uint32_t code)
+{
+    d[0] = 0x80u;
+    for (unsigned k = 0; k < 4u; ++k) d[4u + k] = (uint8_t)(code >> (8u * k));
+}
+
+static uint32_t read_of(const server_t *s, const drive_t *dr, uint16_t index, uint8_t sub)
+{
+    switch (index) {
+    case 0x1000u: return s->device_type;
+    case 0x6041u: return dr->sw;
+    case 0x6061u: return (uint32_t)(uint8_t)dr->mode;
+    case 0x6502u: return dr->modes;
+    case 0x6076u: return dr->rated;
+    case 0x608Fu: return sub == 1u ? dr->enc : dr->enc_revs;
+    case 0x6091u: return sub == 1u ? dr->gear_m : dr->gear_s;
+    case 0x6072u: return dr->max_torque;
+    default: return 0x11u;
+    }
+}
 
 static int serve(server_t *s, const arm_can_frame_t *req, arm_can_frame_t *resp)
 {
@@ -197,28 +260,32 @@ static int serve(server_t *s, const arm_can_frame_t *req, arm_can_frame_t *resp)
         return 0;
     }
     const uint8_t node = (uint8_t)(req->id - ARM_CO_COB_SDO_RX);
+    drive_t *dr = &s->d[node];
     const uint16_t index = (uint16_t)(req->data[1] | (req->data[2] << 8));
+    const uint8_t sub = req->data[3];
     const uint32_t v = u32_at(&req->data[4]);
     uint8_t d[8] = {0, req->data[1], req->data[2], req->data[3], 0, 0, 0, 0};
-    if ((req->data[0] >> 5) == 1u) {
-        s->writes++;
+    if ((dr->lacks & lacks_bit(index)) != 0u) {
+        put_abort(d, 0x06020000u); /* no such object */
+    } else if ((req->data[0] >> 5) == 1u) {
+        dr->writes++;
         d[0] = 0x60u;
         if (index == 0x6040u) {
-            s->sw[node] = v == 0u ? 0x40u : v == 6u ? 0x21u : v == 7u ? 0x23u : v == 15u ? 0x27u : s->sw[node];
+            dr->sw = v == 0u ? 0x40u : v == 6u ? 0x21u : v == 7u ? 0x23u : v == 15u ? 0x27u : dr->sw;
+        } else if (index == 0x6060u && !((dr->modes >> ((uint8_t)v - 1u)) & 1u)) {
+            dr->writes--;
+            put_abort(d, 0x06090030u); /* a mode the drive does not offer */
         } else if (index == 0x6060u) {
-            s->mode[node] = (int8_t)v;
-        } else if (index == 0x1400u && req->data[3] == 1u) {
-            s->cob_rpdo1[node] = v;
-        } else if (index == 0x1600u && !(s->cob_rpdo1[node] & ARM_CO_PDO_INVALID)) {
-            d[0] = 0x80u;
-            d[4] = 0x22; d[5] = 0x00; d[6] = 0x00; d[7] = 0x08; /* 0x08000022 */
+            dr->mode = (int8_t)v;
+        } else if (index == 0x1400u && sub == 1u) {
+            dr->cob_rpdo1 = v;
+        } else if (index == 0x1600u && !(dr->cob_rpdo1 & ARM_CO_PDO_INVALID)) {
+            put_abort(d, 0x08000022u);
         }
-    } else if (index == 0x1018u && s->identity_subs != 0u && req->data[3] > s->identity_subs) {
-        d[0] = 0x80u;
-        d[4] = 0x11; d[5] = 0x00; d[6] = 0x09; d[7] = 0x06; /* 0x06090011: no such sub-index */
+    } else if (index == 0x1018u && s->identity_subs != 0u && sub > s->identity_subs) {
+        put_abort(d, 0x06090011u); /* no such sub-index */
     } else {
-        const uint32_t r = index == 0x1000u ? s->device_type : index == 0x6041u ? s->sw[node]
-                         : index == 0x6061u ? (uint32_t)(uint8_t)s->mode[node] : 0x11u;
+        const uint32_t r = read_of(s, dr, index, sub);
         d[0] = 0x43u;
         for (unsigned k = 0; k < 4u; ++k) {
             d[4u + k] = (uint8_t)(r >> (8u * k));
@@ -244,6 +311,15 @@ static int run_boot(arm_co_boot_t *b, server_t *s, unsigned max_steps)
     return rc;
 }
 
+static unsigned writes_of(const arm_co_boot_t *b, uint8_t node, uint16_t index)
+{
+    unsigned n = 0u;
+    for (unsigned i = 0; i < b->n_log; ++i) {
+        n += b->log[i].node == node && b->log[i].index == index;
+    }
+    return n;
+}
+
 static void test_boot_sequence(void)
 {
     static arm_co_boot_config_t cfg;
@@ -252,55 +328,64 @@ static void test_boot_sequence(void)
     arm_co_boot_default_config(&cfg);
     cfg.n_nodes = 2u;
     cfg.node[0] = (arm_co_node_config_t){.node_id = 1u};
-    cfg.node[1] = (arm_co_node_config_t){.node_id = 2u, .overrides = ARM_CO_OVERRIDE_RATED | ARM_CO_OVERRIDE_GEAR,
-                                         .rated_torque_mnm = 28000u, .gear_motor_revs = 160u, .gear_shaft_revs = 1u};
-    memset(&s, 0, sizeof(s));
-    s.device_type = ARM_CO_DEVICE_TYPE;
-    s.sw[1] = 0x40u; /* switch on disabled: a fresh drive */
-    s.sw[2] = 0x27u; /* left operation enabled by an earlier master: gets controlword 0x00 first */
+    cfg.node[1] = (arm_co_node_config_t){.node_id = 2u, .expect = ARM_CO_EXPECT_RATED | ARM_CO_EXPECT_GEAR,
+                                         .rated_torque = 28000u, .gear_motor_revs = 160u, .gear_shaft_revs = 1u};
+    server_init(&s);
+    s.d[2].rated = 28000u;
+    s.d[2].gear_m = 160u;
+    s.d[2].sw = 0x27u; /* left operation enabled by an earlier master: gets controlword 0x00 first */
     CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
     CHECK(run_boot(&b, &s, 1000u) == 0);
     CHECK(b.node[0].state == ARM_CO_NODE_ENABLED && b.node[1].state == ARM_CO_NODE_ENABLED);
     /* per node: 3 PDOs x (5 + 2 entries) + 1006, 1017, 1016 + 6060 + three controlwords = 28 */
-    CHECK_MSG(b.n_log == 28u + 32u, "%u writes", b.n_log); /* node 2: + 0x6076, 0x6091.1-2, the 0x00 */
-    CHECK(s.writes == b.n_log);
-    const arm_co_write_t *w = b.log;
-    unsigned rated = 0u, disable = 0u;
+    CHECK_MSG(b.n_log == 28u + 29u, "%u writes", b.n_log); /* node 2: + the 0x00 */
+    CHECK(s.d[1].writes + s.d[2].writes == b.n_log);
+    /* the units are read, never written: not even those the drive table gives */
+    CHECK(writes_of(&b, 2u, 0x6076u) == 0u && writes_of(&b, 2u, 0x6091u) == 0u && writes_of(&b, 1u, 0x608Fu) == 0u);
+    unsigned disable = 0u;
     for (unsigned i = 0; i < b.n_log; ++i) {
-        rated += (w[i].index == 0x6076u) ? 1u : 0u;
-        if (w[i].index == 0x6040u && w[i].value == 0u) {
+        const arm_co_write_t *w = &b.log[i];
+        if (w->index == 0x6040u && w->value == 0u) {
             ++disable;
             unsigned j = i + 1u;
-            while (j < b.n_log && w[j].node != w[i].node) {
+            while (j < b.n_log && b.log[j].node != w->node) {
                 ++j;
             }
-            CHECK(w[i].node == 2u && j < b.n_log && w[j].index == 0x1400u); /* before the configuration */
-        }
-        if (w[i].index == 0x6076u) {
-            CHECK(w[i].node == 2u && w[i].value == 28000u);
+            CHECK(w->node == 2u && j < b.n_log && b.log[j].index == 0x1400u); /* before the configuration */
         }
     }
-    CHECK(rated == 1u && disable == 1u);
-    CHECK(s.mode[1] == 10 && s.mode[2] == 10 && s.sw[1] == 0x27u && s.sw[2] == 0x27u);
+    CHECK(disable == 1u);
+    CHECK(s.d[1].mode == 10 && s.d[2].mode == 10 && s.d[1].sw == 0x27u && s.d[2].sw == 0x27u);
+    /* the units are the drive's: one motor revolution is 2 pi / gear at the joint */
+    arm_co_units_t u;
+    CHECK(arm_co_boot_units(&b, 1u, &u) == 0);
+    CHECK(fabsf(arm_co_increments_to_rad(&u, 524288) - (float)(6.283185307179586 / 160.0)) < 1e-7f);
+    CHECK(fabsf(arm_co_permille_to_torque(&u, 1000) - 28.0f) < 1e-4f && u.max_permille == 1000);
+    CHECK(b.node[1].units.from_table == 0u && b.node[1].absent == 0u);
 
-    /* a wrong device type is named: node, 0x1000, the value read */
-    memset(&s, 0, sizeof(s));
-    s.device_type = 0x00020191u;
+    /* the device type is checked on its profile word: a device's own high word passes */
+    server_init(&s);
+    s.device_type = 0xFFFF0192u;
+    s.d[2].rated = 28000u;
+    s.d[2].gear_m = 160u;
+    CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
+    CHECK(run_boot(&b, &s, 1000u) == 0);
+    s.device_type = 0x00020191u; /* another profile is named: node, 0x1000, the value read */
     CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
     CHECK(run_boot(&b, &s, 1000u) == -1);
     CHECK(b.fault.code == ARM_CO_FAULT_WRONG_VALUE && b.fault.node == 1u && b.fault.index == 0x1000u &&
-          b.fault.value == 0x00020191u && b.fault.expected == ARM_CO_DEVICE_TYPE);
+          b.fault.value == 0x00020191u && b.fault.expected == ARM_CO_PROFILE_402);
 
     /* CiA 301: 0x1018 sub 1 is mandatory, 2-4 are optional: a drive with sub 1 alone boots, its
      * others recorded as 0; unless the configuration checks the product code */
-    memset(&s, 0, sizeof(s));
-    s.device_type = ARM_CO_DEVICE_TYPE;
+    server_init(&s);
+    s.d[2].rated = 28000u;
+    s.d[2].gear_m = 160u;
     s.identity_subs = 1u;
-    s.sw[1] = s.sw[2] = 0x40u;
     CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
     CHECK(run_boot(&b, &s, 1000u) == 0);
     CHECK(b.node[0].identity[0] == 0x11u && b.node[0].identity[1] == 0u && b.node[0].identity[3] == 0u);
-    s.sw[1] = s.sw[2] = 0x40u;
+    s.d[1].sw = s.d[2].sw = 0x40u;
     cfg.node[0].product_code = 0x11u;
     CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
     CHECK(run_boot(&b, &s, 1000u) == -1);
@@ -313,12 +398,97 @@ static void test_boot_sequence(void)
     CHECK(arm_co_boot_init(&b, &cfg, 0u) == -1 && b.fault.code == ARM_CO_FAULT_BAD_CONFIG && b.fault.node == 1u);
 }
 
+/* CiA 301's optional objects are written only where the drive has them; CiA 402's optional unit
+ * objects are read where it has them, the drive table standing in where it has not. */
+static void test_optional_objects(void)
+{
+    static arm_co_boot_config_t cfg;
+    static arm_co_boot_t b;
+    static server_t s;
+    arm_co_boot_default_config(&cfg);
+    cfg.n_nodes = 1u;
+    /* an EPOS4 as its DCF says: no 0x1006, 0x608F, 0x6091; 0x6076 in µN m (maxon's unit) */
+    cfg.node[0] = (arm_co_node_config_t){.node_id = 4u, .expect = ARM_CO_EXPECT_ENCODER | ARM_CO_EXPECT_GEAR,
+                                         .encoder_increments = 3200u, .gear_motor_revs = 26u, .gear_shaft_revs = 1u,
+                                         .torque_units_per_nm = 1000000u};
+    server_init(&s);
+    s.d[4].lacks = LACKS_1006 | LACKS_1016 | LACKS_608F | LACKS_6091 | LACKS_6072 | LACKS_6502;
+    s.d[4].rated = 512871u;
+    CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
+    CHECK(run_boot(&b, &s, 1000u) == 0);
+    const arm_co_node_t *n = &b.node[0];
+    CHECK(n->state == ARM_CO_NODE_ENABLED);
+    CHECK(n->absent == (ARM_CO_ABSENT_1006 | ARM_CO_ABSENT_1016 | ARM_CO_ABSENT_608F | ARM_CO_ABSENT_6091 |
+                        ARM_CO_ABSENT_6072 | ARM_CO_ABSENT_6502));
+    CHECK(writes_of(&b, 4u, 0x1006u) == 0u && writes_of(&b, 4u, 0x1016u) == 0u && writes_of(&b, 4u, 0x1017u) == 1u);
+    CHECK_MSG(b.n_log == 26u, "%u writes", b.n_log);
+    CHECK(n->units.from_table == (ARM_CO_EXPECT_ENCODER | ARM_CO_EXPECT_GEAR) && n->units.rated_torque == 512871u);
+    CHECK(n->units.max_torque_permille == 32767u);
+    arm_co_units_t u;
+    CHECK(arm_co_boot_units(&b, 0u, &u) == 0);
+    CHECK(fabsf(arm_co_increments_to_rad(&u, 3200) - (float)(6.283185307179586 / 26.0)) < 1e-6f);
+    CHECK(fabsf(arm_co_permille_to_torque(&u, 1000) - 0.512871f) < 1e-6f); /* 512871 µN m */
+
+    /* without the drive table's encoder, a drive that lacks 0x608F cannot be scaled: named */
+    cfg.node[0].expect = ARM_CO_EXPECT_GEAR;
+    server_init(&s);
+    s.d[4].lacks = LACKS_608F;
+    CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
+    CHECK(run_boot(&b, &s, 1000u) == -1);
+    CHECK(b.fault.code == ARM_CO_FAULT_UNITS_MISSING && b.fault.node == 4u && b.fault.index == 0x608Fu);
+    CHECK(s.d[4].writes == 0u); /* refused before anything is written */
+}
+
+/* A drive whose units are not the drive table's never runs; one without CST is refused by name. */
+static void test_units_and_modes_refused(void)
+{
+    static arm_co_boot_config_t cfg;
+    static arm_co_boot_t b;
+    static server_t s;
+    arm_co_boot_default_config(&cfg);
+    cfg.n_nodes = 1u;
+    cfg.node[0] = (arm_co_node_config_t){.node_id = 3u, .expect = ARM_CO_EXPECT_ENCODER, .encoder_increments = 524288u};
+    server_init(&s);
+    s.d[3].enc = 2000u;
+    CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
+    CHECK(run_boot(&b, &s, 1000u) == -1);
+    CHECK(b.fault.code == ARM_CO_FAULT_UNITS_MISMATCH && b.fault.node == 3u && b.fault.index == 0x608Fu &&
+          b.fault.value == 2000u && b.fault.value_den == 1u && b.fault.expected == 524288u);
+    CHECK(s.d[3].writes == 0u);
+    /* a ratio is compared across: 1048576 increments per 2 revolutions is 524288 per one */
+    s.d[3].enc = 1048576u;
+    s.d[3].enc_revs = 2u;
+    CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
+    CHECK(run_boot(&b, &s, 1000u) == 0);
+    /* a gear of 0 is no unit */
+    server_init(&s);
+    s.d[3].gear_s = 0u;
+    CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
+    CHECK(run_boot(&b, &s, 1000u) == -1 && b.fault.code == ARM_CO_FAULT_BAD_UNITS && b.fault.index == 0x6091u);
+
+    /* no CST in 0x6502: refused before anything is written, the modes named */
+    server_init(&s);
+    s.d[3].modes = 0x00000065u; /* pp, pv, hm, ip */
+    CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
+    CHECK(run_boot(&b, &s, 1000u) == -1);
+    CHECK(b.fault.code == ARM_CO_FAULT_NO_CST && b.fault.index == 0x6502u && b.fault.has_modes &&
+          b.fault.modes == 0x65u && s.d[3].writes == 0u);
+    /* no 0x6502: the mode write's refusal says it */
+    server_init(&s);
+    s.d[3].lacks = LACKS_6502;
+    s.d[3].modes = 0x00000080u; /* csp only, as the 0x6060 write finds */
+    CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
+    CHECK(run_boot(&b, &s, 1000u) == -1);
+    CHECK(b.fault.code == ARM_CO_FAULT_NO_CST && b.fault.index == 0x6060u && !b.fault.has_modes &&
+          b.fault.abort_code == 0x06090030u);
+}
+
 static void test_units(void)
 {
     arm_co_units_t u;
-    CHECK(arm_co_units_init(&u, 150000u, 1u << 19, 101u, 1u, 32767) == 0);
-    CHECK(arm_co_units_init(&u, 0u, 1u << 19, 101u, 1u, 32767) == -1);
-    CHECK(arm_co_units_init(&u, 150000u, 1u << 19, 101u, 1u, 32767) == 0);
+    CHECK(arm_co_units_init(&u, 150000u, 1000u, 1u << 19, 1u, 101u, 1u, 32767) == 0);
+    CHECK(arm_co_units_init(&u, 0u, 1000u, 1u << 19, 1u, 101u, 1u, 32767) == -1);
+    CHECK(arm_co_units_init(&u, 150000u, 1000u, 1u << 19, 1u, 101u, 1u, 32767) == 0);
     const float quantum_nm = 0.15f;
     const double quantum_rad = 2.0 * 3.14159265358979323846 / (524288.0 * 101.0);
     double worst_tau = 0.0, worst_q = 0.0;
@@ -338,7 +508,7 @@ static void test_units(void)
     CHECK(arm_co_torque_to_permille(&u, 1e9f) == 32767 && arm_co_torque_to_permille(&u, -1e9f) == -32767);
     CHECK(arm_co_torque_to_permille(&u, NAN) == 0 && arm_co_torque_to_permille(&u, INFINITY) == 0);
     CHECK(arm_co_increments_to_rad(&u, 524288 * 101) > 6.2831f && arm_co_increments_to_rad(&u, 524288 * 101) < 6.2832f);
-    CHECK(arm_co_units_init(&u, 1000000u, 1u << 19, 101u, 1u, 1000) == 0); /* 1000 N m: 1 N m per-mille */
+    CHECK(arm_co_units_init(&u, 1000000u, 1000u, 1u << 19, 1u, 101u, 1u, 1000) == 0); /* 1000 N m: 1 N m per-mille */
     CHECK(arm_co_torque_to_permille(&u, 2.5f) == 3 && arm_co_torque_to_permille(&u, -2.5f) == -3); /* halves away */
     CHECK(arm_co_torque_to_permille(&u, 5000.0f) == 1000); /* max_permille */
 }
@@ -360,7 +530,7 @@ static void test_pdo_codec(void)
     uint16_t sw = 0;
     CHECK(arm_co_unpack_tpdo2(3u, &t2, &tq, &sw) == 0 && tq == -1000 && sw == 0x0227u);
     arm_co_units_t u;
-    CHECK(arm_co_units_init(&u, 150000u, 1u << 19, 101u, 1u, 32767) == 0);
+    CHECK(arm_co_units_init(&u, 150000u, 1000u, 1u << 19, 1u, 101u, 1u, 32767) == 0);
     float q, qd, tau;
     arm_co_state_si(&u, pos, vel, tq, &q, &qd, &tau);
     CHECK(fabsf(tau + 150.0f) < 1e-4f && q > 0.0f && qd < 0.0f);
@@ -373,6 +543,8 @@ int main(void)
     test_abort_expedited_and_retries();
     test_a_late_answer_does_not_fail_the_next_transfer();
     test_boot_sequence();
+    test_optional_objects();
+    test_units_and_modes_refused();
     test_units();
     test_pdo_codec();
     TEST_MAIN_END();

@@ -9,6 +9,7 @@
 #include <string.h>
 
 #include "arm/co_boot.h"
+#include "arm/co_pdo.h"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
@@ -17,7 +18,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     arm_co_boot_default_config(&cfg);
     cfg.n_nodes = 2u;
     cfg.node[0] = (arm_co_node_config_t){.node_id = 1u};
-    cfg.node[1] = (arm_co_node_config_t){.node_id = 2u, .overrides = ARM_CO_OVERRIDE_RATED, .rated_torque_mnm = 28000u,
+    cfg.node[1] = (arm_co_node_config_t){.node_id = 2u, .expect = ARM_CO_EXPECT_RATED, .rated_torque = 28000u,
                                          .vendor_id = 7u};
     cfg.fault_reset = 1u;
     cfg.sdo_tries = 2u;
@@ -62,5 +63,9 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     if (b.n_log > ARM_CO_BOOT_LOG_MAX) abort();
     if (rc == -1 && b.fault.code == ARM_CO_FAULT_NONE) abort();
     if (rc == 0 && (b.node[0].state != ARM_CO_NODE_ENABLED || b.node[1].state != ARM_CO_NODE_ENABLED)) abort();
+    for (unsigned i = 0; rc == 0 && i < 2u; ++i) { /* an enabled drive's units were settled: never a 0 */
+        arm_co_units_t u;
+        if (arm_co_boot_units(&b, i, &u) != 0) abort();
+    }
     return 0;
 }

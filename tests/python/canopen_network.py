@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import socket
 import struct
+import subprocess
 
 import canopen
 import pytest
@@ -26,3 +27,18 @@ def loopback_network(monkeypatch: pytest.MonkeyPatch, group: str, port: int) -> 
     sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
     assert sock.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL) == 0
     return net
+
+
+def stop_nodes_and_wait(net: canopen.Network, proc: subprocess.Popen) -> str:
+    """NMT stop to every node of the network (broadcast: the end of an emulated drives' run), then
+    the simulator's exit (killed if it does not end), the network closed. Its standard error."""
+    net.nmt.state = "STOPPED"
+    err = ""
+    try:
+        _, err = proc.communicate(timeout=15)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+        net.disconnect()
+    return err or ""

@@ -24,12 +24,21 @@ def build_dir() -> Path:
     return Path(os.environ.get("ARM_BUILD_DIR", REPO / "build" / "debug"))
 
 
-@pytest.fixture(scope="session")
-def controller_bin(build_dir: Path) -> Path:
-    exe = build_dir / "firmware" / "arm_controller"
+def _firmware_program(build_dir: Path, name: str) -> Path:
+    exe = build_dir / "firmware" / name
     if not exe.exists():
         pytest.skip(f"{exe} not built (run tools/armctl build --preset debug)")
     return exe
+
+
+@pytest.fixture(scope="session")
+def boot_bin(build_dir: Path) -> Path:
+    return _firmware_program(build_dir, "arm_canopen_boot")
+
+
+@pytest.fixture(scope="session")
+def controller_bin(build_dir: Path) -> Path:
+    return _firmware_program(build_dir, "arm_controller")
 
 
 @pytest.fixture(scope="session")

@@ -23,7 +23,7 @@ from tools.run.slots import CAN_GROUP, Slot
 canopen = pytest.importorskip("canopen")
 from canopen.profiles.p402 import BaseNode402  # noqa: E402
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError  # noqa: E402
-from canopen_network import loopback_network  # noqa: E402
+from canopen_network import loopback_network, stop_nodes_and_wait  # noqa: E402
 
 # armctl test runs these alone (no other test beside them): python-canopen's state and SDO timeouts are wall-clock
 pytestmark = pytest.mark.serial
@@ -319,7 +319,7 @@ def test_nmt_resets_restore_defaults(rig: Rig) -> None:
     (["--protocol", "ethercat"], "--protocol: 'ethercat' is not arm or canopen"),
     (["--node", "1,rated=5"], "only with --protocol canopen"),
     (["--protocol", "canopen", "--node", "17"], "--node '17': the node id must be a drive, 1..16"),
-    (["--protocol", "canopen", "--node", "1,speed=3"], "--node '1,speed=3': expected ID[,rated=mNm]"),
+    (["--protocol", "canopen", "--node", "1,speed=3"], "--node '1,speed=3': expected ID[,rated=N]"),
     (["--od-gear-ratio", "50:1"], "only with --protocol canopen"),
     (["--protocol", "canopen", "--od-gear-ratio", "50:0"], "--od-gear-ratio: '50:0' is not MOTOR:SHAFT"),
     (["--protocol", "canopen", "--inject-overcurrent", "0:1"], "--inject-overcurrent: '0:1' is not NODE:TIME"),
@@ -347,12 +347,5 @@ def test_nodes_on_a_second_bus(sim_bin: Path, monkeypatch: pytest.MonkeyPatch, s
         with pytest.raises(SdoCommunicationError):  # nodes 1-3 are not on this bus: nobody answers
             net.add_node(BaseNode402(1, str(EDS))).sdo[0x1000].raw
     finally:
-        net.nmt.state = "STOPPED"  # this bus's nodes; the others then stop on their idle timeout
-        try:
-            _, err = proc.communicate(timeout=15)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.communicate()
-            net.disconnect()
+        err = stop_nodes_and_wait(net, proc)  # this bus's nodes; the others then stop on their idle timeout
     assert proc.returncode == 3 and "master silent" in err  # bus 0 never heard a master

@@ -44,9 +44,11 @@ def test_canopen_sil_run_is_ok_and_records_the_boot(tmp_path: Path, controller_b
         assert {"0x1600:01", "0x1A00:01", "0x1A01:01", "0x1006:00", "0x1017:00", "0x1016:01"} <= set(objs)
         assert [w["value"] for w in ws if w["object"] == "0x6060:00"] == [10]
         assert [w["value"] for w in ws if w["object"] == "0x6040:00"][-3:] == [0x06, 0x07, 0x0F]
-        rated = [w["value"] for w in ws if w["object"] == "0x6076:00"]
-        # the arm's rule: rated torque = the joint's torque limit, written where it differs from 150 N m
-        assert rated == ([] if int(node) <= 3 else [28000]), (node, rated)
+        # the units are the drive's, read at boot and never written
+        assert not {"0x6076:00", "0x608F:01", "0x6091:01"} & set(objs), (node, objs)
+    # the bundled table's rule, rated torque = the joint's torque limit, is what the drives report
+    assert [u["rated_torque"] for u in co["units"]] == [150000] * 3 + [28000] * 3  # mN m
+    assert all(u["encoder_increments"] == 524288 and u["gear"] == [101, 1] for u in co["units"])
 
 
 def test_canopen_sil_equals_lockstep_udp(tmp_path: Path, controller_bin: Path) -> None:
@@ -333,7 +335,7 @@ def test_a_capture_decodes_in_si_units_with_the_runs_derived_dbc(tmp_path: Path,
     assert all(abs(first[n + 1] - home[n]) <= quantum for n in range(len(home))), (first, home)
     table = tmp_path / "drives.toml"
     table.write_text((Path(__file__).resolve().parents[2] / "firmware" / "protocol" / "drives.toml").read_text()
-                     .replace("[defaults]\n", "[defaults]\nrated_torque_nm = 300\n")
+                     .replace('rated_torque_nm = "joint_torque_limit"', "rated_torque_nm = 300")
                      .replace('eds = "cia402_servo.eds"', f'eds = "{Path(__file__).resolve().parents[2]}'
                                                           '/firmware/protocol/cia402_servo.eds"'))
     other = cantools.database.load_string(canopen_dbc.dbc_text(drives_mod.load(info, table)), database_format="dbc")

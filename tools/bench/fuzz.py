@@ -30,7 +30,8 @@ HARNESSES: dict[str, list[str]] = {
                   "firmware/transport/src/fd_wait.c"],
     "lcm_url": ["firmware/transport/src/lcm_url.c"],
     "dbc_unpack": ["{gen}/arm_drives.c"],
-    "canopen_master": ["firmware/canopen/src/co_sdo.c", "firmware/canopen/src/co_boot.c"],
+    "canopen_master": ["firmware/canopen/src/co_sdo.c", "firmware/canopen/src/co_boot.c",
+                       "firmware/canopen/src/co_pdo.c"],
 }
 
 

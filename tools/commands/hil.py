@@ -217,6 +217,8 @@ def run(ns: argparse.Namespace) -> int:
                              drives=DRIVE_PRESETS[ns.drives], can_port=ns.can_port, protocol=ns.protocol,
                              drive_config=ns.drive_config))
     print(f"bus: {result['environment']['bus_choice']}; wiring: {result['environment']['topology']['source']}")
+    for note in result["environment"].get("canopen_drive_notes", []):
+        print(f"drive table: {note}")
     for name, pct in result["environment"]["bus_load_pct"].items():
         if pct > 100.0:
             print(f"armctl hil: bus {name} needs {pct:g} % of its time at 1 kHz (tools/armctl busload): the "

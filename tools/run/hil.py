@@ -248,6 +248,7 @@ SIL = "sil"  # --bus: software in the loop
 VM = "vm"
 CAPTURE_FILE = "bus.log"  # a run's capture of its buses (candump -l format)
 CANOPEN_DBC_FILE = "canopen.dbc"  # a CANopen run's frames, derived from its drive table (gen/canopen_dbc.py)
+CANOPEN_OD_FILE = "canopen_od.txt"  # the emulated drives' dictionary, from the drive table's EDS/DCF (gen/eds.py)
 VM_FILES = ("vm_plan.json", "vm_result.json", "vm.log")  # --bus vm: the plan in, the exit codes out, the VM's output
 
 
@@ -441,29 +442,32 @@ def canopen_args(info: dict[str, Any], drive_config: Path | None) -> tuple[list[
     return ctl, node_args, cfg
 
 
-_CANOPEN_MEMO: dict[str, tuple[list[str], list[str], Any, str]] = {}
+_CANOPEN_MEMO: dict[str, tuple[list[str], list[str], Any, str, str]] = {}
 
 
-def canopen_of(info: dict[str, Any], drive_config: Path | None) -> tuple[list[str], list[str], Any, str]:
-    """canopen_args() and the DBC that decodes a capture of these drives (gen/canopen_dbc.py), made
-    once per arm and drive file in a process: a study's runs all share them, and making them took
-    0.7 s of a 0.4 s run."""
+def canopen_of(info: dict[str, Any], drive_config: Path | None) -> tuple[list[str], list[str], Any, str, str]:
+    """canopen_args(), the DBC that decodes a capture of these drives (gen/canopen_dbc.py) and the
+    emulated drives' dictionary from the table's EDS or DCF (gen/eds.py), made once per arm and
+    drive file in a process: a study's runs all share them, and making them took 0.9 s of a 0.4 s run."""
     from gen import canopen_dbc
+    from gen import eds as eds_mod
 
-    stamp = drive_config.stat().st_mtime_ns if drive_config is not None and drive_config.exists() else None
-    key = json.dumps([info, str(drive_config), stamp], sort_keys=True, default=str)
+    files = [drive_config] if drive_config is not None else []
+    key = json.dumps([info, [(str(f), f.stat().st_mtime_ns) for f in files if f.exists()]], sort_keys=True, default=str)
     if key not in _CANOPEN_MEMO:
         ctl, node, table = canopen_args(info, drive_config)
         try:
             dbc = canopen_dbc.dbc_text(table)
-        except canopen_dbc.DbcError as exc:
+            od_table = eds_mod.table_text(eds_mod.load(Path(table.eds)))
+        except (canopen_dbc.DbcError, eds_mod.EdsError) as exc:
             raise HilError(str(exc)) from None
-        _CANOPEN_MEMO[key] = (ctl, node, table, dbc)
+        _CANOPEN_MEMO[key] = (ctl, node, table, dbc, od_table)
     return _CANOPEN_MEMO[key]
 
 
 def canopen_record(controller: dict[str, Any]) -> dict[str, Any] | None:
-    """run.json's record of the CANopen boot: its time, first fault, and every SDO write per node."""
+    """run.json's record of the CANopen boot: its time, first fault, every SDO write per node, and
+    each joint's drive's units as the boot read them."""
     co = controller.get("canopen")
     if co is None:
         return None
@@ -472,7 +476,8 @@ def canopen_record(controller: dict[str, Any]) -> dict[str, Any] | None:
         per_node.setdefault(str(w["node"]), []).append(
             {"object": f"0x{w['index']:04X}:{w['sub']:02X}", "index": w["index"], "sub": w["sub"],
              "value": w["value"], "bytes": w["bytes"]})
-    return {"boot_s": co.get("boot_s"), "fault": co.get("fault"), "sdo_writes": per_node}
+    return {"boot_s": co.get("boot_s"), "fault": co.get("fault"), "sdo_writes": per_node,
+            "units": co.get("units"), "q_first_rad": co.get("q_first_rad")}
 
 
 def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
@@ -495,7 +500,8 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
                        "virtually)")
     if opt.drive_config is not None and not canopen:
         raise HilError("--drive-config: a CiA 402 drive configuration, for --protocol canopen")
-    node_args, sim_node_args, drive_table, dbc = canopen_of(info, opt.drive_config) if canopen else ([], [], None, "")
+    node_args, sim_node_args, drive_table, dbc, od_table = (canopen_of(info, opt.drive_config) if canopen
+                                                            else ([], [], None, "", ""))
     transmission = drive_table.transmission if drive_table is not None else None
     rate_hz = _arg_value(opt.controller_args, "--rate", info["loop_rate_hz"])
     if canopen:
@@ -517,13 +523,16 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
             raise HilError(f"{exe} is missing: run tools/armctl build")
     opt.out.mkdir(parents=True, exist_ok=True)
     for stale in ("telemetry.lcmlog", "controller_summary.json", "sim_summary.json", "run.json", "uncertainty.json",
-                  CAPTURE_FILE, CAPTURE_FILE + ".gz", CANOPEN_DBC_FILE, *VM_FILES):
+                  CAPTURE_FILE, CAPTURE_FILE + ".gz", CANOPEN_DBC_FILE, CANOPEN_OD_FILE, *VM_FILES):
         (opt.out / stale).unlink(missing_ok=True)
     if drive_table is not None:  # what decodes a capture of this run, in SI units (gen/canopen_dbc.py)
         try:
             write_text_atomic(opt.out / CANOPEN_DBC_FILE, dbc)
+            # the emulated drives are the drive table's drives: their dictionary from its EDS or DCF
+            write_text_atomic(opt.out / CANOPEN_OD_FILE, od_table)
         except OutputError as exc:
             raise HilError(str(exc)) from None
+        sim_node_args = [*sim_node_args, "--od", str(opt.out / CANOPEN_OD_FILE)]
     buses = bus_args(bus_kind, can_port, topology)
     bus_argv = [a for spec in buses for a in ("--bus", spec)]
     url = "" if sil else f"udpm://{LCM_GROUP}:{lcm_port}?ttl=0&recv_buf_size=8388608"
@@ -580,6 +589,9 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
               **opt.labels}
     run = analyse(opt.out, controller, simulator, config, {
         "protocol": opt.protocol, "canopen": canopen_record(controller),
+        # what the drive table fills for its drive's file, and what the boot skips (gen/drive_check.py)
+        "canopen_drive_notes": sorted({f"{Path(drive_table.eds).name}: {n}" for d in drive_table.drives
+                                       for n in d.notes}) if drive_table is not None else [],
         "bus": " ".join(buses), "bus_choice": f"{opt.bus} -> {bus_kind} ({bus_why})",
         "topology": {"source": wiring,
                      "buses": [{"name": b.name, "spec": spec.rpartition("@")[0], "kind": b.describe(),

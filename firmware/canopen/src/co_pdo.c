@@ -27,15 +27,17 @@ static int64_t round_clamp(double x, int64_t lo, int64_t hi)
     return (int64_t)r; /* truncation toward zero after the half shift */
 }
 
-int arm_co_units_init(arm_co_units_t *u, uint32_t rated_torque_mnm, uint32_t encoder_increments,
-                      uint32_t gear_motor_revs, uint32_t gear_shaft_revs, int16_t max_permille)
+int arm_co_units_init(arm_co_units_t *u, uint32_t rated_torque, uint32_t torque_units_per_nm,
+                      uint32_t encoder_increments, uint32_t encoder_revs, uint32_t gear_motor_revs,
+                      uint32_t gear_shaft_revs, int16_t max_permille)
 {
-    if (rated_torque_mnm == 0u || encoder_increments == 0u || gear_motor_revs == 0u || gear_shaft_revs == 0u ||
-        max_permille <= 0) {
+    if (rated_torque == 0u || torque_units_per_nm == 0u || encoder_increments == 0u || encoder_revs == 0u ||
+        gear_motor_revs == 0u || gear_shaft_revs == 0u || max_permille <= 0) {
         return -1;
     }
-    u->rated_torque_nm = (double)rated_torque_mnm / 1000.0;
-    u->increments_per_rad = (double)encoder_increments * (double)gear_motor_revs / (double)gear_shaft_revs / TWO_PI;
+    u->rated_torque_nm = (double)rated_torque / (double)torque_units_per_nm;
+    u->increments_per_rad = (double)encoder_increments / (double)encoder_revs * (double)gear_motor_revs /
+                            (double)gear_shaft_revs / TWO_PI;
     u->max_permille = max_permille;
     return 0;
 }

@@ -1,8 +1,9 @@
 /* arm_canopen_boot: configures the CiA 402 drives of one bus with the boot configurator
- * (firmware/canopen, arm/co_boot.h), prints every SDO write and the result, and exits 0 when every
- * node reached operation enabled, else 1 with one line naming the node, the object and the abort
- * code (2: bad arguments). The node options come from the drive configuration (gen/drives.py
- * --boot-args). README: Real drives, The CANopen master. */
+ * (firmware/canopen, arm/co_boot.h), prints every SDO write, each drive's units as it read them and
+ * the optional objects it lacks, and the result; exits 0 when every node reached operation enabled,
+ * else 1 with one line naming the node, the object and the abort code or both values (2: bad
+ * arguments). The node options come from the drive configuration (gen/drives.py --boot-args).
+ * docs/drives-bring-up.md. */
 #define _GNU_SOURCE
 #include <errno.h>
 #include <stdio.h>
@@ -18,13 +19,16 @@
 #include "json_file.h"
 
 static const char k_usage[] =
-    "usage: arm_canopen_boot --bus SPEC --node ID[,rated=mNm][,encoder=INC][,gear=M/S][,vendor=X][,product=X]...\n"
+    "usage: arm_canopen_boot --bus SPEC --node ID[,rated=N][,encoder=INC][,gear=M/S][,torque_unit=mNm|uNm]\n"
+    "         [,vendor=X][,product=X]...\n"
     "         [--cycle-us N] [--heartbeat-ms N] [--master-id N] [--consumer-ms N] [--sdo-timeout-ms N]\n"
     "         [--sdo-tries N] [--state-timeout-ms N] [--period-us N] [--timeout-ms N] [--json FILE]\n"
     "         [--hold-periods N] [--hold-torque NM] [--fault-reset]\n"
     "  --bus SPEC         udp | udp:GROUP:PORT | socketcan:IFACE (the drives' bus)\n"
-    "  --node ...         a node to configure (repeatable): its id and the EDS defaults it overrides\n"
-    "                     (0x6076 rated torque mN m, 0x608F.1 increments per motor rev, 0x6091 gear)\n"
+    "  --node ...         a node to configure (repeatable): its id and the units the drive table gives, which\n"
+    "                     the drive's must equal (0x6076 rated torque, in mN m or the torque_unit's, 0x608F.1\n"
+    "                     increments per motor rev, 0x6091 gear; read, never written; they stand in where the\n"
+    "                     drive lacks one)\n"
     "  --cycle-us         0x1006 communication cycle period [1000]\n"
     "  --heartbeat-ms     0x1017 producer heartbeat of the drives [100]\n"
     "  --master-id        the master's node id (its heartbeat, 0x1016.1) [127]\n"
@@ -183,17 +187,13 @@ static int parse_args(int argc, char **argv, boot_options_t *o, char *err, size_
 /* Once every node is enabled: n periods of RPDO1 (enable operation, the target torque in
  * per-mille of the node's rated torque) then SYNC, the TPDOs of each period decoded into SI units;
  * the master's heartbeat goes on. 0, or -1 with err set on a bus error. */
-static int hold(arm_can_bus_t *bus, const boot_options_t *o, hold_state_t *hs, char *err, size_t cap)
+static int hold(arm_can_bus_t *bus, const boot_options_t *o, const arm_co_boot_t *boot, hold_state_t *hs, char *err,
+                size_t cap)
 {
     const arm_co_boot_config_t *c = &o->cfg;
     for (unsigned i = 0; i < c->n_nodes; ++i) {
-        const arm_co_node_config_t *nc = &c->node[i];
-        const uint32_t rated = (nc->overrides & ARM_CO_OVERRIDE_RATED) ? nc->rated_torque_mnm : ARM_CO_EDS_RATED_TORQUE_MNM;
-        const uint32_t enc = (nc->overrides & ARM_CO_OVERRIDE_ENCODER) ? nc->encoder_increments : ARM_CO_EDS_ENCODER_INCREMENTS;
-        const int gear = (nc->overrides & ARM_CO_OVERRIDE_GEAR) != 0;
-        if (arm_co_units_init(&hs[i].units, rated, enc, gear ? nc->gear_motor_revs : ARM_CO_EDS_GEAR_MOTOR_REVS,
-                              gear ? nc->gear_shaft_revs : ARM_CO_EDS_GEAR_SHAFT_REVS, 32767) != 0) {
-            snprintf(err, cap, "node %u: units cannot be built", nc->node_id);
+        if (arm_co_boot_units(boot, i, &hs[i].units) != 0) { /* each drive's own, as the boot read them */
+            snprintf(err, cap, "node %u: units cannot be built", c->node[i].node_id);
             return -1;
         }
         hs[i].target_permille = arm_co_torque_to_permille(&hs[i].units, o->hold_torque_nm);
@@ -249,6 +249,22 @@ static const char *node_state_name(arm_co_node_state_t s)
     return s == ARM_CO_NODE_ENABLED ? "operation_enabled" : s == ARM_CO_NODE_FAILED ? "failed" : "unfinished";
 }
 
+/* The optional objects a node lacked, "0x1006 0x1016" ("" for none). */
+static void absent_text(uint16_t absent, char *out, size_t cap)
+{
+    static const struct { uint16_t bit, index; } k_objects[] = {
+        {ARM_CO_ABSENT_1006, 0x1006u}, {ARM_CO_ABSENT_1017, 0x1017u}, {ARM_CO_ABSENT_1016, 0x1016u},
+        {ARM_CO_ABSENT_6502, 0x6502u}, {ARM_CO_ABSENT_6076, 0x6076u}, {ARM_CO_ABSENT_608F, 0x608Fu},
+        {ARM_CO_ABSENT_6091, 0x6091u}, {ARM_CO_ABSENT_6072, 0x6072u}};
+    size_t used = 0u;
+    out[0] = '\0';
+    for (unsigned k = 0; k < sizeof(k_objects) / sizeof(k_objects[0]) && used + 8u < cap; ++k) {
+        if (absent & k_objects[k].bit) {
+            used += (size_t)snprintf(out + used, cap - used, "%s0x%04X", used ? " " : "", k_objects[k].index);
+        }
+    }
+}
+
 /* The result for run.json: written whole or not at all (json_file). */
 static int write_json(const char *path, const arm_co_boot_t *b, const hold_state_t *hs, uint32_t hold_periods,
                       const char *result, const char *detail, char *err, size_t cap)
@@ -272,6 +288,18 @@ static int write_json(const char *path, const arm_co_boot_t *b, const hold_state
         fprintf(f, "%s\n    {\"node\": %u, \"state\": \"%s\", \"statusword\": %u, \"identity\": [%u, %u, %u, %u]",
                 i ? "," : "", b->cfg.node[i].node_id, node_state_name(n->state), n->statusword, n->identity[0],
                 n->identity[1], n->identity[2], n->identity[3]);
+        char absent[80];
+        absent_text(n->absent, absent, sizeof(absent));
+        fprintf(f, ", \"absent\": \"%s\"", absent);
+        if (n->state == ARM_CO_NODE_ENABLED) {
+            const arm_co_drive_units_t *u = &n->units;
+            fprintf(f, ", \"units\": {\"rated_torque\": %u, \"torque_units_per_nm\": %u, \"encoder_increments\": %u, "
+                       "\"encoder_revs\": %u, "
+                       "\"gear\": [%u, %u], \"max_torque_permille\": %u, \"modes\": %u, \"from_table\": %u}",
+                    u->rated_torque, u->torque_units_per_nm, u->encoder_increments, u->encoder_revs, u->gear_motor_revs,
+                    u->gear_shaft_revs,
+                    u->max_torque_permille, u->modes, u->from_table);
+        }
         if (hold_periods > 0u) {
             const hold_state_t *h = &hs[i];
             fprintf(f, ", \"hold\": {\"periods\": %u, \"target_permille\": %d, \"tpdo1\": %u, \"tpdo2\": %u, "
@@ -361,7 +389,7 @@ int main(int argc, char **argv)
     }
     static hold_state_t hs[ARM_CO_BOOT_MAX_NODES];
     const uint32_t held = rc == 0 ? opt.hold_periods : 0u;
-    if (held > 0u && hold(&bus, &opt, hs, err, sizeof(err)) != 0) {
+    if (held > 0u && hold(&bus, &opt, &boot, hs, err, sizeof(err)) != 0) {
         fprintf(stderr, "arm_canopen_boot: hold: %s\n", err);
         arm_can_bus_close(&bus);
         return 1;
@@ -396,6 +424,19 @@ int main(int argc, char **argv)
         printf("node %u: operation enabled (statusword 0x%04X; vendor 0x%08X product 0x%08X revision 0x%08X "
                "serial 0x%08X)\n", boot.cfg.node[i].node_id, n->statusword, n->identity[0], n->identity[1],
                n->identity[2], n->identity[3]);
+        const arm_co_drive_units_t *u = &n->units;
+        printf("node %u: units: rated torque %u %s%s, encoder %u/%u increments per motor revolution%s, gear %u/%u%s, "
+               "max torque %u per-mille\n", boot.cfg.node[i].node_id, u->rated_torque,
+               u->torque_units_per_nm == 1000u ? "mN m" : u->torque_units_per_nm == 1000000u ? "uN m" : "units",
+               (u->from_table & ARM_CO_EXPECT_RATED) ? " (drive table)" : "", u->encoder_increments, u->encoder_revs,
+               (u->from_table & ARM_CO_EXPECT_ENCODER) ? " (drive table)" : "", u->gear_motor_revs, u->gear_shaft_revs,
+               (u->from_table & ARM_CO_EXPECT_GEAR) ? " (drive table)" : "", u->max_torque_permille);
+        char absent[80];
+        absent_text(n->absent, absent, sizeof(absent));
+        if (absent[0] != '\0') {
+            printf("node %u: optional objects it lacks (not written, or taken from the drive table): %s\n",
+                   boot.cfg.node[i].node_id, absent);
+        }
         if (held > 0u) {
             const hold_state_t *h = &hs[i];
             printf("node %u: held %u periods at %d per-mille: q %.6f rad, qd %.6f rad/s, tau %.3f N m, statusword "

@@ -10,8 +10,45 @@
 
 #include "arm/co_sdo.h"
 
+/* "pp, pv, hm" from 0x6502's bits (CiA 402: bit k is mode k + 1; 16..31 the manufacturer's). */
+void canopen_modes_text(uint32_t modes, char *out, size_t cap)
+{
+    static const char *const names[] = {"pp", "vl", "pv", "tq", NULL, "hm", "ip", "csp", "csv", "cst", "cstca"};
+    size_t used = 0u;
+    out[0] = '\0';
+    for (unsigned bit = 0; bit <= 16u && used < cap; ++bit) {
+        const int set = bit < 16u ? ((modes >> bit) & 1u) != 0u : (modes >> 16) != 0u;
+        const char *name = bit == 16u ? "manufacturer-specific" : bit < sizeof(names) / sizeof(names[0]) ? names[bit]
+                                                                                                          : NULL;
+        if (!set || name == NULL) continue;
+        const int n = snprintf(out + used, cap - used, "%s%s", used ? ", " : "", name);
+        used += n > 0 ? (size_t)n : 0u;
+    }
+    if (used == 0u) snprintf(out, cap, "none");
+}
+
+/* The unit object's name, and the drive table field that gives it. */
+static void unit_names(uint16_t index, const char **what, const char **field)
+{
+    *what = index == 0x6076u ? "rated torque" : index == 0x608Fu ? "encoder increments per motor revolutions"
+          : index == 0x6091u ? "gear ratio (motor per shaft revolutions)" : "max torque (per-mille)";
+    *field = index == 0x6076u ? "rated_torque_nm" : index == 0x608Fu ? "encoder_increments" : "gear";
+}
+
+/* "2000/1" for a ratio (0x608F, 0x6091), "150000" for a plain value. */
+static void ratio_text(uint16_t index, uint32_t num, uint32_t den, char *out, size_t cap)
+{
+    if (index == 0x608Fu || index == 0x6091u) {
+        snprintf(out, cap, "%u/%u", num, den);
+    } else {
+        snprintf(out, cap, "%u", num);
+    }
+}
+
 void canopen_fault_text(const arm_co_fault_t *f, char *out, size_t cap)
 {
+    const char *what = NULL, *field = NULL;
+    char a[32], b[32], modes[160];
     switch (f->code) {
     case ARM_CO_FAULT_SDO_ABORT:
     case ARM_CO_FAULT_CLIENT_ABORT:
@@ -24,8 +61,46 @@ void canopen_fault_text(const arm_co_fault_t *f, char *out, size_t cap)
                  f->index, f->sub, f->tries, f->abort_code);
         break;
     case ARM_CO_FAULT_WRONG_VALUE:
-        snprintf(out, cap, "node %u: 0x%04X:%02X: read 0x%08X, expected 0x%08X", f->node, f->index, f->sub,
-                 f->value, f->expected);
+        if (f->index == 0x1000u) {
+            snprintf(out, cap, "node %u: 0x1000:00: device type 0x%08X: profile 0x%04X, not CiA 402 (0x%04X)", f->node,
+                     f->value, f->value & 0xFFFFu, f->expected);
+        } else {
+            snprintf(out, cap, "node %u: 0x%04X:%02X: read 0x%08X, expected 0x%08X", f->node, f->index, f->sub,
+                     f->value, f->expected);
+        }
+        break;
+    case ARM_CO_FAULT_NO_CST:
+        canopen_modes_text(f->modes, modes, sizeof(modes));
+        if (f->index == 0x6060u) {
+            snprintf(a, sizeof(a), " (SDO abort 0x%08X)", f->abort_code);
+        } else {
+            a[0] = '\0';
+        }
+        if (f->has_modes) {
+            snprintf(out, cap, "node %u: 0x%04X:00: no cyclic synchronous torque (mode 10), which this controller needs%s; "
+                     "the drive offers %s (0x6502 = 0x%08X)", f->node, f->index, a, modes, f->modes);
+        } else {
+            snprintf(out, cap, "node %u: 0x6060:00: the drive refused mode 10 (cyclic synchronous torque), which this "
+                     "controller needs%s; it has no 0x6502 to say which modes it offers", f->node, a);
+        }
+        break;
+    case ARM_CO_FAULT_UNITS_MISMATCH:
+        unit_names(f->index, &what, &field);
+        ratio_text(f->index, f->value, f->value_den, a, sizeof(a));
+        ratio_text(f->index, f->expected, f->expected_den, b, sizeof(b));
+        snprintf(out, cap, "node %u: 0x%04X %s: the drive has %s, the drive table says %s (%s)", f->node, f->index,
+                 what, a, b, field);
+        break;
+    case ARM_CO_FAULT_UNITS_MISSING:
+        unit_names(f->index, &what, &field);
+        snprintf(out, cap, "node %u: 0x%04X %s: the drive has no such object, and the drive table gives no %s",
+                 f->node, f->index, what, field);
+        break;
+    case ARM_CO_FAULT_BAD_UNITS:
+        unit_names(f->index, &what, &field);
+        ratio_text(f->index, f->value, f->value_den, a, sizeof(a));
+        snprintf(out, cap, "node %u: 0x%04X %s: the drive has %s, from which no unit can be made", f->node, f->index,
+                 what, a);
         break;
     case ARM_CO_FAULT_STATE_TIMEOUT:
         snprintf(out, cap, "node %u: 0x6041:00: statusword 0x%04X did not reach 0x%02X (under mask 0x%02X)", f->node,
@@ -85,11 +160,11 @@ int canopen_parse_node(const char *arg, arm_co_node_config_t *nc, char *err, siz
         const char *val = eq + 1;
         int bad = 0;
         if (strcmp(tok, "rated") == 0) {
-            bad = canopen_parse_u32(val, 1u, UINT32_MAX, &nc->rated_torque_mnm);
-            nc->overrides |= ARM_CO_OVERRIDE_RATED;
+            bad = canopen_parse_u32(val, 1u, UINT32_MAX, &nc->rated_torque);
+            nc->expect |= ARM_CO_EXPECT_RATED;
         } else if (strcmp(tok, "encoder") == 0) {
             bad = canopen_parse_u32(val, 1u, UINT32_MAX, &nc->encoder_increments);
-            nc->overrides |= ARM_CO_OVERRIDE_ENCODER;
+            nc->expect |= ARM_CO_EXPECT_ENCODER;
         } else if (strcmp(tok, "gear") == 0) {
             char *slash = strchr(val, '/');
             if (slash == NULL) {
@@ -99,18 +174,24 @@ int canopen_parse_node(const char *arg, arm_co_node_config_t *nc, char *err, siz
                 bad = canopen_parse_u32(val, 1u, UINT32_MAX, &nc->gear_motor_revs) ||
                       canopen_parse_u32(slash + 1, 1u, UINT32_MAX, &nc->gear_shaft_revs);
             }
-            nc->overrides |= ARM_CO_OVERRIDE_GEAR;
+            nc->expect |= ARM_CO_EXPECT_GEAR;
+        } else if (strcmp(tok, "torque_unit") == 0) {
+            bad = strcmp(val, "mNm") != 0 && strcmp(val, "uNm") != 0;
+            nc->torque_units_per_nm = strcmp(val, "uNm") == 0 ? 1000000u : 1000u;
         } else if (strcmp(tok, "vendor") == 0) {
             bad = canopen_parse_u32(val, 0u, UINT32_MAX, &nc->vendor_id);
         } else if (strcmp(tok, "product") == 0) {
             bad = canopen_parse_u32(val, 0u, UINT32_MAX, &nc->product_code);
         } else {
-            snprintf(err, cap, "--node '%s': unknown field '%s' (rated, encoder, gear, vendor, product)", arg, tok);
+            snprintf(err, cap, "--node '%s': unknown field '%s' (rated, encoder, gear, torque_unit, vendor, product)", arg,
+                     tok);
             return -1;
         }
         if (bad) {
             snprintf(err, cap, "--node '%s': field %s: expected %s", arg, tok,
-                     strcmp(tok, "gear") == 0 ? "MOTOR/SHAFT revolutions, both >= 1" : "an unsigned 32-bit number");
+                     strcmp(tok, "gear") == 0          ? "MOTOR/SHAFT revolutions, both >= 1"
+                     : strcmp(tok, "torque_unit") == 0 ? "mNm or uNm"
+                                                       : "an unsigned 32-bit number");
             return -1;
         }
     }

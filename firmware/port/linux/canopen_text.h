@@ -9,13 +9,16 @@
 
 /* "node 2: 0x6060:00: SDO abort 0x06090030 (value range of parameter exceeded)" and the like. */
 void canopen_fault_text(const arm_co_fault_t *f, char *out, size_t cap);
+/* 0x6502's modes by name: "pp, pv, hm, csp" ("none" for none). */
+void canopen_modes_text(uint32_t modes, char *out, size_t cap);
 
-/* --node "ID[,rated=mNm][,encoder=INC][,gear=M/S][,vendor=X][,product=X]" into nc (the EDS
- * defaults it overrides flagged); -1 with one line naming the field (arm_canopen_boot,
- * arm_controller). */
 /* A whole number in [lo, hi] (decimal or 0x hex, no sign); -1 otherwise. */
 int canopen_parse_u32(const char *s, uint32_t lo, uint32_t hi, uint32_t *out);
 
+/* --node "ID[,rated=N][,encoder=INC][,gear=M/S][,torque_unit=mNm|uNm][,vendor=X][,product=X]" into
+ * nc: the units the drive table gives (the drive's objects must equal them; flagged in nc->expect;
+ * rated in the drive's torque unit); -1 with one line naming the field (arm_canopen_boot,
+ * arm_controller). */
 int canopen_parse_node(const char *arg, arm_co_node_config_t *nc, char *err, size_t cap);
 
 #endif

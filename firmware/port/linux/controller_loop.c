@@ -92,6 +92,10 @@ static int canopen_rx(link_t *l, const arm_can_frame_t *f)
         if (!tpdo_is_this_periods(l, &l->tpdo1_mask, &l->tpdo1_late, j)) return 1;
         d->q[j] = arm_co_increments_to_rad(&l->units[j], pos);
         d->qd[j] = arm_co_increments_to_rad(&l->units[j], vel);
+        if ((l->report->co_q_seen & (1u << j)) == 0u) { /* the units' first use, for the summary */
+            l->report->co_q_seen |= 1u << j;
+            l->report->co_q_first[j] = d->q[j];
+        }
     } else if (arm_co_unpack_tpdo2((uint8_t)node, f, &tq, &sw) == 0) {
         if (!tpdo_is_this_periods(l, &l->tpdo2_mask, &l->tpdo2_late, j)) return 1;
         l->tpdo2_seen |= 1u << j;
@@ -295,8 +299,8 @@ static int boot(link_t *l, const options_t *opt, const arm_robot_model_t *model,
 }
 
 /* --protocol canopen: the CANopen master boots every bus's drives side by side (arm/co_boot.h),
- * to operation enabled in CST with zero torque. Node = drive number; rated torque = the joint's
- * torque limit (written where it differs from the EDS), encoder and gear the EDS's. */
+ * to operation enabled in CST with zero torque. Node = drive number, or the drive table's (--node);
+ * each joint's units are its drive's, read at boot (and checked against the drive table's). */
 static arm_co_boot_t co[ARM_CAN_BUS_SET_MAX];
 
 static int boot_canopen_run(link_t *l, const options_t *opt, const arm_robot_model_t *model, telemetry_t *telem);
@@ -321,6 +325,8 @@ static int boot_canopen(link_t *l, const options_t *opt, const arm_robot_model_t
 
 static int boot_canopen_run(link_t *l, const options_t *opt, const arm_robot_model_t *model, telemetry_t *telem)
 {
+    (void)model;
+    unsigned co_slot[ARM_N_JOINTS] = {0}; /* joint j is node co_slot[j] of its bus's boot */
     const int64_t start = now_ns();
     const int64_t give_up = start + (int64_t)(opt->boot_timeout_s * 1e9);
     for (unsigned b = 0; b < l->buses.n; ++b) {
@@ -338,27 +344,10 @@ static int boot_canopen_run(link_t *l, const options_t *opt, const arm_robot_mod
         cfg.tpdo2.trans = opt->tpdo2_type;
         for (int j = 0; j < ARM_N_JOINTS; ++j) {
             if (l->bus_of[j] != (int)b || cfg.n_nodes >= ARM_CO_BOOT_MAX_NODES) continue;
+            co_slot[j] = cfg.n_nodes;
             arm_co_node_config_t *nc = &cfg.node[cfg.n_nodes++];
-            if (opt->n_nodes == ARM_N_JOINTS) { /* the arm's drive table (gen/drives.py) */
-                *nc = opt->node[j];
-            } else {
-                const uint32_t rated = (uint32_t)(model->link[j].torque_limit * 1000.0f + 0.5f);
-                *nc = (arm_co_node_config_t){.node_id = (uint8_t)(j + 1), .rated_torque_mnm = rated};
-                nc->overrides = rated != ARM_CO_EDS_RATED_TORQUE_MNM ? ARM_CO_OVERRIDE_RATED : 0u;
-            }
-            /* what the drive will use: the override where one is written, else the EDS's default */
-            const uint32_t rated = (nc->overrides & ARM_CO_OVERRIDE_RATED) ? nc->rated_torque_mnm
-                                                                           : ARM_CO_EDS_RATED_TORQUE_MNM;
-            const uint32_t enc = (nc->overrides & ARM_CO_OVERRIDE_ENCODER) ? nc->encoder_increments
-                                                                           : ARM_CO_EDS_ENCODER_INCREMENTS;
-            const int gear = (nc->overrides & ARM_CO_OVERRIDE_GEAR) != 0u;
-            if (arm_co_units_init(&l->units[j], rated, enc, gear ? nc->gear_motor_revs : ARM_CO_EDS_GEAR_MOTOR_REVS,
-                                  gear ? nc->gear_shaft_revs : ARM_CO_EDS_GEAR_SHAFT_REVS, 32767) != 0) {
-                snprintf(l->report->reason, sizeof(l->report->reason),
-                         "boot: canopen: node %u: rated torque %u mN m, encoder %u, gear: units out of range",
-                         nc->node_id, rated, enc);
-                return -1;
-            }
+            /* the arm's drive table (gen/drives.py), else the drive number and the drive's own units */
+            *nc = opt->n_nodes == ARM_N_JOINTS ? opt->node[j] : (arm_co_node_config_t){.node_id = (uint8_t)(j + 1)};
         }
         if (arm_co_boot_init(&co[b], &cfg, (uint64_t)(now_ns() / 1000)) != 0) {
             char text[200];
@@ -385,6 +374,16 @@ static int boot_canopen_run(link_t *l, const options_t *opt, const arm_robot_mod
             running |= rc[b] == 1;
         }
         if (!running) {
+            for (int j = 0; j < ARM_N_JOINTS; ++j) { /* each joint's units: its drive's, as the boot read them */
+                const arm_co_boot_t *cb = &co[l->bus_of[j]];
+                l->report->co_units[j] = cb->node[co_slot[j]].units;
+                if (arm_co_boot_units(cb, co_slot[j], &l->units[j]) != 0) {
+                    snprintf(l->report->reason, sizeof(l->report->reason),
+                             "boot: canopen: node %u: its units (rated torque, encoder, gear) cannot be built",
+                             cb->cfg.node[co_slot[j]].node_id);
+                    return -1;
+                }
+            }
             unsigned writes = 0u;
             for (unsigned b = 0; b < l->buses.n; ++b) writes += co[b].n_log;
             l->report->boot_s = (double)(now_ns() - start) * 1e-9;

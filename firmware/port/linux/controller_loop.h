@@ -46,6 +46,9 @@ typedef struct {
     arm_co_fault_t co_fault;
     unsigned n_co_writes;
     arm_co_write_t co_writes[ARM_CAN_BUS_SET_MAX * ARM_CO_BOOT_LOG_MAX];
+    arm_co_drive_units_t co_units[ARM_N_JOINTS]; /* each joint's drive's units, as the boot settled them */
+    float co_q_first[ARM_N_JOINTS];              /* each joint's first position decoded with them, rad */
+    unsigned co_q_seen;                          /* bit j: joint j's first position came */
 } run_report_t;
 
 void controller_run(const options_t *opt, const arm_robot_model_t *model, telemetry_t *telem,

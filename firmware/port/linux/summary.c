@@ -53,7 +53,25 @@ int summary_write(const char *path, const options_t *opt, const run_report_t *r,
             fprintf(f, "%s\n      {\"node\": %u, \"index\": %u, \"sub\": %u, \"value\": %u, \"bytes\": %u}",
                     i ? "," : "", w->node, w->index, w->sub, w->value, w->len);
         }
-        fprintf(f, "\n    ]},\n");
+        fprintf(f, "\n    ],\n    \"units\": [");
+        for (unsigned j = 0; j < ARM_N_JOINTS; ++j) { /* each drive's, read at boot (from_table: the table's) */
+            const arm_co_drive_units_t *u = &r->co_units[j];
+            fprintf(f, "%s\n      {\"rated_torque\": %u, \"torque_units_per_nm\": %u, \"encoder_increments\": %u, "
+                       "\"encoder_revs\": %u, "
+                       "\"gear\": [%u, %u], \"max_torque_permille\": %u, \"modes\": %u, \"from_table\": %u}",
+                    j ? "," : "", u->rated_torque, u->torque_units_per_nm, u->encoder_increments, u->encoder_revs,
+                    u->gear_motor_revs,
+                    u->gear_shaft_revs, u->max_torque_permille, u->modes, u->from_table);
+        }
+        fprintf(f, "\n    ],\n    \"q_first_rad\": [");
+        for (unsigned j = 0; j < ARM_N_JOINTS; ++j) {
+            if ((r->co_q_seen >> j) & 1u) {
+                fprintf(f, "%s%.9g", j ? ", " : "", (double)r->co_q_first[j]);
+            } else {
+                fprintf(f, "%snull", j ? ", " : "");
+            }
+        }
+        fprintf(f, "]},\n");
     }
     static const char *const names[TELEM_KIND_COUNT] = {"ARM_CTL", "ARM_TIMING", "ARM_EVENT"};
     fprintf(f, "  \"telemetry\": {\"dropped\": %llu, \"sent\": {",

@@ -8,11 +8,20 @@
 
 #define MS 1000000LL
 
+/* Node id, on the build's own drive's dictionary (cia402_servo.eds): 0, or -1 with err. */
+static int init(sim_co_node_t *n, uint8_t id, const sim_co_preset_t *preset, double limit_nm)
+{
+    char err[300];
+    const sim_co_table_t *t = sim_co_table_builtin();
+    CHECK(t != NULL);
+    return t == NULL ? -1 : sim_co_node_init(n, t, id, preset, limit_nm, -1.0, err, sizeof(err));
+}
+
 static sim_co_node_t node(void)
 {
     sim_co_node_t n;
     const sim_co_preset_t none = {0};
-    sim_co_node_init(&n, 3, &none, 150.0, -1.0);
+    CHECK(init(&n, 3, &none, 150.0) == 0);
     sim_co_node_boot(&n, 0);
     return n;
 }
@@ -59,7 +68,7 @@ static void boot_up_and_defaults(void)
 {
     sim_co_node_t n;
     const sim_co_preset_t none = {0};
-    sim_co_node_init(&n, 3, &none, 150.0, -1.0);
+    CHECK(init(&n, 3, &none, 150.0) == 0);
     sim_co_node_boot(&n, 0);
     CHECK(n.n_out == 1u && n.out[0].id == 0x703u && n.out[0].len == 1u && n.out[0].data[0] == 0x00u);
     CHECK(n.nmt == SIM_NMT_STATE_PRE_OPERATIONAL);
@@ -67,8 +76,8 @@ static void boot_up_and_defaults(void)
     CHECK(sim_co_od_get(&n.od, 0x1401u, 1u) == 0x80000303u);         /* RPDO2 invalid */
     CHECK(sim_co_od_get(&n.od, 0x6076u, 0u) == 150000u);
     CHECK(sim_co_od_get(&n.od, 0x608Fu, 1u) == 524288u && sim_co_od_get(&n.od, 0x6091u, 1u) == 101u);
-    const sim_co_preset_t p = {28000u, 4096u, 50u, 1u};
-    sim_co_node_init(&n, 3, &p, 28.0, -1.0);
+    const sim_co_preset_t p = {28000u, 4096u, 50u, 1u, 0u};
+    CHECK(init(&n, 3, &p, 28.0) == 0);
     sim_co_node_boot(&n, 0);
     CHECK(sim_co_od_get(&n.od, 0x6076u, 0u) == 28000u && sim_co_od_get(&n.od, 0x608Fu, 1u) == 4096u);
     CHECK(sim_co_od_get(&n.od, 0x6091u, 1u) == 50u);
@@ -146,7 +155,9 @@ static void mapping_rules(void)
     CHECK(write(&n, 0x1A00, 0, 9u, 1u) == 0x06090030u);
     CHECK(write(&n, 0x1A00, 1, 0x60410010u, 4u) == 0u);
     CHECK(write(&n, 0x1A00, 0, 1u, 1u) == 0u);
-    CHECK(write(&n, 0x1800, 2, 0xFFu, 1u) == 0x06090030u);      /* TPDOs: synchronous only */
+    CHECK(write(&n, 0x1800, 2, 0xF1u, 1u) == 0x06090030u);      /* 241-253: reserved */
+    CHECK(write(&n, 0x1800, 2, 0xFFu, 1u) == 0u);               /* event-driven: taken (sent on SYNC only) */
+    CHECK(write(&n, 0x1800, 2, 1u, 1u) == 0u);
     CHECK(write(&n, 0x1800, 1, 0x183u, 4u) == 0u);
     CHECK(n.tpdo[0].valid && n.tpdo[0].n == 1u && n.tpdo[0].len == 2u);
     CHECK(write(&n, 0x1600, 1, 0x60410010u, 4u) == 0x08000022u); /* RPDO1 valid */

@@ -1,34 +1,40 @@
 /* The CiA 402 boot configurator: brings every node of one bus from power-on to operation enabled
- * in cyclic synchronous torque mode, as the project's CANopen contract says (README: Real drives,
- * The CANopen master). Non-blocking: the port calls arm_co_boot_rx for every received frame and
- * arm_co_boot_step once per period, and sends the frames arm_co_boot_take_tx hands it. The nodes
- * boot side by side (each has its own SDO channel). No heap, no I/O.
+ * in cyclic synchronous torque mode (docs/drives-bring-up.md). Non-blocking: the port calls
+ * arm_co_boot_rx for every received frame and arm_co_boot_step once per period, and sends the
+ * frames arm_co_boot_take_tx hands it. The nodes boot side by side (each has its own SDO channel).
+ * No heap, no I/O.
  *
- * Per node, in order: NMT pre-operational; upload 0x1000 (must be ARM_CO_DEVICE_TYPE) and
- * 0x1018.1-4 (vendor and product checked when the configuration names them); the statusword, and
- * controlword 0x00 if the drive is not switch on disabled (a drive left enabled takes no new mode
- * or scaling); for RPDO1, TPDO1,
- * TPDO2: COB-ID invalid (bit 31), mapping count 0, entries, count, transmission type 1, COB-ID
- * valid; 0x1006 cycle period; 0x1017 heartbeat; 0x1016.1 consumer heartbeat of the master;
- * 0x6076, 0x608F, 0x6091 where the configuration overrides the EDS; 0x6060 = 10, upload 0x6061 must
- * be 10; NMT start; controlword 0x06, 0x07, 0x0F, each confirmed by statusword & 0x6F (0x21,
- * 0x23, 0x27) read back over SDO (a drive in fault: one fault reset if the configuration allows).
- * Every download is logged (arm_co_boot_t.log). */
+ * Per node, in order: NMT pre-operational; upload 0x1000 (its low word must be the CiA 402 profile,
+ * 0x0192) and 0x1018.1-4 (vendor and product checked when the configuration names them); the
+ * units, read from the drive and never written: 0x6502 (bit 9, CST, must be set), 0x6076 rated
+ * torque, 0x608F.1-2 encoder, 0x6091.1-2 gear, 0x6072 max torque; where the configuration gives
+ * one of them the drive's must equal it, and where the drive lacks one (CiA 402 makes 0x608F,
+ * 0x6091 and 0x6072 optional) the configuration's stands in (ARM_CO_FAULT_UNITS_* otherwise);
+ * the statusword, and controlword 0x00 if the drive is not switch on disabled (a drive left
+ * enabled takes no new mode); for RPDO1, TPDO1, TPDO2: COB-ID invalid (bit 31), mapping count 0,
+ * entries, count, transmission type, COB-ID valid; 0x1006 cycle period, 0x1017 heartbeat, 0x1016.1
+ * consumer heartbeat of the master, each written only if the drive has it (CiA 301 makes them
+ * optional: an abort 0x06020000 or 0x06090011 skips it); 0x6060 = 10 (a refusal is
+ * ARM_CO_FAULT_NO_CST), upload 0x6061 must be 10; NMT start; controlword 0x06, 0x07, 0x0F, each
+ * confirmed by statusword & 0x6F (0x21, 0x23, 0x27) read back over SDO (a drive in fault: one fault
+ * reset if the configuration allows). Every download is logged (arm_co_boot_t.log). */
 #ifndef ARM_CO_BOOT_H
 #define ARM_CO_BOOT_H
 
 #include <stdint.h>
 
 #include "arm/can_frame.h"
+#include "arm/co_pdo.h"
 #include "arm/co_sdo.h"
 
 #define ARM_CO_BOOT_MAX_NODES 8u    /* nodes of one bus */
-#define ARM_CO_BOOT_MAX_ACTIONS 48u /* steps of one node's sequence (the default uses 38) */
+#define ARM_CO_BOOT_MAX_ACTIONS 56u /* steps of one node's sequence (the default uses 46) */
 #define ARM_CO_BOOT_LOG_MAX (ARM_CO_BOOT_MAX_NODES * ARM_CO_BOOT_MAX_ACTIONS)
 #define ARM_CO_PDO_MAX_ENTRIES 4u   /* mapping entries per PDO the configurator writes */
 
-#define ARM_CO_DEVICE_TYPE 0x00020192u /* CiA 402 servo drive (contract) */
+#define ARM_CO_PROFILE_402 0x0192u /* 0x1000's low word: CiA 402; the high word is the device's own */
 #define ARM_CO_MODE_CST 10
+#define ARM_CO_MODES_CST (1u << 9) /* 0x6502: cyclic synchronous torque supported */
 #define ARM_CO_COB_NMT 0x000u
 #define ARM_CO_COB_SYNC 0x080u
 #define ARM_CO_COB_TPDO1 0x180u
@@ -39,10 +45,21 @@
 #define ARM_CO_NMT_PREOP 0x80u
 #define ARM_CO_PDO_INVALID 0x80000000u
 
-/* Which EDS defaults a node's configuration overrides (written at boot). */
-#define ARM_CO_OVERRIDE_RATED 0x01u
-#define ARM_CO_OVERRIDE_ENCODER 0x02u
-#define ARM_CO_OVERRIDE_GEAR 0x04u
+/* The units a node's configuration (the drive table) gives: the drive's objects must equal them;
+ * one the drive lacks is taken from the configuration. Never written. */
+#define ARM_CO_EXPECT_RATED 0x01u
+#define ARM_CO_EXPECT_ENCODER 0x02u
+#define ARM_CO_EXPECT_GEAR 0x04u
+
+/* Optional objects a drive turned out not to have (arm_co_node_t.absent). */
+#define ARM_CO_ABSENT_1006 0x0001u
+#define ARM_CO_ABSENT_1017 0x0002u
+#define ARM_CO_ABSENT_1016 0x0004u
+#define ARM_CO_ABSENT_6502 0x0008u
+#define ARM_CO_ABSENT_6076 0x0010u
+#define ARM_CO_ABSENT_608F 0x0020u
+#define ARM_CO_ABSENT_6091 0x0040u
+#define ARM_CO_ABSENT_6072 0x0080u
 
 typedef struct {
     uint8_t n;                                  /* entries */
@@ -54,8 +71,11 @@ typedef struct {
 
 typedef struct {
     uint8_t node_id;             /* 1..127 */
-    uint8_t overrides;           /* ARM_CO_OVERRIDE_* */
-    uint32_t rated_torque_mnm;   /* 0x6076 */
+    uint8_t expect;              /* ARM_CO_EXPECT_*: which of the three below the drive table gives */
+    uint32_t rated_torque;       /* 0x6076, in the drive's torque unit */
+    /* 0x6076's unit, per N m: 1000 (mN m, CiA 402's; 0 means it) or 1000000 (µN m, as maxon's EPOS4
+     * gives it: its firmware specification) */
+    uint32_t torque_units_per_nm;
     uint32_t encoder_increments; /* 0x608F.1 (per motor revolution) */
     uint32_t gear_motor_revs;    /* 0x6091.1 */
     uint32_t gear_shaft_revs;    /* 0x6091.2 */
@@ -97,6 +117,10 @@ typedef enum {
     ARM_CO_FAULT_STATE_TIMEOUT, /* the statusword did not follow the controlword (value: last sw) */
     ARM_CO_FAULT_DRIVE_FAULT,   /* the statusword shows fault (value: sw) */
     ARM_CO_FAULT_BAD_CONFIG,    /* the configuration cannot be run (node id, counts) */
+    ARM_CO_FAULT_NO_CST,        /* no cyclic synchronous torque: 0x6502 bit 9 clear, or 0x6060 = 10 refused */
+    ARM_CO_FAULT_UNITS_MISMATCH, /* a unit object differs from the drive table (value/value_den, expected/_den) */
+    ARM_CO_FAULT_UNITS_MISSING, /* the drive lacks a unit object and the drive table gives none */
+    ARM_CO_FAULT_BAD_UNITS,     /* the drive reports a unit of 0 (value/value_den) */
 } arm_co_fault_code_t;
 
 typedef struct {
@@ -107,6 +131,9 @@ typedef struct {
     uint32_t abort_code;
     uint32_t value;
     uint32_t expected;
+    uint32_t value_den, expected_den; /* a ratio's second term (0x608F.2, 0x6091.2) */
+    uint32_t modes;                   /* NO_CST: 0x6502 as read */
+    uint8_t has_modes;                /* NO_CST: 0x6502 was read (else the drive has none) */
     uint8_t tries;
 } arm_co_fault_t;
 
@@ -123,19 +150,43 @@ typedef struct {
 typedef enum {
     ARM_CO_ACT_NMT = 0,  /* value: NMT command */
     ARM_CO_ACT_WRITE,    /* SDO download */
-    ARM_CO_ACT_READ,     /* SDO upload; checked against value under mask (mask 0: recorded) */
+    ARM_CO_ACT_READ,     /* SDO upload; checked against value under mask (mask 0: recorded in its slot) */
     ARM_CO_ACT_CONTROL,  /* controlword value via SDO, then the statusword shows the state (mask) */
     ARM_CO_ACT_QUIESCE,  /* the statusword; if it does not show the state, the controlword, as CONTROL */
+    ARM_CO_ACT_UNITS,    /* no transfer: the units read so far are checked and settled */
 } arm_co_action_kind_t;
+
+/* Where a READ's value goes (arm_co_node_t.read). */
+typedef enum {
+    ARM_CO_SLOT_NONE = 0, ARM_CO_SLOT_MODES, ARM_CO_SLOT_RATED, ARM_CO_SLOT_ENCODER, ARM_CO_SLOT_ENCODER_REVS,
+    ARM_CO_SLOT_GEAR_MOTOR, ARM_CO_SLOT_GEAR_SHAFT, ARM_CO_SLOT_MAX_TORQUE, ARM_CO_SLOTS
+} arm_co_slot_t;
+
+#define ARM_CO_ACT_OPTIONAL 0x01u /* the drive may lack the object (CiA 301/402): an abort saying so skips it */
 
 typedef struct {
     uint8_t kind;        /* arm_co_action_kind_t */
     uint8_t sub;
     uint8_t len;
+    uint8_t flags;       /* ARM_CO_ACT_OPTIONAL */
+    uint8_t slot;        /* READ: arm_co_slot_t */
     uint16_t index;
     uint32_t value;
     uint32_t mask;       /* READ: bits that must equal value; CONTROL, QUIESCE: state | sw mask << 8 */
 } arm_co_action_t;
+
+/* A node's units as the boot settled them: the drive's objects, or the drive table's value of one
+ * the drive lacks (from_table). */
+typedef struct {
+    uint32_t rated_torque;           /* 0x6076, in the drive's unit */
+    uint32_t torque_units_per_nm;    /* that unit: 1000 mN m, 1000000 µN m */
+    uint32_t encoder_increments;     /* 0x608F.1 */
+    uint32_t encoder_revs;           /* 0x608F.2 */
+    uint32_t gear_motor_revs, gear_shaft_revs; /* 0x6091.1, .2 */
+    uint16_t max_torque_permille;    /* 0x6072; 32767 if the drive has none */
+    uint32_t modes;                  /* 0x6502 (0: the drive has none) */
+    uint8_t from_table;              /* ARM_CO_EXPECT_* bits taken from the configuration */
+} arm_co_drive_units_t;
 
 typedef enum { ARM_CO_NODE_RUNNING = 0, ARM_CO_NODE_ENABLED, ARM_CO_NODE_FAILED } arm_co_node_state_t;
 
@@ -151,6 +202,10 @@ typedef struct {
     uint64_t control_deadline_us;
     uint16_t statusword;
     uint32_t identity[4];         /* 0x1018.1..4 as read */
+    uint16_t absent;              /* ARM_CO_ABSENT_*: optional objects the drive lacks */
+    uint16_t have;                /* bit per arm_co_slot_t: read from the drive */
+    uint32_t read[ARM_CO_SLOTS];  /* values read, per slot */
+    arm_co_drive_units_t units;   /* settled by the ARM_CO_ACT_UNITS step */
     arm_co_action_t action[ARM_CO_BOOT_MAX_ACTIONS];
     arm_co_sdo_t sdo;
 } arm_co_node_t;
@@ -170,6 +225,9 @@ typedef struct {
 /* Builds every node's sequence; -1 with fault ARM_CO_FAULT_BAD_CONFIG (node: the bad one) if a
  * node id is out of 1..127 or twice, a mapping has too many entries, or there are too many nodes. */
 int arm_co_boot_init(arm_co_boot_t *b, const arm_co_boot_config_t *cfg, uint64_t now_us);
+/* Node i's units in SI (arm/co_pdo.h), once the boot has settled them (every node enabled): 0, or
+ * -1 if the node has none yet or they cannot be built. */
+int arm_co_boot_units(const arm_co_boot_t *b, unsigned i, arm_co_units_t *u);
 /* A received frame (SDO answers; anything else is ignored). */
 void arm_co_boot_rx(arm_co_boot_t *b, const arm_can_frame_t *f, uint64_t now_us);
 /* One period: timeouts, the next request of every node. Returns 1 while any node still runs,

@@ -4,10 +4,12 @@
  *   TPDO1 (0x180 + id, 8 bytes): position actual 0x6064 i32, velocity actual 0x606C i32 (increments,
  *                                increments/s of the motor encoder)
  *   TPDO2 (0x280 + id, 4 bytes): torque actual 0x6077 i16 (per-mille), statusword 0x6041 u16
- * Units: joint rad = increments / (encoder increments per motor rev * motor revs / shaft revs) * 2 pi;
- * N m = per-mille * rated torque (mN m) / 1e6. Torque out is rounded to the nearest per-mille
- * (halves away from zero) and saturated to +-max_permille (0x6072's role, <= 32767); a non-finite
- * torque is sent as 0. One quantum is rated / 1000 (0.15 N m at 150 N m). */
+ * Units, each drive's own as the boot read them (arm_co_boot_units): joint rad = increments /
+ * (0x608F.1 / 0x608F.2 increments per motor revolution * 0x6091.1 / 0x6091.2 motor per shaft
+ * revolutions) * 2 pi; N m = per-mille / 1000 * 0x6076 rated torque (in mN m, CiA 402's unit, or another
+ * the drive table names: maxon's EPOS4 gives µN m). Torque out is rounded to
+ * the nearest per-mille (halves away from zero) and saturated to +-max_permille (0x6072, <= 32767);
+ * a non-finite torque is sent as 0. One quantum is rated / 1000 (0.15 N m at 150 N m). */
 #ifndef ARM_CO_PDO_H
 #define ARM_CO_PDO_H
 
@@ -15,22 +17,16 @@
 
 #include "arm/can_frame.h"
 
-/* The EDS's defaults (firmware/protocol/cia402_servo.eds; tests/python/test_canopen_master.py
- * holds them equal): what a drive uses where the configuration overrides nothing. */
-#define ARM_CO_EDS_RATED_TORQUE_MNM 150000u
-#define ARM_CO_EDS_ENCODER_INCREMENTS 524288u
-#define ARM_CO_EDS_GEAR_MOTOR_REVS 101u
-#define ARM_CO_EDS_GEAR_SHAFT_REVS 1u
-
 typedef struct {
     double rated_torque_nm;  /* 0x6076 / 1000 */
     double increments_per_rad; /* 0x608F.1 * 0x6091.1 / 0x6091.2 / (2 pi) */
     int16_t max_permille;    /* saturation of the target torque, 1..32767 */
 } arm_co_units_t;
 
-/* -1 if a value is zero or the product does not fit a double's exact range. */
-int arm_co_units_init(arm_co_units_t *u, uint32_t rated_torque_mnm, uint32_t encoder_increments,
-                      uint32_t gear_motor_revs, uint32_t gear_shaft_revs, int16_t max_permille);
+/* rated_torque in units of which torque_units_per_nm make a N m (1000: mN m). -1 if a value is zero. */
+int arm_co_units_init(arm_co_units_t *u, uint32_t rated_torque, uint32_t torque_units_per_nm,
+                      uint32_t encoder_increments, uint32_t encoder_revs, uint32_t gear_motor_revs,
+                      uint32_t gear_shaft_revs, int16_t max_permille);
 
 int16_t arm_co_torque_to_permille(const arm_co_units_t *u, float torque_nm);
 float arm_co_permille_to_torque(const arm_co_units_t *u, int16_t permille);
