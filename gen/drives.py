@@ -4,7 +4,7 @@
     python -m gen.drives --arm-json build/debug/generated/arm/arm.json            # the table, JSON
     python -m gen.drives --arm-json ... --boot-args can0                          # one bus's options
 
-Rule (README: Real drives, The CANopen master): a joint's field is its [joint.NAME] value, else
+Rule (docs/drives.md, The CANopen master): a joint's field is its [joint.NAME] value, else
 [defaults], else node = the drive's number, rated_torque_nm = the joint's torque limit (arm.json),
 encoder and gear = the EDS defaults. An override is written at boot only where it differs from the
 EDS. Bad input: one line naming the file and the field, exit 2.

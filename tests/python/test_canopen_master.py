@@ -5,7 +5,7 @@ The test drive is a LocalNode with a thin CiA 402 device in its SDO callbacks: t
 follows the controlword (written by SDO, the way the master confirms each state), 0x6060 takes
 the modes 0x6502 lists, and a PDO mapping may be written only while its PDO's COB-ID is invalid
 (else abort 0x08000022, CiA 301). After the boot the test reads back, from LocalNode's own
-dictionary, every object the master wrote and checks it against the contract (README: Real drives).
+dictionary, every object the master wrote and checks it against the contract (docs/drives.md).
 Also gen/drives.py: the drive configuration's rule and its one-line errors."""
 
 from __future__ import annotations
@@ -627,10 +627,10 @@ def test_arm_file_names_its_drive_config(tmp_path: Path) -> None:
         load_arm_file(arm_file)
 
 
-def test_readme_bus_load_table_is_what_busload_computes() -> None:
+def test_the_docs_bus_load_table_is_what_busload_computes() -> None:
     from gen.lib.busload import Bus, canopen_drives_per_bus, canopen_load
 
-    readme = (REPO / "README.md").read_text()
+    readme = (REPO / "docs" / "drives.md").read_text()
     classic, fd = Bus("c", False, 1e6, None, []), Bus("f", True, 1e6, 5e6, [])
     for bus, label in ((classic, "classic 1 Mbit/s"), (fd, "CAN FD 1/5 Mbit/s")):
         row = next(ln for ln in readme.splitlines() if ln.startswith(f"| {label} | 1 / 2 / 3 / 6 |"))

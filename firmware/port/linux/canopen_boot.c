@@ -2,7 +2,7 @@
  * (firmware/canopen, arm/co_boot.h), prints every SDO write and the result, and exits 0 when every
  * node reached operation enabled, else 1 with one line naming the node, the object and the abort
  * code (2: bad arguments). The node options come from the drive configuration (gen/drives.py
- * --boot-args). README: Real drives, The CANopen master. */
+ * --boot-args). docs/drives.md, The CANopen master. */
 #define _GNU_SOURCE
 #include <errno.h>
 #include <stdio.h>

@@ -1,5 +1,5 @@
 /* The CiA 402 boot configurator: brings every node of one bus from power-on to operation enabled
- * in cyclic synchronous torque mode, as the project's CANopen contract says (README: Real drives,
+ * in cyclic synchronous torque mode, as the project's CANopen contract says (docs/drives.md,
  * The CANopen master). Non-blocking: the port calls arm_co_boot_rx for every received frame and
  * arm_co_boot_step once per period, and sends the frames arm_co_boot_take_tx hands it. The nodes
  * boot side by side (each has its own SDO channel). No heap, no I/O.
