@@ -100,12 +100,15 @@ def memory(r: dict[str, Any]) -> str:
 
 
 def synth(r: dict[str, Any]) -> str:
-    runs = {s["structure"]: s for s in r["synth_n6"]}
-    line = [f"per joint: {runs['auto']['wall_time_median_s']:.2f} s (median of {runs['auto']['repeats']})"]
-    if "coupled" in runs:
-        line.append(f"the coupled problem: {runs['coupled']['wall_time_median_s']:.1f} s")
-    return ("Synthesis, verification and emission of the paper's design, six joints, in the process (imports "
-            "excluded): " + "; ".join(line) + ".\n\n" + _made_by(r))
+    rows = ["| solved | estimator gamma: optimal, design, verified | controller gamma (optimal) | synthesis, "
+            "verification and emission |", "|---|---|---|---|"]
+    for s in r["synth_n6"]:
+        what = "per joint (what `synth` does here)" if s["mode"] == "per_joint" else "as one coupled problem"
+        rows.append(f"| {what} | {s['estimator_gamma_opt']:.6f}, {s['estimator_gamma_design']:.6f}, "
+                    f"{s['estimator_verified_hinf_norm']:.6f} | {s['controller_gamma_opt']:.3g} | "
+                    f"{s['wall_time_median_s']:.2f} s (median of {s['repeats']}) |")
+    return ("The paper's design, six joints, in the process (imports excluded):\n\n" + "\n".join(rows) + "\n\n"
+            + _made_by(r))
 
 
 def bench_sim(r: dict[str, Any]) -> str:
@@ -159,8 +162,7 @@ def headline_table(record: dict[str, Any]) -> str:
 
 def _study_made_by(record: dict[str, Any]) -> str:
     return (f"*`tools/armctl study --record`: {len(record['seeds'])} seeds, {record['duration_s']:g} s trajectory, "
-            f"the bundled arm ({record['arm']['name']}); the numbers are the same on every machine that builds the "
-            f"same code (code identity {record['code']}).*")
+            f"the bundled arm ({record['arm']['name']}), code identity {record['code']}.*")
 
 
 def findings(record: dict[str, Any]) -> str:
