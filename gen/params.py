@@ -4,8 +4,8 @@ table as an X-macro (firmware/port/linux/argv_table.h expands it) and its usage 
 #defines: the portable core takes its defaults from here and stays freestanding.
 
     python -m gen.params --out DIR       write DIR/arm_params.h
-    python -m gen.params --readme FILE   rewrite FILE's generated option tables
-    python -m gen.params --check FILE    exit 1 if FILE's option tables differ from the registry
+    python -m gen.params --readme [FILE]  rewrite FILE's generated option tables [docs/reference/parameters.md]
+    python -m gen.params --check [FILE]   exit 1 if FILE's option tables differ from the registry
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ import textwrap
 from pathlib import Path
 
 from gen.lib.atomic_output import exit_on_output_error, write_files_atomically, write_text_atomic
+from gen.lib.paths import PARAMETERS_PAGE
 from gen.lib.params import PROGRAMS, REGISTRY, Param, RegistryError, constants, markdown_table, params, readme_markers
 
 C_PROGRAMS = ("controller", "simulator")
@@ -159,8 +160,11 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m gen.params", description=__doc__.split("\n\n")[0])
     g = ap.add_mutually_exclusive_group(required=True)
     g.add_argument("--out", type=Path, help="write DIR/arm_params.h")
-    g.add_argument("--readme", type=Path, help="rewrite the file's generated option tables")
-    g.add_argument("--check", type=Path, help="exit 1 if the file's option tables differ from the registry")
+    page = PARAMETERS_PAGE.relative_to(PARAMETERS_PAGE.parents[2])
+    g.add_argument("--readme", type=Path, nargs="?", const=PARAMETERS_PAGE,
+                   help=f"rewrite the file's generated option tables [{page}]")
+    g.add_argument("--check", type=Path, nargs="?", const=PARAMETERS_PAGE,
+                   help=f"exit 1 if the file's option tables differ from the registry [{page}]")
     ns = ap.parse_args(argv)
     try:
         if ns.out is not None:

@@ -6,7 +6,7 @@ velocity is estimated from one encoder's differences (a real drive uses the moto
 its current loop follows the torque command with a lag and a transport latency. The ideal drive
 (every field zero, the default) has none of these: it reports the true state and applies the
 torque at once. REALISTIC is a documented default that resembles a real geared joint servo; its
-sources are in the README (Realistic drives).
+sources are in docs/simulated-arm.md (Realistic drives).
 """
 
 from __future__ import annotations
@@ -91,7 +91,7 @@ class DriveModel:
 # at the joint reports the position, a 17-bit one on the motor, through the UR5e's 101:1 gear,
 # gives the velocity (its differences low-passed at 500 Hz); one count of noise on each, 0.5 % of
 # a 28 N m wrist drive's range as torque-measurement noise, a 1.5 kHz current loop and 100 us from
-# the command's arrival to the current loop. Every figure's source or assumption: README,
+# the command's arrival to the current loop. Every figure's source or assumption: docs/simulated-arm.md,
 # Realistic drives.
 REALISTIC = DriveModel(encoder_bits=19, position_noise_counts=1.0, motor_encoder_bits=17, gear_ratio=101.0,
                        velocity_source="motor", velocity_filter_hz=500.0, torque_noise_nm=0.14,

@@ -19,7 +19,7 @@ COMMAND_MODULES = {
     "timing": "tools.bench.timing", "hil": "tools.commands.hil", "demo": "tools.commands.demo",
     "test": "tools.commands.test", "synth": "tools.commands.synth", "vcan": "tools.vcan",
     "busload": "tools.busload", "drive": "tools.commands.drive", "study": "tools.study", "tune": "tools.study",
-    "faults": "tools.bench.faults", "fuzz": "tools.bench.fuzz", "bench": "tools.bench",
+    "faults": "tools.bench.faults", "fuzz": "tools.bench.fuzz", "bench": "tools.bench", "docs": "tools.commands.docs",
 }
 
 
@@ -46,6 +46,7 @@ def _errors() -> list[tuple[tuple[type[BaseException], ...], int | Callable[[Bas
     from tools.run.cluster import ClusterError
     from tools.commands import CommandError
     from tools.bench.fuzz import FuzzError
+    from tools.bench.record import RecordError
     from tools.run.hil import HilError
     from tools.study.config import StudyConfigError
     from tools.vm.image import VmError
@@ -56,7 +57,7 @@ def _errors() -> list[tuple[tuple[type[BaseException], ...], int | Callable[[Bas
         ((CommandError,), lambda exc: exc.code, "{prefix}: {exc}"),
         ((BuildError,), 1, "{exc}"),  # it names the build and its log itself
         # Bad input: a value, a file it names, the arm, the output folder, the cluster.
-        ((StudyConfigError, ArmChoiceError, ArmError, OutDirError, ClusterError, BusConfigError), 2, "{prefix}: {exc}"),
+        ((StudyConfigError, ArmChoiceError, ArmError, OutDirError, ClusterError, BusConfigError, RecordError), 2, "{prefix}: {exc}"),
         # The run or the machine: a run that cannot run, the VM, a compiler, a full disk (OutputError is an OSError).
         ((HilError, VmError, FuzzError, OSError), 1, "{prefix}: {exc}"),
     ]
@@ -81,7 +82,15 @@ def run_command(ns: argparse.Namespace) -> int:
 
     procs.install()
     try:
-        return int(ns.run(ns))
+        code = int(ns.run(ns))
+        if code == 0 and getattr(ns, "record", False):  # results kept for the docs: their figures at once
+            from tools.commands.docs import render
+
+            skipped: list[str] = []  # regions of other results files that cannot be rendered yet
+            render(skipped=skipped)
+            for why in skipped:
+                print(f"armctl {ns.command}: not rendered: {why}", file=sys.stderr)
+        return code
     except (Exception, KeyboardInterrupt) as exc:
         code = exit_code(exc, ns)
         if code is None:

@@ -1,7 +1,7 @@
 """The firmware's methods, read from the one table that defines them (firmware/core/src/methods.c,
 `X(ARM_METHOD_ID, "name", uses_design, init, output, update)` in ARM_METHOD_TABLE): the CLI, the benchmarks and the study's method map
 take the names from here, so adding a method to the core's table is all a new method needs for them
-to list it (README "Adding a method")."""
+to list it (docs/firmware.md, Adding a method)."""
 
 from __future__ import annotations
 

@@ -385,7 +385,7 @@ def phy_spec(b: Bus) -> str:
     return f"{'fd' if b.fd else 'classic'}:{rate_arg(b)}"
 
 
-# The CiA 402 drives of issue #23 (README: Real drives, The CANopen master): per drive and period
+# The CiA 402 drives of issue #23 (docs/drives.md, The CANopen master): per drive and period
 # RPDO1 (controlword + target torque), TPDO1 (position + velocity), TPDO2 (torque + statusword);
 # one SYNC (no counter) per bus and period; a 1-byte heartbeat per drive every heartbeat_ms.
 CANOPEN_PDO_BYTES = {name.upper(): pdo_bytes(name) for name in CODEC_MAPPING}  # RPDO1 4, TPDO1 8, TPDO2 4

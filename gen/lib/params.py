@@ -1,7 +1,7 @@
 """The parameter registry (firmware/params/params.toml) for Python: every option of arm_controller,
 arm_sim and armctl hil with its type, default, range, unit and help, declared once. gen/params.py
-writes the C side from the same file; argparse defaults, the drive model's ranges and the README's
-option tables come from here."""
+writes the C side from the same file; argparse defaults, the drive model's ranges and the option tables
+of docs/reference/parameters.md come from here."""
 
 from __future__ import annotations
 
@@ -166,7 +166,7 @@ def constant(name: str) -> Any:
 
 
 def markdown_table(program: str, path: Path = REGISTRY) -> str:
-    """The README's option table of a program: option, default, range, unit, what."""
+    """The option table of a program (docs/reference/parameters.md): option, default, range, unit, what."""
     rows = ["| option | default | range | unit | what |", "|---|---|---|---|---|"]
     for p in params(program, path).values():
         if p.hidden:
@@ -179,7 +179,7 @@ def markdown_table(program: str, path: Path = REGISTRY) -> str:
     return "\n".join(rows) + "\n"
 
 
-# The README's generated tables sit between these lines (gen/params.py --readme rewrites them).
+# The generated option tables sit between these lines (gen/params.py --readme rewrites them).
 def readme_markers(program: str) -> tuple[str, str]:
     return f"<!-- params:{program} (generated from firmware/params/params.toml: python -m gen.params --readme) -->", \
         f"<!-- /params:{program} -->"

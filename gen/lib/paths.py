@@ -7,6 +7,9 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
 BUILD = REPO / "build"
+DOCS = REPO / "docs"  # the user guide (MkDocs, mkdocs.yml)
+DOCS_RESULTS = DOCS / "results"  # the results files the docs' figures are rendered from (`--record`)
+PARAMETERS_PAGE = DOCS / "reference" / "parameters.md"  # the option tables generated from the registry
 
 
 def build_dir(preset: str) -> Path:

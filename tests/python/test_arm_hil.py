@@ -167,7 +167,7 @@ def test_simulator_integrates_at_a_whole_fraction_of_the_period(tmp_path: Path) 
 def test_a_light_wrist_with_large_friction_needs_the_stiffer_design(tmp_path: Path) -> None:
     """robosuite's xArm7 has 1 N m of frictionloss on every joint, also on a wrist of 1.4e-4 kg m^2:
     w reaches 1,620 rad/s^2 there. The paper's weights (a 4.5 rad/s loop) let what the
-    estimator misses through (README: 26.6 deg on joint 7); gen/configs/wn40.toml holds it."""
+    estimator misses through (docs/arm.md: 26.6 deg on joint 7); gen/configs/wn40.toml holds it."""
     xarm = str(ARMS / "robosuite" / "xarm7.xml")
     r = armctl("hil", "--model", xarm, "--design", str(REPO / "gen" / "configs" / "wn40.toml"), "--duration", "3",
                "--out", str(tmp_path), "--max-error-deg", str(MAX_ERROR_DEG))

@@ -334,7 +334,7 @@ def test_a_public_arm_with_materials_textures_and_sites_is_prepared(tmp_path: Pa
 
 
 def test_build_folder_is_named_after_the_arm_not_its_file(tmp_path: Path) -> None:
-    """README: build/arms/<name>-<digest>, the name being the one in the arm's reports."""
+    """docs/arm.md: build/arms/<name>-<digest>, the name being the one in the arm's reports."""
     from tools.build.arm import ArmRef, arm_build_dir
 
     model = materials_variant(tmp_path / "vendor_file_name.xml")  # <mujoco model="ur5e">

@@ -83,10 +83,10 @@ def test_unprepared_model_is_refused_with_what_to_do(tmp_path: Path) -> None:
 
 def test_every_joint_has_cited_armature_damping_and_friction() -> None:
     """A real geared joint has rotor inertia and friction: the bundled arm carries them on every
-    joint, and the README's table (The bundled arm) gives the MJCF's own values, with the sources
+    joint, and the docs' table (docs/simulated-arm.md, The bundled arm) gives the MJCF's own values, with the sources
     the MJCF's comments cite."""
     m = mujoco.MjModel.from_xml_path(str(DEFAULT_MJCF))
-    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    readme = (Path(__file__).resolve().parents[2] / "docs" / "simulated-arm.md").read_text()
     section = readme[readme.index("## The bundled arm: armature and friction"):readme.index("## Realistic drives")]
     xml = DEFAULT_MJCF.read_text()
     for source in ("mujoco_menagerie", "universal_robots_ur5e/ur5e.xml", "INTO-CPS-Association/aurt",

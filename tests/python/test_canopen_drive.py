@@ -2,7 +2,7 @@
 independent stack as the master: python-canopen (RemoteNode / BaseNode402 with our EDS) on the
 UDP bus through python-can's udp_multicast interface, loopback only (TTL 0, 127.0.0.1).
 
-The master does what the contract's boot sequence says (README "Real drives"): SDO reads of
+The master does what the contract's boot sequence says (docs/drives.md): SDO reads of
 0x1000 and 0x1018, the PDO mappings, 0x1006, 0x1017, 0x1016, the mode, NMT start, then the CiA
 402 enable sequence over RPDO1/TPDO2 on SYNC, and a target torque that moves the joint."""
 

@@ -284,13 +284,13 @@ def test_a_study_scenario_chooses_the_protocol(tmp_path: Path) -> None:
 
 
 def test_readme_tracking_table_is_what_hil_gives(tmp_path: Path, controller_bin: Path) -> None:
-    """README "CiA 402 through armctl": each row is `tools/armctl hil --bus sil --protocol P
+    """docs/drives.md "CiA 402 through armctl": each row is `tools/armctl hil --bus sil --protocol P
     --duration 3 --method M` (the same runs, through run_hil), to the table's 0.01 deg."""
     import re
 
     preset = controller_bin.parent.parent.name
-    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
-    section = readme[readme.index("### CiA 402 through armctl"):readme.index("**Units.** Every drive")]
+    page = (Path(__file__).resolve().parents[2] / "docs" / "drives.md").read_text()
+    section = page[page.index("## CiA 402 through armctl"):page.index("**Units.** Every drive")]
     rows = re.findall(r"^\| (\S+) \| (arm|canopen) \| ([^|]+?) \| ([\d. ]+) \|$", section, re.M)
     assert len(rows) == 12, rows
     for method, protocol, result, figures in rows:

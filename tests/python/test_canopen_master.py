@@ -530,10 +530,10 @@ def test_arm_file_names_its_drive_config(tmp_path: Path) -> None:
         load_arm_file(arm_file)
 
 
-def test_readme_bus_load_table_is_what_busload_computes() -> None:
+def test_the_docs_bus_load_table_is_what_busload_computes() -> None:
     from gen.lib.busload import Bus, canopen_drives_per_bus, canopen_load
 
-    readme = (REPO / "README.md").read_text()
+    readme = (REPO / "docs" / "drives.md").read_text()
     classic, fd = Bus("c", False, 1e6, None, []), Bus("f", True, 1e6, 5e6, [])
     for bus, label in ((classic, "classic 1 Mbit/s"), (fd, "CAN FD 1/5 Mbit/s")):
         row = next(ln for ln in readme.splitlines() if ln.startswith(f"| {label} | 1 / 2 / 3 / 6 |"))

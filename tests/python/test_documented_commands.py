@@ -1,4 +1,4 @@
-"""Every command in the README's command table runs, in a short form, through tools/armctl itself
+"""Every command in the command table (docs/reference/commands.md) runs, in a short form, through tools/armctl itself
 (the bash bootstrap and the CLI, exactly as a user types it), so a documented command cannot rot
 unseen. EXERCISED says where each one runs; the first test holds the table and EXERCISED equal."""
 
@@ -16,12 +16,13 @@ from pathlib import Path
 import pytest
 
 from study_configs import with_tuning
-from gen.lib.paths import REPO
+from gen.lib.paths import DOCS, REPO
 from tools.run.procs import communicate_or_kill
 
 pytestmark = pytest.mark.long  # minutes: every documented command
 
 ARMCTL = str(REPO / "tools" / "armctl")
+COMMANDS_PAGE = DOCS / "reference" / "commands.md"
 
 # Documented command -> the test that runs it through the CLI ("file::function"), or "CI".
 EXERCISED: dict[str, str] = {
@@ -45,6 +46,7 @@ EXERCISED: dict[str, str] = {
     "vcan setup": "test_vcan_vm.py::test_vcan_setup_run_and_up_in_the_vm",
     "vcan run": "test_vcan_vm.py::vm_run",  # the fixture: the VM run every test of that file reads
     "fuzz": "test_fuzz.py::test_every_harness_runs_clean",
+    "docs": "test_docs.py::test_armctl_docs_check_finds_every_figure_rendered_from_its_results_file",
     "faults": "test_faults.py::matrix",
     "cluster-certs": "test_runner.py::test_cluster_certs_make_a_ca_and_refuse_to_overwrite",
     "hil --model|--arm": "test_arm_hil.py::test_lockstep_hil_run_is_ok_within_stated_bounds",
@@ -57,10 +59,9 @@ EXERCISED: dict[str, str] = {
 
 
 def documented_commands() -> set[str]:
-    """The README's command table: `tools/armctl SUB ...`, with alternatives of a first
-    positional word (`bench step|synth`) and of --bus's vm form expanded."""
-    text = (REPO / "README.md").read_text()
-    section = text.split("\n## Commands", 1)[1].split("\n## ", 1)[0]
+    """The command table (docs/reference/commands.md): `tools/armctl SUB ...`, with alternatives of
+    a first positional word (`bench step|synth`) and of --bus's vm form expanded."""
+    section = COMMANDS_PAGE.read_text()
     out: set[str] = set()
     for cell in re.findall(r"^\| `tools/armctl ([^`]+)`", section, re.M):
         words = cell.replace("\\|", "|").split()
@@ -93,7 +94,7 @@ def armctl(*args: str, timeout: float = 900.0) -> subprocess.CompletedProcess[st
 
 def test_every_documented_command_is_exercised() -> None:
     documented = documented_commands()
-    assert documented, "no command table found in README.md"
+    assert documented, f"no command table found in {COMMANDS_PAGE}"
     assert documented == set(EXERCISED), (f"documented but not exercised: {sorted(documented - set(EXERCISED))}; "
                                           f"exercised but not documented: {sorted(set(EXERCISED) - documented)}")
     here = Path(__file__).parent

@@ -1,5 +1,5 @@
-"""The parameter registry (firmware/params/params.toml) is the one definition: the README's option
-tables agree with it, both C programs' --help list exactly its options with its defaults, their
+"""The parameter registry (firmware/params/params.toml) is the one definition: the option tables
+of docs/reference/parameters.md agree with it, both C programs' --help list exactly its options with its defaults, their
 parser refuses a value just outside each registry range and takes the bounds themselves, and the
 Python side (armctl hil, the drive model, the verdict) takes its numbers from it."""
 
@@ -12,16 +12,17 @@ from pathlib import Path
 import pytest
 
 from gen.lib.params import Param, check_table, constant, markdown_table, param, params, readme_markers
+from gen.lib.paths import DOCS, PARAMETERS_PAGE
 from gen.params import main as gen_main, readme_with_tables
 
 REPO = Path(__file__).resolve().parents[2]
-README = REPO / "README.md"
+PAGE = PARAMETERS_PAGE
 
 
 def _readme_rows(program: str) -> dict[str, list[str]]:
-    """The README's table of a program: option (without its argument) -> [default, range, unit]."""
+    """The page's table of a program: option (without its argument) -> [default, range, unit]."""
     start, end = readme_markers(program)
-    text = README.read_text()
+    text = PAGE.read_text()
     block = text[text.index(start) + len(start):text.index(end)]
     rows: dict[str, list[str]] = {}
     for line in block.strip().splitlines()[2:]:
@@ -42,16 +43,17 @@ def test_the_readme_tables_give_the_registrys_defaults_ranges_and_units(program:
         assert unit == (p.unit or "-"), opt
 
 
-def test_a_readme_table_that_differs_is_caught(tmp_path: Path) -> None:
-    text = README.read_text()
-    assert readme_with_tables(text, "README.md") == text
+def test_a_table_that_differs_is_caught(tmp_path: Path) -> None:
+    text = PAGE.read_text()
+    assert readme_with_tables(text, PAGE.name) == text
     row = "| `--duration S` | 5 | [0.001, 86400] | s |"
     stale = text.replace(row, row.replace("| 5 |", "| 10 |"), 1)
     assert stale != text
-    (tmp_path / "README.md").write_text(stale)
-    assert gen_main(["--check", str(tmp_path / "README.md")]) == 1
-    assert gen_main(["--readme", str(tmp_path / "README.md")]) == 0
-    assert (tmp_path / "README.md").read_text() == text
+    (tmp_path / "parameters.md").write_text(stale)
+    assert gen_main(["--check", str(tmp_path / "parameters.md")]) == 1
+    assert gen_main(["--readme", str(tmp_path / "parameters.md")]) == 0
+    assert (tmp_path / "parameters.md").read_text() == text
+    assert gen_main(["--check"]) == 0  # without a file: the parameters page itself
 
 
 def _help(exe: Path) -> str:
@@ -145,7 +147,8 @@ def test_the_defaults_the_readmes_prose_names_are_the_registrys() -> None:
         for p in params(program).values():
             if isinstance(p.default, (int, float)) and not isinstance(p.default, bool):
                 defaults.setdefault(p.option, set()).add(float(p.default))
-    found = [(f.name, *m) for f in (README, REPO / "host_sim" / "README.md") for m in prose_defaults(f.read_text())]
+    pages = [REPO / "README.md", REPO / "host_sim" / "README.md", *sorted(DOCS.rglob("*.md"))]
+    found = [(str(f.relative_to(REPO)), *m) for f in pages for m in prose_defaults(f.read_text())]
     assert len(found) >= 6  # the hold, the timeouts, the watchdog, the bounds
     for name, line, opt, value in found:
         if opt in defaults:
@@ -155,7 +158,7 @@ def test_the_defaults_the_readmes_prose_names_are_the_registrys() -> None:
 
 
 def test_a_number_a_help_text_quotes_is_the_constants(tmp_path: Path) -> None:
-    """{const:NAME} in a help or default text is the constant's value (the C usage text, the README
+    """{const:NAME} in a help or default text is the constant's value (the C usage text, the docs
     and armctl read the same), so the number is never typed twice; an unknown name is refused."""
     from gen.lib.params import PROGRAMS, RegistryError, _load
 

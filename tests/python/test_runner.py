@@ -132,7 +132,7 @@ def test_a_kept_run_is_reused_only_if_it_is_the_run_its_spec_made(tmp_path: Path
 
 def test_the_same_runs_on_a_dask_cluster(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A local Dask cluster of two worker processes, over TLS with the certificates `armctl
-    cluster-certs` makes (the README's set-up): every run is a task, the results are the ones the
+    cluster-certs` makes (docs/study.md's set-up): every run is a task, the results are the ones the
     threads give; a client without a certificate of the study's CA is not let in."""
     distributed = pytest.importorskip("distributed")
     from distributed.security import Security

@@ -562,7 +562,7 @@ def test_a_second_study_on_the_same_out_is_refused_in_one_line(tmp_path: Path) -
     assert sorted(p.name for p in out.iterdir()) == [OUT_LOCK, "ideal"]
 # ---- n joints everywhere ---------------------------------------------------------------------
 FRICTION = "realistic+friction+parameter-error"
-BUNDLED_VISCOUS = [2.0, 2.0, 1.5, 0.5, 0.5, 0.5]  # the README's results were made with these
+BUNDLED_VISCOUS = [2.0, 2.0, 1.5, 0.5, 0.5, 0.5]  # the recorded headline was made with these
 BUNDLED_COULOMB = [3.0, 3.0, 2.0, 0.8, 0.8, 0.8]
 
 
@@ -687,7 +687,7 @@ def test_a_study_on_a_seven_joint_arm_runs_every_scenario(tmp_path: Path) -> Non
     cfg_path = tmp_path / "seven.toml"
     cfg_path.write_text(text)
     # the arm as the CLI makes it (an arm file names its model): the build folder the other
-    # Panda tests and the README's command use, not a second one
+    # Panda tests and the docs' command use, not a second one
     arm = arm_from_args(argparse.Namespace(arm=REPO / "tests" / "arms" / "panda.toml", model=None, design=None))
     build_arm("release", arm)
     out = tmp_path / "study"

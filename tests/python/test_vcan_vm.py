@@ -188,7 +188,7 @@ def vm_run(tmp_path_factory: pytest.TempPathFactory, build_dir: Path) -> dict:
     from tools.run.hil import CAPTURE_FILE, HilOptions, run_hil
 
     run_hil(HilOptions(out=out / "sil", duration_s=0.2, preset=build_dir.name, bus="sil", capture=True))
-    # through the CLI, as a user runs a command in the VM (README)
+    # through the CLI, as a user runs a command in the VM (docs/drives.md)
     res = subprocess.run(
         [ARMCTL, "vcan", "run", "--verbose", "--timeout", f"{VM_TIMEOUT_S:g}", "--",
          "sh", str(script), str(out), str(exes["ctl"]), sys.executable, str(exes["unit"]),
@@ -306,7 +306,7 @@ def test_garbage_frames_are_counted_and_ignored(vm_run: dict) -> None:
 
 
 def test_hil_in_the_vm_through_the_cli(tmp_path: Path) -> None:
-    """The README's way to run HIL over real SocketCAN, as a user types it: armctl builds and plans
+    """The docs' way (docs/drives.md) to run HIL over real SocketCAN, as a user types it: armctl builds and plans
     the run here, boots the VM and starts the logger, the simulator and the controller there on
     vcan0..vcan3 (tools/run/processes.py), then analyses what they wrote; here with a 7-DOF arm
     from an arm file, whose CiA 402 drives take four classic buses (2, 2, 2, 1), the most the

@@ -131,7 +131,8 @@ def cortex_m_costs() -> dict[str, Any]:
         costs = step_costs(r.stdout + r.stderr)
         if r.returncode != 0 or len(costs) != 3:
             raise RuntimeError(f"{preset} image: no step cost (exit {r.returncode}):\n{r.stdout}{r.stderr}")
-        out[preset] = costs
+        report = build_dir(preset) / "firmware" / "port" / "cortex_m" / "memory_report.json"
+        out[preset] = {**costs, "memory": json.loads(report.read_text())}  # flash, RAM, stack vs the part
     return out
 
 
@@ -151,7 +152,8 @@ def table(result: dict[str, Any]) -> str:
                  f"{r['pm_step_over_pinocchio_double_rnea']:.2f} of Pinocchio's RNEA alone")
     for preset, c in result.get("cortex_m", {}).items():
         if isinstance(c, dict) and "skipped" not in c:
-            lines.append(f"{preset} (QEMU -icount, instructions): " + ", ".join(f"{k} {v:.0f}" for k, v in c.items()))
+            lines.append(f"{preset} (QEMU -icount, instructions): " +
+                         ", ".join(f"{k} {v:.0f}" for k, v in c.items() if k != "memory"))
     return "\n".join(lines)
 
 
@@ -276,6 +278,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="a short form that checks the benchmark runs (step: pm only; synth: one repeat, "
                         "no coupled solve, n = 1 comparison; sim: one 1 s run; study: 4 runs of 0.5 s); its "
                         "figures are not the documented ones")
+    p.add_argument("--record", action="store_true",
+                   help="also keep the results for the docs (docs/results/bench-WHAT.json), which tools/armctl docs "
+                        "renders into their figures")
 
 
 def add_subparser(sub: argparse._SubParsersAction) -> None:
@@ -285,25 +290,33 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(ns: argparse.Namespace) -> int:
+    from tools.bench.record import RecordError, record
+
+    if ns.record and ns.quick:
+        raise RecordError("--record with --quick: a quick run checks that the benchmark runs; its figures are not "
+                          "the documented ones")
     if ns.what == "step":
         out = ns.out or REPO / "runs" / "bench" / "step_instructions.json"
         result = bench_step(out, ns.quick)
         print(table(result))
-        print(f"results: {out}")
-        return 0
-    if ns.what == "study":
+    elif ns.what == "study":
         from tools.bench.study import bench_study, table as study_table
 
         out = ns.out or REPO / "runs" / "bench" / "study.json"
-        print(study_table(bench_study(out, ns.quick)))
-        print(f"results: {out}")
-        return 0
-    if ns.what == "sim":
+        result = bench_study(out, ns.quick)
+        print(study_table(result))
+    elif ns.what == "sim":
         out = ns.out or REPO / "runs" / "bench" / "sim.json"
-        print(sim_table(bench_sim(out, ns.quick)))
-        print(f"results: {out}")
-        return 0
-    out = ns.out or REPO / "runs" / "bench" / "synth.json"
-    quick = ["--repeats", "1", "--skip-coupled", "--quick"] if ns.quick else []
-    return subprocess.run([sys.executable, "-m", "gen.synth.bench", "--out", str(out), *quick],
-                          cwd=REPO).returncode
+        result = bench_sim(out, ns.quick)
+        print(sim_table(result))
+    else:
+        out = ns.out or REPO / "runs" / "bench" / "synth.json"
+        quick = ["--repeats", "1", "--skip-coupled", "--quick"] if ns.quick else []
+        rc = subprocess.run([sys.executable, "-m", "gen.synth.bench", "--out", str(out), *quick], cwd=REPO).returncode
+        if rc != 0:
+            return rc
+        result = json.loads(out.read_text())
+    print(f"results: {out}")
+    if ns.record:
+        record(f"bench-{ns.what}", result, f"tools/armctl bench {ns.what} --record")
+    return 0

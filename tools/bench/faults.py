@@ -293,6 +293,9 @@ def table(rows: list[dict[str, Any]]) -> str:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--only", default=None, help="comma-separated faults [all: " + ", ".join(f.name for f in FAULTS) + "]")
     p.add_argument("--out", type=Path, default=REPO / "runs" / "faults")
+    p.add_argument("--record", action="store_true",
+                   help="also keep faults.json for the docs (docs/results/faults.json; the whole matrix only), "
+                        "which tools/armctl docs renders")
 
 
 def add_subparser(sub: argparse._SubParsersAction) -> None:
@@ -309,6 +312,10 @@ def run(ns: argparse.Namespace) -> int:
     bad = [n for n in names if n not in {f.name for f in FAULTS}]
     if bad:
         raise OutDirError(f"--only: unknown fault(s) {', '.join(bad)}")
+    if ns.record and ns.only is not None:
+        from tools.bench.record import RecordError
+
+        raise RecordError("--record with --only: the docs show the whole matrix")
     check_out_dir(ns.out)
     build_arm("release")
     rows = []
@@ -325,6 +332,10 @@ def run(ns: argparse.Namespace) -> int:
     write_json_atomic(ns.out / "faults.json", doc)
     print(table(rows))
     print(f"results: {ns.out / 'faults.json'}")
+    if ns.record:
+        from tools.bench.record import record
+
+        record("faults", doc, "tools/armctl faults --record")
     # The matrix's promise: every fault that must stop the arm stopped it, under a named verdict.
     broken = [x["fault"] for x in rows if x["expect_stop"] and (not x["safe_state"] or x["verdict"] == "ok")]
     broken += [f"{x['fault']} (never injected: {x['harness_problem']})" for x in rows

@@ -52,6 +52,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--cpu", type=int, default=None,
                    help="the CPU of the controller's loop, the simulator and cyclictest [the last one]")
     p.add_argument("--method", default="pd")
+    p.add_argument("--record", action="store_true",
+                   help="also keep timing.json for the docs (docs/results/timing.json), which tools/armctl docs renders")
 
 
 def _stats(values_us: list[float]) -> dict[str, float | int]:
@@ -358,4 +360,8 @@ def run(ns: argparse.Namespace) -> int:
     print(table(d))
     print(f"verdict: {d['verdict']}" + (f": {d['verdict_reason']}" if d["verdict_reason"] else ""))
     print(f"results: {ns.out / 'timing.json'}  plot: {ns.out / 'timing.png'}")
+    if ns.record:
+        from tools.bench.record import record
+
+        record("timing", d, f"tools/armctl timing --duration {ns.duration:g} --rate {ns.rate:g} --record")
     return 0 if d["verdict"] == "ok" else 1

@@ -63,7 +63,7 @@ DEFAULT_ARM = ArmRef()
 
 
 def add_arm_arguments(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group("the arm (README: Your own arm)")
+    g = p.add_argument_group("the arm (docs/arm.md)")
     g.add_argument("--model", type=Path, default=None, metavar="FILE",
                    help="the arm's MJCF (.xml) or URDF (.urdf) [the bundled UR5e-proportioned arm]")
     g.add_argument("--arm", type=Path, default=None, metavar="FILE",

@@ -85,7 +85,7 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
 
     h.add_argument("--protocol", choices=PROTOCOLS, default=DEFAULT_PROTOCOL,
                    help="what the drives speak: arm (this project's frames) or canopen (CiA 301/402 drives booted "
-                        f"over SDO; README \"Real drives\") [{DEFAULT_PROTOCOL}]")
+                        f"over SDO; docs/drives.md) [{DEFAULT_PROTOCOL}]")
     h.add_argument("--rate", type=float, default=None, metavar="HZ",
                    help="the loop rate (the controller's --rate; a design is discretised for one rate) [the arm's]")
     h.add_argument("--drive-config", type=Path, default=None, metavar="FILE",

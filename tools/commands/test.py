@@ -13,13 +13,14 @@ import os
 import shutil
 import subprocess
 import sys
+import time
 from concurrent.futures import ThreadPoolExecutor
 
 from gen.lib.paths import REPO, build_dir, env_with_repo
 from tools.build import build
-from tools.commands import CommandError
+from tools.commands import CommandError, UsageError
 
-SLOWEST_SHOWN = 15  # the slowest tests named at the end of each pass: the suite's time is a target (README)
+SLOWEST_SHOWN = 15  # the slowest tests named at the end of each pass: the suite's time is a target (docs/quickstart.md)
 NO_TESTS_COLLECTED = 5  # pytest's exit code when a pass selects nothing (e.g. `-k` names serial tests only)
 
 
@@ -27,6 +28,8 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
     t = sub.add_parser("test", help="every test: ctest (ASan/UBSan build) and pytest")
     t.add_argument("--workers", type=int, default=None,
                    help="pytest workers for the tests that may share the cores [the cores this process may use]")
+    t.add_argument("--record", action="store_true",
+                   help="keep the suite's time for the docs (docs/results/test.json; the whole suite, all passed)")
     t.add_argument("pytest_args", nargs="*", help="extra pytest arguments for both passes, e.g. -k hil")
     t.set_defaults(run=run)
 
@@ -44,15 +47,26 @@ def run(ns: argparse.Namespace) -> int:
     workers = ns.workers if ns.workers is not None else len(os.sched_getaffinity(0))
     if workers < 1:
         raise CommandError(f"--workers: {workers} is not a worker count (1 or more)")
+    if ns.record and ns.pytest_args:
+        raise UsageError("--record: the docs give the whole suite's time; a run with pytest arguments is part of it")
+    started = time.monotonic()
+    seconds: dict[str, float] = {}  # each phase's wall time, for --record
+
+    def lap(phase: str, since: float) -> float:
+        now = time.monotonic()
+        seconds[phase] = round(now - since, 1)
+        return now
     # side by side: the debug build ends on one long compile (the sanitized Eigen reference step)
     # while the other core would idle; the release build fills it
     with ThreadPoolExecutor(max_workers=2) as pool:
         for done in [pool.submit(build, preset) for preset in ("debug", "release")]:
             done.result()
+    t = lap("builds (debug and release, side by side)", started)
     failed = []
     r = subprocess.run(["ctest", "--preset", "debug", "--output-on-failure"], cwd=REPO)
     if r.returncode != 0:
         failed.append("ctest")
+    t = lap("ctest", t)
     env = env_with_repo()
     env["ARM_BUILD_DIR"] = str(build_dir("debug"))
     # As root on Debian, tools/armctl has installed every package: no test may skip for a missing one.
@@ -63,6 +77,7 @@ def run(ns: argparse.Namespace) -> int:
         print(f"armctl test: pytest, the tests run {name}", flush=True)
         r = subprocess.run([sys.executable, "-m", "pytest", "-q", f"--durations={SLOWEST_SHOWN}", *args,
                             "tests/python", *ns.pytest_args], cwd=REPO, env=env)
+        t = lap(f"pytest, {name}", t)
         if r.returncode == 0:
             ran += 1
         elif r.returncode != NO_TESTS_COLLECTED:
@@ -72,4 +87,9 @@ def run(ns: argparse.Namespace) -> int:
     if failed:
         raise CommandError(f"FAILED ({', '.join(failed)})")
     print("armctl test: all passed")
+    if ns.record:
+        from tools.bench.record import record
+
+        record("test", {"wall_s": round(time.monotonic() - started, 1), "phases_s": seconds, "workers": workers,
+                        "strict": env.get("ARM_TEST_STRICT") == "1"}, "tools/armctl test --record")
     return 0

@@ -49,7 +49,7 @@ class Cluster:
 
 
 def add_cluster_arguments(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group("a Dask cluster (README: Parallel and distributed)")
+    g = p.add_argument_group("a Dask cluster (docs/study.md: Parallel and distributed)")
     g.add_argument("--cluster", default=None, metavar="ADDRESS",
                    help="a Dask scheduler (tls://HOST:8786, with --tls-*): each HIL run is a task on its workers")
     g.add_argument("--tls-ca", type=Path, default=None, metavar="FILE", help="the cluster's CA certificate (PEM)")

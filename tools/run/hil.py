@@ -40,7 +40,7 @@ CONTROLLER_DEFAULT_HOLD_S: float = param_default("controller", "ref-hold")
 LOCKSTEP_SPIN_US = 50
 
 
-# What the drives speak (README "Real drives"): this project's frames, or CANopen CiA 402. The one
+# What the drives speak (docs/drives.md): this project's frames, or CANopen CiA 402. The one
 # definition of the default is the registry's (firmware/params/params.toml [hil.protocol]): every
 # run passes --protocol to both programs.
 PROTOCOLS = ("arm", "canopen")

@@ -19,7 +19,9 @@ BEGIN = "<!-- headline: tools/armctl study --record writes this table (tools/stu
 END = "<!-- /headline -->"
 # What a run's record keeps: its verdict and the numbers the tables and the slice test compare.
 RUN_FIELDS = ("result", "steps", "tracking_max_abs_rad", "tracking_rms_rad", "estimation_error_rms",
-              "torque_power_w", "saturated_fraction")
+              "torque_power_w", "saturated_fraction",
+              # what the report's findings read (docs/study.md renders them from this record)
+              "verdict_reasons", "final_fault", "tracking_max_abs_deg", "bounds")
 
 
 class HeadlineError(RuntimeError):
@@ -30,10 +32,12 @@ def record_of(study: dict[str, Any]) -> dict[str, Any]:
     """What summary_table needs (tools/study/report.py) and the runs' own numbers."""
     return {"config": study["config"], "code": code_identity(), "seeds": study["seeds"],
             "duration_s": study["duration_s"], "methods": study["methods"], "bus": study.get("bus"),
-            "arm": {"name": study["arm"]["name"], "n_joints": study["arm"]["n_joints"]},
+            "arm": {"name": study["arm"]["name"], "n_joints": study["arm"]["n_joints"],
+                    "joint_names": study["arm"]["joint_names"]},
             "scenarios": {s: {"runs": {m: [{k: r.get(k) for k in RUN_FIELDS} for r in runs]
                                        for m, runs in sc["runs"].items()},
-                              "stats": sc["stats"]}
+                              "stats": sc["stats"],
+                              "pm_versus": sc.get("pm_versus", {})}  # the report's comparisons (docs/study.md)
                           for s, sc in study["scenarios"].items()}}
 
 

@@ -24,7 +24,7 @@ typedef struct {
     double boot_timeout_s;
     double lockstep_timeout_s; /* lockstep: wall time to wait for a period's states */
     double spin_us;            /* poll this long for a frame before sleeping in ppoll */
-    int protocol_canopen;      /* --protocol canopen: CiA 301/402 drives (README: Real drives) */
+    int protocol_canopen;      /* --protocol canopen: CiA 301/402 drives (docs/drives.md) */
     /* --node, one per joint in joint order (gen/drives.py's table of the arm); n_nodes 0: the
      * built-in rule (node = drive number, rated torque = the joint's torque limit, EDS encoder/gear) */
     unsigned n_nodes;

@@ -2,7 +2,7 @@
  * (ARM_METHOD_TABLE in firmware/core/src/methods.c), which the step dispatches through and every
  * list of methods reads: the controller's --method and usage, the Cortex-M closed-loop images, the tests, and the
  * Python tools (tools/methods.py reads the table's names from methods.c). Adding a method is one
- * entry there (and its ARM_METHOD_* in controller.h), plus its tests: README "Adding a method". */
+ * entry there (and its ARM_METHOD_* in controller.h), plus its tests: docs/firmware.md, Adding a method. */
 #ifndef ARM_METHODS_H
 #define ARM_METHODS_H
 

@@ -1,0 +1,264 @@
+"""armctl docs: every generated figure of README.md and docs/ rendered from its results file.
+
+A page marks a region `<!-- numbers:NAME (...) -->` ... `<!-- /numbers:NAME -->`; RENDERERS says
+which results file and which function make NAME's text. The results files are written by the
+commands themselves with `--record` (docs/results/*.json: `bench`, `timing`, `faults`, `test`;
+tools/bench/record.py) and by `study --record` and `tune` (tools/studies/). Each region ends by
+naming the command that made its figures, the machine and the date. `--check` renders every region
+and exits 1 if a page differs (tests/python/test_docs.py runs it), so no figure can be typed by hand
+or drift from its file."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from gen.lib.atomic_output import write_text_atomic
+from gen.lib.paths import DOCS, DOCS_RESULTS, REPO
+from tools.commands import CommandError
+
+STUDIES = REPO / "tools" / "studies"
+REGION = re.compile(r"(<!-- numbers:(?P<name>[a-z0-9-]+)\b[^>]*-->\n)(?P<body>.*?)(<!-- /numbers:(?P=name) -->)", re.S)
+
+
+class DocsError(CommandError):
+    """A region without a renderer, or a results file that is missing or lacks what a region needs."""
+
+
+def pages() -> list[Path]:
+    return [REPO / "README.md", *sorted(DOCS.rglob("*.md"))]
+
+
+def _load(path: Path, how: str) -> dict[str, Any]:
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        raise DocsError(f"{path.relative_to(REPO)} is missing: {how} writes it") from None
+    except ValueError as exc:
+        raise DocsError(f"{path.relative_to(REPO)}: not JSON ({exc}); {how} writes it again") from None
+
+
+RECORDED_BY = {"bench-step": "tools/armctl bench step --record", "bench-synth": "tools/armctl bench synth --record",
+               "bench-sim": "tools/armctl bench sim --record", "bench-study": "tools/armctl bench study --record",
+               "timing": "tools/armctl timing --record", "faults": "tools/armctl faults --record",
+               "test": "tools/armctl test --record"}
+
+
+def _result(name: str) -> dict[str, Any]:
+    return _load(DOCS_RESULTS / f"{name}.json", RECORDED_BY[name])
+
+
+def _made_by(r: dict[str, Any]) -> str:
+    """Which command, on what machine and when: the line under every rendered figure."""
+    rec = r["recorded"]
+    m = rec["machine"]
+    kind = "virtual machine" if m.get("virtual") else "machine"
+    commit = (rec.get("commit") or "?")[:10] + (" with local changes" if rec.get("dirty") else "")
+    return (f"*`{rec['command']}`, {rec['date_utc'][:10]}, on a {m['cores']}-core {kind} ({m['cpu']}, "
+            f"{m['memory_gib']} GiB, {m['os']}, Linux {m['kernel']}; load average {m['load_average_1min']} at the "
+            f"start), code {commit}.*")
+
+
+def _block(text: str) -> str:
+    return f"```\n{text}\n```"
+
+
+def bench_step(r: dict[str, Any]) -> str:
+    from tools.bench import table
+
+    return _block(table(r)) + "\n\n" + _made_by(r)
+
+
+def rnea(r: dict[str, Any]) -> str:
+    n = r["rnea"]["instructions"]
+    pm = r["methods"]["pm"]["float"]
+    return (f"Pinocchio's RNEA takes {n['pinocchio-double']:,.0f} instructions in double and "
+            f"{n['pinocchio-float']:,.0f} in float; the arm's generated kernel takes **{n['kernel']:,.0f}: "
+            f"{r['rnea']['pinocchio_double_over_kernel']:.1f}x fewer than Pinocchio in double**, our general "
+            f"`arm_rnea` {n['ours']:,.0f}, and the *whole* PM step (IDC, estimator, controller, safety checks: "
+            f"{pm:,.0f}) takes {r['rnea']['pm_step_over_pinocchio_double_rnea']:.2f} of Pinocchio's RNEA alone.\n\n"
+            + _made_by(r))
+
+
+def memory(r: dict[str, Any]) -> str:
+    rows = ["| image | flash | RAM | worst-case stack |", "|---|---|---|---|"]
+    for preset, c in r.get("cortex_m", {}).items():
+        if not isinstance(c, dict) or "memory" not in c:
+            continue
+        m = c["memory"]
+        rows.append(f"| {preset} ({m['part']}) | {m['flash_bytes'] / 1024:.1f} of {m['flash_budget'] / 1024:.0f} KiB | "
+                    f"{m['ram_bytes'] / 1024:.1f} of {m['ram_budget'] / 1024:.0f} KiB | "
+                    f"{m['stack_worst_case_bytes']} of {m['stack_budget']} B |")
+    if len(rows) == 2:
+        raise DocsError("docs/results/bench-step.json has no Cortex-M memory report: run tools/armctl bench step "
+                        "--record with the cross toolchain installed")
+    return "\n".join(rows) + "\n\n" + _made_by(r)
+
+
+def synth(r: dict[str, Any]) -> str:
+    rows = ["| solved | estimator gamma: optimal, design, verified | controller gamma (optimal) | synthesis, "
+            "verification and emission |", "|---|---|---|---|"]
+    for s in r["synth_n6"]:
+        what = "per joint (what `synth` does here)" if s["mode"] == "per_joint" else "as one coupled problem"
+        rows.append(f"| {what} | {s['estimator_gamma_opt']:.6f}, {s['estimator_gamma_design']:.6f}, "
+                    f"{s['estimator_verified_hinf_norm']:.6f} | {s['controller_gamma_opt']:.3g} | "
+                    f"{s['wall_time_median_s']:.2f} s (median of {s['repeats']}) |")
+    return ("The paper's design, six joints, in the process (imports excluded):\n\n" + "\n".join(rows) + "\n\n"
+            + _made_by(r))
+
+
+def bench_sim(r: dict[str, Any]) -> str:
+    from tools.bench import sim_table
+
+    b = r["lockstep_udp"]["breakdown_us_per_period"]
+    kernel = (b["bus_tx"] + b["bus_rx"]) / b["total"]
+    return (_block(sim_table(r)) + f"\n\nOver UDP, {100 * kernel:.0f} % of the simulator's period is the kernel "
+            "moving datagrams (`bus_tx`, `bus_rx`).\n\n" + _made_by(r))
+
+
+def bench_study(r: dict[str, Any]) -> str:
+    from tools.bench.study import table
+
+    return _block(table(r)) + "\n\n" + _made_by(r)
+
+
+def timing(r: dict[str, Any]) -> str:
+    from tools.bench.timing import table
+
+    verdict = r["verdict"] + (f": {r['verdict_reason']}" if r.get("verdict_reason") else "")
+    return _block(table(r)) + f"\n\nVerdict: `{verdict}`.\n\n" + _made_by(r)
+
+
+def faults(r: dict[str, Any]) -> str:
+    from tools.bench.faults import table
+
+    return _block(table(r["rows"])) + "\n\n" + _made_by(r)
+
+
+def _minutes(s: float) -> str:
+    return f"{int(s // 60)} min {s % 60:.0f} s" if s >= 60 else f"{s:.0f} s"
+
+
+def test_time(r: dict[str, Any]) -> str:
+    if not r:
+        return ("No run of the whole suite is recorded yet: `tools/armctl test --record` records one (the whole "
+                "suite, every test passed).")
+    rows = ["| phase | wall time |", "|---|---|"]
+    rows += [f"| {phase} | {_minutes(s)} |" for phase, s in r["phases_s"].items()]
+    rows.append(f"| **the whole suite** | **{_minutes(r['wall_s'])}** |")
+    return (f"On {r['workers']} pytest worker(s)" + (", strict (no test may skip)" if r.get("strict") else "")
+            + ":\n\n" + "\n".join(rows) + "\n\n" + _made_by(r))
+
+
+def headline_table(record: dict[str, Any]) -> str:
+    from tools.study.headline import render
+
+    return render(record) + "\n\n" + _study_made_by(record)
+
+
+def _study_made_by(record: dict[str, Any]) -> str:
+    return (f"*`tools/armctl study --record`: {len(record['seeds'])} seeds, {record['duration_s']:g} s trajectory, "
+            f"the bundled arm ({record['arm']['name']}), code identity {record['code']}.*")
+
+
+def findings(record: dict[str, Any]) -> str:
+    from tools.study.report import _claims, _labels, _verdict
+
+    out = []
+    for name, sc in record["scenarios"].items():
+        if not sc.get("pm_versus"):
+            raise DocsError("tools/studies/paper.headline.json keeps no comparisons: tools/armctl study --record "
+                            "writes them")
+        out += [f"**{name}**", "", *_claims(sc), *_verdict(record, sc, _labels(record, False)), ""]
+    return "\n".join(out) + "\n" + _study_made_by(record)
+
+
+def tuning(record: dict[str, Any]) -> str:
+    pairs = [(s, m, r) for s, methods in record["scenarios"].items() for m, r in methods.items()]
+    converged = sum(r.get("status") == "converged" for _, _, r in pairs)
+    trials = [r["trials_run"] for _, _, r in pairs]
+    methods = list(dict.fromkeys(m for _, m, _ in pairs))
+    rows = ["| method | " + " | ".join(record["scenarios"]) + " |", "|---|" + "---|" * len(record["scenarios"])]
+    for m in methods:
+        cells = [f"{r['status']}, {r['trials_run']} trials" if (r := record["scenarios"][s].get(m)) else "-"
+                 for s in record["scenarios"]]
+        rows.append(f"| {m} | " + " | ".join(cells) + " |")
+    caps = sorted({r["cap"] for _, _, r in pairs})
+    return (f"{converged} of {len(pairs)} method-scenario pairs converged (the best improved by no more than "
+            f"{100 * pairs[0][2]['tolerance']:g} % over the last {pairs[0][2]['plateau']} trials) within the cap of "
+            f"{', '.join(str(c) for c in caps)} trials, the same for every method: {sum(trials)} trials, "
+            f"{min(trials)}-{max(trials)} a pair.\n\n" + "\n".join(rows) + "\n\n"
+            "*`tools/armctl tune` (`tools/studies/paper.tuning.json`).*")
+
+
+# NAME -> (the results file's loader, the renderer)
+RENDERERS: dict[str, tuple[Callable[[], dict[str, Any]], Callable[[dict[str, Any]], str]]] = {
+    "bench-step": (lambda: _result("bench-step"), bench_step),
+    "rnea": (lambda: _result("bench-step"), rnea),
+    "memory": (lambda: _result("bench-step"), memory),
+    "synth": (lambda: _result("bench-synth"), synth),
+    "bench-sim": (lambda: _result("bench-sim"), bench_sim),
+    "bench-study": (lambda: _result("bench-study"), bench_study),
+    "timing": (lambda: _result("timing"), timing),
+    "faults": (lambda: _result("faults"), faults),
+    "test-time": (lambda: _result("test") if (DOCS_RESULTS / "test.json").is_file() else {}, test_time),
+    "headline": (lambda: _load(STUDIES / "paper.headline.json", "tools/armctl study --record"), headline_table),
+    "findings": (lambda: _load(STUDIES / "paper.headline.json", "tools/armctl study --record"), findings),
+    "tuning": (lambda: _load(STUDIES / "paper.tuning.json", "tools/armctl tune"), tuning),
+}
+
+
+def rendered(text: str, where: str, skipped: list[str] | None = None) -> str:
+    """text with every numbers region rendered from its results file. With `skipped`, a region that
+    cannot be rendered keeps its text and its error is added there; without, it raises DocsError."""
+    def one(m: re.Match[str]) -> str:
+        name = m.group("name")
+        try:
+            if name not in RENDERERS:
+                raise DocsError(f"<!-- numbers:{name} -->: no such region (tools/commands/docs.py RENDERERS)")
+            load, render_region = RENDERERS[name]
+            try:
+                body = render_region(load())
+            except KeyError as exc:
+                raise DocsError(f"numbers:{name}: its results file has no {exc}: record it again") from None
+        except DocsError as exc:
+            if skipped is None:
+                raise DocsError(f"{where}: {exc}") from None
+            skipped.append(f"{where}: {exc}")
+            return m.group(0)
+        return f"{m.group(1)}{body}\n{m.group(4)}"
+
+    return REGION.sub(one, text)
+
+
+def render(check: bool = False, skipped: list[str] | None = None) -> list[Path]:
+    """Render every page's regions; the pages that differed (written unless check). `skipped`:
+    as for rendered()."""
+    changed = []
+    for page in pages():
+        text = page.read_text()
+        new = rendered(text, str(page.relative_to(REPO)), skipped)
+        if new != text:
+            changed.append(page)
+            if not check:
+                write_text_atomic(page, new)
+    for page in changed:
+        print(f"armctl docs: {page.relative_to(REPO)}: " + ("differs from its results files" if check else "rendered"))
+    return changed
+
+
+def add_subparser(sub: argparse._SubParsersAction) -> None:
+    d = sub.add_parser("docs", help="render every generated figure of README.md and docs/ from its results file")
+    d.add_argument("--check", action="store_true", help="change nothing; exit 1 if a page differs")
+    d.set_defaults(run=run)
+
+
+def run(ns: argparse.Namespace) -> int:
+    changed = render(check=ns.check)
+    if ns.check and changed:
+        raise DocsError(f"{len(changed)} page(s) differ from their results files: tools/armctl docs renders them")
+    return 0
