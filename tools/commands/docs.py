@@ -11,6 +11,7 @@ or drift from its file."""
 from __future__ import annotations
 
 import argparse
+import math
 import json
 import re
 from collections.abc import Callable
@@ -177,6 +178,41 @@ def findings(record: dict[str, Any]) -> str:
     return "\n".join(out) + "\n" + _study_made_by(record)
 
 
+def picks(record: dict[str, Any]) -> str:
+    """What to pick for the bundled arm, per scenario, in words (the report's)."""
+    from tools.study.report import recommendation
+
+    return "\n".join(recommendation(record, name) for name in record["scenarios"]) + "\n\n" + _study_made_by(record)
+
+
+def resonances(record: dict[str, Any]) -> str:
+    """The bundled arm's drive train and each joint's first resonance (the report's table)."""
+    from tools.study.report import drivetrain_table
+
+    return drivetrain_table(record) + "\n\n" + _study_made_by(record)
+
+
+def protocols(record: dict[str, Any]) -> str:
+    """The headline (CiA 402) beside the same picks over the arm protocol: the sum over joints of
+    the mean L-infinity tracking error per scenario and method."""
+    from tools.study.headline import RECORD_BY_PROTOCOL
+
+    other = _load(RECORD_BY_PROTOCOL["arm"], "tools/armctl study --protocol arm --record")
+    rows = ["| scenario | method | CiA 402: sum of joints' L-inf e (deg) | arm protocol | CiA 402 / arm |",
+            "|---|---|---|---|---|"]
+    for name, sc in record["scenarios"].items():
+        for m in record["methods"]:
+            a = sc["stats"][m]["linf"]["total"]["mean"]
+            b = other["scenarios"].get(name, {}).get("stats", {}).get(m, {}).get("linf", {}).get("total", {}).get("mean")
+            cell = (lambda v: f"{math.degrees(v):.3f}" if v is not None else "-")
+            ratio = f"{a / b:.2f}" if a is not None and b else "-"
+            ends = sc["stats"][m]["results"]
+            note = "" if all(r == "ok" for r in ends) else f" ({sum(r != 'ok' for r in ends)} not ok)"
+            rows.append(f"| {name} | {m} | {cell(a)}{note} | {cell(b)} | {ratio} |")
+    return "\n".join(rows) + "\n\n" + _study_made_by(record) + " " + _study_made_by(other).replace(
+        "study --record", "study --protocol arm --record")
+
+
 def tuning(record: dict[str, Any]) -> str:
     pairs = [(s, m, r) for s, methods in record["scenarios"].items() for m, r in methods.items()]
     converged = sum(r.get("status") == "converged" for _, _, r in pairs)
@@ -188,10 +224,20 @@ def tuning(record: dict[str, Any]) -> str:
                  for s in record["scenarios"]]
         rows.append(f"| {m} | " + " | ".join(cells) + " |")
     caps = sorted({r["cap"] for _, _, r in pairs})
+    held = [(s, m, r) for s, m, r in pairs if (r.get("validation") or {}).get("picked_rank") is not None]
+    not_held = [f"{m} in {s}" for s, m, r in pairs if (r.get("validation") or {}).get("picked_rank") is None]
+    robust = (f" {len(held)} of {len(pairs)} picks ran ok on every validation seed and robust corner"
+              + (f" (the best by objective in {sum(r['validation']['picked_rank'] == 0 for _, _, r in held)}, the next "
+                 "best in the others)" if held else "")
+              + (f"; none of the candidates of {', '.join(not_held)} held, and its kept pick is not robust" if not_held
+                 else "") + ".")
+    t = record.get("last_tuning")
+    took = (f" The last `tools/armctl tune` tuned {t['pairs']} pairs, {t['trials']} trials, in {_minutes(t['wall_s'])} "
+            f"on {t['cpus']} cores (--jobs {t['jobs']}), {t['when'][:10]}." if t else "")
     return (f"{converged} of {len(pairs)} method-scenario pairs converged (the best improved by no more than "
             f"{100 * pairs[0][2]['tolerance']:g} % over the last {pairs[0][2]['plateau']} trials) within the cap of "
             f"{', '.join(str(c) for c in caps)} trials, the same for every method: {sum(trials)} trials, "
-            f"{min(trials)}-{max(trials)} a pair.\n\n" + "\n".join(rows) + "\n\n"
+            f"{min(trials)}-{max(trials)} a pair.{robust}{took}\n\n" + "\n".join(rows) + "\n\n"
             "*`tools/armctl tune` (`tools/studies/paper.tuning.json`).*")
 
 
@@ -209,6 +255,9 @@ RENDERERS: dict[str, tuple[Callable[[], dict[str, Any]], Callable[[dict[str, Any
     "headline": (lambda: _load(STUDIES / "paper.headline.json", "tools/armctl study --record"), headline_table),
     "findings": (lambda: _load(STUDIES / "paper.headline.json", "tools/armctl study --record"), findings),
     "tuning": (lambda: _load(STUDIES / "paper.tuning.json", "tools/armctl tune"), tuning),
+    "picks": (lambda: _load(STUDIES / "paper.headline.json", "tools/armctl study --record"), picks),
+    "resonances": (lambda: _load(STUDIES / "paper.headline.json", "tools/armctl study --record"), resonances),
+    "protocols": (lambda: _load(STUDIES / "paper.headline.json", "tools/armctl study --record"), protocols),
 }
 
 

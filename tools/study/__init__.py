@@ -487,7 +487,8 @@ def add_study_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--retune", action="store_true", help="tune again even when a tuning is kept")
     p.add_argument("--record", action="store_true",
                    help="the default study only: keep its results as the headline (tools/studies/paper.headline.json) "
-                        "and write the README's result tables from them")
+                        "and write the README's result tables from them; with --protocol arm, its record beside it "
+                        "(the docs compare the two)")
     p.add_argument("--protocol", choices=PROTOCOLS, default=None,
                    help="run every scenario over this drive protocol, with the picks tuned on the scenario's own: "
                         "what the protocol alone changes [each scenario's: CiA 402]")
@@ -569,9 +570,9 @@ def cmd_study(ns: argparse.Namespace) -> int:
         raise StudyConfigError(f"--confirm: must be in [0, 1000], got {ns.confirm}")
     cfg, arm, methods, scenarios, cluster = _common(ns)
     if ns.record and (cfg.path.resolve() != DEFAULT_CONFIG.resolve() or not arm.is_default or ns.seeds or
-                      ns.duration or methods or scenarios or ns.trials or ns.protocol):
+                      ns.duration or methods or scenarios or ns.trials):
         raise StudyConfigError("--record: the headline is the default study as it stands (no --config, "
-                               "--model/--arm, --seeds, --duration, --methods, --scenarios, --trials or --protocol)")
+                               "--model/--arm, --seeds, --duration, --methods, --scenarios or --trials)")
     with ExitStack() as stack:
         _hold_out(stack, ns.out)
         study = run_study(cfg, ns.out, seeds=ns.seeds, duration_s=ns.duration, methods=methods,
@@ -581,7 +582,8 @@ def cmd_study(ns: argparse.Namespace) -> int:
         from tools.study import headline
 
         headline.write(study)
-        print(f"armctl study: the headline recorded in {headline.RECORD} and README.md's result tables")
+        print(f"armctl study: recorded in {headline.RECORD_BY_PROTOCOL[ns.protocol]}" if ns.protocol else
+              f"armctl study: the headline recorded in {headline.RECORD} and README.md's result tables")
     print((ns.out / "summary.txt").read_text())
     print(f"report: {ns.out / 'report.md'}")
     unmeasured = [f"{m} in {s} (seed {seed}): {r.get('result')}" for s, sc in study["scenarios"].items()

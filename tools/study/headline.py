@@ -14,6 +14,9 @@ from tools.build.code_identity import code_identity
 from gen.lib.paths import REPO
 
 RECORD = REPO / "tools" / "studies" / "paper.headline.json"
+# the same study over the arm protocol with the same picks (study --protocol arm --record): what the
+# protocol alone changes, beside the headline in the docs
+RECORD_BY_PROTOCOL = {"arm": REPO / "tools" / "studies" / "paper.headline-arm-protocol.json"}
 README = REPO / "README.md"
 BEGIN = "<!-- headline: tools/armctl study --record writes this table (tools/study/headline.py) -->"
 END = "<!-- /headline -->"
@@ -32,12 +35,15 @@ def record_of(study: dict[str, Any]) -> dict[str, Any]:
     """What summary_table needs (tools/study/report.py) and the runs' own numbers."""
     return {"config": study["config"], "code": code_identity(), "seeds": study["seeds"],
             "duration_s": study["duration_s"], "methods": study["methods"], "bus": study.get("bus"),
-            "arm": {"name": study["arm"]["name"], "n_joints": study["arm"]["n_joints"],
-                    "joint_names": study["arm"]["joint_names"]},
+            "protocol": study.get("protocol"),
+            "arm": {k: study["arm"][k] for k in ("name", "n_joints", "joint_names", "drivetrain",
+                                                   "first_resonance_hz", "payload")},
             "scenarios": {s: {"runs": {m: [{k: r.get(k) for k in RUN_FIELDS} for r in runs]
                                        for m, runs in sc["runs"].items()},
                               "stats": sc["stats"],
-                              "pm_versus": sc.get("pm_versus", {})}  # the report's comparisons (docs/study.md)
+                              "pm_versus": sc.get("pm_versus", {}),  # the report's comparisons (docs/study.md)
+                              "bandwidth_hz": sc.get("bandwidth_hz", {}),
+                              "definition": sc["definition"]}
                           for s, sc in study["scenarios"].items()}}
 
 
@@ -57,6 +63,9 @@ def readme_block(text: str) -> str:
 
 def write(study: dict[str, Any], readme: Path = README) -> None:
     record = record_of(study)
+    if study.get("protocol"):  # another protocol's study: its own record, not the headline
+        write_json_atomic(RECORD_BY_PROTOCOL[study["protocol"]], record)
+        return
     text = readme.read_text()
     old = readme_block(text)
     write_json_atomic(RECORD, record)

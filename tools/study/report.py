@@ -233,26 +233,28 @@ def _trajectory_lines(study: dict[str, Any]) -> list[str]:
             + "; ".join(f"{n} a {a:g} rad, f {f:g} Hz" for n, a, f in zip(names, t["amp"], t["freq_hz"])) + "."]
 
 
-def _drivetrain_lines(study: dict[str, Any]) -> list[str]:
-    """The arm's joints as the simulator makes them (gen/drivetrain.py), and each one's first
+def drivetrain_table(study: dict[str, Any]) -> str:
+    """The arm's joints as the simulator makes them (gen/drivetrain.py) and each one's first
     resonance at home: what bounds the gains a real arm survives."""
-    arm = study["arm"]
-    dt = arm.get("drivetrain")
-    if not dt:
-        return []
     rows = [[j["name"], str(j["size"]), f"{j['stiffness']:.3g}", f"{j['damping']:.3g}", f"{j['rotor_inertia']:.3g}",
              f"{j['link_inertia_at_home']:.3g}", f"{j['resonance_locked_hz']:.1f}",
              f"{j['resonance_free_hz']:.1f}" if j["resonance_free_hz"] is not None else "-",
-             "flexible" if j["flexible"] else f"rigid: {j['rigid_because']}"] for j in dt]
+             "flexible" if j["flexible"] else f"rigid: {j['rigid_because']}"] for j in study["arm"]["drivetrain"]]
+    return _md_table(["joint", "gear size", "stiffness (N m/rad)", "damping (N m s/rad)", "rotor inertia (kg m^2)",
+                      "link inertia at home (kg m^2)", "resonance, motor locked (Hz)", "motor free (Hz)", "simulated"],
+                     rows)
+
+
+def _drivetrain_lines(study: dict[str, Any]) -> list[str]:
+    arm = study["arm"]
+    if not arm.get("drivetrain"):
+        return []
     pay = arm.get("payload") or {}
     return ["## The arm's joints", "",
             "Each joint of the flexible scenarios is a rotor behind its gear, a strain-wave gear's spring and damper, "
             "then the link (gen/drivetrain.py); the controller's nominal model stays rigid. First resonances at the "
             "home pose, each joint on its own (the others held): motor locked sqrt(K / J_link), motor free "
-            "sqrt(K (1 / J_link + 1 / J_rotor)).", "",
-            _md_table(["joint", "gear size", "stiffness (N m/rad)", "damping (N m s/rad)", "rotor inertia (kg m^2)",
-                       "link inertia at home (kg m^2)", "resonance, motor locked (Hz)", "motor free (Hz)", "simulated"],
-                      rows), "",
+            "sqrt(K (1 / J_link + 1 / J_rotor)).", "", drivetrain_table(study), "",
             f"The arm's first resonance: {arm['first_resonance_hz']:.1f} Hz ({2 * np.pi * arm['first_resonance_hz']:.0f} "
             "rad/s). Every tuned pick's closed-loop bandwidth is kept below it (each scenario's tuning table). Rated "
             f"payload {pay.get('rated_kg', 0):g} kg, at {pay.get('at', '-')}.", ""]
