@@ -1,0 +1,59 @@
+"""`python -m gen.arm --model M [--arm-file F] --design CONFIG --out DIR [--depfile F]`: the prepared
+arm's three files written into DIR (gen/arm/__init__.py says what each holds)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from gen.arm.arm_file import load_arm_file
+from gen.arm.design import DEFAULT_DESIGN
+from gen.arm.errors import ArmError
+from gen.arm.prepare import prepare
+from gen.arm.wiring import DEFAULT_TOPOLOGY
+from gen.lib.atomic_output import OutputError, write_files_atomically
+
+
+def main(argv: list[str] | None = None) -> int:
+    import gen.arm
+
+    ap = argparse.ArgumentParser(prog="python -m gen.arm", description=gen.arm.__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--model", type=Path, default=None, help="MJCF or URDF [the arm file's, else the bundled UR5e]")
+    ap.add_argument("--arm-file", type=Path, default=None, help="arm file (TOML)")
+    ap.add_argument("--design", type=Path, default=None,
+                    help="design config when the arm file names none [the arm's default: gen/configs/paper.toml "
+                         "for the bundled arm, else one whose bandwidth fits the arm (auto_bandwidth)]")
+    ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--depfile", type=Path, default=None, help="write the files read, for the build (Ninja depfile)")
+    ns = ap.parse_args(argv)
+    try:
+        if ns.arm_file is not None and ns.model is not None:
+            raise ArmError("--model and --arm-file: give one (the arm file names its model)")
+        af = load_arm_file(ns.arm_file.resolve() if ns.arm_file else None, ns.model)
+        prep = prepare(af, ns.design)
+    except ArmError as exc:
+        print(f"gen.arm: {exc}", file=sys.stderr)
+        return 2
+    files = {"arm.xml": prep.xml, "arm.json": json.dumps(prep.info, indent=1) + "\n", "design.toml": prep.design_text}
+    try:
+        write_files_atomically(ns.out, files)
+    except OutputError as exc:
+        print(f"gen.arm: {exc}", file=sys.stderr)
+        return 1
+    if ns.depfile is not None:
+        deps = [str(af.model.resolve()), str((af.design or ns.design or DEFAULT_DESIGN).resolve())]
+        if af.path:
+            deps.append(str(af.path.resolve()))
+        if af.topology:
+            deps.append(str(af.topology.resolve()))
+        from gen.lib.busload import DEFAULT_DBC
+
+        deps += [str(DEFAULT_DBC), str(DEFAULT_TOPOLOGY)]  # the drive slots; the six-drive wiring
+        target = ns.out / "arm.xml"
+        ns.depfile.write_text(f"{target}: " + " ".join(d.replace(" ", "\\ ") for d in deps) + "\n")
+    for w in prep.info["warnings"]:
+        print(f"gen.arm: {prep.info['name']}: {w}", file=sys.stderr)
+    return 0
