@@ -62,32 +62,36 @@ def _class_names(path: Path, top: Path, names: set[str], seen: set[Path]) -> Non
                 _class_names(inc, top, names, seen)
 
 
-def remove_assets(spec: mujoco.MjSpec, kinds: set[str], classes: list[mujoco.MjsDefault]) -> int:
-    """Deletes every asset of the given kinds with everything that refers to one: the geoms drawn
-    from a mesh or height field are deleted (and the contact pairs and sensors naming them), a mesh
-    site becomes a sphere, and every other reference (a material's textures, a light's texture, the
-    material of a geom, site, tendon, flex, skin or mesh) is cleared, on the elements and on every
-    default class in `classes`. The number of geoms deleted."""
+def remove_assets(spec: mujoco.MjSpec, kinds: set[str], classes: list[mujoco.MjsDefault],
+                  only: set[str] | None = None) -> int:
+    """Deletes every asset of the given kinds (or, given `only`, those of them so named) with
+    everything that refers to one: the geoms drawn from a deleted mesh or height field are deleted
+    (and the contact pairs and sensors naming them), a mesh site becomes a sphere, and every other
+    reference (a material's textures, a light's texture, the material of a geom, site, tendon,
+    flex, skin or mesh) is cleared, on the elements and on every default class in `classes`. The
+    number of geoms deleted."""
     assert kinds <= set(ASSET_KINDS), kinds
+    doomed = {kind: {a.name for a in getattr(spec, _LISTS[kind]) if only is None or a.name in only}
+              for kind in kinds}
     gone: set[str] = set()
     n = 0
     for g in list(spec.geoms):
-        if ("mesh" in kinds and (g.type == mujoco.mjtGeom.mjGEOM_MESH or g.meshname)) or \
-                ("hfield" in kinds and (g.type == mujoco.mjtGeom.mjGEOM_HFIELD or g.hfieldname)):
+        if g.meshname in doomed.get("mesh", ()) or g.hfieldname in doomed.get("hfield", ()):
             if g.name:
                 gone.add(g.name)
             spec.delete(g)
             n += 1
     if gone:
         _delete_naming(spec, gone)
-    if "mesh" in kinds:
-        for s in spec.sites:
-            if s.meshname or s.type == mujoco.mjtGeom.mjGEOM_MESH:
-                s.meshname = ""
-                s.type = mujoco.mjtGeom.mjGEOM_SPHERE
-        for d in classes:
-            if d.site.type == mujoco.mjtGeom.mjGEOM_MESH:
-                d.site.type = mujoco.mjtGeom.mjGEOM_SPHERE
+    for s in spec.sites:
+        if s.meshname and s.meshname in doomed.get("mesh", ()):
+            s.meshname = ""
+            s.type = mujoco.mjtGeom.mjGEOM_SPHERE
+    for d in classes:
+        if d.site.meshname in doomed.get("mesh", ()) or (d.site.type == mujoco.mjtGeom.mjGEOM_MESH and
+                                                         "mesh" in kinds and only is None):
+            d.site.meshname = ""
+            d.site.type = mujoco.mjtGeom.mjGEOM_SPHERE
     for elist, member, attr, kind in REFERENCES:
         if kind not in kinds:
             continue
@@ -95,20 +99,22 @@ def remove_assets(spec: mujoco.MjSpec, kinds: set[str], classes: list[mujoco.Mjs
         if member is not None:
             targets += [getattr(d, member) for d in classes]
         for e in targets:
-            _clear(e, attr)
+            _clear(e, attr, doomed[kind])
     for kind in kinds:
         for a in list(getattr(spec, _LISTS[kind])):
-            spec.delete(a)
+            if a.name in doomed[kind]:
+                spec.delete(a)
     return n
 
 
-def _clear(e: object, attr: str) -> None:
+def _clear(e: object, attr: str, names: set[str]) -> None:
+    """The reference cleared when it names one of `names` (a list of them: those entries)."""
     value = getattr(e, attr)
     if isinstance(value, str):
-        if value:
+        if value and value in names:
             setattr(e, attr, "")
-    elif any(value):
-        setattr(e, attr, [""] * len(value))
+    elif any(v in names for v in value):
+        setattr(e, attr, ["" if v in names else v for v in value])
 
 
 def _delete_naming(spec: mujoco.MjSpec, geoms: set[str]) -> None:
@@ -122,7 +128,9 @@ def _delete_naming(spec: mujoco.MjSpec, geoms: set[str]) -> None:
             spec.delete(s)
 
 
-def strip_meshes(spec: mujoco.MjSpec, classes: list[mujoco.MjsDefault]) -> int:
-    """Drops every mesh geom and mesh asset, and textures and skins (their files may be missing too),
-    with every reference to them; the number of geoms dropped."""
-    return remove_assets(spec, {"mesh", "hfield", "texture", "skin"}, classes)
+def strip_meshes(spec: mujoco.MjSpec, classes: list[mujoco.MjsDefault], only: set[str] | None = None) -> int:
+    """Drops the mesh geoms and mesh assets, and textures, height fields and skins (their files may be
+    missing too), with every reference to them; given `only`, just the assets so named (those whose
+    files are missing: a body whose mass comes from a mesh that is there keeps it). The number of
+    geoms dropped."""
+    return remove_assets(spec, {"mesh", "hfield", "texture", "skin"}, classes, only)

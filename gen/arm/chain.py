@@ -37,14 +37,13 @@ def joint_kind(t: int) -> str:
 
 
 def find_chain(m0: mujoco.MjModel, af: ArmFile, path: Path) -> Chain:
-    free = [joint_name(m0, j) for j in range(m0.njnt) if m0.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
+    tree = _arm_tree(m0, af, path)
+    free = [joint_name(m0, j) for j in range(m0.njnt)
+            if m0.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE and _top(m0, int(m0.jnt_bodyid[j])) == tree]
     if free:
         raise ArmError(f"model {path}: joint '{free[0]}' is a free joint (a floating base): this controller needs "
                        "a fixed base; remove the freejoint from the model")
-    controlled = _named(m0, af, path) if af.joints is not None else default_chain(m0)
-    if not controlled:
-        raise ArmError(f"model {path}: no chain of hinge joints from the base (joints: "
-                       f"{', '.join(joint_name(m0, k) for k in range(m0.njnt)) or 'none'})")
+    controlled = _named(m0, af, path) if af.joints is not None else default_chain(m0, tree)
     for j in controlled:
         t = m0.jnt_type[j]
         if t != mujoco.mjtJoint.mjJNT_HINGE:
@@ -55,6 +54,41 @@ def find_chain(m0: mujoco.MjModel, af: ArmFile, path: Path) -> Chain:
     _check_arm_file_names(m0, chain, af, path)
     _check_loops(m0, chain, path)
     return chain
+
+
+def _top(m: mujoco.MjModel, b: int) -> int:
+    """The body's tree: its ancestor that hangs from the world."""
+    while b and int(m.body_parentid[b]) != 0:
+        b = int(m.body_parentid[b])
+    return b
+
+
+def _arm_tree(m0: mujoco.MjModel, af: ArmFile, path: Path) -> int:
+    """Which of the trees hanging from the world is the arm: the one holding the arm file's joints,
+    else the fixed one with the longest chain of hinges. The others (the objects, doors and props of
+    a scene) are not the arm: their joints are locked like a gripper's (home.lock_other_joints)."""
+    if af.joints:
+        named = _named(m0, af, path)
+        return _top(m0, int(m0.jnt_bodyid[named[0]]))
+    floating = {_top(m0, int(m0.jnt_bodyid[j])) for j in range(m0.njnt) if m0.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE}
+    chains = {}
+    for t in sorted({_top(m0, int(m0.jnt_bodyid[j])) for j in range(m0.njnt)}):
+        chains[t] = default_chain(m0, t)
+    fixed = {t: c for t, c in chains.items() if c and t not in floating}
+    if not fixed:
+        moving = [t for t, c in chains.items() if c]
+        if moving:
+            return max(moving, key=lambda t: len(chains[t]))  # a floating arm: find_chain names its free joint
+        raise ArmError(f"model {path}: no chain of hinge joints from the base (joints: "
+                       f"{', '.join(joint_name(m0, k) for k in range(m0.njnt)) or 'none'})")
+    longest = max(len(c) for c in fixed.values())
+    best = [t for t, c in fixed.items() if len(c) == longest]
+    if len(best) > 1:
+        arms = "; ".join(f"'{mujoco.mj_id2name(m0, mujoco.mjtObj.mjOBJ_BODY, t)}' ({', '.join(joint_name(m0, j) for j in fixed[t])})"
+                         for t in best)
+        raise ArmError(f"model {path}: {len(best)} arms of {longest} joints hang from the world ({arms}): name the "
+                       "joints of the one to run in an arm file (joints = [...]); the other is held still")
+    return best[0]
 
 
 def _named(m0: mujoco.MjModel, af: ArmFile, path: Path) -> list[int]:
@@ -68,9 +102,10 @@ def _named(m0: mujoco.MjModel, af: ArmFile, path: Path) -> list[int]:
     return out
 
 
-def default_chain(m: mujoco.MjModel) -> list[int]:
-    """Hinge joints of the main serial chain: from the base, follow the hinges while the rest of
-    the tree below holds hinges in one branch only; a branch point (a hand with fingers) ends it."""
+def default_chain(m: mujoco.MjModel, root: int = 0) -> list[int]:
+    """Hinge joints of the main serial chain below `root` (the world, or one tree's top body): from
+    it, follow the hinges while the rest of the tree below holds hinges in one branch only; a branch
+    point (a hand with fingers) ends it."""
     hinge_bodies = {int(m.jnt_bodyid[j]): j for j in range(m.njnt) if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE}
     children: dict[int, list[int]] = {}
     for b in range(1, m.nbody):
@@ -81,8 +116,8 @@ def default_chain(m: mujoco.MjModel) -> list[int]:
         if has_hinge[b]:
             has_hinge[int(m.body_parentid[b])] = True
 
-    chain: list[int] = []
-    b = 0
+    chain: list[int] = [hinge_bodies[root]] if root in hinge_bodies else []
+    b = root
     while True:
         nxt = [c for c in children.get(b, []) if has_hinge[c]]
         if len(nxt) != 1:
@@ -154,14 +189,18 @@ def _check_arm_file_names(m0: mujoco.MjModel, chain: Chain, af: ArmFile, path: P
 
 
 def _check_loops(m0: mujoco.MjModel, chain: Chain, path: Path) -> None:
-    """Closed chains: equality constraints between bodies of the arm, or coupling controlled joints."""
+    """Closed chains: an equality constraint that couples controlled joints, or that connects or welds
+    a link of the arm to anything but a mocap body (a handle to drag the arm by, dropped with the
+    model's other equalities)."""
     for e in range(m0.neq):
         et = int(m0.eq_type[e])
         objs = (int(m0.eq_obj1id[e]), int(m0.eq_obj2id[e]))
         if et == int(mujoco.mjtEq.mjEQ_JOINT) and any(o in chain.joints for o in objs):
             raise ArmError(f"model {path}: equality constraint {e} couples controlled joint(s): a closed or coupled "
                            "chain the firmware's serial-chain model cannot represent")
-        if et in (int(mujoco.mjtEq.mjEQ_CONNECT), int(mujoco.mjtEq.mjEQ_WELD)) and \
-                any(o in chain.bodies or o == 0 for o in objs):
-            raise ArmError(f"model {path}: equality constraint {e} closes a loop through the arm (connect/weld): "
-                           "closed chains are not supported")
+        if et in (int(mujoco.mjtEq.mjEQ_CONNECT), int(mujoco.mjtEq.mjEQ_WELD)):
+            if int(m0.eq_objtype[e]) == int(mujoco.mjtObj.mjOBJ_SITE):
+                objs = tuple(int(m0.site_bodyid[o]) if o >= 0 else 0 for o in objs)
+            if any(o in chain.bodies for o in objs) and not any(o > 0 and m0.body_mocapid[o] >= 0 for o in objs):
+                raise ArmError(f"model {path}: equality constraint {e} closes a loop through the arm (connect/weld): "
+                               "closed chains are not supported")

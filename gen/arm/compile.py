@@ -4,6 +4,7 @@ a file that is there but that MuJoCo refuses is named with MuJoCo's reason."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import mujoco
@@ -27,35 +28,86 @@ def compile_spec(spec: mujoco.MjSpec, path: Path, what: str) -> mujoco.MjModel:
 
 
 def compile_model(spec: mujoco.MjSpec, path: Path, contacts: bool) -> tuple[mujoco.MjModel, list[str]]:
-    """The compiled model and the warnings of what was dropped to compile it. Every body is named
-    (the later stages find bodies by name)."""
+    """The compiled model and the warnings of what was changed to compile it: asset files that are
+    not there dropped, inertias that break the triangle inequality (A + B >= C: rounding in a
+    vendor's file) balanced. Every body and joint is named (the later stages find them by name)."""
     warnings: list[str] = []
-    try:
-        spec.compile()
-    except Exception as exc:  # noqa: BLE001
-        msg = joined_lines(str(exc))
-        if "file" not in msg.lower() and "mesh" not in msg.lower():
-            raise ArmError(f"model {path}: MuJoCo cannot compile it: {msg}") from exc
-        missing = missing_asset_files(spec, path)
-        if not missing:  # the files are there: MuJoCo refuses one of them, and says which and why
-            raise ArmError(f"model {path}: an asset MuJoCo cannot take (over its limits, or malformed): {msg}") from exc
-        if contacts:
-            raise ArmError(f"model {path}: {msg}; contacts = true needs the collision meshes") from exc
-        n = strip_meshes(spec, default_classes(spec, path))
-        warnings.append(f"mesh files not found ({msg[:120]}): {n} mesh geoms dropped; the dynamics "
-                        "come from the bodies' inertials")
-    for i, b in enumerate(spec.bodies):
-        if i > 0 and not b.name:
-            b.name = f"body{i}"
+    stripped = False
+    while True:
+        try:
+            spec.compile()
+            break
+        except Exception as exc:  # noqa: BLE001 - MuJoCo's compiler raises ValueError with its message
+            msg = joined_lines(str(exc))
+            if "A + B >= C" in msg and not spec.compiler.balanceinertia:
+                spec.compiler.balanceinertia = True
+                warnings.append(f"inertia of body '{_element(msg)}' (and any other) breaks the triangle inequality "
+                                "A + B >= C: balanced (MuJoCo's balanceinertia); check the link's inertia")
+                continue
+            if stripped or _physics(msg) or ("file" not in msg.lower() and "mesh" not in msg.lower()):
+                raise _refusal(msg, path) from exc
+            missing = missing_asset_files(spec, path)
+            if not missing:  # the files are there: MuJoCo refuses one, and says why
+                raise ArmError(f"model {path}: an asset MuJoCo cannot take (over its limits, or malformed): "
+                               f"{msg}") from exc
+            if contacts:
+                raise ArmError(f"model {path}: {msg}; contacts = true needs the collision meshes") from exc
+            n = strip_meshes(spec, default_classes(spec, path), set(missing))
+            stripped = True
+            warnings.insert(0, f"mesh files not found ({msg[:120]}): {n} mesh geoms dropped; the dynamics "
+                               "come from the bodies' inertials")
+    _name_everything(spec)
     m0 = compile_spec(spec, path, "compiling it")
     check_depth(m0, path)
     return m0, warnings
 
 
+def _element(msg: str) -> str:
+    found = re.search(r"Element name '([^']*)'", msg)
+    return found.group(1) if found else "?"
+
+
+def _physics(msg: str) -> bool:
+    return "mass and inertia of moving bodies" in msg or "positive eigenvalues" in msg or "positive definite" in msg
+
+
+def _refusal(msg: str, path: Path) -> ArmError:
+    """MuJoCo's reason, said as what is wrong with which body when it is about the physics."""
+    if "mass and inertia of moving bodies" in msg:
+        return ArmError(f"model {path}: body '{_element(msg)}' moves but has no mass and inertia (a URDF link "
+                        "without <inertial>, or an MJCF body with neither an <inertial> nor geoms): give it its "
+                        "mass and inertia")
+    if "positive eigenvalues" in msg or "positive definite" in msg:
+        return ArmError(f"model {path}: body '{_element(msg)}': its inertia matrix is not positive definite, no "
+                        f"physical body has it ({msg}): give the link its real inertia")
+    return ArmError(f"model {path}: MuJoCo cannot compile it: {msg}")
+
+
+def _name_everything(spec: mujoco.MjSpec) -> None:
+    for kind, items in (("body", spec.bodies), ("joint", spec.joints)):
+        taken = {x.name for x in items if x.name}
+        for i, x in enumerate(items):
+            if (kind == "joint" or i > 0) and not x.name:
+                name = f"{kind}{i}"
+                while name in taken:
+                    name += "_"
+                x.name = name
+                taken.add(name)
+
+
 def missing_asset_files(spec: mujoco.MjSpec, path: Path) -> list[str]:
+    """The names of the meshes, textures, height fields and skins whose files are not there (MuJoCo
+    looks in meshdir or texturedir, else assetdir, beside the model; a URDF's package:// path and any
+    folder are stripped to the file's name when strippath is on, as for URDF by default)."""
     out = []
-    for assets, sub in ((spec.meshes, spec.meshdir), (spec.textures, spec.texturedir), (spec.hfields, "")):
+    for assets, sub in ((spec.meshes, spec.meshdir), (spec.textures, spec.texturedir), (spec.hfields, ""),
+                        (spec.skins, "")):
         for a in assets:
-            if a.file and not (path.parent / (sub or "") / a.file).is_file():
-                out.append(a.file)
+            if a.file and not _asset_file(path, sub, a.file, spec.strippath).is_file():
+                out.append(a.name or a.file)
     return out
+
+
+def _asset_file(path: Path, sub: str, file: str, strip: bool) -> Path:
+    name = Path(file.replace("package://", "")).name if strip else file
+    return Path(file) if Path(file).is_absolute() and not strip else path.parent / (sub or "") / name

@@ -59,7 +59,7 @@ def home_pose(m0: mujoco.MjModel, chain: Chain, af: ArmFile, path: Path, warning
         warnings.append(f"home pose: {source}")
     for name, h, r in zip(names, home, ranges):
         if r and not (r[0] + RANGE_MARGIN <= h <= r[1] - RANGE_MARGIN):
-            raise ArmError(f"home pose ({source}): joint '{name}' at {h:g} rad is not inside its range "
+            raise ArmError(f"model {path}: home pose ({source}): joint '{name}' at {h:g} rad is not inside its range "
                            f"[{r[0]:g}, {r[1]:g}] by {RANGE_MARGIN} rad")
     return Pose(home, source, ranges, np.array(qpos_key, dtype=float))
 
@@ -67,41 +67,54 @@ def home_pose(m0: mujoco.MjModel, chain: Chain, af: ArmFile, path: Path, warning
 def lock_other_joints(spec: mujoco.MjSpec, m0: mujoco.MjModel, chain: Chain, pose: Pose, af: ArmFile,
                       path: Path, warnings: list[str]) -> list[dict[str, Any]]:
     """Each joint that is not controlled deleted from the spec, its body moved to where the joint's
-    locked value puts it; the locked joints and their values."""
+    locked value puts it (a hinge or slide: the arm file's value, else the keyframe's; a ball or
+    free joint, of a wrist or of an object in the scene: the keyframe's); the locked joints and
+    their values."""
     locked: list[dict[str, Any]] = []
+    frames: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # a body's pose after the joints locked so far
     for j in range(m0.njnt):
         if j in chain.joints:
             continue
         name = joint_name(m0, j)
         adr = int(m0.jnt_qposadr[j])
         t = m0.jnt_type[j]
-        if t == mujoco.mjtJoint.mjJNT_BALL:
-            raise ArmError(f"model {path}: joint '{name}' is a ball joint off the chain: lock it in the model "
-                           "(the arm file locks hinge and slide joints)")
-        v = af.locked.get(name, float(pose.qpos_key[adr]))
-        spec_joint = spec.joint(name) if mujoco.mj_id2name(m0, mujoco.mjtObj.mjOBJ_JOINT, j) else None
-        if spec_joint is None:
-            raise ArmError(f"model {path}: joint {j} off the chain has no name: name it, or control it")
+        spec_joint = spec.joint(name)
         b = int(m0.jnt_bodyid[j])
         body = spec.body(mujoco.mj_id2name(m0, mujoco.mjtObj.mjOBJ_BODY, b))
-        q0 = m0.body_quat[b].copy()
-        p0 = m0.body_pos[b].copy()
+        p0, q0 = frames.get(b, (m0.body_pos[b].copy(), m0.body_quat[b].copy()))  # joints of a body act in turn
         axis = m0.jnt_axis[j].copy()
-        delta = v - float(m0.qpos0[adr])  # the body's frame in the model is the one at qpos0 (= ref)
-        if t == mujoco.mjtJoint.mjJNT_HINGE:
+        if t == mujoco.mjtJoint.mjJNT_FREE:  # an object of the scene: held where the keyframe puts it
+            v = [float(x) for x in pose.qpos_key[adr:adr + 7]]
+            body.pos = v[:3]
+            body.quat = np.asarray(v[3:]) / (np.linalg.norm(v[3:]) or 1.0)
+        elif t == mujoco.mjtJoint.mjJNT_BALL:  # its rotation about the joint's centre, as for a hinge
+            v = [float(x) for x in pose.qpos_key[adr:adr + 4]]
+            r = np.asarray(v) / (np.linalg.norm(v) or 1.0)
+            c = m0.jnt_pos[j].copy()
+            body.pos = p0 + _rotate(q0, c - _rotate(r, c))
+            body.quat = _quat_mul(q0, r)
+        elif t == mujoco.mjtJoint.mjJNT_HINGE:
+            v = af.locked.get(name, float(pose.qpos_key[adr]))
+            delta = v - float(m0.qpos0[adr])  # the body's frame in the model is the one at qpos0 (= ref)
             c = m0.jnt_pos[j].copy()
             r = _axis_quat(axis, delta)
             body.pos = p0 + _rotate(q0, c - _rotate(r, c))
             body.quat = _quat_mul(q0, r)
         else:
-            body.pos = p0 + _rotate(q0, axis * delta)
+            v = af.locked.get(name, float(pose.qpos_key[adr]))
+            body.pos = p0 + _rotate(q0, axis * (v - float(m0.qpos0[adr])))
             body.quat = q0
         body.alt.type = mujoco.mjtOrientation.mjORIENTATION_QUAT
+        frames[b] = (np.array(body.pos, dtype=float), np.array(body.quat, dtype=float))
         spec.delete(spec_joint)
         locked.append({"name": name, "value": v})
     if locked:
-        warnings.append("locked (not controlled): " + ", ".join(f"{x['name']} at {x['value']:g}" for x in locked))
+        warnings.append("locked (not controlled): " + ", ".join(f"{x['name']} at {_value(x['value'])}" for x in locked))
     return locked
+
+
+def _value(v: float | list[float]) -> str:
+    return f"{v:g}" if isinstance(v, float) else "(" + " ".join(f"{x:g}" for x in v) + ")"
 
 
 def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -19,6 +19,7 @@ from gen.arm.assets import ASSET_KINDS, remove_assets
 from gen.arm.chain import Chain
 from gen.arm.compile import compile_spec
 from gen.arm.errors import ArmError, float32
+from gen.lib.one_line import joined_lines
 
 MIN_JOINT_INERTIA = 1e-7   # kg m^2: a joint that moves less than this cannot be controlled
 LIGHT_LINK_KG = 1e-6       # a link lighter than this (its children may still be heavy): a warning
@@ -94,7 +95,7 @@ def write(spec: mujoco.MjSpec, dyn: Dynamics, chain: Chain, home: list[float], l
     try:
         m = mujoco.MjModel.from_xml_string(xml)
     except Exception as exc:  # noqa: BLE001
-        raise ArmError(f"model {path}: the prepared model does not load back: {exc}") from exc
+        raise ArmError(f"model {path}: the prepared model does not load back: {joined_lines(str(exc))}") from exc
     if m.nq != n or m.nv != n or m.nu != n or m1.nbody != m.nbody:
         raise ArmError(f"model {path}: the prepared model has nq={m.nq}, nv={m.nv}, nu={m.nu} for {n} joints")
     written_error = inverse_dynamics_difference(m1, m)
