@@ -19,7 +19,7 @@ COMMAND_MODULES = {
     "timing": "tools.bench.timing", "hil": "tools.commands.hil", "demo": "tools.commands.demo",
     "test": "tools.commands.test", "synth": "tools.commands.synth", "vcan": "tools.vcan",
     "busload": "tools.busload", "study": "tools.study", "tune": "tools.study", "faults": "tools.bench.faults",
-    "fuzz": "tools.bench.fuzz", "bench": "tools.bench",
+    "fuzz": "tools.bench.fuzz", "bench": "tools.bench", "arms": "tools.commands.arms",
 }
 
 

@@ -11,9 +11,49 @@ from pathlib import Path
 from gen.arm.arm_file import load_arm_file
 from gen.arm.design import DEFAULT_DESIGN
 from gen.arm.errors import ArmError
-from gen.arm.prepare import prepare
+from gen.arm.prepare import Prepared, prepare
 from gen.arm.wiring import DEFAULT_TOPOLOGY
 from gen.lib.atomic_output import OutputError, write_files_atomically
+
+
+FILES = ("arm.xml", "arm.json", "design.toml")
+KEY_FILE = ".inputs.sha256"  # beside the three files: what they were prepared from
+
+
+def inputs_key(model: Path | None, arm_file: Path | None, design: Path | None) -> str:
+    """A digest of everything the prepared files come from: the model, the arm file and the design
+    config (their bytes), and the importer itself (gen/arm and the registry files it reads). A build
+    folder whose files carry the key of the same inputs is not prepared again (tools/build/arm.py
+    seeds it with the preparation its check before the build already made)."""
+    import hashlib
+
+    from gen.lib.paths import REPO
+
+    h = hashlib.sha256()
+    for label, p in (("model", model), ("arm", arm_file), ("design", design)):
+        h.update(f"{label}={p}\0".encode())
+        if p is not None and p.is_file():
+            h.update(p.read_bytes())
+    for src in sorted((REPO / "gen" / "arm").glob("*.py")) + [REPO / "firmware" / "params" / "params.toml",
+                                                               REPO / "firmware" / "protocol" / "buses.toml",
+                                                               REPO / "firmware" / "protocol" / "arm_drives.dbc"]:
+        h.update(src.read_bytes())
+    return h.hexdigest()
+
+
+def write_prepared(out: Path, prep: Prepared, key: str) -> None:
+    write_files_atomically(out, {"arm.xml": prep.xml, "arm.json": json.dumps(prep.info, indent=1) + "\n",
+                                 "design.toml": prep.design_text, KEY_FILE: key + "\n"})
+
+
+def already_prepared(out: Path, key: str) -> dict | None:
+    """arm.json of a folder prepared from these very inputs, else None."""
+    try:
+        if (out / KEY_FILE).read_text().strip() != key or not all((out / f).is_file() for f in FILES):
+            return None
+        return json.loads((out / "arm.json").read_text())
+    except (OSError, ValueError):
+        return None
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -33,16 +73,19 @@ def main(argv: list[str] | None = None) -> int:
         if ns.arm_file is not None and ns.model is not None:
             raise ArmError("--model and --arm-file: give one (the arm file names its model)")
         af = load_arm_file(ns.arm_file.resolve() if ns.arm_file else None, ns.model)
-        prep = prepare(af, ns.design)
+        key = inputs_key(af.model.resolve(), af.path, ns.design.resolve() if ns.design else None)
+        info = already_prepared(ns.out, key)
+        prep = None if info is not None else prepare(af, ns.design)
     except ArmError as exc:
         print(f"gen.arm: {exc}", file=sys.stderr)
         return 2
-    files = {"arm.xml": prep.xml, "arm.json": json.dumps(prep.info, indent=1) + "\n", "design.toml": prep.design_text}
-    try:
-        write_files_atomically(ns.out, files)
-    except OutputError as exc:
-        print(f"gen.arm: {exc}", file=sys.stderr)
-        return 1
+    if prep is not None:
+        try:
+            write_prepared(ns.out, prep, key)
+        except OutputError as exc:
+            print(f"gen.arm: {exc}", file=sys.stderr)
+            return 1
+        info = prep.info
     if ns.depfile is not None:
         deps = [str(af.model.resolve()), str((af.design or ns.design or DEFAULT_DESIGN).resolve())]
         if af.path:
@@ -54,6 +97,6 @@ def main(argv: list[str] | None = None) -> int:
         deps += [str(DEFAULT_DBC), str(DEFAULT_TOPOLOGY)]  # the drive slots; the six-drive wiring
         target = ns.out / "arm.xml"
         ns.depfile.write_text(f"{target}: " + " ".join(d.replace(" ", "\\ ") for d in deps) + "\n")
-    for w in prep.info["warnings"]:
-        print(f"gen.arm: {prep.info['name']}: {w}", file=sys.stderr)
+    for w in info["warnings"]:
+        print(f"gen.arm: {info['name']}: {w}", file=sys.stderr)
     return 0

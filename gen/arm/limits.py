@@ -70,10 +70,12 @@ def model_limit(m: mujoco.MjModel, j: int, override: float | None) -> tuple[floa
     return min(cands)
 
 
-def holding_torque(m: mujoco.MjModel, q: np.ndarray) -> np.ndarray:
+def holding_torque(m: mujoco.MjModel, q: np.ndarray, d: mujoco.MjData | None = None) -> np.ndarray:
     """What each joint must give to hold the arm still at q: gravity and springs (mj_inverse at rest,
     constraints off)."""
-    d = mujoco.MjData(m)
+    d = d or mujoco.MjData(m)
+    d.qvel[:] = 0.0
+    d.qacc[:] = 0.0
     flags = m.opt.disableflags
     m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
     try:
@@ -91,9 +93,10 @@ def arm_needs(m: mujoco.MjModel, pose: Pose) -> np.ndarray:
     rng = np.random.default_rng(0)
     lo = np.array([r[0] if r else -math.pi for r in pose.ranges])
     hi = np.array([r[1] if r else math.pi for r in pose.ranges])
-    worst = np.abs(holding_torque(m, np.asarray(pose.home, float)))
+    d = mujoco.MjData(m)
+    worst = np.abs(holding_torque(m, np.asarray(pose.home, float), d))
     for _ in range(GRAVITY_SAMPLES):
-        worst = np.maximum(worst, np.abs(holding_torque(m, rng.uniform(lo, hi))))
+        worst = np.maximum(worst, np.abs(holding_torque(m, rng.uniform(lo, hi), d)))
     ref = default_reference(pose.home, pose.ranges)
     worst = np.maximum(worst, reference_torque(m, pose.home, ref["amp"], ref["freq_hz"]))
     return worst

@@ -104,15 +104,39 @@ def arm_from_args(ns: argparse.Namespace) -> ArmRef:
     return ref
 
 
+_PREPARED: dict[ArmRef, Any] = {}  # this process's check of an arm: the build takes it (seed_prepared)
+
+
 def _check_importable(arm: ArmRef) -> None:
     """The importer's verdict before anything builds: its error (named element, what to change)
     instead of a failed build step, and no build folder for an arm that cannot be used."""
-    from gen.arm import DEFAULT_DESIGN, ArmError, load_arm_file, prepare
+    from gen.arm import ArmError, load_arm_file, prepare
 
     try:
-        prepare(load_arm_file(arm.arm_file, None if arm.arm_file else arm.model), arm.design)
+        _PREPARED[arm] = prepare(load_arm_file(arm.arm_file, None if arm.arm_file else arm.model), arm.design)
     except ArmError as exc:
         raise ArmChoiceError(str(exc)) from exc
+
+
+def seed_prepared(bdir: Path, arm: ArmRef) -> None:
+    """The prepared arm this process made when it checked the arm, written where the build's gen.arm
+    step writes it, with the key of its inputs: that step then finds it done instead of preparing the
+    arm a second time (a second or more of a first build)."""
+    prep = _PREPARED.get(arm)
+    if prep is None:
+        return
+    from gen.arm.cli import already_prepared, inputs_key, write_prepared
+
+    out = bdir / "generated" / "arm"
+    key = inputs_key(prep_model(arm), arm.arm_file, arm.design)
+    if already_prepared(out, key) is None:
+        write_prepared(out, prep, key)
+
+
+def prep_model(arm: ArmRef) -> Path:
+    from gen.arm import load_arm_file
+
+    return load_arm_file(arm.arm_file, None if arm.arm_file else arm.model).model.resolve()
 
 
 def arm_build_dir(preset: str, arm: ArmRef = DEFAULT_ARM) -> Path:
@@ -132,6 +156,8 @@ def build_arm(preset: str, arm: ArmRef = DEFAULT_ARM, quiet: bool = True, target
     """Configure (when needed) and build the preset for the arm (only `targets`, if given); its
     build folder."""
     bdir = arm_build_dir(preset, arm)
+    if not arm.is_default:
+        seed_prepared(bdir, arm)
     build(preset, quiet=quiet, bdir=None if arm.is_default else bdir, cache=None if arm.is_default else arm.cache(),
           targets=targets)
     return bdir
