@@ -4,6 +4,7 @@ its body fixed where the joint held it."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -25,7 +26,10 @@ class Pose:
     qpos_key: np.ndarray                 # the keyframe's qpos (else qpos0): the locked joints' values
 
 
-def home_pose(m0: mujoco.MjModel, chain: Chain, af: ArmFile, path: Path, warnings: list[str]) -> Pose:
+def home_pose(m0: mujoco.MjModel, chain: Chain, af: ArmFile, path: Path, warnings: list[str],
+              spec_degrees: bool = False) -> Pose:
+    """spec_degrees: the file gives its angles in degrees (MuJoCo's default for MJCF), for the hint
+    when a range is too narrow to move in."""
     key = -1
     if af.keyframe is not None:
         key = mujoco.mj_name2id(m0, mujoco.mjtObj.mjOBJ_KEY, af.keyframe)
@@ -58,6 +62,10 @@ def home_pose(m0: mujoco.MjModel, chain: Chain, af: ArmFile, path: Path, warning
         source = "mid-range (no keyframe 'home' in the model, none in the arm file)"
         warnings.append(f"home pose: {source}")
     for name, h, r in zip(names, home, ranges):
+        if r and r[1] - r[0] < 2 * RANGE_MARGIN:
+            raise ArmError(f"model {path}: joint '{name}': its range [{r[0]:.4g}, {r[1]:.4g}] rad "
+                           f"({math.degrees(r[1] - r[0]):.2g} deg) leaves it no room to move {RANGE_MARGIN} rad inside "
+                           f"it{_degrees_hint(spec_degrees)}; give its real range, or hold it (arm file: locked)")
         if r and not (r[0] + RANGE_MARGIN <= h <= r[1] - RANGE_MARGIN):
             raise ArmError(f"model {path}: home pose ({source}): joint '{name}' at {h:g} rad is not inside its range "
                            f"[{r[0]:g}, {r[1]:g}] by {RANGE_MARGIN} rad")
@@ -111,6 +119,11 @@ def lock_other_joints(spec: mujoco.MjSpec, m0: mujoco.MjModel, chain: Chain, pos
     if locked:
         warnings.append("locked (not controlled): " + ", ".join(f"{x['name']} at {_value(x['value'])}" for x in locked))
     return locked
+
+
+def _degrees_hint(degrees: bool) -> str:
+    return (" (the file gives angles in degrees, MuJoCo's default without <compiler angle=\"radian\"/>: "
+            "were its ranges meant as radians?)") if degrees else ""
 
 
 def _value(v: float | list[float]) -> str:

@@ -43,7 +43,7 @@ def prepare(af: ArmFile, design: Path | None = None) -> Prepared:
     m0, dropped = compile_model(spec, path, af.contacts)
     warnings += dropped
     chain = find_chain(m0, af, path)
-    pose = home_pose(m0, chain, af, path, warnings)
+    pose = home_pose(m0, chain, af, path, warnings, spec_degrees=path.suffix.lower() != ".urdf" and spec.compiler.degree)
     locked = lock_other_joints(spec, m0, chain, pose, af, path, warnings)
     dyn = dynamics_only(spec, m0, af, path, cfg.rate, classes, warnings)
     limits = torque_limits(m0, dyn.model, chain, pose, af, path, warnings)
