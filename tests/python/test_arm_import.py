@@ -279,7 +279,8 @@ def test_cli_writes_the_three_files_and_a_depfile(tmp_path: Path) -> None:
     out = tmp_path / "out"
     dep = tmp_path / "arm.d"
     assert gen_arm.main(["--model", str(UR5E), "--out", str(out), "--depfile", str(dep)]) == 0
-    assert sorted(x.name for x in out.iterdir()) == ["arm.json", "arm.xml", "design.toml"]
+    # the three files, and the key of what they were prepared from (gen/arm/cli.py inputs_key)
+    assert sorted(x.name for x in out.iterdir()) == [".inputs.sha256", "arm.json", "arm.xml", "design.toml"]
     info = json.loads((out / "arm.json").read_text())
     assert info["model_hash"] == f"{gen_arm.fnv1a64((out / 'arm.xml').read_bytes()):016x}"
     assert str(UR5E.resolve()) in dep.read_text() and str(DESIGN.resolve()) in dep.read_text()
@@ -377,3 +378,19 @@ def test_a_joint_without_a_torque_limit_gets_one_sized_from_the_arm_with_a_warni
     w = [x for x in p.info["warnings"] if x.startswith("torque limits assumed")]
     assert len(w) == 1 and "j0" in w[0] and "torque_limits" in w[0]
     assert max(p.info["reference"]["peak_torque_fraction"]) <= 0.5 + 1e-6
+
+
+def test_a_folder_prepared_from_the_same_inputs_is_not_prepared_again(tmp_path: Path, monkeypatch) -> None:
+    """The build's gen.arm step finds the preparation the check before the build made (tools/build/arm.py
+    seed_prepared): same inputs, nothing prepared; another model, prepared again."""
+    from gen.arm import cli
+
+    model = write(tmp_path, chain_mjcf())
+    out = tmp_path / "out"
+    assert gen_arm.main(["--model", str(model), "--out", str(out)]) == 0
+    calls = []
+    monkeypatch.setattr(cli, "prepare", lambda *a: calls.append(a) or prepare(*a))
+    assert gen_arm.main(["--model", str(model), "--out", str(out)]) == 0 and calls == []
+    model.write_text(chain_mjcf(n=4))
+    assert gen_arm.main(["--model", str(model), "--out", str(out)]) == 0 and len(calls) == 1
+    assert json.loads((out / "arm.json").read_text())["n_joints"] == 4
