@@ -362,6 +362,9 @@ def run_one(c: Candidate, model: Path, out: Path, bound_deg: float) -> dict[str,
         res = json.loads(run_json.read_text())["results"]
     except (OSError, ValueError, KeyError):
         return row | {"result": "failed", "reason": (r.stderr.strip().splitlines() or ["no output"])[-1][:300]}
+    if res.get("tracking_max_abs_deg") is None:  # the run ended before the trajectory: no error to give
+        return row | {"result": res.get("result", "failed"),
+                      "reason": "; ".join(res.get("verdict_reasons") or [])[:300] or "no result"}
     row.update(result=res["result"], max_error_deg=round(max(res["tracking_max_abs_deg"]), 4),
                n_joints=res["arm"]["n_joints"], reason="; ".join(res.get("verdict_reasons") or []) or None,
                design=res["arm"].get("design", {}).get("config") if isinstance(res["arm"].get("design"), dict)

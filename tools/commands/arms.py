@@ -26,6 +26,8 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--sets", default=None, metavar="A,B", help="only these sets (tools/bench/model_sets.toml) [all]")
     p.add_argument("--match", default=None, metavar="TEXT", help="only the arms whose id contains TEXT")
     p.add_argument("--list", action="store_true", help="list the arms found, run nothing")
+    p.add_argument("--missing", action="store_true",
+                   help="run only the arms the results file has no row for (a run that was stopped goes on)")
     p.add_argument("--out", type=Path, default=None, help="the results file [runs/bench/arms.json]")
     p.add_argument("--page", type=Path, default=None, help="the page to render [docs/arm-compatibility.md]")
     p.set_defaults(run=run)
@@ -64,12 +66,14 @@ def run(ns: argparse.Namespace) -> int:
         set_rows[ms.name] = {"name": ms.name, "requirement": ms.requirement, "licence": ms.licence,
                              "files": nfiles, "arms": len(cands), "not_arms": skipped}
         found += [(ms, folder, c) for c in cands if ns.match is None or ns.match in c.id]
-        for rid in [r for r, row in rows.items() if row["set"] == ms.name and ns.match is None]:
+        for rid in [r for r, row in rows.items() if row["set"] == ms.name and ns.match is None and not ns.missing]:
             del rows[rid]  # the set is run again: an arm it no longer holds goes
     if ns.list:
         for _, _, c in found:
             print(f"{c.id}  {len(c.joints)} joints" + ("  (arm file)" if c.arm_file else ""))
         return 0
+    if ns.missing:
+        found = [(ms, folder, c) for ms, folder, c in found if c.id not in rows]
     bound = arms.bound()
     bar = tqdm(found, desc="armctl arms", unit="arm", file=sys.stderr)
     for ms, folder, c in bar:
