@@ -278,7 +278,7 @@ def kernel_source(model: RobotModel, model_hash: int) -> tuple[str, str]:
 @exit_on_output_error("gen.rnea_kernel")
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m gen.rnea_kernel", description=__doc__.splitlines()[0])
-    p.add_argument("--mjcf", type=Path, required=True, help="the prepared arm (gen/arm.py)")
+    p.add_argument("--mjcf", type=Path, required=True, help="the prepared arm (gen/arm)")
     p.add_argument("--out", type=Path, required=True)
     ns = p.parse_args(argv)
     try:

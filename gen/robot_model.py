@@ -1,4 +1,4 @@
-"""Extract the nominal rigid-body model of the arm from its prepared MJCF (gen/arm.py) and emit it
+"""Extract the nominal rigid-body model of the arm from its prepared MJCF (gen/arm) and emit it
 as C headers.
 
 The firmware's recursive Newton-Euler needs, per joint: the fixed transform from the parent link,
@@ -19,7 +19,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from gen.arm import fnv1a64
+from gen.lib.model_hash import fnv1a64
 from gen.lib.atomic_output import exit_on_output_error, write_files_atomically
 
 REPO = Path(__file__).resolve().parent.parent
@@ -51,7 +51,7 @@ class Link:
 class RobotModel:
     links: list[Link]
     gravity: np.ndarray
-    home: np.ndarray | None = None  # the keyframe "home" gen/arm.py writes (else qpos0), rad
+    home: np.ndarray | None = None  # the keyframe "home" gen/arm writes (else qpos0), rad
 
 
 def _quat_to_mat(q: np.ndarray) -> np.ndarray:
@@ -63,20 +63,20 @@ def _quat_to_mat(q: np.ndarray) -> np.ndarray:
 def nominal_for_inverse(m: mujoco.MjModel) -> mujoco.MjModel:
     """The firmware's nominal model as MuJoCo sees it: rigid bodies, armature and joint damping; no
     constraints (joint limits, frictionloss, contacts) and no springs, which the firmware leaves to
-    the estimator (gen/arm.py says which). mj_inverse on it is the RNEA's oracle."""
+    the estimator (gen/arm says which). mj_inverse on it is the RNEA's oracle."""
     m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT) | int(mujoco.mjtDisableBit.mjDSBL_SPRING)
     return m
 
 
 def extract(mjcf: Path, mass_scale: float = 1.0, inertia_scale: float = 1.0) -> RobotModel:
-    """The serial chain of a prepared arm model (gen/arm.py: one hinge per body, fused, one motor per
+    """The serial chain of a prepared arm model (gen/arm: one hinge per body, fused, one motor per
     joint); the scales give a nominal model deliberately off from the truth. Each link frame sits
     at its joint's point with its body's orientation."""
     if mass_scale <= 0 or inertia_scale <= 0:
         raise ModelError(f"mass_scale and inertia_scale must be > 0, got {mass_scale}, {inertia_scale}")
     m = mujoco.MjModel.from_xml_path(str(mjcf))
     if m.nv != m.njnt or m.nq != m.njnt or m.nu != m.njnt:
-        raise ModelError(f"{mjcf}: expected a prepared arm (gen/arm.py): only hinge joints, one motor each "
+        raise ModelError(f"{mjcf}: expected a prepared arm (gen/arm): only hinge joints, one motor each "
                          f"(nq == nv == nu == njnt), got nq={m.nq} nv={m.nv} nu={m.nu} njnt={m.njnt}")
     links: list[Link] = []
     for j in range(m.njnt):
@@ -88,7 +88,7 @@ def extract(mjcf: Path, mass_scale: float = 1.0, inertia_scale: float = 1.0) -> 
         expected_parent = 0 if j == 0 else int(m.jnt_bodyid[j - 1])
         if parent != expected_parent or m.body_jntnum[b] != 1:
             raise ModelError(f"{mjcf}: joint '{name}' breaks the serial chain (one hinge per body, in order): "
-                             "prepare the model with gen/arm.py")
+                             "prepare the model with gen/arm")
         a = int(np.flatnonzero((m.actuator_trntype == mujoco.mjtTrn.mjTRN_JOINT) & (m.actuator_trnid[:, 0] == j))[0]) \
             if m.nu else -1
         limit = float(m.actuator_ctrlrange[a][1]) if a >= 0 and m.actuator_ctrllimited[a] else 0.0
@@ -176,7 +176,7 @@ def model_header(model: RobotModel, source: str, model_hash: int = 0) -> str:
         " * (SIM_IDENTITY), and a controller built for another arm refuses to start. */\n"
         f"#define ARM_MODEL_HASH64 0x{model_hash:016x}ull\n\n"
         f"static const char *const ARM_JOINT_NAMES[ARM_N_JOINTS] = {{{names}}};\n"
-        "/* The arm's home pose (its model's keyframe \"home\", gen/arm.py), rad: where tests and the\n"
+        "/* The arm's home pose (its model's keyframe \"home\", gen/arm), rad: where tests and the\n"
         " * MCU's closed-loop check start. Not part of ARM_ROBOT_MODEL_HASH (the dynamics). */\n"
         f"static const float ARM_HOME_Q[ARM_N_JOINTS] = {_vec(home)};\n\n"
         "static const arm_robot_model_t ARM_ROBOT_MODEL = {\n"

@@ -1,5 +1,5 @@
 """The tracking bound a run must meet to be `ok`, which the default design of an arm is also chosen
-for: one definition for gen (gen/arm.py's design choice) and tools (tools/run/verdict.py)."""
+for: one definition for gen (gen/arm's design choice) and tools (tools/run/verdict.py)."""
 
 from gen.lib.params import default
 

@@ -6,3 +6,9 @@ from __future__ import annotations
 
 def one_line(text: str) -> str:
     return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text)
+
+
+def joined_lines(text: str) -> str:
+    """A message of several lines (MuJoCo's parser and compiler write them) as one: its lines,
+    stripped, joined by '; ', anything else unprintable escaped."""
+    return one_line("; ".join(ln.strip() for ln in text.splitlines() if ln.strip()))

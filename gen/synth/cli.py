@@ -77,7 +77,63 @@ def _summary(m: dict[str, Any], out: Path) -> str:
     return "\n".join(lines)
 
 
+CACHE_FILES = ("manifest.json", "pm_design_float.h", "pm_design_fixed.h", "pm_design.txt")
+
+
+def _cache_dir(config: Path) -> Path | None:
+    """Where the design of this very config text is kept (build/synth-cache/<digest>), by the config's
+    bytes and the synthesis code's: a design is solved once, whichever arm or build folder asks for
+    it again (an arm's first build pays for cvxpy only when its design is new)."""
+    from gen.lib.paths import BUILD
+
+    try:
+        h = hashlib.sha256(config.read_bytes())
+    except OSError:
+        return None
+    for src in sorted((REPO_ROOT / "gen" / "synth").glob("*.py")):
+        h.update(src.read_bytes())
+    return BUILD / "synth-cache" / h.hexdigest()[:32]
+
+
+def _from_cache(config: Path, out: Path) -> dict[str, Any] | None:
+    """The kept design written to out (its manifest naming this config file), or None."""
+    from gen.lib.atomic_output import write_files_atomically
+
+    cache = _cache_dir(config)
+    if cache is None or not all((cache / f).is_file() for f in CACHE_FILES[:3]):
+        return None
+    files = {f: (cache / f).read_text() for f in CACHE_FILES if (cache / f).is_file()}
+    manifest = json.loads(files["manifest.json"])
+    manifest["run"]["config_file"] = str(config)
+    manifest["run"]["from_cache"] = str(cache)
+    files["manifest.json"] = json.dumps(manifest, indent=1, allow_nan=False) + "\n"
+    write_files_atomically(out, files)
+    return manifest
+
+
+def _keep(config: Path, out: Path) -> None:
+    from gen.lib.atomic_output import write_files_atomically
+
+    cache = _cache_dir(config)
+    if cache is not None:
+        try:
+            write_files_atomically(cache, {f: (out / f).read_text() for f in CACHE_FILES if (out / f).is_file()})
+        except OSError:
+            pass  # a cache that cannot be written is only a slower next build
+
+
 def run(ns: argparse.Namespace) -> int:
+    from gen.lib.outdir import OutDirError, check_out_dir
+
+    try:
+        check_out_dir(ns.out)
+        kept = _from_cache(ns.config, ns.out)
+    except (OutDirError, OSError, ValueError, KeyError):
+        kept = None
+    if kept is not None:
+        if not getattr(ns, "quiet", False):
+            print(_summary(kept, ns.out))
+        return 0
     from gen.lib.atomic_output import OutputError
     from gen.synth.config import ConfigError
     from gen.synth.lmi import SynthesisError
@@ -99,6 +155,7 @@ def run(ns: argparse.Namespace) -> int:
     except OSError as exc:
         print(f"synth: cannot write {ns.out}: {exc}", file=sys.stderr)
         return 1
+    _keep(ns.config, ns.out)
     if not getattr(ns, "quiet", False):
         print(_summary(manifest, ns.out))
     return 0

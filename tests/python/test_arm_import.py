@@ -1,4 +1,4 @@
-"""gen/arm.py on what real arm models contain: the public arms vendored in tests/arms, and small
+"""gen/arm on what real arm models contain: the public arms vendored in tests/arms, and small
 models that each carry one thing the importer must take or refuse by name."""
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ import pytest
 
 from gen import arm as gen_arm
 from gen.arm import ArmError, clip_amplitude, inverse_forces, load_arm_file, prepare
+from gen.arm.assets import default_classes, strip_meshes
 from gen.robot_model import extract, nominal_for_inverse
 from tools.build.arm import ArmChoiceError, reference_for
 
@@ -87,7 +88,7 @@ def test_robosuite_ur5e_fixed_base_bodies_are_fused_and_the_dynamics_kept() -> N
     """robosuite's UR5e hangs the chain under two fixed bodies (base, and a rotated link): the
     prepared model has one body per joint, and its inverse dynamics equal the original's."""
     raw = mujoco.MjSpec.from_file(str(UR5E))
-    gen_arm._strip_meshes(raw)
+    strip_meshes(raw, default_classes(raw, UR5E))
     m0 = raw.compile()
     assert m0.nbody > 7  # world, fixed bodies, six links, the hand's bodies
     p = prep(UR5E)
@@ -107,7 +108,7 @@ def test_urdf_gripper_is_locked_and_its_mass_carried_by_the_last_link() -> None:
     assert [x["name"] for x in p.info["locked"]] == ["panda_finger_joint1", "panda_finger_joint2"]
     m = mujoco.MjModel.from_xml_string(p.xml)
     raw = mujoco.MjSpec.from_file(str(PANDA_URDF))
-    gen_arm._strip_meshes(raw)
+    strip_meshes(raw, default_classes(raw, PANDA_URDF))
     m0 = raw.compile()
     assert sum(m.body_mass) == pytest.approx(sum(m0.body_mass), rel=1e-6)  # fingers fused, not dropped
 
@@ -175,7 +176,10 @@ def test_reference_stays_inside_the_ranges_with_a_warning_when_clipped() -> None
     (chain_mjcf(tip_mass=1e-9), "joint 'j2' moves almost no inertia"),
     (chain_mjcf().replace('<inertial pos="0 0 0.1" mass="1.0" diaginertia="0.01 0.01 0.01"/></body></body></body>',
                           "</body></body></body>"), "mass and inertia"),
-    (chain_mjcf(actuators=False), "joint 'j0' has no torque limit"),
+    (chain_mjcf(extra='<keyframe><key name="home" qpos="0 1.5 0"/></keyframe>').replace('ctrlrange="-50 50"',
+                                                                                         'ctrlrange="-0.5 0.5"'),
+     r"joint 'j1': its torque limit 0.5 N m \(actuator actuator1 ctrlrange x gear\) cannot hold the arm at home "
+     r"\(keyframe 'home'\) against gravity \(needs 3.9\d N m\)"),
     (chain_mjcf(extra='<equality><connect body1="l2" body2="world" anchor="0 0 0"/></equality>'),
      "closes a loop through the arm"),
     (chain_mjcf(extra='<equality><joint joint1="j0" joint2="j1"/></equality>'), "couples controlled joint"),
@@ -275,7 +279,8 @@ def test_cli_writes_the_four_files_and_a_depfile(tmp_path: Path) -> None:
     out = tmp_path / "out"
     dep = tmp_path / "arm.d"
     assert gen_arm.main(["--model", str(UR5E), "--out", str(out), "--depfile", str(dep)]) == 0
-    assert sorted(x.name for x in out.iterdir()) == ["arm.json", "arm.xml", "design.toml", "plant.xml"]
+    # the four files, and the key of what they were prepared from (gen/arm/cli.py inputs_key)
+    assert sorted(x.name for x in out.iterdir()) == [".inputs.sha256", "arm.json", "arm.xml", "design.toml", "plant.xml"]
     info = json.loads((out / "arm.json").read_text())
     assert info["model_hash"] == f"{gen_arm.fnv1a64((out / 'arm.xml').read_bytes()):016x}"
     assert str(UR5E.resolve()) in dep.read_text() and str(DESIGN.resolve()) in dep.read_text()
@@ -330,7 +335,7 @@ def test_a_public_arm_with_materials_textures_and_sites_is_prepared(tmp_path: Pa
     assert any("mesh files not found" in w for w in p.info["warnings"])
     same = prep(UR5E)  # the dressing changes nothing the controller uses
     assert [j["torque_limit"] for j in p.info["joints"]] == [j["torque_limit"] for j in same.info["joints"]]
-    assert gen_arm._inverse_dynamics_difference(m, mujoco.MjModel.from_xml_string(same.xml)) < 1e-9
+    assert gen_arm.inverse_dynamics_difference(m, mujoco.MjModel.from_xml_string(same.xml)) < 1e-9
 
 
 def test_build_folder_is_named_after_the_arm_not_its_file(tmp_path: Path) -> None:
@@ -357,3 +362,35 @@ def test_a_massless_link_says_what_carries_its_joints_inertia(tmp_path: Path) ->
                    "middle.xml")
     w = [x for x in prep(middle).info["warnings"] if "weighs" in x]
     assert len(w) == 1 and "'j1'" in w[0] and "(1 kg of links beyond it carries the inertia)" in w[0]
+
+
+def test_a_joint_without_a_torque_limit_gets_one_sized_from_the_arm_with_a_warning(tmp_path: Path) -> None:
+    """dm_control's Jaco carries no actuator: each limit is assumed, 1 / REF_TORQUE_FRACTION times what
+    the joint needs to hold the arm anywhere in its ranges and to follow the default reference, and
+    the warning says so and how to give the drives' own."""
+    model = write(tmp_path, chain_mjcf(actuators=False))
+    p = prep(model)
+    limits = [j["torque_limit"] for j in p.info["joints"]]
+    assert all(j["torque_limit_from"] == "assumed: no limit in the model" for j in p.info["joints"])
+    # j1 (axis y) holds two 1 kg links 0.1 and 0.3 m out when laid flat: about 3.9 N m, times 2
+    assert limits[1] == pytest.approx(2 * 9.81 * 0.4, rel=0.05)
+    assert limits[0] < limits[1] and all(x > 0 for x in limits)
+    w = [x for x in p.info["warnings"] if x.startswith("torque limits assumed")]
+    assert len(w) == 1 and "j0" in w[0] and "torque_limits" in w[0]
+    assert max(p.info["reference"]["peak_torque_fraction"]) <= 0.5 + 1e-6
+
+
+def test_a_folder_prepared_from_the_same_inputs_is_not_prepared_again(tmp_path: Path, monkeypatch) -> None:
+    """The build's gen.arm step finds the preparation the check before the build made (tools/build/arm.py
+    seed_prepared): same inputs, nothing prepared; another model, prepared again."""
+    from gen.arm import cli
+
+    model = write(tmp_path, chain_mjcf())
+    out = tmp_path / "out"
+    assert gen_arm.main(["--model", str(model), "--out", str(out)]) == 0
+    calls = []
+    monkeypatch.setattr(cli, "prepare", lambda *a: calls.append(a) or prepare(*a))
+    assert gen_arm.main(["--model", str(model), "--out", str(out)]) == 0 and calls == []
+    model.write_text(chain_mjcf(n=4))
+    assert gen_arm.main(["--model", str(model), "--out", str(out)]) == 0 and len(calls) == 1
+    assert json.loads((out / "arm.json").read_text())["n_joints"] == 4

@@ -71,7 +71,7 @@ def test_nominal_parameter_error_scales_the_model() -> None:
 
 
 def test_unprepared_model_is_refused_with_what_to_do(tmp_path: Path) -> None:
-    """gen.robot_model reads prepared arms only (gen/arm.py makes them); anything else is named."""
+    """gen.robot_model reads prepared arms only (gen/arm makes them); anything else is named."""
     bad = tmp_path / "bad.xml"
     bad.write_text(DEFAULT_MJCF.read_text().replace("</actuator>", '<motor joint="wrist_3" ctrlrange="-1 1"/></actuator>'))
     with pytest.raises(robot_model.ModelError, match="prepare|expected a prepared arm"):

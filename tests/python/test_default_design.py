@@ -1,4 +1,4 @@
-"""An arm that names no design gets one that tracks (gen/arm.py auto_bandwidth: the largest wn at
+"""An arm that names no design gets one that tracks (gen/arm auto_bandwidth: the largest wn at
 which an error at the tracking bound fits the torque the reference leaves); the bundled arm keeps
 the paper's weights (its kept tuning is keyed by them); a design asked for is the one used; run.json
 and hil's summary say which and why."""

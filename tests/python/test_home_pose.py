@@ -1,4 +1,4 @@
-"""The arm's home pose comes from its model (the keyframe "home" gen/arm.py writes, arm.json's
+"""The arm's home pose comes from its model (the keyframe "home" gen/arm writes, arm.json's
 per-joint "home"), emitted as ARM_HOME_Q in the generated model header: the C tests and the MCU's
 closed-loop check start there, for any arm, instead of a UR5e pose reused through `j % 6`."""
 

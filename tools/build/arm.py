@@ -1,7 +1,7 @@
 """Which arm a command works on (--model / --arm), and where its build lives.
 
 Every command that builds or runs takes the same arm options. The arm is prepared at build time
-(gen/arm.py, a CMake step), so one build folder holds everything of one arm: the prepared model,
+(gen/arm, a CMake step), so one build folder holds everything of one arm: the prepared model,
 arm.json, the design, the firmware, the simulator. The bundled arm builds in build/<preset>; any
 other in build/arms/<name>-<digest>/<preset>, side by side, so switching arms rebuilds nothing that
 did not change.
@@ -41,7 +41,7 @@ class ArmRef:
         return str(self.arm_file or self.model or "the bundled arm")
 
     def key(self) -> str:
-        """The build folder's name, <name>-<digest>: the arm's name (gen/arm.py: arm_name, the one
+        """The build folder's name, <name>-<digest>: the arm's name (gen/arm: arm_name, the one
         in its reports) and a digest of the files that define it, so two arms of one name differ."""
         from gen.arm import arm_name_of
 
@@ -53,7 +53,7 @@ class ArmRef:
         if self.model is not None:
             out["ARM_MODEL"] = str(self.model)
         out["ARM_FILE"] = str(self.arm_file) if self.arm_file is not None else ""
-        # always set: empty is the arm's own default design (gen/arm.py), and a build folder
+        # always set: empty is the arm's own default design (gen/arm), and a build folder
         # configured before this default existed must not keep another one in its cache
         out["ARM_DESIGN_CONFIG"] = str(self.design) if self.design is not None else ""
         return out
@@ -104,15 +104,39 @@ def arm_from_args(ns: argparse.Namespace) -> ArmRef:
     return ref
 
 
+_PREPARED: dict[ArmRef, Any] = {}  # this process's check of an arm: the build takes it (seed_prepared)
+
+
 def _check_importable(arm: ArmRef) -> None:
     """The importer's verdict before anything builds: its error (named element, what to change)
     instead of a failed build step, and no build folder for an arm that cannot be used."""
-    from gen.arm import DEFAULT_DESIGN, ArmError, load_arm_file, prepare
+    from gen.arm import ArmError, load_arm_file, prepare
 
     try:
-        prepare(load_arm_file(arm.arm_file, None if arm.arm_file else arm.model), arm.design)
+        _PREPARED[arm] = prepare(load_arm_file(arm.arm_file, None if arm.arm_file else arm.model), arm.design)
     except ArmError as exc:
         raise ArmChoiceError(str(exc)) from exc
+
+
+def seed_prepared(bdir: Path, arm: ArmRef) -> None:
+    """The prepared arm this process made when it checked the arm, written where the build's gen.arm
+    step writes it, with the key of its inputs: that step then finds it done instead of preparing the
+    arm a second time (a second or more of a first build)."""
+    prep = _PREPARED.get(arm)
+    if prep is None:
+        return
+    from gen.arm.cli import already_prepared, inputs_key, write_prepared
+
+    out = bdir / "generated" / "arm"
+    key = inputs_key(prep_model(arm), arm.arm_file, arm.design)
+    if already_prepared(out, key) is None:
+        write_prepared(out, prep, key)
+
+
+def prep_model(arm: ArmRef) -> Path:
+    from gen.arm import load_arm_file
+
+    return load_arm_file(arm.arm_file, None if arm.arm_file else arm.model).model.resolve()
 
 
 def arm_build_dir(preset: str, arm: ArmRef = DEFAULT_ARM) -> Path:
@@ -132,13 +156,15 @@ def build_arm(preset: str, arm: ArmRef = DEFAULT_ARM, quiet: bool = True, target
     """Configure (when needed) and build the preset for the arm (only `targets`, if given); its
     build folder."""
     bdir = arm_build_dir(preset, arm)
+    if not arm.is_default:
+        seed_prepared(bdir, arm)
     build(preset, quiet=quiet, bdir=None if arm.is_default else bdir, cache=None if arm.is_default else arm.cache(),
           targets=targets)
     return bdir
 
 
 def arm_info(bdir: Path) -> dict[str, Any]:
-    """arm.json of the arm a build folder was built for (gen/arm.py)."""
+    """arm.json of the arm a build folder was built for (gen/arm)."""
     path = bdir / "generated" / "arm" / "arm.json"
     try:
         return json.loads(path.read_text())
@@ -163,9 +189,9 @@ def reference_for(info: dict[str, Any], amp: list[float] | None, freq: list[floa
                   bdir: Path | None = None, friction: dict[str, list[float]] | None = None) -> tuple[
         list[float], list[float], list[str]]:
     """The reference for a run: the arm's default (arm.json), or the one asked for with every
-    amplitude clipped so the motion stays inside the joint ranges (gen/arm.py: RANGE_MARGIN) and,
+    amplitude clipped so the motion stays inside the joint ranges (gen/arm: RANGE_MARGIN) and,
     given the build folder (its prepared model), so that its inverse dynamics with the friction a
-    scenario adds (viscous, coulomb) fit the arm (gen/arm.py: fit_reference). The warnings say what
+    scenario adds (viscous, coulomb) fit the arm (gen/arm: fit_reference). The warnings say what
     was changed, one line a joint, naming the torque the asked-for amplitude would need."""
     from gen.arm import clip_amplitude, fit_reference
 

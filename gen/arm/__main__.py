@@ -1,0 +1,5 @@
+import sys
+
+from gen.arm.cli import main
+
+sys.exit(main())
