@@ -113,6 +113,7 @@ int sim_co_table_parse(sim_co_table_t *t, const char *text, char *err, size_t ca
                 return -1;
             }
         }
+        t->key[t->n] = (uint32_t)e->index << 8 | e->sub;
         t->n++;
     }
     if (t->n != declared) {
@@ -167,7 +168,7 @@ int sim_co_table_find(const sim_co_table_t *t, uint16_t index, uint8_t sub, uint
     unsigned lo = 0u, hi = t->n;
     while (lo < hi) { /* the first row at or after key */
         const unsigned mid = lo + (hi - lo) / 2u;
-        if (((uint32_t)t->e[mid].index << 8 | t->e[mid].sub) < key) {
+        if (t->key[mid] < key) {
             lo = mid + 1u;
         } else {
             hi = mid;

@@ -55,6 +55,7 @@ typedef struct {
 
 typedef struct {
     unsigned n;                       /* entries, sorted by index and sub-index */
+    uint32_t key[SIM_CO_OD_MAX];      /* index << 8 | sub of each: the lookup searches these packed */
     sim_co_entry_t e[SIM_CO_OD_MAX];
     unsigned text_len;
     uint8_t text[SIM_CO_TEXT_MAX];

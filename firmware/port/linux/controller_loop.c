@@ -606,7 +606,9 @@ static int publish(loop_t *p, uint32_t k, int64_t wake_latency, int64_t compute,
     return -1;
 }
 
-/* Bus period k begins: what came before its SYNC is read, then the SYNC goes out. */
+/* Bus period k begins: what came before its SYNC is read, then the SYNC goes out. now: the bus's
+ * time, which paces the master's heartbeat: the wall clock in realtime; in lockstep the periods
+ * themselves (period_time), so a run sends the same frames however loaded the machine is. */
 static void start_period(link_t *l, uint32_t k, int64_t now)
 {
     arm_can_frame_t sync;
@@ -629,6 +631,12 @@ static void start_period(link_t *l, uint32_t k, int64_t now)
     l->report->bus_periods = k + 1u;
 }
 
+/* The bus's time at the start of period k (start_period). */
+static int64_t period_time(const loop_t *p, uint32_t k, int64_t wall)
+{
+    return p->opt->mode == MODE_REALTIME ? wall : (int64_t)k * p->period_ns;
+}
+
 /* A stop signal at a period boundary: zero torque with controlword shutdown, before the NMT stop.
  * The commands go in a period of their own (k, not yet begun): the
  * last period's commands are out already, and a second command for one SYNC is a second master
@@ -642,7 +650,7 @@ static void stop_on_signal(link_t *l, loop_t *p, uint32_t k)
     telemetry_event(p->telem, p->k_run, "fault", p->report->reason);
     p->out.state = ARM_STATE_SAFE_STOP;
     memset(p->out.tau, 0, sizeof(p->out.tau));
-    start_period(l, k, now_ns());
+    start_period(l, k, period_time(p, k, now_ns()));
     send_commands(l, &p->out);
 }
 
@@ -731,7 +739,7 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
         }
         const int64_t wake_latency = wait_for_period(&p);
         const int64_t cycle_start = now_ns();
-        start_period(&l, k, cycle_start);
+        start_period(&l, k, period_time(&p, k, cycle_start));
         const int64_t wait_until = opt->mode == MODE_REALTIME
                                        ? p.next_deadline + p.period_ns * 8 / 10
                                        : cycle_start + (int64_t)(opt->lockstep_timeout_s * 1e9);
