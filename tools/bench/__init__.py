@@ -45,10 +45,12 @@ def _callgrind(fn: str, argv: list[str]) -> int:
         return int(m.group(1))
 
 
-def per_step(exe: Path, method: str, numeric: str, steps: int = STEPS) -> float:
+def per_step(exe: Path, method: str, numeric: str, steps: int = STEPS, design_file: Path | None = None) -> float:
+    """design_file: the same step with a design read at run time (its run-time-sized path)."""
     fn = "bench_eigen_step*" if numeric == "eigen" else "bench_firmware_step"
-    a = _callgrind(fn, [str(exe), method, numeric, str(WARMUP)])
-    b = _callgrind(fn, [str(exe), method, numeric, str(WARMUP + steps)])
+    design = [str(design_file)] if design_file is not None else []
+    a = _callgrind(fn, [str(exe), method, numeric, str(WARMUP), *design])
+    b = _callgrind(fn, [str(exe), method, numeric, str(WARMUP + steps), *design])
     return (b - a) / steps
 
 
@@ -72,9 +74,16 @@ def bench_step(out: Path, quick: bool = False) -> dict[str, Any]:
     steps = 200 if quick else STEPS
     jobs = [(m, n) for m in methods for n in ("float", "fixed") if n == "float" or firmware_methods()[m]]
     jobs += [(m, "eigen") for m in methods if m in ("pd", "pm", "pm-paper", "gh2")]
+    # the methods that run the synthesised design, once more with it read from the build's design
+    # file (the Linux port's --design-file) instead of built in: the step's run-time-sized path
+    design_file = build_dir("release") / "generated" / "design" / "pm_design.txt"
+    loaded = [(m, n) for m, n in jobs if n != "eigen" and firmware_methods()[m]]
     rows: dict[str, dict[str, float]] = {}
     for method, numeric in tqdm(jobs, desc="callgrind", unit="run"):
         rows.setdefault(method, {})[numeric] = per_step(exe, method, numeric, steps)
+    runtime: dict[str, dict[str, float]] = {}
+    for method, numeric in tqdm(loaded, desc="callgrind, design read at run time", unit="run"):
+        runtime.setdefault(method, {})[numeric] = per_step(exe, method, numeric, steps, design_file)
     for method, r in rows.items():
         if "eigen" in r:
             r["eigen_over_float"] = r["eigen"] / r["float"]
@@ -84,6 +93,13 @@ def bench_step(out: Path, quick: bool = False) -> dict[str, Any]:
         "steps_measured": steps,
         "quick": quick,
         "methods": rows,
+        "design_read_at_run_time": {
+            "what": ("the same steps with the same design read from the build's design file (the Linux port's "
+                     "--design-file: its run-time-sized path) instead of the built-in one (compiled with its own "
+                     "dimensions, the figures of `methods`); the MCU images have the built-in path alone"),
+            "design_file": str(design_file),
+            "methods": runtime,
+        },
     }
     if not quick:  # quick: no Pinocchio comparison (compiling it alone takes about 2 minutes)
         result["rnea"] = rnea_costs(rows["pm"]["float"], steps)
@@ -145,12 +161,17 @@ def cortex_m_costs() -> dict[str, Any]:
 
 
 def table(result: dict[str, Any]) -> str:
-    lines = [f"{'method':<10}{'float':>10}{'fixed':>10}{'eigen ref':>12}{'ref/float':>11}"]
+    loaded = result.get("design_read_at_run_time", {}).get("methods", {})
+    lines = [f"{'method':<10}{'float':>10}{'fixed':>10}{'eigen ref':>12}{'ref/float':>11}"
+             f"{'loaded float':>14}{'loaded fixed':>14}"]
     for m, r in result["methods"].items():
-        f = lambda k: f"{r[k]:>10.0f}" if k in r else f"{'-':>10}"  # noqa: E731
+        f = lambda k, row=r, w=10: f"{row[k]:>{w}.0f}" if k in row else f"{'-':>{w}}"  # noqa: E731
         ratio = f"{r['eigen_over_float']:>10.1f}x" if "eigen_over_float" in r else f"{'-':>11}"
         eigen = f"{r['eigen']:>12.0f}" if "eigen" in r else f"{'-':>12}"
-        lines.append(f"{m:<10}{f('float')}{f('fixed')}{eigen}{ratio}")
+        lr = loaded.get(m, {})
+        lines.append(f"{m:<10}{f('float')}{f('fixed')}{eigen}{ratio}{f('float', lr, 14)}{f('fixed', lr, 14)}")
+    if loaded:
+        lines.append("loaded: the same design read from its file at run time (--design-file), the run-time-sized path")
     r = result.get("rnea")
     if r is None:
         return "\n".join(lines)
