@@ -1,14 +1,27 @@
 """The bare-metal Cortex-M images (firmware/port/cortex_m): the QEMU board of each preset, one
-run of an image, and the step's cost it prints."""
+run of the golden image and the step's cost it prints, and the processor-in-the-loop image's
+place and the clock its figures are stated at."""
 
 from __future__ import annotations
 
 import re
 import subprocess
+from pathlib import Path
 
 from gen.lib.paths import build_dir
 
 MACHINES = {"cortex-m4": "mps2-an386", "cortex-m7": "mps2-an500", "cortex-m3": "mps2-an385"}
+
+# The clock a PIL run's share of the period is stated at: a representative part's core clock
+# (QEMU counts instructions; at one instruction a cycle, the share such a part would use).
+STATED_CLOCK = {"cortex-m4": (168e6, "STM32F407-class Cortex-M4F at 168 MHz"),
+                "cortex-m7": (216e6, "STM32F767-class Cortex-M7 at 216 MHz"),
+                "cortex-m3": (120e6, "STM32F205-class Cortex-M3 at 120 MHz")}
+
+
+def pil_image(bdir: Path, preset: str) -> Path:
+    """The processor-in-the-loop image of a Cortex-M build folder."""
+    return bdir / "firmware" / "port" / "cortex_m" / f"pil_{preset}.elf"
 
 
 def run_image(preset: str, timeout: float = 600) -> subprocess.CompletedProcess[str]:

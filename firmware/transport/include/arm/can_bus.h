@@ -2,7 +2,7 @@
  * (firmware/port/linux/controller_loop.c), with two implementations: Linux (src/can_bus.c: UDP
  * multicast, SocketCAN, the in-process bus, SLCAN over TCP) and the MCU image
  * (firmware/port/cortex_m/can_uart_bus.c: SLCAN on the board's UARTs, built with
- * ARM_CAN_BUS_MCU). The --bus specs and the bus set's configuration: arm/can_bus_config.h. */
+ * ARM_PORT_MCU 1). The --bus specs and the bus set's configuration: arm/can_bus_config.h. */
 #ifndef ARM_CAN_BUS_H
 #define ARM_CAN_BUS_H
 
@@ -12,7 +12,7 @@
 #include "arm/can_bus_config.h"
 #include "arm/can_frame.h"
 
-#if defined(ARM_CAN_BUS_MCU)
+#if ARM_PORT_MCU
 #include "can_uart_bus.h" /* the MCU port's arm_can_bus_t and arm_can_bus_set_t */
 #else
 #include "arm/can_mem.h"
