@@ -5,6 +5,7 @@ seconds, so the figure repeats on a busy machine) for every method, float32 and 
 next to the dense double-precision Eigen reference of the same step (the mass-matrix
 formulation, a correctness model), and the inverse dynamics alone beside Pinocchio's RNEA.
 `armctl bench synth`: wall time of the synthesis (gen.synth.bench).
+`armctl bench pil`: docs/pil.md's figures (tools/bench/pil.py).
 `armctl bench sim`: the simulator's speed: the default 10 s lockstep HIL run five times (real-time
 factor after boot, wall time), one period's CPU broken down by activity, and MuJoCo's bare
 mj_step on the same model beside it as the limit.
@@ -273,7 +274,7 @@ def sim_table(r: dict[str, Any]) -> str:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("what", choices=("step", "synth", "sim", "study"))
+    p.add_argument("what", choices=("step", "synth", "sim", "study", "pil"))
     p.add_argument("--out", type=Path, default=None, help="results file (JSON)")
     p.add_argument("--quick", action="store_true",
                    help="a short form that checks the benchmark runs (step: pm only; synth: one repeat, "
@@ -293,6 +294,12 @@ def run(ns: argparse.Namespace) -> int:
         result = bench_step(out, ns.quick)
         print(table(result))
         print(f"results: {out}")
+        return 0
+    if ns.what == "pil":
+        from tools.bench.pil import RECORD, bench_pil, render
+
+        print(render(bench_pil()))
+        print(f"results: {RECORD} (and docs/pil.md's figures block)")
         return 0
     if ns.what == "study":
         from tools.bench.study import bench_study, table as study_table
