@@ -103,17 +103,19 @@ def render(record: dict[str, Any]) -> str:
 
 
 def page_block(text: str) -> str:
-    try:
-        start = text.index(BEGIN) + len(BEGIN)
-        return text[start:text.index(END, start)].strip("\n")
-    except ValueError:
-        raise PilBenchError(f"{PAGE}: the figures markers ({BEGIN} ... {END}) are missing") from None
+    from tools.study.headline import marked_block
+
+    block = marked_block(text, BEGIN, END)
+    if block is None:
+        raise PilBenchError(f"{PAGE}: the figures markers ({BEGIN} ... {END}) are missing")
+    return block
 
 
 def bench_pil() -> dict[str, Any]:
     record = measure()
     write_json_atomic(RECORD, record)
     text = PAGE.read_text()
-    old = page_block(text)
-    write_text_atomic(PAGE, text.replace(old, render(record), 1))
+    page_block(text)  # the markers are there
+    start = text.index(BEGIN) + len(BEGIN)
+    write_text_atomic(PAGE, text[:start] + "\n" + render(record) + "\n" + text[text.index(END, start):])
     return record
