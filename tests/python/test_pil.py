@@ -66,6 +66,8 @@ def test_refused_slcan_lines_are_counted_and_dropped_by_the_image(tmp_path: Path
             pytest.fail("the image's UART 0 never listened")
         lines = [ln.rstrip("\n") for ln in REPLAY.read_text().splitlines() if ln and not ln.startswith("#")]
         peer.sendall(b"O\r" + "".join(ln + "\r" for ln in lines).encode())
+        time.sleep(3.0)  # the image's boot gives up on the silent drives, then it waits for C
+        peer.sendall(b"C\r")
         out, _ = proc.communicate(timeout=120)
         peer.close()
     finally:

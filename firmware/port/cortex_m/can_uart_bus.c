@@ -124,9 +124,14 @@ int arm_can_bus_recv(arm_can_bus_t *bus, arm_can_frame_t *f, int timeout_us)
 
 void arm_can_bus_close(arm_can_bus_t *bus)
 {
-    /* the last frames (an NMT stop) leave before the image ends: wait for the ring to drain */
-    const int64_t give_up = port_clock_ns() + 1000000000LL;
-    while (!mcu_uart_tx_empty(bus->uart) && port_clock_ns() < give_up) __asm__ volatile("wfi");
+    /* The last frames (an NMT stop) leave before the image ends, and it ends once the peer closed
+     * the channel (C, when the drives have stopped), reading what comes meanwhile: the emulator then
+     * closes its socket on nothing unread (a socket closed on unread bytes resets the peer's side). */
+    const int64_t give_up = port_clock_ns() + CAN_UART_CLOSE_TIMEOUT_NS;
+    arm_can_frame_t f;
+    while ((!mcu_uart_tx_empty(bus->uart) || bus->open) && port_clock_ns() < give_up) {
+        if (!take(bus, &f)) mcu_uart_wait();
+    }
 }
 
 uint64_t arm_can_bus_rx_undecodable(const arm_can_bus_t *bus)

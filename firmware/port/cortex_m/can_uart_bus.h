@@ -2,7 +2,7 @@
  * board's UARTs, bus "uart:N" on UART N. QEMU's Cortex-M boards model no CAN controller, so the
  * controller's frames travel as SLCAN lines (arm/slcan.h) to the host, where the simulator's drives
  * read them (arm_sim --bus slcan:HOST:PORT). The port behaves as an SLCAN adapter to the other end:
- * its channel is closed until the peer sends O; it answers commands as an adapter does (\r ok,
+ * its channel is closed until the peer sends O, and the port closes the bus once the peer sent C; it answers commands as an adapter does (\r ok,
  * \a error); frames are not acknowledged. What its decoder refuses (garbage, too long, a bad DLC)
  * is counted and dropped. No heap; every loop bounded. */
 #ifndef ARM_CAN_UART_BUS_H
@@ -15,6 +15,7 @@
 
 #define CAN_UART_OPEN_TIMEOUT_NS 60000000000LL /* for the peer's O, when the bus opens */
 #define CAN_UART_MAX_BYTES 512u                 /* decoded per recv call at most, then it returns */
+#define CAN_UART_CLOSE_TIMEOUT_NS 10000000000LL /* for the peer's C, when the bus closes */
 
 typedef struct {
     arm_bus_kind_t kind;

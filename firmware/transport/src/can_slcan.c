@@ -157,7 +157,14 @@ int arm_can_slcan_recv(arm_can_slcan_t *bus, arm_can_frame_t *f, int timeout_us)
 void arm_can_slcan_close(arm_can_slcan_t *bus)
 {
     if (bus->fd >= 0) {
-        (void)flush_tx(bus); /* the last frames (an NMT stop) before the connection goes */
+        /* the last frames (an NMT stop), then C: the adapter's channel closes, and an MCU waiting
+         * for it (docs/pil.md) ends after us, so neither side closes on bytes the other has not read */
+        (void)queue_tx(bus, "C\r", 2u);
+        for (int i = 0; i < 100 && bus->tx_len > 0u && flush_tx(bus) == 0; ++i) {
+            const struct timespec pause = {0, 1000000L};
+            nanosleep(&pause, NULL);
+        }
+        (void)shutdown(bus->fd, SHUT_WR);
         close(bus->fd);
         bus->fd = -1;
     }

@@ -4,7 +4,7 @@
  *
  * Open connects (retrying while nothing listens yet, for up to ARM_CAN_SLCAN_CONNECT_S: the peer
  * may start after us), then writes "O\r", the command that opens an adapter's channel: frames
- * flow from then on. Each frame sent is one SLCAN line; each frame line received is a frame.
+ * flow from then on; close writes "C\r", which closes it. Each frame sent is one SLCAN line; each frame line received is a frame.
  * The adapter's replies (an empty line: ok; BEL: error) and command lines are not frames: read
  * and counted, never returned. A line the decoder refuses (garbage, too long, a bad DLC) is
  * counted in rx_undecodable and skipped.
