@@ -23,6 +23,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/prctl.h>
 #include <sys/socket.h>
 #include <sys/wait.h>
 #include <time.h>
@@ -245,6 +246,7 @@ int main(int argc, char **argv)
     fflush(stdout);
     g_qemu = fork();
     if (g_qemu == 0) {
+        prctl(PR_SET_PDEATHSIG, SIGKILL); /* the image goes with its bridge, however the bridge ends */
         execvp(qargv[0], qargv);
         fprintf(stderr, "arm_pil_bridge: %s: %s\n", qargv[0], strerror(errno));
         _exit(127);

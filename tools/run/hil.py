@@ -465,6 +465,9 @@ def canopen_record(controller: dict[str, Any]) -> dict[str, Any] | None:
 
 
 PIL_FILE = "pil.json"  # what the image measured in the loop (tools/pil_bridge)
+# Bounds of a hung PIL run: the emulated MCU runs its loop 50-100x slower than real time here
+# (docs/pil.md: QEMU hands it its UARTs' bytes one at a time), slower still on a loaded machine.
+PIL_DEADLINE_S = (600.0, 600.0)  # + this per simulated second
 
 
 def _pil_bus(opt: HilOptions, n_buses: int) -> tuple[str, str]:
@@ -610,7 +613,7 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
         exit_codes, wall, sim_scheduling = _run_sil(opt, sil_exe, ctl_args[1:], sim_args[1:], log_path)
     else:
         in_vm = opt.bus == VM
-        base_s, per_s = VM_DEADLINE_S if in_vm else (120.0, 60.0)
+        base_s, per_s = VM_DEADLINE_S if in_vm else PIL_DEADLINE_S if opt.target else (120.0, 60.0)
         plan = ProcessPlan(out=str(opt.out), mode=opt.mode, cpu=realtime_cpu(opt),
                            deadline_s=base_s + per_s * opt.duration_s,
                            logger=[str(logger_exe), "--lcm-url", url, str(log_path)], simulator=sim_args,
