@@ -27,22 +27,8 @@ class PilBenchError(RuntimeError):
     pass
 
 
-def _worst_relative(pil: dict[str, Any], sil: dict[str, Any]) -> tuple[float, str]:
-    """The largest relative difference between the two runs' numeric results, and which."""
-    worst, which = 0.0, ""
-    for key, value in sil.items():
-        if isinstance(value, bool) or not isinstance(value, (int, float, list)) or key not in pil:
-            continue
-        a, b = (pil[key], value) if isinstance(value, list) else ([pil[key]], [value])
-        for x, y in zip(a, b):
-            if isinstance(x, (int, float)) and isinstance(y, (int, float)) and (x or y):
-                d = abs(x - y) / max(abs(x), abs(y))
-                if d > worst:
-                    worst, which = d, key
-    return worst, which
-
-
 def measure() -> dict[str, Any]:
+    from tools.build.cortex_m import pil_sil_differences
     from tools.run.hil import HilOptions, run_hil
 
     try:
@@ -60,7 +46,7 @@ def measure() -> dict[str, Any]:
         if run["results"]["result"] != "ok":
             raise PilBenchError(f"{name} run: {run['results']['verdict_reasons']}")
     pil, again, sil = (runs[n]["results"] for n in ("pil", "pil_again", "sil"))
-    worst, which = _worst_relative(pil, sil)
+    diff = pil_sil_differences(pil, sil)
     t = runs["pil"]["target"]
     return {
         "step_bench": {"x86_64_builtin": step["methods"]["pm"]["float"],
@@ -75,7 +61,8 @@ def measure() -> dict[str, Any]:
                 "tracking_max_abs_deg": max(pil["tracking_max_abs_deg"]),
                 "twice_bit_identical": {k: v for k, v in pil.items() if k != "problems"} ==
                                        {k: v for k, v in again.items() if k != "problems"},
-                "sil_worst_relative_difference": worst, "sil_worst_in": which},
+                "sil_worst_relative_difference": diff["relative"][0], "sil_worst_in": diff["relative"][1],
+                "sil_estimation_difference_over_w": diff["estimation_over_w"][0]},
     }
 
 
@@ -97,8 +84,10 @@ def render(record: dict[str, Any]) -> str:
         f"high-water mark {p['stack_high_water_bytes']} bytes; its largest tracking error "
         f"{p['tracking_max_abs_deg']:.4f} deg. Run twice: "
         f"{'the same results bit for bit' if p['twice_bit_identical'] else 'DIFFERENT results'}. Against "
-        f"software in the loop: worst relative difference {p['sil_worst_relative_difference']:.1e} "
-        f"(in {p['sil_worst_in']}). It took {p['wall_s']:.0f} s of wall time on this 2-core machine.",
+        f"software in the loop: every result within {p['sil_worst_relative_difference']:.1e} of itself (the "
+        f"worst: {p['sil_worst_in']}), the estimation error's RMS within "
+        f"{p['sil_estimation_difference_over_w']:.1e} of w's RMS. It took {p['wall_s']:.0f} s of wall time on "
+        "this 2-core machine.",
     ])
 
 

@@ -19,10 +19,32 @@ STATED_CLOCK = {"cortex-m4": (168e6, "STM32F407-class Cortex-M4F at 168 MHz"),
                 "cortex-m3": (120e6, "STM32F205-class Cortex-M3 at 120 MHz")}
 
 
-# How far a PIL run's results may be from the software-in-the-loop run of the same method, relative
-# to each result: newlib's sinf/cosf and glibc's differ in the last bit, which the closed loop
-# carries along without amplifying (docs/pil.md; measured: 3e-5 at most on the bundled arm).
+# How far a PIL run's results may be from the software-in-the-loop run of the same method (docs/pil.md):
+# newlib's sinf/cosf and glibc's differ in the last bit, which the closed loop carries along without
+# amplifying: each result within PIL_SIL_REL_TOL of itself, except the estimation error's RMS, the
+# small difference of w and w_hat (w_hat: a high gain on e_dot), within PIL_SIL_W_TOL of w's RMS.
 PIL_SIL_REL_TOL = 1e-4
+PIL_SIL_W_TOL = 1e-3
+
+
+def pil_sil_differences(pil: dict, sil: dict) -> dict[str, tuple[float, str]]:
+    """The worst difference of two runs' numeric results, each as the tolerances measure it:
+    {"relative": (worst, which result), "estimation_over_w": (worst, ...)}."""
+    worst = {"relative": (0.0, ""), "estimation_over_w": (0.0, "")}
+    for key, value in sil.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float, list)) or key not in pil:
+            continue
+        a, b = (pil[key], value) if isinstance(value, list) else ([pil[key]], [value])
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
+            if not (isinstance(x, (int, float)) and isinstance(y, (int, float))) or x == y:
+                continue
+            if key == "estimation_error_rms":
+                kind, d = "estimation_over_w", abs(x - y) / max(sil["w_rms"][i], 1e-300)
+            else:
+                kind, d = "relative", abs(x - y) / max(abs(x), abs(y))
+            if d > worst[kind][0]:
+                worst[kind] = (d, key)
+    return worst
 
 
 def pil_image(bdir: Path, preset: str) -> Path:
