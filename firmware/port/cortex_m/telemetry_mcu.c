@@ -113,7 +113,8 @@ void telemetry_mcu_report(telemetry_t *t, const run_report_t *r, uint32_t stack)
         n = pil_encode_report(r, writes, &c, frame, sizeof(frame));
         if (writes == 0u) break;
     }
-    for (size_t at = 0; at < n;) {
+    const int64_t give_up = port_clock_ns() + 10000000000LL; /* a host that stopped reading: no report */
+    for (size_t at = 0; at < n && port_clock_ns() < give_up;) {
         const size_t chunk = n - at < 256u ? n - at : 256u;
         if (mcu_uart_write(TELEM_UART, frame + at, chunk)) {
             at += chunk;
