@@ -135,6 +135,17 @@ def test_pil_equals_sil_within_the_stated_tolerance(runs: dict[str, dict]) -> No
     assert pil["tracking_rms_deg"] != sil["tracking_rms_deg"] or pil == sil  # compared, not skipped
 
 
+def test_the_cortex_m7_equals_sil_bit_for_bit(runs: dict[str, dict], tmp_path: Path) -> None:
+    """The M7's newlib gives the same sines and cosines as glibc on these runs' angles: its PIL run's
+    results are the SIL run's, bit for bit (docs/pil.md)."""
+    build("cortex-m7")
+    m7 = run_hil(HilOptions(out=tmp_path, duration_s=DURATION_S, method="pm", protocol="canopen", target="cortex-m7"))
+    assert m7["results"]["result"] == "ok", m7["results"]["verdict_reasons"]
+    sil = runs["sil"]["results"]
+    diff = pil_sil_differences(m7["results"], sil)
+    assert diff == {"relative": (0.0, ""), "estimation_over_w": (0.0, "")}, diff
+
+
 def test_documented_command_ends_ok(tmp_path: Path) -> None:
     """docs/pil.md: `tools/armctl hil --target cortex-m4 --duration 3`, through the CLI."""
     _need_target()
