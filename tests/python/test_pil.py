@@ -164,3 +164,13 @@ def test_the_recorded_figures_are_within_the_budget() -> None:
     assert record["pil"]["twice_bit_identical"]
     assert record["pil"]["sil_worst_relative_difference"] <= PIL_SIL_REL_TOL
     assert record["pil"]["sil_estimation_difference_over_w"] <= PIL_SIL_W_TOL
+
+
+def test_bench_pil_runs_in_its_short_form() -> None:
+    """`tools/armctl bench pil --quick`: the benchmark's runs, short, through the CLI (its documented
+    figures are `bench pil --record`'s: test_docs.py holds the page to them)."""
+    _need_target()
+    r = subprocess.run([str(REPO / "tools" / "armctl"), "bench", "pil", "--quick"], cwd=REPO, capture_output=True,
+                       text=True, timeout=1800)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    assert "the same results bit for bit" in r.stdout

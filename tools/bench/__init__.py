@@ -307,8 +307,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, default=None, help="results file (JSON)")
     p.add_argument("--quick", action="store_true",
                    help="a short form that checks the benchmark runs (step: pm only; synth: one repeat, "
-                        "no coupled solve, n = 1 comparison; sim: one 1 s run; study: 4 runs of 0.5 s); its "
-                        "figures are not the documented ones")
+                        "no coupled solve, n = 1 comparison; sim: one 1 s run; study: 4 runs of 0.5 s; pil: "
+                        "0.2 s runs); its figures are not the documented ones")
     p.add_argument("--record", action="store_true",
                    help="also keep the results for the docs (docs/results/bench-WHAT.json), which tools/armctl docs "
                         "renders into their figures")
@@ -333,7 +333,7 @@ def run(ns: argparse.Namespace) -> int:
     elif ns.what == "pil":
         from tools.bench.pil import bench_pil, render
 
-        result = bench_pil()
+        result = bench_pil(ns.quick)
         print(render(result))
         out = ns.out or REPO / "runs" / "bench" / "pil.json"
         write_json_atomic(out, result)

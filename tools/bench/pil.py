@@ -21,7 +21,10 @@ class PilBenchError(RuntimeError):
     pass
 
 
-def measure() -> dict[str, Any]:
+QUICK_DURATION_S = 0.2  # --quick: the same runs, short: that the benchmark runs, not its figures
+
+
+def measure(duration_s: float = DURATION_S) -> dict[str, Any]:
     from tools.build.cortex_m import pil_sil_differences
     from tools.run.hil import HilOptions, run_hil
 
@@ -32,7 +35,7 @@ def measure() -> dict[str, Any]:
     if step.get("quick") or "cortex_m" not in step:
         raise PilBenchError(f"{STEP_RESULTS}: a --quick run: run tools/armctl bench step (without --quick)")
     with tempfile.TemporaryDirectory() as tmp:
-        runs = {name: run_hil(HilOptions(out=Path(tmp) / name, duration_s=DURATION_S, method=METHOD,
+        runs = {name: run_hil(HilOptions(out=Path(tmp) / name, duration_s=duration_s, method=METHOD,
                                          protocol="canopen", **opts))
                 for name, opts in (("pil", {"target": TARGET}), ("pil_again", {"target": TARGET}),
                                    ("sil", {"bus": "sil"}))}
@@ -47,7 +50,7 @@ def measure() -> dict[str, Any]:
                        "x86_64_loaded": step["design_read_at_run_time"]["methods"]["pm"]["float"],
                        "cortex_m4": step["cortex_m"]["cortex-m4"]["pm step (float)"],
                        "cortex_m7": step["cortex_m"]["cortex-m7"]["pm step (float)"]},
-        "pil": {"target": TARGET, "method": METHOD, "duration_s": DURATION_S, "periods": pil["steps"],
+        "pil": {"target": TARGET, "method": METHOD, "duration_s": duration_s, "periods": pil["steps"],
                 "step_instructions": t["step_instructions"], "stated_clock_hz": t["stated_clock_hz"],
                 "stated_part": t["stated_part"], "share": t["step_share_of_period_at_stated_clock"],
                 "stack_high_water_bytes": t["stack_high_water_bytes"],
@@ -85,5 +88,5 @@ def render(record: dict[str, Any]) -> str:
     ])
 
 
-def bench_pil() -> dict[str, Any]:
-    return measure()
+def bench_pil(quick: bool = False) -> dict[str, Any]:
+    return {"quick": quick, **measure(QUICK_DURATION_S if quick else DURATION_S)}
