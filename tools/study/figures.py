@@ -16,7 +16,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from tools.run.telemetry_log import read_log  # noqa: E402
+from tools.run.telemetry_log import read_log, truth_rows  # noqa: E402
 from tools.study.config import METHODS  # noqa: E402
 from tools.study.report import ESTIMATING, fig_name  # noqa: E402
 
@@ -47,14 +47,9 @@ def _series(run_dir: Path, hold: float) -> dict[str, np.ndarray]:
     ctl, sim = log["ARM_CTL"].messages, log["ARM_SIM"].messages
     ctl = ctl[(ctl.state == 1) & (ctl.t >= hold - 1e-9)]
     w_hat = ctl.w_hat.astype(float)
-    # w_true of the period each controller message names (the last one logged for it), NaN if none
-    steps, last = np.unique(sim.step[::-1], return_index=True)
-    truth = sim.w_true[::-1][last].astype(float)
-    at = np.searchsorted(steps, ctl.bus_period)
-    found = (at < len(steps)) & (steps[np.minimum(at, max(len(steps) - 1, 0))] == ctl.bus_period) if len(steps) \
-        else np.zeros(len(ctl), bool)
+    at = truth_rows(ctl, sim)  # w_true of the period each controller message names, NaN if none
     w = np.full(w_hat.shape, np.nan)
-    w[found] = truth[at[found]]
+    w[at >= 0] = sim.w_true[at[at >= 0]]
     return {"t": ctl.t - hold, "e": ctl.e.astype(float), "w": w, "w_hat": w_hat}
 
 
