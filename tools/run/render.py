@@ -27,7 +27,6 @@ from tools.build.arm import prepared_model
 from tools.run.telemetry_log import read_log, truth_rows
 
 STRIP_FILE = "arm-strip.png"
-STRIP_INFO_FILE = "arm-strip.json"   # the strip's moments and where each panel is in the PNG
 VIDEO_FILE = "arm.mp4"
 PANEL = (400, 300)                    # one moment of the strip, width x height (pixels)
 VIDEO_SIZE = (480, 320)               # multiples of 16, as H.264 wants them
@@ -61,6 +60,8 @@ class Motion:
     joint_names: list[str]
     result: str
     method: str
+    hold_s: float          # the reference holds its start this long before the trajectory begins
+    stopped: bool          # the run ended before its trajectory did (the safety layer stopped it)
 
 
 def load_run(run_dir: Path) -> tuple[dict[str, Any], Path]:
@@ -100,9 +101,11 @@ def load_motion(run_dir: Path, run: dict[str, Any]) -> Motion:
         raise RenderError(f"{log_path}: the controller never ran (result {res.get('result')}): no motion to render")
     at = truth_rows(ctl, sim)
     q = np.where((at >= 0)[:, None], sim.q[np.maximum(at, 0)], ctl.q.astype(float)) if len(sim) else ctl.q.astype(float)
+    hold, rate = float(res.get("ref_hold_s") or 0.0), float(res.get("rate_hz") or 1000.0)
+    end = hold + float(res.get("duration_s") or 0.0)
     return Motion(t=ctl.t.astype(float), q=q.astype(float), q_d=ctl.q_d.astype(float), e=ctl.e.astype(float),
                   joint_names=list(res.get("joint_names") or []), result=str(res.get("result")),
-                  method=str(res.get("method")))
+                  method=str(res.get("method")), hold_s=hold, stopped=float(ctl.t[-1]) < end - 2.0 / rate)
 
 
 def moments(mo: Motion) -> list[tuple[str, int]]:
@@ -110,7 +113,7 @@ def moments(mo: Motion) -> list[tuple[str, int]]:
     any joint) and the end (where a run that stopped early stopped)."""
     k = len(mo.t)
     worst = int(np.argmax(np.abs(mo.e).max(axis=1)))
-    picks = [("start", 0), ("middle", k // 2), ("worst", worst), ("end" if mo.result == "ok" else "stopped", k - 1)]
+    picks = [("start", 0), ("middle", k // 2), ("worst", worst), ("stopped" if mo.stopped else "end", k - 1)]
     return sorted(picks, key=lambda p: (p[1], p[0] != "worst"))
 
 
@@ -265,9 +268,9 @@ def _caption(mo: Motion, label: str, i: int) -> str:
     return f"{label}: t {mo.t[i]:.3f} s, largest |e| {np.degrees(abs(mo.e[i, worst])):.3g} deg ({name})"
 
 
-def write_strip(run_dir: Path, out: Path | None = None) -> dict[str, Any]:
-    """The frame strip of a run (STRIP_FILE) and its record (STRIP_INFO_FILE: the moments, each
-    panel's box in the PNG and where the arm and the ghost stand in it): the record."""
+def write_strip(run_dir: Path, out: Path | None = None, name: str = STRIP_FILE) -> dict[str, Any]:
+    """The frame strip of a run (OUT/NAME, default RUN_DIR/STRIP_FILE) and its record (the same
+    name, .json: the moments, each panel's box in the PNG, the ghost's offset): the record."""
     from PIL import Image, ImageDraw
 
     out = out or run_dir
@@ -283,16 +286,17 @@ def write_strip(run_dir: Path, out: Path | None = None) -> dict[str, Any]:
     title_h = 26
     img = Image.new("RGB", (w * len(panels), title_h + CAPTION_H + h), BACKGROUND)
     draw = ImageDraw.Draw(img)
-    draw.text((6, 4), f"{run_dir.name}: {mo.method}, {mo.result}. Solid blue: the arm as simulated (orange: its "
-                      "joint axes); translucent green, beside it: the commanded reference", fill=(0, 0, 0),
-              font=_font(14))
+    where = "/".join(run_dir.resolve().parts[-3:])
+    draw.text((6, 4), f"{where}: {mo.method}, {mo.result}. Solid blue: the arm as simulated (orange: its joint axes); "
+                      "translucent green, beside it: the commanded reference. t from the run's start (the "
+                      f"trajectory begins after a {mo.hold_s:g} s hold)", fill=(0, 0, 0), font=_font(13))
     boxes = []
     names = [(view.pixel(view.base), "arm"), (view.pixel(view.base + view.offset), "reference")]
     for k, (label, i, rgb) in enumerate(panels):
         x = k * w
         img.paste(Image.fromarray(rgb), (x, title_h + CAPTION_H))
-        for (px, py), name in names:
-            draw.text((x + px, title_h + CAPTION_H + min(py + 14, h - 10)), name, fill=(60, 60, 60), font=_font(12),
+        for (px, py), who in names:
+            draw.text((x + px, title_h + CAPTION_H + min(py + 14, h - 10)), who, fill=(60, 60, 60), font=_font(12),
                       anchor="mm")
         words = _caption(mo, label, i).split(", largest")
         draw.text((x + 6, title_h + 2), words[0], fill=(0, 0, 0), font=_font(14))
@@ -305,10 +309,10 @@ def write_strip(run_dir: Path, out: Path | None = None) -> dict[str, Any]:
 
     buf = io.BytesIO()
     img.save(buf, format="PNG")
-    write_bytes_atomic(out / STRIP_FILE, buf.getvalue())
+    write_bytes_atomic(out / name, buf.getvalue())
     record = {"run": str(run_dir), "model": str(model), "method": mo.method, "result": mo.result,
               "panels": boxes, "arm_rgba": ARM_RGBA, "ghost_rgba": GHOST_RGBA, "ghost_offset_m": view.offset.tolist()}
-    write_json_atomic(out / STRIP_INFO_FILE, record)
+    write_json_atomic((out / name).with_suffix(".json"), record)
     return record
 
 
