@@ -1,6 +1,8 @@
-"""The study's PNG figures, named by scenario: distributions per method and joint; the paper's
-Figs. 6-8 for the first seed of every scenario; each tuned method's best-so-far curve. One colour
-per method in every figure, runs that did not end ok marked. Apart from the report's text
+"""The study's PNG figures, named by scenario: distributions per method and joint; every metric per
+joint as bars with their 95 % intervals; the paper's Figs. 6-8 for the first seed of every
+scenario; the arm in the worst kept run (tools/run/render.py); each tuned method's best-so-far
+curve. One colour per method in every figure, runs that did not end ok marked (what they draw:
+tools/study/figure_data.py). Apart from the report's text
 (tools/study/report.py) so that `--no-figures` costs neither the figures (about a second of CPU
 each) nor matplotlib's import (0.4 s a process)."""
 
@@ -17,20 +19,14 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from tools.study.config import METHODS  # noqa: E402
-from tools.study.report import ESTIMATING, METRIC_TEXT, fig_name, in_degrees, worst_kept_run  # noqa: E402
-from tools.study.series import ENVELOPE_S, envelopes, scenario_series, stopped_early  # noqa: E402
+from tools.study.figure_data import (BAR_METRICS, ENVELOPE_S, METRIC_UNITS, colour_of, envelopes,  # noqa: E402
+                                     metric_bars, scenario_series, stopped_early)
+from tools.study.html_figures import (distribution_figure, envelope_figure, metrics_figure,  # noqa: E402
+                                      tuning_figure)
+from tools.study.report import ESTIMATING, METRIC_TEXT, fig_name, worst_kept_run  # noqa: E402
 
 
-def colour_of(study: dict[str, Any]) -> dict[str, Any]:
-    """One colour per method, the same in every figure of every study: by its place in the table
-    of study methods (tools/study/config.py METHODS), whichever of them a study runs."""
-    cmap = plt.get_cmap("tab10")
-    order = list(METHODS)
-    return {m: cmap((order.index(m) if m in order else len(order) + i) % 10) for i, m in enumerate(study["methods"])}
-
-
-def _time_figures(out: Path, study: dict[str, Any], scenario: str) -> list[str]:
+def _time_figures(out: Path, study: dict[str, Any], scenario: str) -> list[tuple[str, str | None]]:
     """The paper's Figs. 6-8 for the first seed of one scenario: every method in its own colour, a
     run the safety layer stopped drawn up to its stop and marked there (a cross and a dotted line),
     one that ended badly otherwise named with its result in the legend, a run with no trajectory
@@ -40,7 +36,7 @@ def _time_figures(out: Path, study: dict[str, Any], scenario: str) -> list[str]:
     colour = colour_of(study)
     runs = study["scenarios"][scenario]["runs"]
     series, empty = scenario_series(out, study, scenario)
-    made: list[str] = []
+    made: list[tuple[str, str | None]] = []
     if not series:
         return made
     env = envelopes(series, study.get("rate_hz", 1000.0))
@@ -49,7 +45,8 @@ def _time_figures(out: Path, study: dict[str, Any], scenario: str) -> list[str]:
         r = runs[m][0].get("result") if runs.get(m) else None
         return m if r == "ok" else f"{m} ({r}{', stopped' if stopped_early(series[m]['t'], study) else ''})"
 
-    def finish(fig: Any, axes: Any, title: str, kind: str, shown: list[str], at: Any = None) -> None:
+    def finish(fig: Any, axes: Any, title: str, kind: str, shown: list[str], at: Any = None,
+               interactive: str | None = None) -> None:
         for m in shown:
             if stopped_early(series[m]["t"], study):  # where the safety layer stopped it
                 for j, ax in enumerate(axes):
@@ -58,7 +55,7 @@ def _time_figures(out: Path, study: dict[str, Any], scenario: str) -> list[str]:
                         ax.plot([series[m]["t"][-1]], [at(m, j)], marker="X", ms=8, color=colour[m], mec="k", zorder=5)
         axes[0].set_title(title + (f"; {', '.join(empty)}" if empty else ""), fontsize=9)
         axes[-1].set_xlabel("t (s)")
-        made.append(_save(fig, out / fig_name(kind, scenario), tight=False))
+        made.append((_save(fig, out / fig_name(kind, scenario), tight=False), interactive))
 
     if "pm" in series:
         fig, axes = _joint_column(n)
@@ -88,7 +85,8 @@ def _time_figures(out: Path, study: dict[str, Any], scenario: str) -> list[str]:
         finish(fig, axes, f"{what} over {ENVELOPE_S * 1e3:g} ms ({unit}), {scenario}, seed {study['seeds'][0]} "
                f"(cf. the paper's {fig_of}); x: where the safety layer stopped a run",
                "estimation_error" if kind == "estimation" else "tracking_error", methods,
-               at=lambda m, j, kind=kind: env[kind][m][-1, j])
+               at=lambda m, j, kind=kind: env[kind][m][-1, j],
+               interactive=envelope_figure(study, scenario, kind, series, env[kind]))
     return made
 
 
@@ -142,31 +140,6 @@ def _distribution_figure(out: Path, study: dict[str, Any], scenario: str) -> str
     axes[0].set_ylabel("L-inf tracking error (deg), one point per seed")
     fig.suptitle(f"{scenario}: {len(study['seeds'])} seed(s); dot: a run that ended ok, x: one that did not")
     return _save(fig, out / fig_name("distribution", scenario))
-
-
-def metric_bars(study: dict[str, Any], scenario: str, metric: str) -> tuple[list[str], dict[str, dict[str, Any]]]:
-    """One metric of a scenario as the bar chart draws it: the groups (a joint each; "total" for
-    power) and per method its means, the 95 % interval's half-widths below and above (NaN: none)
-    and how many of its runs did not end ok."""
-    sc = study["scenarios"][scenario]
-    names = study["arm"]["joint_names"]
-    groups = ["total"] if metric == "power" else [f"{j + 1} {names[j]}" for j in range(len(names))]
-    out = {}
-    for m in study["methods"]:
-        if metric == "est" and m not in ESTIMATING:
-            continue
-        st = sc["stats"][m][metric]
-        cells = [in_degrees(s, metric) for s in ([st["total"]] if metric == "power" else st["per_joint"])]
-        mean = np.array([c["mean"] if c.get("mean") is not None else np.nan for c in cells], float)
-        lo = np.array([c["ci95"][0] if c.get("ci95") else np.nan for c in cells], float)
-        hi = np.array([c["ci95"][1] if c.get("ci95") else np.nan for c in cells], float)
-        out[m] = {"mean": mean, "below": mean - lo, "above": hi - mean,
-                  "not_ok": sum(1 for r in sc["stats"][m]["results"] if r != "ok"), "runs": len(sc["stats"][m]["results"])}
-    return groups, out
-
-
-METRIC_UNITS = {"linf": "deg", "rms": "deg", "est": "rad/s^2", "power": "W"}
-BAR_METRICS = ("linf", "rms", "est", "power")
 
 
 def _metrics_figure(out: Path, study: dict[str, Any], scenario: str) -> str:
@@ -235,7 +208,7 @@ def convergence_figure(out: Path, scenario: str, recs: dict[str, dict[str, Any]]
     return _save(fig, out / fig_name("tuning", scenario))
 
 
-def _arm_strip(out: Path, study: dict[str, Any], scenario: str) -> list[str]:
+def _arm_strip(out: Path, study: dict[str, Any], scenario: str) -> list[tuple[str, str | None]]:
     """The frame strip of the scenario's worst kept run (tools/study/report.py worst_kept_run)."""
     from tools.run.render import RenderError, write_strip
 
@@ -248,17 +221,20 @@ def _arm_strip(out: Path, study: dict[str, Any], scenario: str) -> list[str]:
     except RenderError as exc:  # the report says why it has no strip, and the study goes on
         print(f"armctl study: no arm strip for {scenario}: {exc}", file=sys.stderr)
         return []
-    return [name]
+    return [(name, None)]
 
 
-def _scenario_figures(out: Path, study: dict[str, Any], scenario: str, kind: str) -> list[str]:
-    """One scenario's figures of one kind (FIGURE_KINDS): their file names."""
+def _scenario_figures(out: Path, study: dict[str, Any], scenario: str, kind: str) -> list[tuple[str, str | None]]:
+    """One scenario's figures of one kind (FIGURE_KINDS): each one's file name and its interactive
+    version for report.html (plotly's JSON; None: the PNG itself)."""
     if kind == "tuning":
-        return [convergence_figure(out, scenario, study["scenarios"][scenario]["tuning"], colour_of(study))]
+        recs = study["scenarios"][scenario]["tuning"]
+        return [(convergence_figure(out, scenario, recs, colour_of(study)),
+                 tuning_figure(scenario, recs, colour_of(study)))]
     if kind == "distribution":
-        return [_distribution_figure(out, study, scenario)]
+        return [(_distribution_figure(out, study, scenario), distribution_figure(study, scenario))]
     if kind == "metrics":
-        return [_metrics_figure(out, study, scenario)]
+        return [(_metrics_figure(out, study, scenario), metrics_figure(study, scenario))]
     if kind == "arm":
         return _arm_strip(out, study, scenario)
     return _time_figures(out, study, scenario)
@@ -267,10 +243,12 @@ def _scenario_figures(out: Path, study: dict[str, Any], scenario: str, kind: str
 FIGURE_KINDS = ("time", "arm", "distribution", "metrics", "tuning")  # the slowest first: the workers end together
 
 
-def draw_figures(out: Path, study: dict[str, Any], jobs: int | None = None) -> dict[tuple[str, str], list[str]]:
+def draw_figures(out: Path, study: dict[str, Any], jobs: int | None = None) -> dict[tuple[str, str],
+                                                                                   list[tuple[str, str | None]]]:
     """Every scenario's figures, drawn in `jobs` processes (default: every core this process may
     use; matplotlib holds the GIL, and the figures were a third of a study's time): (scenario,
-    kind) -> file names. Each task gets its own scenario of the study alone."""
+    kind) -> each figure's file name and interactive version. Each task gets its own scenario of
+    the study alone."""
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 

@@ -347,7 +347,8 @@ def _remove_figures(out: Path, scenarios: list[str]) -> None:
 
 
 def write_report(out: Path, study: dict[str, Any], figures: bool = True) -> None:
-    """report.md and summary.txt, and the figures unless `figures` is False (`--no-figures`)."""
+    """report.md, report.html (the same, one self-contained page, its figures interactive) and
+    summary.txt, and the figures unless `figures` is False (`--no-figures`)."""
     if figures:
         from tools.study.figures import draw_figures  # matplotlib: only when there are figures to draw
 
@@ -356,8 +357,8 @@ def write_report(out: Path, study: dict[str, Any], figures: bool = True) -> None
         drawn = {}
         _remove_figures(out, list(study["scenarios"]))
 
-    def images(name: str, kind: str) -> list[str]:
-        return [f"![{f}]({f})" for f in drawn.get((name, kind), [])]
+    def images(name: str, kind: str) -> list[str]:  # a paragraph each (report.html puts a figure in its place)
+        return [line for f, _ in drawn.get((name, kind), []) for line in ("", f"![{f}]({f})", "")]
 
     arm = study["arm"]
     n = arm["n_joints"]
@@ -442,6 +443,9 @@ def write_report(out: Path, study: dict[str, Any], figures: bool = True) -> None
     md += ["## Summary", "", "```", summary_table(study), "```", ""]
     write_text_atomic(out / "report.md", "\n".join(md))
     write_text_atomic(out / "summary.txt", summary_table(study) + "\n")
+    from tools.study.html_report import write_html
+
+    write_html(out, study, "\n".join(md), {f: fig for figs in drawn.values() for f, fig in figs if fig is not None})
 
 
 def summary_table(study: dict[str, Any]) -> str:

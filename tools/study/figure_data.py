@@ -1,8 +1,9 @@
-"""The time series the study's figures draw, apart from any drawing: each method's kept run of a
-scenario (the first seed's: the study keeps that seed's telemetry) read once, and the envelopes
-(max |x| over a trailing window) that let methods whose errors differ a hundredfold stay apart.
-The PNG figures (tools/study/figures.py) and report.html's interactive ones
-(tools/study/html_report.py) both draw these."""
+"""What the study's figures draw, apart from any drawing, so that the PNG figures
+(tools/study/figures.py, matplotlib) and report.html's interactive ones (tools/study/html_report.py,
+plotly) draw the same: one colour per method, each method's kept run of a scenario (the first
+seed's: the study keeps that seed's telemetry) and its envelopes (max |x| over a trailing window,
+which lets methods whose errors differ a hundredfold stay apart), and each metric's means with
+their 95 % intervals per joint."""
 
 from __future__ import annotations
 
@@ -12,8 +13,46 @@ from typing import Any
 import numpy as np
 
 from tools.run.telemetry_log import read_log, truth_rows
+from tools.study.config import METHODS
+from tools.study.report import ESTIMATING, in_degrees
+
+# matplotlib's tab10, the colours of every figure's methods in their order in the study's method
+# table (METHODS): the same colour for a method in every figure of every study, PNG or HTML
+PALETTE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22",
+           "#17becf")
+METRIC_UNITS = {"linf": "deg", "rms": "deg", "est": "rad/s^2", "power": "W"}
+BAR_METRICS = ("linf", "rms", "est", "power")
 
 ENVELOPE_S = 0.1  # the tracking and estimation figures draw each method's max |x| over this trailing window
+
+
+def colour_of(study: dict[str, Any]) -> dict[str, str]:
+    """One colour per method, the same in every figure of every study: by its place in the table
+    of study methods (tools/study/config.py METHODS), whichever of them a study runs."""
+    order = list(METHODS)
+    return {m: PALETTE[(order.index(m) if m in order else len(order) + i) % len(PALETTE)]
+            for i, m in enumerate(study["methods"])}
+
+
+def metric_bars(study: dict[str, Any], scenario: str, metric: str) -> tuple[list[str], dict[str, dict[str, Any]]]:
+    """One metric of a scenario as the bar charts draw it: the groups (a joint each; "total" for
+    power) and per method its means, the 95 % interval's half-widths below and above (NaN: none)
+    and how many of its runs did not end ok."""
+    sc = study["scenarios"][scenario]
+    names = study["arm"]["joint_names"]
+    groups = ["total"] if metric == "power" else [f"{j + 1} {names[j]}" for j in range(len(names))]
+    out = {}
+    for m in study["methods"]:
+        if metric == "est" and m not in ESTIMATING:
+            continue
+        st = sc["stats"][m][metric]
+        cells = [in_degrees(s, metric) for s in ([st["total"]] if metric == "power" else st["per_joint"])]
+        mean = np.array([c["mean"] if c.get("mean") is not None else np.nan for c in cells], float)
+        lo = np.array([c["ci95"][0] if c.get("ci95") else np.nan for c in cells], float)
+        hi = np.array([c["ci95"][1] if c.get("ci95") else np.nan for c in cells], float)
+        out[m] = {"mean": mean, "below": mean - lo, "above": hi - mean,
+                  "not_ok": sum(1 for r in sc["stats"][m]["results"] if r != "ok"), "runs": len(sc["stats"][m]["results"])}
+    return groups, out
 
 
 def envelope(x: np.ndarray, window: int) -> np.ndarray:
