@@ -7,8 +7,8 @@ Lichtblick, PlotJuggler's MCAP loader, the `mcap` CLI.
 - Every frame of the run's capture (bus.log or bus.log.gz) is a message of topic
   `can/BUS/MESSAGE`, decoded with the run's DBC (run.json environment.dbc: the drive table's
   canopen.dbc, or the arm protocol's) into its named signals, in the DBC's units (SI: rad, rad/s,
-  N m); the raw frame beside them (`id`, `data`). A frame no DBC message describes goes to
-  `can/BUS/unknown`, raw.
+  N m), under `signals`; the raw frame under `frame` (`bus`, `id`, `data` in hex, `is_fd`). A
+  frame no DBC message describes goes to `can/BUS/unknown`, raw.
 - One timeline, the run's: in lockstep and in software in the loop the simulated time the capture
   keeps (a controller message at its bus period, a simulator message at its step, both times the
   loop period); in realtime the wall clock (the logger's receive time, the capture's own). A
@@ -172,17 +172,22 @@ def _frames(capture: Path) -> Iterator[Any]:
         raise ExportError(f"{capture}: not a candump log ({type(exc).__name__}: {exc})") from None
 
 
+FRAME_SCHEMA = {"type": "object", "properties": {
+    "bus": {"type": "string"}, "id": {"type": "integer"}, "data": {"type": "string", "description": "its bytes, hex"},
+    "is_fd": {"type": "boolean"}}}
+
+
 def _can_schema(msg: Any) -> dict[str, Any]:
-    props: dict[str, Any] = {"bus": {"type": "string"}, "id": {"type": "integer"},
-                             "data": {"type": "string", "description": "the frame's bytes, hex"}}
-    for s in msg.signals:
-        props[s.name] = {"type": ["number", "null"], "description": f"{s.comment or s.name} ({s.unit or 'no unit'})"}
-    return {"type": "object", "title": msg.name, "properties": props}
+    """A DBC message's topic: the raw frame, and its signals (apart: a signal may be named `data`)."""
+    return {"type": "object", "title": msg.name, "properties": {
+        "frame": FRAME_SCHEMA,
+        "signals": {"type": "object", "properties": {
+            s.name: {"type": ["number", "null"], "description": f"{s.comment or s.name} ({s.unit or 'no unit'})"}
+            for s in msg.signals}}}}
 
 
 RAW_SCHEMA = {"type": "object", "title": "CAN frame", "properties": {
-    "bus": {"type": "string"}, "id": {"type": "integer"}, "data": {"type": "string", "description": "hex"},
-    "is_fd": {"type": "boolean"}, "error": {"type": "string"}}}
+    "frame": FRAME_SCHEMA, "error": {"type": "string", "description": "why its DBC message did not decode it"}}}
 
 
 def export_mcap(run_dir: Path, out: Path | None = None,
@@ -278,16 +283,15 @@ def _can_messages(capture: Path, db: Any, w: Any, realtime: bool, result: Export
     for fr in _frames(capture):
         bus = str(fr.channel)
         msg = by_id.get((fr.arbitration_id, fr.is_extended_id))
-        body: dict[str, Any] = {"bus": bus, "id": int(fr.arbitration_id), "data": bytes(fr.data).hex()}
+        body: dict[str, Any] = {"frame": {"bus": bus, "id": int(fr.arbitration_id), "data": bytes(fr.data).hex(),
+                                          "is_fd": bool(fr.is_fd)}}
         name = msg.name if msg is not None else UNKNOWN_FRAME
         if msg is not None:
             try:
-                body.update({k: _value(float(v)) for k, v in
-                             msg.decode(bytes(fr.data), decode_choices=False, allow_truncated=True).items()})
+                body["signals"] = {k: _value(float(v)) for k, v in
+                                   msg.decode(bytes(fr.data), decode_choices=False, allow_truncated=True).items()}
             except Exception as exc:  # noqa: BLE001 - a frame its DBC message cannot decode: kept raw, named
                 name, body["error"] = UNKNOWN_FRAME, f"{msg.name}: {exc}"
-        if name == UNKNOWN_FRAME:
-            body["is_fd"] = bool(fr.is_fd)
         topic = f"{CAN_PREFIX}/{bus}/{name}"
         if topic not in channels:
             if name not in schemas:
