@@ -286,7 +286,8 @@ def write_strip(run_dir: Path, out: Path | None = None, name: str = STRIP_FILE) 
     title_h = 26
     img = Image.new("RGB", (w * len(panels), title_h + CAPTION_H + h), BACKGROUND)
     draw = ImageDraw.Draw(img)
-    where = "/".join(run_dir.resolve().parts[-3:])
+    parts = run_dir.resolve().parts
+    where = str(run_dir.resolve()) if len(parts) <= 4 else "/".join(parts[-3:])  # a study's SCENARIO/METHOD/seed-N
     draw.text((6, 4), f"{where}: {mo.method}, {mo.result}. Solid blue: the arm as simulated (orange: its joint axes); "
                       "translucent green, beside it: the commanded reference. t from the run's start (the "
                       f"trajectory begins after a {mo.hold_s:g} s hold)", fill=(0, 0, 0), font=_font(13))
