@@ -88,7 +88,7 @@ def test_the_worst_runs_strip_shows_the_arm_beside_its_ghost(study: tuple[Path, 
     rec = json.loads((out / name).with_suffix(".json").read_text())
     run_dir = _worst(out, st)
     assert Path(rec["run"]) == run_dir.resolve() or Path(rec["run"]) == run_dir
-    assert [p["moment"] for p in rec["panels"]].count("worst") == 1 and len(rec["panels"]) == 4
+    assert sum("worst" in p["moment"] for p in rec["panels"]) == 1 and 2 <= len(rec["panels"]) <= 4
     run, model = load_run(run_dir)
     mo = load_motion(run_dir, run)
     view = ArmView(model, PANEL, np.concatenate([mo.q, mo.q_d]))

@@ -110,11 +110,15 @@ def load_motion(run_dir: Path, run: dict[str, Any]) -> Motion:
 
 def moments(mo: Motion) -> list[tuple[str, int]]:
     """The strip's moments, in time order: start, middle, the worst tracking (the largest |e| of
-    any joint) and the end (where a run that stopped early stopped)."""
+    any joint) and the end (where a run that stopped early stopped); moments that fall on one
+    period are one panel, named by both ("worst, stopped")."""
     k = len(mo.t)
     worst = int(np.argmax(np.abs(mo.e).max(axis=1)))
     picks = [("start", 0), ("middle", k // 2), ("worst", worst), ("stopped" if mo.stopped else "end", k - 1)]
-    return sorted(picks, key=lambda p: (p[1], p[0] != "worst"))
+    names: dict[int, list[str]] = {}
+    for label, i in sorted(picks, key=lambda p: (p[1], p[0] != "worst")):
+        names.setdefault(i, []).append(label)
+    return [(", ".join(labels), i) for i, labels in names.items()]
 
 
 class ArmView:

@@ -53,7 +53,7 @@ def _time_figures(out: Path, study: dict[str, Any], scenario: str) -> list[tuple
                     ax.axvline(series[m]["t"][-1], color=colour[m], lw=0.8, ls=":")
                     if at is not None:  # and a cross on its line, where it ended
                         ax.plot([series[m]["t"][-1]], [at(m, j)], marker="X", ms=8, color=colour[m], mec="k", zorder=5)
-        axes[0].set_title(title + (f"; {', '.join(empty)}" if empty else ""), fontsize=9)
+        fig.suptitle(title + (f"; {', '.join(empty)}" if empty else ""), fontsize=9, y=0.995)
         axes[-1].set_xlabel("t (s)")
         made.append((_save(fig, out / fig_name(kind, scenario), tight=False), interactive))
 
@@ -81,8 +81,9 @@ def _time_figures(out: Path, study: dict[str, Any], scenario: str) -> list[tuple
             if bound:  # the run's tracking bound: above it, the verdict is tracking-bound-exceeded
                 for ax in axes:
                     ax.axhline(bound, color="k", lw=0.7, ls="--", label=f"tracking bound {bound:g} deg")
-        axes[0].legend(loc="upper right", fontsize=7, ncol=min(len(methods) + 1, 4))
-        finish(fig, axes, f"{what} over {ENVELOPE_S * 1e3:g} ms ({unit}), {scenario}, seed {study['seeds'][0]} "
+        # above the panels, where it hides no line
+        axes[0].legend(loc="lower left", bbox_to_anchor=(0.0, 1.0), fontsize=7, ncol=4, frameon=False)
+        finish(fig, axes, f"{what} over {ENVELOPE_S * 1e3:g} ms, {scenario}, seed {study['seeds'][0]} "
                f"(cf. the paper's {fig_of}); x: where the safety layer stopped a run",
                "estimation_error" if kind == "estimation" else "tracking_error", methods,
                at=lambda m, j, kind=kind: env[kind][m][-1, j],
@@ -95,7 +96,7 @@ def _joint_column(n: int) -> tuple[Any, Any]:
     measured every tick label again, 40 % of a time figure's cost, for margins these figures never
     need to change (short labels, a one-line title)."""
     fig, axes = plt.subplots(n, 1, figsize=(9, 11), sharex=True, squeeze=False)
-    fig.subplots_adjust(left=0.1, right=0.98, bottom=0.05, top=0.965, hspace=0.12)
+    fig.subplots_adjust(left=0.1, right=0.98, bottom=0.05, top=0.93, hspace=0.12)
     return fig, axes[:, 0]
 
 

@@ -67,7 +67,8 @@ def envelope_figure(study: dict[str, Any], scenario: str, kind: str, series: dic
                               row=j + 1, col=1)
     bound = next((r[0]["bounds"]["max_error_deg"] for r in runs.values() if r and r[0].get("bounds")), None)
     for j in range(n):
-        fig.update_yaxes(type="log", dtick=1, title_text=f"{j + 1} {names[j]}", title_font={"size": 10}, row=j + 1,
+        fig.update_yaxes(type="log", dtick=1, exponentformat="power", title_text=f"{j + 1} {names[j]}",
+                         title_font={"size": 10}, row=j + 1,
                          col=1)
         if kind == "tracking" and bound:
             fig.add_hline(y=bound, line={"dash": "dash", "width": 1, "color": "black"}, row=j + 1, col=1)
