@@ -26,6 +26,9 @@ struct co_sim {
     double w[SIM_MAX_JOINTS];
     uint16_t last_emcy[SIM_MAX_JOINTS];
     int64_t t0;
+    /* the drives' clock: the wall clock until the master's first SYNC, then that moment plus the
+     * periods simulated since (bus_now) */
+    int64_t t_first_sync;
     uint64_t syncs[ARM_CAN_BUS_SET_MAX]; /* SYNCs handled per bus */
     unsigned held[ARM_CAN_BUS_SET_MAX];  /* a SYNC that came before its period's lead SYNC */
     int synced; /* a SYNC came: the next one ends a period */
@@ -46,6 +49,17 @@ static int64_t mono_ns(void)
     struct timespec ts;
     clock_gettime(CLOCK_MONOTONIC, &ts);
     return (int64_t)ts.tv_sec * 1000000000LL + ts.tv_nsec;
+}
+
+/* The drives' clock (their heartbeats, the master's heartbeat they watch): once the master's SYNC
+ * has begun, the periods it paced, as a drive synchronised to it counts them. A run then gives the
+ * same frames whatever the machine's load: in lockstep a stalled machine stalls the SYNC too, and
+ * software in the loop runs faster or slower than the wall clock. (A master silent on the bus is
+ * caught on the wall clock still: --idle-timeout, controller-lost.) */
+static int64_t bus_now(co_sim_t *s)
+{
+    if (s->t_first_sync == 0) return mono_ns();
+    return s->t_first_sync + (int64_t)((double)s->arm->step_count * s->arm->period * 1e9 + 0.5);
 }
 
 static void set_result(sim_report_t *rep, const char *result, const char *reason)
@@ -212,7 +226,7 @@ static void sync_nodes(co_sim_t *s, unsigned bus)
         time_sync(s, bus);
         for (unsigned i = 0; i < s->n_late[bus]; ++i) { /* last period's late RPDOs, after this SYNC */
             for (int j = 0; j < s->n; ++j) {
-                if (s->bus_of[j] == (int)bus) sim_co_node_on_frame(&s->node[j], &s->late[bus][i], mono_ns());
+                if (s->bus_of[j] == (int)bus) sim_co_node_on_frame(&s->node[j], &s->late[bus][i], bus_now(s));
             }
         }
         s->n_late[bus] = 0u;
@@ -272,6 +286,7 @@ static int on_frame(co_sim_t *s, const arm_can_frame_t *f, unsigned bus, int64_t
     if ((f->flags & (ARM_CAN_FLAG_RTR | ARM_CAN_FLAG_ERR | ARM_CAN_FLAG_EXT | ARM_CAN_FLAG_FD)) != 0u) {
         rep->rx_bad_frame++; /* classic 11-bit data frames only */
     } else if (f->id == COB_SYNC) {
+        if (s->t_first_sync == 0) s->t_first_sync = now;
         if (f->len <= 1u) on_sync(s, bus);
         else rep->rx_bad_frame++;
     } else {
@@ -307,7 +322,7 @@ static void run(co_sim_t *s)
             set_result(rep, "interrupted", "stopped by a signal");
             return;
         }
-        int64_t now = mono_ns();
+        int64_t now = bus_now(s);
         int64_t wait = 100000000; /* a stop request is noticed within 100 ms */
         for (int j = 0; j < s->n; ++j) {
             const int64_t w = sim_co_node_wait_ns(&s->node[j], now);
@@ -322,7 +337,8 @@ static void run(co_sim_t *s)
             set_result(rep, "bus-error", text);
             return;
         }
-        now = mono_ns();
+        now = bus_now(s);
+        const int64_t wall = mono_ns();
         int stopped = 0;
         /* SYNC and NMT go on every bus, and sockets keep no order between buses: what is already
          * queued on the others up to their own SYNC (this period's RPDOs) was sent first; their
@@ -342,17 +358,17 @@ static void run(co_sim_t *s)
             const uint64_t before = rep->frames_rx;
             stopped = on_frame(s, &f, bus, now);
             if (rep->frames_rx != before) {
-                last_rx = now;
+                last_rx = wall;
                 booted = 1;
             }
         }
         for (unsigned i = 0; i < s->set.n; ++i) {
             for (unsigned k = 0; k < n_later[i] && !stopped; ++k) stopped = on_frame(s, &later[i][k], i, now);
         }
-        tick_all(s, now);
+        tick_all(s, bus_now(s)); /* the frames may have ended a period */
         if (stopped) return; /* the master stopped every drive */
         const double timeout = booted ? cfg->idle_timeout_s : cfg->boot_timeout_s;
-        if ((double)(now - last_rx) * 1e-9 > timeout) {
+        if ((double)(wall - last_rx) * 1e-9 > timeout) {
             char why[160];
             snprintf(why, sizeof(why), "%s for %g s: drives faulted, torque off",
                      booted ? "master silent" : "no master on the bus", timeout);
@@ -432,9 +448,9 @@ int sim_co_service(co_sim_t *s)
     arm_can_frame_t f;
     unsigned bus = 0;
     while (!s->ended && arm_can_bus_set_recv(&s->set, &f, &bus, 0) == 1) {
-        s->ended = on_frame(s, &f, bus, mono_ns());
+        s->ended = on_frame(s, &f, bus, bus_now(s));
     }
-    if (!s->ended) tick_all(s, mono_ns());
+    if (!s->ended) tick_all(s, bus_now(s));
     return !s->ended;
 }
 

@@ -65,6 +65,21 @@ static int parse_line(sim_co_table_t *t, char *line, sim_co_entry_t *e)
     return 0;
 }
 
+static unsigned hash_of(uint32_t key)
+{
+    return (key * 2654435761u) >> (32u - SIM_CO_HASH_BITS); /* Knuth's multiplicative hash */
+}
+
+static void index_rows(sim_co_table_t *t)
+{
+    memset(t->slot, 0, sizeof(t->slot));
+    for (unsigned i = 0; i < t->n; ++i) {
+        unsigned h = hash_of(t->key[i]);
+        while (t->slot[h] != 0u) h = (h + 1u) & (SIM_CO_HASH_SLOTS - 1u);
+        t->slot[h] = (uint16_t)(i + 1u);
+    }
+}
+
 int sim_co_table_parse(sim_co_table_t *t, const char *text, char *err, size_t cap)
 {
     t->n = 0u;
@@ -113,12 +128,14 @@ int sim_co_table_parse(sim_co_table_t *t, const char *text, char *err, size_t ca
                 return -1;
             }
         }
+        t->key[t->n] = (uint32_t)e->index << 8 | e->sub;
         t->n++;
     }
     if (t->n != declared) {
         snprintf(err, cap, "%u entries, line 1 declares %u", t->n, declared);
         return -1;
     }
+    index_rows(t);
     return 0;
 }
 
@@ -164,10 +181,14 @@ const sim_co_table_t *sim_co_table_builtin(void)
 int sim_co_table_find(const sim_co_table_t *t, uint16_t index, uint8_t sub, uint32_t *abort_code)
 {
     const uint32_t key = (uint32_t)index << 8 | sub;
+    for (unsigned h = hash_of(key); t->slot[h] != 0u; h = (h + 1u) & (SIM_CO_HASH_SLOTS - 1u)) {
+        if (t->key[t->slot[h] - 1u] == key) return (int)t->slot[h] - 1;
+    }
+    /* not there: which abort, no object or no sub-index, from the rows around where it would be */
     unsigned lo = 0u, hi = t->n;
     while (lo < hi) { /* the first row at or after key */
         const unsigned mid = lo + (hi - lo) / 2u;
-        if (((uint32_t)t->e[mid].index << 8 | t->e[mid].sub) < key) {
+        if (t->key[mid] < key) {
             lo = mid + 1u;
         } else {
             hi = mid;

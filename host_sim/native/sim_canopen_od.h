@@ -27,6 +27,8 @@
 
 #define SIM_CO_OD_MAX 2048u    /* entries of one dictionary (a large vendor file has about 1000) */
 #define SIM_CO_TEXT_MAX 16384u /* bytes of a dictionary's string and domain defaults */
+#define SIM_CO_HASH_BITS 12u   /* 4096 slots, twice SIM_CO_OD_MAX: short probe runs */
+#define SIM_CO_HASH_SLOTS (1u << SIM_CO_HASH_BITS)
 #define SIM_CO_VALUE_MAX 256u  /* the longest value an SDO moves */
 #define SIM_CO_STR_SLOTS 16u   /* string objects a node keeps written values of */
 
@@ -55,6 +57,9 @@ typedef struct {
 
 typedef struct {
     unsigned n;                       /* entries, sorted by index and sub-index */
+    uint32_t key[SIM_CO_OD_MAX];      /* index << 8 | sub of each, sorted */
+    uint16_t slot[SIM_CO_HASH_SLOTS]; /* row + 1 of the key hashed there (0: none): a drive reads its
+                                         objects every period, a lookup costs a probe or two */
     sim_co_entry_t e[SIM_CO_OD_MAX];
     unsigned text_len;
     uint8_t text[SIM_CO_TEXT_MAX];

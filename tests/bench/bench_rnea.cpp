@@ -4,7 +4,9 @@
 // (ours: the general arm_rnea; kernel: the arm's generated arm_rnea_kernel, what the controller runs)
 //   bench_rnea check        (Pinocchio's torques against ours on 200 states; prints the worst)
 // Pinocchio's model is built from the same generated header the firmware uses: the same link
-// frames, axes, masses, centres of mass, inertias and armature.
+// frames, axes, masses, centres of mass, inertias, armature (model.armature, which Pinocchio's
+// rnea adds as armature * a) and joint damping (model.damping, which its rnea leaves out: our
+// RNEA adds damping * qd, so every Pinocchio call here adds it too, inside the counted function).
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -51,6 +53,7 @@ pinocchio::ModelTpl<S> build_model()
         m.appendBodyToJoint(id, pinocchio::InertiaTpl<S>(S(l.mass), Vec3(S(l.com[0]), S(l.com[1]), S(l.com[2])), inertia),
                             pinocchio::SE3Tpl<S>::Identity());
         m.armature[i] = S(l.armature);
+        m.damping[i] = S(l.damping);
         parent = id;
     }
     return m;
@@ -86,6 +89,7 @@ __attribute__((noinline)) void bench_rnea_pinocchio(const pinocchio::ModelTpl<S>
                                                     const Eigen::Matrix<S, Eigen::Dynamic, 1> &a)
 {
     pinocchio::rnea(m, d, q, v, a);
+    d.tau.array() += m.damping.array() * v.array(); // the joint's viscous damping: see the top
 }
 
 template <typename S>
@@ -124,7 +128,7 @@ int main(int argc, char **argv)
                 vv[j] = qd[j];
                 va[j] = qdd[j];
             }
-            pinocchio::rnea(m, d, vq, vv, va);
+            bench_rnea_pinocchio<double>(m, d, vq, vv, va);
             float tau_k[ARM_N_JOINTS];
             arm_rnea(&ARM_ROBOT_MODEL, q, qd, qdd, tau);
             arm_rnea_kernel(q, qd, qdd, tau_k);

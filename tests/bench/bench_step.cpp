@@ -1,6 +1,8 @@
 // Runs N control steps of one method so callgrind can count the instructions per step:
-//   bench_step METHOD float|fixed|eigen N
+//   bench_step METHOD float|fixed|eigen N [DESIGN_FILE]
 // "eigen" runs the dense double-precision reference (tests/c/reference) for the same method.
+// DESIGN_FILE: the design read at run time (the Linux port's --design-file, gen.synth's
+// pm_design.txt) instead of the built-in one: the run-time-sized path of the same step.
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -10,6 +12,7 @@
 
 extern "C" {
 #include "arm_robot_model_data.h"
+#include "design_file.h"
 }
 
 namespace {
@@ -51,8 +54,8 @@ __attribute__((noinline)) ref::VecN bench_eigen_step(ref::Step &s, const arm_ctl
 
 int main(int argc, char **argv)
 {
-    if (argc != 4) {
-        std::fprintf(stderr, "usage: %s METHOD float|fixed|eigen N\n", argv[0]);
+    if (argc != 4 && argc != 5) {
+        std::fprintf(stderr, "usage: %s METHOD float|fixed|eigen N [DESIGN_FILE]\n", argv[0]);
         return 2;
     }
     const arm_method_t method = arm_method_from_str(argv[1]);
@@ -65,6 +68,15 @@ int main(int argc, char **argv)
     arm_ctl_default_config(&ARM_ROBOT_MODEL, &cfg);
     cfg.method = method;
     cfg.numeric = std::strcmp(argv[2], "fixed") == 0 ? ARM_NUMERIC_FIXED : ARM_NUMERIC_FLOAT;
+    static design_file_t design;
+    if (argc == 5) {
+        char err[512];
+        if (design_file_load(argv[4], &design, err, sizeof(err)) != 0) {
+            std::fprintf(stderr, "bench_step: %s\n", err);
+            return 2;
+        }
+        cfg.design = &design.d;
+    }
     static arm_ctl_t ctl;
     if (arm_ctl_init(&ctl, &ARM_ROBOT_MODEL, &cfg) != ARM_CTL_OK) return 2;
     arm_ctl_input_t in{};

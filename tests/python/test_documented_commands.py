@@ -39,6 +39,10 @@ EXERCISED: dict[str, str] = {
     "bench synth": "test_documented_commands.py::test_bench",
     "bench sim": "test_documented_commands.py::test_bench",
     "bench study": "test_documented_commands.py::test_bench",
+    "bench pil": "test_pil.py::test_bench_pil_runs_in_its_short_form",
+    "hil --target": "test_pil.py::test_documented_command_ends_ok",
+    "drive check": "test_canopen_vendor.py::test_drive_check_says_whether_this_controller_can_run_it",
+    "arms": "test_arm_matrix.py::test_armctl_arms_runs_a_set_end_to_end",
     "timing": "test_timing.py::timing_run",
     "busload": "test_documented_commands.py::test_busload",
     "vcan status": "test_documented_commands.py::test_vcan_status_and_up",
@@ -70,6 +74,11 @@ def documented_commands() -> set[str]:
         sub = words[0]
         if len(words) > 1 and re.fullmatch(r"[a-z]+(\|[a-z]+)+", words[1]):
             out.update(f"{sub} {alt}" for alt in words[1].split("|"))
+        elif len(words) > 1 and re.fullmatch(r"[a-z]+", words[1]):  # a subcommand (drive check)
+            out.add(f"{sub} {words[1]}")
+        elif sub == "hil" and len(words) > 1 and words[1] == "--target":  # processor in the loop
+            out.add("hil --target")
+            continue
         else:
             out.add(sub)
         if sub == "hil" and "vm" in cell:
@@ -116,7 +125,7 @@ def test_demo(tmp_path: Path) -> None:
     r = armctl("demo", "--duration", "0.2", "--out", str(tmp_path))
     assert r.returncode == 0, r.stdout + r.stderr
     study = json.loads((tmp_path / "study.json").read_text())
-    assert list(study["scenarios"]) == ["ideal", "realistic", "realistic+friction+parameter-error"]
+    assert list(study["scenarios"]) == ["ideal", "realistic", "realistic+payload", "realistic+friction+parameter-error"]
     for sc in study["scenarios"].values():
         assert set(sc["runs"]) == {"pm", "pm-paper-weights", "pm-paper", "pd", "gh2", "tde", "usde-smc"}
         assert all(rec["source"].startswith("tuned earlier") for rec in sc["tuning"].values())  # the kept tuning

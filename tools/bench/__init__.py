@@ -5,6 +5,7 @@ seconds, so the figure repeats on a busy machine) for every method, float32 and 
 next to the dense double-precision Eigen reference of the same step (the mass-matrix
 formulation, a correctness model), and the inverse dynamics alone beside Pinocchio's RNEA.
 `armctl bench synth`: wall time of the synthesis (gen.synth.bench).
+`armctl bench pil`: docs/pil.md's figures (tools/bench/pil.py).
 `armctl bench sim`: the simulator's speed: the default 10 s lockstep HIL run five times (real-time
 factor after boot, wall time), one period's CPU broken down by activity, and MuJoCo's bare
 mj_step on the same model beside it as the limit.
@@ -45,10 +46,12 @@ def _callgrind(fn: str, argv: list[str]) -> int:
         return int(m.group(1))
 
 
-def per_step(exe: Path, method: str, numeric: str, steps: int = STEPS) -> float:
+def per_step(exe: Path, method: str, numeric: str, steps: int = STEPS, design_file: Path | None = None) -> float:
+    """design_file: the same step with a design read at run time (its run-time-sized path)."""
     fn = "bench_eigen_step*" if numeric == "eigen" else "bench_firmware_step"
-    a = _callgrind(fn, [str(exe), method, numeric, str(WARMUP)])
-    b = _callgrind(fn, [str(exe), method, numeric, str(WARMUP + steps)])
+    design = [str(design_file)] if design_file is not None else []
+    a = _callgrind(fn, [str(exe), method, numeric, str(WARMUP), *design])
+    b = _callgrind(fn, [str(exe), method, numeric, str(WARMUP + steps), *design])
     return (b - a) / steps
 
 
@@ -72,9 +75,16 @@ def bench_step(out: Path, quick: bool = False) -> dict[str, Any]:
     steps = 200 if quick else STEPS
     jobs = [(m, n) for m in methods for n in ("float", "fixed") if n == "float" or firmware_methods()[m]]
     jobs += [(m, "eigen") for m in methods if m in ("pd", "pm", "pm-paper", "gh2")]
+    # the methods that run the synthesised design, once more with it read from the build's design
+    # file (the Linux port's --design-file) instead of built in: the step's run-time-sized path
+    design_file = build_dir("release") / "generated" / "design" / "pm_design.txt"
+    loaded = [(m, n) for m, n in jobs if n != "eigen" and firmware_methods()[m]]
     rows: dict[str, dict[str, float]] = {}
     for method, numeric in tqdm(jobs, desc="callgrind", unit="run"):
         rows.setdefault(method, {})[numeric] = per_step(exe, method, numeric, steps)
+    runtime: dict[str, dict[str, float]] = {}
+    for method, numeric in tqdm(loaded, desc="callgrind, design read at run time", unit="run"):
+        runtime.setdefault(method, {})[numeric] = per_step(exe, method, numeric, steps, design_file)
     for method, r in rows.items():
         if "eigen" in r:
             r["eigen_over_float"] = r["eigen"] / r["float"]
@@ -84,6 +94,13 @@ def bench_step(out: Path, quick: bool = False) -> dict[str, Any]:
         "steps_measured": steps,
         "quick": quick,
         "methods": rows,
+        "design_read_at_run_time": {
+            "what": ("the same steps with the same design read from the build's design file (the Linux port's "
+                     "--design-file: its run-time-sized path) instead of the built-in one (compiled with its own "
+                     "dimensions, the figures of `methods`); the MCU images have the built-in path alone"),
+            "design_file": str(design_file),
+            "methods": runtime,
+        },
     }
     if not quick:  # quick: no Pinocchio comparison (compiling it alone takes about 2 minutes)
         result["rnea"] = rnea_costs(rows["pm"]["float"], steps)
@@ -92,13 +109,22 @@ def bench_step(out: Path, quick: bool = False) -> dict[str, Any]:
     return result
 
 
-def rnea_costs(pm_step: float, calls: int) -> dict[str, Any]:
-    """Our inverse dynamics against Pinocchio's on the same arm and inputs, once their torques agree."""
+def rnea_agreement() -> tuple[Path, str]:
+    """bench_rnea, built, and its check: Pinocchio's RNEA (given the arm's armature and damping)
+    and ours, the general one and the arm's kernel, on 200 states of the bundled arm; the
+    executable and the check's line. Nothing is counted before they agree (RuntimeError if not).
+    Compiling it takes about 2 minutes and 4.7 GB (Pinocchio's headers)."""
     build("release", targets=["bench_rnea"])  # not in `all` (tests/bench/CMakeLists.txt)
     rnea_exe = build_dir("release") / "tests" / "bench" / "bench_rnea"
     check = subprocess.run([str(rnea_exe), "check"], capture_output=True, text=True)
     if check.returncode != 0:
         raise RuntimeError(f"bench_rnea check: {check.stdout}{check.stderr}")
+    return rnea_exe, check.stdout.strip()
+
+
+def rnea_costs(pm_step: float, calls: int) -> dict[str, Any]:
+    """Our inverse dynamics against Pinocchio's on the same arm and inputs, once their torques agree."""
+    rnea_exe, check = rnea_agreement()
     rnea = {v: per_rnea(rnea_exe, v, calls) for v in tqdm(RNEA_VARIANTS, desc="callgrind rnea", unit="run")}
     return {
         "what": ("instructions per inverse-dynamics call on the same arm and inputs: kernel = the arm's "
@@ -106,7 +132,7 @@ def rnea_costs(pm_step: float, calls: int) -> dict[str, Any]:
                  "arm_rnea (any other model), Pinocchio 4.1's rnea (the pin wheel's headers and "
                  "libpinocchio_default) in double and in float"),
         "instructions": rnea,
-        "check": check.stdout.strip(),
+        "check": check,
         "pinocchio_double_over_kernel": rnea["pinocchio-double"] / rnea["kernel"],
         "pm_step_over_pinocchio_double_rnea": pm_step / rnea["pinocchio-double"],
     }
@@ -137,12 +163,17 @@ def cortex_m_costs() -> dict[str, Any]:
 
 
 def table(result: dict[str, Any]) -> str:
-    lines = [f"{'method':<10}{'float':>10}{'fixed':>10}{'eigen ref':>12}{'ref/float':>11}"]
+    loaded = result.get("design_read_at_run_time", {}).get("methods", {})
+    lines = [f"{'method':<10}{'float':>10}{'fixed':>10}{'eigen ref':>12}{'ref/float':>11}"
+             f"{'loaded float':>14}{'loaded fixed':>14}"]
     for m, r in result["methods"].items():
-        f = lambda k: f"{r[k]:>10.0f}" if k in r else f"{'-':>10}"  # noqa: E731
+        f = lambda k, row=r, w=10: f"{row[k]:>{w}.0f}" if k in row else f"{'-':>{w}}"  # noqa: E731
         ratio = f"{r['eigen_over_float']:>10.1f}x" if "eigen_over_float" in r else f"{'-':>11}"
         eigen = f"{r['eigen']:>12.0f}" if "eigen" in r else f"{'-':>12}"
-        lines.append(f"{m:<10}{f('float')}{f('fixed')}{eigen}{ratio}")
+        lr = loaded.get(m, {})
+        lines.append(f"{m:<10}{f('float')}{f('fixed')}{eigen}{ratio}{f('float', lr, 14)}{f('fixed', lr, 14)}")
+    if loaded:
+        lines.append("loaded: the same design read from its file at run time (--design-file), the run-time-sized path")
     r = result.get("rnea")
     if r is None:
         return "\n".join(lines)
@@ -272,12 +303,12 @@ def sim_table(r: dict[str, Any]) -> str:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("what", choices=("step", "synth", "sim", "study"))
+    p.add_argument("what", choices=("step", "synth", "sim", "study", "pil"))
     p.add_argument("--out", type=Path, default=None, help="results file (JSON)")
     p.add_argument("--quick", action="store_true",
                    help="a short form that checks the benchmark runs (step: pm only; synth: one repeat, "
-                        "no coupled solve, n = 1 comparison; sim: one 1 s run; study: 4 runs of 0.5 s); its "
-                        "figures are not the documented ones")
+                        "no coupled solve, n = 1 comparison; sim: one 1 s run; study: 4 runs of 0.5 s; pil: "
+                        "0.2 s runs); its figures are not the documented ones")
     p.add_argument("--record", action="store_true",
                    help="also keep the results for the docs (docs/results/bench-WHAT.json), which tools/armctl docs "
                         "renders into their figures")
@@ -299,6 +330,13 @@ def run(ns: argparse.Namespace) -> int:
         out = ns.out or REPO / "runs" / "bench" / "step_instructions.json"
         result = bench_step(out, ns.quick)
         print(table(result))
+    elif ns.what == "pil":
+        from tools.bench.pil import bench_pil, render
+
+        result = bench_pil(ns.quick)
+        print(render(result))
+        out = ns.out or REPO / "runs" / "bench" / "pil.json"
+        write_json_atomic(out, result)
     elif ns.what == "study":
         from tools.bench.study import bench_study, table as study_table
 

@@ -1,6 +1,7 @@
 """`armctl fuzz [--seconds N]`: libFuzzer on every C decoder, under AddressSanitizer and UBSan.
 
-Harnesses (tests/fuzz/): the python-can wire format (msgpack), the controller's frame handling
+Harnesses (tests/fuzz/): the python-can wire format (msgpack), SLCAN lines (the MCU's and the TCP
+transport's decoder), the controller's frame handling
 (arm_bus_handle_rx), SocketCAN frames, LCM URLs, every DBC unpacker (generated here from
 the DBC's C, one harness that feeds each message's unpack), and the CANopen master's boot
 configurator and SDO client answered by a drive that says anything. Each starts from its corpus
@@ -27,7 +28,8 @@ HARNESSES: dict[str, list[str]] = {
     "pycan_decode": ["firmware/transport/src/pycan_wire.c"],
     "bus_rx": ["firmware/core/src/drive_bus.c", "{gen}/arm_drives.c", "{gen}/arm_drive_ids.c"],
     "socketcan": ["firmware/transport/src/can_socketcan.c", "firmware/transport/src/pycan_wire.c",
-                  "firmware/transport/src/fd_wait.c"],
+                  "firmware/transport/src/fd_wait.c", "firmware/transport/src/can_bus_config.c"],
+    "slcan": ["firmware/transport/src/slcan.c"],
     "lcm_url": ["firmware/transport/src/lcm_url.c"],
     "dbc_unpack": ["{gen}/arm_drives.c"],
     "canopen_master": ["firmware/canopen/src/co_sdo.c", "firmware/canopen/src/co_boot.c",

@@ -143,7 +143,8 @@ def arm_build_dir(preset: str, arm: ArmRef = DEFAULT_ARM) -> Path:
     return build_dir(preset) if arm.is_default else BUILD / "arms" / arm.key() / preset
 
 
-HIL_TARGETS = ["arm_controller", "arm_sim", "arm_lcm_logger", "arm_sil"]  # what a run needs (HIL or SIL)
+# what a run needs (HIL or SIL; arm_pil_bridge: a processor-in-the-loop run's controller)
+HIL_TARGETS = ["arm_controller", "arm_sim", "arm_lcm_logger", "arm_sil", "arm_pil_bridge"]
 
 
 def targets_for(bus: str) -> list[str]:

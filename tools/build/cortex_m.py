@@ -1,14 +1,55 @@
 """The bare-metal Cortex-M images (firmware/port/cortex_m): the QEMU board of each preset, one
-run of an image, and the step's cost it prints."""
+run of the golden image and the step's cost it prints, and the processor-in-the-loop image's
+place and the clock its figures are stated at."""
 
 from __future__ import annotations
 
 import re
 import subprocess
+from pathlib import Path
 
 from gen.lib.paths import build_dir
 
 MACHINES = {"cortex-m4": "mps2-an386", "cortex-m7": "mps2-an500", "cortex-m3": "mps2-an385"}
+
+# The clock a PIL run's share of the period is stated at: a representative part's core clock
+# (QEMU counts instructions; at one instruction a cycle, the share such a part would use).
+STATED_CLOCK = {"cortex-m4": (168e6, "STM32F407-class Cortex-M4F at 168 MHz"),
+                "cortex-m7": (216e6, "STM32F767-class Cortex-M7 at 216 MHz"),
+                "cortex-m3": (120e6, "STM32F205-class Cortex-M3 at 120 MHz")}
+
+
+# How far a PIL run's results may be from the software-in-the-loop run of the same method (docs/pil.md):
+# newlib's sinf/cosf and glibc's differ in the last bit, which the closed loop carries along without
+# amplifying: each result within PIL_SIL_REL_TOL of itself, except the estimation error's RMS, the
+# small difference of w and w_hat (w_hat: a high gain on e_dot), within PIL_SIL_W_TOL of w's RMS.
+PIL_SIL_REL_TOL = 1e-4
+PIL_SIL_W_TOL = 1e-3
+
+
+def pil_sil_differences(pil: dict, sil: dict) -> dict[str, tuple[float, str]]:
+    """The worst difference of two runs' numeric results, each as the tolerances measure it:
+    {"relative": (worst, which result), "estimation_over_w": (worst, ...)}."""
+    worst = {"relative": (0.0, ""), "estimation_over_w": (0.0, "")}
+    for key, value in sil.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float, list)) or key not in pil:
+            continue
+        a, b = (pil[key], value) if isinstance(value, list) else ([pil[key]], [value])
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
+            if not (isinstance(x, (int, float)) and isinstance(y, (int, float))) or x == y:
+                continue
+            if key == "estimation_error_rms":
+                kind, d = "estimation_over_w", abs(x - y) / max(sil["w_rms"][i], 1e-300)
+            else:
+                kind, d = "relative", abs(x - y) / max(abs(x), abs(y))
+            if d > worst[kind][0]:
+                worst[kind] = (d, key)
+    return worst
+
+
+def pil_image(bdir: Path, preset: str) -> Path:
+    """The processor-in-the-loop image of a Cortex-M build folder."""
+    return bdir / "firmware" / "port" / "cortex_m" / f"pil_{preset}.elf"
 
 
 def run_image(preset: str, timeout: float = 600) -> subprocess.CompletedProcess[str]:

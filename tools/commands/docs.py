@@ -46,7 +46,7 @@ def _load(path: Path, how: str) -> dict[str, Any]:
 RECORDED_BY = {"bench-step": "tools/armctl bench step --record", "bench-synth": "tools/armctl bench synth --record",
                "bench-sim": "tools/armctl bench sim --record", "bench-study": "tools/armctl bench study --record",
                "timing": "tools/armctl timing --record", "faults": "tools/armctl faults --record",
-               "test": "tools/armctl test --record"}
+               "test": "tools/armctl test --record", "bench-pil": "tools/armctl bench pil --record"}
 
 
 def _result(name: str) -> dict[str, Any]:
@@ -119,6 +119,12 @@ def bench_sim(r: dict[str, Any]) -> str:
     kernel = (b["bus_tx"] + b["bus_rx"]) / b["total"]
     return (_block(sim_table(r)) + f"\n\nOver UDP, {100 * kernel:.0f} % of the simulator's period is the kernel "
             "moving datagrams (`bus_tx`, `bus_rx`).\n\n" + _made_by(r))
+
+
+def pil(r: dict[str, Any]) -> str:
+    from tools.bench.pil import render
+
+    return render(r) + "\n\n" + _made_by(r)
 
 
 def bench_study(r: dict[str, Any]) -> str:
@@ -249,6 +255,7 @@ RENDERERS: dict[str, tuple[Callable[[], dict[str, Any]], Callable[[dict[str, Any
     "synth": (lambda: _result("bench-synth"), synth),
     "bench-sim": (lambda: _result("bench-sim"), bench_sim),
     "bench-study": (lambda: _result("bench-study"), bench_study),
+    "pil": (lambda: _result("bench-pil"), pil),
     "timing": (lambda: _result("timing"), timing),
     "faults": (lambda: _result("faults"), faults),
     "test-time": (lambda: _result("test") if (DOCS_RESULTS / "test.json").is_file() else {}, test_time),

@@ -91,6 +91,12 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
     h.add_argument("--drive-config", type=Path, default=None, metavar="FILE",
                    help="canopen: the CiA 402 drive configuration, a file like firmware/protocol/drives.toml "
                         "[the arm's: its arm file's `drives`, else that file]")
+    from tools.build.cortex_m import MACHINES
+
+    h.add_argument("--target", choices=tuple(MACHINES), default=None,
+                   help="processor in the loop (docs/pil.md): the controller is the Cortex-M image of this preset in "
+                        "qemu-system-arm (-icount), its buses SLCAN on the image's UARTs; lockstep; the Cortex-M3 runs "
+                        "a method's fixed-point variant where it has one [the controller runs here]")
     add_arm_arguments(h)
     h.set_defaults(run=run)
 
@@ -105,6 +111,12 @@ def _ended(run: dict, out: Path) -> int:
     from tools.run import procs
 
     _print_run(run)
+    t = run.get("target")
+    if t and t.get("step_instructions"):
+        s, share = t["step_instructions"], t["step_share_of_period_at_stated_clock"]
+        print(f"{t['name']} ({t['machine']}): control step {s['min']}/{s['median']:g}/{s['max']} instructions "
+              f"(min/median/max of {s['periods']} periods), {100 * share['median']:.1f} % of the period at "
+              f"{t['stated_clock_hz'] / 1e6:g} MHz; stack high-water {t['stack_high_water_bytes']} bytes")
     print(f"results: {out / 'run.json'}  log: {out / 'telemetry.lcmlog'}")
     if procs.interrupted is not None:
         return 128 + procs.interrupted
@@ -200,7 +212,12 @@ def run(ns: argparse.Namespace) -> int:
             raise UsageError(f"--topology: {exc}") from None
     if ns.can_port is not None and not 1024 <= ns.can_port <= 65532:
         raise UsageError(f"--can-port: must be in [1024, 65532], got {ns.can_port}")
+    if ns.target is not None and ns.bus != "auto":
+        raise UsageError(f"--target {ns.target} --bus {ns.bus}: a processor-in-the-loop run's buses are SLCAN links "
+                         "to the image's UARTs (give no --bus)")
     bdir = build_arm("release", arm)
+    if ns.target is not None:
+        build_arm(ns.target, arm)
     info = arm_info(bdir)
     amp, freq, warnings = reference_for(info, ns.ref_amp, ns.ref_freq, bdir)
     print_arm_warnings(info, "armctl hil")
@@ -215,7 +232,7 @@ def run(ns: argparse.Namespace) -> int:
                              capture=ns.capture,
                              bounds=Bounds(ns.max_error_deg, ns.max_saturated_fraction),
                              drives=DRIVE_PRESETS[ns.drives], can_port=ns.can_port, protocol=ns.protocol,
-                             drive_config=ns.drive_config))
+                             drive_config=ns.drive_config, target=ns.target))
     print(f"bus: {result['environment']['bus_choice']}; wiring: {result['environment']['topology']['source']}")
     for note in result["environment"].get("canopen_drive_notes", []):
         print(f"drive table: {note}")

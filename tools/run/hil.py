@@ -96,6 +96,10 @@ class HilOptions:
     protocol: str = DEFAULT_PROTOCOL
     # canopen: the arm's CiA 402 drive configuration (a drives.toml; None: the arm's, gen/drives.py)
     drive_config: Path | None = None
+    # Processor in the loop (docs/pil.md): the Cortex-M preset whose image runs the controller in
+    # qemu-system-arm (tools/build/cortex_m.py MACHINES), its buses SLCAN links on the image's UARTs;
+    # None: the controller runs here.
+    target: str | None = None
 
 
 def spin_args(mode: str, spin_us: float = LOCKSTEP_SPIN_US) -> list[str]:
@@ -252,12 +256,18 @@ CANOPEN_OD_FILE = "canopen_od.txt"  # the emulated drives' dictionary, from the 
 VM_FILES = ("vm_plan.json", "vm_result.json", "vm.log")  # --bus vm: the plan in, the exit codes out, the VM's output
 
 
-def bus_args(kind: str, can_port: int, topology: list[busload.Bus]) -> list[str]:
-    """SPEC@DRIVES per bus of the topology: udp on port can_port + i, vcan0, vcan1, ..., or the
-    in-process bus's lines mem:0, mem:1, ... (software in the loop)."""
+PIL = "pil"  # the buses of a processor-in-the-loop run: SLCAN on the MCU image's UARTs
+PIL_UARTS = 4  # uart:0 .. uart:3 (the image's fifth UART carries its telemetry)
+
+
+def bus_args(kind: str, can_port: int, topology: list[busload.Bus], side: str = "controller") -> list[str]:
+    """SPEC@DRIVES per bus of the topology: udp on port can_port + i, vcan0, vcan1, ..., the
+    in-process bus's lines mem:0, mem:1, ... (software in the loop), or (processor in the loop) the
+    image's uart:i, which the simulator reaches as slcan:127.0.0.1:can_port + i."""
     out = []
     for i, b in enumerate(topology):
-        spec = {"udp": f"udp:239.74.163.2:{can_port + i}", SIL: f"mem:{i}"}.get(kind, f"socketcan:vcan{i}")
+        pil = f"uart:{i}" if side == "controller" else f"slcan:127.0.0.1:{can_port + i}"
+        spec = {"udp": f"udp:239.74.163.2:{can_port + i}", SIL: f"mem:{i}", PIL: pil}.get(kind, f"socketcan:vcan{i}")
         out.append(f"{spec}@{','.join(map(str, b.drives))}")
     return out
 
@@ -480,6 +490,72 @@ def canopen_record(controller: dict[str, Any]) -> dict[str, Any] | None:
             "units": co.get("units"), "q_first_rad": co.get("q_first_rad")}
 
 
+PIL_FILE = "pil.json"  # what the image measured in the loop (tools/pil_bridge)
+# Bounds of a hung PIL run: the emulated MCU runs its loop 50-100x slower than real time here
+# (docs/pil.md: QEMU hands it its UARTs' bytes one at a time), slower still on a loaded machine.
+PIL_DEADLINE_S = (600.0, 600.0)  # + this per simulated second
+
+
+def _pil_bus(opt: HilOptions, n_buses: int) -> tuple[str, str]:
+    from tools.build.cortex_m import MACHINES
+
+    if opt.target not in MACHINES:
+        raise HilError(f"--target {opt.target}: expected one of {', '.join(MACHINES)}")
+    if opt.mode != "lockstep":
+        raise HilError("--target: the MCU image runs lockstep (SysTick paces its SYNC; QEMU counts instructions, "
+                       "not the host's time): --mode lockstep")
+    if n_buses > PIL_UARTS:
+        raise HilError(f"--target: the topology has {n_buses} buses; the image has {PIL_UARTS} SLCAN UARTs")
+    return PIL, (f"processor in the loop: SLCAN on the {opt.target} image's UARTs (QEMU {MACHINES[opt.target]}, "
+                 f"-icount shift=0), the simulator on 127.0.0.1 TCP")
+
+
+def pil_numeric(opt: HilOptions) -> list[str]:
+    """The Cortex-M3 has no FPU: its image runs a method's fixed-point variant where it has one."""
+    from tools.methods import firmware_methods
+
+    if opt.target != "cortex-m3" or "--numeric" in opt.controller_args or not firmware_methods().get(opt.method):
+        return []
+    return ["--numeric", "fixed"]
+
+
+def pil_bridge_argv(opt: HilOptions, bdir: Path, can_port: int) -> list[str]:
+    """arm_pil_bridge's own arguments: the image of the target's build folder for this arm."""
+    from tools.build.cortex_m import MACHINES, pil_image
+
+    assert opt.target is not None
+    image = pil_image(arm_build_dir(opt.target, opt.arm), opt.target)
+    if not image.exists():
+        raise HilError(f"{image} is missing: run tools/armctl build --target {opt.target}")
+    bridge = bdir / "tools" / "pil_bridge" / "arm_pil_bridge"
+    if not bridge.exists():
+        raise HilError(f"{bridge} is missing: run tools/armctl build")
+    return [str(bridge), "--machine", MACHINES[opt.target], "--image", str(image), "--port-base", str(can_port),
+            "--pil-summary", str(opt.out / PIL_FILE)]
+
+
+def pil_record(opt: HilOptions, rate_hz: float) -> dict[str, Any]:
+    """run.json's `target`: the MCU, and what its image measured in the loop (pil.json), with the
+    share of the period the control step takes at the stated clock."""
+    from tools.build.cortex_m import MACHINES, STATED_CLOCK
+
+    assert opt.target is not None
+    measured = _load_json(opt.out / PIL_FILE)
+    clock_hz, part = STATED_CLOCK[opt.target]
+    steps = measured.get("step_instructions")
+    cycles_per_period = clock_hz / rate_hz
+    share = ({k: steps[k] / cycles_per_period for k in ("min", "median", "max")} if steps else None)
+    return {"name": opt.target, "machine": MACHINES[opt.target], "stated_clock_hz": clock_hz, "stated_part": part,
+            "step_instructions": steps,
+            "step_share_of_period_at_stated_clock": share,
+            "what": ("the control step (arm_ctl_step) measured on every period of the run, in instructions: SysTick "
+                     "ticks under QEMU -icount shift=0, from a tick's edge to the next after the step; the share "
+                     "assumes one instruction a cycle at the stated clock (no wait states, caches or stalls)"),
+            "stack_high_water_bytes": measured.get("stack_high_water_bytes"),
+            "slcan": measured.get("slcan"), "mcu_telemetry": measured.get("telemetry"),
+            "link_frames_refused": measured.get("link_frames_refused")}
+
+
 def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
     started = datetime.now(timezone.utc)
     sil = opt.bus == SIL
@@ -513,7 +589,10 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
     else:
         topology, wiring = load_topology(opt.topology, info), str(opt.topology or "the arm's wiring (arm.json)")
     substeps = sim_substeps(info, rate_hz)
-    bus_kind, bus_why = resolve_bus(opt.bus, len(topology))
+    if opt.target is not None:
+        bus_kind, bus_why = _pil_bus(opt, len(topology))
+    else:
+        bus_kind, bus_why = resolve_bus(opt.bus, len(topology))
     binary = opt.controller or controller_binary(bdir)
     logger_exe = logger_binary(bdir)
     sim_exe = bdir / "host_sim" / "native" / "arm_sim"
@@ -522,7 +601,7 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
         if not exe.exists():
             raise HilError(f"{exe} is missing: run tools/armctl build")
     opt.out.mkdir(parents=True, exist_ok=True)
-    for stale in ("telemetry.lcmlog", "controller_summary.json", "sim_summary.json", "run.json", "uncertainty.json",
+    for stale in ("telemetry.lcmlog", "controller_summary.json", "sim_summary.json", "run.json", "uncertainty.json", PIL_FILE,
                   CAPTURE_FILE, CAPTURE_FILE + ".gz", CANOPEN_DBC_FILE, CANOPEN_OD_FILE, *VM_FILES):
         (opt.out / stale).unlink(missing_ok=True)
     if drive_table is not None:  # what decodes a capture of this run, in SI units (gen/canopen_dbc.py)
@@ -535,6 +614,7 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
         sim_node_args = [*sim_node_args, "--od", str(opt.out / CANOPEN_OD_FILE)]
     buses = bus_args(bus_kind, can_port, topology)
     bus_argv = [a for spec in buses for a in ("--bus", spec)]
+    sim_buses = bus_args(bus_kind, can_port, topology, "simulator") if bus_kind == PIL else buses
     url = "" if sil else f"udpm://{LCM_GROUP}:{lcm_port}?ttl=0&recv_buf_size=8388608"
     log_path = opt.out / "telemetry.lcmlog"
     if opt.uncertainty is not None:
@@ -542,7 +622,7 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
             write_json_atomic(opt.out / "uncertainty.json", opt.uncertainty)  # the record of what ran
         except OutputError as exc:
             raise HilError(str(exc)) from None
-    sim_args = sim_argv(sim_exe, buses, lcm_url=url, summary=opt.out / "sim_summary.json",
+    sim_args = sim_argv(sim_exe, sim_buses, lcm_url=url, summary=opt.out / "sim_summary.json",
                         uncertainty=opt.uncertainty, timing=bus_timing_mode(opt.mode) if opt.bus_timing else "off",
                         phys=topology, model=prepared_model(bdir), drives=opt.drives, canopen=canopen,
                         extra=["--substeps", str(substeps), *([] if sil else sim_mode_args(opt.mode, opt.spin_us)),
@@ -550,16 +630,18 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
                                *opt.sim_args])
     ctl_args = [*opt.controller_cmd_prefix, str(binary), *bus_argv, "--lcm-url", url,
                 "--duration", f"{opt.duration_s:g}", "--method", opt.method, "--mode", opt.mode,
-                "--summary", str(opt.out / "controller_summary.json"), *([] if sil else spin_args(opt.mode, opt.spin_us)),
+                "--summary", str(opt.out / "controller_summary.json"), *([] if sil or opt.target else spin_args(opt.mode, opt.spin_us)),
                 *(["--cpu", str(realtime_cpu(opt))] if opt.mode == "realtime" else []),
                 "--protocol", opt.protocol, *node_args,
                 *reference_args(info, opt.controller_args),
                 *(["--design-file", str(opt.design_file)] if opt.design_file is not None else []), *opt.controller_args]
+    if bus_kind == PIL:  # the bridge stands for the controller: it runs the image and relays it
+        ctl_args = [*pil_bridge_argv(opt, bdir, can_port), "--", *ctl_args[1:], *pil_numeric(opt)]
     if sil:
         exit_codes, wall, sim_scheduling = _run_sil(opt, sil_exe, ctl_args[1:], sim_args[1:], log_path)
     else:
         in_vm = opt.bus == VM
-        base_s, per_s = VM_DEADLINE_S if in_vm else (120.0, 60.0)
+        base_s, per_s = VM_DEADLINE_S if in_vm else PIL_DEADLINE_S if opt.target else (120.0, 60.0)
         plan = ProcessPlan(out=str(opt.out), mode=opt.mode, cpu=realtime_cpu(opt),
                            deadline_s=base_s + per_s * opt.duration_s,
                            logger=[str(logger_exe), "--lcm-url", url, str(log_path)], simulator=sim_args,
@@ -586,6 +668,7 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
               "controller_args": list(opt.controller_args),
               "uncertainty": opt.uncertainty, "drives": opt.drives.to_dict(),
               "bus_timing": bus_timing_mode(opt.mode) if opt.bus_timing else "off", "protocol": opt.protocol,
+              **({"target": opt.target, "numeric": "fixed" if pil_numeric(opt) else "float"} if opt.target else {}),
               **opt.labels}
     run = analyse(opt.out, controller, simulator, config, {
         "protocol": opt.protocol, "canopen": canopen_record(controller),
@@ -613,6 +696,8 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
         "capture": str(_compress(opt.out / CAPTURE_FILE) if opt.compress_capture else opt.out / CAPTURE_FILE)
                    if opt.capture and (opt.out / CAPTURE_FILE).exists() else None},
         opt.bounds)
+    if opt.target is not None:
+        run["target"] = pil_record(opt, rate_hz)
     try:
         run["provenance"] = provenance(started)
         write_json_atomic(opt.out / "run.json", run)

@@ -49,7 +49,8 @@ LEGACY_DESIGN_KNOBS = ("E1", "E2", "D12", "H", "f_bw")
 #             PD with kp = ks lambda, kd = lambda + ks; lambda and ks are the roots of
 #             x^2 - 2 zeta wn x + wn^2 (lambda the slower: the sliding surface's bandwidth), which are
 #             real only for zeta >= 1: its structure cannot be underdamped, so its zeta range starts
-#             at 1 (USDE_SMC_MIN_ZETA). k: the USDE filter's time constant. eta 1, phi 0.05.
+#             at 1 (USDE_SMC_MIN_ZETA). k: the USDE filter's time constant. eta and phi: the
+#             controller's defaults (the registry's), not tuned.
 GAIN_KNOBS = {"pd": ("wn", "zeta"), "tde": ("wn", "zeta", "cutoff_hz"), "usde-smc": ("wn", "zeta", "k")}
 USDE_SMC_MIN_ZETA = 1.0
 # A knob's floor where the method's structure ends (widening never goes past it).
@@ -493,5 +494,6 @@ def gain_args(method: str, gains: dict[str, float]) -> list[str]:
         else:
             lam = ks = gains["lambda"]
         return ["--usde-k", f"{gains['k']:g}", "--smc-lambda", f"{lam:g}", "--smc-ks", f"{ks:g}",
-                "--smc-eta", "1", "--smc-phi", "0.05"]
+                "--smc-eta", f"{param('controller', 'smc-eta').default:g}",
+                "--smc-phi", f"{param('controller', 'smc-phi').default:g}"]
     return []

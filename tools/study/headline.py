@@ -53,12 +53,20 @@ def render(record: dict[str, Any]) -> str:
     return "```\n" + summary_table(record) + "\n```"
 
 
-def readme_block(text: str) -> str:
+def marked_block(text: str, begin: str, end: str) -> str | None:
+    """What a page holds between two marker lines (a rendered block), or None without them."""
     try:
-        start = text.index(BEGIN) + len(BEGIN)
-        return text[start:text.index(END, start)].strip("\n")
+        start = text.index(begin) + len(begin)
+        return text[start:text.index(end, start)].strip("\n")
     except ValueError:
-        raise HeadlineError(f"{README}: the headline markers ({BEGIN} ... {END}) are missing") from None
+        return None
+
+
+def readme_block(text: str) -> str:
+    block = marked_block(text, BEGIN, END)
+    if block is None:
+        raise HeadlineError(f"{README}: the headline markers ({BEGIN} ... {END}) are missing")
+    return block
 
 
 def write(study: dict[str, Any], readme: Path = README) -> None:

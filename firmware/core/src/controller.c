@@ -10,6 +10,7 @@
 #include "arm_rnea_kernel.h"
 
 #define ARM_ALL_JOINTS_MASK ((uint32_t)((1ull << ARM_N_JOINTS) - 1u))
+_Static_assert((ARM_TORQUE_REPORT_LAG_MAX & (ARM_TORQUE_REPORT_LAG_MAX - 1u)) == 0u, "a power of two: the ring's index");
 
 void arm_ctl_joint_range(const arm_robot_model_t *model, float margin, float q_min[ARM_N_JOINTS],
                          float q_max[ARM_N_JOINTS])
@@ -119,21 +120,25 @@ arm_ctl_init_result_t arm_ctl_init(arm_ctl_t *ctl, const arm_robot_model_t *mode
     return ARM_CTL_OK;
 }
 
+/* x - x is +0 for every finite x and NaN for an infinity or a NaN, and a NaN stays NaN through any
+ * sum: one subtraction and one addition per value, no branch (isfinite per value branches). */
 static int all_finite(const float *v, int n)
 {
+    float z = 0.0f;
     for (int i = 0; i < n; ++i) {
-        if (!isfinite(v[i])) {
-            return 0;
-        }
+        z += v[i] - v[i];
     }
-    return 1;
+    return z == 0.0f;
 }
 
 static int input_finite(const arm_ctl_input_t *in)
 {
-    return all_finite(in->q, ARM_N_JOINTS) && all_finite(in->qd, ARM_N_JOINTS) &&
-           all_finite(in->q_d, ARM_N_JOINTS) && all_finite(in->qd_d, ARM_N_JOINTS) &&
-           all_finite(in->qdd_d, ARM_N_JOINTS);
+    float z = 0.0f; /* all_finite's sum, over the five inputs in one pass */
+    for (int i = 0; i < ARM_N_JOINTS; ++i) {
+        z += ((in->q[i] - in->q[i]) + (in->qd[i] - in->qd[i])) +
+             ((in->q_d[i] - in->q_d[i]) + (in->qd_d[i] - in->qd_d[i])) + (in->qdd_d[i] - in->qdd_d[i]);
+    }
+    return z == 0.0f;
 }
 
 static void latch_fault(arm_ctl_t *ctl, arm_fault_t fault)
@@ -158,12 +163,56 @@ static void latch_joint_fault(arm_ctl_t *ctl, arm_fault_t fault, int joint, floa
     latch_fault(ctl, fault);
 }
 
+/* Whether the torque reported for joint i is near one of the commands it may be reporting. */
+static int torque_near(const arm_ctl_t *ctl, const arm_ctl_input_t *in, int i)
+{
+    const arm_ctl_config_t *c = &ctl->cfg;
+    int near = 0;
+    for (uint32_t k = c->torque_report_lag_min; k <= c->torque_report_lag_max && k <= ctl->n_sent; ++k) {
+        const float sent = ctl->tau_sent[(ctl->sent_head + k - 1u) % ARM_TORQUE_REPORT_LAG_MAX][i];
+        near |= fabsf(in->tau_measured[i] - sent) <= c->torque_mismatch_limit[i];
+    }
+    return near;
+}
+
+/* Every check of plausible() passes for every joint, with no mismatch to count: the common
+ * period, decided without a branch per check and joint (the checks' arithmetic is plausible()'s). */
+static int all_plausible(const arm_ctl_t *ctl, const arm_ctl_input_t *in, int torque)
+{
+    const arm_ctl_config_t *c = &ctl->cfg;
+    const int range = (c->checks & ARM_CHECK_POSITION_RANGE) != 0u;
+    const int velocity = (c->checks & ARM_CHECK_VELOCITY) != 0u;
+    const int step = (c->checks & ARM_CHECK_POSITION_STEP) != 0u && ctl->have_last;
+    int bad = 0;
+    for (int i = 0; i < ARM_N_JOINTS; ++i) {
+        const float q = in->q[i], qd = in->qd[i];
+        const float explained = 0.5f * (qd + ctl->last_qd[i]) * c->period_s;
+        bad |= (range & ((q < c->q_min[i]) | (q > c->q_max[i]))) | (velocity & (fabsf(qd) > c->velocity_limit[i])) |
+               (step & (fabsf((q - ctl->last_q[i]) - explained) > c->step_tolerance));
+    }
+    uint32_t near = torque ? 0u : ARM_ALL_JOINTS_MASK; /* torque_near's test, command by command */
+    for (uint32_t k = c->torque_report_lag_min; torque && k <= c->torque_report_lag_max && k <= ctl->n_sent; ++k) {
+        const float *sent = ctl->tau_sent[(ctl->sent_head + k - 1u) % ARM_TORQUE_REPORT_LAG_MAX];
+        for (int i = 0; i < ARM_N_JOINTS; ++i) {
+            near |= (uint32_t)(fabsf(in->tau_measured[i] - sent[i]) <= c->torque_mismatch_limit[i]) << i;
+        }
+    }
+    return !bad && near == ARM_ALL_JOINTS_MASK;
+}
+
 /* The joint states of this period against the joint's range, its velocity limit and the last
  * period's state (a step the velocities cannot explain), and the torque the drives report
  * against the one commanded last period. Returns 0 when plausible, else latches the fault. */
 static int plausible(arm_ctl_t *ctl, const arm_ctl_input_t *in)
 {
     const arm_ctl_config_t *c = &ctl->cfg;
+    const int torque = (c->checks & ARM_CHECK_TORQUE) && ctl->state == ARM_STATE_RUNNING &&
+                       ctl->n_sent >= c->torque_report_lag_min;
+    if (all_plausible(ctl, in, torque)) {
+        if (torque) memset(ctl->mismatch_periods, 0, sizeof(ctl->mismatch_periods));
+        return 1;
+    }
+    /* something to latch or count: joint by joint, in the checks' order */
     for (int i = 0; i < ARM_N_JOINTS; ++i) {
         const float q = in->q[i], qd = in->qd[i];
         if ((c->checks & ARM_CHECK_POSITION_RANGE) && (q < c->q_min[i] || q > c->q_max[i])) {
@@ -182,13 +231,8 @@ static int plausible(arm_ctl_t *ctl, const arm_ctl_input_t *in)
                 return 0;
             }
         }
-        if ((c->checks & ARM_CHECK_TORQUE) && ctl->state == ARM_STATE_RUNNING &&
-            ctl->n_sent >= c->torque_report_lag_min) {
-            int near = 0; /* the report is one of the commands it may be reporting */
-            for (uint32_t k = c->torque_report_lag_min; k <= c->torque_report_lag_max && k <= ctl->n_sent; ++k) {
-                near |= fabsf(in->tau_measured[i] - ctl->tau_sent[k - 1u][i]) <= c->torque_mismatch_limit[i];
-            }
-            if (!near) {
+        if (torque) {
+            if (!torque_near(ctl, in, i)) {
                 if (++ctl->mismatch_periods[i] >= c->torque_mismatch_periods) {
                     latch_joint_fault(ctl, ARM_FAULT_TORQUE_MISMATCH, i, in->tau_measured[i]);
                     return 0;
@@ -304,8 +348,8 @@ void arm_ctl_step(arm_ctl_t *ctl, const arm_ctl_input_t *in, arm_ctl_output_t *o
     /* INIT commands zero torque: out->tau is already zero. */
 
     memcpy(ctl->tau_prev, out->tau, sizeof(ctl->tau_prev));
-    memmove(ctl->tau_sent[1], ctl->tau_sent[0], sizeof(ctl->tau_sent) - sizeof(ctl->tau_sent[0]));
-    memcpy(ctl->tau_sent[0], out->tau, sizeof(ctl->tau_sent[0]));
+    ctl->sent_head = (ctl->sent_head + ARM_TORQUE_REPORT_LAG_MAX - 1u) % ARM_TORQUE_REPORT_LAG_MAX;
+    memcpy(ctl->tau_sent[ctl->sent_head], out->tau, sizeof(ctl->tau_sent[0]));
     if (ctl->n_sent < ARM_TORQUE_REPORT_LAG_MAX) ctl->n_sent++;
     out->state = ctl->state;
     out->fault = ctl->fault;

@@ -1,6 +1,7 @@
 #include "semihost.h"
 
 #define SYS_WRITE0 0x04u
+#define SYS_GET_CMDLINE 0x15u
 #define SYS_EXIT 0x18u
 #define SYS_EXIT_EXTENDED 0x20u
 #define ADP_STOPPED_APPLICATION_EXIT 0x20026u
@@ -12,6 +13,14 @@ static uint32_t semihost(uint32_t op, const void *arg)
     register const void *r1 __asm__("r1") = arg;
     __asm__ volatile("bkpt 0xAB" : "+r"(r0) : "r"(r1) : "memory");
     return r0;
+}
+
+int sh_get_cmdline(char *buf, uint32_t cap)
+{
+    uint32_t block[2] = {(uint32_t)(uintptr_t)buf, cap};
+    if (cap == 0u || semihost(SYS_GET_CMDLINE, block) != 0u || block[1] >= cap) return -1;
+    buf[block[1]] = '\0';
+    return 0;
 }
 
 void sh_puts(const char *s)

@@ -13,6 +13,10 @@ int main(void);
 void Reset_Handler(void);
 void Fault_Handler(void);
 void Default_Handler(void);
+/* What an image that takes interrupts defines (the PIL image: mcu_clock.c, mcu_uart.c); the
+ * golden image takes none, and one would stop it (Default_Handler). */
+void SysTick_Handler(void) __attribute__((weak, alias("Default_Handler")));
+void External_IRQHandler(void) __attribute__((weak, alias("Default_Handler")));
 
 #define STACK_PAINT 0xA5A5A5A5u
 
@@ -62,7 +66,7 @@ void Default_Handler(void)
 
 typedef void (*vector_t)(void);
 
-/* ARMv7-M: initial SP, then the exception vectors; the mps2 FPGA images' IRQs are unused here. */
+/* ARMv7-M: initial SP, then the exception vectors, then the mps2 FPGA images' IRQs. */
 __attribute__((section(".vectors"), used)) const vector_t g_vectors[16 + 32] = {
     (vector_t)(uintptr_t)_stack_top,
     Reset_Handler,
@@ -76,6 +80,6 @@ __attribute__((section(".vectors"), used)) const vector_t g_vectors[16 + 32] = {
     Default_Handler, /* DebugMon */
     0,
     Default_Handler, /* PendSV */
-    Default_Handler, /* SysTick */
-    [16 ... 47] = Default_Handler,
+    SysTick_Handler,
+    [16 ... 47] = External_IRQHandler, /* the mps2 boards' IRQs (the PIL image's UARTs) */
 };

@@ -42,6 +42,21 @@ int argv_copy(const char *name, const char *s, char *dst, size_t cap, char *err,
     return 0;
 }
 
+/* An int-like member as wide as it is: an enum is one byte where the ABI makes it the smallest that
+ * holds its values (arm-none-eabi's short enums: the MCU image parses these options too). */
+static void store_int(void *p, size_t size, int v)
+{
+    if (size == sizeof(int8_t)) {
+        const int8_t b = (int8_t)v;
+        memcpy(p, &b, sizeof(b));
+    } else if (size == sizeof(int16_t)) {
+        const int16_t h = (int16_t)v;
+        memcpy(p, &h, sizeof(h));
+    } else {
+        memcpy(p, &v, sizeof(v));
+    }
+}
+
 static void store(const argv_opt_t *o, void *target, double v)
 {
     char *p = (char *)target + o->offset;
@@ -54,7 +69,7 @@ static void store(const argv_opt_t *o, void *target, double v)
     case ARGV_UINT32: *(uint32_t *)(void *)p = (uint32_t)v; break;
     case ARGV_INT:
     case ARGV_FLAG:
-    case ARGV_CHOICE: *(int *)(void *)p = (int)v; break;
+    case ARGV_CHOICE: store_int(p, o->size, (int)v); break;
     case ARGV_LONG: *(long *)(void *)p = (long)v; break;
     case ARGV_TEXT:
     case ARGV_SPECIAL: break;

@@ -13,6 +13,7 @@
 #include "arm_drives.h"
 #include "arm/reference.h"
 #include "canopen_text.h"
+#include "loop_port.h"
 
 #define ALL_JOINTS ((uint32_t)((1ull << ARM_N_JOINTS) - 1u))
 
@@ -21,9 +22,7 @@ volatile sig_atomic_t controller_stop_signal = 0;
 
 static int64_t now_ns(void)
 {
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (int64_t)ts.tv_sec * 1000000000LL + ts.tv_nsec;
+    return port_clock_ns();
 }
 
 typedef struct {
@@ -49,7 +48,9 @@ typedef struct {
 } link_t;
 
 #define CANOPEN_MASTER_ID 0x7Fu
+#ifndef CANOPEN_HEARTBEAT_MS /* the master's and the drives' heartbeat period (the MCU image's: its CMake) */
 #define CANOPEN_HEARTBEAT_MS 100u
+#endif
 
 /* Whether joint j's TPDO (of the kind `seen` records this period) is this period's answer. One read
  * before this period's SYNC is late: counted as such, not used. A second one this period is
@@ -335,6 +336,9 @@ static int boot_canopen_run(link_t *l, const options_t *opt, const arm_robot_mod
         cfg.cycle_us = (uint32_t)(1e6 / opt->rate_hz + 0.5);
         cfg.heartbeat_ms = CANOPEN_HEARTBEAT_MS;
         cfg.master_id = CANOPEN_MASTER_ID;
+#ifdef CANOPEN_CONSUMER_MS /* the drives' timeout for the master's heartbeat (the MCU image's: its CMake) */
+        cfg.consumer_ms = CANOPEN_CONSUMER_MS;
+#endif
         /* drives that come up after the controller (a slower process, a bus powered later) are
          * waited for, as the arm protocol waits for their heartbeats: for the first half of the
          * boot timeout, so that one that never comes is still named (no_answer, node, 0x1000) */
@@ -450,6 +454,13 @@ typedef struct {
     uint32_t k_run;        /* tracking periods done */
 } loop_t;
 
+/* Periods on the clock: realtime, and lockstep too where the port paces it (the MCU's SysTick-driven
+ * SYNC: its states are still waited for, but the next SYNC goes no sooner than its time). */
+static int paced(const loop_t *p)
+{
+    return p->opt->mode == MODE_REALTIME || port_paces_lockstep;
+}
+
 /* Enable: the CiA 402 sequence with zero torque, one step a period. 1 when every drive is
  * operation enabled (tracking starts), 0 while enabling, -1 on a boot failure (reason set). */
 static int enable(link_t *l, loop_t *p, uint32_t k, uint32_t fresh)
@@ -550,7 +561,7 @@ static int64_t control(link_t *l, loop_t *p)
     memcpy(p->in.tau_measured, l->drives.tau_measured, sizeof(p->in.tau_measured));
     arm_reference_eval(&p->ref, (float)p->k_run * p->opt->ctl.period_s, p->in.q_d, p->in.qd_d, p->in.qdd_d);
     const int64_t c0 = now_ns();
-    arm_ctl_step(&p->ctl, &p->in, &p->out);
+    port_control_step(&p->ctl, &p->in, &p->out);
     if (p->opt->rt.debug_slow_step_us > 0u) {
         rt_debug_busy_wait_us(p->opt->rt.debug_slow_step_us); /* TEST HOOK: forces overruns */
     }
@@ -570,7 +581,7 @@ static int publish(loop_t *p, uint32_t k, int64_t wake_latency, int64_t compute,
     memcpy(snap.qd, p->in.qd, sizeof(snap.qd));
     memcpy(snap.q_d, p->in.q_d, sizeof(snap.q_d));
     telemetry_controller(p->telem, &snap);
-    if (p->opt->mode == MODE_REALTIME) {
+    if (paced(p)) {
         p->next_deadline += p->period_ns;
         if (now_ns() > p->next_deadline) {
             report->overruns++;
@@ -606,7 +617,9 @@ static int publish(loop_t *p, uint32_t k, int64_t wake_latency, int64_t compute,
     return -1;
 }
 
-/* Bus period k begins: what came before its SYNC is read, then the SYNC goes out. */
+/* Bus period k begins: what came before its SYNC is read, then the SYNC goes out. now: the bus's
+ * time, which paces the master's heartbeat: the wall clock in realtime; in lockstep the periods
+ * themselves (period_time), so a run sends the same frames however loaded the machine is. */
 static void start_period(link_t *l, uint32_t k, int64_t now)
 {
     arm_can_frame_t sync;
@@ -629,6 +642,12 @@ static void start_period(link_t *l, uint32_t k, int64_t now)
     l->report->bus_periods = k + 1u;
 }
 
+/* The bus's time at the start of period k (start_period). */
+static int64_t period_time(const loop_t *p, uint32_t k, int64_t wall)
+{
+    return p->opt->mode == MODE_REALTIME ? wall : (int64_t)k * p->period_ns;
+}
+
 /* A stop signal at a period boundary: zero torque with controlword shutdown, before the NMT stop.
  * The commands go in a period of their own (k, not yet begun): the
  * last period's commands are out already, and a second command for one SYNC is a second master
@@ -642,17 +661,15 @@ static void stop_on_signal(link_t *l, loop_t *p, uint32_t k)
     telemetry_event(p->telem, p->k_run, "fault", p->report->reason);
     p->out.state = ARM_STATE_SAFE_STOP;
     memset(p->out.tau, 0, sizeof(p->out.tau));
-    start_period(l, k, now_ns());
+    start_period(l, k, period_time(p, k, now_ns()));
     send_commands(l, &p->out);
 }
 
-/* Realtime: sleep to the period's absolute deadline; the wake-up's lateness. */
+/* Sleep to the period's absolute deadline (paced); the wake-up's lateness. */
 static int64_t wait_for_period(loop_t *p)
 {
-    if (p->opt->mode != MODE_REALTIME) return 0;
-    const struct timespec dl = {.tv_sec = p->next_deadline / 1000000000LL, .tv_nsec = p->next_deadline % 1000000000LL};
-    while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &dl, NULL) == EINTR) {
-    }
+    if (!paced(p)) return 0;
+    port_clock_sleep_until(p->next_deadline);
     return now_ns() - p->next_deadline;
 }
 
@@ -731,7 +748,7 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
         }
         const int64_t wake_latency = wait_for_period(&p);
         const int64_t cycle_start = now_ns();
-        start_period(&l, k, cycle_start);
+        start_period(&l, k, period_time(&p, k, cycle_start));
         const int64_t wait_until = opt->mode == MODE_REALTIME
                                        ? p.next_deadline + p.period_ns * 8 / 10
                                        : cycle_start + (int64_t)(opt->lockstep_timeout_s * 1e9);
@@ -740,7 +757,7 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
             const int e = enable(&l, &p, k, l.drives.fresh_mask & ALL_JOINTS);
             if (e < 0) break;
             enabling = e == 0;
-            if (opt->mode == MODE_REALTIME) {
+            if (paced(&p)) {
                 p.next_deadline += p.period_ns;
             }
             continue;

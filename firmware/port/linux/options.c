@@ -1,7 +1,9 @@
 #include "options.h"
 
-#include "arm/can_bus.h"
+#include "arm/can_bus_config.h"
+#if !ARM_PORT_MCU
 #include "arm/lcm_url.h"
+#endif
 
 #include <errno.h>
 #include <math.h>
@@ -89,12 +91,19 @@ static int parse_list(const char *name, const char *s, double lo, double hi, flo
 
 static int check_lcm_url(const char *url, char *err, unsigned long errcap)
 {
+#if ARM_PORT_MCU /* the MCU image publishes nothing itself: its bridge does, and checks the URL */
+    (void)url;
+    (void)err;
+    (void)errcap;
+    return 0;
+#else
     /* The multicast rule: telemetry never leaves this host (TTL exactly 0, the group on lo). */
     arm_lcm_url_t u;
     if (arm_lcm_url_parse(url, "--lcm-url", &u, err, errcap) != 0) {
         return -1;
     }
     return arm_lcm_url_check_route(&u, "--lcm-url", err, errcap);
+#endif
 }
 
 /* The special options' handlers (the registry's type "special"): target is the options_t. */
@@ -129,10 +138,16 @@ static int opt_design_file(void *t, void *c, const argv_opt_t *o, const char *v,
 {
     options_t *opt = t;
     (void)c;
+#if ARM_PM_RUNTIME_DESIGNS
     (void)o;
     if (design_file_load(v, &opt->design, err, errcap) != 0) return -1;
     opt->ctl.design = &opt->design.d;
     return 0;
+#else
+    (void)opt;
+    snprintf(err, errcap, "%s %s: this firmware runs the design built into it alone (ARM_PM_RUNTIME_DESIGNS 0)", o->name, v);
+    return -1;
+#endif
 }
 
 static int opt_method(void *t, void *c, const argv_opt_t *o, const char *v, char *err, unsigned long errcap)

@@ -4,7 +4,7 @@
 
 #include <stdint.h>
 
-#include "arm/can_bus.h"
+#include "arm/can_bus_config.h"
 #include "arm/co_boot.h"
 #include "arm/controller.h"
 #include "design_file.h"

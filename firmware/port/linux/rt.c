@@ -13,6 +13,7 @@
 #include <unistd.h>
 
 #include "arm_params.h"
+#include "loop_port.h"
 
 #if defined(__SANITIZE_ADDRESS__)
 #define RT_UNDER_ASAN 1
@@ -157,4 +158,27 @@ void rt_debug_busy_wait_us(uint32_t us)
     do {
         clock_gettime(CLOCK_MONOTONIC, &t);
     } while ((int64_t)(t.tv_sec - t0.tv_sec) * 1000000000LL + (t.tv_nsec - t0.tv_nsec) < want);
+}
+
+/* ---- loop_port.h: the Linux loop's clock ------------------------------------------------------ */
+
+const int port_paces_lockstep = 0; /* lockstep periods follow each other as fast as the peer answers */
+
+int64_t port_clock_ns(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (int64_t)ts.tv_sec * 1000000000LL + ts.tv_nsec;
+}
+
+void port_clock_sleep_until(int64_t t_ns)
+{
+    const struct timespec dl = {.tv_sec = t_ns / 1000000000LL, .tv_nsec = t_ns % 1000000000LL};
+    while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &dl, NULL) == EINTR) {
+    }
+}
+
+void port_control_step(arm_ctl_t *ctl, const arm_ctl_input_t *in, arm_ctl_output_t *out)
+{
+    arm_ctl_step(ctl, in, out);
 }

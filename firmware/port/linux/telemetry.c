@@ -226,6 +226,11 @@ void telemetry_stop(telemetry_t *t)
     /* Counters stay readable: the caller frees with free() after reading them. */
 }
 
+void telemetry_resequence(telemetry_t *t, telem_kind_t kind, uint64_t seq)
+{
+    t->seq[kind] = seq;
+}
+
 uint64_t telemetry_sent(const telemetry_t *t, telem_kind_t kind)
 {
     return t->seq[kind];

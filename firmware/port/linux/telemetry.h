@@ -49,6 +49,9 @@ void telemetry_event(telemetry_t *t, int64_t step, const char *level, const char
 /* Software in the loop: no thread; every message goes to sink (shared, not closed here) as it is
  * made, in the loop's own thread. */
 telemetry_t *telemetry_start_inline(lcm_sink_t *sink, char *err, unsigned long errcap);
+/* The next message of kind gets sequence number seq (a relay of another controller's telemetry, the
+ * PIL bridge, keeps that controller's numbers, and so its gaps). */
+void telemetry_resequence(telemetry_t *t, telem_kind_t kind, uint64_t seq);
 /* Publishes what is queued, stops the thread. */
 void telemetry_stop(telemetry_t *t);
 

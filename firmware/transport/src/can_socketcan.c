@@ -9,6 +9,7 @@
 #define _GNU_SOURCE /* ppoll, SOCK_NONBLOCK regardless of -std */
 
 #include "arm/can_socketcan.h"
+#include "arm/can_bus_config.h"
 #include "arm/fd_wait.h"
 
 #include <errno.h>
@@ -146,24 +147,6 @@ const char *arm_socketcan_errname(int err)
     }
 }
 
-int arm_can_socketcan_ifname_valid(const char *ifname)
-{
-    if (ifname == NULL) {
-        return -1;
-    }
-    const size_t n = strlen(ifname);
-    if (n == 0u || n > ARM_CAN_SOCKETCAN_IFNAME_MAX || strcmp(ifname, ".") == 0 ||
-        strcmp(ifname, "..") == 0) {
-        return -1;
-    }
-    for (size_t i = 0; i < n; ++i) {
-        const unsigned char c = (unsigned char)ifname[i];
-        if (c == '/' || c == ':' || c <= ' ' || c == 0x7fu) {
-            return -1;
-        }
-    }
-    return 0;
-}
 
 /* ---- the socket ----------------------------------------------------------------------------- */
 
@@ -212,7 +195,7 @@ int arm_can_socketcan_open(arm_can_socketcan_t *bus, const char *ifname, char *e
     memset(bus, 0, sizeof *bus);
     bus->fd = -1;
     errno = 0;
-    if (arm_can_socketcan_ifname_valid(ifname) != 0) {
+    if (arm_can_bus_ifname_valid(ifname) != 0) {
         errno = EINVAL;
         if (err != NULL && errcap > 0u) {
             snprintf(err, errcap, "socketcan:%s: not a valid interface name (1..15 characters, "

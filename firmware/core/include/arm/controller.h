@@ -51,7 +51,7 @@ typedef enum {
 #define ARM_CHECK_TORQUE 0x10u
 #define ARM_CHECK_ALL 0x1Fu
 
-#define ARM_TORQUE_REPORT_LAG_MAX 4u /* the commands kept for the torque check (torque_report_lag_max) */
+#define ARM_TORQUE_REPORT_LAG_MAX 4u /* the commands kept for the torque check (torque_report_lag_max); a power of two */
 
 typedef enum {
     ARM_SAFE_STOP_ZERO_TORQUE = 0,
@@ -130,7 +130,10 @@ typedef struct {
     float last_q[ARM_N_JOINTS];
     float last_qd[ARM_N_JOINTS];
     float tau_prev[ARM_N_JOINTS];
-    float tau_sent[ARM_TORQUE_REPORT_LAG_MAX][ARM_N_JOINTS]; /* [k]: the command of k + 1 periods ago */
+    /* The last commands, a ring (no copying a period): the command of k + 1 periods ago is
+     * tau_sent[(sent_head + k) % ARM_TORQUE_REPORT_LAG_MAX]. */
+    float tau_sent[ARM_TORQUE_REPORT_LAG_MAX][ARM_N_JOINTS];
+    uint32_t sent_head;
     uint32_t n_sent;                        /* commands in tau_sent, at most ARM_TORQUE_REPORT_LAG_MAX */
     int have_last;                          /* last_q/last_qd hold a fresh sample of the last period */
     uint32_t mismatch_periods[ARM_N_JOINTS];

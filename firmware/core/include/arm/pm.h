@@ -20,11 +20,23 @@
 #error "the firmware runs per-joint designs (ARM_DESIGN_PER_JOINT 1, y = [e_j, e_dot_j])"
 #endif
 
-/* The largest state dimensions a design may have: the built-in design's, and at least
- * ARM_PM_NX_MIN_MAX, which holds every design the tuner makes (per joint, F of first order: K has
- * at most the plant's 2 states plus F's 1, C at most the plant's 2). A larger design is refused
- * (arm_pm_design_fits). Loops run to a design's own dimensions, bounded by these. */
+/* Designs loaded at run time (the Linux port's --design-file): 1 where a port loads them, 0 where
+ * only the built-in design runs (the MCU images: cortex_m's CMake sets 0), which then compiles
+ * with its own dimensions alone (firmware/core/src/pm.c). */
+#ifndef ARM_PM_RUNTIME_DESIGNS
+#define ARM_PM_RUNTIME_DESIGNS 1
+#endif
+
+/* The largest state dimensions a design may have: the built-in design's, and, where designs are
+ * loaded at run time, at least ARM_PM_NX_MIN_MAX, which holds every design the tuner makes (per
+ * joint, F of first order: K has at most the plant's 2 states plus F's 1, C at most the plant's
+ * 2). A larger design is refused (arm_pm_design_fits). Loops run to a design's own dimensions,
+ * bounded by these. */
+#if ARM_PM_RUNTIME_DESIGNS
 #define ARM_PM_NX_MIN_MAX 4
+#else
+#define ARM_PM_NX_MIN_MAX 1
+#endif
 #if ARM_EST_NX > ARM_PM_NX_MIN_MAX
 #define ARM_PM_EST_NX_MAX ARM_EST_NX
 #else
@@ -110,8 +122,9 @@ void arm_pm_output(arm_pm_t *pm, const float e[ARM_N_JOINTS], const float e_dot[
 void arm_pm_update(arm_pm_t *pm, uint32_t hold_mask);
 
 /* 0 if this firmware can run the design: ARM_N_JOINTS joints, state dimensions within
- * ARM_PM_*_NX_MAX, every table given, shifts and formats in 0..62; else -1 (arm_ctl_init refuses
- * with ARM_CTL_BAD_DESIGN). */
+ * ARM_PM_*_NX_MAX, every table given, shifts and formats in 0..62, and, without
+ * ARM_PM_RUNTIME_DESIGNS, the built-in design itself; else -1 (arm_ctl_init refuses with
+ * ARM_CTL_BAD_DESIGN). */
 int arm_pm_design_fits(const arm_pm_design_t *design);
 /* 0 if loop_rate_hz is the rate the design was discretised for (within 0.1 %), else -1
  * (arm_ctl_init refuses with ARM_CTL_BAD_DESIGN_RATE). */

@@ -94,12 +94,6 @@ int arm_socketcan_to_frame(const arm_socketcan_frame_t *in, size_t nbytes, arm_c
 const char *arm_socketcan_errname(int err);
 
 /*
- * Checks an interface name the way the kernel does (1..15 bytes, not "." or "..", no '/', ':'
- * or whitespace). Returns 0 if valid.
- */
-int arm_can_socketcan_ifname_valid(const char *ifname);
-
-/*
  * Open a CAN_RAW socket bound to ifname with FD frames on. Returns 0, or -1 with a message in
  * err naming the interface and the failing step, e.g. when the kernel has no AF_CAN
  * (EAFNOSUPPORT), the interface does not exist, is not a CAN interface, or is down.
