@@ -1,4 +1,5 @@
-"""tools/apt-packages.txt, installed with --no-install-recommends, brings every file that the
+"""tools/apt-packages.txt (and tools/apt-packages-test.txt, which `armctl test` alone installs),
+installed with --no-install-recommends, brings every file that the
 presets, targets and tests take from the system, proved on this machine without a second one:
 each such file is owned (dpkg -S) by a package that apt would install for the list on an empty
 machine (apt-get -s with an empty dpkg status: Depends and Pre-Depends, alternatives resolved as
@@ -19,6 +20,7 @@ import pytest
 from gen.lib.paths import REPO
 
 APT_LIST = REPO / "tools" / "apt-packages.txt"
+APT_TEST_LIST = REPO / "tools" / "apt-packages-test.txt"
 
 ARM_M4 = ["-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard"]
 
@@ -82,11 +84,19 @@ REQUIRED: list[tuple[str, str]] = [
     ("armctl fuzz: libFuzzer's runtime", _print_file("clang", "libclang_rt.fuzzer-x86_64.a")),
     ("armctl fuzz: ASan's runtime", _print_file("clang", "libclang_rt.asan-x86_64.a")),
     ("armctl's venv from Debian's Python: ensurepip", "/usr/lib/python3.11/ensurepip/__init__.py"),
+    ("armctl render: the EGL loader MuJoCo's context opens", _library("libEGL.so.1")),
+    ("armctl render: Mesa's EGL", _library("libEGL_mesa.so.0")),
+    ("armctl render: Mesa's EGL, found by the loader", "/usr/share/glvnd/egl_vendor.d/50_mesa.json"),
+    ("armctl render: Mesa's software rasteriser (the EGL device without a GPU)",
+     "/usr/lib/x86_64-linux-gnu/dri/swrast_dri.so"),
+    ("armctl render: OpenGL for PyOpenGL on EGL", _library("libOpenGL.so.0")),
+    ("test_report_html: headless Chromium", _program("chromium-headless-shell")),
 ]
 
 
 def listed_packages() -> list[str]:
-    return [ln.strip() for ln in APT_LIST.read_text().splitlines() if ln.strip() and not ln.startswith("#")]
+    return [ln.strip() for path in (APT_LIST, APT_TEST_LIST) for ln in path.read_text().splitlines()
+            if ln.strip() and not ln.startswith("#")]
 
 
 @cache

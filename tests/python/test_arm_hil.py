@@ -80,16 +80,19 @@ def built_arm(request: pytest.FixtureRequest) -> tuple[str, list[str], int, str]
     return name, args, n, r.stdout
 
 
-def _warnings(args: list[str]) -> list[str]:
+def _prepared(args: list[str]) -> Path:
+    """The arm's prepared folder, as the CLI makes the arm from its arguments (an arm file names its model too)."""
     import argparse
 
     from tools.build.arm import arm_from_args
 
-    # the arm as the CLI makes it from its arguments (an arm file names its model too)
     ns = argparse.Namespace(model=Path(args[1]) if args[0] == "--model" else None,
                             arm=Path(args[1]) if args[0] == "--arm" else None, design=None)
-    arm = arm_from_args(ns)
-    return json.loads((arm_build_dir("release", arm) / "generated" / "arm" / "arm.json").read_text())["warnings"]
+    return arm_build_dir("release", arm_from_args(ns)) / "generated" / "arm"
+
+
+def _warnings(args: list[str]) -> list[str]:
+    return json.loads((_prepared(args) / "arm.json").read_text())["warnings"]
 
 
 def test_synth_designs_for_the_arms_joint_count(built_arm: tuple[str, list[str], int, str]) -> None:
@@ -109,10 +112,18 @@ def test_firmware_rnea_matches_mj_inverse_on_the_arm(built_arm: tuple[str, list[
 
 def test_lockstep_hil_run_is_ok_within_stated_bounds(built_arm: tuple[str, list[str], int, str],
                                                      tmp_path: Path) -> None:
+    from tools.commands.hil import FIRST_RUN_MARK
+
     name, args, n, _ = built_arm
+    mark = _prepared(args) / FIRST_RUN_MARK
+    mark.unlink(missing_ok=True)  # as on a fresh build: this is the arm's first run
     r = armctl("hil", *args, "--duration", "3", "--out", str(tmp_path), "--max-error-deg", str(MAX_ERROR_DEG))
     run = json.loads((tmp_path / "run.json").read_text())
     res = run["results"]
+    # the first run of an imported arm shows the arm, beside its reference, and says where
+    assert f"the arm as it ran, this arm's first run: {tmp_path / 'arm-strip.png'}" in r.stdout, r.stdout[-2000:]
+    assert (tmp_path / "arm-strip.png").stat().st_size > 10_000
+    assert mark.read_text().strip() == res["arm"]["model_hash"]
     assert r.returncode == 0, (r.stdout[-2000:], r.stderr[-2000:], res.get("verdict_reasons"))
     assert res["arm"]["warnings"] and all(f"armctl hil: {res['arm']['name']}: {w}" in r.stderr
                                           for w in res["arm"]["warnings"]), r.stderr[-2000:]

@@ -59,6 +59,8 @@ EXERCISED: dict[str, str] = {
     "study --model|--arm": "test_documented_commands.py::test_tune_and_study_on_another_arm",
     "tune --model|--arm": "test_documented_commands.py::test_tune_and_study_on_another_arm",
     "demo --model|--arm": "test_documented_commands.py::test_demo_on_another_arm",
+    "render": "test_seeing_runs.py::test_render_writes_the_video_and_strip_of_a_run",
+    "export": "test_seeing_runs.py::test_mcap_export_reads_back_message_for_message",
 }
 
 
@@ -128,6 +130,8 @@ def test_demo(tmp_path: Path) -> None:
         assert set(sc["runs"]) == {"pm", "pm-paper-weights", "pm-paper", "pd", "gh2", "tde", "usde-smc"}
         assert all(rec["source"].startswith("tuned earlier") for rec in sc["tuning"].values())  # the kept tuning
     assert (tmp_path / "report.md").is_file()
+    page = (tmp_path / "report.html").read_text()  # the same report for a browser (test_seeing_runs.py opens one)
+    assert page.count('<div class="figure" data-figure=') >= 5 * len(study["scenarios"]) and "Plotly.newPlot" in page
 
 
 def test_hil(tmp_path: Path) -> None:

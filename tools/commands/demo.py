@@ -37,4 +37,5 @@ def run(ns: argparse.Namespace) -> int:
           f"each scenario of {study.DEFAULT_CONFIG.relative_to(REPO)}, one seed -> {ns.out}")
     ns.config, ns.methods, ns.seeds, ns.retune, ns.cluster = study.DEFAULT_CONFIG, None, 1, False, None
     ns.record = False  # the headline is the full study's (study --record)
+    ns.protocol = None  # each scenario's own drive protocol
     return study.cmd_study(ns)

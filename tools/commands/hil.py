@@ -241,4 +241,31 @@ def run(ns: argparse.Namespace) -> int:
             print(f"armctl hil: bus {name} needs {pct:g} % of its time at 1 kHz (tools/armctl busload): the "
                   "frames of a period do not fit in it" + (", so commands end late (--bus-timing)"
                                                            if ns.bus_timing else ""), file=sys.stderr)
+    if not arm.is_default:
+        _first_run_strip(bdir, info, ns.out)
     return _ended(result, ns.out)
+
+
+FIRST_RUN_MARK = ".first-run-strip"  # in the arm's prepared folder: the model hash whose strip a run offered
+
+
+def _first_run_strip(bdir: Path, info: dict, out: Path) -> None:
+    """An imported arm's first run draws the arm as it ran, beside its reference, so that a user
+    sees the import is right (a flipped axis, a wrong frame) before reading any number."""
+    import sys
+
+    from tools.build.arm import prepared_model
+    from tools.run.render import STRIP_FILE, RenderError, write_strip
+
+    mark = prepared_model(bdir).with_name(FIRST_RUN_MARK)
+    if mark.exists() and mark.read_text().strip() == info["model_hash"]:
+        return
+    try:
+        write_strip(out)
+    except RenderError as exc:
+        print(f"armctl hil: no picture of the arm: {exc}", file=sys.stderr)
+        return
+    mark.write_text(info["model_hash"] + "\n")
+    print(f"the arm as it ran, this arm's first run: {out / STRIP_FILE} (beside its reference at the start, the "
+          f"middle, the worst tracking and the end: check that each joint turns where it should; tools/armctl "
+          f"render {out} makes a video)")

@@ -291,3 +291,14 @@ def read_log(path: Path, channels: tuple[str, ...] | None = None) -> dict[str, C
             log.duplicates = int(len(seqs) - len(unique))
             log.gaps = int(unique[-1] + 1 - len(unique))  # sequence numbers start at 0
     return out
+
+
+def truth_rows(ctl: np.ndarray, sim: np.ndarray) -> np.ndarray:
+    """For each controller message, the row of the simulator's message of the period it names
+    (ctl.bus_period = sim.step; the last one logged for that step), or -1 where none was logged."""
+    if len(sim) == 0:
+        return np.full(len(ctl), -1, np.int64)
+    steps, last = np.unique(sim["step"][::-1], return_index=True)
+    rows = len(sim) - 1 - last  # the last logged message of each step, in the original order
+    at = np.minimum(np.searchsorted(steps, ctl["bus_period"]), len(steps) - 1)
+    return np.where(steps[at] == ctl["bus_period"], rows[at], -1).astype(np.int64)

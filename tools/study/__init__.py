@@ -626,7 +626,8 @@ def cmd_tune(ns: argparse.Namespace) -> int:
                   f"({rec['trials_run']} of at most {rec['cap']} trials)  {json.dumps(rec['knobs'])}"
                   + (f"  ({rec['edge_note']})" if rec["edge_note"] else "")
                   + (f"  validation: {rec['validation']['note']}" if rec.get("validation") else ""))
-    from tools.study.figures import colour_of, convergence_figure
+    from tools.study.figure_data import colour_of
+    from tools.study.figures import convergence_figure
 
     colour = colour_of({"methods": cfg.methods})
     for s, recs in result.items():

@@ -1,12 +1,15 @@
-"""The study's PNG figures, named by scenario: distributions per method and joint; the paper's
-Figs. 6-8 for the first seed of every scenario; each tuned method's best-so-far curve. One colour
-per method in every figure, runs that did not end ok marked. Apart from the report's text
+"""The study's PNG figures, named by scenario: distributions per method and joint; every metric per
+joint as bars with their 95 % intervals; the paper's Figs. 6-8 for the first seed of every
+scenario; the arm in the worst kept run (tools/run/render.py); each tuned method's best-so-far
+curve. One colour per method in every figure, runs that did not end ok marked (what they draw:
+tools/study/figure_data.py). Apart from the report's text
 (tools/study/report.py) so that `--no-figures` costs neither the figures (about a second of CPU
 each) nor matplotlib's import (0.4 s a process)."""
 
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -16,81 +19,43 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from tools.run.telemetry_log import read_log  # noqa: E402
-from tools.study.config import METHODS  # noqa: E402
-from tools.study.report import ESTIMATING, fig_name  # noqa: E402
+from tools.study.figure_data import (BAR_METRICS, ENVELOPE_S, METRIC_UNITS, colour_of, envelopes,  # noqa: E402
+                                     metric_bars, scenario_series, stopped_early)
+from tools.study.html_figures import (distribution_figure, envelope_figure, metrics_figure,  # noqa: E402
+                                      tuning_figure)
+from tools.study.report import ESTIMATING, METRIC_TEXT, fig_name, worst_kept_run  # noqa: E402
 
 
-ENVELOPE_S = 0.1  # the tracking figure draws each method's max |e| over this trailing window
-
-
-def colour_of(study: dict[str, Any]) -> dict[str, Any]:
-    """One colour per method, the same in every figure of every study: by its place in the table
-    of study methods (tools/study/config.py METHODS), whichever of them a study runs."""
-    cmap = plt.get_cmap("tab10")
-    order = list(METHODS)
-    return {m: cmap((order.index(m) if m in order else len(order) + i) % 10) for i, m in enumerate(study["methods"])}
-
-
-def envelope(x: np.ndarray, window: int) -> np.ndarray:
-    """max |x| over the trailing `window` samples: a band of sensor noise around zero becomes one
-    line at its height, and lines of methods that differ stay apart."""
-    from scipy.ndimage import maximum_filter1d
-
-    w = max(1, min(window, len(x)))
-    return maximum_filter1d(np.abs(x), size=w, origin=(w - 1) // 2, mode="nearest")
-
-
-def _series(run_dir: Path, hold: float) -> dict[str, np.ndarray]:
-    """One kept run's trajectory series (the figures plot a seed): its whole ARM_CTL and ARM_SIM."""
-    log = read_log(run_dir / "telemetry.lcmlog", channels=("ARM_CTL", "ARM_SIM"))
-    ctl, sim = log["ARM_CTL"].messages, log["ARM_SIM"].messages
-    ctl = ctl[(ctl.state == 1) & (ctl.t >= hold - 1e-9)]
-    w_hat = ctl.w_hat.astype(float)
-    # w_true of the period each controller message names (the last one logged for it), NaN if none
-    steps, last = np.unique(sim.step[::-1], return_index=True)
-    truth = sim.w_true[::-1][last].astype(float)
-    at = np.searchsorted(steps, ctl.bus_period)
-    found = (at < len(steps)) & (steps[np.minimum(at, max(len(steps) - 1, 0))] == ctl.bus_period) if len(steps) \
-        else np.zeros(len(ctl), bool)
-    w = np.full(w_hat.shape, np.nan)
-    w[found] = truth[at[found]]
-    return {"t": ctl.t - hold, "e": ctl.e.astype(float), "w": w, "w_hat": w_hat}
-
-
-def _time_figures(out: Path, study: dict[str, Any], scenario: str) -> list[str]:
+def _time_figures(out: Path, study: dict[str, Any], scenario: str) -> list[tuple[str, str | None]]:
     """The paper's Figs. 6-8 for the first seed of one scenario: every method in its own colour, a
-    run the safety layer stopped drawn up to its stop and marked, a run with no trajectory named."""
-    hold, seed = study["hold_s"], study["seeds"][0]
+    run the safety layer stopped drawn up to its stop and marked there (a cross and a dotted line),
+    one that ended badly otherwise named with its result in the legend, a run with no trajectory
+    named in the title. Estimation and tracking errors as envelopes on a log scale: methods whose
+    errors differ a hundredfold all stay visible, and none dissolves into a band of noise."""
     n = study["arm"]["n_joints"]
     colour = colour_of(study)
     runs = study["scenarios"][scenario]["runs"]
-    series, empty = {}, []
-    for m in study["methods"]:
-        d = out / scenario / m / f"seed-{seed}"
-        got = _series(d, hold) if (d / "telemetry.lcmlog").exists() else None
-        if got is not None and len(got["t"]) >= 2:
-            series[m] = got
-        else:
-            empty.append(f"{m} ({runs[m][0].get('result') if runs.get(m) else 'not run'}: no trajectory)")
-    made: list[str] = []
+    series, empty = scenario_series(out, study, scenario)
+    made: list[tuple[str, str | None]] = []
     if not series:
         return made
+    env = envelopes(series, study.get("rate_hz", 1000.0))
 
     def label(m: str) -> str:
         r = runs[m][0].get("result") if runs.get(m) else None
-        return m if r == "ok" else f"{m} ({r})"
+        return m if r == "ok" else f"{m} ({r}{', stopped' if stopped_early(series[m]['t'], study) else ''})"
 
-    def finish(fig: Any, axes: Any, title: str, kind: str, at: Any = None) -> None:
-        for m in series:
-            if runs.get(m) and runs[m][0].get("result") != "ok":  # where it stopped or ended badly
+    def finish(fig: Any, axes: Any, title: str, kind: str, shown: list[str], at: Any = None,
+               interactive: str | None = None) -> None:
+        for m in shown:
+            if stopped_early(series[m]["t"], study):  # where the safety layer stopped it
                 for j, ax in enumerate(axes):
                     ax.axvline(series[m]["t"][-1], color=colour[m], lw=0.8, ls=":")
                     if at is not None:  # and a cross on its line, where it ended
                         ax.plot([series[m]["t"][-1]], [at(m, j)], marker="X", ms=8, color=colour[m], mec="k", zorder=5)
-        axes[0].set_title(title + (f"; {', '.join(empty)}" if empty else ""), fontsize=9)
+        fig.suptitle(title + (f"; {', '.join(empty)}" if empty else ""), fontsize=9, y=0.995)
         axes[-1].set_xlabel("t (s)")
-        made.append(_save(fig, out / fig_name(kind, scenario), tight=False))
+        made.append((_save(fig, out / fig_name(kind, scenario), tight=False), interactive))
 
     if "pm" in series:
         fig, axes = _joint_column(n)
@@ -98,32 +63,31 @@ def _time_figures(out: Path, study: dict[str, Any], scenario: str) -> list[str]:
             axes[j].plot(series["pm"]["t"], series["pm"]["w"][:, j], lw=0.6, color=colour["pm"])
             axes[j].set_ylabel(f"w{j + 1}")
         finish(fig, axes, f"Total uncertainty w (rad/s^2) during the PM run, {scenario} (cf. the paper's Fig. 6)",
-               "uncertainty")
-    est = [m for m in ESTIMATING if m in series]
-    if est:
+               "uncertainty", ["pm"])
+    for kind, methods, unit, what, fig_of in (
+            ("estimation", [m for m in ESTIMATING if m in series], "rad/s^2", "Estimation error: max |w - w_hat|",
+             "Fig. 7"),
+            ("tracking", list(series), "deg", "Tracking error: max |e|", "Fig. 8")):
+        if not methods:
+            continue
         fig, axes = _joint_column(n)
-        for m in est:
+        for m in methods:
             for j in range(n):
-                axes[j].plot(series[m]["t"], series[m]["w"][:, j] - series[m]["w_hat"][:, j], lw=0.6,
-                             color=colour[m], label=label(m))
+                axes[j].semilogy(series[m]["t"], env[kind][m][:, j], lw=1.0, color=colour[m], label=label(m))
         for j in range(n):
-            axes[j].set_ylabel(f"joint {j + 1}")
-        axes[0].legend(loc="upper right", fontsize=7, ncol=len(est))
-        finish(fig, axes, f"Estimation error w - w_hat (rad/s^2), {scenario} (cf. the paper's Fig. 7)",
-               "estimation_error")
-    # the envelope of |e| on a log scale: methods whose errors differ a hundredfold all stay visible,
-    # and none dissolves into a band of noise that crosses zero
-    fig, axes = _joint_column(n)
-    env = {m: np.maximum(np.degrees(np.stack([envelope(sr["e"][:, j], int(ENVELOPE_S * study.get("rate_hz", 1000.0)))
-                                              for j in range(n)], axis=1)), 1e-6) for m, sr in series.items()}
-    for m, sr in series.items():
-        for j in range(n):
-            axes[j].semilogy(sr["t"], env[m][:, j], lw=1.0, color=colour[m], label=label(m))
-    for j in range(n):
-        axes[j].set_ylabel(f"|e{j + 1}| (deg)")
-    axes[0].legend(loc="upper right", fontsize=7, ncol=min(len(series), 4))
-    finish(fig, axes, f"Tracking error: max |e| over {ENVELOPE_S * 1e3:g} ms, {scenario} (cf. the paper's Fig. 8); "
-           "x: where a run that did not end ok stopped", "tracking_error", at=lambda m, j: env[m][-1, j])
+            axes[j].set_ylabel(f"joint {j + 1} ({unit})")
+        if kind == "tracking":
+            bound = next((r[0]["bounds"]["max_error_deg"] for r in runs.values() if r and r[0].get("bounds")), None)
+            if bound:  # the run's tracking bound: above it, the verdict is tracking-bound-exceeded
+                for ax in axes:
+                    ax.axhline(bound, color="k", lw=0.7, ls="--", label=f"tracking bound {bound:g} deg")
+        # above the panels, where it hides no line
+        axes[0].legend(loc="lower left", bbox_to_anchor=(0.0, 1.0), fontsize=7, ncol=4, frameon=False)
+        finish(fig, axes, f"{what} over {ENVELOPE_S * 1e3:g} ms, {scenario}, seed {study['seeds'][0]} "
+               f"(cf. the paper's {fig_of}); x: where the safety layer stopped a run",
+               "estimation_error" if kind == "estimation" else "tracking_error", methods,
+               at=lambda m, j, kind=kind: env[kind][m][-1, j],
+               interactive=envelope_figure(study, scenario, kind, series, env[kind]))
     return made
 
 
@@ -132,7 +96,7 @@ def _joint_column(n: int) -> tuple[Any, Any]:
     measured every tick label again, 40 % of a time figure's cost, for margins these figures never
     need to change (short labels, a one-line title)."""
     fig, axes = plt.subplots(n, 1, figsize=(9, 11), sharex=True, squeeze=False)
-    fig.subplots_adjust(left=0.1, right=0.98, bottom=0.05, top=0.965, hspace=0.12)
+    fig.subplots_adjust(left=0.1, right=0.98, bottom=0.05, top=0.93, hspace=0.12)
     return fig, axes[:, 0]
 
 
@@ -167,7 +131,7 @@ def _distribution_figure(out: Path, study: dict[str, Any], scenario: str) -> str
             patch.set_alpha(0.5)
         for i, (d, b) in enumerate(zip(data, bad)):
             ax.scatter(np.full(len(d), i + 1.0), d, s=8, color="k", zorder=3)
-            ax.scatter(np.full(len(b), i + 1.0), b, s=30, color="red", marker="x", zorder=4)
+            ax.scatter(np.full(len(b), i + 1.0), b, s=45, color="k", marker="x", linewidths=1.5, zorder=4)
         if any(np.any(d > 0) for d in data):  # a scale of logs needs a value; no run may have measured
             ax.set_yscale("log")
         else:
@@ -175,8 +139,41 @@ def _distribution_figure(out: Path, study: dict[str, Any], scenario: str) -> str
         ax.set_xticks(range(1, len(methods) + 1), methods, rotation=70, fontsize=7)
         ax.set_title(study["arm"]["joint_names"][j], fontsize=8)
     axes[0].set_ylabel("L-inf tracking error (deg), one point per seed")
-    fig.suptitle(f"{scenario}: {len(study['seeds'])} seed(s); red x: a run that did not end ok")
+    fig.suptitle(f"{scenario}: {len(study['seeds'])} seed(s); dot: a run that ended ok, x: one that did not")
     return _save(fig, out / fig_name("distribution", scenario))
+
+
+def _metrics_figure(out: Path, study: dict[str, Any], scenario: str) -> str:
+    """Each metric per joint as bars, the mean over the seeds with its 95 % interval (the paper's
+    Tables 1-3 drawn): one bar a method in its colour, hatched where some of its runs did not end
+    ok (the legend says how many); a log scale where the means span more than 30x."""
+    colour = colour_of(study)
+    n = study["arm"]["n_joints"]
+    fig, axes = plt.subplots(len(BAR_METRICS), 1, figsize=(max(9.0, 1.4 * n + 2), 13),
+                             gridspec_kw={"height_ratios": [3, 3, 3, 2]})
+    for ax, metric in zip(axes, BAR_METRICS):
+        groups, bars = metric_bars(study, scenario, metric)
+        width = 0.8 / max(len(bars), 1)
+        x0 = np.arange(len(groups))
+        for k, (m, b) in enumerate(bars.items()):
+            x = x0 + (k - (len(bars) - 1) / 2) * width
+            bad = b["not_ok"] > 0
+            ax.bar(x, b["mean"], width, color=colour[m], edgecolor="k" if bad else colour[m], lw=0.6,
+                   hatch="///" if bad else None, alpha=0.9,
+                   label=m + (f" ({b['not_ok']} of {b['runs']} runs not ok)" if bad else ""))
+            ax.errorbar(x, b["mean"], yerr=[b["below"], b["above"]], fmt="none", ecolor="k", lw=0.8, capsize=2)
+        vals = np.concatenate([b["mean"] for b in bars.values()]) if bars else np.array([])
+        vals = vals[np.isfinite(vals) & (vals > 0)]
+        if len(vals) and vals.max() / vals.min() > 30:
+            ax.set_yscale("log")
+        ax.set_xticks(x0, groups, fontsize=8)
+        ax.set_ylabel(METRIC_UNITS[metric])
+        ax.set_title(f"{METRIC_TEXT[metric]}: mean over {len(study['seeds'])} seed(s), 95 % interval", fontsize=9)
+        ax.grid(axis="y", lw=0.3, alpha=0.6)
+    axes[0].legend(fontsize=7, ncol=min(len(study["methods"]), 4), loc="upper left")
+    fig.suptitle(f"{scenario}: every metric per joint (hatched: a method some of whose runs did not end ok)",
+                 fontsize=10)
+    return _save(fig, out / fig_name("metrics", scenario))
 
 
 def convergence_figure(out: Path, scenario: str, recs: dict[str, dict[str, Any]], colour: dict[str, Any]) -> str:
@@ -212,22 +209,47 @@ def convergence_figure(out: Path, scenario: str, recs: dict[str, dict[str, Any]]
     return _save(fig, out / fig_name("tuning", scenario))
 
 
-def _scenario_figures(out: Path, study: dict[str, Any], scenario: str, kind: str) -> list[str]:
-    """One scenario's figures of one kind ("tuning", "distribution" or "time"): their file names."""
+def _arm_strip(out: Path, study: dict[str, Any], scenario: str) -> list[tuple[str, str | None]]:
+    """The frame strip of the scenario's worst kept run (tools/study/report.py worst_kept_run)."""
+    from tools.run.render import RenderError, write_strip
+
+    worst = worst_kept_run(study, scenario)
+    if worst is None:
+        return []
+    name = fig_name("arm", scenario)
+    try:
+        write_strip(out / scenario / worst[0] / f"seed-{worst[1]}", out, name)
+    except RenderError as exc:  # the report says why it has no strip, and the study goes on
+        print(f"armctl study: no arm strip for {scenario}: {exc}", file=sys.stderr)
+        return []
+    return [(name, None)]
+
+
+def _scenario_figures(out: Path, study: dict[str, Any], scenario: str, kind: str) -> list[tuple[str, str | None]]:
+    """One scenario's figures of one kind (FIGURE_KINDS): each one's file name and its interactive
+    version for report.html (plotly's JSON; None: the PNG itself)."""
     if kind == "tuning":
-        return [convergence_figure(out, scenario, study["scenarios"][scenario]["tuning"], colour_of(study))]
+        recs = study["scenarios"][scenario]["tuning"]
+        return [(convergence_figure(out, scenario, recs, colour_of(study)),
+                 tuning_figure(scenario, recs, colour_of(study)))]
     if kind == "distribution":
-        return [_distribution_figure(out, study, scenario)]
+        return [(_distribution_figure(out, study, scenario), distribution_figure(study, scenario))]
+    if kind == "metrics":
+        return [(_metrics_figure(out, study, scenario), metrics_figure(study, scenario))]
+    if kind == "arm":
+        return _arm_strip(out, study, scenario)
     return _time_figures(out, study, scenario)
 
 
-FIGURE_KINDS = ("time", "distribution", "tuning")  # the slowest first: the workers end together
+FIGURE_KINDS = ("time", "arm", "distribution", "metrics", "tuning")  # the slowest first: the workers end together
 
 
-def draw_figures(out: Path, study: dict[str, Any], jobs: int | None = None) -> dict[tuple[str, str], list[str]]:
+def draw_figures(out: Path, study: dict[str, Any], jobs: int | None = None) -> dict[tuple[str, str],
+                                                                                   list[tuple[str, str | None]]]:
     """Every scenario's figures, drawn in `jobs` processes (default: every core this process may
     use; matplotlib holds the GIL, and the figures were a third of a study's time): (scenario,
-    kind) -> file names. Each task gets its own scenario of the study alone."""
+    kind) -> each figure's file name and interactive version. Each task gets its own scenario of
+    the study alone."""
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 

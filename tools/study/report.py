@@ -74,7 +74,7 @@ def _labels(study: dict[str, Any], paper: bool) -> list[str]:
     return [f"joint {j + 1}" if paper else f"{j + 1} {names[j]}" for j in range(len(names))]
 
 
-def _deg(s: dict[str, Any], metric: str) -> dict[str, Any]:
+def in_degrees(s: dict[str, Any], metric: str) -> dict[str, Any]:
     """A statistic of radians, in degrees when the metric is an angle (IN_DEGREES)."""
     if metric not in IN_DEGREES or s.get("mean") is None:
         return s
@@ -86,9 +86,9 @@ def _stats_table(study: dict[str, Any], sc: dict[str, Any], metric: str, labels:
     methods = [m for m in study["methods"] if metric != "est" or m in ESTIMATING]
     if metric == "power":
         return _md_table(["method", "mean ± 95 % CI"], [[m, _ci(sc["stats"][m]["power"]["total"])] for m in methods])
-    rows = [[labels[j]] + [_ci(_deg(sc["stats"][m][metric]["per_joint"][j], metric)) for m in methods]
+    rows = [[labels[j]] + [_ci(in_degrees(sc["stats"][m][metric]["per_joint"][j], metric)) for m in methods]
             for j in range(len(labels))]
-    rows.append(["sum of joints"] + [_ci(_deg(sc["stats"][m][metric]["total"], metric)) for m in methods])
+    rows.append(["sum of joints"] + [_ci(in_degrees(sc["stats"][m][metric]["total"], metric)) for m in methods])
     return _md_table(["joint", *methods], rows)
 
 
@@ -307,16 +307,48 @@ def fig_name(kind: str, scenario: str) -> str:
     return f"fig_{kind}_{''.join(c if c.isalnum() else '-' for c in scenario)}.png"
 
 
+def _shown(path: Path) -> str:
+    """A path as a command in the report names it: from the repository's root when inside it."""
+    from gen.lib.paths import REPO
+
+    p = path.resolve()
+    return str(p.relative_to(REPO)) if p.is_relative_to(REPO) else str(p)
+
+
+def worst_kept_run(study: dict[str, Any], scenario: str) -> tuple[str, int, str] | None:
+    """The scenario's worst run among those whose telemetry the study keeps (every method's first
+    seed): one the safety layer stopped before its trajectory ended, else the largest sum over the
+    joints of the L-infinity tracking error (the tuning's objective). (method, seed, why), or None."""
+    seed = study["seeds"][0]
+    ranked = []
+    for m, runs in study["scenarios"][scenario]["runs"].items():
+        if not runs:
+            continue
+        r = runs[0]
+        linf = r.get("tracking_max_abs_deg")
+        if linf:
+            ranked.append((0, float(sum(linf)), m, f"the largest L-infinity tracking error summed over the joints, "
+                                                   f"{sum(linf):.3g} deg; {r.get('result')}"))
+        elif r.get("result") != "ok":
+            ranked.append((1, 0.0, m, f"{r.get('result')} before its trajectory ended"))
+    if not ranked:
+        return None
+    _, _, m, why = max(ranked)
+    return m, seed, why
+
+
 def _remove_figures(out: Path, scenarios: list[str]) -> None:
     """A report without figures leaves none beside it of an earlier study of these scenarios in
     the same folder: every figure there is the report's."""
     for s in scenarios:
-        for f in out.glob(fig_name("*", s)):
+        png = fig_name("*", s)
+        for f in [*out.glob(png), *out.glob(png.removesuffix(".png") + ".json")]:  # the arm strip's record too
             f.unlink()
 
 
 def write_report(out: Path, study: dict[str, Any], figures: bool = True) -> None:
-    """report.md and summary.txt, and the figures unless `figures` is False (`--no-figures`)."""
+    """report.md, report.html (the same, one self-contained page, its figures interactive) and
+    summary.txt, and the figures unless `figures` is False (`--no-figures`)."""
     if figures:
         from tools.study.figures import draw_figures  # matplotlib: only when there are figures to draw
 
@@ -325,8 +357,8 @@ def write_report(out: Path, study: dict[str, Any], figures: bool = True) -> None
         drawn = {}
         _remove_figures(out, list(study["scenarios"]))
 
-    def images(name: str, kind: str) -> list[str]:
-        return [f"![{f}]({f})" for f in drawn.get((name, kind), [])]
+    def images(name: str, kind: str) -> list[str]:  # a paragraph each (report.html puts a figure in its place)
+        return [line for f, _ in drawn.get((name, kind), []) for line in ("", f"![{f}]({f})", "")]
 
     arm = study["arm"]
     n = arm["n_joints"]
@@ -383,6 +415,7 @@ def write_report(out: Path, study: dict[str, Any], figures: bool = True) -> None
             md += [f"### {METRIC_TEXT[metric]}", "", _stats_table(study, sc, metric, labels), "",
                    f"PM against each method (ratio of means PM/other, seeds PM lower, p):", "",
                    _paired_table(study, sc, metric, labels), ""]
+        md += [*images(name, "metrics"), ""]
         if paper and name == next(iter(study["scenarios"])):
             md += ["### Beside the paper's numbers", "",
                    "The paper's Table 1 is its simulation (its units and uncertainty), Tables 2-3 its hardware "
@@ -401,9 +434,18 @@ def write_report(out: Path, study: dict[str, Any], figures: bool = True) -> None
         if figures:
             md += [*images(name, "distribution"), "", f"Time series, the first seed of `{name}`:", "",
                    *images(name, "time"), ""]
+            worst = worst_kept_run(study, name)
+            if worst and drawn.get((name, "arm")):
+                md += [f"The arm in the worst run of `{name}` whose telemetry is kept (seed {worst[1]}): "
+                       f"{worst[0]}, {worst[2]}. Solid: the arm as simulated; translucent, beside it: the "
+                       f"commanded reference (`tools/armctl render {_shown(out / name / worst[0])}/seed-{worst[1]}` "
+                       "makes its video):", "", *images(name, "arm"), ""]
     md += ["## Summary", "", "```", summary_table(study), "```", ""]
     write_text_atomic(out / "report.md", "\n".join(md))
     write_text_atomic(out / "summary.txt", summary_table(study) + "\n")
+    from tools.study.html_report import write_html
+
+    write_html(out, study, "\n".join(md), {f: fig for figs in drawn.values() for f, fig in figs if fig is not None})
 
 
 def summary_table(study: dict[str, Any]) -> str:

@@ -1,0 +1,121 @@
+"""What the study's figures draw, apart from any drawing, so that the PNG figures
+(tools/study/figures.py, matplotlib) and report.html's interactive ones (tools/study/html_report.py,
+plotly) draw the same: one colour per method, each method's kept run of a scenario (the first
+seed's: the study keeps that seed's telemetry) and its envelopes (max |x| over a trailing window,
+which lets methods whose errors differ a hundredfold stay apart), and each metric's means with
+their 95 % intervals per joint."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tools.run.telemetry_log import read_log, truth_rows
+from tools.study.config import METHODS
+from tools.study.report import ESTIMATING, in_degrees
+
+# matplotlib's tab10, the colours of every figure's methods in their order in the study's method
+# table (METHODS): the same colour for a method in every figure of every study, PNG or HTML
+PALETTE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22",
+           "#17becf")
+METRIC_UNITS = {"linf": "deg", "rms": "deg", "est": "rad/s^2", "power": "W"}
+BAR_METRICS = ("linf", "rms", "est", "power")
+
+ENVELOPE_S = 0.1  # the tracking and estimation figures draw each method's max |x| over this trailing window
+
+
+def colour_of(study: dict[str, Any]) -> dict[str, str]:
+    """One colour per method, the same in every figure of every study: by its place in the table
+    of study methods (tools/study/config.py METHODS), whichever of them a study runs."""
+    order = list(METHODS)
+    return {m: PALETTE[(order.index(m) if m in order else len(order) + i) % len(PALETTE)]
+            for i, m in enumerate(study["methods"])}
+
+
+def metric_bars(study: dict[str, Any], scenario: str, metric: str) -> tuple[list[str], dict[str, dict[str, Any]]]:
+    """One metric of a scenario as the bar charts draw it: the groups (a joint each; "total" for
+    power) and per method its means, the 95 % interval's half-widths below and above (NaN: none)
+    and how many of its runs did not end ok."""
+    sc = study["scenarios"][scenario]
+    names = study["arm"]["joint_names"]
+    groups = ["total"] if metric == "power" else [f"{j + 1} {names[j]}" for j in range(len(names))]
+    out = {}
+    for m in study["methods"]:
+        if metric == "est" and m not in ESTIMATING:
+            continue
+        st = sc["stats"][m][metric]
+        cells = [in_degrees(s, metric) for s in ([st["total"]] if metric == "power" else st["per_joint"])]
+        mean = np.array([c["mean"] if c.get("mean") is not None else np.nan for c in cells], float)
+        lo = np.array([c["ci95"][0] if c.get("ci95") else np.nan for c in cells], float)
+        hi = np.array([c["ci95"][1] if c.get("ci95") else np.nan for c in cells], float)
+        out[m] = {"mean": mean, "below": mean - lo, "above": hi - mean,
+                  "not_ok": sum(1 for r in sc["stats"][m]["results"] if r != "ok"), "runs": len(sc["stats"][m]["results"])}
+    return groups, out
+
+
+def envelope(x: np.ndarray, window: int) -> np.ndarray:
+    """max |x| over the trailing `window` samples: a band of sensor noise around zero becomes one
+    line at its height, and lines of methods that differ stay apart."""
+    from scipy.ndimage import maximum_filter1d
+
+    w = max(1, min(window, len(x)))
+    return maximum_filter1d(np.abs(x), size=w, origin=(w - 1) // 2, mode="nearest", axis=0)
+
+
+def run_series(run_dir: Path, hold: float) -> dict[str, np.ndarray]:
+    """One kept run's trajectory series: t after the hold (s), e (rad), w and w_hat (rad/s^2; w NaN
+    where the simulator logged no message for the period)."""
+    log = read_log(run_dir / "telemetry.lcmlog", channels=("ARM_CTL", "ARM_SIM"))
+    ctl, sim = log["ARM_CTL"].messages, log["ARM_SIM"].messages
+    ctl = ctl[(ctl.state == 1) & (ctl.t >= hold - 1e-9)]
+    w_hat = ctl.w_hat.astype(float)
+    at = truth_rows(ctl, sim)  # w_true of the period each controller message names, NaN if none
+    w = np.full(w_hat.shape, np.nan)
+    w[at >= 0] = sim.w_true[at[at >= 0]]
+    return {"t": ctl.t - hold, "e": ctl.e.astype(float), "w": w, "w_hat": w_hat}
+
+
+def scenario_series(out: Path, study: dict[str, Any], scenario: str) -> tuple[dict[str, dict[str, np.ndarray]],
+                                                                               list[str]]:
+    """Every method's series of the first seed of a scenario, and a note for each method whose run
+    left no trajectory."""
+    hold, seed = study["hold_s"], study["seeds"][0]
+    runs = study["scenarios"][scenario]["runs"]
+    series, empty = {}, []
+    for m in study["methods"]:
+        d = out / scenario / m / f"seed-{seed}"
+        got = run_series(d, hold) if (d / "telemetry.lcmlog").exists() else None
+        if got is not None and len(got["t"]) >= 2:
+            series[m] = got
+        else:
+            empty.append(f"{m} ({runs[m][0].get('result') if runs.get(m) else 'not run'}: no trajectory)")
+    return series, empty
+
+
+def envelopes(series: dict[str, dict[str, np.ndarray]], rate_hz: float) -> dict[str, dict[str, np.ndarray]]:
+    """Per kind ("tracking": |e| in deg, "estimation": |w - w_hat| in rad/s^2) and method, the
+    envelope over ENVELOPE_S, (periods, joints); floored at 1e-6 for a log scale."""
+    window = int(ENVELOPE_S * rate_hz)
+    return {"tracking": {m: np.maximum(np.degrees(envelope(sr["e"], window)), 1e-6) for m, sr in series.items()},
+            "estimation": {m: np.maximum(envelope(np.nan_to_num(sr["w"] - sr["w_hat"]), window), 1e-6)
+                           for m, sr in series.items()}}
+
+
+def stopped_early(t: np.ndarray, study: dict[str, Any]) -> bool:
+    """Whether a run's series ends before its trajectory did (the safety layer stopped it)."""
+    return float(t[-1]) < study["duration_s"] - 2.0 / study.get("rate_hz", 1000.0)
+
+
+def decimate(t: np.ndarray, y: np.ndarray, points: int) -> tuple[np.ndarray, np.ndarray]:
+    """At most `points` samples of an envelope, each the max over its block: no peak is lost."""
+    k = max(1, int(np.ceil(len(t) / points)))
+    if k == 1:
+        return t, y
+    cut = len(t) // k * k
+    tb = t[:cut].reshape(-1, k)[:, -1]
+    yb = y[:cut].reshape(-1, k, *y.shape[1:]).max(axis=1)
+    if cut < len(t):
+        tb, yb = np.append(tb, t[-1]), np.concatenate([yb, y[cut:].max(axis=0, keepdims=True)])
+    return tb, yb

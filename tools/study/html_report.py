@@ -1,0 +1,84 @@
+"""report.html: the study's report as one self-contained page, for a browser, offline. Its text
+and tables are report.md's (python-markdown), so both always say the same; where report.md shows a
+figure the page shows its interactive version (plotly: zoom into a run, hover a value, a method
+toggled in the legend; tools/study/html_figures.py), or the PNG itself, inlined. plotly.js, the
+figures' data, the images and the style are all inside the page: no CDN, no file beside it."""
+
+from __future__ import annotations
+
+import base64
+import html
+import re
+from pathlib import Path
+from typing import Any
+
+from gen.lib.atomic_output import write_text_atomic
+
+HTML_FILE = "report.html"
+STYLE = """
+body { font-family: system-ui, -apple-system, "Segoe UI", Roboto, sans-serif; margin: 0; color: #222;
+       background: #fafafa; }
+main { max-width: 1200px; margin: 0 auto; padding: 1em 2em 4em; background: #fff; }
+h1 { font-size: 1.6em; } h2 { border-bottom: 1px solid #ddd; padding-bottom: .2em; margin-top: 2em; }
+h3 { margin-top: 1.6em; }
+table { border-collapse: collapse; margin: .6em 0; font-size: .85em; display: block; overflow-x: auto; }
+th, td { border: 1px solid #ccc; padding: .25em .55em; text-align: right; white-space: nowrap; }
+th { background: #f0f0f0; } td:first-child, th:first-child { text-align: left; }
+code { background: #f3f3f3; padding: 0 .2em; border-radius: 3px; font-size: .92em; }
+pre { background: #f6f6f6; padding: .8em; overflow-x: auto; font-size: .8em; }
+pre code { background: none; padding: 0; }
+.figure { width: 100%; margin: 1em 0; border: 1px solid #eee; }
+img.figure { height: auto; }
+"""
+RENDER = """
+const drawing = [];
+for (const el of document.querySelectorAll("div.figure[data-figure]")) {
+  const fig = JSON.parse(document.getElementById(el.dataset.figure).textContent);
+  drawing.push(Plotly.newPlot(el, fig.data, fig.layout, {responsive: true, displaylogo: false}));
+}
+Promise.all(drawing).then(() => { document.body.dataset.figures = "drawn"; });
+"""
+IMAGE = re.compile(r'<p><img alt="([^"]*)" src="([^"]+\.png)" ?/?></p>')
+
+
+def _script_json(text: str) -> str:
+    """JSON safe inside a <script> element: no "</" can end it early."""
+    return text.replace("</", "<\\/")
+
+
+def page(title: str, body: str, plotly: bool) -> str:
+    from plotly.offline import get_plotlyjs
+
+    scripts = f"<script>{get_plotlyjs()}</script>" if plotly else ""
+    return (f'<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
+            f'<meta name="viewport" content="width=device-width, initial-scale=1">\n<title>{html.escape(title)}</title>\n'
+            f"<style>{STYLE}</style>\n{scripts}\n</head>\n<body>\n<main>\n{body}\n</main>\n"
+            + (f"<script>{RENDER}</script>\n" if plotly else "") + "</body>\n</html>\n")
+
+
+def write_html(out: Path, study: dict[str, Any], markdown_text: str, interactive: dict[str, str]) -> Path:
+    """OUT/report.html from report.md's text: each figure interactive where `interactive` has it
+    (file name -> plotly JSON), else its PNG inlined."""
+    import markdown
+
+    body = markdown.markdown(markdown_text, extensions=["tables", "fenced_code", "toc"])
+    used: list[str] = []
+
+    def figure(m: re.Match[str]) -> str:
+        alt, src = m.group(1), m.group(2)
+        if src in interactive:
+            key = f"figure-{len(used)}"
+            used.append(key)
+            return (f'<div class="figure" data-figure="{key}" title="{html.escape(alt)}"></div>\n'
+                    f'<script type="application/json" id="{key}">{_script_json(interactive[src])}</script>')
+        try:
+            data = base64.b64encode((out / src).read_bytes()).decode()
+        except OSError:
+            return m.group(0)  # report.md names it and it is gone: the page says so as the Markdown does
+        return f'<p><img class="figure" alt="{html.escape(alt)}" src="data:image/png;base64,{data}"></p>'
+
+    body = IMAGE.sub(figure, body)
+    path = out / HTML_FILE
+    write_text_atomic(path, page(f"Study: {study['description']}", body, bool(used)))
+    return path
+
