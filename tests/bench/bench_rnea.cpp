@@ -132,11 +132,10 @@ int main(int argc, char **argv)
             float tau_k[ARM_N_JOINTS];
             arm_rnea(&ARM_ROBOT_MODEL, q, qd, qdd, tau);
             arm_rnea_kernel(q, qd, qdd, tau_k);
-            // Pinocchio's rnea adds the armature's torque but not joint damping, which ours adds
-            // (damping * qd, rnea.c): the same torque is Pinocchio's plus that term.
+            // (bench_rnea_pinocchio has added the joint damping Pinocchio's rnea leaves out)
             double want[ARM_N_JOINTS], scale = 1.0;
             for (int j = 0; j < ARM_N_JOINTS; ++j) {
-                want[j] = d.tau[j] + double(ARM_ROBOT_MODEL.link[j].damping) * double(qd[j]);
+                want[j] = d.tau[j];
                 scale = std::max(scale, std::fabs(want[j]));
             }
             for (int j = 0; j < ARM_N_JOINTS; ++j) {

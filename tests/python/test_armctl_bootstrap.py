@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shlex
 import shutil
 import subprocess
 from pathlib import Path
@@ -16,7 +17,7 @@ def apt_missing(apt_list: Path) -> list[str]:
     script = (REPO / "tools" / "armctl").read_text()
     start = script.index("apt_missing() {")
     body = script[start:script.index("\n}\n", start) + 3]
-    r = subprocess.run(["bash", "-c", f"set -euo pipefail\n{body}\nAPT_LIST={apt_list}\napt_missing"],
+    r = subprocess.run(["bash", "-c", f"set -euo pipefail\n{body}\napt_missing {shlex.quote(str(apt_list))}"],
                        capture_output=True, text=True, timeout=60, check=True)
     return r.stdout.split()
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import pytest
 from pathlib import Path
@@ -273,5 +274,5 @@ def test_canopen_over_the_budget_says_what_fits(capsys: pytest.CaptureFixture[st
 def test_max_buses_is_the_controllers_limit() -> None:
     from gen.lib.busload import MAX_BUSES
 
-    header = (REPO / "firmware" / "transport" / "include" / "arm" / "can_bus.h").read_text()
-    assert f"#define ARM_CAN_BUS_SET_MAX {MAX_BUSES}u" in header
+    headers = "".join(h.read_text() for h in (REPO / "firmware" / "transport" / "include" / "arm").glob("*.h"))
+    assert re.findall(r"#define ARM_CAN_BUS_SET_MAX (\d+)u\b", headers) == [str(MAX_BUSES)]

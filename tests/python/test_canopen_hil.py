@@ -269,11 +269,12 @@ def test_armctl_hil_protocol_canopen_through_the_cli(tmp_path: Path, controller_
 
 def test_a_study_scenario_chooses_the_protocol(tmp_path: Path) -> None:
     from tools.run.runner import RunSpec
-    from tools.study.config import StudyConfigError, _scenario
+    from tools.study.config import STUDY_PROTOCOL, StudyConfigError, _scenario
 
-    sc = _scenario("co", {"protocol": "canopen"})
-    assert sc.protocol == "canopen" and sc.as_dict()["protocol"] == "canopen"
-    assert "protocol" not in _scenario("a", {}).as_dict()  # the arm protocol's tuning keys unchanged
+    sc = _scenario("a", {"protocol": "arm"})
+    assert sc.protocol == "arm" and sc.as_dict()["protocol"] == "arm"
+    default = _scenario("co", {})  # CiA 402 (STUDY_PROTOCOL), left out of the tuning key
+    assert default.protocol == STUDY_PROTOCOL == "canopen" and "protocol" not in default.as_dict()
     assert _scenario("t", {"protocol": "canopen", "bus_timing": True}).bus_timing  # timed CiA 402 frames
     with pytest.raises(StudyConfigError, match="not arm or canopen"):
         _scenario("x", {"protocol": "ethercat"})

@@ -109,6 +109,32 @@ def test_the_worst_runs_strip_shows_the_arm_beside_its_ghost(study: tuple[Path, 
         view.close()
 
 
+def test_a_fork_of_a_process_that_has_rendered_still_draws_the_strip(study: tuple[Path, dict[str, Any]],
+                                                                     tmp_path: Path) -> None:
+    """A study's figures are drawn in forks (tools/study/figures.py). Once a process has rendered,
+    Mesa keeps worker threads that a fork lacks, and the fork's first render waited forever: the
+    strip is drawn in a fresh interpreter instead, and a fork of this process, which renders
+    first here, gets its strip."""
+    import multiprocessing
+
+    from tools.run.render import PANEL, ArmView, load_motion, load_run, write_strip_apart
+
+    run_dir = _worst(*study)
+    run, model = load_run(run_dir)
+    mo = load_motion(run_dir, run)
+    view = ArmView(model, PANEL, np.concatenate([mo.q, mo.q_d]))
+    view.render(mo.q[0], mo.q_d[0])
+    view.close()
+    fork = multiprocessing.get_context("fork").Process(target=write_strip_apart, args=(run_dir, tmp_path, "s.png"))
+    fork.start()
+    fork.join(180)
+    hung = fork.is_alive()
+    if hung:
+        fork.kill()
+    assert not hung and fork.exitcode == 0, f"the fork's strip: {'no end in 180 s' if hung else fork.exitcode}"
+    assert _png((tmp_path / "s.png").read_bytes()).shape[0] > PANEL[1]
+
+
 def test_render_writes_the_video_and_strip_of_a_run(study: tuple[Path, dict[str, Any]], tmp_path: Path) -> None:
     import imageio_ffmpeg
 

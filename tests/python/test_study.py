@@ -545,8 +545,9 @@ def test_two_tunings_at_once_keep_both(tmp_path: Path) -> None:
 
 
 def test_a_second_study_on_the_same_out_is_refused_in_one_line(tmp_path: Path) -> None:
-    """Another study holds --out (its lock, taken here as that study would): this one exits at
-    once with one line naming the folder, and leaves the other's files alone."""
+    """Another study holds --out (its lock, taken here as that study would): this one waits
+    OUT_LOCK_WAIT_S for it (a study killed a moment ago holds it while its workers end), then exits
+    with one line naming the folder, and leaves the other's files alone."""
     from gen.lib.locks import flocked
     from tools.study import OUT_LOCK
 

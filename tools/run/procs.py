@@ -21,6 +21,7 @@ import os
 import signal
 import subprocess
 import threading
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -28,7 +29,9 @@ PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
 _libc = ctypes.CDLL(None, use_errno=True)
 
 _live: list[tuple[str, subprocess.Popen[Any]]] = []
-_lock = threading.Lock()
+# Re-entrant: the signal handlers below take it in the thread they interrupt, which may hold it
+# (a worker stopped inside spawn() or forget() waited for itself forever)
+_lock = threading.RLock()
 _held = threading.local()  # .fds: the run slot locks this thread holds (hold_for_children)
 interrupted: int | None = None  # the signal that stopped this armctl, if one did
 
@@ -107,11 +110,17 @@ def adopt(role: str, pid: int) -> Any:
     return p
 
 
+ORPHAN_STOP_S = 10.0  # a worker whose armctl died: its runs' safe stops take about a second
+_parent: int | None = None  # in a forked worker: the armctl it works for
+
+
 def as_child_of(parent: int) -> None:
     """In a forked worker (tools/run/workers.py): a process group of its own; on a signal it stops
     its own runs, not its parent's children (the list it inherited), and notes the signal for the
     code it runs to stop at its next check, never raising where it stands (a worker that waits
-    for work would die of it); a SIGTERM when armctl dies."""
+    for work would die of it); a SIGTERM when armctl dies, after which it ends (_end_as_orphan)."""
+    global _parent
+    _parent = parent
     os.setpgid(0, 0)
     with _lock:
         _live.clear()
@@ -125,6 +134,24 @@ def _on_signal_in_worker(signum: int, frame: Any) -> None:
     first = interrupted is None
     interrupted = interrupted or signum
     _stop(signal.SIGTERM if first else signal.SIGKILL)
+    if first and os.getppid() != _parent:
+        threading.Thread(target=_end_as_orphan, name="orphan", daemon=True).start()
+
+
+def _end_as_orphan() -> None:
+    """A pool's worker whose armctl has died waits for work that never comes, holding what it
+    inherited (the lock on the study's --out folder): once its runs have stopped (their safe stop),
+    or ORPHAN_STOP_S have passed, it ends. What it was writing is written atomically or not at
+    all, and the resumed study redoes that run."""
+    deadline = time.monotonic() + ORPHAN_STOP_S
+    while time.monotonic() < deadline:
+        with _lock:
+            if all(p.poll() is not None for _, p in _live):
+                break
+        time.sleep(0.05)
+    else:
+        _stop(signal.SIGKILL)
+    os._exit(128 + signal.SIGTERM)
 
 
 def communicate_or_kill(p: subprocess.Popen[Any], timeout: float) -> tuple[Any, Any]:

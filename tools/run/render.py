@@ -49,6 +49,9 @@ class RenderError(Exception):
         super().__init__(message)
         self.code = code
 
+    def __reduce__(self) -> tuple[type, tuple[str, int]]:  # its code kept across processes (write_strip_apart)
+        return RenderError, (str(self), self.code)
+
 
 @dataclass
 class Motion:
@@ -319,6 +322,17 @@ def write_strip(run_dir: Path, out: Path | None = None, name: str = STRIP_FILE) 
               "panels": boxes, "arm_rgba": ARM_RGBA, "ghost_rgba": GHOST_RGBA, "ghost_offset_m": view.offset.tolist()}
     write_json_atomic((out / name).with_suffix(".json"), record)
     return record
+
+
+def write_strip_apart(run_dir: Path, out: Path | None = None, name: str = STRIP_FILE) -> dict[str, Any]:
+    """write_strip in a fresh interpreter of its own. For a caller that may be a fork: once a
+    process has rendered, Mesa's llvmpipe keeps worker threads, and a fork of that process waits
+    for them forever in its first render (a study drawn after a render in the same process)."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn")) as pool:
+        return pool.submit(write_strip, run_dir, out, name).result()
 
 
 def write_video(run_dir: Path, out: Path | None = None, progress: Callable[[int, int], None] | None = None) -> Path:

@@ -540,14 +540,24 @@ def _common(ns: argparse.Namespace) -> tuple[StudyConfig, ArmRef, list[str] | No
 OUT_LOCK = ".armctl-out.lock"  # in a study's or tuning's --out: held while the command writes there
 
 
+# A study killed a moment ago still holds its --out while its workers stop their runs
+# (tools/run/procs.py ORPHAN_STOP_S): the same command given again at once waits for that.
+OUT_LOCK_WAIT_S = procs.ORPHAN_STOP_S + 5.0
+
+
 def _hold_out(stack: ExitStack, out: Path) -> None:
     """--out for this command alone, until it ends: a second study there would delete and rewrite
     the first's run folders under it."""
-    try:
-        stack.enter_context(flocked(out / OUT_LOCK, wait=False))
-    except LockHeld:
-        raise OutDirError(f"--out {out}: another study or tune holds this folder (lock {out / OUT_LOCK}); "
-                          "wait for it to end or give another --out") from None
+    deadline = time.monotonic() + OUT_LOCK_WAIT_S
+    while True:
+        try:
+            stack.enter_context(flocked(out / OUT_LOCK, wait=False))
+            return
+        except LockHeld:
+            if time.monotonic() > deadline:
+                raise OutDirError(f"--out {out}: another study or tune holds this folder (lock {out / OUT_LOCK}); "
+                                  "wait for it to end or give another --out") from None
+            time.sleep(0.1)
 
 
 def add_subparser(sub: argparse._SubParsersAction) -> None:

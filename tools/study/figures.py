@@ -211,14 +211,14 @@ def convergence_figure(out: Path, scenario: str, recs: dict[str, dict[str, Any]]
 
 def _arm_strip(out: Path, study: dict[str, Any], scenario: str) -> list[tuple[str, str | None]]:
     """The frame strip of the scenario's worst kept run (tools/study/report.py worst_kept_run)."""
-    from tools.run.render import RenderError, write_strip
+    from tools.run.render import RenderError, write_strip_apart
 
     worst = worst_kept_run(study, scenario)
     if worst is None:
         return []
     name = fig_name("arm", scenario)
     try:
-        write_strip(out / scenario / worst[0] / f"seed-{worst[1]}", out, name)
+        write_strip_apart(out / scenario / worst[0] / f"seed-{worst[1]}", out, name)
     except RenderError as exc:  # the report says why it has no strip, and the study goes on
         print(f"armctl study: no arm strip for {scenario}: {exc}", file=sys.stderr)
         return []

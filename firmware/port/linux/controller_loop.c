@@ -316,7 +316,7 @@ static int boot_canopen(link_t *l, const options_t *opt, const arm_robot_model_t
     r->canopen = 1;
     r->co_boot_s = (double)(now_ns() - start) * 1e-9;
     for (unsigned b = 0; b < l->buses.n; ++b) {
-        for (unsigned i = 0; i < co[b].n_log && r->n_co_writes < ARM_CAN_BUS_SET_MAX * ARM_CO_BOOT_LOG_MAX; ++i) {
+        for (unsigned i = 0; i < co[b].n_log && r->n_co_writes < ARM_REPORT_CO_WRITES_MAX; ++i) {
             r->co_writes[r->n_co_writes++] = co[b].log[i];
         }
         if (r->co_fault.code == ARM_CO_FAULT_NONE) r->co_fault = co[b].fault;

@@ -23,6 +23,15 @@ typedef enum {
 /* The signal that asked the loop to stop (0: none); set by main's handler. */
 extern volatile sig_atomic_t controller_stop_signal;
 
+/* The boot's SDO writes a run's report keeps: every bus's whole log, except on the MCU, whose
+ * report leaves in one frame of 8 KiB (cortex_m/telemetry_mcu.c: about 800 writes fit) and whose
+ * 128 KiB part has no RAM to spare for writes that frame could not carry. */
+#ifdef ARM_PORT_MCU
+#define ARM_REPORT_CO_WRITES_MAX 512u
+#else
+#define ARM_REPORT_CO_WRITES_MAX (ARM_CAN_BUS_SET_MAX * ARM_CO_BOOT_LOG_MAX)
+#endif
+
 typedef struct {
     run_result_t result;
     char reason[512];
@@ -45,7 +54,7 @@ typedef struct {
     double co_boot_s;
     arm_co_fault_t co_fault;
     unsigned n_co_writes;
-    arm_co_write_t co_writes[ARM_CAN_BUS_SET_MAX * ARM_CO_BOOT_LOG_MAX];
+    arm_co_write_t co_writes[ARM_REPORT_CO_WRITES_MAX];
     arm_co_drive_units_t co_units[ARM_N_JOINTS]; /* each joint's drive's units, as the boot settled them */
     float co_q_first[ARM_N_JOINTS];              /* each joint's first position decoded with them, rad */
     unsigned co_q_seen;                          /* bit j: joint j's first position came */
