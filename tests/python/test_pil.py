@@ -22,7 +22,8 @@ import pytest
 
 from gen.lib.paths import REPO, build_dir
 from tools.build import build, toolchain_missing
-from tools.build.cortex_m import MACHINES, PIL_SIL_REL_TOL, PIL_SIL_W_TOL, pil_image, pil_sil_differences
+from tools.build.cortex_m import (MACHINES, PIL_SIL_KINDS, PIL_SIL_PEAK_TOL, PIL_SIL_REL_TOL, PIL_SIL_W_TOL, pil_image,
+                                  pil_sil_differences)
 from tools.run.hil import HilOptions, run_hil
 
 # QEMU's vCPU polls its UARTs while it waits for the drives: a whole core for minutes; alone.
@@ -129,7 +130,7 @@ def test_pil_equals_sil_within_the_stated_tolerance(runs: dict[str, dict]) -> No
     for key in ("steps", "final_state", "trajectory_periods", "method", "design_hash"):
         assert pil[key] == sil[key], key
     diff = pil_sil_differences(pil, sil)
-    assert diff["relative"][0] <= PIL_SIL_REL_TOL, diff
+    assert diff["relative"][0] <= PIL_SIL_REL_TOL and diff["peak"][0] <= PIL_SIL_PEAK_TOL, diff
     assert diff["estimation_over_w"][0] <= PIL_SIL_W_TOL, diff
     assert pil["tracking_rms_deg"] != sil["tracking_rms_deg"] or pil == sil  # compared, not skipped
 
@@ -142,7 +143,7 @@ def test_the_cortex_m7_equals_sil_bit_for_bit(runs: dict[str, dict], tmp_path: P
     assert m7["results"]["result"] == "ok", m7["results"]["verdict_reasons"]
     sil = runs["sil"]["results"]
     diff = pil_sil_differences(m7["results"], sil)
-    assert diff == {"relative": (0.0, ""), "estimation_over_w": (0.0, "")}, diff
+    assert diff == {kind: (0.0, "") for kind in PIL_SIL_KINDS}, diff
 
 
 def test_documented_command_ends_ok(tmp_path: Path) -> None:
@@ -163,6 +164,7 @@ def test_the_recorded_figures_are_within_the_budget() -> None:
     assert record["step_bench"]["x86_64_builtin"] <= 2509 and record["step_bench"]["cortex_m4"] <= 2920
     assert record["pil"]["twice_bit_identical"]
     assert record["pil"]["sil_worst_relative_difference"] <= PIL_SIL_REL_TOL
+    assert record["pil"]["sil_worst_peak_difference"] <= PIL_SIL_PEAK_TOL
     assert record["pil"]["sil_estimation_difference_over_w"] <= PIL_SIL_W_TOL
 
 

@@ -693,7 +693,8 @@ def test_a_study_on_a_seven_joint_arm_runs_every_scenario(tmp_path: Path) -> Non
     build_arm("release", arm)
     out = tmp_path / "study"
     s = run_study(load(cfg_path), out, duration_s=1.0, arm=arm, jobs=2)
-    assert s["arm"]["n_joints"] == 7 and list(s["scenarios"]) == ["ideal", "realistic", FRICTION]
+    assert s["arm"]["n_joints"] == 7 and list(s["scenarios"]) == list(load(cfg_path).scenarios)
+    assert FRICTION in s["scenarios"] and "realistic+payload" in s["scenarios"]
     friction = s["scenarios"][FRICTION]["definition"]["uncertainty"]
     assert len(friction["viscous"]) == len(friction["coulomb"]) == 7
     report = (out / "report.md").read_text()

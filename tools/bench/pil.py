@@ -59,6 +59,7 @@ def measure(duration_s: float = DURATION_S) -> dict[str, Any]:
                 "twice_bit_identical": {k: v for k, v in pil.items() if k != "problems"} ==
                                        {k: v for k, v in again.items() if k != "problems"},
                 "sil_worst_relative_difference": diff["relative"][0], "sil_worst_in": diff["relative"][1],
+                "sil_worst_peak_difference": diff["peak"][0], "sil_worst_peak_in": diff["peak"][1],
                 "sil_estimation_difference_over_w": diff["estimation_over_w"][0]},
     }
 
@@ -82,7 +83,8 @@ def render(record: dict[str, Any]) -> str:
         f"{p['tracking_max_abs_deg']:.4f} deg. Run twice: "
         f"{'the same results bit for bit' if p['twice_bit_identical'] else 'DIFFERENT results'}. Against "
         f"software in the loop: every result within {p['sil_worst_relative_difference']:.1e} of itself (the "
-        f"worst: {p['sil_worst_in']}), the estimation error's RMS within "
+        f"worst: {p['sil_worst_in']}), every peak within {p['sil_worst_peak_difference']:.1e} (the worst: "
+        f"{p['sil_worst_peak_in']}), the estimation error's RMS within "
         f"{p['sil_estimation_difference_over_w']:.1e} of w's RMS. It took {p['wall_s']:.0f} s of wall time on "
         "this 2-core machine.",
     ])

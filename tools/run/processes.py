@@ -104,6 +104,11 @@ def last_line(path: Path) -> str:
     return lines[-1][:400] if lines else ""
 
 
+# A controller outlives the simulator by its lockstep timeout, or, on the emulated MCU, by the
+# report it sends after the drives' NMT stop (seconds of wall time): past this it is hung.
+SIMULATOR_GONE_GRACE_S = 120.0
+
+
 def _wait_run(plan: ProcessPlan, ctl: subprocess.Popen[bytes], sim: subprocess.Popen[bytes],
               logs: dict[str, Any]) -> None:
     """Until the controller and then the simulator have ended. A child that refuses its
@@ -112,10 +117,17 @@ def _wait_run(plan: ProcessPlan, ctl: subprocess.Popen[bytes], sim: subprocess.P
     the simulator follows on the controller's NMT stop or after its idle timeout."""
     out = Path(plan.out)
     deadline = time.monotonic() + plan.deadline_s
+    sim_ended: float | None = None
     while ctl.poll() is None:
         if sim.poll() == USAGE_ERROR:
             logs["simulator"].flush()
             raise HilError(f"the simulator refused its arguments: {last_line(out / 'simulator.log')}")
+        if sim_ended is None and sim.poll() is not None:
+            sim_ended = time.monotonic()
+        if sim_ended is not None and time.monotonic() > sim_ended + SIMULATOR_GONE_GRACE_S:
+            ctl.kill()
+            raise HilError(f"{ctl.args[0]} did not end within {SIMULATOR_GONE_GRACE_S:g} s of the simulator's end "
+                           f"({last_line(out / 'simulator.log')}); killed")
         if time.monotonic() > deadline:
             ctl.kill()
             raise HilError(f"{ctl.args[0]} did not finish in time; killed")
