@@ -127,6 +127,7 @@ def as_child_of(parent: int) -> None:
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         signal.signal(sig, _on_signal_in_worker)
     dies_with_parent(parent)()
+    threading.Thread(target=_end_as_orphan, name="orphan-watch", daemon=True).start()
 
 
 def _on_signal_in_worker(signum: int, frame: Any) -> None:
@@ -134,15 +135,18 @@ def _on_signal_in_worker(signum: int, frame: Any) -> None:
     first = interrupted is None
     interrupted = interrupted or signum
     _stop(signal.SIGTERM if first else signal.SIGKILL)
-    if first and os.getppid() != _parent:
-        threading.Thread(target=_end_as_orphan, name="orphan", daemon=True).start()
 
 
 def _end_as_orphan() -> None:
     """A pool's worker whose armctl has died waits for work that never comes, holding what it
-    inherited (the lock on the study's --out folder): once its runs have stopped (their safe stop),
-    or ORPHAN_STOP_S have passed, it ends. What it was writing is written atomically or not at
-    all, and the resumed study redoes that run."""
+    inherited (the lock on the study's --out folder). Watched here, not by the death signal alone:
+    that comes when the thread that forked the worker ends, which may be long before armctl does.
+    Once orphaned, it stops its runs, and once they have stopped (their safe stop) or ORPHAN_STOP_S
+    have passed, it ends. What it was writing is written atomically or not at all, and the resumed
+    study redoes that run."""
+    while os.getppid() == _parent:
+        time.sleep(0.1)
+    _stop(signal.SIGTERM)
     deadline = time.monotonic() + ORPHAN_STOP_S
     while time.monotonic() < deadline:
         with _lock:
