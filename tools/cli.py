@@ -47,6 +47,7 @@ def _errors() -> list[tuple[tuple[type[BaseException], ...], int | Callable[[Bas
     from tools.run.cluster import ClusterError
     from tools.commands import CommandError
     from tools.bench.fuzz import FuzzError
+    from tools.bench.pil import PilBenchError
     from tools.bench.record import RecordError
     from tools.run.hil import HilError
     from tools.study.config import StudyConfigError
@@ -60,7 +61,7 @@ def _errors() -> list[tuple[tuple[type[BaseException], ...], int | Callable[[Bas
         # Bad input: a value, a file it names, the arm, the output folder, the cluster.
         ((StudyConfigError, ArmChoiceError, ArmError, OutDirError, ClusterError, BusConfigError, RecordError), 2, "{prefix}: {exc}"),
         # The run or the machine: a run that cannot run, the VM, a compiler, a full disk (OutputError is an OSError).
-        ((HilError, VmError, FuzzError, OSError), 1, "{prefix}: {exc}"),
+        ((HilError, VmError, FuzzError, PilBenchError, OSError), 1, "{prefix}: {exc}"),
     ]
 
 
