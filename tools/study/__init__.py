@@ -548,16 +548,11 @@ OUT_LOCK_WAIT_S = procs.ORPHAN_STOP_S + 5.0
 def _hold_out(stack: ExitStack, out: Path) -> None:
     """--out for this command alone, until it ends: a second study there would delete and rewrite
     the first's run folders under it."""
-    deadline = time.monotonic() + OUT_LOCK_WAIT_S
-    while True:
-        try:
-            stack.enter_context(flocked(out / OUT_LOCK, wait=False))
-            return
-        except LockHeld:
-            if time.monotonic() > deadline:
-                raise OutDirError(f"--out {out}: another study or tune holds this folder (lock {out / OUT_LOCK}); "
-                                  "wait for it to end or give another --out") from None
-            time.sleep(0.1)
+    try:
+        stack.enter_context(flocked(out / OUT_LOCK, timeout_s=OUT_LOCK_WAIT_S))
+    except LockHeld:
+        raise OutDirError(f"--out {out}: another study or tune holds this folder (lock {out / OUT_LOCK}); "
+                          "wait for it to end or give another --out") from None
 
 
 def add_subparser(sub: argparse._SubParsersAction) -> None:
