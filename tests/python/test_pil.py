@@ -22,8 +22,8 @@ import pytest
 
 from gen.lib.paths import REPO, build_dir
 from tools.build import build, toolchain_missing
-from tools.build.cortex_m import (MACHINES, PIL_SIL_KINDS, PIL_SIL_PEAK_TOL, PIL_SIL_REL_TOL, PIL_SIL_W_TOL, pil_image,
-                                  pil_sil_differences)
+from tools.build.cortex_m import (MACHINES, PIL_SIL_KINDS, PIL_SIL_PEAK_TOL, PIL_SIL_REL_TOL, PIL_SIL_W_TOL,
+                                  STEP_INSTRUCTIONS_SPREAD, pil_image, pil_sil_differences)
 from tools.run.hil import HilOptions, run_hil
 
 # QEMU's vCPU polls its UARTs while it waits for the drives: a whole core for minutes; alone.
@@ -119,7 +119,9 @@ def _deterministic(run: dict) -> dict:
 def test_the_same_pil_run_twice_gives_the_same_results_bit_for_bit(runs: dict[str, dict]) -> None:
     a, b = _deterministic(runs["pil_a"]), _deterministic(runs["pil_b"])
     assert a == b
-    assert runs["pil_a"]["target"]["step_instructions"] == runs["pil_b"]["target"]["step_instructions"]
+    sa, sb = runs["pil_a"]["target"]["step_instructions"], runs["pil_b"]["target"]["step_instructions"]
+    assert sa["periods"] == sb["periods"]
+    assert all(abs(sa[k] - sb[k]) <= STEP_INSTRUCTIONS_SPREAD for k in ("min", "median", "max")), (sa, sb)
 
 
 def test_pil_equals_sil_within_the_stated_tolerance(runs: dict[str, dict]) -> None:

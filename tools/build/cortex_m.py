@@ -31,6 +31,13 @@ PIL_SIL_PEAK_TOL = 1e-2
 PIL_SIL_W_TOL = 2.5e-3
 PIL_SIL_KINDS = ("relative", "peak", "estimation_over_w")
 
+# How far two counts of the same control step may be apart (firmware/port/cortex_m/mcu_clock.c):
+# the count starts 0-2 instructions after a SysTick edge (a 3-instruction poll) and ends 0-3 before
+# one (4-instruction polls), and the calibrated overhead carries the same error once: each count is
+# within 5 of the step's own. Where the edges fall follows the host's clock while the image sleeps,
+# so the same run twice gives the same results bit for bit but its counts only within this.
+STEP_INSTRUCTIONS_SPREAD = 10
+
 
 def pil_sil_differences(pil: dict, sil: dict) -> dict[str, tuple[float, str]]:
     """The worst difference of two runs' numeric results, each as the tolerances measure it:

@@ -38,6 +38,10 @@ static void rx_service(unsigned index)
         if (u->rx_head - u->rx_tail > u->rx_mask) {
             u->rx_paused = 1u; /* the byte stays in the UART until the reader makes room */
             r[R_CTRL] &= ~CTRL_RXINT;
+            /* A byte taken since the clear above latched the receive status again, and the status
+             * drives the interrupt line whatever RXINT says: left set, the interrupt would repeat
+             * forever and the reader never run (seen: the image silent at 100 % CPU). */
+            r[R_INT] = INT_RX;
             return;
         }
         u->rx[u->rx_head & u->rx_mask] = (uint8_t)r[R_DATA];
@@ -146,7 +150,10 @@ void mcu_uart_irq(void)
     for (unsigned i = 0; i < MCU_UARTS; ++i) {
         if (!g_uart[i].on) continue;
         const uint32_t status = reg(i)[R_INT];
-        if ((status & INT_RX) != 0u && !g_uart[i].rx_paused) rx_service(i);
+        if ((status & INT_RX) != 0u) {
+            if (g_uart[i].rx_paused) reg(i)[R_INT] = INT_RX; /* the reader takes the byte; never a status left set */
+            else rx_service(i);
+        }
         if ((status & INT_TX) != 0u) tx_service(i);
     }
 }
