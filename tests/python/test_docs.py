@@ -88,3 +88,9 @@ def test_no_timing_figure_is_typed_outside_a_rendered_region() -> None:
             found.append(f"{page.relative_to(REPO)}:{line}: {text[max(0, m.start() - 40):m.end() + 20]!r}")
     assert found == []
     assert TIMING_PHRASES.search("a study took 34 s here") and TIMING_PHRASES.search("156.6x real time")
+
+
+@pytest.mark.parametrize(("seconds", "text"), [(839.7, "14 min 0 s"), (706.5, "11 min 46 s"), (59.6, "1 min 0 s"),
+                                               (42.2, "42 s")])
+def test_a_duration_reads_in_whole_minutes_and_seconds(seconds: float, text: str) -> None:
+    assert docs_cmd._minutes(seconds) == text

@@ -147,7 +147,8 @@ def faults(r: dict[str, Any]) -> str:
 
 
 def _minutes(s: float) -> str:
-    return f"{int(s // 60)} min {s % 60:.0f} s" if s >= 60 else f"{s:.0f} s"
+    whole = round(s)  # rounded first: 839.7 s is 14 min 0 s, never 13 min 60 s
+    return f"{whole // 60} min {whole % 60} s" if whole >= 60 else f"{whole} s"
 
 
 def test_time(r: dict[str, Any]) -> str:

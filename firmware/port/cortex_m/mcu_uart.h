@@ -20,7 +20,7 @@ typedef struct {
     volatile uint32_t rx_head, rx_tail; /* the interrupt writes head, the reader tail */
     volatile uint32_t tx_head, tx_tail; /* the writer head, the interrupt tail */
     volatile uint8_t rx_paused;         /* the ring was full: the receive interrupt is off */
-    uint8_t on;
+    volatile uint8_t on;                /* set before the UART's interrupt is enabled */
 } mcu_uart_t;
 
 /* Starts UART index with the given rings (sizes powers of two, >= 2). */
