@@ -42,6 +42,7 @@ struct co_sim {
     double last_cmd[ARM_CAN_BUS_SET_MAX]; /* when the period's last RPDO ended on each bus (0: none yet) */
     arm_can_frame_t late[ARM_CAN_BUS_SET_MAX][SIM_MAX_JOINTS];
     unsigned n_late[ARM_CAN_BUS_SET_MAX];
+    int holding_answers; /* TEST HOOK (cfg->late_answer_period): what the nodes queue stays queued */
 };
 
 static int64_t mono_ns(void)
@@ -80,6 +81,7 @@ static void captured(const co_sim_t *s, unsigned bus, const arm_can_frame_t *f)
 /* Every frame the nodes queued goes out on their bus; EMCYs are also telemetry events. */
 static void flush(co_sim_t *s)
 {
+    if (s->holding_answers) return;
     for (int j = 0; j < s->n; ++j) {
         sim_co_node_t *nd = &s->node[j];
         const unsigned bus = (unsigned)s->bus_of[j];
@@ -149,6 +151,14 @@ static void advance(co_sim_t *s)
  * then each node takes its synchronous RPDOs and samples the state for its TPDOs. */
 static void sync_nodes(co_sim_t *s, unsigned bus);
 
+/* TEST HOOK: the held answers go out now, after what the master just sent. */
+static void release_answers(co_sim_t *s)
+{
+    if (!s->holding_answers) return;
+    s->holding_answers = 0;
+    flush(s);
+}
+
 static void on_sync(co_sim_t *s, unsigned bus)
 {
     /* Every bus's SYNC of a period follows the first joint's bus's, which moves the arm. Sockets
@@ -164,7 +174,8 @@ static void on_sync(co_sim_t *s, unsigned bus)
         return;
     }
     s->syncs[bus]++;
-    sim_debug_late_answer(s->cfg, s->syncs[bus] - 1u);
+    release_answers(s);
+    s->holding_answers = sim_answers_late(s->cfg, s->syncs[bus] - 1u);
     if (s->synced) advance(s);
     s->synced = 1;
     s->states_end = 0.0;
@@ -237,13 +248,17 @@ static void sync_nodes(co_sim_t *s, unsigned bus)
 /* Bus timing: an RPDO of a node on this bus, from the master, goes on the bus once every TPDO of
  * the period has ended (plus the controller's latency); 1 if it would end after its period, when
  * it is held back for the next SYNC. */
+static int is_rpdo(const co_sim_t *s, const arm_can_frame_t *f, unsigned bus)
+{
+    for (int j = 0; j < s->n; ++j) {
+        if (s->bus_of[j] == (int)bus && f->id == 0x200u + s->node[j].id) return 1;
+    }
+    return 0;
+}
+
 static int rpdo_late(co_sim_t *s, const arm_can_frame_t *f, unsigned bus)
 {
-    int rpdo = 0;
-    for (int j = 0; j < s->n && !rpdo; ++j) {
-        rpdo = s->bus_of[j] == (int)bus && f->id == 0x200u + s->node[j].id;
-    }
-    if (!rpdo || !s->synced) return 0;
+    if (!is_rpdo(s, f, bus) || !s->synced) return 0;
     sim_timeline_t *tl = &s->timing[bus];
     double end;
     sim_timeline_transmit(tl, s->states_end + s->cfg->controller_latency_s, &f->id, 1u, &end);
@@ -295,6 +310,11 @@ static int on_frame(co_sim_t *s, const arm_can_frame_t *f, unsigned bus, int64_t
              * would have, before any drive stops applying its torque */
             advance(s);
             s->synced = 0;
+        }
+        /* An RPDO on a bus whose SYNC of this period came: the master's command for this period. */
+        if (s->cfg->late_answer_release == SIM_LATE_AT_COMMAND && is_rpdo(s, f, bus) &&
+            s->syncs[bus] == s->syncs[s->bus_of[0]]) {
+            release_answers(s);
         }
         if (s->timed && rpdo_late(s, f, bus)) return 0;
         for (int j = 0; j < s->n; ++j) {

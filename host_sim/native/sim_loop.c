@@ -26,6 +26,8 @@ typedef struct {
     int flag; /* 0 fresh, 1 other buses already drained for it, 2 that and never held back again */
 } queued_t;
 
+#define HELD_MAX (2u * SIM_MAX_JOINTS) /* a period's answers, and an EMCY or heartbeat beside them */
+
 /* The whole working set: static, sized at compile time, nothing allocated per period. */
 struct sim {
     const sim_config_t *cfg;
@@ -62,6 +64,10 @@ struct sim {
     int64_t t0_ns;       /* when the drives booted */
     int booted;          /* the controller has spoken (NMT or SYNC) */
     int ended;           /* the controller stopped every drive */
+    /* TEST HOOK (cfg->late_answer_period): what the drives send while their answers are held back */
+    int holding_answers;
+    queued_t held[HELD_MAX];
+    unsigned n_held;
 };
 
 static int64_t mono_ns(void)
@@ -138,6 +144,10 @@ static void send(sim_t *s, unsigned bus, const arm_can_frame_t *f)
         s->rep->tx_dropped++;
         return;
     }
+    if (s->holding_answers && s->n_held < HELD_MAX) {
+        s->held[s->n_held++] = (queued_t){.bus = bus, .f = *f};
+        return;
+    }
     const int64_t c0 = prof_mark(s);
     if (arm_can_bus_set_send(&s->set, bus, f) == 0) {
         s->rep->frames_tx++;
@@ -153,6 +163,10 @@ static void send_batch(sim_t *s, unsigned bus, const arm_can_frame_t *frames, un
     if (n == 0u) return;
     if (bus_lost(s, bus)) {
         s->rep->tx_dropped += n;
+        return;
+    }
+    if (s->holding_answers) {
+        for (unsigned i = 0; i < n; ++i) send(s, bus, &frames[i]);
         return;
     }
     const int64_t c0 = prof_mark(s);
@@ -441,11 +455,13 @@ static void sleep_until(int64_t t_ns)
     }
 }
 
-void sim_debug_late_answer(const sim_config_t *cfg, uint64_t period)
+/* TEST HOOK: the held answers go out now, after what the controller just sent. */
+static void release_answers(sim_t *s)
 {
-    if (cfg->late_answer_period >= 0 && (uint64_t)cfg->late_answer_period == period) {
-        sleep_until(mono_ns() + (int64_t)(cfg->late_answer_s * 1e9));
-    }
+    if (!s->holding_answers) return;
+    s->holding_answers = 0;
+    for (unsigned i = 0; i < s->n_held; ++i) send(s, s->held[i].bus, &s->held[i].f);
+    s->n_held = 0u;
 }
 
 /* CANopen has one SYNC producer: on each bus the counter continues its sequence (mod 256). A SYNC
@@ -478,7 +494,8 @@ static void on_sync(sim_t *s, int counter, unsigned bus)
         finish_period(s); /* commands missing: the drives count it, the arm still moves */
     }
     if (s->counter < 0) {
-        sim_debug_late_answer(s->cfg, s->rep->periods);
+        release_answers(s);
+        s->holding_answers = sim_answers_late(s->cfg, s->rep->periods);
         s->counter = counter;
         s->got_cmd = 0u;
         s->synced = 0u;
@@ -587,6 +604,7 @@ static void on_command(sim_t *s, int j, const arm_can_frame_t *f, unsigned bus)
     s->cmd_cw[j] = cw;
     s->cmd_tau[j] = tau;
     s->got_cmd |= 1u << j;
+    if (s->cfg->late_answer_release == SIM_LATE_AT_COMMAND) release_answers(s);
     if (s->got_cmd == all_joints(s)) finish_period(s);
 }
 

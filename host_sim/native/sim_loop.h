@@ -17,6 +17,12 @@
 
 typedef enum { SIM_TIMING_OFF = 0, SIM_TIMING_VIRTUAL, SIM_TIMING_WALLCLOCK } sim_timing_mode_t;
 
+/* TEST HOOK (--debug-late-answer PERIOD[-LAST]:WHEN): the drives' answers to those periods' SYNCs
+ * are held back until the controller has stopped waiting for them, told by what it sends next
+ * rather than by a time, which a loaded machine would blur: its first command of the period (it has
+ * taken the period as stale, and the next SYNC has not gone out yet) or its next SYNC. */
+typedef enum { SIM_LATE_AT_COMMAND = 0, SIM_LATE_AT_NEXT_SYNC } sim_late_release_t;
+
 typedef struct {
     arm_can_bus_set_config_t buses;
     char bus_text[600];          /* the --bus arguments as given, for messages */
@@ -37,9 +43,17 @@ typedef struct {
     sim_capture_t *capture;      /* every frame received or sent, candump's log format (NULL: none) */
     int lose_bus;                /* TEST HOOK: this bus sends nothing from period lose_bus_from on; -1: off */
     uint64_t lose_bus_from;
-    int64_t late_answer_period;  /* TEST HOOK: the drives answer this period's SYNC late; -1: off */
-    double late_answer_s;
+    int64_t late_answer_period;  /* TEST HOOK: the drives answer the SYNCs of these periods late; -1: off */
+    int64_t late_answer_last;
+    sim_late_release_t late_answer_release;
 } sim_config_t;
+
+/* TEST HOOK: whether the drives answer bus period `period`'s SYNC late (sim_late_release_t). */
+static inline int sim_answers_late(const sim_config_t *cfg, uint64_t period)
+{
+    return cfg->late_answer_period >= 0 && period >= (uint64_t)cfg->late_answer_period &&
+           period <= (uint64_t)cfg->late_answer_last;
+}
 
 #define SIM_COST_BINS 5000u /* per-period CPU cost histogram, 1 us bins */
 
@@ -78,10 +92,6 @@ typedef struct {
 
 /* Set from a signal handler: the loop stops at its next frame or within 100 ms. */
 extern volatile sig_atomic_t sim_stop_requested;
-
-/* TEST HOOK (--debug-late-answer PERIOD:US): before the drives answer bus period `period`'s SYNC,
- * the simulator stalls as a descheduled process would (both protocols' loops call it). */
-void sim_debug_late_answer(const sim_config_t *cfg, uint64_t period);
 
 typedef struct sim sim_t;
 

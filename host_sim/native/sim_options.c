@@ -171,17 +171,28 @@ static int sim_lose_bus(void *t, void *c, const argv_opt_t *opt, const char *v, 
 static int sim_late_answer(void *t, void *c, const argv_opt_t *opt, const char *v, char *err, unsigned long errcap)
 {
     sim_config_t *cfg = &((sim_options_t *)t)->cfg;
-    unsigned long long period = 0;
-    double us = 0.0;
-    char tail = 0;
+    unsigned long long first = 0, last = 0;
+    int used = 0;
     (void)c;
-    if (sscanf(v, "%llu:%lf%c", &period, &us, &tail) != 2 || v[0] == '-' || period > INT64_MAX || !isfinite(us) ||
-        us < 0.0 || us > 1e7) {
-        snprintf(err, errcap, "%s: '%s' is not PERIOD:US (period >= 0, 0..1e7 us)", opt->name, v);
+    int parsed = v[0] != '-' && sscanf(v, "%llu-%llu:%n", &first, &last, &used) == 2 && used > 0;
+    if (!parsed) {
+        used = 0;
+        parsed = v[0] != '-' && sscanf(v, "%llu:%n", &first, &used) == 1 && used > 0;
+        last = first;
+    }
+    parsed = parsed && last >= first && last < INT64_MAX;
+    const char *when = parsed ? v + used : "";
+    if (parsed && strcmp(when, "command") == 0) {
+        cfg->late_answer_release = SIM_LATE_AT_COMMAND;
+    } else if (parsed && strcmp(when, "next-sync") == 0) {
+        cfg->late_answer_release = SIM_LATE_AT_NEXT_SYNC;
+    } else {
+        snprintf(err, errcap, "%s: '%s' is not PERIOD[-LAST]:command or PERIOD[-LAST]:next-sync (0 <= PERIOD <= LAST)",
+                 opt->name, v);
         return -1;
     }
-    cfg->late_answer_period = (int64_t)period;
-    cfg->late_answer_s = us * 1e-6;
+    cfg->late_answer_period = (int64_t)first;
+    cfg->late_answer_last = (int64_t)last;
     return 0;
 }
 

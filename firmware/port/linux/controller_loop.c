@@ -35,9 +35,12 @@ typedef struct {
     int canopen;
     arm_co_units_t units[ARM_N_JOINTS];
     uint32_t tpdo1_mask, tpdo2_mask;
-    /* The joints whose TPDO1 (TPDO2) of the last period did not come: their answer to that SYNC may
-     * still arrive after this one's SYNC (a CANopen TPDO carries no SYNC counter), so one second
-     * TPDO this period is that late answer, not another node on their id */
+    /* The joints that may be one answer behind: their TPDO1 (TPDO2) of the last period did not
+     * come, or the one that came may itself have been late (this mask had the joint, and no second
+     * TPDO came to tell). Their answer to an earlier SYNC may still arrive after this one's SYNC (a
+     * CANopen TPDO carries no SYNC counter), so one second TPDO this period is that late answer,
+     * not another node on their id. A drive that stays behind keeps its bit; another node's
+     * extra TPDO then clears it, and is taken for a second node one period later. */
     uint32_t tpdo1_late, tpdo2_late;
     int draining; /* reading what came before this period's SYNC: every TPDO then is late */
     int64_t next_heartbeat_ns;
@@ -627,8 +630,8 @@ static void start_period(link_t *l, uint32_t k, int64_t now)
     if (l->canopen) {
         sync.len = 0u; /* CiA 301 SYNC without a counter (0x1019 = 0) */
         const int tpdo2_was_due = k > 0u && k % l->tpdo2_every == 0u;
-        l->tpdo1_late = k > 0u ? ALL_JOINTS & ~l->tpdo1_mask : 0u;
-        l->tpdo2_late = tpdo2_was_due ? ALL_JOINTS & ~l->tpdo2_mask : 0u;
+        l->tpdo1_late = k > 0u ? (ALL_JOINTS & ~l->tpdo1_mask) | l->tpdo1_late : 0u;
+        l->tpdo2_late = tpdo2_was_due ? (ALL_JOINTS & ~l->tpdo2_mask) | l->tpdo2_late : 0u;
         l->tpdo1_mask = l->tpdo2_mask = 0u;
         l->period = k;
         if (now >= l->next_heartbeat_ns) { /* the drives consume it (0x1016.1) */
