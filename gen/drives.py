@@ -34,7 +34,9 @@ from gen.lib import toml_input
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_DRIVES = ROOT / "firmware" / "protocol" / "drives.toml"
 TOP_FIELDS = {"eds", "heartbeat_ms", "consumer_ms", "master_id", "defaults", "joint", "pdo"}
-JOINT_FIELDS = {"node", "encoder_increments", "gear", "rated_torque_nm", "torque_unit"}
+JOINT_FIELDS = {"node", "encoder_increments", "gear", "rated_torque_nm", "torque_unit", "brake_holding_nm",
+                "brake_close_ms", "brake_release_ms", "quick_stop_deceleration"}
+BRAKE_FIELDS = ("brake_holding_nm", "brake_close_ms", "brake_release_ms")  # all or none
 # 0x6076's unit, per N m: CiA 402 says mN m; maxon's EPOS4 gives µN m (its firmware specification)
 TORQUE_UNITS = {"mNm": 1000, "uNm": 1000000}
 JOINT_TORQUE_LIMIT = "joint_torque_limit"  # rated_torque_nm: the joint's torque limit (arm.json)
@@ -62,6 +64,17 @@ class Drive:
     notes: list[str] = field(default_factory=list)  # what the table fills, what the boot skips
     encoder_revs: int = 1   # 0x608F.2 (the table gives increments per one revolution)
     torque_unit: str = "mNm"  # 0x6076's unit (TORQUE_UNITS)
+    # The drive's holding brake (its own settings, no CiA 402 object): holding torque at the joint,
+    # closing and release delays; None: no brake. And 0x6085 in the drive's own unit (None: its own).
+    brake: tuple[float, float, float] | None = None
+    quick_stop_deceleration: int | None = None
+
+    def brake_spec(self) -> str | None:
+        """arm_sim's --brake value for this drive's joint, or None."""
+        if self.brake is None:
+            return None
+        hold, close, release = self.brake
+        return f"{self.drive}:{hold:g}:{close:g}:{release:g}"
 
     def node_spec(self) -> str:
         """The programs' --node value: ID, then what the table gives (arm_controller and
@@ -75,6 +88,8 @@ class Drive:
             spec.append(f"gear={self.gear[0]}/{self.gear[1]}")
         if self.torque_unit != "mNm":
             spec.append(f"torque_unit={self.torque_unit}")
+        if self.quick_stop_deceleration is not None:
+            spec.append(f"quick_stop={self.quick_stop_deceleration}")
         return ",".join(spec)
 
 
@@ -166,6 +181,37 @@ def _units(get: Callable[[str], tuple[Any, str]], torque_limit: float | None) ->
         raise DrivesError(f"{w}: expected a torque in N m, {1 / TORQUE_UNITS[unit]:g}..{top:g} (or "
                           f"\"{JOINT_TORQUE_LIMIT}\"), got {rated_v!r}")
     return float(rated_v), enc, gear, unit
+
+
+def _stopping(get: Callable[[str], tuple[Any, str]], torque_limit: float | None) -> tuple[
+        tuple[float, float, float] | None, int | None]:
+    """The brake a table gives (holding torque in N m at the joint, or "joint_torque_limit"; closing
+    and release delays in ms: all three or none) and 0x6085 in the drive's own unit."""
+    given = {k: get(k) for k in BRAKE_FIELDS}
+    have = [k for k in BRAKE_FIELDS if given[k][0] is not None]
+    brake = None
+    if have:
+        missing = [k for k in BRAKE_FIELDS if given[k][0] is None]
+        if missing:
+            raise DrivesError(f"{given[missing[0]][1]}: missing: a brake needs {', '.join(BRAKE_FIELDS)} "
+                              f"(given: {', '.join(have)})")
+        hold, w = given["brake_holding_nm"]
+        if hold == JOINT_TORQUE_LIMIT:
+            hold = torque_limit
+        if isinstance(hold, bool) or not isinstance(hold, (int, float)) or not math.isfinite(hold) \
+                or not 0 < hold <= 1e6:
+            raise DrivesError(f"{w}: expected a holding torque in N m at the joint, (0, 1e6] (or "
+                              f"\"{JOINT_TORQUE_LIMIT}\"), got {hold!r}")
+        delays = []
+        for k in ("brake_close_ms", "brake_release_ms"):
+            v, w = given[k]
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not 0 <= v <= 10000:
+                raise DrivesError(f"{w}: expected a delay in ms, 0..10000, got {v!r}")
+            delays.append(float(v))
+        brake = (float(hold), delays[0], delays[1])
+    qs_v, w = get("quick_stop_deceleration")
+    qs = None if qs_v is None else _uint(qs_v, w)
+    return brake, qs
 
 
 def _in_unit(rated_nm: float | None, unit: str) -> int | None:
@@ -311,9 +357,11 @@ def load(arm: dict[str, Any], path: Path | None = None) -> DriveConfig:
         if num not in bus_of:
             raise DrivesError(f"arm.json: drive {num} (joint {name}) is on no bus")
         rated_mnm = rated * 1000 if rated is not None else units["rated"] * 1000 / TORQUE_UNITS[unit]
+        brake, quick_stop = _stopping(get, j["torque_limit"])
         out.append(Drive(name, num, bus_of[num], node, rated_mnm,
                          enc if enc is not None else units["encoder"], gear if gear is not None else units["gear"],
-                         given, report.notes, 1 if enc is not None else units["encoder_revs"], unit))
+                         given, report.notes, 1 if enc is not None else units["encoder_revs"], unit, brake,
+                         quick_stop))
     for b in {d.bus for d in out}:
         nodes = [d.node for d in out if d.bus == b]
         dup = sorted({n for n in nodes if nodes.count(n) > 1})

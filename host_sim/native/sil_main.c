@@ -121,7 +121,7 @@ int main(int argc, char **argv)
     mju_user_warning = on_mujoco_warning;
     static sim_arm_t arm;
     if (sim_arm_open(&arm, so.model, so.plant, so.keyframe, so.substeps, &so.unc, err, sizeof(err)) != 0 ||
-        sim_options_finish(&so, arm.n, err, sizeof(err)) != 0) {
+        sim_options_finish(&so, &arm, err, sizeof(err)) != 0) {
         fprintf(stderr, "arm_sil: simulator: %s\n", err);
         return 2;
     }

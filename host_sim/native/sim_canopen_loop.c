@@ -43,6 +43,9 @@ struct co_sim {
     arm_can_frame_t late[ARM_CAN_BUS_SET_MAX][SIM_MAX_JOINTS];
     unsigned n_late[ARM_CAN_BUS_SET_MAX];
     int holding_answers; /* TEST HOOK (cfg->late_answer_period): what the nodes queue stays queued */
+    int lost;            /* the master fell silent */
+    int power_lost;      /* stopped by a signal: the drives lose their supply */
+    int after_stop;      /* the master is gone: the arm runs on (post_stop), nothing is counted */
 };
 
 static int64_t mono_ns(void)
@@ -117,32 +120,48 @@ static int32_t fault_bits(const co_sim_t *s)
     return m;
 }
 
+/* ARM_SIM's flags: the brakes that hold, and whether the master is gone. */
+static int32_t truth_flags(const co_sim_t *s)
+{
+    int32_t m = s->after_stop ? SIM_FLAG_AFTER_STOP : 0;
+    for (int j = 0; j < s->n; ++j) {
+        if (sim_power_stage_brake_nm(&s->node[j].ps) > 0.0) m |= (int32_t)(1u << j);
+    }
+    return m;
+}
+
+/* One period of the arm under the torques the drives' power stages apply. Nonzero: diverged. */
+static int step_arm(co_sim_t *s)
+{
+    const int ideal = sim_servo_is_ideal(&s->cfg->servo);
+    double cmd[SIM_MAX_JOINTS];
+    for (int j = 0; j < s->n; ++j) {
+        cmd[j] = sim_co_node_period(&s->node[j], sim_arm_motor_qd(s->arm, j), s->arm->period);
+        sim_arm_set_brake(s->arm, j, sim_power_stage_brake_nm(&s->node[j].ps));
+        s->tau[j] = ideal ? cmd[j]
+                          : sim_servo_period_torque(&s->cfg->servo, &s->servo[j], cmd[j], 0.0, s->arm->period,
+                                                    s->arm->data->qpos[j]);
+    }
+    const int bad = sim_arm_step(s->arm, s->tau, cmd, s->w);
+    if (!s->after_stop) s->rep->periods++;
+    sim_telemetry_truth(s->tel, s->arm->step_count - 1, s->arm->period, s->n, s->arm->data->qpos,
+                        s->arm->data->qvel, s->tau, s->w, fault_bits(s), truth_flags(s));
+    if (bad != 0) {
+        char why[300];
+        sim_arm_diverged_text(s->arm, bad, (unsigned long long)s->rep->periods, why, sizeof(why));
+        set_result(s->rep, "diverged", why);
+        for (int j = 0; j < s->n; ++j) sim_co_node_fault(&s->node[j], 0xFF00u, 0x80u);
+    }
+    return bad;
+}
+
 /* The arm advances by the first joint's communication cycle (0x1006), in whole periods. */
 static void advance(co_sim_t *s)
 {
     const double cycle_s = (double)sim_co_od_get(&s->node[0].od, 0x1006u, 0u) * 1e-6;
     unsigned steps = (unsigned)nearbyint(cycle_s / s->arm->period);
     steps = steps < 1u ? 1u : steps > STEPS_PER_SYNC_MAX ? STEPS_PER_SYNC_MAX : steps;
-    const int ideal = sim_servo_is_ideal(&s->cfg->servo);
-    for (unsigned k = 0; k < steps; ++k) {
-        double cmd[SIM_MAX_JOINTS];
-        for (int j = 0; j < s->n; ++j) {
-            cmd[j] = sim_co_node_torque(&s->node[j]);
-            s->tau[j] = ideal ? cmd[j]
-                              : sim_servo_period_torque(&s->cfg->servo, &s->servo[j], cmd[j], 0.0, s->arm->period,
-                                                        s->arm->data->qpos[j]);
-        }
-        const int bad = sim_arm_step(s->arm, s->tau, cmd, s->w);
-        s->rep->periods++;
-        sim_telemetry_truth(s->tel, s->arm->step_count - 1, s->arm->period, s->n, s->arm->data->qpos,
-                            s->arm->data->qvel, s->tau, s->w, fault_bits(s));
-        if (bad != 0) {
-            char why[300];
-            sim_arm_diverged_text(s->arm, bad, (unsigned long long)s->rep->periods, why, sizeof(why));
-            set_result(s->rep, "diverged", why);
-            for (int j = 0; j < s->n; ++j) sim_co_node_fault(&s->node[j], 0xFF00u, 0x80u);
-            break;
-        }
+    for (unsigned k = 0; k < steps && step_arm(s) == 0; ++k) {
     }
 }
 
@@ -340,6 +359,7 @@ static void run(co_sim_t *s)
     for (;;) {
         if (sim_stop_requested) {
             set_result(rep, "interrupted", "stopped by a signal");
+            s->power_lost = 1;
             return;
         }
         int64_t now = bus_now(s);
@@ -386,15 +406,17 @@ static void run(co_sim_t *s)
             for (unsigned k = 0; k < n_later[i] && !stopped; ++k) stopped = on_frame(s, &later[i][k], i, now);
         }
         tick_all(s, bus_now(s)); /* the frames may have ended a period */
-        if (stopped) return; /* the master stopped every drive */
+        if (stopped) { /* the master stopped every drive */
+            s->ended = 1;
+            return;
+        }
         const double timeout = booted ? cfg->idle_timeout_s : cfg->boot_timeout_s;
         if ((double)(wall - last_rx) * 1e-9 > timeout) {
             char why[160];
             snprintf(why, sizeof(why), "%s for %g s: drives faulted, torque off",
                      booted ? "master silent" : "no master on the bus", timeout);
             set_result(rep, "controller-lost", why);
-            for (int j = 0; j < s->n; ++j) sim_co_node_fault(&s->node[j], SIM_CO_EMCY_HEARTBEAT, 0x10u);
-            flush(s);
+            s->lost = 1; /* the drives fault once the arm has run on after the stop (post_stop) */
             return;
         }
     }
@@ -436,6 +458,7 @@ co_sim_t *sim_co_begin(const sim_config_t *cfg, const sim_co_config_t *co, sim_a
         if (own->rated_torque_mnm) pre.rated_torque_mnm = own->rated_torque_mnm;
         if (own->torque_units_per_nm) pre.torque_units_per_nm = own->torque_units_per_nm;
         if (own->encoder_increments) pre.encoder_increments = own->encoder_increments;
+        if (own->quick_stop_decel) pre.quick_stop_decel = own->quick_stop_decel;
         if (own->gear_motor) {
             pre.gear_motor = own->gear_motor;
             pre.gear_shaft = own->gear_shaft;
@@ -451,6 +474,8 @@ co_sim_t *sim_co_begin(const sim_config_t *cfg, const sim_co_config_t *co, sim_a
             snprintf(err, errcap, "--protocol canopen: %s", why);
             return NULL;
         }
+        sim_co_node_set_stopping(&sp->node[j], &cfg->brake[j], arm->drive_inertia[j], cfg->quick_stop_decel);
+        sim_arm_set_brake(arm, j, sim_power_stage_brake_nm(&sp->node[j].ps));
         sim_servo_init(&sp->servo[j]);
         sim_rng_seed(&sp->noise[j], arm->unc.seed ^ (0x9E3779B97F4A7C15ull * ((uint64_t)j + 1u)));
     }
@@ -474,11 +499,63 @@ int sim_co_service(co_sim_t *s)
     return !s->ended;
 }
 
+/* After the master stopped the drives, fell silent or the simulator was stopped: the arm runs on
+ * for --post-stop s of simulated time, as fast as it computes, each drive on its own clock (its
+ * heartbeat consumer, its fault reaction, its brake; the supply cut when the simulator was stopped
+ * by a signal). Its truth goes on in ARM_SIM (SIM_FLAG_AFTER_STOP); the run's own counts stop. */
+static void post_stop(co_sim_t *s, const char *why)
+{
+    sim_report_t *rep = s->rep;
+    const double *q = s->arm->data->qpos;
+    double q0[SIM_MAX_JOINTS];
+    memcpy(q0, q, (size_t)s->n * sizeof(double));
+    snprintf(rep->post_stop_why, sizeof(rep->post_stop_why), "%s", why);
+    rep->post_stop_from_step = s->arm->step_count;
+    rep->post_stop_mujoco_s = s->arm->data->time;
+    s->after_stop = 1;
+    s->holding_answers = 0;
+    if (s->power_lost) {
+        for (int j = 0; j < s->n; ++j) sim_co_node_power_lost(&s->node[j]);
+    }
+    char text[300];
+    snprintf(text, sizeof(text), "after the stop (%s): the arm runs on for %g s", why, s->cfg->post_stop_s);
+    sim_telemetry_event(s->tel, s->arm->step_count, "sim", "info", text);
+    const uint64_t periods = (uint64_t)(s->cfg->post_stop_s / s->arm->period + 0.5);
+    for (uint64_t k = 0; k < periods; ++k) {
+        tick_all(s, bus_now(s)); /* the drives' own timers: the master's heartbeat they watch */
+        const int bad = step_arm(s);
+        rep->post_stop_periods++;
+        for (int j = 0; j < s->n; ++j) {
+            const double moved = fabs(q[j] - q0[j]);
+            if (moved > rep->post_stop_moved_rad[j]) rep->post_stop_moved_rad[j] = moved;
+        }
+        if (bad != 0) break;
+    }
+    tick_all(s, bus_now(s));
+    for (int j = 0; j < s->n; ++j) {
+        rep->post_stop_statusword[j] = (uint16_t)s->node[j].power;
+        if (sim_power_stage_brake_nm(&s->node[j].ps) > 0.0) rep->post_stop_braked_mask |= 1u << j;
+    }
+}
+
 void sim_co_end(co_sim_t *s)
 {
     sim_report_t *rep = s->rep;
+    /* the run's drive faults: those of the stop; a drive that faults after it (its heartbeat
+     * consumer, once the master stopped heartbeating) is post_stop's to say */
     for (int j = 0; j < s->n; ++j) {
-        if (s->node[j].power == SIM_PS_FAULT) rep->drive_fault_mask |= 1u << j;
+        if (s->node[j].power == SIM_PS_FAULT || s->node[j].power == SIM_PS_FAULT_REACTION) rep->drive_fault_mask |= 1u << j;
+    }
+    if (s->cfg->post_stop_s > 0.0 && s->t_first_sync != 0 && strcmp(rep->result, "diverged") != 0) {
+        post_stop(s, s->power_lost ? "the simulator was stopped: the drives lost their supply"
+                     : s->lost     ? "the master fell silent"
+                     : s->ended    ? "the master stopped the drives (NMT stop)"
+                                   : "the bus failed");
+    }
+    if (s->lost) { /* the master was lost: every drive faulted, on its own or now */
+        for (int j = 0; j < s->n; ++j) sim_co_node_fault(&s->node[j], SIM_CO_EMCY_HEARTBEAT, 0x10u);
+        flush(s);
+        for (int j = 0; j < s->n; ++j) rep->drive_fault_mask |= 1u << j;
     }
     for (unsigned b = 0; b < s->set.n; ++b) {
         rep->rx_undecodable += arm_can_bus_rx_undecodable(&s->set.bus[b]);

@@ -12,6 +12,7 @@
 #include "sim_arm.h"
 #include "sim_bus_timing.h"
 #include "sim_capture.h"
+#include "sim_power_stage.h"
 #include "sim_servo.h"
 #include "sim_telemetry.h"
 
@@ -46,6 +47,12 @@ typedef struct {
     int64_t late_answer_period;  /* TEST HOOK: the drives answer the SYNCs of these periods late; -1: off */
     int64_t late_answer_last;
     sim_late_release_t late_answer_release;
+    /* The drives' stopping (sim_power_stage.h): each joint's brake (--brake), the deceleration of
+     * a drive's ramp where it has no 0x6084/0x6085 (the arm protocol's drives always), and how long
+     * the arm is simulated on after the controller stopped the drives or fell silent (--post-stop). */
+    sim_brake_config_t brake[SIM_MAX_JOINTS];
+    double quick_stop_decel;
+    double post_stop_s;
 } sim_config_t;
 
 /* TEST HOOK: whether the drives answer bus period `period`'s SYNC late (sim_late_release_t). */
@@ -54,6 +61,9 @@ static inline int sim_answers_late(const sim_config_t *cfg, uint64_t period)
     return cfg->late_answer_period >= 0 && period >= (uint64_t)cfg->late_answer_period &&
            period <= (uint64_t)cfg->late_answer_last;
 }
+
+/* ARM_SIM's flags: bit j, joint j's brake holds; this bit, the period is after the stop. */
+#define SIM_FLAG_AFTER_STOP (1 << 16)
 
 #define SIM_COST_BINS 5000u /* per-period CPU cost histogram, 1 us bins */
 
@@ -88,6 +98,15 @@ typedef struct {
     uint64_t cost_n;
     /* --profile: thread CPU time per activity, summed over the periods measured */
     uint64_t prof_physics_ns, prof_bus_tx_ns, prof_bus_rx_ns, prof_telemetry_ns;
+    /* After the stop (--post-stop): why it began, its first step, the periods simulated, each
+     * joint's largest motion in them, and what the drives ended in (their state, their brake). */
+    char post_stop_why[160];
+    int64_t post_stop_from_step;
+    double post_stop_mujoco_s;      /* MuJoCo's clock when it began */
+    uint64_t post_stop_periods;
+    double post_stop_moved_rad[SIM_MAX_JOINTS];
+    uint16_t post_stop_statusword[SIM_MAX_JOINTS];
+    uint32_t post_stop_braked_mask; /* bit j: joint j's brake engaged at the end */
 } sim_report_t;
 
 /* Set from a signal handler: the loop stops at its next frame or within 100 ms. */

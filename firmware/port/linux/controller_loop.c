@@ -418,15 +418,13 @@ static int boot_canopen_run(link_t *l, const options_t *opt, const arm_robot_mod
 }
 
 /* Each bus's commands in one batch (one syscall on the UDP transport): the period's critical
- * path in lockstep is mostly syscalls. */
-static void send_commands(link_t *l, const arm_ctl_output_t *out)
+ * path in lockstep is mostly syscalls. Every drive gets controlword cw. */
+static void send_commands(link_t *l, const arm_ctl_output_t *out, uint16_t cw)
 {
-    const int enabled = out->state == ARM_STATE_RUNNING || out->state == ARM_STATE_INIT;
     arm_can_frame_t batch[ARM_CAN_BUS_SET_MAX][ARM_N_JOINTS];
     unsigned count[ARM_CAN_BUS_SET_MAX] = {0};
     for (int j = 0; j < ARM_N_JOINTS; ++j) {
         const unsigned b = (unsigned)l->bus_of[j];
-        const uint16_t cw = enabled ? ARM_CW_ENABLE_OPERATION : ARM_CW_SHUTDOWN;
         if (l->canopen) {
             arm_co_pack_rpdo1((uint8_t)(j + 1), cw, arm_co_torque_to_permille(&l->units[j], out->tau[j]),
                               &batch[b][count[b]++]);
@@ -455,6 +453,7 @@ typedef struct {
     int64_t next_deadline; /* realtime: the next period's start */
     int64_t period_ns;
     uint32_t k_run;        /* tracking periods done */
+    uint32_t k_published;  /* periods in telemetry: the tracking ones, then the stop's */
 } loop_t;
 
 /* Periods on the clock: realtime, and lockstep too where the port paces it (the MCU's SysTick-driven
@@ -569,16 +568,21 @@ static int64_t control(link_t *l, loop_t *p)
         rt_debug_busy_wait_us(p->opt->rt.debug_slow_step_us); /* TEST HOOK: forces overruns */
     }
     const int64_t compute = now_ns() - c0;
-    send_commands(l, &p->out);
+    /* a stop begins in the very period of its fault: the drives quick-stop under the hold */
+    const int stopping = p->out.state == ARM_STATE_FAULT || p->out.state == ARM_STATE_SAFE_STOP;
+    send_commands(l, &p->out, stopping ? ARM_CW_QUICK_STOP : ARM_CW_ENABLE_OPERATION);
     return compute;
 }
 
 /* Publish: the period's telemetry, its timing, state changes and a fault's reason. 0 to go on, -1
  * when the controller stopped the arm. */
-static int publish(loop_t *p, uint32_t k, int64_t wake_latency, int64_t compute, int64_t cycle)
+/* The period's ARM_CTL and ARM_TIMING (one each per period, numbered on: the tracking periods,
+ * then a stop's), and the next deadline. */
+static void publish_period(loop_t *p, uint32_t k, int64_t wake_latency, int64_t compute, int64_t cycle)
 {
     run_report_t *report = p->report;
-    telem_controller_t snap = {.step = p->k_run, .bus_period = k, .t = (double)p->k_run * p->opt->ctl.period_s,
+    const uint32_t step = p->k_published++;
+    telem_controller_t snap = {.step = step, .bus_period = k, .t = (double)step * p->opt->ctl.period_s,
                                .method = (int8_t)p->opt->ctl.method, .out = p->out};
     memcpy(snap.q, p->in.q, sizeof(snap.q));
     memcpy(snap.qd, p->in.qd, sizeof(snap.qd));
@@ -592,10 +596,16 @@ static int publish(loop_t *p, uint32_t k, int64_t wake_latency, int64_t compute,
             while (p->next_deadline < now_ns()) p->next_deadline += p->period_ns;
         }
     }
-    const telem_timing_t tm = {.step = p->k_run, .period_ns = (int32_t)p->period_ns,
+    const telem_timing_t tm = {.step = step, .period_ns = (int32_t)p->period_ns,
                                .wake_latency_ns = (int32_t)wake_latency, .compute_ns = (int32_t)compute,
                                .cycle_ns = (int32_t)cycle, .overruns = (int64_t)report->overruns};
     telemetry_timing(p->telem, &tm);
+}
+
+static int publish(loop_t *p, uint32_t k, int64_t wake_latency, int64_t compute, int64_t cycle)
+{
+    run_report_t *report = p->report;
+    publish_period(p, k, wake_latency, compute, cycle);
     report->steps_done = ++p->k_run;
     const arm_ctl_output_t *out = &p->out;
     if (out->state != p->last_state) {
@@ -651,29 +661,111 @@ static int64_t period_time(const loop_t *p, uint32_t k, int64_t wall)
     return p->opt->mode == MODE_REALTIME ? wall : (int64_t)k * p->period_ns;
 }
 
-/* A stop signal at a period boundary: zero torque with controlword shutdown, before the NMT stop.
- * The commands go in a period of their own (k, not yet begun): the
- * last period's commands are out already, and a second command for one SYNC is a second master
- * to the drives (EMCY 0x8200). */
-static void stop_on_signal(link_t *l, loop_t *p, uint32_t k)
-{
-    snprintf(p->report->reason, sizeof(p->report->reason),
-             "stopped by signal %d after %u periods: zero torque, drives shut down and stopped",
-             (int)controller_stop_signal, p->k_run);
-    p->report->result = RUN_INTERRUPTED;
-    telemetry_event(p->telem, p->k_run, "fault", p->report->reason);
-    p->out.state = ARM_STATE_SAFE_STOP;
-    memset(p->out.tau, 0, sizeof(p->out.tau));
-    start_period(l, k, period_time(p, k, now_ns()));
-    send_commands(l, &p->out);
-}
-
 /* Sleep to the period's absolute deadline (paced); the wake-up's lateness. */
 static int64_t wait_for_period(loop_t *p)
 {
     if (!paced(p)) return 0;
     port_clock_sleep_until(p->next_deadline);
     return now_ns() - p->next_deadline;
+}
+
+/* ---- the controlled stop ------------------------------------------------------------------- */
+#define DISABLE_PERIODS_MAX 200u /* after the quick stop: disable voltage until the drives show it */
+
+/* A drive whose quick stop is done: switch on disabled (its brake closed, its power stage off), or
+ * in fault (its own fault reaction done). */
+static int drive_stopped(uint16_t sw)
+{
+    return (sw & 0x004Fu) == 0x0040u || (sw & 0x004Fu) == 0x0008u;
+}
+
+static uint32_t stopped_drives(const link_t *l)
+{
+    uint32_t m = 0u;
+    for (int j = 0; j < ARM_N_JOINTS; ++j) {
+        if (drive_stopped(l->drives.statusword[j])) m |= 1u << j;
+    }
+    return m;
+}
+
+/* One period of a stop: SYNC, the drives' states (not waited for once the plant fell silent in
+ * lockstep, where a wait costs the lockstep timeout), the core's hold, the commands with controlword
+ * cw, the period's telemetry. The states that came. */
+static uint32_t stop_period(link_t *l, loop_t *p, uint32_t k, uint16_t cw, int wait)
+{
+    const options_t *opt = p->opt;
+    const int64_t wake_latency = wait_for_period(p);
+    const int64_t cycle_start = now_ns();
+    start_period(l, k, period_time(p, k, cycle_start));
+    const int64_t wait_until = !wait ? cycle_start
+                               : opt->mode == MODE_REALTIME ? p->next_deadline + p->period_ns * 8 / 10
+                                                            : cycle_start + (int64_t)(opt->lockstep_timeout_s * 1e9);
+    pump(l, wait_until, states_done);
+    const uint32_t fresh = l->drives.fresh_mask & ALL_JOINTS;
+    memcpy(p->in.q, l->drives.q, sizeof(p->in.q));
+    memcpy(p->in.qd, l->drives.qd, sizeof(p->in.qd));
+    p->in.fresh_mask = fresh;
+    memcpy(p->in.tau_measured, l->drives.tau_measured, sizeof(p->in.tau_measured));
+    const int64_t c0 = now_ns();
+    port_control_step(&p->ctl, &p->in, &p->out);
+    const int64_t compute = now_ns() - c0;
+    send_commands(l, &p->out, cw);
+    publish_period(p, k, wake_latency, compute, now_ns() - cycle_start);
+    return fresh;
+}
+
+/* The one way this controller stops the arm, whatever asked (a fault, a stop signal, the end of the
+ * run): from period k on, every drive is told to quick-stop (controlword 0x0002: its 0x605A ramp to
+ * standstill, then its brake closes with the power stage on, then switch on disabled) while the
+ * core holds the arm (gravity compensation and damping, --safe-stop) as the drives' target torque;
+ * once every drive reports switch on disabled or fault (or after --stop-timeout, or once the plant
+ * has been silent for the watchdog's periods) every drive is disabled (0x0000), then stopped (NMT).
+ * Telemetry (ARM_EVENT) says which safe state the arm reached; the report keeps it. Returns the
+ * next bus period. */
+static uint32_t controlled_stop(link_t *l, loop_t *p, uint32_t k, run_stop_cause_t cause)
+{
+    const options_t *opt = p->opt;
+    run_stop_t *st = &p->report->stop;
+    st->cause = cause;
+    st->from_bus_period = k;
+    arm_ctl_stop(&p->ctl);
+    telemetry_event(p->telem, p->k_published, "info",
+                    "safe stop: drives quick-stopping (controlword 0x0002) under the hold (gravity compensation and "
+                    "damping); their brakes close once they stand still");
+    const uint32_t limit = (uint32_t)(opt->stop_timeout_s * opt->rate_hz + 0.5);
+    uint32_t silent = 0u, periods = 0u;
+    int wait = 1;
+    while (periods < limit && stopped_drives(l) != ALL_JOINTS && silent <= p->ctl.cfg.watchdog_periods) {
+        const uint32_t fresh = stop_period(l, p, k++, ARM_CW_QUICK_STOP, wait);
+        periods++;
+        silent = fresh == 0u ? silent + 1u : 0u;
+        if (fresh != ALL_JOINTS && opt->mode == MODE_LOCKSTEP) wait = 0; /* the plant fell silent: no more waits */
+    }
+    st->quick_stop_periods = periods;
+    st->stopped_mask = stopped_drives(l);
+    char missing[64], text[300];
+    list_joints(ALL_JOINTS & ~st->stopped_mask, missing, sizeof(missing));
+    if (st->stopped_mask == ALL_JOINTS) {
+        st->braked = 1;
+        snprintf(text, sizeof(text), "safe stop: arm braked: every drive reports switch on disabled or fault (its ramp "
+                 "done, its brake closed, its power stage off) after %u periods", periods);
+    } else if (silent > p->ctl.cfg.watchdog_periods) {
+        snprintf(text, sizeof(text), "safe stop: brakes not confirmed: no joint state for %u periods (drive(s) %s not "
+                 "seen switch on disabled); the drives' own reaction to a lost master stops them", silent, missing);
+    } else {
+        snprintf(text, sizeof(text), "safe stop: brakes not confirmed: drive(s) %s not switch on disabled after %u "
+                 "periods (--stop-timeout %g s); disabling them", missing, periods, opt->stop_timeout_s);
+    }
+    snprintf(st->safe_state, sizeof(st->safe_state), "%.230s", text + strlen("safe stop: "));
+    telemetry_event(p->telem, p->k_published, st->braked ? "info" : "fault", text);
+    /* disable voltage: a drive still in quick stop active (0x605A 5-8) closes its brake now */
+    for (uint32_t i = 0; i < DISABLE_PERIODS_MAX; ++i) {
+        stop_period(l, p, k++, ARM_CW_DISABLE_VOLTAGE, wait && silent == 0u);
+        if (stopped_drives(l) == ALL_JOINTS || silent > 0u || opt->mode == MODE_LOCKSTEP) break;
+    }
+    for (int j = 0; j < ARM_N_JOINTS; ++j) st->statusword[j] = l->drives.statusword[j];
+    st->periods = k - st->from_bus_period;
+    return k;
 }
 
 void controller_run(const options_t *opt, const arm_robot_model_t *model, telemetry_t *telem,
@@ -744,9 +836,16 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
 
     /* k counts bus periods (SYNCs); the first few bring the drives to operation enabled. Each
      * period: SYNC out, the drives' states in, then enable, or supervise, control and publish. */
-    for (uint32_t k = 0; p.k_run < opt->steps; ++k) {
-        if (controller_stop_signal != 0) {
-            stop_on_signal(&l, &p, k);
+    uint32_t k = 0;
+    run_stop_cause_t cause = RUN_STOP_END;
+    for (; p.k_run < opt->steps; ++k) {
+        if (controller_stop_signal != 0) { /* at a period boundary: the stop begins with period k */
+            snprintf(p.report->reason, sizeof(p.report->reason),
+                     "stopped by signal %d after %u periods: drives quick-stopped under the hold, braked, disabled "
+                     "and stopped", (int)controller_stop_signal, p.k_run);
+            p.report->result = RUN_INTERRUPTED;
+            telemetry_event(p.telem, p.k_run, "fault", p.report->reason);
+            cause = RUN_STOP_SIGNAL;
             break;
         }
         const int64_t wake_latency = wait_for_period(&p);
@@ -767,15 +866,24 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
         }
         supervise(&l, &p);
         const int64_t compute = control(&l, &p);
-        if (publish(&p, k, wake_latency, compute, now_ns() - cycle_start) != 0) break;
+        if (publish(&p, k, wake_latency, compute, now_ns() - cycle_start) != 0) {
+            cause = RUN_STOP_FAULT; /* this period's commands are out: the stop goes on with the next */
+            ++k;
+            break;
+        }
+    }
+    const arm_state_t tracked = p.out.state;
+    const arm_fault_t fault = p.out.fault;
+    if (!enabling) {
+        k = controlled_stop(&l, &p, k, cause);
     }
 
-    /* Stop the drives: they go to a stopped NMT state and stop applying torque. */
+    /* Stop the drives (NMT): they are braked and disabled by now, or their own reaction takes over. */
     arm_can_frame_t stop;
     arm_bus_make_nmt(ARM_NMT_STOP, 0u, &stop);
     send_all(&l, &stop);
-    report->final_state = p.out.state;
-    report->final_fault = p.out.fault;
+    report->final_state = cause == RUN_STOP_SIGNAL ? ARM_STATE_SAFE_STOP : tracked;
+    report->final_fault = fault;
     report->rx = l.drives.rx;
     for (unsigned b = 0; b < l.buses.n; ++b) {
         report->rx_undecodable += arm_can_bus_rx_undecodable(&l.buses.bus[b]);

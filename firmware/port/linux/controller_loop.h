@@ -32,6 +32,21 @@ extern volatile sig_atomic_t controller_stop_signal;
 #define ARM_REPORT_CO_WRITES_MAX (ARM_CAN_BUS_SET_MAX * ARM_CO_BOOT_LOG_MAX)
 #endif
 
+/* What began a stop (controller_loop.c controlled_stop: the one path every stop takes). */
+typedef enum { RUN_STOP_NONE = 0, RUN_STOP_END, RUN_STOP_FAULT, RUN_STOP_SIGNAL } run_stop_cause_t;
+
+/* How the arm was stopped: the safe state it reached (summary.json "stop", ARM_EVENT). */
+typedef struct {
+    run_stop_cause_t cause;            /* NONE: never enabled, nothing to stop */
+    uint32_t from_bus_period;          /* the stop's first period */
+    uint32_t periods;                  /* its periods, up to the NMT stop */
+    uint32_t quick_stop_periods;       /* of them, the drives' quick stop */
+    uint32_t stopped_mask;             /* drives that reported switch on disabled or fault */
+    int braked;                        /* every drive did: braked and disabled */
+    char safe_state[240];
+    uint16_t statusword[ARM_N_JOINTS]; /* each drive's last */
+} run_stop_t;
+
 typedef struct {
     run_result_t result;
     char reason[512];
@@ -58,6 +73,7 @@ typedef struct {
     arm_co_drive_units_t co_units[ARM_N_JOINTS]; /* each joint's drive's units, as the boot settled them */
     float co_q_first[ARM_N_JOINTS];              /* each joint's first position decoded with them, rad */
     unsigned co_q_seen;                          /* bit j: joint j's first position came */
+    run_stop_t stop;
 } run_report_t;
 
 void controller_run(const options_t *opt, const arm_robot_model_t *model, telemetry_t *telem,
