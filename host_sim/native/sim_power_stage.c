@@ -139,20 +139,24 @@ static double clamp(double x, double lim)
     return x > lim ? lim : x < -lim ? -lim : x;
 }
 
+/* The release or closing delay runs on by one period (the brake as it was acted through it). */
+static void brake_delay(sim_power_stage_t *ps, sim_power_t *power, double dt)
+{
+    if (ps->brake_state != SIM_BRAKE_RELEASING && ps->brake_state != SIM_BRAKE_CLOSING) return;
+    ps->brake_timer_s -= dt;
+    if (ps->brake_timer_s > 1e-12) return;
+    const int closed = ps->brake_state == SIM_BRAKE_CLOSING;
+    ps->brake_state = closed ? SIM_BRAKE_ENGAGED : SIM_BRAKE_RELEASED;
+    if (closed && ps->powered_close) { /* closed: now the power stage goes off */
+        ps->powered_close = 0;
+        ps->mode = SIM_STAGE_OFF;
+        *power = ps->after_close;
+    }
+}
+
 double sim_power_stage_period(sim_power_stage_t *ps, sim_power_t *power, double target_nm, double qd, double dt)
 {
-    if (ps->brake_state == SIM_BRAKE_RELEASING || ps->brake_state == SIM_BRAKE_CLOSING) {
-        ps->brake_timer_s -= dt;
-        if (ps->brake_timer_s <= 0.0) {
-            const int closed = ps->brake_state == SIM_BRAKE_CLOSING;
-            ps->brake_state = closed ? SIM_BRAKE_ENGAGED : SIM_BRAKE_RELEASED;
-            if (closed && ps->powered_close) { /* closed: now the power stage goes off */
-                ps->powered_close = 0;
-                ps->mode = SIM_STAGE_OFF;
-                *power = ps->after_close;
-            }
-        }
-    }
+    const sim_brake_state_t brake_before = ps->brake_state;
     double tau = 0.0;
     if (ps->mode == SIM_STAGE_FOLLOW) {
         tau = target_nm;
@@ -176,6 +180,7 @@ double sim_power_stage_period(sim_power_stage_t *ps, sim_power_t *power, double 
         }
     }
     ps->last_nm = tau;
+    if (ps->brake_state == brake_before) brake_delay(ps, power, dt); /* a delay begun this period runs from the next */
     return tau;
 }
 
