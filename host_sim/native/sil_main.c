@@ -191,8 +191,9 @@ int main(int argc, char **argv)
     }
     sim_arm_close(&arm);
     if (report.result != RUN_OK) {
-        fprintf(stderr, "arm_sil: controller: %s; state %s, zero torque commanded\n", report.reason,
-                arm_state_str(report.final_state));
+        fprintf(stderr, "arm_sil: controller: %s; state %s; safe stop: %s\n", report.reason,
+                arm_state_str(report.final_state),
+                report.stop.cause != RUN_STOP_NONE ? report.stop.safe_state : "none (never enabled)");
     }
     if (sim_rc != 0) {
         fprintf(stderr, "arm_sil: simulator: %s\n", srep.reason);

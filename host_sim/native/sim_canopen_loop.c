@@ -43,6 +43,11 @@ struct co_sim {
     arm_can_frame_t late[ARM_CAN_BUS_SET_MAX][SIM_MAX_JOINTS];
     unsigned n_late[ARM_CAN_BUS_SET_MAX];
     int holding_answers; /* TEST HOOK (cfg->late_answer_period): what the nodes queue stays queued */
+    double frame_sent_s; /* the frame being handled: when the master sent it (-1: the bus does not say) */
+    double sync_sent_s;  /* this period's lead SYNC: when it was sent, when it was read (-1: unknown) */
+    double sync_read_s;
+    double answered_s;   /* when the period's answers last went out */
+    int prestepped;      /* the period since the last SYNC is simulated already (maybe_prestep) */
     int lost;            /* the master fell silent */
     int power_lost;      /* stopped by a signal: the drives lose their supply */
     int after_stop;      /* the master is gone: the arm runs on (post_stop), nothing is counted */
@@ -81,33 +86,40 @@ static void captured(const co_sim_t *s, unsigned bus, const arm_can_frame_t *f)
     }
 }
 
-/* Every frame the nodes queued goes out on their bus; EMCYs are also telemetry events. */
+/* Every frame the nodes queued goes out on their bus, each bus's in one batch (one syscall on UDP:
+ * the drives' answers leave together, as fast as the bus takes them); EMCYs are also telemetry events. */
 static void flush(co_sim_t *s)
 {
     if (s->holding_answers) return;
+    static arm_can_frame_t batch[ARM_CAN_BUS_SET_MAX][SIM_MAX_JOINTS * SIM_CO_OUT_MAX];
+    unsigned count[ARM_CAN_BUS_SET_MAX] = {0};
     for (int j = 0; j < s->n; ++j) {
         sim_co_node_t *nd = &s->node[j];
         const unsigned bus = (unsigned)s->bus_of[j];
         for (unsigned k = 0; k < nd->n_out; ++k) {
             const arm_can_frame_t *f = &nd->out[k];
-            if (arm_can_bus_set_send(&s->set, bus, f) == 0) {
-                s->rep->frames_tx++;
-                captured(s, bus, f);
-            } else {
-                s->rep->tx_dropped++;
-            }
+            batch[bus][count[bus]++] = *f;
             if (f->id == 0x080u + nd->id) {
-                char src[24], text[96];
+                char src[24], text[112];
                 const unsigned code = (unsigned)(f->data[0] | (f->data[1] << 8));
                 snprintf(src, sizeof(src), "drive%d", j + 1);
                 snprintf(text, sizeof(text), "EMCY 0x%04x from node %u%s", code, nd->id,
-                         code != 0u ? ": fault, torque off" : ": error reset");
+                         code != 0u ? ": fault (its fault reaction, then its brake)" : ": error reset");
                 sim_telemetry_event(s->tel, s->arm->step_count, src, code != 0u ? "fault" : "info", text);
             }
         }
         s->rep->tx_dropped += nd->out_dropped;
         nd->out_dropped = 0u;
         nd->n_out = 0u;
+    }
+    for (unsigned b = 0; b < s->set.n; ++b) {
+        for (unsigned at = 0; at < count[b]; at += ARM_CAN_UDP_TX_BATCH) {
+            const unsigned chunk = count[b] - at < ARM_CAN_UDP_TX_BATCH ? count[b] - at : ARM_CAN_UDP_TX_BATCH;
+            const unsigned sent = arm_can_bus_set_send_many(&s->set, b, &batch[b][at], chunk);
+            for (unsigned i = 0; i < sent; ++i) captured(s, b, &batch[b][at + i]);
+            s->rep->frames_tx += sent;
+            s->rep->tx_dropped += chunk - sent;
+        }
     }
 }
 
@@ -178,6 +190,50 @@ static void release_answers(co_sim_t *s)
     flush(s);
 }
 
+static uint64_t bin_of(double us)
+{
+    return us < 0.0 ? 0u : us >= (double)SIM_COST_BINS ? SIM_COST_BINS : (uint64_t)us;
+}
+
+/* The period that just ended: how long after the master sent its SYNC the drives read it and their
+ * answers went out (where the bus says when it was sent). */
+static void record_answer(co_sim_t *s)
+{
+    sim_report_t *r = s->rep;
+    if (s->sync_sent_s < 0.0 || s->answered_s < 0.0 || s->after_stop) return;
+    const double read_us = (s->sync_read_s - s->sync_sent_s) * 1e6, answer_us = (s->answered_s - s->sync_sent_s) * 1e6;
+    r->read_hist[bin_of(read_us)]++;
+    r->answer_hist[bin_of(answer_us)]++;
+    r->answer_n++;
+    if (read_us > r->read_max_us) r->read_max_us = read_us;
+    if (answer_us > r->answer_max_us) r->answer_max_us = answer_us;
+    int64_t *row = r->answer_last[r->answer_last_n++ % SIM_ANSWER_LAST];
+    row[0] = (int64_t)s->syncs[s->bus_of[0]] - 2; /* the bus period of the SYNC before this one */
+    row[1] = (int64_t)read_us;
+    row[2] = (int64_t)answer_us;
+    s->answered_s = -1.0;
+}
+
+/* Once every bus's drives have answered this period's SYNC, the arm is stepped through the period
+ * at once, under the torques in effect from this SYNC on (each drive's synchronous RPDOs took effect
+ * at it), instead of when the next SYNC comes: the next period's answers then go out the moment its
+ * SYNC is read, the physics off their path. Not where a drive's RPDO is event-driven (its torque
+ * changes when the frame comes, inside the period). */
+static void maybe_prestep(co_sim_t *s)
+{
+    if (!s->synced || s->prestepped) return;
+    const unsigned lead = (unsigned)s->bus_of[0];
+    for (unsigned b = 0; b < s->set.n; ++b) {
+        if (s->syncs[b] != s->syncs[lead]) return;
+    }
+    for (int j = 0; j < s->n; ++j) {
+        const sim_co_pdo_t *r = &s->node[j].rpdo[0];
+        if (r->valid && r->trans >= 254u) return;
+    }
+    advance(s);
+    s->prestepped = 1;
+}
+
 static void on_sync(co_sim_t *s, unsigned bus)
 {
     /* Every bus's SYNC of a period follows the first joint's bus's, which moves the arm. Sockets
@@ -190,12 +246,17 @@ static void on_sync(co_sim_t *s, unsigned bus)
         }
         s->syncs[bus]++;
         sync_nodes(s, bus);
+        maybe_prestep(s);
         return;
     }
     s->syncs[bus]++;
+    record_answer(s);
+    s->sync_sent_s = s->frame_sent_s;
+    s->sync_read_s = arm_can_bus_clock_s();
     release_answers(s);
     s->holding_answers = sim_answers_late(s->cfg, s->syncs[bus] - 1u);
-    if (s->synced) advance(s);
+    if (s->synced && !s->prestepped) advance(s);
+    s->prestepped = 0;
     s->synced = 1;
     s->states_end = 0.0;
     sync_nodes(s, bus);
@@ -206,6 +267,7 @@ static void on_sync(co_sim_t *s, unsigned bus)
             sync_nodes(s, b);
         }
     }
+    maybe_prestep(s);
 }
 
 /* Bus timing: this bus's SYNC at the period's start, then the TPDOs the nodes just queued, in id
@@ -262,6 +324,7 @@ static void sync_nodes(co_sim_t *s, unsigned bus)
         s->n_late[bus] = 0u;
     }
     flush(s);
+    if (!s->holding_answers) s->answered_s = arm_can_bus_clock_s();
 }
 
 /* Bus timing: an RPDO of a node on this bus, from the master, goes on the bus once every TPDO of
@@ -327,8 +390,9 @@ static int on_frame(co_sim_t *s, const arm_can_frame_t *f, unsigned bus, int64_t
         if (f->id == COB_NMT && f->len == 2u && f->data[0] == 0x02u && f->data[1] == 0u && s->synced) {
             /* NMT stop to all (on whichever bus it is read first) ends the last period, as the next SYNC
              * would have, before any drive stops applying its torque */
-            advance(s);
+            if (!s->prestepped) advance(s);
             s->synced = 0;
+            s->prestepped = 0;
         }
         /* An RPDO on a bus whose SYNC of this period came: the master's command for this period. */
         if (s->cfg->late_answer_release == SIM_LATE_AT_COMMAND && is_rpdo(s, f, bus) &&
@@ -371,6 +435,7 @@ static void run(co_sim_t *s)
         arm_can_frame_t f;
         unsigned bus = 0;
         const int rc = arm_can_bus_set_recv(&s->set, &f, &bus, (int)(wait / 1000));
+        const double f_sent_s = rc == 1 ? arm_can_bus_set_sent_s(&s->set, bus) : -1.0;
         if (rc < 0) {
             char text[200];
             snprintf(text, sizeof(text), "receiving on bus %u failed: %s", bus, strerror(errno));
@@ -384,18 +449,25 @@ static void run(co_sim_t *s)
          * queued on the others up to their own SYNC (this period's RPDOs) was sent first; their
          * SYNC and what follows it come after this frame. */
         static arm_can_frame_t later[ARM_CAN_BUS_SET_MAX][64];
+        static double later_sent_s[ARM_CAN_BUS_SET_MAX][64];
         unsigned n_later[ARM_CAN_BUS_SET_MAX] = {0};
         if (rc == 1 && (f.id == COB_SYNC || f.id == COB_NMT) && s->set.n > 1u) {
             for (unsigned i = 0; i < s->set.n && !stopped; ++i) {
                 arm_can_frame_t g;
                 while (i != bus && n_later[i] < 64u && !stopped && arm_can_bus_recv(&s->set.bus[i], &g, 0) == 1) {
-                    if (n_later[i] > 0u || g.id == COB_SYNC || g.id == COB_NMT) later[i][n_later[i]++] = g;
-                    else stopped = on_frame(s, &g, i, now);
+                    if (n_later[i] > 0u || g.id == COB_SYNC || g.id == COB_NMT) {
+                        later_sent_s[i][n_later[i]] = s->set.bus[i].rx_sent_s;
+                        later[i][n_later[i]++] = g;
+                    } else {
+                        s->frame_sent_s = s->set.bus[i].rx_sent_s;
+                        stopped = on_frame(s, &g, i, now);
+                    }
                 }
             }
         }
         if (rc == 1 && !stopped) {
             const uint64_t before = rep->frames_rx;
+            s->frame_sent_s = f_sent_s;
             stopped = on_frame(s, &f, bus, now);
             if (rep->frames_rx != before) {
                 last_rx = wall;
@@ -403,7 +475,10 @@ static void run(co_sim_t *s)
             }
         }
         for (unsigned i = 0; i < s->set.n; ++i) {
-            for (unsigned k = 0; k < n_later[i] && !stopped; ++k) stopped = on_frame(s, &later[i][k], i, now);
+            for (unsigned k = 0; k < n_later[i] && !stopped; ++k) {
+                s->frame_sent_s = later_sent_s[i][k];
+                stopped = on_frame(s, &later[i][k], i, now);
+            }
         }
         tick_all(s, bus_now(s)); /* the frames may have ended a period */
         if (stopped) { /* the master stopped every drive */
@@ -438,6 +513,7 @@ co_sim_t *sim_co_begin(const sim_config_t *cfg, const sim_co_config_t *co, sim_a
     sp->n = arm->n;
     sp->t0 = mono_ns();
     sp->timed = cfg->timing != SIM_TIMING_OFF;
+    sp->frame_sent_s = sp->sync_sent_s = sp->answered_s = -1.0;
     memcpy(sp->timing, cfg->timelines, sizeof(sp->timing));
     for (int j = sp->n; j < SIM_MAX_JOINTS; ++j) {
         const sim_co_preset_t *own = &co->node_preset[j];
@@ -475,6 +551,7 @@ co_sim_t *sim_co_begin(const sim_config_t *cfg, const sim_co_config_t *co, sim_a
             return NULL;
         }
         sim_co_node_set_stopping(&sp->node[j], &cfg->brake[j], arm->drive_inertia[j], cfg->quick_stop_decel);
+        if (cfg->brakes_released_at_start) sim_power_stage_release_brake(&sp->node[j].ps);
         sim_arm_set_brake(arm, j, sim_power_stage_brake_nm(&sp->node[j].ps));
         sim_servo_init(&sp->servo[j]);
         sim_rng_seed(&sp->noise[j], arm->unc.seed ^ (0x9E3779B97F4A7C15ull * ((uint64_t)j + 1u)));
@@ -493,6 +570,7 @@ int sim_co_service(co_sim_t *s)
     arm_can_frame_t f;
     unsigned bus = 0;
     while (!s->ended && arm_can_bus_set_recv(&s->set, &f, &bus, 0) == 1) {
+        s->frame_sent_s = arm_can_bus_set_sent_s(&s->set, bus);
         s->ended = on_frame(s, &f, bus, bus_now(s));
     }
     if (!s->ended) tick_all(s, bus_now(s));

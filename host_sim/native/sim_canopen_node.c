@@ -282,7 +282,9 @@ static void boot(sim_co_node_t *n, int64_t now_ns, int comm_only)
     sim_co_od_set(&n->od, 0x1018u, 4u, n->id);
     if (!comm_only) {
         apply_presets(n);
-        sim_power_stage_power_lost(&n->ps, &n->power); /* a reset: the power stage off, the brake closing */
+        if (sim_power_stage_energised(&n->ps)) { /* a reset of a running drive: the power stage off, the brake closing */
+            sim_power_stage_power_lost(&n->ps, &n->power);
+        }
         n->power = SIM_PS_SWITCH_ON_DISABLED; /* not ready to switch on passes at once: no self-test */
         n->prev_cw = 0u;
     }

@@ -892,6 +892,7 @@ sim_t *sim_begin(const sim_config_t *cfg, sim_arm_t *arm, sim_telemetry_t *tel, 
         }
         sim_drive_init(&s.drives[j], (uint8_t)(j + 1), arm->torque_limit[j], cfg->command_timeout_periods);
         sim_drive_set_stopping(&s.drives[j], &cfg->brake[j], arm->drive_inertia[j], cfg->quick_stop_decel);
+        if (cfg->brakes_released_at_start) sim_power_stage_release_brake(&s.drives[j].ps);
         sim_arm_set_brake(arm, j, sim_power_stage_brake_nm(&s.drives[j].ps));
         sim_servo_init(&s.servo[j]);
         /* not the uncertainty's stream, and one per drive */

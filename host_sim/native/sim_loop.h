@@ -51,6 +51,7 @@ typedef struct {
      * a drive's ramp where it has no 0x6084/0x6085 (the arm protocol's drives always), and how long
      * the arm is simulated on after the controller stopped the drives or fell silent (--post-stop). */
     sim_brake_config_t brake[SIM_MAX_JOINTS];
+    int brakes_released_at_start; /* --brakes-at-start released */
     double quick_stop_decel;
     double post_stop_s;
 } sim_config_t;
@@ -66,6 +67,7 @@ static inline int sim_answers_late(const sim_config_t *cfg, uint64_t period)
 #define SIM_FLAG_AFTER_STOP (1 << 16)
 
 #define SIM_COST_BINS 5000u /* per-period CPU cost histogram, 1 us bins */
+#define SIM_ANSWER_LAST 1536u /* the last periods whose answer times the summary keeps: a stop's and those before it */
 
 typedef struct {
     char result[32]; /* "ok", "controller-lost", "bus-error", "interrupted" */
@@ -107,6 +109,14 @@ typedef struct {
     double post_stop_moved_rad[SIM_MAX_JOINTS];
     uint16_t post_stop_statusword[SIM_MAX_JOINTS];
     uint32_t post_stop_braked_mask; /* bit j: joint j's brake engaged at the end */
+    /* How fast the drives answered each SYNC (where the bus says when the master sent it: UDP): the
+     * simulator's reading of the SYNC and its answers' leaving, after the SYNC was sent, us
+     * (histograms of 1 us bins, the last bin: more), and the last periods' of them. */
+    uint64_t read_hist[SIM_COST_BINS + 1u], answer_hist[SIM_COST_BINS + 1u];
+    uint64_t answer_n;
+    double read_max_us, answer_max_us;
+    int64_t answer_last[SIM_ANSWER_LAST][3]; /* bus period, read us, answered us */
+    unsigned answer_last_n;
 } sim_report_t;
 
 /* Set from a signal handler: the loop stops at its next frame or within 100 ms. */

@@ -21,6 +21,11 @@ void sim_power_stage_init(sim_power_stage_t *ps, const sim_brake_config_t *brake
     ps->mode = SIM_STAGE_OFF;
 }
 
+void sim_power_stage_release_brake(sim_power_stage_t *ps)
+{
+    ps->brake_state = SIM_BRAKE_RELEASED;
+}
+
 static int energised_state(sim_power_t p)
 {
     return p == SIM_PS_OPERATION_ENABLED || p == SIM_PS_QUICK_STOP_ACTIVE || p == SIM_PS_FAULT_REACTION;

@@ -91,6 +91,8 @@ typedef struct {
 /* joint_inertia: kg m^2 at the joint (sim_arm_t.drive_inertia). The brake starts engaged. */
 void sim_power_stage_init(sim_power_stage_t *ps, const sim_brake_config_t *brake, double torque_limit,
                           double joint_inertia);
+/* The brake open from the start (the arm held by its drive as the run begins). */
+void sim_power_stage_release_brake(sim_power_stage_t *ps);
 /* The CiA 402 state machine moved the drive from *power to next (sim_cia402_next; a quick stop
  * entered with option qs_option and decelerations slow_down/quick, rad/s^2 at the joint; a ramp
  * starts from the velocity of the next period): the power stage follows, and *power becomes what

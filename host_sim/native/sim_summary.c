@@ -19,6 +19,18 @@ static double cost_percentile(const sim_report_t *r, double p)
     return (double)r->cost_max_ns * 1e-3;
 }
 
+/* The p-th percentile of a 1-us histogram of n values (the last bin: max). */
+static double hist_percentile(const uint64_t *hist, uint64_t n, double p, double max)
+{
+    const double want = p / 100.0 * (double)n;
+    uint64_t seen = 0;
+    for (unsigned b = 0; b <= SIM_COST_BINS; ++b) {
+        seen += hist[b];
+        if ((double)seen >= want) return b < SIM_COST_BINS ? (double)(b + 1u) : max;
+    }
+    return max;
+}
+
 int sim_write_summary(const char *path, const sim_options_t *o, const sim_arm_t *arm, const sim_report_t *r,
                          const sim_telemetry_t *tel, int locked, char *err, unsigned long errcap)
 {
@@ -109,6 +121,21 @@ int sim_write_summary(const char *path, const sim_options_t *o, const sim_arm_t 
                 "\"telemetry\": %.3f, \"total\": %.3f},\n",
                 (double)r->prof_physics_ns * per, (double)r->prof_bus_tx_ns * per, (double)r->prof_bus_rx_ns * per,
                 (double)r->prof_telemetry_ns * per, r->cost_n ? (double)r->cost_sum_ns * 1e-3 / (double)r->cost_n : 0.0);
+    }
+    if (r->answer_n > 0u) {
+        fprintf(f, "  \"answer_timing\": {\"n\": %llu, \"read_p99_us\": %.0f, \"read_max_us\": %.0f, "
+                   "\"answer_p50_us\": %.0f, \"answer_p99_us\": %.0f, \"answer_max_us\": %.0f, \"last\": [",
+                (unsigned long long)r->answer_n, hist_percentile(r->read_hist, r->answer_n, 99.0, r->read_max_us),
+                r->read_max_us, hist_percentile(r->answer_hist, r->answer_n, 50.0, r->answer_max_us),
+                hist_percentile(r->answer_hist, r->answer_n, 99.0, r->answer_max_us), r->answer_max_us);
+        const unsigned kept = r->answer_last_n < SIM_ANSWER_LAST ? r->answer_last_n : SIM_ANSWER_LAST;
+        for (unsigned i = 0; i < kept; ++i) {
+            const int64_t *row = r->answer_last[(r->answer_last_n - kept + i) % SIM_ANSWER_LAST];
+            fprintf(f, "%s[%lld, %lld, %lld]", i ? ", " : "", (long long)row[0], (long long)row[1], (long long)row[2]);
+        }
+        fprintf(f, "]},\n");
+    } else {
+        fprintf(f, "  \"answer_timing\": null,\n");
     }
     fprintf(f, "  \"post_stop\": {\"configured_s\": %.6g, \"why\": ", o->cfg.post_stop_s);
     json_string(f, r->post_stop_why);

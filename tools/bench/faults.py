@@ -257,7 +257,7 @@ def run_fault(f: Fault, out: Path, pose: list[float]) -> dict[str, Any]:
             # held at the most loaded pose the whole run: a zero reference (the default frequencies)
             zeros = ",".join("0" for _ in pose)
             run = run_hil(HilOptions(out=out, duration_s=8.0, method="pm", can_port=slot.can_port, protocol="arm",
-                                     lcm_port=slot.lcm_port, mode=f.mode, brakes=True,
+                                     lcm_port=slot.lcm_port, mode=f.mode,
                                      sim_args=("--start-pose", ",".join(f"{x:.9g}" for x in pose), *f.sim_args),
                                      controller_args=("--ref-amp", zeros, "--ref-freq", ",".join("0.2" for _ in pose))))
         finally:

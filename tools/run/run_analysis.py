@@ -406,6 +406,22 @@ def stop_record(controller: dict[str, Any], sim: dict[str, Any], stop_from: int 
             **motion}
 
 
+def lateness_record(controller: dict[str, Any], sim: dict[str, Any], stop_from: int | None) -> dict[str, Any]:
+    """Which side was late, from both ends (wall-clock facts: environment, not results): the
+    controller's count of the periods that missed their states by side and its account of a stop for
+    lateness (firmware/port/linux/lateness.c), and the simulator's own times for each SYNC it
+    answered, those of the periods before the stop beside them."""
+    late = controller.get("lateness") or {}
+    answers = sim.get("answer_timing") or {}
+    near = [{"period": p, "read_us": r, "answered_us": a} for p, r, a in answers.get("last", [])
+            if stop_from is not None and stop_from - 8 <= p < stop_from]
+    return {"late_periods": late.get("late_periods"), "worst_us": late.get("worst_us"),
+            "stop_side": late.get("stop_side"), "stop": late.get("stop") or None,
+            "simulator": {k: answers.get(k) for k in ("n", "read_p99_us", "read_max_us", "answer_p50_us",
+                                                      "answer_p99_us", "answer_max_us")} if answers else None,
+            "simulator_before_stop": near}
+
+
 def final_state(scan: LogScan, controller: dict[str, Any]) -> str:
     if controller.get("final_state"):
         return str(controller["final_state"])
@@ -460,6 +476,7 @@ def analyse(out_dir: Path, controller: dict[str, Any], sim: dict[str, Any], conf
         "telemetry_gaps_total": int(sum(v["sequence_gaps"] for v in tele.values())) if tele else None,
         "telemetry_foreign": foreign_telemetry(tele),
     }
+    environment = {**environment, "lateness": lateness_record(controller, sim, stop_from)}
     verdict, reasons = judge(results, transport, controller, sim, environment.get("exit_codes", {}), bounds)
     results["result"] = verdict
     results["verdict_reasons"] = reasons

@@ -13,6 +13,7 @@
 #include "arm_drives.h"
 #include "arm/reference.h"
 #include "canopen_text.h"
+#include "lateness.h"
 #include "loop_port.h"
 
 #define ALL_JOINTS ((uint32_t)((1ull << ARM_N_JOINTS) - 1u))
@@ -43,7 +44,11 @@ typedef struct {
      * extra TPDO then clears it, and is taken for a second node one period later. */
     uint32_t tpdo1_late, tpdo2_late;
     int draining; /* reading what came before this period's SYNC: every TPDO then is late */
+    double rx_sent_s; /* the frame being handled: when its sender sent it (-1: the transport does not say) */
+    double sync_clock_s; /* the transport's clock as this period's SYNC went out (-1: it has none) */
     int64_t next_heartbeat_ns;
+    lateness_t late;  /* each period's timing: which side was late when states missed the wait */
+    int late_on;      /* tracking or stopping: the periods the lateness counts */
     /* TPDO2 every tpdo2_every-th SYNC (its transmission type); the joints whose TPDO2 has come */
     uint32_t tpdo2_every;
     uint32_t period;
@@ -55,6 +60,13 @@ typedef struct {
 #define CANOPEN_HEARTBEAT_MS 100u
 #endif
 
+/* A frame its sender sent before this period's SYNC went out (the transport says when: UDP) cannot
+ * answer it, however long it took to arrive: a late answer, whatever came before it. */
+static int sent_before_sync(const link_t *l)
+{
+    return l->rx_sent_s >= 0.0 && l->sync_clock_s >= 0.0 && l->rx_sent_s < l->sync_clock_s;
+}
+
 /* Whether joint j's TPDO (of the kind `seen` records this period) is this period's answer. One read
  * before this period's SYNC is late: counted as such, not used. A second one this period is
  * either the real answer after a late one (the joint's last answer was missing: the late one is
@@ -63,7 +75,7 @@ static int tpdo_is_this_periods(link_t *l, uint32_t *seen, uint32_t *may_be_late
 {
     arm_drive_bus_t *d = &l->drives;
     const uint32_t bit = 1u << j;
-    if (l->draining) {
+    if (l->draining || sent_before_sync(l)) {
         d->rx.wrong_counter++;
         return 0;
     }
@@ -93,6 +105,7 @@ static int canopen_rx(link_t *l, const arm_can_frame_t *f)
     int16_t tq;
     uint16_t sw;
     if (arm_co_unpack_tpdo1((uint8_t)node, f, &pos, &vel) == 0) {
+        if (l->late_on) lateness_state(&l->late, now_ns(), l->rx_sent_s, l->draining ? 1u : sent_before_sync(l) ? 2u : 0u);
         if (!tpdo_is_this_periods(l, &l->tpdo1_mask, &l->tpdo1_late, j)) return 1;
         d->q[j] = arm_co_increments_to_rad(&l->units[j], pos);
         d->qd[j] = arm_co_increments_to_rad(&l->units[j], vel);
@@ -160,8 +173,14 @@ static void dispatch(link_t *l, const arm_can_frame_t *f, unsigned bus)
         l->report->rx_wrong_bus++; /* drive j is not on this bus: not its frame */
         return;
     }
+    l->rx_sent_s = arm_can_bus_set_sent_s(&l->buses, bus);
     if (!l->canopen || !canopen_rx(l, f)) {
-        (void)arm_bus_handle_rx(&l->drives, f); /* heartbeats and EMCY: the same in both */
+        const arm_rx_kind_t kind = arm_bus_handle_rx(&l->drives, f); /* heartbeats and EMCY: the same in both */
+        if (l->late_on && (kind == ARM_RX_STATE || kind == ARM_RX_WRONG_COUNTER)) {
+            /* a state of another period: before this period's SYNC, the last period's answer; after it, the one before */
+            const unsigned back = kind == ARM_RX_STATE ? 0u : l->draining ? 1u : 2u;
+            lateness_state(&l->late, now_ns(), l->rx_sent_s, back);
+        }
     }
 }
 
@@ -454,6 +473,7 @@ typedef struct {
     int64_t period_ns;
     uint32_t k_run;        /* tracking periods done */
     uint32_t k_published;  /* periods in telemetry: the tracking ones, then the stop's */
+    int states_missing;    /* lockstep: a period's states did not come within the wait (supervise) */
 } loop_t;
 
 /* Periods on the clock: realtime, and lockstep too where the port paces it (the MCU's SysTick-driven
@@ -529,6 +549,7 @@ static void supervise(link_t *l, loop_t *p)
     switch (f.condition) {
     case ARM_BUS_WELL: return;
     case ARM_BUS_STATES_MISSING:
+        p->states_missing = 1;
         list_joints(ALL_JOINTS & ~fresh, missing, sizeof(missing));
         snprintf(reason, cap, "period %u: no joint state from drive(s) %s within %.3f s (simulator stopped?)",
                  p->k_run, missing, p->opt->lockstep_timeout_s);
@@ -641,7 +662,8 @@ static void start_period(link_t *l, uint32_t k, int64_t now)
         sync.len = 0u; /* CiA 301 SYNC without a counter (0x1019 = 0) */
         const int tpdo2_was_due = k > 0u && k % l->tpdo2_every == 0u;
         l->tpdo1_late = k > 0u ? (ALL_JOINTS & ~l->tpdo1_mask) | l->tpdo1_late : 0u;
-        l->tpdo2_late = tpdo2_was_due ? (ALL_JOINTS & ~l->tpdo2_mask) | l->tpdo2_late : 0u;
+        /* a TPDO2 late for its period may come a period after that one too (a non-due one between) */
+        l->tpdo2_late = tpdo2_was_due ? (ALL_JOINTS & ~l->tpdo2_mask) | l->tpdo2_late : k > 0u ? l->tpdo2_late : 0u;
         l->tpdo1_mask = l->tpdo2_mask = 0u;
         l->period = k;
         if (now >= l->next_heartbeat_ns) { /* the drives consume it (0x1016.1) */
@@ -651,8 +673,26 @@ static void start_period(link_t *l, uint32_t k, int64_t now)
         }
     }
     drain(l);
+    l->sync_clock_s = arm_can_bus_clock_s();
     send_all(l, &sync);
     l->report->bus_periods = k + 1u;
+}
+
+/* The frames the kernel dropped on a full receive queue, on every bus so far. */
+static uint64_t rx_dropped(const link_t *l)
+{
+    uint64_t n = 0u;
+    for (unsigned b = 0; b < l->buses.n; ++b) n += arm_can_bus_rx_kernel_drops(&l->buses.bus[b]);
+    return n;
+}
+
+/* The period's SYNC is out (start_period): its timing begins, waiting for the states until wait_until. */
+static void begin_timing(link_t *l, uint32_t k, int64_t wake_latency, int64_t wait_until)
+{
+    const int64_t t = now_ns();
+    l->late_on = 1;
+    lateness_begin(&l->late, k, wake_latency, t, l->sync_clock_s, wait_until - t, l->report->tx_would_block,
+                   rx_dropped(l));
 }
 
 /* The bus's time at the start of period k (start_period). */
@@ -700,8 +740,10 @@ static uint32_t stop_period(link_t *l, loop_t *p, uint32_t k, uint16_t cw, int w
     const int64_t wait_until = !wait ? cycle_start
                                : opt->mode == MODE_REALTIME ? p->next_deadline + p->period_ns * 8 / 10
                                                             : cycle_start + (int64_t)(opt->lockstep_timeout_s * 1e9);
+    begin_timing(l, k, wake_latency, wait_until);
     pump(l, wait_until, states_done);
     const uint32_t fresh = l->drives.fresh_mask & ALL_JOINTS;
+    lateness_missing(&l->late, ALL_JOINTS & ~fresh);
     memcpy(p->in.q, l->drives.q, sizeof(p->in.q));
     memcpy(p->in.qd, l->drives.qd, sizeof(p->in.qd));
     p->in.fresh_mask = fresh;
@@ -712,6 +754,22 @@ static uint32_t stop_period(link_t *l, loop_t *p, uint32_t k, uint16_t cw, int w
     send_commands(l, &p->out, cw);
     publish_period(p, k, wake_latency, compute, now_ns() - cycle_start);
     return fresh;
+}
+
+/* A stop for lateness (the watchdog, a lockstep wait that ran out) says which side was late and by
+ * how much, from the periods that led to it: in its reason, in ARM_EVENT and in the summary. */
+static void explain_late_stop(link_t *l, loop_t *p)
+{
+    run_report_t *r = p->report;
+    const int watchdog = p->out.fault == ARM_FAULT_STALE_INPUT || r->final_fault == ARM_FAULT_STALE_INPUT;
+    if (!watchdog && !p->states_missing) return;
+    const uint32_t periods = p->states_missing ? 1u : p->ctl.cfg.watchdog_periods + 1u;
+    char text[300];
+    r->late_side = lateness_explain(&l->late, 1u, periods, r->tx_would_block, rx_dropped(l), text, sizeof(text));
+    snprintf(r->late_text, sizeof(r->late_text), "%s", text);
+    const size_t len = strlen(r->reason);
+    snprintf(r->reason + len, sizeof(r->reason) - len, "; %s", text);
+    telemetry_event(p->telem, p->k_published, "fault", text);
 }
 
 /* The one way this controller stops the arm, whatever asked (a fault, a stop signal, the end of the
@@ -740,6 +798,7 @@ static uint32_t controlled_stop(link_t *l, loop_t *p, uint32_t k, run_stop_cause
         periods++;
         silent = fresh == 0u ? silent + 1u : 0u;
         if (fresh != ALL_JOINTS && opt->mode == MODE_LOCKSTEP) wait = 0; /* the plant fell silent: no more waits */
+        if (periods == 1u) explain_late_stop(l, p); /* what came late for the stop's periods has been read */
     }
     st->quick_stop_periods = periods;
     st->stopped_mask = stopped_drives(l);
@@ -854,7 +913,9 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
         const int64_t wait_until = opt->mode == MODE_REALTIME
                                        ? p.next_deadline + p.period_ns * 8 / 10
                                        : cycle_start + (int64_t)(opt->lockstep_timeout_s * 1e9);
+        if (!enabling) begin_timing(&l, k, wake_latency, wait_until);
         pump(&l, wait_until, states_done);
+        if (l.late_on) lateness_missing(&l.late, ALL_JOINTS & ~l.drives.fresh_mask);
         if (enabling) {
             const int e = enable(&l, &p, k, l.drives.fresh_mask & ALL_JOINTS);
             if (e < 0) break;
@@ -874,8 +935,13 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
     }
     const arm_state_t tracked = p.out.state;
     const arm_fault_t fault = p.out.fault;
+    report->final_fault = fault;
     if (!enabling) {
         k = controlled_stop(&l, &p, k, cause);
+    }
+    for (unsigned s = 0; s < LATE_SIDES; ++s) {
+        report->late_count[s] = l.late.count[s];
+        report->late_worst_us[s] = l.late.worst_us[s];
     }
 
     /* Stop the drives (NMT): they are braked and disabled by now, or their own reaction takes over. */

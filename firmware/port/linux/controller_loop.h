@@ -74,6 +74,12 @@ typedef struct {
     float co_q_first[ARM_N_JOINTS];              /* each joint's first position decoded with them, rad */
     unsigned co_q_seen;                          /* bit j: joint j's first position came */
     run_stop_t stop;
+    /* Periods whose states missed the wait, by the side that was late (lateness.h: none, the plant,
+     * the controller, the bus), the worst of each (us); a stop for lateness: its side and why. */
+    uint32_t late_count[4];
+    int32_t late_worst_us[4];
+    int late_side;
+    char late_text[300];
 } run_report_t;
 
 void controller_run(const options_t *opt, const arm_robot_model_t *model, telemetry_t *telem,
