@@ -100,7 +100,8 @@ int arm_can_bus_recv(arm_can_bus_t *bus, arm_can_frame_t *f, int timeout_us)
 
 double arm_can_bus_set_sent_s(const arm_can_bus_set_t *set, unsigned index)
 {
-    return index < set->n ? set->bus[index].rx_sent_s : -1.0;
+    /* only UDP frames carry it (the in-process bus's set reads past arm_can_bus_recv) */
+    return index < set->n && set->bus[index].kind == ARM_BUS_UDP ? set->bus[index].rx_sent_s : -1.0;
 }
 
 double arm_can_bus_clock_s(void)
