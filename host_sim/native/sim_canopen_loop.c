@@ -1,6 +1,8 @@
 #define _GNU_SOURCE
 #include "sim_canopen_loop.h"
 
+#include "sim_after_stop.h"
+
 #include <errno.h>
 #include <math.h>
 #include <stdio.h>
@@ -583,36 +585,22 @@ int sim_co_service(co_sim_t *s)
  * by a signal). Its truth goes on in ARM_SIM (SIM_FLAG_AFTER_STOP); the run's own counts stop. */
 static void post_stop(co_sim_t *s, const char *why)
 {
-    sim_report_t *rep = s->rep;
-    const double *q = s->arm->data->qpos;
     double q0[SIM_MAX_JOINTS];
-    memcpy(q0, q, (size_t)s->n * sizeof(double));
-    snprintf(rep->post_stop_why, sizeof(rep->post_stop_why), "%s", why);
-    rep->post_stop_from_step = s->arm->step_count;
-    rep->post_stop_mujoco_s = s->arm->data->time;
+    const uint64_t periods = sim_after_stop_begin(s->rep, s->cfg, s->arm, s->tel, why, q0);
     s->after_stop = 1;
     s->holding_answers = 0;
     if (s->power_lost) {
         for (int j = 0; j < s->n; ++j) sim_co_node_power_lost(&s->node[j]);
     }
-    char text[300];
-    snprintf(text, sizeof(text), "after the stop (%s): the arm runs on for %g s", why, s->cfg->post_stop_s);
-    sim_telemetry_event(s->tel, s->arm->step_count, "sim", "info", text);
-    const uint64_t periods = (uint64_t)(s->cfg->post_stop_s / s->arm->period + 0.5);
     for (uint64_t k = 0; k < periods; ++k) {
         tick_all(s, bus_now(s)); /* the drives' own timers: the master's heartbeat they watch */
         const int bad = step_arm(s);
-        rep->post_stop_periods++;
-        for (int j = 0; j < s->n; ++j) {
-            const double moved = fabs(q[j] - q0[j]);
-            if (moved > rep->post_stop_moved_rad[j]) rep->post_stop_moved_rad[j] = moved;
-        }
+        sim_after_stop_period(s->rep, s->arm, q0);
         if (bad != 0) break;
     }
     tick_all(s, bus_now(s));
     for (int j = 0; j < s->n; ++j) {
-        rep->post_stop_statusword[j] = (uint16_t)s->node[j].power;
-        if (sim_power_stage_brake_nm(&s->node[j].ps) > 0.0) rep->post_stop_braked_mask |= 1u << j;
+        sim_after_stop_drive(s->rep, j, (uint16_t)s->node[j].power, sim_power_stage_brake_nm(&s->node[j].ps) > 0.0);
     }
 }
 

@@ -7,6 +7,7 @@
 #include <time.h>
 
 #include "arm_drives.h"
+#include "sim_after_stop.h"
 #include "sim_drive.h"
 #include "sim_frames.h"
 
@@ -679,38 +680,24 @@ static void fault_lost_drives(sim_t *s)
  * by a signal). Its truth goes on in ARM_SIM (SIM_FLAG_AFTER_STOP); the run's own counts stop. */
 static void post_stop(sim_t *s, const char *why)
 {
-    sim_report_t *rep = s->rep;
     if (s->counter >= 0) finish_period(s); /* the period under way: its missing commands count */
     publish_truth(s);
-    const double *q = s->arm->data->qpos;
     double q0[SIM_MAX_JOINTS];
-    memcpy(q0, q, (size_t)s->n * sizeof(double));
-    snprintf(rep->post_stop_why, sizeof(rep->post_stop_why), "%s", why);
-    rep->post_stop_from_step = s->arm->step_count;
-    rep->post_stop_mujoco_s = s->arm->data->time;
+    const uint64_t periods = sim_after_stop_begin(s->rep, s->cfg, s->arm, s->tel, why, q0);
     s->after_stop = 1;
     if (s->power_lost) {
         for (int j = 0; j < s->n; ++j) sim_power_stage_power_lost(&s->drives[j].ps, &s->drives[j].power);
     }
-    const uint64_t periods = (uint64_t)(s->cfg->post_stop_s / s->arm->period + 0.5);
-    char text[300];
-    snprintf(text, sizeof(text), "after the stop (%s): the arm runs on for %g s", why, s->cfg->post_stop_s);
-    event(s, "sim", "info", text);
     uint64_t missed[SIM_MAX_JOINTS]; /* the run's count: what the drives miss after it is not the controller's */
     for (int j = 0; j < s->n; ++j) missed[j] = s->drives[j].commands_missed;
-    for (uint64_t k = 0; k < periods && strcmp(rep->result, "diverged") != 0; ++k) {
+    for (uint64_t k = 0; k < periods && strcmp(s->rep->result, "diverged") != 0; ++k) {
         s->got_cmd = 0u;
         finish_period(s);
-        rep->post_stop_periods++;
-        for (int j = 0; j < s->n; ++j) {
-            const double moved = q[j] - q0[j] < 0.0 ? q0[j] - q[j] : q[j] - q0[j];
-            if (moved > rep->post_stop_moved_rad[j]) rep->post_stop_moved_rad[j] = moved;
-        }
+        sim_after_stop_period(s->rep, s->arm, q0);
     }
     for (int j = 0; j < s->n; ++j) {
         s->drives[j].commands_missed = missed[j];
-        rep->post_stop_statusword[j] = (uint16_t)s->drives[j].power;
-        if (sim_power_stage_brake_nm(&s->drives[j].ps) > 0.0) rep->post_stop_braked_mask |= 1u << j;
+        sim_after_stop_drive(s->rep, j, (uint16_t)s->drives[j].power, sim_power_stage_brake_nm(&s->drives[j].ps) > 0.0);
     }
 }
 
