@@ -60,6 +60,17 @@ typedef struct {
 #define CANOPEN_HEARTBEAT_MS 100u
 #endif
 
+/* When the sender of the frame just read from `bus` sent it, if the transport says so and the time
+ * is the sender's clock at all: a python-can node that leaves its messages' timestamps at 0, or keeps
+ * one Message to send again, says nothing of it (-1). */
+static double sender_time(const arm_can_bus_set_t *buses, unsigned bus)
+{
+    const double sent = arm_can_bus_set_sent_s(buses, bus);
+    if (sent < 0.0) return -1.0;
+    const double age = arm_can_bus_clock_s() - sent;
+    return age >= -0.001 && age <= 0.5 ? sent : -1.0;
+}
+
 /* A frame its sender sent before this period's SYNC went out (the transport says when: UDP) cannot
  * answer it, however long it took to arrive: a late answer, whatever came before it. */
 static int sent_before_sync(const link_t *l)
@@ -173,7 +184,7 @@ static void dispatch(link_t *l, const arm_can_frame_t *f, unsigned bus)
         l->report->rx_wrong_bus++; /* drive j is not on this bus: not its frame */
         return;
     }
-    l->rx_sent_s = arm_can_bus_set_sent_s(&l->buses, bus);
+    l->rx_sent_s = sender_time(&l->buses, bus);
     if (!l->canopen || !canopen_rx(l, f)) {
         const arm_rx_kind_t kind = arm_bus_handle_rx(&l->drives, f); /* heartbeats and EMCY: the same in both */
         if (l->late_on && (kind == ARM_RX_STATE || kind == ARM_RX_WRONG_COUNTER)) {
