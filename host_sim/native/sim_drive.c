@@ -39,8 +39,9 @@ sim_power_t sim_cia402_next(sim_power_t state, uint16_t cw, uint16_t prev_cw, in
     if ((cw & 0x0082u) == 0x0000u) { /* disable voltage (transitions 7, 9, 10, 12) */
         return SIM_PS_SWITCH_ON_DISABLED;
     }
-    if (state == SIM_PS_QUICK_STOP_ACTIVE) { /* left by disable voltage, above, or enable operation (16) */
-        return (cw & 0x008Fu) == 0x000Fu ? SIM_PS_OPERATION_ENABLED : state;
+    if (state == SIM_PS_QUICK_STOP_ACTIVE) { /* left by disable voltage, above, or, with 0x605A 5-8, enable operation (16) */
+        const int back = (cw & 0x008Fu) == 0x000Fu && quick_stop_option >= 5 && quick_stop_option <= 8;
+        return back ? SIM_PS_OPERATION_ENABLED : state;
     }
     if ((cw & 0x0086u) == 0x0002u) { /* quick stop (7, 10, 11): from operation enabled a ramp, unless option 0 */
         const int ramps = state == SIM_PS_OPERATION_ENABLED && quick_stop_option >= 1 && quick_stop_option <= 8;

@@ -49,6 +49,7 @@ static void quick_stop_ends_as_the_option_code_says(void)
     CHECK(q == SIM_PS_QUICK_STOP_ACTIVE && ((unsigned)q & 0x006Fu) == 0x0007u);
     CHECK(sim_cia402_next(q, 0x06, 0x02, 6) == q && sim_cia402_next(q, 0x07, 0x02, 6) == q);
     CHECK(sim_cia402_next(q, 0x0F, 0x02, 6) == SIM_PS_OPERATION_ENABLED);
+    CHECK(sim_cia402_next(q, 0x0F, 0x02, 2) == q); /* 1-4: it ends in switch on disabled, no way back */
     CHECK(sim_cia402_next(q, 0x00, 0x02, 6) == SIM_PS_SWITCH_ON_DISABLED);
     CHECK(sim_cia402_next(SIM_PS_SWITCHED_ON, 0x02, 0x07, 6) == SIM_PS_SWITCH_ON_DISABLED);
 }
@@ -154,10 +155,9 @@ static void the_brake_opens_and_closes_with_its_delays(void)
     CHECK(d.power == SIM_PS_READY_TO_SWITCH_ON && sim_power_stage_brake_nm(&d.ps) == 150.0 && period(&d, 0.0) == 0.0);
 }
 
-/* A quick stop ramps the joint's velocity to zero at the drive's deceleration, then brakes and
- * disables; a fault reaction does the same and ends in fault; a lost supply drops the torque at
- * once and the spring-applied brake closes after its delay. */
-static void quick_stop_fault_reaction_and_power_loss(void)
+/* An enabled drive of 150 N m with a brake (150 N m, 50 ms to close, at once to open), a 2 kg m^2
+ * joint and 10 rad/s^2 of quick stop, told 20 N m. */
+static sim_drive_t braked_drive(void)
 {
     const sim_brake_config_t brake = {150.0, 0.050, 0.0};
     sim_drive_t d;
@@ -166,6 +166,15 @@ static void quick_stop_fault_reaction_and_power_loss(void)
     sim_drive_on_nmt(&d, SIM_NMT_START);
     sim_drive_on_command(&d, 0x06, 0.0);
     sim_drive_on_command(&d, 0x0F, 20.0);
+    return d;
+}
+
+/* A quick stop ramps the joint's velocity to zero at the drive's deceleration, then brakes and
+ * disables; a fault reaction does the same and ends in fault; a lost supply drops the torque at
+ * once and the spring-applied brake closes after its delay. */
+static void quick_stop_fault_reaction_and_power_loss(void)
+{
+    sim_drive_t d = braked_drive();
     period(&d, 0.5);
     period(&d, 0.5);
     sim_drive_on_command(&d, 0x02, 20.0); /* quick stop, moving at 0.5 rad/s */
@@ -186,22 +195,14 @@ static void quick_stop_fault_reaction_and_power_loss(void)
     for (k = 0; k < 50; ++k) period(&d, 0.0);
     CHECK(d.power == SIM_PS_SWITCH_ON_DISABLED && sim_power_stage_brake_nm(&d.ps) == 150.0);
 
-    sim_drive_init(&d, 1, 150.0, 3);
-    sim_drive_set_stopping(&d, &brake, 2.0, 10.0);
-    sim_drive_on_nmt(&d, SIM_NMT_START);
-    sim_drive_on_command(&d, 0x06, 0.0);
-    sim_drive_on_command(&d, 0x0F, 20.0);
+    d = braked_drive();
     period(&d, 0.0);
     sim_drive_fault(&d, SIM_ERR_COMMAND_TIMEOUT, SIM_EMCY_RPDO_TIMEOUT);
     CHECK(d.power == SIM_PS_FAULT_REACTION && fabs(period(&d, 0.0) - 20.0) < 1e-9);
     for (k = 0; k < 100; ++k) period(&d, 0.0);
     CHECK(d.power == SIM_PS_FAULT && sim_power_stage_brake_nm(&d.ps) == 150.0 && period(&d, 0.0) == 0.0);
 
-    sim_drive_init(&d, 1, 150.0, 3);
-    sim_drive_set_stopping(&d, &brake, 2.0, 10.0);
-    sim_drive_on_nmt(&d, SIM_NMT_START);
-    sim_drive_on_command(&d, 0x06, 0.0);
-    sim_drive_on_command(&d, 0x0F, 20.0);
+    d = braked_drive();
     period(&d, 0.0);
     sim_power_stage_power_lost(&d.ps, &d.power);
     for (k = 0; k < 49; ++k) CHECK(period(&d, 0.0) == 0.0 && sim_power_stage_brake_nm(&d.ps) == 0.0);
