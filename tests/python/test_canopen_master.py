@@ -79,7 +79,7 @@ def test_boot_brings_every_node_to_operation_enabled(boot_bin: Path, udp_port: i
     cfg = gen_drives.load(_arm())
     args = cfg.boot_args("can0")
     # the bundled table: rated torque = the joint's torque limit, checked against the drive's own
-    assert "3,rated=28000,encoder=524288,gear=101/1,quick_stop=84277457" in args
+    assert "3,rated=28000,encoder=524288,gear=101/1,quick_stop=337109828" in args
     drives = [Cia402Drive(1), Cia402Drive(2), Cia402Drive(3, commissioned={(0x6076, 0): 28000})]
     out = tmp_path / "boot.json"
     p, _ = _run(boot_bin, udp_port, [*args, "--json", str(out)], drives, monkeypatch)
@@ -221,9 +221,9 @@ def test_gen_drives_boot_args_on_the_command_line(tmp_path: Path) -> None:
     p = subprocess.run([*run, "--boot-args", "can0"], capture_output=True, text=True, cwd=REPO)
     assert p.returncode == 0, p.stderr
     assert p.stdout.split() == ["--cycle-us", "1000", "--heartbeat-ms", "100", "--consumer-ms", "300", "--master-id",
-                                "127", "--node", "1,rated=150000,encoder=524288,gear=101/1,quick_stop=84277457",
-                                "--node", "2,rated=150000,encoder=524288,gear=101/1,quick_stop=84277457",
-                                "--node", "3,rated=28000,encoder=524288,gear=101/1,quick_stop=84277457"]
+                                "127", "--node", "1,rated=150000,encoder=524288,gear=101/1,quick_stop=337109828",
+                                "--node", "2,rated=150000,encoder=524288,gear=101/1,quick_stop=337109828",
+                                "--node", "3,rated=28000,encoder=524288,gear=101/1,quick_stop=337109828"]
     p = subprocess.run([*run, "--boot-args", "can7"], capture_output=True, text=True, cwd=REPO)
     assert p.returncode == 2 and "no drive is on bus 'can7'" in p.stderr
     table = json.loads(subprocess.run(run, capture_output=True, text=True, cwd=REPO).stdout)
@@ -501,10 +501,10 @@ def test_drive_config_brakes_and_quick_stop(tmp_path: Path) -> None:
     assert d1.brake == (150.0, 50.0, 80.0) and d2.brake == (300.0, 50.0, 80.0) and d3.brake == (28.0, 50.0, 80.0)
     assert d1.brake_spec() == "1:150:50:80" and d3.brake_spec() == "3:28:50:80"
     assert d2.node_spec().endswith(",quick_stop=84277457")
-    # the bundled table's: a brake on every joint, the deceleration of 10 rad/s^2 at the joint
+    # the bundled table's: a brake on every joint, the deceleration of 40 rad/s^2 at the joint
     bundled = gen_drives.load(_arm())
     assert all(d.brake is not None and d.brake[1:] == (50.0, 80.0) for d in bundled.drives)
-    assert all(d.quick_stop_deceleration == 84277457 for d in bundled.drives)
+    assert all(d.quick_stop_deceleration == 337109828 for d in bundled.drives)
 
 
 @pytest.mark.parametrize("body, message", [
