@@ -23,6 +23,7 @@ from typing import Any, Callable
 import numpy as np
 
 from gen.lib.atomic_output import write_bytes_atomic, write_json_atomic
+from gen.lib.one_line import one_line
 from tools.build.arm import prepared_model
 from tools.run.telemetry_log import read_log, truth_rows
 
@@ -272,7 +273,7 @@ def _font(size: int) -> Any:
 def _caption(mo: Motion, label: str, i: int) -> str:
     worst = int(np.argmax(np.abs(mo.e[i])))
     name = mo.joint_names[worst] if worst < len(mo.joint_names) else f"joint {worst + 1}"
-    return f"{label}: t {mo.t[i]:.3f} s, largest |e| {np.degrees(abs(mo.e[i, worst])):.3g} deg ({name})"
+    return f"{label}: t {mo.t[i]:.3f} s, largest |e| {np.degrees(abs(mo.e[i, worst])):.3g} deg ({one_line(name)})"
 
 
 def write_strip(run_dir: Path, out: Path | None = None, name: str = STRIP_FILE) -> dict[str, Any]:
@@ -295,7 +296,7 @@ def write_strip(run_dir: Path, out: Path | None = None, name: str = STRIP_FILE) 
     draw = ImageDraw.Draw(img)
     parts = run_dir.resolve().parts
     where = str(run_dir.resolve()) if len(parts) <= 4 else "/".join(parts[-3:])  # a study's SCENARIO/METHOD/seed-N
-    draw.text((6, 4), f"{where}: {mo.method}, {mo.result}. Solid blue: the arm as simulated (orange: its joint axes); "
+    draw.text((6, 4), f"{one_line(where)}: {mo.method}, {mo.result}. Solid blue: the arm as simulated (orange: its joint axes); "
                       "translucent green, beside it: the commanded reference. t from the run's start (the "
                       f"trajectory begins after a {mo.hold_s:g} s hold)", fill=(0, 0, 0), font=_font(13))
     boxes = []

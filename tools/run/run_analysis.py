@@ -15,6 +15,7 @@ import numpy as np
 
 from tools.run.telemetry_log import CHUNK_BYTES, EVENT_CHANNELS, FIXED_CHANNELS, Chunk, iter_chunks
 from tools.run.verdict import Bounds, judge
+from gen.lib.one_line import one_line
 from gen.lib.params import constant, default as param_default
 
 # The controller's states as telemetry numbers them (the registry's, firmware/params/params.toml).
@@ -401,12 +402,12 @@ def table(run: dict[str, Any]) -> str:
     for i, name in enumerate(names[: len(r.get("tracking_max_abs_deg", []))]):
         est = r.get("estimation_error_rms")
         est_s = f"{est[i]:>14.4f}" if est else f"{'-':>14}"
-        lines.append(f"{name:<14}{r['tracking_max_abs_deg'][i]:>15.4f}{r['tracking_rms_deg'][i]:>14.4f}{est_s}")
+        lines.append(f"{one_line(name):<14}{r['tracking_max_abs_deg'][i]:>15.4f}{r['tracking_rms_deg'][i]:>14.4f}{est_s}")
     # a run whose controller died has no final state nor step count: its result says so
     lines.append(f"result {r['result']}: method {r.get('method', '?')}, controller {r.get('final_state', 'unknown')} "
                  f"after {r.get('steps', '?')} of {r.get('steps_requested', '?')} periods")
     for why in r.get("verdict_reasons", []):
-        lines.append(f"  {why}")
+        lines.append(f"  {one_line(why)}")
     cf, sf = t["controller_frames"], t["simulator_frames"]
     lines.append(f"frames: controller sent {cf.get('tx', '?')} / received {cf.get('rx', '?')}, "
                  f"simulator sent {sf['frames_tx']} / received {sf['frames_rx']}")

@@ -364,7 +364,7 @@ def run_command(cfg: StudyConfig, arm: ArmRef, scenario: str, method: str, seed:
                 knobs: dict[str, Any] | None, bus: str, out: str) -> str:
     """The `armctl hil` command that runs one run of a study again on its own (the same run.json
     results: tests/python/test_study_rerun.py)."""
-    import shlex
+    from gen.lib.escape import shell_command
 
     parts = ["tools/armctl", "hil", "--bus", bus, "--config", _rel(cfg.path), "--scenario", scenario,
              "--method", method, "--seed", str(seed), "--duration", f"{duration:g}"]
@@ -374,7 +374,7 @@ def run_command(cfg: StudyConfig, arm: ArmRef, scenario: str, method: str, seed:
                    ("--design", arm.design)):
         if p is not None:
             parts += [opt, _rel(p)]
-    return " ".join(shlex.quote(x) for x in [*parts, "--out", out])
+    return shell_command([*parts, "--out", out])
 
 
 def _rel(p: Path) -> str:
