@@ -8,7 +8,7 @@ other way (tests/python/test_escape.py greps the generators for it):
 
 | target | function | rule |
 |---|---|---|
-| C string literal | `c_string` | printable ASCII as is, `"` `\\` and the first `?` of `??` escaped, every other byte (UTF-8) as an octal escape; a NUL or a literal over C11's 4095 characters is refused |
+| C string literal | `c_string` | printable ASCII as is, `"` `\\` and each `?` of `??` escaped, every other byte (UTF-8) as an octal escape; a NUL or a literal over C11's 4095 characters is refused |
 | C comment | `c_comment` | printable ASCII as is but a backslash and the first character of `*/`, `/*`, `??`; the rest `\\xNN`/`\\uNNNN`: nothing ends the comment or splices a line |
 | identifier (C, DBC signal, LCM channel) | `identifier`, `Identifiers` | letters, digits and `_`, other runs one `_`, never a C keyword, never a leading digit; longer than the target allows, empty, or two names on one identifier: refused |
 | DBC string (a comment) | `dbc_string` | printable ASCII but `"` `\\` `%`; the rest percent-encoded |
@@ -19,6 +19,7 @@ other way (tests/python/test_escape.py greps the generators for it):
 | Markdown text | `markdown_text` | one line; `&<~` as entities; `` \\ ` * _ [ ] | # `` backslash-escaped (not `_` inside a word); a leading block marker escaped |
 | Markdown code span / block | `markdown_code`, `markdown_fence` | a backtick fence longer than any run inside |
 | Markdown to HTML | `markdown_html` | python-markdown with raw HTML off: data cannot bring an element |
+| a folder or file name | `path_component`, `file_stem` | no `/`, `.`, `..` or NUL, at most 128 bytes; a stem: letters and digits, the rest `-` |
 | shell | `shell_word`, `shell_command` | `shlex.quote` of each argument |
 | Ninja depfile | `depfile_path` | space, `#`, `$` escaped; a line break refused |
 | CMake value (a path) | `cmake_value` | `;` (a list separator), a line break or NUL refused |
@@ -70,7 +71,7 @@ _C_NAMED = {'"': '\\"', "\\": "\\\\", "\n": "\\n", "\t": "\\t"}
 
 def c_string(text: str, what: str) -> str:
     """`text` as a C string literal, quotes included (UTF-8 bytes; octal escapes have at most three
-    digits, so no escape runs into the next character; the first `?` of `??` escaped: no trigraph)."""
+    digits, so no escape runs into the next character; each `?` of `??` escaped: no trigraph)."""
     if "\0" in text:
         raise EscapeError(f"{what}: {_shown(text)} holds a NUL character, which a C string cannot")
     data = text.encode("utf-8", "surrogatepass")
@@ -79,7 +80,7 @@ def c_string(text: str, what: str) -> str:
         ch = chr(b)
         if ch in _C_NAMED:
             out.append(_C_NAMED[ch])
-        elif ch == "?" and data[i + 1:i + 2] == b"?":
+        elif ch == "?" and b"?" in (data[i - 1:i] if i else b"", data[i + 1:i + 2]):
             out.append("\\?")
         elif 0x20 <= b < 0x7F:
             out.append(ch)
@@ -213,7 +214,10 @@ def markdown_text(text: str) -> str:
     s = "".join(out)
     m = _MD_BLOCK_START.match(s)
     if m:  # a list item's "-", "+", a setext "=", a quote's ">", a numbered item's "1." at the start of a line
-        s = (s[:m.end()] + "\\" + s[m.end():]) if m.group(0)[0].isdigit() else "\\" + s
+        if m.group(0)[0].isdigit():
+            s = s[:m.end()] + "\\" + s[m.end():]
+        else:  # "=" has no backslash escape in python-markdown: its character reference
+            s = ("&#61;" + s[1:]) if s[0] == "=" else "\\" + s
     return s
 
 
@@ -248,6 +252,27 @@ def markdown_html(text: str, extensions: Sequence[str] = ("tables", "fenced_code
     for name in ("html", "autolink", "automail"):
         md.inlinePatterns.deregister(name)
     return md.convert(text)
+
+
+# ---- file names ----------------------------------------------------------------------------
+PATH_COMPONENT_MAX = 128  # bytes of a name that names a folder and the files made from it (NAME_MAX is 255)
+
+
+def path_component(text: str, what: str, max_bytes: int = PATH_COMPONENT_MAX) -> str:
+    """A name that becomes one folder or file name as it is: no `/`, not `.` or `..`, no NUL, at
+    most max_bytes of UTF-8. Refused otherwise: it would name a place outside its folder, or none."""
+    if not text or text in (".", "..") or "/" in text or "\0" in text:
+        raise EscapeError(f"{what}: {_shown(text)} cannot name a folder (it is empty, . or .., or holds / or a NUL)")
+    if len(text.encode("utf-8", "surrogatepass")) > max_bytes:
+        raise EscapeError(f"{what}: {_shown(text)} is {len(text.encode('utf-8', 'surrogatepass'))} bytes, more than the "
+                          f"{max_bytes} a name that names folders and files may have")
+    return text
+
+
+def file_stem(text: str) -> str:
+    """A name made part of a file name: every character but a letter or digit a `-` (two names may
+    meet on one stem: a caller that names several files so checks them, see Identifiers)."""
+    return "".join(c if c.isalnum() else "-" for c in text)
 
 
 # ---- shell and build files --------------------------------------------------------------------

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from gen.lib.atomic_output import write_text_atomic
-from gen.lib.escape import markdown_code as code, markdown_fence, markdown_text as md, shell_command
+from gen.lib.escape import file_stem, markdown_code as code, markdown_fence, markdown_text as md, shell_command
 from gen.lib.one_line import one_line
 from tools.run.verdict import FOLLOWING_ERROR_STOP_DEG, left_tracking_bound, stopped_by_following_error
 from gen.lib.params import default
@@ -308,7 +308,7 @@ def _bandwidth_cell(sc: dict[str, Any], m: str, resonance: float | None) -> str:
 
 def fig_name(kind: str, scenario: str) -> str:
     """fig_KIND_SCENARIO.png, the scenario's name made a file name."""
-    return f"fig_{kind}_{''.join(c if c.isalnum() else '-' for c in scenario)}.png"
+    return f"fig_{kind}_{file_stem(scenario)}.png"
 
 
 def _shown(path: Path) -> str:
