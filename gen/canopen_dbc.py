@@ -69,8 +69,10 @@ def build(cfg: drives_mod.DriveConfig) -> Database:
                 if e is None:
                     raise DbcError(f"{cfg.eds}: PDO {pdo} maps 0x{index:04X}:{sub:02X}, which the EDS does not define")
                 scale, unit = _scaling(index, d)
-                try:  # the EDS's name made an identifier; the name itself kept beside it, as the comment
-                    ident = names.add(e.name, f"{cfg.eds}: 0x{index:04X}:{sub:02X} ParameterName")
+                try:  # the EDS's name made an identifier (its index where no letter is left); the name itself kept
+                    # beside it, as the comment
+                    ident = names.add(e.name, f"{cfg.eds}: 0x{index:04X}:{sub:02X} ParameterName",
+                                      fallback=f"object_{index:04x}_{sub:02x}")
                 except EscapeError as exc:
                     raise DbcError(str(exc)) from None
                 sigs.append(_sig(ident, start, bits, e.type.kind == "int", scale, unit,

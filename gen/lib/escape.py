@@ -10,7 +10,7 @@ other way (tests/python/test_escape.py greps the generators for it):
 |---|---|---|
 | C string literal | `c_string` | printable ASCII as is, `"` `\\` and each `?` of `??` escaped, every other byte (UTF-8) as an octal escape; a NUL or a literal over C11's 4095 characters is refused |
 | C comment | `c_comment` | printable ASCII as is but a backslash and the first character of `*/`, `/*`, `??`; the rest `\\xNN`/`\\uNNNN`: nothing ends the comment or splices a line |
-| identifier (C, DBC signal, LCM channel) | `identifier`, `Identifiers` | letters, digits and `_`, other runs one `_`, never a C keyword, never a leading digit; longer than the target allows, empty, or two names on one identifier: refused |
+| identifier (C, DBC signal, LCM channel) | `identifier`, `Identifiers` | letters (accents dropped), digits and `_`, other runs one `_`, none left: the caller's fallback, never a C keyword, never a leading digit; longer than the target allows, empty, or two names on one identifier: refused |
 | DBC string (a comment) | `dbc_string` | printable ASCII but `"` `\\` `%`; the rest percent-encoded |
 | HTML | `html_text` | `html.escape` with quotes |
 | JSON inside `<script>` | `script_json` | `<`, `>`, `&` as `\\u003c`, ... |
@@ -38,6 +38,7 @@ import json
 import math
 import re
 import shlex
+import unicodedata
 import urllib.parse
 from collections.abc import Iterable, Sequence
 from typing import Any
@@ -116,15 +117,21 @@ def c_comment(text: str) -> str:
 
 
 # ---- identifiers ------------------------------------------------------------------------------
-def identifier(text: str, what: str, max_len: int = C_IDENTIFIER_MAX, prefix: str = "n_", lower: bool = True) -> str:
-    """`text` as an identifier of C, a DBC or an LCM channel: each run of other characters one `_`,
-    no `_` at either end, `prefix` before a leading digit, `_` after a C keyword. Refused when
-    nothing is left or the identifier would be longer than max_len (never cut to fit)."""
-    ident = re.sub(r"[^0-9A-Za-z]+", "_", text).strip("_")
+def identifier(text: str, what: str, max_len: int = C_IDENTIFIER_MAX, prefix: str = "n_", lower: bool = True,
+               fallback: str | None = None) -> str:
+    """`text` as an identifier of C, a DBC or an LCM channel: accents dropped (für: fur), each run of
+    other characters one `_`, no `_` at either end, `prefix` before a leading digit, `_` after a C
+    keyword. A name with no letter or digit left is `fallback` (an identifier the caller makes of
+    where the name is, such as an object's index), else refused; one longer than max_len is refused
+    (never cut to fit)."""
+    plain = "".join(c for c in unicodedata.normalize("NFKD", text) if not unicodedata.combining(c))
+    ident = re.sub(r"[^0-9A-Za-z]+", "_", plain).strip("_")
     if lower:
         ident = ident.lower()
     if not ident:
-        raise EscapeError(f"{what}: {_shown(text)} has no letter or digit to make an identifier of")
+        if fallback is None:
+            raise EscapeError(f"{what}: {_shown(text)} has no letter or digit to make an identifier of")
+        ident = fallback
     if ident[0].isdigit():
         ident = prefix + ident
     if ident in C_KEYWORDS:
@@ -145,8 +152,8 @@ class Identifiers:
         self.max_len = max_len
         self._by_ident: dict[str, tuple[str, str]] = {}
 
-    def add(self, text: str, what: str) -> str:
-        ident = identifier(text, what, self.max_len)
+    def add(self, text: str, what: str, fallback: str | None = None) -> str:
+        ident = identifier(text, what, self.max_len, fallback=fallback)
         other = self._by_ident.get(ident)
         if other is not None and other[0] != text:
             raise EscapeError(f"{what}: {_shown(text)} and {other[1]} ({_shown(other[0])}) both become the identifier "
@@ -177,11 +184,17 @@ def script_json(text: str) -> str:
     return text.replace("<", "\\u003c").replace(">", "\\u003e").replace("&", "\\u0026")
 
 
+_PLOTLY_REFS = {"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&#34;", "'": "&#39;", "%": "&#37;", "$": "&#36;"}
+
+
 def plotly_text(text: str) -> str:
     """`text` for a plotly label (a trace's name, a title, a hover text): plotly reads a few tags
     (<b>, <br>, <a href>, ...) and `%{...}` template fields in them, and LaTeX between `$`: all
     written as character references, which plotly shows as the characters."""
-    return html_text(one_line(text)).replace("%", "&#37;").replace("$", "&#36;")
+    out = []
+    for ch in one_line(text):  # plotly knows &amp; &lt; &gt; and numeric references, not &quot;
+        out.append(_PLOTLY_REFS.get(ch, ch))
+    return "".join(out)
 
 
 def matplotlib_text(text: str) -> str:

@@ -120,6 +120,10 @@ def test_two_names_on_one_identifier_are_refused_naming_both() -> None:
     with pytest.raises(EscapeError, match="refused, not cut"):
         escape.identifier("a" * 70, "x", 63)
     assert escape.identifier("int", "x") == "int_" and escape.identifier("3rd", "x") == "n_3rd"
+    assert escape.identifier("Sollwert für Moment", "x") == "sollwert_fur_moment"
+    assert escape.identifier("目標トルク", "x", fallback="object_6071_00") == "object_6071_00"
+    with pytest.raises(EscapeError, match="no letter or digit"):
+        escape.identifier("目標トルク", "0x6071:00 ParameterName")
 
 
 # ---- Markdown and HTML ----------------------------------------------------------------------------
