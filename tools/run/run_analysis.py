@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from tools.run.telemetry_log import CHUNK_BYTES, EVENT_CHANNELS, FIXED_CHANNELS, Chunk, iter_chunks
+from tools.run.telemetry_log import CHUNK_BYTES, EVENT_CHANNELS, FIXED_CHANNELS, Chunk, LogDamage, iter_chunks
 from tools.run.verdict import Bounds, judge
 from gen.lib.one_line import one_line
 from gen.lib.params import constant, default as param_default
@@ -212,6 +212,7 @@ class LogScan:
         self.pairing = _Pairing()
         self.high = [-(1 << 62), -(1 << 62)]
         self.last_state: int | None = None
+        self.damage = LogDamage()  # where the log breaks, if it does
         self.power_total: np.float64 | None = None
         self.tau_sq_total: np.float64 | None = None
 
@@ -270,7 +271,7 @@ def scan_log(path: Path, hold_s: float, rate_hz: float, sent: dict[str, int], ex
     pairwise-summed means need the count before they start)."""
     scan = LogScan(hold_s, rate_hz, sent, max(int(expected_periods), 0))
     if path.exists():
-        for chunk in iter_chunks(path, chunk_bytes):
+        for chunk in iter_chunks(path, chunk_bytes, scan.damage):
             scan.feed(chunk)
     scan.finish()
     if scan.running and scan.running != scan.expected:
@@ -387,6 +388,8 @@ def analyse(out_dir: Path, controller: dict[str, Any], sim: dict[str, Any], conf
         "telemetry_lost_total": int(sum(v["lost"] for v in tele.values())) if tele else None,
         "telemetry_gaps_total": int(sum(v["sequence_gaps"] for v in tele.values())) if tele else None,
         "telemetry_foreign": foreign_telemetry(tele),
+        # where the log breaks and what was left unread (a damaged log: the run is incomplete, never ok)
+        "telemetry_log": scan.damage.as_dict(),
     }
     verdict, reasons = judge(results, transport, controller, sim, environment.get("exit_codes", {}), bounds)
     results["result"] = verdict
