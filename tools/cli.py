@@ -22,6 +22,7 @@ COMMAND_MODULES = {
     "busload": "tools.busload", "drive": "tools.commands.drive", "study": "tools.study", "tune": "tools.study",
     "faults": "tools.bench.faults", "fuzz": "tools.bench.fuzz", "bench": "tools.bench", "docs": "tools.commands.docs",
     "arms": "tools.commands.arms", "render": "tools.commands.render", "export": "tools.commands.export",
+    "lock": "tools.commands.lock",
 }
 
 
