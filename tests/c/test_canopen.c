@@ -491,6 +491,14 @@ static void test_units_and_modes_refused(void)
           b.fault.abort_code == 0x06090030u);
 }
 
+/* The contract's defaults and one node. */
+static void one_node(arm_co_boot_config_t *cfg, arm_co_node_config_t node)
+{
+    arm_co_boot_default_config(cfg);
+    cfg->n_nodes = 1u;
+    cfg->node[0] = node;
+}
+
 /* The joint's torque limit must be within what the drive gives there (0x6072 x 0x6076 x gear x
  * efficiency): refused before anything is written, with the numbers. */
 static void test_torque_limit_checked(void)
@@ -498,10 +506,8 @@ static void test_torque_limit_checked(void)
     static arm_co_boot_config_t cfg;
     static arm_co_boot_t b;
     static server_t s;
-    arm_co_boot_default_config(&cfg);
-    cfg.n_nodes = 1u;
     /* 1000 per-mille of 1486 mN m behind 101:1 is 150.086 N m: a 150 N m joint boots */
-    cfg.node[0] = (arm_co_node_config_t){.node_id = 2u, .joint_torque_limit_nm = 150.0f};
+    one_node(&cfg, (arm_co_node_config_t){.node_id = 2u, .joint_torque_limit_nm = 150.0f});
     server_init(&s);
     CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
     CHECK(run_boot(&b, &s, 1000u) == 0);
@@ -540,9 +546,7 @@ static void test_master_watchdog_required(void)
     static arm_co_boot_config_t cfg;
     static arm_co_boot_t b;
     static server_t s;
-    arm_co_boot_default_config(&cfg);
-    cfg.n_nodes = 1u;
-    cfg.node[0] = (arm_co_node_config_t){.node_id = 5u};
+    one_node(&cfg, (arm_co_node_config_t){.node_id = 5u});
     server_init(&s);
     s.d[5].lacks = LACKS_1016;
     CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
