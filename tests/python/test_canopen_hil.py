@@ -293,7 +293,7 @@ def test_readme_tracking_table_is_what_hil_gives(tmp_path: Path, controller_bin:
 
     preset = controller_bin.parent.parent.name
     page = (Path(__file__).resolve().parents[2] / "docs" / "drives.md").read_text()
-    section = page[page.index("## CiA 402 through armctl"):page.index("**Units.** Every drive")]
+    section = page[page.index("## CiA 402 through armctl"):page.index("**Units.** CiA 402")]
     rows = re.findall(r"^\| (\S+) \| (arm|canopen) \| ([^|]+?) \| ([\d. ]+) \|$", section, re.M)
     assert len(rows) == 12, rows
     for method, protocol, result, figures in rows:
