@@ -71,7 +71,7 @@ class Plan:
     master_id: int = 127
     transmission: dict[str, int] = field(default_factory=lambda: {"rpdo1": 1, "tpdo1": 1, "tpdo2": 1})
     # the drive table's units (None: not given): the boot compares the drive's objects with them
-    rated: int | None = None  # 0x6076, the motor's, in the drive's torque unit (mN m, CiA 402's, unless the table names another)
+    rated: int | None = None  # 0x6076, the motor's, in the drive's torque unit (mN m unless the table names another)
     encoder: int | None = None
     gear: tuple[int, int] | None = None
     units_per_nm: int = 1000           # 0x6076's unit per N m (the table's torque_unit)

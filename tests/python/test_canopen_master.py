@@ -514,7 +514,8 @@ def test_drive_config_rule_and_what_the_table_gives(tmp_path: Path) -> None:
     ('accept_no_master_watchdog = "yes"\n', "accept_no_master_watchdog: expected true or false"),
     # 0x6072 1000 per-mille x 1486 mN m x 101 is 150.086 N m: a 150 N m joint behind a 90 % gear is not given
     ('[defaults]\ngear_efficiency = 0.9\n', "joint j1 (node 1): its torque limit 150 N m is more than its drive gives "
-     "at the joint, 135.077 N m = 0x6072 1000 per-mille x 0x6076 1486 mN m (the motor's) x gear 101/1 x efficiency 0.9"),
+     "at the joint, 135.077 N m = 0x6072 1000 per-mille x 0x6076 1486 mN m (the motor's) x gear 101/1 x "
+     "efficiency 0.9"),
     ('consumer_ms = 0\n', "0x1016:01 (consumer heartbeat, the drive's watchdog on the master): a consumer time of 0 "
      "ms turns it off"),
     ('[pdo]\ntransmission = { tpdo1 = 2 }\n', "pdo.transmission.tpdo1: expected 1 (the joint state, every SYNC)"),

@@ -557,9 +557,8 @@ def test_a_vendor_file_s_harmless_mistakes_are_warnings_naming_the_line(boot_bin
     assert (DRIVES / MAXON).read_bytes() == original
 
 
-def test_a_drive_whose_master_watchdog_cannot_be_set_is_refused_unless_accepted(boot_bin: Path, udp_port: int,
-                                                                                tmp_path: Path,
-                                                                                monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_drive_whose_master_watchdog_cannot_be_set_is_refused_unless_accepted(
+        boot_bin: Path, udp_port: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A drive that keeps its file's 0x1016:01 HighLimit of 65535 refuses the master's consumer
     heartbeat; python-canopen's e35 has no 0x1016 at all. Either would go on with its last torque if
     the master died: refused in one line saying so, before it is enabled; booted when the drive table
