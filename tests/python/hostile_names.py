@@ -85,13 +85,18 @@ def hostile_arm(folder: Path, n: Names) -> Path:
     renamed_model(folder / "model.xml", dict(zip(JOINTS, n.joints)), dict(zip(BODIES, n.bodies)),
                   {"flange": n.site}, model=n.model)
     eds = (REPO / "firmware" / "protocol" / "cia402_servo.eds").read_text()
+    assert "ProductName=Arm emulated CiA 402 servo drive\n" in eds  # what is replaced is there to replace
     eds = eds.replace("ProductName=Arm emulated CiA 402 servo drive", f"ProductName={n.product}")
     for index, old in EDS_NAMED.items():
+        assert f"[{index:X}]\nParameterName={old}\n" in eds
         eds = eds.replace(f"[{index:X}]\nParameterName={old}\n", f"[{index:X}]\nParameterName={n.parameters[index]}\n")
     _write(folder / n.eds_file, eds)
-    _write(folder / "drives.toml", toml_text({
-        "eds": n.eds_file, "defaults": {"rated_torque_nm": "joint_torque_limit"},
-        "joint": {j: {"node": i + 1} for i, j in enumerate(n.joints)}}))
+    import tomllib
+
+    table = tomllib.loads((REPO / "firmware" / "protocol" / "drives.toml").read_text())  # the project's drives
+    table["eds"] = n.eds_file
+    table["joint"] = {j: {"node": i + 1} for i, j in enumerate(n.joints)}
+    _write(folder / "drives.toml", toml_text(table))
     _write(folder / "arm.toml", toml_text({
         "name": n.arm, "model": "model.xml", "joints": n.joints, "flange": n.site, "drives": "drives.toml",
         "home": {j: q for j, q in zip(n.joints, [0.0, -1.3, 1.6, -1.87, -1.5708, 0.0])},
