@@ -15,27 +15,15 @@ from typing import Any
 import pytest
 
 from gen.lib.paths import REPO
-from headless_browser import Browser
+from headless_browser import Browser, page_facts
+from hil_procs import armctl
 from hostile_names import SCRIPT_NAME, SCRIPT_TITLE, STABLE, c_injection, renamed_model
 from tools.build.arm import ArmRef, arm_build_dir
-from tools.run.procs import communicate_or_kill
 
 pytestmark = pytest.mark.long  # one arm built (a minute or two), a run and two small studies
 
-ARMCTL = str(REPO / "tools" / "armctl")
 EVIL = STABLE / "evil.xml"
 MARKER = STABLE / "evil.marker"  # what the joint name's constructor touches, if it ever runs
-
-
-def armctl(*args: str, timeout: float = 900.0) -> subprocess.CompletedProcess[str]:
-    p = subprocess.Popen([ARMCTL, *args], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        out, err = p.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        p.terminate()
-        out, err = communicate_or_kill(p, 60)
-        raise AssertionError(f"armctl {' '.join(args)}: no end after {timeout:g} s\n{out}\n{err[-3000:]}") from None
-    return subprocess.CompletedProcess(p.args, p.returncode, out, err)
 
 
 def one_line_refusal(r: subprocess.CompletedProcess[str]) -> str:
@@ -54,7 +42,7 @@ def evil() -> Path:
 
 
 def test_a_joint_name_carrying_c_runs_nothing_and_is_kept_as_data(evil: Path, tmp_path: Path) -> None:
-    r = armctl("hil", "--model", str(evil), "--duration", "1", "--out", str(tmp_path / "run"))
+    r = armctl("hil", "--model", str(evil), "--duration", "1", "--out", str(tmp_path / "run"), timeout=900)
     assert not MARKER.exists(), "the joint name's constructor ran: the model file ran code on this machine"
     if r.returncode != 0:
         one_line_refusal(r)
@@ -70,28 +58,9 @@ def test_a_joint_name_carrying_c_runs_nothing_and_is_kept_as_data(evil: Path, tm
 
 
 def _page_facts(page: Path) -> dict[str, Any]:
-    """What a reader's browser made of the page: its title, every element a name could have
-    brought (scripts but the page's own, images not inlined, event handlers, links), its text."""
     b = Browser()
     try:
-        b.open(page)
-        for _ in range(600):
-            if b.evaluate("document.body.dataset.figures") == "drawn" or not b.evaluate(
-                    "document.querySelector('div.figure[data-figure]')"):
-                break
-            b.call("Runtime.evaluate", {"expression": "new Promise(r => setTimeout(r, 100))", "awaitPromise": True},
-                   session=True)
-        return b.evaluate("""({
-            title: document.title,
-            scripts: Array.from(document.scripts).filter(s => s.type !== 'application/json').length,
-            foreign_images: document.querySelectorAll('img:not([src^="data:"])').length,
-            handlers: Array.from(document.querySelectorAll('*')).filter(e => Array.from(e.attributes).some(
-                a => a.name.startsWith('on'))).length,
-            links: document.querySelectorAll('a[href]:not([href^="#"])').length,
-            svg_links: document.querySelectorAll('svg a').length,
-            text: document.body.innerText,
-            svg_text: Array.from(document.querySelectorAll('svg text')).map(t => t.textContent).join('\\n'),
-        })""")
+        return page_facts(b, page)
     finally:
         b.close()
 
@@ -99,7 +68,7 @@ def _page_facts(page: Path) -> dict[str, Any]:
 def test_b_a_joint_name_carrying_a_script_stays_text_in_the_report(evil: Path, tmp_path: Path) -> None:
     out = tmp_path / "study"
     r = armctl("study", "--model", str(evil), "--methods", "pm-paper-weights", "--scenarios", "ideal", "--seeds",
-               "1", "--duration", "0.5", "--confirm", "0", "--out", str(out))
+               "1", "--duration", "0.5", "--confirm", "0", "--out", str(out), timeout=900)
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-3000:]
     facts = _page_facts(out / "report.html")
     assert facts["title"] != SCRIPT_TITLE, "the joint name's script ran in the report"

@@ -32,27 +32,15 @@ from hypothesis import HealthCheck, event, given, settings, strategies as st
 from gen.lib.escape import c_string, identifier, markdown_code
 from gen.lib.one_line import one_line
 from gen.lib.paths import REPO
-from headless_browser import Browser
+from headless_browser import Browser, page_facts
+from hil_procs import armctl
 from hostile_names import EDS_NAMED, JOINTS, STABLE, TOKEN, WORST, Names, hostile_arm, study_config
-from tools.run.procs import communicate_or_kill
 
 pytestmark = pytest.mark.long  # one arm built and studied (a minute or two), a few drawn arms imported
 
-ARMCTL = str(REPO / "tools" / "armctl")
 FOLDER = STABLE / "hostile arm"  # a space in the arm's folder, too
 CC = shutil.which("cc") or shutil.which("gcc")
 C_FLAGS = ["-std=c11", "-Wall", "-Wextra", "-Wconversion", "-Wshadow", "-Wvla", "-Werror"]
-
-
-def armctl(*args: str, timeout: float = 900.0) -> subprocess.CompletedProcess[str]:
-    p = subprocess.Popen([ARMCTL, *args], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        out, err = p.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        p.terminate()
-        out, err = communicate_or_kill(p, 60)
-        raise AssertionError(f"armctl {' '.join(args)}: no end after {timeout:g} s\n{out}\n{err[-3000:]}") from None
-    return subprocess.CompletedProcess(p.args, p.returncode, out, err)
 
 
 @pytest.fixture(scope="module")
@@ -62,7 +50,7 @@ def pipeline(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     cfg = study_config(FOLDER / "study.toml", WORST)
     out = tmp_path_factory.mktemp("hostile") / "study"
     r = armctl("study", "--arm", str(arm), "--config", str(cfg), "--methods", "pm-paper-weights", "--scenarios",
-               WORST.scenario, "--seeds", "1", "--duration", "0.5", "--confirm", "0", "--out", str(out))
+               WORST.scenario, "--seeds", "1", "--duration", "0.5", "--confirm", "0", "--out", str(out), timeout=900)
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-3000:]
     study = json.loads((out / "study.json").read_text())
     from gen.arm import load_arm_file
@@ -113,28 +101,6 @@ def test_every_name_is_where_a_user_looks_escaped_for_that_place(pipeline: dict[
     assert argv[argv.index("--scenario") + 1] == WORST.scenario
 
 
-def _page_facts(page: Path, browser: Browser) -> dict[str, Any]:
-    browser.events.clear()  # a browser used before holds the last page's load event
-    browser.open(page)
-    for _ in range(600):
-        if browser.evaluate("document.body.dataset.figures") == "drawn" or not browser.evaluate(
-                "document.querySelector('div.figure[data-figure]')"):
-            break
-        browser.call("Runtime.evaluate", {"expression": "new Promise(r => setTimeout(r, 100))", "awaitPromise": True},
-                     session=True)
-    return browser.evaluate("""({
-        title: document.title,
-        scripts: Array.from(document.scripts).filter(s => s.type !== 'application/json').length,
-        elements: Array.from(document.querySelectorAll('main *')).map(e => e.tagName.toLowerCase()),
-        foreign_images: document.querySelectorAll('img:not([src^="data:"])').length,
-        handlers: Array.from(document.querySelectorAll('*')).filter(e => Array.from(e.attributes).some(
-            a => a.name.startsWith('on'))).length,
-        links: document.querySelectorAll('a[href]:not([href^="#"])').length,
-        text: document.body.innerText,
-        svg_text: Array.from(document.querySelectorAll('svg text, svg tspan')).map(t => t.textContent).join('\\n'),
-    })""")
-
-
 # What report.html's own elements are: the Markdown's, the figures' and plotly's (its SVG and its
 # controls). An element of any other kind came from the input.
 PAGE_ELEMENTS = {"h1", "h2", "h3", "p", "ul", "li", "code", "pre", "strong", "em", "table", "thead", "tbody", "tr",
@@ -155,7 +121,7 @@ def _check_page(facts: dict[str, Any], names: list[str]) -> None:
 def test_the_report_in_a_browser_holds_no_element_or_script_from_the_input(pipeline: dict[str, Any]) -> None:
     b = Browser()
     try:
-        facts = _page_facts(pipeline["out"] / "report.html", b)
+        facts = page_facts(b, pipeline["out"] / "report.html")
     finally:
         b.close()
     _check_page(facts, [*WORST.joints, WORST.scenario, WORST.description])
@@ -341,5 +307,5 @@ def test_drawn_names_in_every_place_are_refused_in_one_line_or_kept_as_data(
     db = cantools.database.load_string(got["dbc"], database_format="dbc")
     comments = {urllib.parse.unquote(s.comment or "") for m in db.messages for s in m.signals}
     assert f"0x6071:00 {one_line(n.parameters[0x6071])}" in comments  # gen/eds.py reads a name as one line
-    facts = _page_facts(_report_with(pipeline, n, tmp / "study"), browser)
+    facts = page_facts(browser, _report_with(pipeline, n, tmp / "study"))
     _check_page(facts, [*n.joints, n.scenario])
