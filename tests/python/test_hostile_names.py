@@ -286,7 +286,7 @@ def _report_with(pipeline: dict[str, Any], n: Names, out: Path) -> Path:
     return out / "report.html"
 
 
-@settings(max_examples=5, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture,
+@settings(max_examples=4, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture,
                                                                 HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(n=names())
 def test_drawn_names_in_every_place_are_refused_in_one_line_or_kept_as_data(
