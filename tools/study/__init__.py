@@ -198,7 +198,7 @@ def keep_tuning_time(path: Path, record: dict[str, Any]) -> None:
 
 def tuned(cfg: StudyConfig, arm: ArmRef, setup: TuneSetup, info: dict[str, Any], scenarios: list[str],
           methods: list[str], *, retune: bool = False, trials: int | None = None,
-          in_study: bool = False) -> dict[str, dict[str, Any]]:
+          in_study: bool = False, only: set[tuple[str, str]] | None = None) -> dict[str, dict[str, Any]]:
     """The tuning of every tuned method in every scenario: the kept one when it was made for the
     same arm, scenario and tuning settings, else tuned now (and kept, method by method, so an
     interrupted tuning resumes). `armctl tune` wants the config's cap (or --trials) exactly; a
@@ -210,7 +210,7 @@ def tuned(cfg: StudyConfig, arm: ArmRef, setup: TuneSetup, info: dict[str, Any],
     todo = []
     for s in scenarios:
         for m in methods:
-            if METHODS[m][1] is None:
+            if METHODS[m][1] is None or (only is not None and (s, m) not in only):
                 continue
             key = tuning_key(cfg, info, setup, s, m)
             scen = doc["scenarios"].get(s)
@@ -239,7 +239,7 @@ def tuned(cfg: StudyConfig, arm: ArmRef, setup: TuneSetup, info: dict[str, Any],
             bar.set_postfix_str(f"{m} / {s} done")
             bar.update(cap - rec["trials_run"])  # a converged tuning ends before its cap
             rec["key"] = key
-            rec["code"] = code_identity()
+            rec["code"] = rec["tuned_code"] = code_identity()  # tuned on it (verify.py restamps "code")
             keep_tuning(path, s, m, rec, {"arm": {"name": info["name"], "model_hash": info["model_hash"]},
                                           "procedure": procedure(cfg, cap, setup.jobs)})
             out[s][m] = {**rec, "source": f"tuned now, kept in {path}"}
@@ -251,6 +251,19 @@ def tuned(cfg: StudyConfig, arm: ArmRef, setup: TuneSetup, info: dict[str, Any],
                                 "when": datetime.now(timezone.utc).isoformat(timespec="seconds")})
     # in the config's order, however the pairs finished
     return {s: {m: out[s][m] for m in methods if m in out[s]} for s in scenarios}
+
+
+def verified_notes(setup: TuneSetup, path: Path, tuning: dict[str, dict[str, Any]],
+                   prefix: str = "armctl study") -> list[str]:
+    """The kept pairs stamped with other code, verified on this one (tools/study/verify.py: once per
+    code, kept in the build folder); a note naming the pairs whose picks moved, none when none did."""
+    from tools.study import verify
+
+    stale = verify.stale_pairs(tuning, code_identity())
+    if not stale:
+        return []
+    note = verify.moved_note(verify.verify_for_study(setup, path, stale, prefix), path)
+    return [note] if note else []
 
 
 def procedure(cfg: StudyConfig, trials: int | None = None, jobs: int | None = None) -> str:
@@ -291,10 +304,7 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
     traj_args, traj_used, traj_notes = trajectory_for(info, cfg.trajectory, "trajectory", arm_build_dir("release", arm),
                                                       scenario_friction(cfg))
     notes += traj_notes
-    stale = sorted(f"{m} in {s}" for s in tuning for m, rec in tuning[s].items() if rec.get("code") != code_identity())
-    if stale:
-        notes.append(f"the kept tuning of {', '.join(stale)} was made with other firmware or simulator code "
-                     f"(tools/build/code_identity.py); `armctl study --retune` tunes again")
+    notes += verified_notes(setup, tuning_file(cfg, arm), tuning)
     for n in notes:
         print(f"armctl study: {n}", file=sys.stderr)
     paper_text = None if Path(info["design_config"]).resolve() == DEFAULT_DESIGN.resolve() else DEFAULT_DESIGN.read_text()
@@ -507,6 +517,14 @@ def add_figures_argument(p: argparse.ArgumentParser) -> None:
 def add_tune_arguments(p: argparse.ArgumentParser) -> None:
     add_common_arguments(p)
     p.add_argument("--out", type=Path, default=REPO / "runs" / "tune")
+    what = p.add_mutually_exclusive_group()
+    what.add_argument("--verify", action="store_true",
+                      help="tune nothing: run each kept pick's recorded validation runs again on this code and "
+                           "compare them number for number; equal: stamp the pair with this code's identity; "
+                           "moved: say by how much and whether the pick still ranks ahead of its runner-up "
+                           "(exit 1; the pairs to tune again are named)")
+    what.add_argument("--retune", nargs="+", metavar="SCENARIO/METHOD", default=None,
+                      help="tune these pairs alone (e.g. realistic/pm ideal/gh2), keeping every other pair's record")
 
 
 def _subset(text: str | None, allowed: list[str], what: str) -> list[str] | None:
@@ -606,6 +624,56 @@ def cmd_study(ns: argparse.Namespace) -> int:
     return 0 if not unmeasured else 1
 
 
+def _cmd_verify(ns: argparse.Namespace, cfg: StudyConfig, arm: ArmRef, methods: list[str] | None,
+                scenarios: list[str] | None, cluster: Cluster | None) -> int:
+    """armctl tune --verify: every kept pair (of --scenarios, --methods) verified on this code
+    (tools/study/verify.py); the equal ones restamped; exit 1 when any moved."""
+    from tools.study import verify
+
+    if ns.bus != SIL:
+        raise StudyConfigError("--verify: the kept tuning's runs are software in the loop (--bus sil)")
+    path = tuning_file(cfg, arm)
+    with ExitStack() as stack:
+        _hold_out(stack, ns.out)
+        setup, info, _ = setup_for(cfg, arm, ns.out, ns.jobs, cluster, ns.bus)
+        doc = _read_tuning(path)
+        recs: dict[tuple[str, str], dict[str, Any]] = {}
+        unkept = []
+        for s in scenarios or list(cfg.scenarios):
+            for m in methods or cfg.methods:
+                if METHODS[m][1] is None:
+                    continue
+                rec = (doc["scenarios"].get(s) or {}).get(m)
+                if not isinstance(rec, dict) or rec.get("key") != tuning_key(setup.cfg, info, setup, s, m):
+                    unkept.append(f"{s}/{m}")
+                else:
+                    recs[(s, m)] = rec
+        if unkept:
+            raise StudyConfigError(f"--verify: {path} keeps no tuning of {', '.join(unkept)} for this arm and these "
+                                   f"settings: `armctl tune --retune {' '.join(unkept)}` tunes them")
+        bar = tqdm(total=sum(len(verify.recorded_runs(r, setup.cfg.tuning_seeds)[2]) for r in recs.values()),
+                   desc="verify", unit="run")
+        started = time.monotonic()
+        checks = verify.verify_pairs(setup, recs, ns.out / "verify", progress=lambda spec, run: bar.update(1))
+        bar.close()
+        stamped = verify.restamp(path, checks)
+    for c in checks:
+        print(c.line())
+    moved = [c for c in checks if not c.equal]
+    retune = [c.pair for c in moved if c.retune]
+    print(f"armctl tune --verify: {len(checks)} pair(s), {sum(c.runs for c in checks)} runs in "
+          f"{time.monotonic() - started:.0f} s on {ns.jobs} core(s): {len(checks) - len(moved)} as recorded"
+          + (f" (stamped with this code, {code_identity()}, in {_rel(path)})" if stamped else "")
+          + (f"; {len(moved)} moved" if moved else ""))
+    if retune:
+        print(f"armctl tune --verify: the pick no longer holds in {len(retune)} pair(s): "
+              f"tools/armctl tune --retune {' '.join(retune)}")
+    elif moved:
+        print("armctl tune --verify: every moved pick still ranks ahead of its runner-up; its record's numbers are "
+              f"another code's: tools/armctl tune --retune {' '.join(c.pair for c in moved)} records them anew")
+    return 1 if moved else 0
+
+
 # A method's own outcome, which the comparison reports: the run itself was complete.
 OUTCOMES = ("ok", "tracking-bound-exceeded", "torque-limited", "diverged", "commands-missed")
 
@@ -617,14 +685,35 @@ def measured(r: dict[str, Any]) -> bool:
     return r.get("result") in OUTCOMES or (r.get("result") == "failed" and r.get("final_state") in ("safe-stop", "fault"))
 
 
+def _pairs(text: list[str], cfg: StudyConfig) -> list[tuple[str, str]]:
+    """--retune's SCENARIO/METHOD pairs, each a tuned method of a scenario of the config."""
+    out = []
+    for item in text:
+        s, _, m = item.rpartition("/")
+        if s not in cfg.scenarios or m not in cfg.methods or METHODS[m][1] is None:
+            tuned_methods = [x for x in cfg.methods if METHODS[x][1] is not None]
+            raise StudyConfigError(f"--retune {item!r}: not SCENARIO/METHOD of the config (scenarios: "
+                                   f"{', '.join(cfg.scenarios)}; tuned methods: {', '.join(tuned_methods)})")
+        out.append((s, m))
+    return list(dict.fromkeys(out))
+
+
 def cmd_tune(ns: argparse.Namespace) -> int:
-    """armctl tune (its errors as the study's)."""
+    """armctl tune (its errors as the study's); --verify: the kept tuning checked on this code."""
     cfg, arm, methods, scenarios, cluster = _common(ns)
+    if getattr(ns, "verify", False):
+        return _cmd_verify(ns, cfg, arm, methods, scenarios, cluster)
+    pairs = _pairs(ns.retune, cfg) if getattr(ns, "retune", None) else None
     with ExitStack() as stack:
         _hold_out(stack, ns.out)
         setup, info, _ = setup_for(cfg, arm, ns.out, ns.jobs, cluster, ns.bus)
-        result = tuned(setup.cfg, arm, setup, info, scenarios or list(cfg.scenarios), methods or cfg.methods,
-                       retune=True, trials=ns.trials)
+        if pairs is None:
+            result = tuned(setup.cfg, arm, setup, info, scenarios or list(cfg.scenarios), methods or cfg.methods,
+                           retune=True, trials=ns.trials)
+        else:  # the pairs side by side, as a whole tuning's (tools/study/pairs.py)
+            result = tuned(setup.cfg, arm, setup, info, list(dict.fromkeys(s for s, _ in pairs)),
+                           list(dict.fromkeys(m for _, m in pairs)), retune=True, trials=ns.trials, only=set(pairs))
+            result = {s: recs for s, recs in result.items() if recs}
     for s, recs in result.items():
         for m, rec in recs.items():
             print(f"{s:<40} {m:<10} objective {rec['objective']:.4g}  {rec['status']} "
