@@ -53,6 +53,9 @@ def dbc_harness(header: Path) -> str:
 
 
 def compile_all() -> dict[str, Path]:
+    from tools.build.packages import ensure
+
+    ensure("fuzz")
     clang = shutil.which("clang")
     if clang is None:
         raise FuzzError("clang not found: apt-get install clang libclang-rt-14-dev (tools/armctl does as root)")

@@ -291,9 +291,9 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
               methods: list[str] | None = None, scenarios: list[str] | None = None, arm: ArmRef = DEFAULT_ARM,
               jobs: int = 1, cluster: Cluster | None = None, retune: bool = False,
               trials: int | None = None, bus: str = SIL, confirm: int = DEFAULT_CONFIRM,
-              figures: bool = True, protocol: str | None = None) -> dict[str, Any]:
+              figures: bool = True, protocol: str | None = None, prefix: str = "armctl study") -> dict[str, Any]:
     """protocol: every scenario's runs over this drive protocol instead of its own, with the picks
-    tuned on its own (what the protocol alone changes)."""
+    tuned on its own (what the protocol alone changes); prefix: how its notes begin."""
     methods = methods or cfg.methods
     scen_names = scenarios or list(cfg.scenarios)
     seed_list = cfg.seed_list(seeds)
@@ -304,9 +304,9 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
     traj_args, traj_used, traj_notes = trajectory_for(info, cfg.trajectory, "trajectory", arm_build_dir("release", arm),
                                                       scenario_friction(cfg))
     notes += traj_notes
-    notes += verified_notes(setup, tuning_file(cfg, arm), tuning)
+    notes += verified_notes(setup, tuning_file(cfg, arm), tuning, prefix)
     for n in notes:
-        print(f"armctl study: {n}", file=sys.stderr)
+        print(f"{prefix}: {n}", file=sys.stderr)
     paper_text = None if Path(info["design_config"]).resolve() == DEFAULT_DESIGN.resolve() else DEFAULT_DESIGN.read_text()
     specs: list[RunSpec] = []
     where: list[tuple[str, str, int]] = []
@@ -527,7 +527,7 @@ def add_tune_arguments(p: argparse.ArgumentParser) -> None:
                       help="tune these pairs alone (e.g. realistic/pm ideal/gh2), keeping every other pair's record")
 
 
-def _subset(text: str | None, allowed: list[str], what: str) -> list[str] | None:
+def subset(text: str | None, allowed: list[str], what: str) -> list[str] | None:
     if text is None:
         return None
     items = [x for x in text.split(",") if x]
@@ -540,19 +540,26 @@ def _subset(text: str | None, allowed: list[str], what: str) -> list[str] | None
 def _common(ns: argparse.Namespace) -> tuple[StudyConfig, ArmRef, list[str] | None, list[str] | None,
                                           Cluster | None]:
     cfg = load(ns.config)
-    methods = _subset(ns.methods, cfg.methods, "methods")
-    scenarios = _subset(ns.scenarios, list(cfg.scenarios), "scenarios")
+    methods = subset(ns.methods, cfg.methods, "methods")
+    scenarios = subset(ns.scenarios, list(cfg.scenarios), "scenarios")
     if ns.jobs is None:
         ns.jobs = default_jobs(ns.bus)
-    if not 1 <= ns.jobs <= 256:
-        raise StudyConfigError(f"--jobs: must be in [1, 256], got {ns.jobs}")
-    if ns.trials is not None and not 1 <= ns.trials <= 100000:
-        raise StudyConfigError(f"--trials: must be in [1, 100000], got {ns.trials}")
     cluster = cluster_from_args(ns)
-    check_out_dir(ns.out)
     arm = arm_from_args(ns)
-    print_arm_warnings(arm_info(build_arm("release", arm)), f"armctl {getattr(ns, 'command', 'study')}")
+    prepare(arm, ns.out, ns.jobs, ns.trials, f"armctl {getattr(ns, 'command', 'study')}")
     return cfg, arm, methods, scenarios, cluster
+
+
+def prepare(arm: ArmRef, out: Path, jobs: int, trials: int | None, prefix: str,
+            targets: list[str] | None = None) -> None:
+    """What a study or tuning checks before it runs: --jobs, --trials, --out; then the arm built
+    (only `targets`, if given) and its warnings said."""
+    if not 1 <= jobs <= 256:
+        raise StudyConfigError(f"--jobs: must be in [1, 256], got {jobs}")
+    if trials is not None and not 1 <= trials <= 100000:
+        raise StudyConfigError(f"--trials: must be in [1, 100000], got {trials}")
+    check_out_dir(out)
+    print_arm_warnings(arm_info(build_arm("release", arm, targets=targets)), prefix)
 
 
 OUT_LOCK = ".armctl-out.lock"  # in a study's or tuning's --out: held while the command writes there
@@ -585,41 +592,60 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
 
 def cmd_study(ns: argparse.Namespace) -> int:
     """armctl study (a bad config, arm, --out or cluster exits 2; a run that cannot run, 1: tools/cli.py)."""
-    if ns.seeds is not None and not 1 <= ns.seeds <= 1000:
-        raise StudyConfigError(f"--seeds: must be in [1, 1000], got {ns.seeds}")
-    if ns.duration is not None and not (0.001 <= ns.duration <= 86400):
-        raise StudyConfigError(f"--duration: must be in [0.001, 86400] s, got {ns.duration}")
-    if not 0 <= ns.confirm <= 1000:
-        raise StudyConfigError(f"--confirm: must be in [0, 1000], got {ns.confirm}")
-    cfg, arm, methods, scenarios, cluster = _common(ns)
-    if ns.record and (cfg.path.resolve() != DEFAULT_CONFIG.resolve() or not arm.is_default or ns.seeds or
-                      ns.duration or methods or scenarios or ns.trials):
+    cfg = load(ns.config)
+    methods = subset(ns.methods, cfg.methods, "methods")
+    scenarios = subset(ns.scenarios, list(cfg.scenarios), "scenarios")
+    return study_and_summary(cfg, arm_from_args(ns), ns.out, methods=methods, scenarios=scenarios, seeds=ns.seeds,
+                             duration_s=ns.duration, jobs=ns.jobs, cluster=cluster_from_args(ns), retune=ns.retune,
+                             trials=ns.trials, bus=ns.bus, confirm=ns.confirm, figures=ns.figures,
+                             protocol=ns.protocol, record=ns.record)
+
+
+def study_and_summary(cfg: StudyConfig, arm: ArmRef, out: Path, *, methods: list[str] | None = None,
+                      scenarios: list[str] | None = None, seeds: int | None = None, duration_s: float | None = None,
+                      jobs: int | None = None, cluster: Cluster | None = None, retune: bool = False,
+                      trials: int | None = None, bus: str = SIL, confirm: int = DEFAULT_CONFIRM, figures: bool = True,
+                      protocol: str | None = None, record: bool = False, prefix: str = "armctl study",
+                      targets: list[str] | None = None) -> int:
+    """A study as `armctl study` runs it (and `armctl demo`): its options checked, the arm built
+    (`targets` only, if given), the study run holding `out`, its summary printed; the exit code
+    (1: a run measured nothing trustworthy, or SIL and the bus disagreed)."""
+    if seeds is not None and not 1 <= seeds <= 1000:
+        raise StudyConfigError(f"--seeds: must be in [1, 1000], got {seeds}")
+    if duration_s is not None and not (0.001 <= duration_s <= 86400):
+        raise StudyConfigError(f"--duration: must be in [0.001, 86400] s, got {duration_s}")
+    if not 0 <= confirm <= 1000:
+        raise StudyConfigError(f"--confirm: must be in [0, 1000], got {confirm}")
+    jobs = default_jobs(bus) if jobs is None else jobs
+    prepare(arm, out, jobs, trials, prefix, targets)
+    if record and (cfg.path.resolve() != DEFAULT_CONFIG.resolve() or not arm.is_default or seeds or
+                   duration_s or methods or scenarios or trials):
         raise StudyConfigError("--record: the headline is the default study as it stands (no --config, "
                                "--model/--arm, --seeds, --duration, --methods, --scenarios or --trials)")
     with ExitStack() as stack:
-        _hold_out(stack, ns.out)
-        study = run_study(cfg, ns.out, seeds=ns.seeds, duration_s=ns.duration, methods=methods,
-                          scenarios=scenarios, arm=arm, jobs=ns.jobs, cluster=cluster, retune=ns.retune,
-                          trials=ns.trials, bus=ns.bus, confirm=ns.confirm, figures=ns.figures, protocol=ns.protocol)
-    if ns.record:
+        _hold_out(stack, out)
+        study = run_study(cfg, out, seeds=seeds, duration_s=duration_s, methods=methods,
+                          scenarios=scenarios, arm=arm, jobs=jobs, cluster=cluster, retune=retune,
+                          trials=trials, bus=bus, confirm=confirm, figures=figures, protocol=protocol, prefix=prefix)
+    if record:
         from tools.study import headline
 
         headline.write(study)
-        print(f"armctl study: recorded in {headline.RECORD_BY_PROTOCOL[ns.protocol]}" if ns.protocol else
-              f"armctl study: the headline recorded in {headline.RECORD} and README.md's result tables")
-    print((ns.out / "summary.txt").read_text())
-    print(f"report: {ns.out / 'report.md'}")
+        print(f"{prefix}: recorded in {headline.RECORD_BY_PROTOCOL[protocol]}" if protocol else
+              f"{prefix}: the headline recorded in {headline.RECORD} and README.md's result tables")
+    print((out / "summary.txt").read_text())
+    print(f"report: {out / 'report.md'}")
     unmeasured = [f"{m} in {s} (seed {seed}): {r.get('result')}" for s, sc in study["scenarios"].items()
                   for m, runs in sc["runs"].items() for seed, r in zip(study["seeds"], runs) if not measured(r)]
     conf = study.get("confirmation")
     if conf is not None and not conf["all_match"]:
         bad = [f"{r['method']} in {r['scenario']} (seed {r['seed']}): {', '.join(r['differences'][:6])}"
                for r in conf["runs"] if not r["match"]]
-        print(f"armctl study: software in the loop and lockstep HIL disagree on {len(bad)} run(s): "
+        print(f"{prefix}: software in the loop and lockstep HIL disagree on {len(bad)} run(s): "
               + "; ".join(bad), file=sys.stderr)
         return 1
     if unmeasured:
-        print(f"armctl study: incomplete: {len(unmeasured)} run(s) measured nothing trustworthy: "
+        print(f"{prefix}: incomplete: {len(unmeasured)} run(s) measured nothing trustworthy: "
               + "; ".join(unmeasured[:8]) + (" ..." if len(unmeasured) > 8 else ""), file=sys.stderr)
     return 0 if not unmeasured else 1
 
