@@ -97,6 +97,8 @@ def run_harness(name: str, exe: Path, seconds: float) -> tuple[bool, str]:
     execs = int(runs.group(1)) if runs else 0
     if r.returncode != 0:
         return False, f"crashed after {execs} runs; input in {crashes}:\n{r.stderr[-2000:]}"
+    if execs == 0:  # it fuzzed nothing: no finding proves nothing
+        return False, f"ran no input (libFuzzer's stats: {runs.group(0) if runs else 'none printed'})"
     return True, f"{execs} runs, {len(seeds)} regression seed(s), no finding"
 
 
