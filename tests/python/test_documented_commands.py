@@ -178,21 +178,23 @@ def small_tuning_config(dirpath: Path) -> Path:
 
 
 def test_tune(tmp_path: Path) -> None:
-    """Two trials per method on a 0.2 s tuning run; the tuning lands next to the config."""
+    """One pair (--retune SCENARIO/METHOD), two trials on a 0.2 s tuning run; the tuning lands next
+    to the config, and only that pair is tuned. (--verify: tests/python/test_tuning_verify.py.)"""
     cfg = small_tuning_config(tmp_path)
-    r = armctl("tune", "--config", str(cfg), "--scenarios", "realistic", "--methods", "pm,pd,tde", "--trials", "2",
-               "--out", str(tmp_path / "runs"))
+    r = armctl("tune", "--config", str(cfg), "--retune", "realistic/pd", "--trials", "2", "--out", str(tmp_path / "runs"))
     assert r.returncode == 0, r.stdout + r.stderr
     tuning = json.loads((tmp_path / "paper.tuning.json").read_text())
-    recs = tuning["scenarios"]["realistic"]
-    assert set(recs) == {"pm", "pd", "tde"} and all(len(rec["rounds"][0]["trials"]) == 2 for rec in recs.values())
+    assert list(tuning["scenarios"]) == ["realistic"] and list(tuning["scenarios"]["realistic"]) == ["pd"]
+    assert len(tuning["scenarios"]["realistic"]["pd"]["rounds"][0]["trials"]) == 2
+    r = armctl("tune", "--config", str(cfg), "--retune", "realistic/pm-paper-weights", "--out", str(tmp_path / "runs"))
+    assert r.returncode == 2 and "--retune 'realistic/pm-paper-weights': not SCENARIO/METHOD" in r.stderr, r.stderr
 
 
 def test_tune_and_study_on_another_arm(tmp_path: Path) -> None:
     """tune on a 7-DOF arm keeps its tuning in the arm's build folder; the study then uses it."""
     cfg = small_tuning_config(tmp_path)
     model = str(REPO / "tests" / "arms" / "robosuite" / "iiwa.xml")
-    common = ["--model", model, "--config", str(cfg), "--scenarios", "ideal", "--methods", "pm,tde", "--trials", "2"]
+    common = ["--model", model, "--config", str(cfg), "--scenarios", "ideal", "--methods", "pm", "--trials", "2"]
     r = armctl("tune", *common, "--out", str(tmp_path / "runs"))
     assert r.returncode == 0, r.stdout + r.stderr
     kept = Path(next(ln for ln in r.stdout.splitlines() if ln.startswith("tuning: ")).removeprefix("tuning: "))
@@ -203,7 +205,7 @@ def test_tune_and_study_on_another_arm(tmp_path: Path) -> None:
     study = json.loads((tmp_path / "study" / "study.json").read_text())
     sc = study["scenarios"]["ideal"]
     assert sc["tuning"]["pm"]["source"] == f"tuned earlier, kept in {kept}"
-    assert len(sc["runs"]["tde"][0]["tracking_max_abs_deg"]) == 7
+    assert len(sc["runs"]["pm"][0]["tracking_max_abs_deg"]) == 7
 
 
 def test_demo_on_another_arm(tmp_path: Path) -> None:
