@@ -56,6 +56,17 @@ def test_a_sample_of_every_pick_reruns_number_for_number_at_head(tmp_path: Path)
     assert check.equal, "\n".join(check.results_changed + check.moved[:20])
 
 
+def _made_here(rec: dict, scenario: str, method: str, out: Path) -> None:
+    """rec's recorded validation runs replaced by the same runs on this code: a record that verifies
+    here whatever the committed tuning's state (the test of that is the one above)."""
+    setup, _, _ = setup_for(load(DEFAULT_CONFIG), DEFAULT_ARM, out, 2, None)
+    variants, seeds, recorded = verify.recorded_runs(rec, setup.cfg.tuning_seeds)
+    here = verify.run_all(verify._specs(setup, scenario, method, rec["knobs"], seeds, variants, out), 2, None,
+                          forked=True)
+    for r, run in zip(recorded, here):
+        r["result"], r["tracking_max_abs_deg"] = run["results"]["result"], run["results"]["tracking_max_abs_deg"]
+
+
 def _config_with_tuning_file(tmp_path: Path, doc: dict) -> tuple[Path, Path]:
     """The default study config with its kept tuning a copy in tmp_path (the same key: [tuning] file
     is not in it), so a test may restamp and edit it."""
@@ -73,6 +84,7 @@ def test_verify_restamps_a_pair_that_reproduces_and_names_one_that_moved(tmp_pat
     moved, with the joint, the change and its pick's rank against the runner-up, exit 1, and its
     stamp is left alone."""
     doc = json.loads(json.dumps(KEPT))
+    _made_here(doc["scenarios"]["ideal"]["pd"], "ideal", "pd", tmp_path / "here")
     doc["scenarios"]["ideal"]["pd"]["code"] = "0123456789abcdef"
     cfg, kept = _config_with_tuning_file(tmp_path, doc)
     base = [ARMCTL, "tune", "--config", str(cfg), "--verify", "--scenarios", "ideal", "--methods", "pd", "--jobs", "2"]
@@ -99,26 +111,30 @@ def test_verify_restamps_a_pair_that_reproduces_and_names_one_that_moved(tmp_pat
     assert json.loads(kept.read_text())["scenarios"]["ideal"]["pd"]["code"] == "fedcba9876543210"
 
 
+
 def test_a_drives_rated_torque_moves_the_pairs_it_reaches(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """The bundled arm's drives with another rated torque (0x6076: the torque command's per-mille
-    unit) on joint 2: the CiA 402 scenario's pick moves, and verify names it, by how much, and says
-    whether it still ranks ahead of its runner-up."""
+    """The bundled arm's drives with another rated torque on joint 2 (0x6076: the unit of the torque
+    command's per-mille): the pair's pick moves, and verify names it, by how much, and whether it
+    still ranks ahead of its runner-up. The record is first made this code's own (its validation
+    runs run here), so that only the rated torque can move it: with the bundled drives it verifies."""
     from gen import drives
     from tools.run import hil
 
-    table = drives.DEFAULT_DRIVES.read_text().replace('rated_torque_nm = "joint_torque_limit"',
-                                                    'rated_torque_nm = "joint_torque_limit"\n\n'
-                                                    "[joint.shoulder_lift]\nrated_torque_nm = 97.0")
-    (tmp_path / "drives.toml").write_text(table)
+    cfg = load(DEFAULT_CONFIG)
+    setup, _, _ = setup_for(cfg, DEFAULT_ARM, tmp_path / "v", 2, None)
+    rec = json.loads(json.dumps(_read_tuning(tuning_file(cfg, DEFAULT_ARM))["scenarios"]["realistic"]["pd"]))
+    _made_here(rec, "realistic", "pd", tmp_path / "here")
+    recs = {("realistic", "pd"): rec}
+    assert verify.verify_pairs(setup, recs, tmp_path / "same")[0].equal
+
+    table = drives.DEFAULT_DRIVES.read_text()
+    assert 'rated_torque_nm = "joint_torque_limit / gear"' in table
+    (tmp_path / "drives.toml").write_text(table + "\n[joint.shoulder_lift]\nrated_torque_nm = 2.0\n")
     (tmp_path / "cia402_servo.eds").write_bytes((drives.DEFAULT_DRIVES.parent / "cia402_servo.eds").read_bytes())
     monkeypatch.setattr(drives, "DEFAULT_DRIVES", tmp_path / "drives.toml")
     monkeypatch.setattr(hil, "_CANOPEN_MEMO", {})
-    cfg = load(DEFAULT_CONFIG)
-    setup, _, _ = setup_for(cfg, DEFAULT_ARM, tmp_path / "v", 2, None)
-    doc = _read_tuning(tuning_file(cfg, DEFAULT_ARM))
-    recs = {(s, "pd"): doc["scenarios"][s]["pd"] for s in ("ideal", "realistic")}
-    checks = {c.pair: c for c in verify.verify_pairs(setup, recs, tmp_path / "v")}
-    assert not checks["realistic/pd"].equal, "a rated torque 97 N m instead of 150 N m moved nothing"
-    assert checks["realistic/pd"].moved and checks["realistic/pd"].rank
-    note = verify.moved_note(list(checks.values()), tuning_file(cfg, DEFAULT_ARM))
-    assert note is not None and "realistic/pd" in note
+    [check] = verify.verify_pairs(setup, recs, tmp_path / "other")
+    assert not check.equal and check.moved, "a 2.0 N m motor instead of 1.486 N m on joint 2 moved nothing"
+    assert check.rank.startswith("the pick scores") and "runner-up" in check.rank, check.rank
+    note = verify.moved_note([check], tuning_file(cfg, DEFAULT_ARM))
+    assert note is not None and "realistic/pd: moved" in note, note
