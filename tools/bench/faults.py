@@ -11,8 +11,11 @@ quick stop, disable or shutdown command or NMT stop, or the drives faulting), wh
 was reached and which, how far each joint moved in the window after the stop (run.json's
 results.stop, from the simulator's truth: the simulator runs the arm on after the controller stopped
 or died), the run's verdict, and whether the telemetry is complete. A row whose arm moved more than
-the bound after its stop fails the command; a row where it cannot be measured says why.
-tests/python/test_faults.py holds every row.
+the bound after its stop fails the command; a row where it cannot be measured says why. One row's
+fault is in the input itself (hostile-names: the arm's model names its joints with C, a script and
+a shell command, as a downloaded file may): its arm is built and run like any other, its names are
+data (gen/lib/escape.py), and the row fails if anything of the file ran. tests/python/test_faults.py
+holds every row.
 """
 
 from __future__ import annotations
@@ -62,6 +65,7 @@ class Fault:
     expect_stop: bool                          # the arm must end stopped (a named fault, never ok)
     sim_args: tuple[str, ...] = ()
     mode: str = "lockstep"                     # the run's mode (tools/run/hil.py)
+    arm: Callable[[], Any] | None = None       # the arm to run (a tools.build.arm.ArmRef): None, the bundled one
 
 
 class Injector:
@@ -153,7 +157,43 @@ FAULTS = [
           "on the run's telemetry port, with the simulator's own sequence numbers", lambda i: _forge_truth(i), False),
     Fault("second-master", "realtime: a second master sends its own SYNC periods on bus 1, each with a "
           "DRIVE_6_CMD of 0.2 N m, three times", lambda i: _second_master(i), True, mode="realtime"),
+    Fault("hostile-names", "the model's joint names carry C (a constructor that touches a file), a script and a "
+          "shell command substitution", lambda i: setattr(i, "acted", True), False, arm=lambda: _hostile_arm()),
 ]
+
+# hostile-names: the model a user might have downloaded, and what its C would touch if it ever ran
+HOSTILE_DIR = REPO / "build" / "faults"
+HOSTILE_MARKER = HOSTILE_DIR / "hostile-names.ran"
+
+
+def hostile_names() -> dict[str, str]:
+    """The bundled arm's joint names as an attacker would set them (old name -> new)."""
+    return {"elbow": ('a"}; extern int system(const char *); __attribute__((constructor)) static void '
+                      f'hostile_ctor(void) {{ system("touch {HOSTILE_MARKER}"); }} static const char *const '
+                      'hostile_tail[] __attribute__((used)) = {"b'),
+            "shoulder_lift": "lift<script>document.title='hostile'</script>",
+            "wrist_1": "w1*/ int hostile_c; /* $(touch /tmp/hostile) `id` %s%n",
+            "wrist_2": "w2\\\" \\n ??/ é"}
+
+
+def _hostile_arm() -> Any:
+    """The bundled arm's MJCF with hostile_names(), at a fixed path (one build folder for every run)."""
+    import xml.etree.ElementTree as ET
+
+    from tools.build.arm import ArmRef
+
+    names = hostile_names()
+    root = ET.parse(REPO / "host_sim" / "models" / "ur5e_arm.xml").getroot()
+    for el in root.iter():
+        for attr in ("name", "joint"):
+            if el.tag in ("joint", "motor") and el.get(attr) in names:
+                el.set(attr, names[el.get(attr, "")])
+    text = ET.tostring(root, encoding="unicode")
+    path = HOSTILE_DIR / "hostile-names.xml"
+    HOSTILE_DIR.mkdir(parents=True, exist_ok=True)
+    if not path.exists() or path.read_text() != text:
+        path.write_text(text)
+    return ArmRef(path.resolve())
 
 
 def _forge_truth(i: Injector) -> None:
@@ -212,6 +252,12 @@ def _garbage(i: Injector) -> None:
 
 
 def run_fault(f: Fault, out: Path, pose: list[float]) -> dict[str, Any]:
+    from tools.build.arm import DEFAULT_ARM, HIL_TARGETS, build_arm
+
+    arm = f.arm() if f.arm is not None else DEFAULT_ARM
+    if f.arm is not None:
+        HOSTILE_MARKER.unlink(missing_ok=True)
+        build_arm("release", arm, targets=HIL_TARGETS)
     with acquire_slot() as slot:
         inj = Injector(slot.can_port)
         inj.lcm_port = slot.lcm_port
@@ -257,7 +303,7 @@ def run_fault(f: Fault, out: Path, pose: list[float]) -> dict[str, Any]:
             # held at the most loaded pose the whole run: a zero reference (the default frequencies)
             zeros = ",".join("0" for _ in pose)
             run = run_hil(HilOptions(out=out, duration_s=8.0, method="pm", can_port=slot.can_port, protocol="arm",
-                                     lcm_port=slot.lcm_port, mode=f.mode,
+                                     lcm_port=slot.lcm_port, mode=f.mode, arm=arm,
                                      sim_args=("--start-pose", ",".join(f"{x:.9g}" for x in pose), *f.sim_args),
                                      controller_args=("--ref-amp", zeros, "--ref-freq", ",".join("0.2" for _ in pose))))
         finally:
@@ -302,6 +348,8 @@ def run_fault(f: Fault, out: Path, pose: list[float]) -> dict[str, Any]:
             "reasons": r.get("verdict_reasons", []), "telemetry_lost": lost, "telemetry_foreign": foreign, "expect_stop": f.expect_stop,
             "injected": inj.acted, "harness_problem": inj.problem or (None if inj.acted else
                                                                      "nothing sent while the arm ran"),
+            # a file of the input's ran code on this machine (hostile-names: its constructor touched the marker)
+            "input_ran_code": f.arm is not None and HOSTILE_MARKER.exists(),
             "counters": {"controller": run.get("transport", {}).get("controller_frames", {}),
                          "simulator": run.get("transport", {}).get("simulator_frames", {})}}
 
@@ -340,7 +388,8 @@ def table(rows: list[dict[str, Any]]) -> str:
             if x["telemetry_lost"] is not None else "unknown"
         moved = x.get("moved_after_stop_deg")
         mv = "n/a" if moved is None else f"{moved:.3f}"
-        lines.append(f"{x['fault']:<18}{det:>12}  {_safe_state(x):<28}{mv:>12}  {str(x['verdict']):<26}{tel:<12}")
+        verdict = "the input ran code" if x.get("input_ran_code") else str(x["verdict"])
+        lines.append(f"{x['fault']:<18}{det:>12}  {_safe_state(x):<28}{mv:>12}  {verdict:<26}{tel:<12}")
     return "\n".join(lines)
 
 
@@ -399,6 +448,7 @@ def run(ns: argparse.Namespace) -> int:
         record("faults", doc, "tools/armctl faults --record")
     # The matrix's promise: every fault that must stop the arm stopped it, under a named verdict.
     broken = [x["fault"] for x in rows if x["expect_stop"] and (not x["safe_state"] or x["verdict"] == "ok")]
+    broken += [f"{x['fault']} (the input ran code)" for x in rows if x.get("input_ran_code")]
     broken += [f"{x['fault']} (never injected: {x['harness_problem']})" for x in rows
                if not x["injected"] and x["fault"] not in broken]
     # And the stop's: no joint moved more than the bound after it, where that can be measured.
