@@ -70,8 +70,8 @@ static void test_a_stop_says_which_side_and_by_how_much(void)
         lateness_missing(&lt, 0x3Fu);
     }
     CHECK(lateness_explain(&lt, 0u, 4u, 0u, 0u, text, sizeof(text)) == LATE_CONTROLLER);
-    CHECK_MSG(strstr(text, "late: the controller's wake-up in 4 of the 4 periods 0-3 (it woke or read 2.00-2.00 ms "
-                           "late)") == text, "%s", text);
+    CHECK_MSG(strstr(text, "late: the controller's wake-up in 4 of the 4 periods 0-3 that missed their states "
+                           "(it woke or read 2.00-2.00 ms late)") == text, "%s", text);
     lateness_init(&lt);
     begin(&lt, 7, 10000, 900 * MS, 0u, 0u); /* lockstep: a second's wait, and nothing */
     lateness_missing(&lt, 0x04u);

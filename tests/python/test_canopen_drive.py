@@ -301,10 +301,11 @@ def test_quick_stop_and_the_shortcut_to_operation_enabled_as_python_canopen_asks
     assert node.sdo[0x6041].raw & 0x6F == 0x07 and abs(_tpdo_value(rig, 2, "Torque actual value")) <= 1000
     node.state = "OPERATION ENABLED"
     node.state = "READY TO SWITCH ON"
-    node.sdo[0x6040].raw = 0x0F
-    assert node.sdo[0x6041].raw & 0x6F == 0x27
+    # the controlword through the running RPDO1 (an SDO write would be undone by its next frame)
+    node.controlword = 0x0F
+    _until("operation enabled from ready to switch on", lambda: node.sdo[0x6041].raw & 0x6F == 0x27)
     node.sdo[0x605A].raw = 2  # 1-4: a quick stop ends in SWITCH ON DISABLED, after its ramp
-    node.sdo[0x6040].raw = 0x02
+    node.controlword = 0x02
     _until("switch on disabled after the ramp", lambda: node.sdo[0x6041].raw & 0x4F == 0x40)
 
 

@@ -375,7 +375,7 @@ def test_controller_runs_on_localnode_drives(build_dir: Path, udp_port: int, tmp
     drives = {i: Cia402Drive(i) for i in range(1, 7)}
     pending = {i: 0 for i in drives}   # the latest RPDO1 torque, applied at the next SYNC
     applied = {i: 0 for i in drives}
-    rpdo_cw: set[int] = set()
+    rpdo_cw: list[int] = []  # each change of an RPDO1's controlword
     sync_lengths: set[int] = set()
     net = loopback_network(monkeypatch, GROUP, udp_port)
     summary = tmp_path / "controller.json"
@@ -385,7 +385,8 @@ def test_controller_runs_on_localnode_drives(build_dir: Path, udp_port: int, tmp
 
             def on_rpdo(can_id: int, data: bytes, ts: float, i: int = i) -> None:
                 cw, tq = struct.unpack("<Hh", data)
-                rpdo_cw.add(cw)
+                if not rpdo_cw or rpdo_cw[-1] != cw:
+                    rpdo_cw.append(cw)
                 pending[i] = tq
 
             net.subscribe(0x200 + i, on_rpdo)
@@ -414,7 +415,9 @@ def test_controller_runs_on_localnode_drives(build_dir: Path, udp_port: int, tmp
     assert all(drives[i].stored(0x6076) == 1486 and (0x6076, 0) not in {(x, s) for x, s, _ in drives[i].writes}
                for i in drives)
     assert all(drives[i].sw & 0x6F == 0x27 and drives[i].stored(0x6060) == 10 for i in drives)
-    assert rpdo_cw == {0x000F}  # enable operation all along (the NMT stop ends the run)
+    # enable operation all along, then the end of the run's controlled stop: quick stop (these drives
+    # never leave operation enabled, so until --stop-timeout), disable voltage, then the NMT stop
+    assert rpdo_cw == [0x000F, 0x0002, 0x0000]
     assert sync_lengths == {0}  # CiA 301 SYNC without a counter
 
 
