@@ -53,6 +53,8 @@ MOVED_BOUND_DEG = constant("max-moved-after-stop-deg")
 UNMEASURED = {
     "kill-simulator": "the simulator is the arm: killed (SIGKILL), it simulates nothing after (a real arm's drives lose "
                       "their supply there, and their spring-applied brakes close: term-simulator runs that path)",
+    "kill-logger": "the logger is the record: killed, the log holds no simulator truth of the stop (the simulator's "
+                   "own account of the window after the controller fell silent is the row's stop.simulator.moved_deg)",
 }
 GROUP = "239.74.163.2"
 

@@ -404,7 +404,8 @@ def stop_record(controller: dict[str, Any], sim: dict[str, Any], stop_from: int 
             "from_bus_period": stop_from, "found_by": source, "safe_state": stop.get("safe_state"),
             "braked": stop.get("braked"), "window_s": window_s,
             "simulator": {"why": post.get("why"), "braked": post.get("braked"),
-                          "statuswords": post.get("statuswords")} if post else None,
+                          "statuswords": post.get("statuswords"), "from_step": post.get("from_step"),
+                          "moved_deg": post.get("moved_deg")} if post else None,
             **motion}
 
 
