@@ -67,7 +67,10 @@ def test_a_signal_to_armctl_stops_the_run_safely_and_leaves_nothing(tmp_path: Pa
     stop = run["results"]["stop"]
     assert stop["cause"] == "stop signal" and stop["braked"] is True, stop
     if protocol == "canopen":
-        assert stop["moved_after_stop_max_deg"] <= 1.0, stop
+        # the arm was following the reference when the signal came: its quick stop ramp (the drives'
+        # deceleration) takes it some way on; once braked and disabled (the simulator's own window, from
+        # the NMT stop on) it stays (a brake that holds nothing lets the arm fall here)
+        assert stop["simulator"]["why"] and max(stop["simulator"]["moved_deg"]) <= 1.0, stop
     # the stop's commands came in periods of their own: the drives took them, none saw a second
     # master (the arm protocol's drives fault on a second command for one SYNC: a race between two buses
     # once made them, in the VM)
