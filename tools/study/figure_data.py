@@ -14,7 +14,7 @@ import numpy as np
 
 from tools.run.telemetry_log import read_log, truth_rows
 from tools.study.config import METHODS
-from tools.study.report import ESTIMATING, in_degrees
+from tools.study.report import ESTIMATING, in_degrees, loop_rate_hz
 
 # matplotlib's tab10, the colours of every figure's methods in their order in the study's method
 # table (METHODS): the same colour for a method in every figure of every study, PNG or HTML
@@ -105,7 +105,7 @@ def envelopes(series: dict[str, dict[str, np.ndarray]], rate_hz: float) -> dict[
 
 def stopped_early(t: np.ndarray, study: dict[str, Any]) -> bool:
     """Whether a run's series ends before its trajectory did (the safety layer stopped it)."""
-    return float(t[-1]) < study["duration_s"] - 2.0 / study.get("rate_hz", 1000.0)
+    return float(t[-1]) < study["duration_s"] - 2.0 / loop_rate_hz(study)
 
 
 def decimate(t: np.ndarray, y: np.ndarray, points: int) -> tuple[np.ndarray, np.ndarray]:

@@ -23,7 +23,7 @@ from tools.study.figure_data import (BAR_METRICS, ENVELOPE_S, METRIC_UNITS, colo
                                      metric_bars, scenario_series, stopped_early)
 from tools.study.html_figures import (distribution_figure, envelope_figure, metrics_figure,  # noqa: E402
                                       tuning_figure)
-from tools.study.report import ESTIMATING, METRIC_TEXT, fig_name, worst_kept_run  # noqa: E402
+from tools.study.report import ESTIMATING, METRIC_TEXT, fig_name, loop_rate_hz, worst_kept_run  # noqa: E402
 from gen.lib.escape import matplotlib_text as mt  # noqa: E402
 from gen.lib.one_line import one_line  # noqa: E402
 
@@ -41,7 +41,7 @@ def _time_figures(out: Path, study: dict[str, Any], scenario: str) -> list[tuple
     made: list[tuple[str, str | None]] = []
     if not series:
         return made
-    env = envelopes(series, study.get("rate_hz", 1000.0))
+    env = envelopes(series, loop_rate_hz(study))
 
     def label(m: str) -> str:
         r = runs[m][0].get("result") if runs.get(m) else None

@@ -341,6 +341,12 @@ def worst_kept_run(study: dict[str, Any], scenario: str) -> tuple[str, int, str]
     return m, seed, why
 
 
+def loop_rate_hz(study: dict[str, Any]) -> float:
+    """The loop rate the study ran at (study.json's rate_hz, the arm's design's); a record made
+    before it was kept ran at the registry's default."""
+    return float(study.get("rate_hz") or default("controller", "rate"))
+
+
 def _remove_figures(out: Path, scenarios: list[str]) -> None:
     """A report without figures leaves none beside it of an earlier study of these scenarios in
     the same folder: every figure there is the report's."""
@@ -372,7 +378,7 @@ def write_report(out: Path, study: dict[str, Any], figures: bool = True) -> None
     text = [f"# Study: {md(study['description'])}", "",
             f"Arm {code(arm['name'])} ({n} joints: {', '.join(map(code, arm['joint_names']))}; model "
             f"{code(arm['model'])}, hash {md(arm['model_hash'])}), its CAN buses {wiring}, {md(_how_run(study))} at "
-            f"{default('controller', 'rate') / 1000:g} kHz. Config {code(study['config'])}; "
+            f"{loop_rate_hz(study) / 1000:g} kHz. Config {code(study['config'])}; "
             f"seeds {study['seeds']}; trajectory {study['duration_s']:g} s after a {study['hold_s']:g} s hold on the "
             "start pose (metrics cover the trajectory only). Intervals are 95 % confidence intervals of the mean over "
             "the seeds (Student's t); PM against another method is paired on the same seeds: the ratio of the means, "
