@@ -55,6 +55,23 @@ def metric_bars(study: dict[str, Any], scenario: str, metric: str) -> tuple[list
     return groups, out
 
 
+def answer_bars(study: dict[str, Any]) -> tuple[list[str], dict[str, dict[str, Any]]]:
+    """The study's answer as bars: per scenario (the groups) each method's L-infinity tracking error
+    summed over the joints (deg), the mean over the seeds, the 95 % interval's half-widths and how
+    many of its runs did not end ok: what the pick is picked by."""
+    groups = list(study["scenarios"])
+    out: dict[str, dict[str, Any]] = {}
+    for m in study["methods"]:
+        cells = [in_degrees(study["scenarios"][s]["stats"][m]["linf"]["total"], "linf") for s in groups]
+        mean = np.array([c["mean"] if c.get("mean") is not None else np.nan for c in cells], float)
+        lo = np.array([c["ci95"][0] if c.get("ci95") else np.nan for c in cells], float)
+        hi = np.array([c["ci95"][1] if c.get("ci95") else np.nan for c in cells], float)
+        not_ok = [sum(1 for r in study["scenarios"][s]["stats"][m]["results"] if r != "ok") for s in groups]
+        out[m] = {"mean": mean, "below": mean - lo, "above": hi - mean, "not_ok": not_ok,
+                  "runs": [len(study["scenarios"][s]["stats"][m]["results"]) for s in groups]}
+    return groups, out
+
+
 def envelope(x: np.ndarray, window: int) -> np.ndarray:
     """max |x| over the trailing `window` samples: a band of sensor noise around zero becomes one
     line at its height, and lines of methods that differ stay apart."""
