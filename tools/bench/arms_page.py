@@ -64,8 +64,11 @@ def render(doc: dict[str, Any]) -> str:
         why = "; ".join(f"{n}: {k}" for k, n in sorted(st["not_arms"].items(), key=lambda kv: -kv[1]))
         lines.append(f"| {_cell(st['name'])} | {markdown_code(st['requirement'])} | {_cell(st['licence'])} | {st['files']} | "
                      f"{st['arms']} | {_cell(why)} |")
-    # why a set is left out: the project's own prose (tools/bench/model_sets.toml), Markdown by intent
-    lines += ["", "Left out:", ""] + [f"- **{_cell(x['name'])}**: {x['why']}" for x in doc["left_out"]] + ["", END]
+    # why a set is left out: the project's own prose, read from its one definition
+    # (tools/bench/model_sets.toml), Markdown by intent
+    from tools.bench.arms import load_sets
+
+    lines += ["", "Left out:", ""] + [f"- **{_cell(x['name'])}**: {x['why']}" for x in load_sets()[1]] + ["", END]
     return "\n".join(lines) + "\n"
 
 
