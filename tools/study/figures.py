@@ -146,25 +146,33 @@ def _distribution_figure(out: Path, study: dict[str, Any], scenario: str) -> str
     return _save(fig, out / fig_name("distribution", scenario))
 
 
-def _answer_figure(out: Path, study: dict[str, Any]) -> str:
-    """The answer drawn (fig_answer_all.png): per scenario, each method's L-infinity tracking error
-    summed over the joints, mean and 95 % interval; hatched where some runs did not end ok."""
-    colour = colour_of(study)
-    groups, bars = answer_bars(study)
-    fig, ax = plt.subplots(figsize=(max(7.0, 2.2 * len(groups) + 2), 3.6))
+def _grouped_bars(ax: Any, groups: list[str], bars: dict[str, dict[str, Any]], colour: dict[str, str]) -> None:
+    """One group of bars per entry of `groups`, a bar a method in its colour with its 95 % interval;
+    hatched where some of its runs did not end ok (`not_ok`: one count, or one per group; `labels`:
+    the legend's, one per group, None for none); a log scale where the means span more than 30x."""
     width = 0.8 / max(len(bars), 1)
     x0 = np.arange(len(groups))
     for k, (m, b) in enumerate(bars.items()):
         x = x0 + (k - (len(bars) - 1) / 2) * width
-        for xi, mean, bad in zip(x, b["mean"], b["not_ok"]):
-            ax.bar(xi, mean, width, color=colour[m], edgecolor="k" if bad else colour[m], lw=0.6,
-                   hatch="///" if bad else None, alpha=0.9)
+        bad = np.broadcast_to(np.asarray(b["not_ok"]) > 0, x.shape)
+        for xi, mean, hatched, label in zip(x, b["mean"], bad, b["labels"]):
+            ax.bar(xi, mean, width, color=colour[m], edgecolor="k" if hatched else colour[m], lw=0.6,
+                   hatch="///" if hatched else None, alpha=0.9, label=label)
         ax.errorbar(x, b["mean"], yerr=[b["below"], b["above"]], fmt="none", ecolor="k", lw=0.8, capsize=2)
     vals = np.concatenate([b["mean"] for b in bars.values()]) if bars else np.array([])
     vals = vals[np.isfinite(vals) & (vals > 0)]
     if len(vals) and vals.max() / vals.min() > 30:
         ax.set_yscale("log")
     ax.set_xticks(x0, [mt(g) for g in groups], fontsize=8)
+
+
+def _answer_figure(out: Path, study: dict[str, Any]) -> str:
+    """The answer drawn (fig_answer_all.png): per scenario, each method's L-infinity tracking error
+    summed over the joints, mean and 95 % interval; hatched where some runs did not end ok."""
+    colour = colour_of(study)
+    groups, bars = answer_bars(study)
+    fig, ax = plt.subplots(figsize=(max(7.0, 2.2 * len(groups) + 2), 3.6))
+    _grouped_bars(ax, groups, {m: {**b, "labels": [None] * len(groups)} for m, b in bars.items()}, colour)
     ax.set_ylabel("deg")
     ax.grid(axis="y", lw=0.3, alpha=0.6)
     from matplotlib.patches import Patch
@@ -186,20 +194,9 @@ def _metrics_figure(out: Path, study: dict[str, Any], scenario: str) -> str:
                              gridspec_kw={"height_ratios": [3, 3, 3, 2]})
     for ax, metric in zip(axes, BAR_METRICS):
         groups, bars = metric_bars(study, scenario, metric)
-        width = 0.8 / max(len(bars), 1)
-        x0 = np.arange(len(groups))
-        for k, (m, b) in enumerate(bars.items()):
-            x = x0 + (k - (len(bars) - 1) / 2) * width
-            bad = b["not_ok"] > 0
-            ax.bar(x, b["mean"], width, color=colour[m], edgecolor="k" if bad else colour[m], lw=0.6,
-                   hatch="///" if bad else None, alpha=0.9,
-                   label=mt(m + (f" ({b['not_ok']} of {b['runs']} runs not ok)" if bad else "")))
-            ax.errorbar(x, b["mean"], yerr=[b["below"], b["above"]], fmt="none", ecolor="k", lw=0.8, capsize=2)
-        vals = np.concatenate([b["mean"] for b in bars.values()]) if bars else np.array([])
-        vals = vals[np.isfinite(vals) & (vals > 0)]
-        if len(vals) and vals.max() / vals.min() > 30:
-            ax.set_yscale("log")
-        ax.set_xticks(x0, [mt(g) for g in groups], fontsize=8)
+        _grouped_bars(ax, groups, {m: {**b, "labels": [mt(m + (f" ({b['not_ok']} of {b['runs']} runs not ok)"
+                                                               if b["not_ok"] else ""))] + [None] * (len(groups) - 1)}
+                                   for m, b in bars.items()}, colour)
         ax.set_ylabel(METRIC_UNITS[metric])
         ax.set_title(f"{METRIC_TEXT[metric]}: mean over {len(study['seeds'])} seed(s), 95 % interval", fontsize=9)
         ax.grid(axis="y", lw=0.3, alpha=0.6)
