@@ -91,7 +91,7 @@ REQUIRED: list[tuple[str, str]] = [
      "/usr/lib/x86_64-linux-gnu/dri/swrast_dri.so"),
     ("armctl render: OpenGL for PyOpenGL on EGL", _library("libOpenGL.so.0")),
     ("test_report_html: headless Chromium", _program("chromium-headless-shell")),
-    ("the user guide's diagrams: Graphviz's dot (tools/mkdocs_hooks.py)", _program("dot")),
+    ("the user guide's diagrams: Graphviz's dot (tools/commands/docs_hooks.py)", _program("dot")),
 ]
 
 

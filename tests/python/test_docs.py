@@ -37,8 +37,8 @@ def test_the_guide_builds_strictly(tmp_path: Path) -> None:
 def guide_copy(tmp_path: Path) -> Path:
     """mkdocs.yml and docs/ copied, to break."""
     shutil.copy(REPO / "mkdocs.yml", tmp_path / "mkdocs.yml")
-    (tmp_path / "tools").mkdir()
-    shutil.copy(REPO / "tools" / "mkdocs_hooks.py", tmp_path / "tools" / "mkdocs_hooks.py")  # the hooks mkdocs.yml names
+    (tmp_path / "tools" / "commands").mkdir(parents=True)
+    shutil.copy(REPO / "tools" / "commands" / "docs_hooks.py", tmp_path / "tools" / "commands")  # mkdocs.yml's hooks
     shutil.copytree(DOCS, tmp_path / "docs", ignore=shutil.ignore_patterns("results"))
     return tmp_path
 
@@ -102,7 +102,7 @@ def test_a_duration_reads_in_whole_minutes_and_seconds(seconds: float, text: str
 # ---- the guide as a newcomer reads it: every word explained, nothing of a machine or a lab notebook
 
 from tools.bench import arms_page  # noqa: E402
-from tools.mkdocs_hooks import glossary_terms, render_diagram  # noqa: E402
+from tools.commands.docs_hooks import glossary_terms, render_diagram  # noqa: E402
 
 GLOSSARY = DOCS / "glossary.md"
 # Parts a command writes: the numbers regions (tools/armctl docs), the parameter tables (gen.params),
@@ -314,7 +314,7 @@ def test_the_data_flow_diagram_is_drawn_from_its_source(tmp_path: Path) -> None:
     assert "diagrams/data-flow.svg" in (DOCS / "index.md").read_text()
     bad = tmp_path / "bad.dot"
     bad.write_text("digraph { a -> }")
-    from tools.mkdocs_hooks import DiagramError
+    from tools.commands.docs_hooks import DiagramError
 
     with pytest.raises(DiagramError, match="bad.dot: dot failed"):
         render_diagram(bad)
