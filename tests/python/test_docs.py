@@ -27,10 +27,17 @@ def mkdocs_build(root: Path, site: Path) -> subprocess.CompletedProcess[str]:
                           env={**os.environ, "NO_MKDOCS_2_WARNING": "1"})
 
 
-def test_the_guide_builds_strictly(tmp_path: Path) -> None:
-    r = mkdocs_build(REPO, tmp_path / "site")
+def test_the_guide_builds_strictly_and_the_site_fetches_nothing(tmp_path: Path) -> None:
+    """The strict build passes; its diagram is drawn into the site; no page loads a script, style,
+    font or image from elsewhere (links a reader follows are not loads)."""
+    site = tmp_path / "site"
+    r = mkdocs_build(REPO, site)
     assert r.returncode == 0, r.stdout + r.stderr
-    assert (tmp_path / "site" / "reference" / "commands" / "index.html").is_file()
+    assert (site / "reference" / "commands" / "index.html").is_file()
+    assert (site / "diagrams" / "data-flow.svg").read_text().lstrip().startswith(("<?xml", "<svg", "<!--"))
+    fetched = {m for page in site.rglob("*.html") for m in re.findall(
+        r"""<(?:script|link|img|iframe|source)\b[^>]*\b(?:src|href)=["']?((?:https?:)?//[^"' >]+)""", page.read_text())}
+    assert fetched == set()
 
 
 @pytest.fixture
