@@ -286,30 +286,16 @@ def test_a_study_scenario_chooses_the_protocol(tmp_path: Path) -> None:
     assert RunSpec(**base).key()["protocol"] == RunSpec(**base, protocol="canopen").key()["protocol"] == "canopen"
 
 
-# Max |e| per joint (deg) of `tools/armctl hil --bus sil --protocol P --duration 3 --method M` on the
-# bundled arm: every method over both protocols (docs/drives.md "Tracking, canopen next to the arm
-# protocol" says what differs and why). gh2 stops on its following error in the same period on both.
-TRACKING = """
-pd       arm     ok      0.10 0.10 0.09 0.58 0.54 0.58
-pd       canopen ok      0.10 0.10 0.09 0.58 0.54 0.57
-pm       arm     ok      0.05 0.15 0.10 0.29 0.31 0.36
-pm       canopen ok      0.05 0.10 0.07 0.29 0.31 0.36
-pm-paper arm     ok      0.72 0.47 0.28 1.62 1.64 1.66
-pm-paper canopen ok      0.72 0.47 0.28 1.62 1.64 1.66
-gh2      arm     failed  4.48 5.70 7.09 16.43 22.25 28.64
-gh2      canopen failed  4.48 5.70 7.11 16.43 22.25 28.64
-tde      arm     ok      0.01 0.01 0.01 0.06 0.07 0.07
-tde      canopen ok      0.01 0.01 0.01 0.06 0.07 0.07
-usde-smc arm     ok      0.03 0.03 0.04 0.22 0.24 0.28
-usde-smc canopen ok      0.03 0.04 0.04 0.23 0.24 0.28
-"""
+# Max |e| per joint (deg) of every method over both protocols on the bundled arm: canopen_tracking.txt
+# (docs/drives.md "Tracking, canopen next to the arm protocol" says what differs and why).
+TRACKING = Path(__file__).with_name("canopen_tracking.txt")
 
 
 def test_every_method_tracks_alike_over_both_protocols(tmp_path: Path, controller_bin: Path) -> None:
     """Each row of TRACKING is what the run gives, to 0.01 deg; gh2's stop is in the same period over
     both protocols."""
     preset = controller_bin.parent.parent.name
-    rows = [line.split() for line in TRACKING.strip().splitlines()]
+    rows = [line.split() for line in TRACKING.read_text().splitlines() if line and not line.startswith("#")]
     assert len(rows) == 12, rows
     stops = {}
     for method, protocol, result, *figures in rows:
