@@ -21,10 +21,11 @@ from tools.commands import docs as docs_cmd
 
 
 def mkdocs_build(root: Path, site: Path) -> subprocess.CompletedProcess[str]:
-    # not -q: a quiet build does not count its warnings, so --strict would let them pass
+    # not -q: a quiet build does not count its warnings, so --strict would let them pass.
+    # PYTHONPATH: a copied guide's hooks import tools.build from the repository.
     return subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-f", str(root / "mkdocs.yml"),
                            "-d", str(site)], cwd=root, capture_output=True, text=True, timeout=300,
-                          env={**os.environ, "NO_MKDOCS_2_WARNING": "1"})
+                          env={**os.environ, "NO_MKDOCS_2_WARNING": "1", "PYTHONPATH": str(REPO)})
 
 
 def test_the_guide_builds_strictly_and_the_site_fetches_nothing(tmp_path: Path) -> None:
@@ -332,3 +333,22 @@ def test_the_data_flow_diagram_is_drawn_from_its_source(tmp_path: Path) -> None:
 
     with pytest.raises(DiagramError, match="bad.dot: dot failed"):
         render_diagram(bad)
+
+
+def test_the_guide_build_installs_graphviz_as_its_own_need(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The diagrams ask for the docs need (tools/apt-packages-docs.txt), not the base list every
+    command installs; where it cannot be installed, the build's error gives the apt-get line."""
+    from tools.build import packages
+    from tools.commands.docs_hooks import DiagramError
+
+    assert "graphviz" in packages.listed("docs") and "graphviz" not in packages.listed(None)
+    asked: list[str] = []
+
+    def refuse(need: str) -> None:
+        asked.append(need)
+        raise packages.PackagesMissing("run: sudo apt-get install -y --no-install-recommends graphviz")
+
+    monkeypatch.setattr(packages, "ensure", refuse)
+    with pytest.raises(DiagramError, match=r"data-flow.dot: Graphviz's dot is missing: run: sudo apt-get .* graphviz"):
+        render_diagram(DOCS / "diagrams" / "data-flow.dot")
+    assert asked == ["docs"]

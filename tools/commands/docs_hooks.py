@@ -1,8 +1,9 @@
 """MkDocs hooks of the user guide (mkdocs.yml `hooks:`).
 
 - Every Graphviz source under docs/diagrams/ (`NAME.dot`) is rendered to `diagrams/NAME.svg` when
-  the guide is built, by Graphviz's `dot` (the Debian package graphviz, tools/apt-packages.txt):
-  the diagram's one definition is its text, and the site holds the SVG, fetching nothing.
+  the guide is built, by Graphviz's `dot` (the Debian package graphviz, tools/apt-packages-docs.txt,
+  installed when the guide is first built: the demo never pays for it): the diagram's one
+  definition is its text, and the site holds the SVG, fetching nothing.
 - Every acronym of the glossary (docs/glossary.md) explains itself on every page: the page gets the
   glossary's abbreviations (python-markdown's `abbr`, shown as a tooltip by the theme).
 
@@ -14,8 +15,14 @@ from __future__ import annotations
 import re
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 from typing import Any
+
+# mkdocs loads this file by its path, from a console script whose sys.path lacks the repository
+_REPO = str(Path(__file__).resolve().parents[2])
+if _REPO not in sys.path:
+    sys.path.append(_REPO)
 
 DIAGRAMS = "diagrams"
 GLOSSARY = "glossary.md"
@@ -41,10 +48,15 @@ def glossary_terms(text: str) -> dict[str, str]:
 
 def render_diagram(source: Path) -> str:
     """The SVG Graphviz's dot draws from `source`; DiagramError naming the file when it cannot."""
+    from tools.build.packages import PackagesMissing, ensure
+
+    try:
+        ensure("docs")
+    except PackagesMissing as e:
+        raise DiagramError(f"{source.name}: Graphviz's dot is missing: {e}") from None
     dot = shutil.which("dot")
     if dot is None:
-        raise DiagramError(f"{source.name}: Graphviz's dot is missing: tools/armctl installs it (graphviz, "
-                           "tools/apt-packages.txt)")
+        raise DiagramError(f"{source.name}: Graphviz's dot is missing: install graphviz (tools/apt-packages-docs.txt)")
     r = subprocess.run([dot, "-Tsvg", str(source)], capture_output=True, text=True, timeout=60)
     if r.returncode != 0 or "<svg" not in r.stdout:
         raise DiagramError(f"{source.name}: dot failed: {' '.join(r.stderr.split())[:300]}")
