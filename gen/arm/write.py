@@ -19,11 +19,13 @@ from gen.arm.assets import ASSET_KINDS, remove_assets
 from gen.arm.chain import Chain
 from gen.arm.compile import compile_spec
 from gen.arm.errors import ArmError, float32
+from gen.lib import mjcf_defaults
 from gen.lib.one_line import joined_lines
 
 MIN_JOINT_INERTIA = 1e-7   # kg m^2: a joint that moves less than this cannot be controlled
 LIGHT_LINK_KG = 1e-6       # a link lighter than this (its children may still be heavy): a warning
 WRITTEN_TOLERANCE = 1e-4   # relative change of the inverse dynamics that writing to XML may cost
+OWN_KINDS = ("actuator", "site")  # the kinds of element the importer adds to arm.xml
 
 
 @dataclass
@@ -54,6 +56,9 @@ def dynamics_only(spec: mujoco.MjSpec, m0: mujoco.MjModel, af: ArmFile, path: Pa
     for elist in (spec.actuators, spec.sensors, spec.tendons, spec.equalities, spec.keys, spec.excludes, spec.pairs):
         for e in list(elist):
             spec.delete(e)
+    # the motors and the payload site the importer adds take nothing from the model's classes (a
+    # class that makes every `general` a position servo); the model's own sites keep their values
+    mjcf_defaults.reset_to_builtin(classes, OWN_KINDS)
     if not af.contacts:
         for g in list(spec.geoms):
             spec.delete(g)
