@@ -53,6 +53,7 @@ def dynamics_only(spec: mujoco.MjSpec, m0: mujoco.MjModel, af: ArmFile, path: Pa
         body.iquat = m0.body_iquat[b].copy()
         body.inertia = m0.body_inertia[b].copy()
         body.fullinertia = [math.nan, 0, 0, 0, 0, 0]  # unset: inertia + iquat are the ones
+    _drop_gravity_compensation(spec, m0, warnings)
     for elist in (spec.actuators, spec.sensors, spec.tendons, spec.equalities, spec.keys, spec.excludes, spec.pairs):
         for e in list(elist):
             spec.delete(e)
@@ -84,6 +85,20 @@ def dynamics_only(spec: mujoco.MjSpec, m0: mujoco.MjModel, af: ArmFile, path: Pa
     spec.option.timestep = dt
     spec.compiler.fusestatic = True
     return Dynamics(compile_spec(spec, path, "preparing it"), dt, substeps)
+
+
+def _drop_gravity_compensation(spec: mujoco.MjSpec, m0: mujoco.MjModel, warnings: list[str]) -> None:
+    """MuJoCo's body gravcomp is a force from nowhere that holds a body up (a simulation's stand-in
+    for a robot's own gravity compensation). On a real arm the drives carry gravity, and this
+    controller's model compensates it itself: with gravcomp the simulated arm would float and the
+    assumed torque limits would leave gravity out."""
+    held = [mujoco.mj_id2name(m0, mujoco.mjtObj.mjOBJ_BODY, b) for b in range(1, m0.nbody) if m0.body_gravcomp[b]]
+    for name in held:
+        spec.body(name).gravcomp = 0.0
+    if held:
+        warnings.append(f"gravcomp (MuJoCo's gravity compensation, a force no drive gives) removed from "
+                        f"{len(held)} bodies ({', '.join(held[:3])}{' ...' if len(held) > 3 else ''}): the drives "
+                        "carry the arm's weight, as on the real arm, and the controller's model compensates it")
 
 
 def write(spec: mujoco.MjSpec, dyn: Dynamics, chain: Chain, home: list[float], limits: list[tuple[float, str]],
