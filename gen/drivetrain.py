@@ -39,7 +39,7 @@ import numpy as np
 
 from gen.lib import mjcf_defaults
 from gen.lib.params import param
-from gen.lib.paths import REPO
+from gen.lib.paths import BUNDLED_DRIVETRAIN
 
 
 @dataclass(frozen=True)
@@ -76,7 +76,6 @@ PLANT_KINDS = ("joint", "tendon", "actuator", "site")  # the kinds of element pl
 # the rotor's body: its inertia is the hinge's armature; MuJoCo wants a moving body to have some mass
 ROTOR_BODY_MASS, ROTOR_BODY_INERTIA = 1e-3, 1e-9
 DRIVETRAIN_FIELDS = {"size", "stiffness", "damping", "damping_ratio", "rotor_inertia"}
-BUNDLED_DRIVETRAIN = REPO / "host_sim" / "models" / "ur5e_arm_drivetrain.toml"
 
 
 class DrivetrainError(ValueError):

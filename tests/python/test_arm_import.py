@@ -386,13 +386,13 @@ def test_a_joint_without_a_torque_limit_gets_one_sized_from_the_arm_with_a_warni
 def test_a_folder_prepared_from_the_same_inputs_is_not_prepared_again(tmp_path: Path, monkeypatch) -> None:
     """The build's gen.arm step finds the preparation the check before the build made (tools/build/arm.py
     seed_prepared): same inputs, nothing prepared; another model, prepared again."""
-    from gen.arm import cli
+    from gen.arm import preparation as stage  # the CLI imports prepare() from it when it needs it
 
     model = write(tmp_path, chain_mjcf())
     out = tmp_path / "out"
     assert gen_arm.main(["--model", str(model), "--out", str(out)]) == 0
     calls = []
-    monkeypatch.setattr(cli, "prepare", lambda *a: calls.append(a) or prepare(*a))
+    monkeypatch.setattr(stage, "prepare", lambda *a: calls.append(a) or prepare(*a))
     assert gen_arm.main(["--model", str(model), "--out", str(out)]) == 0 and calls == []
     model.write_text(chain_mjcf(n=4))
     assert gen_arm.main(["--model", str(model), "--out", str(out)]) == 0 and len(calls) == 1
@@ -447,3 +447,20 @@ def test_a_drive_too_coarse_for_its_link_is_named_in_the_limitations(tmp_path: P
     assert lim["joint"] == "j2" and lim["kind"] == "torque-step"
     assert "0.035 N m" in lim["text"] and "rated_torque_nm" in lim["text"] and lim["text"] in p.info["warnings"]
     assert prep(write(tmp_path, chain_mjcf(), "heavy.xml")).info["limitations"] == []
+
+
+def test_a_build_that_finds_its_arm_prepared_does_not_load_mujoco(tmp_path: Path) -> None:
+    """The build's gen.arm step on a folder the check before the build prepared (every first build of
+    an arm: tools/build/arm.py seed_prepared) reads the key, not MuJoCo and the importer: it sits
+    before the synthesis on the first build's critical path."""
+    import subprocess
+    import sys
+
+    model = write(tmp_path, chain_mjcf())
+    out = tmp_path / "out"
+    assert gen_arm.main(["--model", str(model), "--out", str(out)]) == 0
+    probe = ("import sys; from gen.arm.cli import main; rc = main(['--model', sys.argv[1], '--out', sys.argv[2]]); "
+             "print(rc, sorted(m for m in ('mujoco', 'numpy', 'gen.arm.preparation') if m in sys.modules))")
+    r = subprocess.run([sys.executable, "-c", probe, str(model), str(out)], cwd=REPO, capture_output=True, text=True,
+                       env={**__import__("os").environ, "PYTHONPATH": str(REPO)}, timeout=120)
+    assert r.stdout.strip() == "0 []", (r.stdout, r.stderr)
