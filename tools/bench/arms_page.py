@@ -91,8 +91,9 @@ def render(doc: dict[str, Any]) -> str:
         err = f"{r['max_error_deg']:.3g}" if r.get("max_error_deg") is not None else "-"
         t = f"{r['first_result_s']:.1f}" if r.get("first_result_s") is not None else "-"
         lines.append(f"| {_cell(arm)} | {r['set']} | {len(r['joints'])} | {_cell(result)} | {err} | {t} |")
-    lines += ["", "The sets taken (installed with `pip install --no-deps`; their files read, their Python never run):",
-              "", "| set | package | licence | files looked at | arms | files without an arm, by reason |",
+    taken = ("The folder taken (armctl arms --path):" if all(st.get("path") for st in doc["sets"]) else
+             "The sets taken (installed with `pip install --no-deps`; their files read, their Python never run):")
+    lines += ["", taken, "", "| set | package | licence | files looked at | arms | files without an arm, by reason |",
               "|---|---|---|---|---|---|"]
     for st in doc["sets"]:
         why = "; ".join(f"{n}: {k}" for k, n in sorted(st["not_arms"].items(), key=lambda kv: -kv[1]))
