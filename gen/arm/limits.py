@@ -165,9 +165,10 @@ def _check_gravity_at_home(m1: mujoco.MjModel, chain: Chain, pose: Pose, limits:
                            "(arm file home)")
 
 
-# CiA 402 commands torque in steps of 1 per mille of the drive's rated torque (0x6071), and the
-# emulated drives are rated at the joint's torque limit (firmware/protocol/drives.toml). One step
-# that changes a joint's speed by more than MAX_STEP_SPEED within one loop period leaves the loop
+# CiA 402 commands torque in steps of 1 per mille of the motor's rated torque (0x6071), which the
+# emulated drives give the joint's torque limit through the gear (firmware/protocol/drives.toml:
+# "joint_torque_limit / gear"): a step of a thousandth of the limit at the joint. One step that
+# changes a joint's speed by more than MAX_STEP_SPEED within one loop period leaves the loop
 # nothing finer to hold it with: it cycles between steps, up to the safety layer's 2 pi rad/s
 # stop (SO-100's gripper in docs/arm-compatibility.md: 1.6 rad/s a step; SO-101's, 0.6, runs).
 TORQUE_STEP = 1e-3
@@ -176,19 +177,19 @@ MAX_STEP_SPEED = 1.0  # rad/s
 
 def coarse_torque_steps(names: list[str], limits: list[float], inertia_at_home: np.ndarray,
                         period: float) -> list[dict[str, object]]:
-    """The joints whose drive, rated at the joint's torque limit, changes the joint's speed within
-    one period by more than MAX_STEP_SPEED with one torque step (M_jj at home): arm.json's
-    limitations, each with what to change."""
+    """The joints whose drive, giving the joint's torque limit at its rated torque, changes the
+    joint's speed within one period by more than MAX_STEP_SPEED with one torque step (M_jj at
+    home): arm.json's limitations, each with what to change."""
     out: list[dict[str, object]] = []
     for name, lim, mjj in zip(names, limits, inertia_at_home):
         step = TORQUE_STEP * lim
         speed = step / float(mjj) * period
         if speed > MAX_STEP_SPEED:
             out.append({"joint": name, "kind": "torque-step", "text": (
-                f"joint '{name}': one torque step of a drive rated at its {lim:g} N m limit (CiA 402 commands "
-                f"1 per mille of the rated torque: {step:.3g} N m) changes its speed by {speed:.2g} rad/s within "
-                f"a {period * 1e3:g} ms period (it moves {float(mjj):.2g} kg m^2 at home), more than "
-                f"{MAX_STEP_SPEED:g} rad/s: the loop has nothing finer to hold it with; give it a drive with a "
-                "finer step (a lower rated torque: the arm file's drives, rated_torque_nm) or its drive's real "
-                "torque limit (torque_limits)")})
+                f"joint '{name}': one torque step of a drive whose rated torque gives its {lim:g} N m limit "
+                f"(CiA 402 commands 1 per mille of the rated torque: {step:.3g} N m at the joint) changes its "
+                f"speed by {speed:.2g} rad/s within a {period * 1e3:g} ms period (it moves {float(mjj):.2g} kg m^2 "
+                f"at home), more than {MAX_STEP_SPEED:g} rad/s: the loop has nothing finer to hold it with; give "
+                "it a drive with a finer step (the arm file's drives: a lower rated_torque_nm, or more gear) or "
+                "its drive's real torque limit (torque_limits)")})
     return out
