@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import statistics
 import sys
 from pathlib import Path
@@ -50,6 +51,11 @@ def _cell(text: str) -> str:
     return text.replace("|", "\\|").replace("\n", " ")
 
 
+def _percent(x: float) -> str:
+    """Rounded down to a tenth: a share just under a bound never reads as reaching it."""
+    return f"{math.floor(1000 * x) / 10:g} %"
+
+
 def _arm(r: dict[str, Any]) -> str:
     return r["model"] + (f" ({r['joints'][0]} ..., one arm of two)" if r.get("arm_file") else "")
 
@@ -64,7 +70,7 @@ def render(doc: dict[str, Any]) -> str:
              f"**{s['ok']} of {s['arms']} arms `ok`** ({100 * s['ok_fraction']:.0f} %) from {s['sets']} model "
              f"{'set' if s['sets'] == 1 else 'sets'}, {s['refused']} refused, {s['failed']} not `ok`; of the "
              f"{s['with_physics']} whose files give their physics (all but the refusals for a defect of the file), "
-             f"**{100 * s['ok_fraction_with_physics']:.0f} % `ok`** ({worst}the bound {doc['bound_deg']:g} deg). "
+             f"**{_percent(s['ok_fraction_with_physics'])} `ok`** ({worst}the bound {doc['bound_deg']:g} deg). "
              f"Time to first result (a build folder that did not exist, to the run's verdict): {times}. Measured "
              f"by `tools/armctl arms` on commit {doc['commit']} ({doc['date']}), {m['cores']} cores, {m['cpu']}.", ""]
     if s["not_ok_with_physics"]:
