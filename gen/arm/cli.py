@@ -14,6 +14,8 @@ from gen.arm.arm_file import DEFAULT_DESIGN, drivetrain_inputs, load_arm_file
 from gen.arm.errors import ArmError
 from gen.lib.atomic_output import OutputError, write_files_atomically
 from gen.lib.busload import DEFAULT_DBC, DEFAULT_TOPOLOGY
+from gen.lib.escape import EscapeError, depfile_path
+from gen.lib.one_line import one_line
 
 if TYPE_CHECKING:
     from gen.arm.preparation import Prepared
@@ -105,7 +107,12 @@ def main(argv: list[str] | None = None) -> int:
         deps += [str(p) for p in drivetrain_inputs(af)]
         deps += [str(DEFAULT_DBC), str(DEFAULT_TOPOLOGY)]  # the drive slots; the six-drive wiring
         target = ns.out / "arm.xml"
-        ns.depfile.write_text(f"{target}: " + " ".join(d.replace(" ", "\\ ") for d in deps) + "\n")
+        try:
+            head, *rest = (depfile_path(str(d), "a file the arm is made of") for d in [str(target), *deps])
+        except EscapeError as exc:
+            print(f"gen.arm: {exc}", file=sys.stderr)
+            return 2
+        ns.depfile.write_text(f"{head}: {' '.join(rest)}\n")
     for w in info["warnings"]:
-        print(f"gen.arm: {info['name']}: {w}", file=sys.stderr)
+        print(f"gen.arm: {info['name']}: {one_line(w)}", file=sys.stderr)
     return 0

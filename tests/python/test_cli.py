@@ -24,7 +24,7 @@ def test_every_command_is_a_module_with_add_subparser_and_run() -> None:
     sub = next(a for a in p._actions if isinstance(a, argparse._SubParsersAction))  # noqa: SLF001
     assert list(sub.choices) == ["setup", "build", "cluster-certs", "timing", "hil", "demo", "test", "synth", "vcan",
                                  "busload", "drive", "study", "tune", "faults", "fuzz", "bench", "docs", "arms", "render",
-                                 "export"]
+                                 "export", "lock"]
     for name, parser in sub.choices.items():
         assert callable(parser.get_default("run")), name
     for module in cli._commands():  # noqa: SLF001

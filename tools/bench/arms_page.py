@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from gen.lib.escape import markdown_code, markdown_text
 from gen.lib.paths import REPO
 
 PAGE = REPO / "docs" / "arm-compatibility.md"
@@ -48,7 +49,7 @@ def summary(doc: dict[str, Any]) -> dict[str, Any]:
 
 
 def _cell(text: str) -> str:
-    return text.replace("|", "\\|").replace("\n", " ")
+    return markdown_text(str(text))
 
 
 def _percent(x: float) -> str:
@@ -75,7 +76,7 @@ def render(doc: dict[str, Any]) -> str:
              f"by `tools/armctl arms` on commit {doc['commit']} ({doc['date']}), {m['cores']} cores, {m['cpu']}.", ""]
     if s["not_ok_with_physics"]:
         lines += ["Not `ok` although the file gives its physics, and why:", ""]
-        lines += [f"- {_cell(_arm(r))} ({r['set']}): {r['result']}: "
+        lines += [f"- {_cell(_arm(r))} ({_cell(r['set'])}): {r['result']}: "
                   + _cell("; ".join(r.get("limitations") or []) or "no physical reason found: a defect of this "
                           "controller, to fix") for r in s["not_ok_with_physics"]]
         lines.append("")
@@ -96,17 +97,18 @@ def render(doc: dict[str, Any]) -> str:
         result = r["result"] if r["result"] == "ok" else f"{r['result']}: {why or r.get('reason') or ''}"
         err = f"{r['max_error_deg']:.3g}" if r.get("max_error_deg") is not None else "-"
         t = f"{r['first_result_s']:.1f}" if r.get("first_result_s") is not None else "-"
-        lines.append(f"| {_cell(arm)} | {r['set']} | {len(r['joints'])} | {_cell(result)} | {err} | {t} |")
+        lines.append(f"| {_cell(arm)} | {_cell(r['set'])} | {len(r['joints'])} | {_cell(result)} | {err} | {t} |")
     taken = ("The folder taken (armctl arms --path):" if all(st.get("path") for st in doc["sets"]) else
              "The sets taken (installed with `pip install --no-deps`; their files read, their Python never run):")
     lines += ["", taken, "", "| set | package | licence | files looked at | arms | files without an arm, by reason |",
               "|---|---|---|---|---|---|"]
     for st in doc["sets"]:
         why = "; ".join(f"{n}: {k}" for k, n in sorted(st["not_arms"].items(), key=lambda kv: -kv[1]))
-        lines.append(f"| {st['name']} | `{st.get('path') or st['requirement']}` | {_cell(st['licence'])} | "
-                     f"{st['files']} | {st['arms']} | {_cell(why)} |")
+        lines.append(f"| {_cell(st['name'])} | {markdown_code(st.get('path') or st['requirement'])} | "
+                     f"{_cell(st['licence'])} | {st['files']} | {st['arms']} | {_cell(why)} |")
     if doc["left_out"]:
-        lines += ["", "Left out:", ""] + [f"- **{x['name']}**: {x['why']}" for x in doc["left_out"]]
+        # why a set is left out: the project's own prose (tools/bench/model_sets.toml), Markdown by intent
+        lines += ["", "Left out:", ""] + [f"- **{_cell(x['name'])}**: {x['why']}" for x in doc["left_out"]]
     lines += ["", END]
     return "\n".join(lines) + "\n"
 
