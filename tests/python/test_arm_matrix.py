@@ -74,6 +74,7 @@ CONTROLLER_DEFECTS = {
     # limit / 10 ms, the arm sags for 4 periods) grows the light wrist roll's (9.2e-4 kg m^2)
     # estimator loop past the 2 pi rad/s stop at period 45; ok before the torque units of issue 46
     # moved its drive's step by 0.1 %, and ok with that wrist's limit at 3.4 N m: per-joint tuning
+    # (issue 47). The firmware's pd and tde run it ok (armctl hil --method pd|tde): the defect is pm's
     "robosuite/robosuite/models/assets/robots/spot_arm/robot.xml": "failed",
 }
 
