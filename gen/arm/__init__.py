@@ -23,7 +23,6 @@ say what to change (exit 2); nothing is written then.
 """
 
 from gen.arm.arm_file import ARM_FILE_FIELDS, DEFAULT_MODEL, ArmFile, arm_name, arm_name_of, load_arm_file
-from gen.arm.cli import main
 from gen.arm.design import (AUTO_WN_MAX, AUTO_WN_MIN, DEFAULT_DESIGN, auto_bandwidth, design_for,
                             with_static_controller)
 from gen.arm.errors import ArmError
@@ -39,5 +38,5 @@ __all__ = ["ARM_FILE_FIELDS", "AUTO_WN_MAX", "AUTO_WN_MIN", "BUS_BUDGET", "DEFAU
            "DEFAULT_TOPOLOGY", "RANGE_MARGIN", "REF_MAX_ACCELERATION", "REF_MAX_VELOCITY", "REF_TORQUE_FRACTION",
            "ArmError", "ArmFile", "Prepared", "arm_name", "arm_name_of", "auto_bandwidth", "clip_amplitude",
            "default_reference", "design_for", "fit_reference", "fnv1a64", "inverse_dynamics_difference",
-           "inverse_forces", "load_arm_file", "main", "prepare", "reference_peak_fraction", "reference_rule",
+           "inverse_forces", "load_arm_file", "prepare", "reference_peak_fraction", "reference_rule",
            "reference_torque", "with_static_controller"]

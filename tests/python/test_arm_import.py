@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from gen import arm as gen_arm
+from gen.arm.cli import main as arm_main
 from gen.arm import ArmError, clip_amplitude, inverse_forces, load_arm_file, prepare
 from gen.arm.assets import default_classes, strip_meshes
 from gen.robot_model import extract, nominal_for_inverse
@@ -190,7 +191,7 @@ def test_what_the_controller_cannot_use_is_refused_by_name(tmp_path: Path, text:
     with pytest.raises(ArmError, match=match):
         prep(model)
     out = tmp_path / "out"
-    assert gen_arm.main(["--model", str(model), "--out", str(out)]) == 2
+    assert arm_main(["--model", str(model), "--out", str(out)]) == 2
     assert not out.exists()  # nothing half-written
 
 
@@ -278,7 +279,7 @@ def test_arm_file_names_joints_torque_limits_and_wiring(tmp_path: Path) -> None:
 def test_cli_writes_the_four_files_and_a_depfile(tmp_path: Path) -> None:
     out = tmp_path / "out"
     dep = tmp_path / "arm.d"
-    assert gen_arm.main(["--model", str(UR5E), "--out", str(out), "--depfile", str(dep)]) == 0
+    assert arm_main(["--model", str(UR5E), "--out", str(out), "--depfile", str(dep)]) == 0
     # the four files, and the key of what they were prepared from (gen/arm/cli.py inputs_key)
     assert sorted(x.name for x in out.iterdir()) == [".inputs.sha256", "arm.json", "arm.xml", "design.toml", "plant.xml"]
     info = json.loads((out / "arm.json").read_text())
@@ -387,10 +388,10 @@ def test_a_folder_prepared_from_the_same_inputs_is_not_prepared_again(tmp_path: 
 
     model = write(tmp_path, chain_mjcf())
     out = tmp_path / "out"
-    assert gen_arm.main(["--model", str(model), "--out", str(out)]) == 0
+    assert arm_main(["--model", str(model), "--out", str(out)]) == 0
     calls = []
     monkeypatch.setattr(cli, "prepare", lambda *a: calls.append(a) or prepare(*a))
-    assert gen_arm.main(["--model", str(model), "--out", str(out)]) == 0 and calls == []
+    assert arm_main(["--model", str(model), "--out", str(out)]) == 0 and calls == []
     model.write_text(chain_mjcf(n=4))
-    assert gen_arm.main(["--model", str(model), "--out", str(out)]) == 0 and len(calls) == 1
+    assert arm_main(["--model", str(model), "--out", str(out)]) == 0 and len(calls) == 1
     assert json.loads((out / "arm.json").read_text())["n_joints"] == 4
