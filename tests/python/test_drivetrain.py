@@ -121,7 +121,7 @@ def test_a_bad_drive_train_is_one_line_naming_the_field(tmp_path: Path, table: s
 
 def test_arm_json_of_a_build_carries_the_drive_train(tmp_path: Path) -> None:
     """What the report and the study read (arm.json), as gen.arm writes it."""
-    from gen.arm.cli import main
+    from gen.arm import main
 
     out = tmp_path / "arm"
     model = tmp_path / "pendulum.xml"
