@@ -100,7 +100,7 @@ def render(record: dict[str, Any]) -> str:
         f"worst: {p['sil_worst_in']}), every peak within {p['sil_worst_peak_difference']:.1e} (the worst: "
         f"{p['sil_worst_peak_in']}), the estimation error's RMS within "
         f"{p['sil_estimation_difference_over_w']:.1e} of w's RMS. It took {p['wall_s']:.0f} s of wall time on "
-        "this 2-core machine.",
+        f"the machine below.",
     ])
 
 

@@ -14,9 +14,8 @@ from gen.lib.atomic_output import write_text_atomic
 from gen.lib.escape import markdown_code as code, markdown_fence, markdown_text as md, shell_command
 from gen.lib.one_line import one_line
 from tools.run.verdict import FOLLOWING_ERROR_STOP_DEG, left_tracking_bound, stopped_by_following_error
-from gen.lib.params import default
 from tools.study.config import ESTIMATING, STUDY_PROTOCOL
-from tools.study.figure_data import METRIC_TEXT, fig_name, in_degrees, worst_kept_run
+from tools.study.figure_data import ANSWER_FIGURE, METRIC_TEXT, fig_name, in_degrees, loop_rate_hz, worst_kept_run
 
 PROTOCOL_TEXT = {"canopen": "CiA 402 (per-mille torque of the rated torque, positions in encoder increments)",
                  "arm": "the arm protocol (torques in micro-newton-metres, CAN FD state frames)"}
@@ -320,7 +319,7 @@ def write_report(out: Path, study: dict[str, Any], figures: bool = True) -> None
         drawn = draw_figures(out, study)
     else:
         drawn = {}
-        _remove_figures(out, list(study["scenarios"]))
+        _remove_figures(out, [*study["scenarios"], "all"])  # "all": the study's own figure (fig_answer_all)
 
     def images(name: str, kind: str) -> list[str]:  # a paragraph each (report.html puts a figure in its place)
         return [line for f, _ in drawn.get((name, kind), []) for line in ("", f"![{f}]({f})", "")]
@@ -330,10 +329,16 @@ def write_report(out: Path, study: dict[str, Any], figures: bool = True) -> None
     paper = arm["is_default"] and n == 6  # the paper's numbers are for its six-joint arm
     labels = _labels(study, paper)
     wiring = ", ".join(f"{md(b['name'])}: drives {','.join(map(str, b['drives']))}" for b in arm["buses"])
+    from tools.study.answer import answer
+
     text = [f"# Study: {md(study['description'])}", "",
+            "## The answer", "", *answer(study), "",
+            "Means over the seeds per scenario and method (the detail of each is in its scenario's section):", "",
+            markdown_fence(summary_table(study).splitlines()), "", *images(ANSWER_FIGURE, ANSWER_FIGURE),
+            "## How the study was run", "",
             f"Arm {code(arm['name'])} ({n} joints: {', '.join(map(code, arm['joint_names']))}; model "
             f"{code(arm['model'])}, hash {md(arm['model_hash'])}), its CAN buses {wiring}, {md(_how_run(study))} at "
-            f"{default('controller', 'rate') / 1000:g} kHz. Config {code(study['config'])}; "
+            f"{loop_rate_hz(study) / 1000:g} kHz. Config {code(study['config'])}; "
             f"seeds {study['seeds']}; trajectory {study['duration_s']:g} s after a {study['hold_s']:g} s hold on the "
             "start pose (metrics cover the trajectory only). Intervals are 95 % confidence intervals of the mean over "
             "the seeds (Student's t); PM against another method is paired on the same seeds: the ratio of the means, "
@@ -344,7 +349,7 @@ def write_report(out: Path, study: dict[str, Any], figures: bool = True) -> None
             *([] if figures else ["Figures: not drawn (`--no-figures`).", ""]),
             *(["Notes:", "", *[f"- {md(x)}" for x in study.get("notes", [])], ""] if study.get("notes") else []),
             *_drivetrain_lines(study),
-            "## What to pick", "",
+            "## What to pick, in detail", "",
             "Per scenario, the method with the lowest mean tracking error (the sum over joints of the L-infinity "
             "error, the tuning's objective) among those whose every run ended ok, against the next best and PM on the "
             "same seeds (paired t-test):", "",
@@ -405,7 +410,6 @@ def write_report(out: Path, study: dict[str, Any], figures: bool = True) -> None
                 text += [f"The arm in the worst run of {code(name)} whose telemetry is kept (seed {worst[1]}): "
                          f"{md(worst[0])}, {md(worst[2])}. Solid: the arm as simulated; translucent, beside it: the "
                          f"commanded reference ({code(render)} makes its video):", "", *images(name, "arm"), ""]
-    text += ["## Summary", "", markdown_fence(summary_table(study).splitlines()), ""]
     write_text_atomic(out / "report.md", "\n".join(text))
     write_text_atomic(out / "summary.txt", summary_table(study) + "\n")
     from tools.study.html_report import write_html
