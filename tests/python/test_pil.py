@@ -109,8 +109,13 @@ def commands(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[subpro
     with ThreadPoolExecutor(max_workers=len(plan)) as pool:
         futs = {name: pool.submit(_armctl_hil, dirs[name], *args) for name, args in plan}
         done = {name: f.result() for name, f in futs.items()}
-    return {name: (r, json.loads((dirs[name] / "run.json").read_text()) if (dirs[name] / "run.json").exists()
-                   else None) for name, r in done.items()}
+    out = {name: (r, json.loads((dirs[name] / "run.json").read_text()) if (dirs[name] / "run.json").exists()
+                  else None) for name, r in done.items()}
+    for name, (_, run) in out.items():  # the controller's own count of its steps, the stop's included
+        summary = dirs[name] / "controller_summary.json"
+        if run is not None and summary.exists():
+            run["controller_summary"] = json.loads(summary.read_text())
+    return out
 
 
 @pytest.fixture(scope="module")
@@ -126,7 +131,11 @@ def test_pil_run_is_ok_and_records_what_the_image_measured(runs: dict[str, dict]
     assert r["results"]["target"] == "cortex-m4" and r["results"]["numeric"] == "float"
     t = r["target"]
     steps = t["step_instructions"]
-    assert steps["periods"] == r["results"]["steps"] and 1000 < steps["min"] <= steps["median"] <= steps["max"]
+    # the image timed every step the core ran: the run's, then the controlled stop's hold
+    ctl = r["controller_summary"]
+    assert ctl["steps_done"] == r["results"]["steps"] and ctl["stop"]["periods"] > 0
+    assert steps["periods"] == ctl["steps_done"] + ctl["stop"]["periods"], (steps["periods"], ctl["stop"])
+    assert 1000 < steps["min"] <= steps["median"] <= steps["max"]
     assert t["stated_clock_hz"] == 168e6
     share = t["step_share_of_period_at_stated_clock"]
     assert share["median"] == pytest.approx(steps["median"] / 168e3)
