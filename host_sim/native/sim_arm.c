@@ -304,6 +304,21 @@ int sim_arm_open(sim_arm_t *a, const char *path, const char *plant, const char *
     return 0;
 }
 
+void sim_arm_set_pose(sim_arm_t *a, const double *q)
+{
+    mjData *d = a->data;
+    for (int j = 0; j < a->n; ++j) {
+        d->qpos[j] = q[j];
+        if (a->motor_qpos[j] != j) d->qpos[a->motor_qpos[j]] = q[j]; /* the rotor with its link, then wound up */
+    }
+    for (int v = 0; v < a->model->nv; ++v) d->qvel[v] = 0.0;
+    if (a->flexible) {
+        wind_up_gears(a);
+    } else {
+        mj_forward(a->model, d);
+    }
+}
+
 double sim_arm_motor_q(const sim_arm_t *a, int j)
 {
     return a->data->qpos[a->motor_qpos[j]];

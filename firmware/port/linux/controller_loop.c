@@ -14,6 +14,7 @@
 #include "arm/reference.h"
 #include "canopen_text.h"
 #include "loop_port.h"
+#include "task.h"
 
 #define ALL_JOINTS ((uint32_t)((1ull << ARM_N_JOINTS) - 1u))
 
@@ -448,7 +449,8 @@ typedef struct {
     telemetry_t *telem;
     run_report_t *report;
     arm_ctl_t ctl;
-    arm_reference_t ref;
+    task_t task; /* what the arm does: the reference source (task.h) */
+    int task_over; /* 1: the task ended (the arm is stopped next period); -1: it stopped the arm (a fault) */
     arm_ctl_input_t in;
     arm_ctl_output_t out;
     arm_state_t last_state;
@@ -487,12 +489,13 @@ static int enable(link_t *l, loop_t *p, uint32_t k, uint32_t fresh)
         enabled = fresh & l->tpdo2_seen;
     }
     if (enabled == ALL_JOINTS) {
-        if (p->opt->ref_given) {
-            arm_reference_set(&p->ref, l->drives.q, p->opt->ref_amp, p->opt->ref_freq_hz);
-        } else {
-            arm_reference_default(&p->ref, l->drives.q);
+        char err[200];
+        if (task_begin(&p->task, p->opt, l->drives.q, p->telem, &p->report->task, p->k_run, err, sizeof(err)) != 0) {
+            snprintf(p->report->reason, sizeof(p->report->reason), "%s", err);
+            p->report->result = RUN_FAULT;
+            telemetry_event(p->telem, 0, "fault", p->report->reason);
+            return -1;
         }
-        arm_reference_set_hold(&p->ref, (float)p->opt->ref_hold_s);
         telemetry_event(p->telem, 0, "info", "all drives operation enabled; tracking starts");
         return 1;
     }
@@ -562,7 +565,15 @@ static int64_t control(link_t *l, loop_t *p)
     memcpy(p->in.qd, l->drives.qd, sizeof(p->in.qd));
     p->in.fresh_mask = l->drives.fresh_mask & ALL_JOINTS;
     memcpy(p->in.tau_measured, l->drives.tau_measured, sizeof(p->in.tau_measured));
-    arm_reference_eval(&p->ref, (float)p->k_run * p->opt->ctl.period_s, p->in.q_d, p->in.qd_d, p->in.qdd_d);
+    char err[240];
+    const int over = task_step(&p->task, (float)p->k_run * p->opt->ctl.period_s, p->k_run, p->in.q, p->out.tau, &p->in,
+                               err, sizeof(err));
+    if (over < 0 && p->task_over == 0) { /* the task stopped the arm (commissioning's bound): a fault */
+        snprintf(p->report->reason, sizeof(p->report->reason), "period %u: %s", p->k_run, err);
+        telemetry_event(p->telem, p->k_run, "fault", p->report->reason);
+        p->report->result = RUN_FAULT;
+    }
+    if (over != 0 && p->task_over == 0) p->task_over = over;
     const int64_t c0 = now_ns();
     port_control_step(&p->ctl, &p->in, &p->out);
     if (p->opt->rt.debug_slow_step_us > 0u) {
@@ -655,6 +666,24 @@ static int64_t period_time(const loop_t *p, uint32_t k, int64_t wall)
  * The commands go in a period of their own (k, not yet begun): the
  * last period's commands are out already, and a second command for one SYNC is a second master
  * to the drives (EMCY 0x8200). */
+static void stop_arm(link_t *l, loop_t *p, uint32_t k)
+{
+    p->out.state = ARM_STATE_SAFE_STOP;
+    memset(p->out.tau, 0, sizeof(p->out.tau));
+    start_period(l, k, period_time(p, k, now_ns()));
+    send_commands(l, &p->out);
+    if (l->canopen && p->opt->rpdo_type <= 240u) {
+        /* a synchronous RPDO acts at the next SYNC: without it the drives would never take the
+         * shutdown, and would stay enabled under the NMT stop (then fault when the master's
+         * heartbeat ends). Their answers to it say they have taken it, on every bus, before the
+         * NMT stop goes out (buses keep no order between them). */
+        start_period(l, k + 1u, period_time(p, k + 1u, now_ns()));
+        const int64_t wait = p->opt->mode == MODE_REALTIME ? p->period_ns
+                                                           : (int64_t)(p->opt->lockstep_timeout_s * 1e9);
+        pump(l, now_ns() + wait, states_done);
+    }
+}
+
 static void stop_on_signal(link_t *l, loop_t *p, uint32_t k)
 {
     snprintf(p->report->reason, sizeof(p->report->reason),
@@ -662,10 +691,18 @@ static void stop_on_signal(link_t *l, loop_t *p, uint32_t k)
              (int)controller_stop_signal, p->k_run);
     p->report->result = RUN_INTERRUPTED;
     telemetry_event(p->telem, p->k_run, "fault", p->report->reason);
-    p->out.state = ARM_STATE_SAFE_STOP;
-    memset(p->out.tau, 0, sizeof(p->out.tau));
-    start_period(l, k, period_time(p, k, now_ns()));
-    send_commands(l, &p->out);
+    stop_arm(l, p, k);
+}
+
+/* The task is over (it ended, or stopped the arm itself): the same controlled stop as a signal's. */
+static void stop_at_task_end(link_t *l, loop_t *p, uint32_t k)
+{
+    if (p->task_over > 0) {
+        snprintf(p->report->reason, sizeof(p->report->reason), "%s done after %u periods: the arm stopped",
+                 task_name(p->opt->task), p->k_run);
+        telemetry_event(p->telem, p->k_run, "info", p->report->reason);
+    }
+    stop_arm(l, p, k);
 }
 
 /* Sleep to the period's absolute deadline (paced); the wake-up's lateness. */
@@ -749,6 +786,10 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
             stop_on_signal(&l, &p, k);
             break;
         }
+        if (p.task_over != 0) {
+            stop_at_task_end(&l, &p, k);
+            break;
+        }
         const int64_t wake_latency = wait_for_period(&p);
         const int64_t cycle_start = now_ns();
         start_period(&l, k, period_time(&p, k, cycle_start));
@@ -774,6 +815,7 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
     arm_can_frame_t stop;
     arm_bus_make_nmt(ARM_NMT_STOP, 0u, &stop);
     send_all(&l, &stop);
+    if (p.task.opt != NULL) task_end(&p.task);
     report->final_state = p.out.state;
     report->final_fault = p.out.fault;
     report->rx = l.drives.rx;
