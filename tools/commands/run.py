@@ -142,18 +142,32 @@ def describe(setup: object, mode: str, task: str, prog: str) -> None:
     sys.stdout.flush()
 
 
-def finish(res: object, prog: str) -> int:
-    """The session's end in one line, and the command's exit code: 0 when the task ended or the
-    user stopped it (Ctrl-C), else the controller's."""
+def finish(res: object, setup: object, task: str, prog: str) -> int:
+    """The session's end: its record (OUT/session.json: the task, how it ended, how closely each joint
+    followed), one line, and the command's exit code: 0 when the task ended or the user stopped it
+    (Ctrl-C), else the controller's."""
+    from gen.lib.atomic_output import write_json_atomic
+    from tools.run.arm_session import tracking
+
     summary = res.summary  # type: ignore[attr-defined]
     code = res.code  # type: ignore[attr-defined]
+    out = res.out  # type: ignore[attr-defined]
     reason = summary.get("reason") or f"the controller ended with exit code {code}"
     user_stop = res.interrupted is not None and code == EXIT_INTERRUPTED  # type: ignore[attr-defined]
+    follow = tracking(out / "telemetry.lcmlog", setup.joint_names)  # type: ignore[attr-defined]
+    write_json_atomic(out / "session.json", {
+        "task": task, "controller_exit": code, "stopped_by_user": user_stop, "reason": reason,
+        "final_state": summary.get("final_state"), "task_report": summary.get("task"),
+        "buses": setup.buses, "tracking": follow})  # type: ignore[attr-defined]
+    if follow.get("periods"):
+        worst = max(follow["max_abs_deg"].items(), key=lambda kv: kv[1])
+        print(f"{prog}: followed within {worst[1]:.3g} deg ({worst[0]}) over {follow['periods']} periods "
+              f"(each joint: {out / 'session.json'})")
     if code == 0 or user_stop:
         print(f"{prog}: {'stopped by you' if user_stop else 'done'}: {reason}; final state "
-              f"{summary.get('final_state', '?')} (log {res.out})")  # type: ignore[attr-defined]
+              f"{summary.get('final_state', '?')}")
         return 0
-    raise CommandError(f"{reason} (controller exit {code}; log {res.out / 'controller.log'})", 1)  # type: ignore[attr-defined]
+    raise CommandError(f"{reason} (controller exit {code}; log {out / 'controller.log'})", 1)
 
 
 def run(ns: argparse.Namespace) -> int:
@@ -175,4 +189,4 @@ def run(ns: argparse.Namespace) -> int:
     mode = ns.mode or ("lockstep" if setup.rehearsal else "realtime")
     describe(setup, mode, task, "armctl run")
     res = run_controller(setup, ["--method", "pm", *ctl], ns.out, mode)
-    return finish(res, "armctl run")
+    return finish(res, setup, task, "armctl run")

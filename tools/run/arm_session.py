@@ -133,7 +133,7 @@ def check_interface(iface: str, bus: busload.Bus) -> bool:
     info = _link_details(iface)
     kind = info.get("linkinfo", {}).get("info_kind", "")
     virtual = kind == "vcan" or (not kind and iface.startswith("vcan"))
-    rate = int(bus.nominal)
+    rate = int(bus.nominal_bps)
     flags = _sysfs(iface, "flags")
     if flags is not None and not int(flags, 16) & IFF_UP:
         fix = f"ip link set {iface} up" if virtual else f"ip link set {iface} up type can bitrate {rate}"
@@ -149,7 +149,8 @@ def arm_on_bus(ns: Any, prog: str) -> ArmOnBus:
     """The arm of --model/--arm, built (release), its drive table, wiring and buses, all checked
     before anything starts: bad input is UsageError (one line naming the file, object or value)."""
     from gen import drives as drives_mod
-    from tools.run.hil import HilError, canopen_of, canopen_topology
+    from gen import eds as eds_mod
+    from tools.run.hil import HilError, canopen_args, canopen_topology
 
     arm = arm_from_args(ns)
     bdir = build_arm("release", arm, targets=["arm_controller", "arm_sim", "arm_lcm_logger"])
@@ -158,9 +159,10 @@ def arm_on_bus(ns: Any, prog: str) -> ArmOnBus:
     if ns.drive_config is not None and not ns.drive_config.is_file():
         raise UsageError(f"--drive-config {ns.drive_config}: no such file")
     try:
-        node_args, sim_node_args, table, _dbc, od_table = canopen_of(info, ns.drive_config)
+        node_args, sim_node_args, table = canopen_args(info, ns.drive_config)
+        od_table = eds_mod.table_text(eds_mod.load(Path(table.eds)))
         topology, wiring = canopen_topology(ns.topology, info, info["loop_rate_hz"], table.transmission)
-    except (HilError, drives_mod.DrivesError) as exc:
+    except (HilError, drives_mod.DrivesError, eds_mod.EdsError) as exc:
         raise UsageError(str(exc).removeprefix("drive configuration: ")) from None
     bus = ns.bus if ns.bus is not None else "socketcan:" + ",".join(f"can{i}" for i in range(len(topology)))
     kind, ifaces = parse_bus(bus, len(topology))
@@ -207,7 +209,7 @@ def run_controller(setup: ArmOnBus, ctl_args: list[str], out: Path, mode: str) -
     """arm_controller alone on the arm's buses (and the telemetry logger), until it ends: the task
     ends, the arm faults, or a signal to armctl (Ctrl-C) makes it stop the arm. Its output is shown
     as it comes and kept in OUT/controller.log."""
-    from tools.run.hil import check_loopback_route
+    from tools.run.hil import check_loopback_route, spin_args
     from tools.run.slots import acquire_slot
 
     out.mkdir(parents=True, exist_ok=True)
@@ -222,8 +224,10 @@ def run_controller(setup: ArmOnBus, ctl_args: list[str], out: Path, mode: str) -
         cpu = (os.cpu_count() or 1) - 1  # the loop's CPU, as a HIL run's (tools/run/hil.py realtime_cpu)
         ctl = [str(controller_binary(setup.bdir)), *setup.bus_args(), "--lcm-url", url, "--protocol", "canopen",
                *setup.node_args, "--mode", mode, "--summary", str(out / "controller_summary.json"),
-               *(["--cpu", str(cpu)] if realtime else []), *ctl_args]
+               *(["--cpu", str(cpu)] if realtime else spin_args(mode)), *ctl_args]
         (out / "controller.argv").write_text(json.dumps(ctl) + "\n")
+        print(f"  telemetry: {url} (ARM_CTL: q, q_d, tau; ARM_EVENT), logged to {out / 'telemetry.lcmlog'}")
+        sys.stdout.flush()
         with open(out / "logger.log", "w") as llog, open(out / "controller.log", "w") as clog:
             try:
                 logger = procs_mod.spawn("logger", [str(logger_binary(setup.bdir)), "--lcm-url", url,
@@ -264,3 +268,25 @@ def run_controller(setup: ArmOnBus, ctl_args: list[str], out: Path, mode: str) -
     except (OSError, ValueError):
         summary = {}
     return SessionResult(p.returncode, summary, out, procs_mod.interrupted)
+
+
+def tracking(log: Path, names: list[str]) -> dict[str, Any]:
+    """From a session's telemetry (ARM_CTL): each joint's largest and RMS |q_d - q| while the
+    controller ran the task (state running), in degrees, and how many periods that covers."""
+    import numpy as np
+
+    from tools.run.telemetry_log import read_log
+
+    try:
+        ctl = read_log(log, ("ARM_CTL",))["ARM_CTL"].messages
+    except OSError:
+        return {}
+    if len(ctl) == 0:
+        return {"periods": 0}
+    running = ctl[ctl["state"] == 1]
+    if len(running) == 0:
+        return {"periods": 0}
+    e = np.degrees(np.abs(np.asarray(running["q_d"], float) - np.asarray(running["q"], float)))
+    return {"periods": int(len(running)),
+            "max_abs_deg": {n: round(float(x), 4) for n, x in zip(names, e.max(axis=0))},
+            "rms_deg": {n: round(float(x), 4) for n, x in zip(names, np.sqrt((e ** 2).mean(axis=0)))}}

@@ -463,7 +463,8 @@ typedef struct {
  * SYNC: its states are still waited for, but the next SYNC goes no sooner than its time). */
 static int paced(const loop_t *p)
 {
-    return p->opt->mode == MODE_REALTIME || port_paces_lockstep;
+    /* a planner's stream comes on the wall clock: a lockstep rehearsal of it keeps that time too */
+    return p->opt->mode == MODE_REALTIME || port_paces_lockstep || p->opt->task == TASK_STREAM;
 }
 
 /* Enable: the CiA 402 sequence with zero torque, one step a period. 1 when every drive is

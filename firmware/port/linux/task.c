@@ -75,6 +75,7 @@ int task_begin(task_t *t, const options_t *opt, const float q[ARM_N_JOINTS], tel
     memset(report, 0, sizeof(*report));
     report->begun = 1;
     report->last_seq = -1;
+    memcpy(report->start_pose, q, sizeof(report->start_pose));
     memcpy(t->hold, q, sizeof(t->hold));
     memcpy(t->last_q_d, q, sizeof(t->last_q_d));
     const float now = (float)k_run * opt->ctl.period_s;
@@ -160,7 +161,11 @@ int task_begin(task_t *t, const options_t *opt, const float q[ARM_N_JOINTS], tel
     }
 #endif
     if ((task_kind_t)opt->task == TASK_HOLD) {
-        snprintf(text, sizeof(text), "hold: holding the pose the arm is in for %.6g s", duration);
+        if (duration >= (float)ARM_P_CONTROLLER_DURATION_MAX) {
+            snprintf(text, sizeof(text), "hold: holding the pose the arm is in until stopped");
+        } else {
+            snprintf(text, sizeof(text), "hold: holding the pose the arm is in for %.6g s", duration);
+        }
         say(t, k_run, "info", text);
     }
     return 0;
@@ -228,7 +233,9 @@ static void stream_step(task_t *t, float now, uint32_t k_run, arm_ctl_input_t *i
                 t->following = 0;
             } else {
                 if (first) memcpy(r->first_point, p.q, sizeof(r->first_point));
-                if (!t->following && t->have_plan) say(t, k_run, "info", "stream: following the plan again");
+                if (!t->following) {
+                    say(t, k_run, "info", r->stale_events > 0u ? "stream: following the plan again" : "stream: following the plan");
+                }
                 t->plan = p;
                 t->t_plan = now;
                 t->have_plan = 1;

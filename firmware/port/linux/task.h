@@ -35,6 +35,7 @@ typedef struct {
     int begun;
     float start_move_s;               /* the move from the measured pose to the first point (0: none) */
     float start_move_rad;             /* its longest joint motion */
+    float start_pose[ARM_N_JOINTS];   /* rad: the measured pose the task began at */
     float first_point[ARM_N_JOINTS];  /* rad */
     float task_s;                     /* the task's own length after the move (0: open-ended) */
     int ended;                        /* the task ran to its end */

@@ -21,6 +21,7 @@ void task_summary_write(FILE *f, const options_t *opt, const task_report_t *r)
 {
     fprintf(f, "  \"task\": {\"name\": \"%s\", \"start_move_s\": %.9g, \"start_move_rad\": %.9g, ", task_name(opt->task),
             (double)r->start_move_s, (double)r->start_move_rad);
+    floats(f, "start_pose", r->start_pose, ARM_N_JOINTS, ", ");
     floats(f, "first_point", r->first_point, ARM_N_JOINTS, ", ");
     fprintf(f, "\"task_s\": %.9g, \"ended\": %s", (double)r->task_s, r->ended ? "true" : "false");
     if (opt->task == TASK_STREAM) {
