@@ -1,7 +1,8 @@
 """The CiA 402 drives' frames as a DBC, derived, never hand-kept: the PDOs' layouts from the drive
 table's mapping (gen/drives.py, the codec's), their signals' names and types from the EDS, and each
-drive's scaling from its encoder, gear and rated torque, so that cantools (or any DBC reader)
-decodes a capture of a `--protocol canopen` run in the core's SI units: rad, rad/s, N m.
+drive's scaling from its encoder, gear, the motor's rated torque and the gear's efficiency, so that
+cantools (or any DBC reader) decodes a capture of a `--protocol canopen` run in the core's SI units
+at the joint: rad, rad/s, N m.
 
     python -m gen.canopen_dbc --arm-json build/release/generated/arm/arm.json [--drive-config F] --out F
 
@@ -28,7 +29,7 @@ from gen.lib.atomic_output import exit_on_output_error, write_text_atomic
 from gen.lib.cia402 import CODEC_MAPPING, PDO_COB
 
 POSITION_OBJECTS = {0x6064, 0x606C}  # increments, increments/s: at the joint through encoder and gear
-TORQUE_OBJECTS = {0x6071, 0x6077}    # per mille of the rated torque 0x6076
+TORQUE_OBJECTS = {0x6071, 0x6077}    # per mille of the motor's rated torque 0x6076: at the joint through the gear
 
 
 class DbcError(ValueError):
@@ -44,7 +45,7 @@ def _scaling(index: int, d: drives_mod.Drive) -> tuple[float, str | None]:
         rad = 2.0 * math.pi * d.gear[1] * d.encoder_revs / (d.encoder_increments * d.gear[0])
         return rad, "rad" if index == 0x6064 else "rad/s"
     if index in TORQUE_OBJECTS:
-        return d.rated_torque_mnm / 1e6, "N.m"
+        return d.joint_rated_torque_nm / 1000, "N.m"
     return 1.0, None
 
 

@@ -3,7 +3,8 @@ every object the boot reads or writes (firmware/canopen co_boot.c), checked agai
 objects, access types, data types, limits and PDO mapping rules before any frame goes out.
 
 `armctl drive check FILE` prints check()'s problems (one line each: why this controller cannot run
-the drive) and notes (what the master skips or takes from the drive table); gen/drives.py refuses a
+the drive), warnings (the file's own harmless mistakes, by line: gen/eds.py) and notes (what the
+master skips or takes from the drive table, and the torque at the joint); gen/drives.py refuses a
 drive table whose drive has a problem, before a boot starts. docs/drives-bring-up.md has the table
 of NEEDS."""
 
@@ -24,6 +25,9 @@ MAPPING = {"rpdo1": 0x1600, "tpdo1": 0x1A00, "tpdo2": 0x1A01}
 
 REQUIRED, OPTIONAL, TABLE = "required", "written only if present", "read if present, else the drive table's"
 READ_IF_PRESENT = "read if present"
+WATCHDOG = "required, unless the drive table accepts its absence"
+ACCEPT_NO_WATCHDOG = "accept_no_master_watchdog"  # the drive table's field that accepts a drive without 0x1016
+MAX_PERMILLE = 32767  # a target torque's range (INTEGER16): the most a drive without 0x6072 is asked for
 
 
 @dataclass(frozen=True)
@@ -39,18 +43,20 @@ NEEDS = [
     Need("0x1018.1", REQUIRED, "vendor id (checked when the drive table names one)"),
     Need("0x1018.2-4", READ_IF_PRESENT, "product code, revision, serial: recorded"),
     Need("0x6502", READ_IF_PRESENT, "supported drive modes: bit 9 (cyclic synchronous torque) must be set"),
-    Need("0x6076", TABLE, "rated torque (mN m, or the drive table's torque_unit): 0x6071/0x6077 are per-mille of "
-         "it; never written"),
+    Need("0x6076", TABLE, "the motor's rated torque (mN m, or the drive table's torque_unit): 0x6071/0x6077 are "
+         "per-mille of it, and the joint gets it times the gear (and its efficiency); never written"),
     Need("0x608F.1-2", TABLE, "encoder increments per motor revolutions; never written"),
     Need("0x6091.1-2", TABLE, "gear ratio, motor per shaft revolutions; never written"),
-    Need("0x6072", READ_IF_PRESENT, "max torque, per-mille: the target torque is saturated to it"),
+    Need("0x6072", READ_IF_PRESENT, "max torque, per-mille: the target torque is saturated to it, and the joint's "
+         "torque limit must be within it x 0x6076 x gear"),
     Need("0x6040, 0x6041", REQUIRED, "controlword (written) and statusword (read): the power state machine"),
     Need("0x1400/0x1600", REQUIRED, "RPDO1: COB-ID, type, mapping 0x6040 + 0x6071 (target torque) written"),
     Need("0x1800/0x1A00", REQUIRED, "TPDO1: mapping 0x6064 + 0x606C (position, velocity actual) written"),
     Need("0x1801/0x1A01", REQUIRED, "TPDO2: mapping 0x6077 + 0x6041 (torque actual, statusword) written"),
     Need("0x1006", OPTIONAL, "communication cycle period, us"),
     Need("0x1017", OPTIONAL, "producer heartbeat, ms"),
-    Need("0x1016.1", OPTIONAL, "consumer heartbeat: the drive faults if the master's heartbeat stops"),
+    Need("0x1016.1", WATCHDOG, "consumer heartbeat: the drive faults if the master's heartbeat stops; without it a "
+         "dead master leaves the drive applying its last torque"),
     Need("0x6060, 0x6061", REQUIRED, "mode of operation 10 (CST) written, then read back"),
 ]
 
@@ -65,15 +71,26 @@ class Plan:
     master_id: int = 127
     transmission: dict[str, int] = field(default_factory=lambda: {"rpdo1": 1, "tpdo1": 1, "tpdo2": 1})
     # the drive table's units (None: not given): the boot compares the drive's objects with them
-    rated: int | None = None  # 0x6076 in the drive's torque unit (mN m, CiA 402's, unless the table names another)
+    rated: int | None = None  # 0x6076, the motor's, in the drive's torque unit (mN m unless the table names another)
     encoder: int | None = None
     gear: tuple[int, int] | None = None
+    units_per_nm: int = 1000           # 0x6076's unit per N m (the table's torque_unit)
+    gear_efficiency: float = 1.0       # the table's: the joint gets 0x6076 x gear x it
+    accept_no_master_watchdog: bool = False  # the table accepts a drive without a settable 0x1016.1
 
 
 @dataclass
 class Report:
     problems: list[str] = field(default_factory=list)  # why this controller cannot run the drive
     notes: list[str] = field(default_factory=list)     # what the boot skips, or takes from the drive table
+    warnings: list[str] = field(default_factory=list)  # the file's harmless mistakes, "FILE:LINE: ..." (gen/eds.py)
+    joint_rated_nm: float | None = None                # 1000 per-mille at the joint: 0x6076 x gear x efficiency
+    max_permille: int = MAX_PERMILLE                   # 0x6072 (the file's), else the per-mille's range
+
+    @property
+    def max_joint_torque_nm(self) -> float | None:
+        """The most the drive gives at the joint, N m (0x6072 x 0x6076 x gear x efficiency)."""
+        return None if self.joint_rated_nm is None else self.max_permille * self.joint_rated_nm / 1000
 
     @property
     def ok(self) -> bool:
@@ -122,11 +139,25 @@ def _in_limits(e: Entry, value: int) -> str | None:
     return None
 
 
+def _write_problem(d: Dictionary, index: int, sub: int, size: int, value: int) -> str | None:
+    """Why the master's write of value cannot be done on the file's object (None: it can; "": the
+    file has no such object)."""
+    e = d.get(index, sub)
+    if e is None:
+        return ""
+    if not e.writable:
+        return f"access {e.access_raw}; the master writes 0x{value:X}"
+    if e.type.size != size:
+        return f"the file says {e.type.name}, the master writes {size} bytes (CiA 301's type)"
+    why = _in_limits(e, value)
+    return None if why is None else f"the master writes {value}, {why}"
+
+
 def _check_write(d: Dictionary, r: Report, index: int, sub: int, size: int, value: int, optional: bool,
                  what: str) -> bool:
-    e = d.get(index, sub)
     where = f"{_obj(index, sub)} ({what})"
-    if e is None:
+    why = _write_problem(d, index, sub, size, value)
+    if why == "":
         if optional:
             if not d.has(index) or sub != 0:
                 note = f"{where}: not in the file (optional in CiA 301): not written"
@@ -135,17 +166,48 @@ def _check_write(d: Dictionary, r: Report, index: int, sub: int, size: int, valu
             return False
         r.problems.append(f"{where}: not in the file; the master writes it")
         return False
-    if not e.writable:
-        r.problems.append(f"{where}: access {e.access_raw}; the master writes 0x{value:X}")
-        return False
-    if e.type.size != size:
-        r.problems.append(f"{where}: the file says {e.type.name}, the master writes {size} bytes (CiA 301's type)")
-        return False
-    why = _in_limits(e, value)
     if why is not None:
-        r.problems.append(f"{where}: the master writes {value}, {why}")
+        r.problems.append(f"{where}: {why}")
         return False
     return True
+
+
+def _check_watchdog(d: Dictionary, r: Report, p: Plan) -> None:
+    """0x1016.1, the drive's watchdog on the master: a drive on which the master cannot set it is
+    refused, unless the drive table accepts what a dead master then leaves it doing."""
+    value = p.master_id << 16 | p.consumer_ms
+    why = "a consumer time of 0 ms turns it off" if p.consumer_ms == 0 else _write_problem(d, 0x1016, 1, 4, value)
+    if why is None:
+        return
+    why = why or "not in the file"
+    line = (f"0x1016:01 (consumer heartbeat, the drive's watchdog on the master): {why}; a dead master would leave "
+            "this drive applying its last torque")
+    if p.accept_no_master_watchdog:
+        r.notes.append(f"{line} (the drive table accepts it: {ACCEPT_NO_WATCHDOG} = true)")
+    else:
+        r.problems.append(f"{line}; a drive table that accepts this says {ACCEPT_NO_WATCHDOG} = true")
+
+
+def _joint_torque(d: Dictionary, r: Report, p: Plan) -> None:
+    """What 1000 per-mille is at the joint (0x6076 x gear x efficiency) and the most the drive gives
+    there (x 0x6072), from the table's units (the drive's must equal them) or the file's."""
+    def num(index: int, sub: int = 0) -> int | None:
+        e = d.get(index, sub)
+        return int(e.value(p.node)) if e is not None and isinstance(e.default, int) else None
+
+    rated = p.rated if p.rated is not None else num(0x6076)
+    motor, shaft = num(0x6091, 1), num(0x6091, 2) or 1
+    gear = p.gear if p.gear is not None else (motor, shaft) if motor else None
+    max_permille = num(0x6072)
+    r.max_permille = MAX_PERMILLE if max_permille is None else min(max_permille, MAX_PERMILLE)
+    if not rated or gear is None or not gear[1]:
+        return
+    r.joint_rated_nm = rated / p.units_per_nm * gear[0] / gear[1] * p.gear_efficiency
+    unit = "uN m" if p.units_per_nm == 1_000_000 else "mN m"
+    r.notes.append(f"torque at the joint: 1000 per-mille is 0x6076 {rated} {unit} (the motor's) x gear {gear[0]}/"
+                   f"{gear[1]} x efficiency {p.gear_efficiency:g} = {r.joint_rated_nm:.6g} N m; the drive gives at "
+                   f"most {r.max_joint_torque_nm:.6g} N m ({r.max_permille} per-mille"
+                   f"{'' if max_permille is not None else ', no 0x6072'})")
 
 
 def _check_mapping(d: Dictionary, r: Report, name: str) -> None:
@@ -217,19 +279,24 @@ def check(d: Dictionary, plan: Plan | None = None) -> Report:
                           f"cyclic synchronous torque (mode {CST_MODE}, bit 9), which this controller needs")
     elif modes is None:
         r.notes.append("0x6502 (supported drive modes): not in the file: the mode write shows whether CST is there")
-    _unit(d, r, 0x6076, "rated torque", "rated_torque_nm", p.rated, 0)
+    _unit(d, r, 0x6076, "motor rated torque", "rated_torque_nm", p.rated, 0)
     _unit(d, r, 0x608F, "encoder increments", "encoder_increments", p.encoder, 2)
     _unit(d, r, 0x6091, "gear ratio", "gear", p.gear, 2)
     if d.get(0x6072) is None:
         r.notes.append("0x6072 (max torque): not in the file: the target torque is not saturated below 32767 per-mille")
+    _joint_torque(d, r, p)
     for index, sub, what in ((0x6041, 0, "statusword"), (0x6061, 0, "mode of operation display")):
         e = d.get(index, sub)
         if e is None or not e.readable:
             r.problems.append(f"{_obj(index, sub)} ({what}): {'not in the file' if e is None else 'not readable'}; "
                               "the master reads it")
     for index, sub, size, value, optional, what in _writes(p):
-        _check_write(d, r, index, sub, size, value, optional, what)
+        if index == 0x1016:
+            _check_watchdog(d, r, p)
+        else:
+            _check_write(d, r, index, sub, size, value, optional, what)
     for name in CODEC_MAPPING:
         _check_mapping(d, r, name)
     r.problems = list(dict.fromkeys(r.problems))  # one line per problem: the controlword is written four times
+    r.warnings = list(d.warnings)
     return r

@@ -5,12 +5,17 @@
     python -m gen.drives --arm-json ... --boot-args can0                          # one bus's options
 
 Rule (docs/drives-bring-up.md): a joint's field is its [joint.NAME] value, else [defaults], else
-node = the drive's number. Units (rated torque, encoder, gear) are the drive's: the master reads
-0x6076, 0x608F and 0x6091 at boot and never writes them; what the table gives is compared with them
-(a mismatch stops the boot), and fills what the drive lacks. rated_torque_nm = "joint_torque_limit"
-is the joint's torque limit from arm.json (the emulated drives, commissioned for this arm). The
-drive's EDS or DCF is checked against the boot before it starts (gen/drive_check.py). Bad input:
-one line naming the file and the field, exit 2.
+node = the drive's number. Units (the motor's rated torque, encoder, gear) are the drive's: the
+master reads 0x6076, 0x608F and 0x6091 at boot and never writes them; what the table gives is
+compared with them (a mismatch stops the boot), and fills what the drive lacks. CiA 402: 0x6076 is
+the MOTOR's; the joint's torque is per-mille / 1000 x 0x6076 x gear x gear_efficiency (1 unless
+the table gives one). rated_torque_nm = "joint_torque_limit / gear" is the motor that gives the
+joint's torque limit (arm.json) through the gear, rounded up to the drive's torque unit (the
+emulated drives, commissioned for this arm). Each joint's torque limit must be within what its
+drive gives at the joint (0x6072 x 0x6076 x gear x efficiency). A drive without a settable 0x1016.1
+(its watchdog on the master) is refused unless accept_no_master_watchdog = true. The drive's EDS or
+DCF is checked against the boot before it starts (gen/drive_check.py). Bad input: one line naming
+the file and the field, exit 2.
 """
 
 from __future__ import annotations
@@ -33,11 +38,13 @@ from gen.lib import toml_input
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_DRIVES = ROOT / "firmware" / "protocol" / "drives.toml"
-TOP_FIELDS = {"eds", "heartbeat_ms", "consumer_ms", "master_id", "defaults", "joint", "pdo"}
-JOINT_FIELDS = {"node", "encoder_increments", "gear", "rated_torque_nm", "torque_unit"}
+TOP_FIELDS = {"eds", "heartbeat_ms", "consumer_ms", "master_id", "defaults", "joint", "pdo",
+              drive_check.ACCEPT_NO_WATCHDOG}
+JOINT_FIELDS = {"node", "encoder_increments", "gear", "rated_torque_nm", "torque_unit", "gear_efficiency"}
 # 0x6076's unit, per N m: CiA 402 says mN m; maxon's EPOS4 gives µN m (its firmware specification)
 TORQUE_UNITS = {"mNm": 1000, "uNm": 1000000}
-JOINT_TORQUE_LIMIT = "joint_torque_limit"  # rated_torque_nm: the joint's torque limit (arm.json)
+# rated_torque_nm: the motor that gives the joint's torque limit (arm.json) through the gear
+JOINT_TORQUE_LIMIT = "joint_torque_limit / gear"
 U32_MAX = 0xFFFFFFFF
 # The contract's: every PDO on every SYNC. TPDO2 may come every n-th SYNC (the controller keeps its
 # torque and statusword in between); TPDO1, the joint state, must come every SYNC; RPDO1 may be
@@ -55,17 +62,28 @@ class Drive:
     drive: int              # the drive's number, 1..n (buses.toml)
     bus: str
     node: int
-    rated_torque_mnm: float  # 0x6076 in mN m: the table's, else the file's
+    rated_torque_mnm: float  # 0x6076, the MOTOR's, in mN m: the table's, else the file's
     encoder_increments: int  # 0x608F.1 increments per 0x608F.2 motor revolutions: the table's, else the file's
     gear: tuple[int, int]   # 0x6091.1, .2: the table's, else the file's
     given: list[str]        # the objects the table gives: the boot compares the drive's with them
-    notes: list[str] = field(default_factory=list)  # what the table fills, what the boot skips
+    notes: list[str] = field(default_factory=list)  # what the table fills, what the boot skips; the file's warnings
     encoder_revs: int = 1   # 0x608F.2 (the table gives increments per one revolution)
     torque_unit: str = "mNm"  # 0x6076's unit (TORQUE_UNITS)
+    gear_efficiency: float = 1.0  # the table's: the joint gets 0x6076 x gear x it
+    joint_torque_limit_nm: float = 0.0  # arm.json's: the drive must give it at the joint
+    max_torque_permille: int = drive_check.MAX_PERMILLE  # 0x6072 as the file says (the boot reads the drive's)
+    accept_no_master_watchdog: bool = False  # the table accepts a drive without a settable 0x1016.1
 
-    def node_spec(self) -> str:
+    @property
+    def joint_rated_torque_nm(self) -> float:
+        """1000 per-mille at the joint: the motor's rated torque x gear x efficiency (CiA 402)."""
+        return self.rated_torque_mnm / 1000 * self.gear[0] / self.gear[1] * self.gear_efficiency
+
+    def node_spec(self, limit: bool = False) -> str:
         """The programs' --node value: ID, then what the table gives (arm_controller and
-        arm_canopen_boot check the drive against it; arm_sim commissions its drive with it)."""
+        arm_canopen_boot check the drive against it; arm_sim commissions its drive with it), the
+        gear's efficiency, whether a drive without a master watchdog is accepted, and (limit:
+        arm_canopen_boot's, which has no arm) the joint's torque limit the drive must give."""
         spec = [str(self.node)]
         if "0x6076" in self.given:  # in the drive's own unit
             spec.append(f"rated={round(self.rated_torque_mnm * TORQUE_UNITS[self.torque_unit] / 1000)}")
@@ -75,6 +93,12 @@ class Drive:
             spec.append(f"gear={self.gear[0]}/{self.gear[1]}")
         if self.torque_unit != "mNm":
             spec.append(f"torque_unit={self.torque_unit}")
+        if self.gear_efficiency != 1.0:
+            spec.append(f"efficiency={self.gear_efficiency:g}")
+        if self.accept_no_master_watchdog:
+            spec.append(f"{drive_check.ACCEPT_NO_WATCHDOG}=true")
+        if limit and self.joint_torque_limit_nm > 0:
+            spec.append(f"limit={self.joint_torque_limit_nm:g}")
         return ",".join(spec)
 
 
@@ -98,7 +122,7 @@ class DriveConfig:
         args = ["--cycle-us", str(self.cycle_us), "--heartbeat-ms", str(self.heartbeat_ms),
                 "--consumer-ms", str(self.consumer_ms), "--master-id", str(self.master_id)]
         for d in on_bus:
-            args += ["--node", d.node_spec()]
+            args += ["--node", d.node_spec(limit=True)]
         return args
 
 
@@ -138,10 +162,20 @@ def _fmt(m: list[tuple[int, int, int]]) -> str:
     return ", ".join(f"0x{i:04X}:{s}:{b}" for i, s, b in m)
 
 
-def _units(get: Callable[[str], tuple[Any, str]], torque_limit: float | None) -> tuple[float | None, int | None,
-                                                                                      tuple[int, int] | None, str]:
-    """The units a table gives (None where it gives none): rated torque in N m, encoder increments
-    per motor revolution, gear, and 0x6076's unit. get(key) -> (value or None, where it is)."""
+@dataclass(frozen=True)
+class TableUnits:
+    """The units a table gives for one drive (None where it gives none)."""
+    rated_nm: float | None          # 0x6076, the motor's rated torque, N m
+    encoder: int | None             # increments per motor revolution
+    gear: tuple[int, int] | None    # motor, shaft revolutions
+    unit: str                       # 0x6076's unit (TORQUE_UNITS)
+    efficiency: float               # the gear's: the joint gets 0x6076 x gear x it
+
+
+def _units(get: Callable[[str], tuple[Any, str]], torque_limit: float | None,
+           file_gear: tuple[int, int] | None) -> TableUnits:
+    """The units a table gives. get(key) -> (value or None, where it is); torque_limit: the joint's
+    (None: no arm); file_gear: the drive file's 0x6091 (for "joint_torque_limit / gear")."""
     unit, w = get("torque_unit")
     if unit is None:
         unit = "mNm"
@@ -155,17 +189,32 @@ def _units(get: Callable[[str], tuple[Any, str]], torque_limit: float | None) ->
         if not isinstance(gear_v, list) or len(gear_v) != 2:
             raise DrivesError(f"{w}: expected [motor revolutions, shaft revolutions], got {gear_v!r}")
         gear = (_uint(gear_v[0], w), _uint(gear_v[1], w))
+    eff_v, w = get("gear_efficiency")
+    efficiency = 1.0 if eff_v is None else eff_v
+    if isinstance(efficiency, bool) or not isinstance(efficiency, (int, float)) or not 0 < efficiency <= 1:
+        raise DrivesError(f"{w}: expected the gear's efficiency, above 0 and at most 1 (a strain-wave gear's is "
+                          f"about 0.7-0.85), got {eff_v!r}")
     rated_v, w = get("rated_torque_nm")
+    if rated_v == "joint_torque_limit":  # the joint's torque as 0x6076: what CiA 402 does not define
+        raise DrivesError(f"{w}: \"joint_torque_limit\": 0x6076 is the motor's rated torque (CiA 402), the joint "
+                          f"gets it times the gear; \"{JOINT_TORQUE_LIMIT}\" is the motor that gives the joint's limit")
     if rated_v == JOINT_TORQUE_LIMIT:
-        rated_v = torque_limit
+        through = gear or file_gear
+        if torque_limit is None:
+            rated_v = None
+        elif through is None:
+            raise DrivesError(f"{w}: \"{JOINT_TORQUE_LIMIT}\": neither the table nor the drive's file gives the gear")
+        else:  # rounded up to the drive's unit: the drive gives at least the joint's limit at 1000 per-mille
+            per_unit = TORQUE_UNITS[unit]
+            rated_v = math.ceil(round(torque_limit / (through[0] / through[1]) / efficiency * per_unit, 6)) / per_unit
     if rated_v is None:
-        return None, enc, gear, unit
+        return TableUnits(None, enc, gear, unit, float(efficiency))
     top = U32_MAX / TORQUE_UNITS[unit]
     if isinstance(rated_v, bool) or not isinstance(rated_v, (int, float)) or not math.isfinite(rated_v) \
             or not 1 / TORQUE_UNITS[unit] <= rated_v <= top:
-        raise DrivesError(f"{w}: expected a torque in N m, {1 / TORQUE_UNITS[unit]:g}..{top:g} (or "
+        raise DrivesError(f"{w}: expected the motor's rated torque in N m, {1 / TORQUE_UNITS[unit]:g}..{top:g} (or "
                           f"\"{JOINT_TORQUE_LIMIT}\"), got {rated_v!r}")
-    return float(rated_v), enc, gear, unit
+    return TableUnits(float(rated_v), enc, gear, unit, float(efficiency))
 
 
 def _in_unit(rated_nm: float | None, unit: str) -> int | None:
@@ -184,15 +233,25 @@ def table_plan(path: Path) -> tuple[drive_check.Plan, Path]:
     def get(key: str) -> tuple[Any, str]:
         return defaults.get(key), f"{path}: defaults.{key}"
 
-    rated, enc, gear, unit = _units(get, None)
+    u = _units(get, None, None)
     node = _uint(defaults.get("node", 1), f"{path}: defaults.node", 1, 127)
     eds_rel = doc.get("eds")
     eds = Path(str(eds_rel)) if eds_rel and Path(str(eds_rel)).is_absolute() else path.parent / str(eds_rel or "")
     plan = drive_check.Plan(node=node, heartbeat_ms=_uint(doc.get("heartbeat_ms", 100), f"{path}: heartbeat_ms", 0, 65535),
                             consumer_ms=_uint(doc.get("consumer_ms", 300), f"{path}: consumer_ms", 0, 65535),
                             master_id=_uint(doc.get("master_id", 127), f"{path}: master_id", 1, 127),
-                            transmission=_pdo(doc, path), rated=_in_unit(rated, unit), encoder=enc, gear=gear)
+                            transmission=_pdo(doc, path), rated=_in_unit(u.rated_nm, u.unit), encoder=u.encoder,
+                            gear=u.gear, units_per_nm=TORQUE_UNITS[u.unit], gear_efficiency=u.efficiency,
+                            accept_no_master_watchdog=_accept_no_watchdog(doc, path))
     return plan, eds.resolve()
+
+
+def _accept_no_watchdog(doc: dict[str, Any], path: Path) -> bool:
+    v = doc.get(drive_check.ACCEPT_NO_WATCHDOG, False)
+    if not isinstance(v, bool):
+        raise DrivesError(f"{path}: {drive_check.ACCEPT_NO_WATCHDOG}: expected true or false (true: a drive without a "
+                          f"settable 0x1016.1 boots, and a dead master leaves it applying its last torque), got {v!r}")
+    return v
 
 
 def drives_file_of(arm: dict[str, Any]) -> Path:
@@ -267,6 +326,7 @@ def load(arm: dict[str, Any], path: Path | None = None) -> DriveConfig:
     heartbeat = _uint(doc.get("heartbeat_ms", 100), f"{path}: heartbeat_ms", 0, 65535)
     consumer = _uint(doc.get("consumer_ms", 300), f"{path}: consumer_ms", 0, 65535)
     master = _uint(doc.get("master_id", 127), f"{path}: master_id", 1, 127)
+    accept = _accept_no_watchdog(doc, path)
     transmission = _pdo(doc, path)
     cycle_us = round(1e6 / float(arm.get("loop_rate_hz", 1000.0)))
     defaults = doc.get("defaults", {})
@@ -300,20 +360,25 @@ def load(arm: dict[str, Any], path: Path | None = None) -> DriveConfig:
 
         node_v, w = get("node")
         node = _uint(num if node_v is None else node_v, w, 1, 127)
-        rated, enc, gear, unit = _units(get, j["torque_limit"])
-        given = [o for o, v in (("0x6076", rated), ("0x608F", enc), ("0x6091", gear)) if v is not None]
+        u = _units(get, j["torque_limit"], units["gear"])
+        given = [o for o, v in (("0x6076", u.rated_nm), ("0x608F", u.encoder), ("0x6091", u.gear)) if v is not None]
         plan = drive_check.Plan(node=node, cycle_us=cycle_us, heartbeat_ms=heartbeat, consumer_ms=consumer,
-                                master_id=master, transmission=transmission, rated=_in_unit(rated, unit), encoder=enc,
-                                gear=gear)
+                                master_id=master, transmission=transmission, rated=_in_unit(u.rated_nm, u.unit),
+                                encoder=u.encoder, gear=u.gear, units_per_nm=TORQUE_UNITS[u.unit],
+                                gear_efficiency=u.efficiency, accept_no_master_watchdog=accept)
         report = drive_check.check(dictionary, plan)
         if not report.ok:
             raise DrivesError(f"{path}: joint {name} (node {node}): {eds.name}: {report.problems[0]}")
         if num not in bus_of:
             raise DrivesError(f"arm.json: drive {num} (joint {name}) is on no bus")
-        rated_mnm = rated * 1000 if rated is not None else units["rated"] * 1000 / TORQUE_UNITS[unit]
-        out.append(Drive(name, num, bus_of[num], node, rated_mnm,
-                         enc if enc is not None else units["encoder"], gear if gear is not None else units["gear"],
-                         given, report.notes, 1 if enc is not None else units["encoder_revs"], unit))
+        rated_mnm = u.rated_nm * 1000 if u.rated_nm is not None else units["rated"] * 1000 / TORQUE_UNITS[u.unit]
+        d = Drive(name, num, bus_of[num], node, rated_mnm, u.encoder if u.encoder is not None else units["encoder"],
+                  u.gear if u.gear is not None else units["gear"], given,
+                  [f"warning: {x}" for x in report.warnings] + report.notes,
+                  1 if u.encoder is not None else units["encoder_revs"], u.unit, u.efficiency, float(j["torque_limit"]),
+                  report.max_permille, accept)
+        _check_torque_limit(path, d)
+        out.append(d)
     for b in {d.bus for d in out}:
         nodes = [d.node for d in out if d.bus == b]
         dup = sorted({n for n in nodes if nodes.count(n) > 1})
@@ -322,6 +387,19 @@ def load(arm: dict[str, Any], path: Path | None = None) -> DriveConfig:
         if master in nodes:
             raise DrivesError(f"{path}: master_id: {master} is a drive's node id on bus {b}")
     return DriveConfig(str(path), str(eds), heartbeat, consumer, master, cycle_us, out, transmission)
+
+
+def _check_torque_limit(path: Path, d: Drive) -> None:
+    """The joint's torque limit must be within what its drive gives at the joint: 0x6072 x 0x6076 x
+    gear x efficiency (the boot checks the drive's own 0x6072 again)."""
+    most = d.max_torque_permille * d.joint_rated_torque_nm / 1000
+    if most < d.joint_torque_limit_nm * (1 - 1e-6):
+        unit = "uN m" if d.torque_unit == "uNm" else "mN m"
+        raise DrivesError(f"{path}: joint {d.joint} (node {d.node}): its torque limit {d.joint_torque_limit_nm:g} N m "
+                          f"is more than its drive gives at the joint, {most:.6g} N m = 0x6072 "
+                          f"{d.max_torque_permille} per-mille x 0x6076 "
+                          f"{round(d.rated_torque_mnm * TORQUE_UNITS[d.torque_unit] / 1000)} {unit} (the motor's) x "
+                          f"gear {d.gear[0]}/{d.gear[1]} x efficiency {d.gear_efficiency:g}")
 
 
 def main(argv: list[str] | None = None) -> int:

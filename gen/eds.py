@@ -12,7 +12,11 @@ What a real file may hold, and how it is read:
   ([MandatoryObjects], [OptionalObjects], [ManufacturerObjects]).
 A broken file (an unknown type, a broken $NODEID, a default PDO mapping longer than 64 bits, no
 [MandatoryObjects], a value its type cannot hold, ...) is one line naming the section and the key,
-exit 2. Parsed with configparser as python-canopen does (the file is an INI file)."""
+exit 2. Vendors' files as they are: a mistake in an object the CANopen master never uses
+(gen/lib/cia402.py MASTER_OBJECTS) leaves that object out, and a limit its data type cannot hold,
+or one that cuts into the values CiA 301's definition of the object needs (0x1016's node id, a PDO
+COB-ID's valid bit), is ignored; each is a warning naming the file's line (Dictionary.warnings),
+not a refusal. Parsed with configparser as python-canopen does (the file is an INI file)."""
 
 from __future__ import annotations
 
@@ -22,10 +26,12 @@ import math
 import re
 import struct
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from gen.lib.atomic_output import exit_on_output_error, write_files_atomically, write_text_atomic
+from gen.lib.cia402 import MASTER_OBJECTS
 from gen.lib.one_line import one_line
 
 
@@ -63,7 +69,21 @@ Value = int | float | str | bytes
 
 
 class EdsError(ValueError):
-    pass
+    """A broken file: one line naming the section and the key (section, key: where, if known)."""
+
+    def __init__(self, message: str, section: str | None = None, key: str | None = None) -> None:
+        super().__init__(message)
+        self.section, self.key = section, key
+
+
+def _defined_range(index: int, sub: int) -> tuple[int, str] | None:
+    """For an object whose values CiA 301 defines field by field: the highest value its definition
+    needs a HighLimit to allow, and why. A file's HighLimit below it contradicts the object."""
+    if index == 0x1016 and 1 <= sub <= 127:
+        return 0x007FFFFF, "the consumer heartbeat's node id is in bits 16-23 and its time in ms in bits 0-15"
+    if (0x1400 <= index <= 0x15FF or 0x1800 <= index <= 0x19FF) and sub == 1:
+        return 0x800007FF, "a PDO COB-ID's bit 31 marks it invalid, and the master sets it while mapping"
+    return None
 
 
 @dataclass(frozen=True)
@@ -111,6 +131,8 @@ class Dictionary:
     listed: dict[str, set[int]]                  # [MandatoryObjects] ...: the indices each lists
     device: dict[str, str] = field(default_factory=dict)  # [DeviceInfo]
     node_id: int | None = None                   # a DCF's [DeviceComissioning] NodeID
+    # the file's harmless mistakes, "FILE:LINE: ...": an object left out, a limit ignored
+    warnings: list[str] = field(default_factory=list)
     _by_key: dict[tuple[int, int], Entry] = field(default_factory=dict, repr=False)
 
     def __post_init__(self) -> None:
@@ -130,6 +152,10 @@ def _where(section: str, key: str, text: str) -> str:
     return one_line(f"[{section}] {key}={text}")
 
 
+def _fail(section: str, key: str, text: str, why: str) -> EdsError:
+    return EdsError(f"{_where(section, key, text)}: {why}", section, key)
+
+
 def _int(section: str, key: str, text: str) -> int:
     t = text.strip()
     try:
@@ -137,7 +163,7 @@ def _int(section: str, key: str, text: str) -> int:
             return int(t, 8)
         return int(t, 0)
     except ValueError:
-        raise EdsError(f"{_where(section, key, text)}: not an integer") from None
+        raise _fail(section, key, text, "not an integer") from None
 
 
 def _nodeid(section: str, key: str, text: str) -> tuple[str, bool]:
@@ -147,7 +173,7 @@ def _nodeid(section: str, key: str, text: str) -> tuple[str, bool]:
     t = text.replace(" ", "").replace("\t", "")
     m = re.fullmatch(r"\$NODEID(?:\+(.+))?", t, re.IGNORECASE) or re.fullmatch(r"(.+)\+\$NODEID", t, re.IGNORECASE)
     if m is None or (m.group(1) is not None and "$" in m.group(1)):
-        raise EdsError(f"{_where(section, key, text)}: a $NODEID value is $NODEID, $NODEID+N or N+$NODEID")
+        raise _fail(section, key, text, "a $NODEID value is $NODEID, $NODEID+N or N+$NODEID")
     return m.group(1) or "0", True
 
 
@@ -159,21 +185,26 @@ def _number(section: str, key: str, text: str, dtype: int) -> int | float:
         try:
             x = float(text)
         except ValueError:
-            raise EdsError(f"{_where(section, key, text)}: not a {t.name} number") from None
+            raise _fail(section, key, text, f"not a {t.name} number") from None
         if math.isnan(x) or (t.size == 4 and abs(x) > 3.4028235e38 and not math.isinf(x)):
-            raise EdsError(f"{_where(section, key, text)}: not a finite {t.name}")
+            raise _fail(section, key, text, f"not a finite {t.name}")
         return x
     v = _int(section, key, text)
+    lo, hi = _type_range(dtype)
+    if t.kind == "int" and text.strip().lower().startswith("0x") and hi < v <= 2 * hi + 1:
+        v -= 2 * hi + 2
+    if not lo <= v <= hi:
+        raise _fail(section, key, text, f"out of range for {t.name} ({lo}..{hi})")
+    return v
+
+
+def _type_range(dtype: int) -> tuple[int, int]:
+    """The values an integer data type holds."""
+    t = TYPES[dtype]
     bits = 8 * t.size
     if t.kind == "int":
-        if text.strip().lower().startswith("0x") and 1 << (bits - 1) <= v < 1 << bits:
-            v -= 1 << bits
-        lo, hi = -(1 << (bits - 1)), (1 << (bits - 1)) - 1
-    else:
-        lo, hi = 0, (1 << bits) - 1 if t.kind != "bool" else 1
-    if not lo <= v <= hi:
-        raise EdsError(f"{_where(section, key, text)}: out of range for {t.name} ({lo}..{hi})")
-    return v
+        return -(1 << (bits - 1)), (1 << (bits - 1)) - 1
+    return 0, (1 << bits) - 1 if t.kind != "bool" else 1
 
 
 def _value(section: str, key: str, text: str, dtype: int) -> tuple[Value, bool]:
@@ -186,19 +217,31 @@ def _value(section: str, key: str, text: str, dtype: int) -> tuple[Value, bool]:
         except ValueError:
             if dtype == 0x000F:  # a DOMAIN's default is the tool's (python-canopen's datatypes.eds: "@ABCD")
                 return text.encode("utf-8"), False
-            raise EdsError(f"{_where(section, key, text)}: not hexadecimal bytes ({t.name})") from None
+            raise _fail(section, key, text, f"not hexadecimal bytes ({t.name})") from None
     if text.strip() == "":
         return (0.0 if t.kind == "float" else 0), False
     raw, rel = _nodeid(section, key, text)
     if rel and t.kind not in ("int", "uint"):
-        raise EdsError(f"{_where(section, key, text)}: $NODEID in a {t.name}")
+        raise _fail(section, key, text, f"$NODEID in a {t.name}")
     return _number(section, key, raw, dtype), rel
 
 
-def _limit(section: str, key: str, text: str, dtype: int) -> int | float | None:
+Warn = Callable[[str, str, str], None]  # (section, key, what): a warning at the key's line
+
+
+def _limit(section: str, key: str, text: str, dtype: int, warn: Warn) -> int | float | None:
+    """A LowLimit or HighLimit; one its type cannot hold limits nothing the type allows: ignored,
+    with a warning."""
     if text.strip() == "" or TYPES[dtype].kind in ("text", "bytes"):
         return None
     raw, _rel = _nodeid(section, key, text)  # a node-relative limit is taken at node 0: the widest
+    if TYPES[dtype].kind != "float":
+        v, (lo, hi) = _int(section, key, raw), _type_range(dtype)
+        wraps = TYPES[dtype].kind == "int" and raw.strip().lower().startswith("0x") and hi < v <= 2 * hi + 1
+        if not wraps and not lo <= v <= hi:
+            warn(section, key, f"{_where(section, key, text)}: out of range for {TYPES[dtype].name} ({lo}..{hi}): "
+                               "the limit is ignored")
+            return None
     return _number(section, key, raw, dtype)
 
 
@@ -224,6 +267,15 @@ class _File:
         self.path = path
         self.sections: dict[str, dict[str, str]] = {}
         self.names: dict[str, str] = {}
+        self.lines: dict[tuple[str, str], int] = {}  # (section, key; "" the header) -> its line, 1-based
+        section = ""
+        for number, line in enumerate(text.splitlines(), 1):
+            t = line.strip()
+            if t.startswith("[") and "]" in t:
+                section = t[1:t.index("]")].strip().lower()
+                self.lines.setdefault((section, ""), number)
+            elif "=" in t and not t.startswith((";", "#")):
+                self.lines.setdefault((section, t.split("=", 1)[0].strip()), number)
         for s in cp.sections():
             if s.lower() in self.sections:
                 raise EdsError(one_line(f"{path}: section [{s}] appears twice"))
@@ -236,29 +288,40 @@ class _File:
     def name(self, section: str) -> str:
         return self.names.get(section.lower(), section)
 
+    def line(self, section: str | None, key: str | None = None) -> str:
+        """FILE:LINE of a key (else of its section's header)."""
+        s = (section or "").lower()
+        n = self.lines.get((s, key or "")) or self.lines.get((s, ""))
+        return f"{self.path}:{n}" if n else str(self.path)
 
-def _entry(f: _File, section: str, index: int, sub: int, s: dict[str, str], name: str | None = None,
+
+def _entry(f: _File, section: str, index: int, sub: int, s: dict[str, str], warn: Warn, name: str | None = None,
            value: str | None = None) -> Entry:
     where = f.name(section)
     for key in ("DataType", "AccessType"):
         if key not in s:
-            raise EdsError(f"[{where}] has no {key}")
+            raise EdsError(f"[{where}] has no {key}", where)
     dtype = _int(where, "DataType", s["DataType"])
     if dtype not in TYPES:
-        raise EdsError(f"{_where(where, 'DataType', s['DataType'])}: not a CiA 301 basic data type "
-                       f"(0x0001-0x001B; 0x000E and 0x0017 are reserved)")
+        raise _fail(where, "DataType", s["DataType"], "not a CiA 301 basic data type (0x0001-0x001B; 0x000E and "
+                    "0x0017 are reserved)")
     access_raw = s["AccessType"].strip().lower()
     if access_raw not in ACCESS:
-        raise EdsError(f"{_where(where, 'AccessType', s['AccessType'])}: expected ro, rw, wo, rww, rwr or const")
+        raise _fail(where, "AccessType", s["AccessType"], "expected ro, rw, wo, rww, rwr or const")
     # an empty ParameterValue is a DCF's "not configured": the DefaultValue stands
     configured = value is not None or s.get("ParameterValue", "") != ""
     key = "ParameterValue" if configured else "DefaultValue"
     text = value if value is not None else s.get(key, "")
     default, rel = _value(where, key, text, dtype)
-    low = _limit(where, "LowLimit", s.get("LowLimit", ""), dtype)
-    high = _limit(where, "HighLimit", s.get("HighLimit", ""), dtype)
+    low = _limit(where, "LowLimit", s.get("LowLimit", ""), dtype, warn)
+    high = _limit(where, "HighLimit", s.get("HighLimit", ""), dtype, warn)
+    defined = _defined_range(index, sub)
+    if defined is not None and high is not None and high < defined[0]:
+        warn(where, "HighLimit", f"{_where(where, 'HighLimit', s['HighLimit'])}: below 0x{defined[0]:X}, which CiA "
+                                 f"301's definition of 0x{index:04X} needs ({defined[1]}): the limit is ignored")
+        high = None
     if low is not None and high is not None and low > high:
-        raise EdsError(f"[{where}] LowLimit={s['LowLimit']} is above HighLimit={s['HighLimit']}")
+        raise EdsError(f"[{where}] LowLimit={s['LowLimit']} is above HighLimit={s['HighLimit']}", where, "LowLimit")
     pdo = _int(where, "PDOMapping", s.get("PDOMapping", "0") or "0") != 0
     return Entry(index, sub, one_line(name if name is not None else s.get("ParameterName", "")), dtype,
                  ACCESS[access_raw], access_raw, default, rel, low, high, pdo, configured)
@@ -279,23 +342,25 @@ def _lists(f: _File) -> dict[str, set[int]]:
     return out
 
 
-def _compact(f: _File, section: str, index: int, s: dict[str, str]) -> list[Entry]:
+def _compact(f: _File, section: str, index: int, s: dict[str, str], warn: Warn) -> list[Entry]:
     """An ARRAY written whole: sub 0 is its length, 1..N share the object's type and limits."""
     where = f.name(section)
     n = _int(where, "CompactSubObj", s["CompactSubObj"])
     if not 1 <= n <= 254:
-        raise EdsError(f"{_where(where, 'CompactSubObj', s['CompactSubObj'])}: expected 1..254 sub-indices")
+        raise _fail(where, "CompactSubObj", s["CompactSubObj"], "expected 1..254 sub-indices")
     names = f.get(f"{section}Name") or {}
     values = f.get(f"{section}Value") or {}
     out = [Entry(index, 0, "Number of entries", 0x0005, "RO", "ro", n, False, None, None, False, False)]
     base = s.get("ParameterName", "")
     for k in range(1, n + 1):
         name = names.get(str(k), f"{base}{k}")
-        out.append(_entry(f, section, index, k, s, name=name, value=values.get(str(k))))
+        out.append(_entry(f, section, index, k, s, warn, name=name, value=values.get(str(k))))
     return out
 
 
-def _check_mappings(d: Dictionary, node_id: int) -> None:
+def _long_mappings(d: Dictionary, node_id: int) -> list[tuple[int, str]]:
+    """The default PDO mappings longer than a frame: (mapping index, why)."""
+    out = []
     for e in d.entries:
         if e.sub != 0 or not any(e.index in r for r in PDO_MAPPINGS) or not isinstance(e.default, int):
             continue
@@ -303,36 +368,60 @@ def _check_mappings(d: Dictionary, node_id: int) -> None:
         entries = [d.get(e.index, k) for k in range(1, int(count) + 1)]
         bits = sum(int(m.value(node_id)) & 0xFF for m in entries if m is not None and isinstance(m.default, int))
         if bits > MAX_PDO_BITS:
-            raise EdsError(f"[{e.index:04X}] its mapping of {count} entries is {bits} bits, more than the "
-                           f"{MAX_PDO_BITS} of a CAN frame")
+            out.append((e.index, f"[{e.index:04X}] its mapping of {count} entries is {bits} bits, more than the "
+                                 f"{MAX_PDO_BITS} of a CAN frame"))
+    return out
+
+
+def _leave_out(where: str, index: int, names: dict[int, str]) -> str:
+    return f"{where}: 0x{index:04X} ({names.get(index, '')}) is left out: the master never uses it"
+
+
+
+def _object(f: _File, low: str, s: dict[str, str], warn: Warn) -> list[Entry]:
+    """The entries of one object (the section [low] and its [lowsubN])."""
+    where = f.name(low)
+    index = int(low, 16)
+    otype = _int(where, "ObjectType", s.get("ObjectType", "0x7") or "0x7")
+    if otype not in OBJECT_TYPES:
+        raise _fail(where, "ObjectType", s["ObjectType"],
+                    f"expected one of {', '.join(f'0x{k:X} ({v})' for k, v in OBJECT_TYPES.items())}")
+    if otype in (0x2, 0x5, 0x7):
+        return [_entry(f, low, index, 0, s, warn)]
+    if "CompactSubObj" in s:  # CiA 306 says ARRAY; Lely's dcfgen writes it for records too
+        return _compact(f, low, index, s, warn)
+    subs = sorted(k for k in f.sections if re.fullmatch(rf"{low}sub[0-9a-f]+", k))
+    if not subs:
+        raise EdsError(f"[{where}] is an ARRAY/RECORD with no [{where}subN] sections", where)
+    return [_entry(f, k, index, int(k[len(low) + 3:], 16), f.sections[k], warn) for k in subs]
 
 
 def load(path: Path) -> Dictionary:
-    """Every object of the EDS or DCF, its entries sorted by index and sub-index."""
+    """Every object of the EDS or DCF, its entries sorted by index and sub-index. A mistake in an
+    object the master uses is an EdsError; in another object, or a limit that limits nothing or
+    contradicts the object's definition, a warning (Dictionary.warnings)."""
     f = _File(path)
     listed = _lists(f)
     entries: list[Entry] = []
     names: dict[int, str] = {}
+    warnings: list[str] = []
+
+    def warn(section: str, key: str, what: str) -> None:
+        warnings.append(one_line(f"{f.line(section, key)}: {what}"))
+
     for low, s in f.sections.items():
         if not re.fullmatch(r"[0-9a-f]{4}", low):
             continue
-        where = f.name(low)
         index = int(low, 16)
-        otype = _int(where, "ObjectType", s.get("ObjectType", "0x7") or "0x7")
-        if otype not in OBJECT_TYPES:
-            raise EdsError(f"{_where(where, 'ObjectType', s['ObjectType'])}: expected one of "
-                           f"{', '.join(f'0x{k:X} ({v})' for k, v in OBJECT_TYPES.items())}")
         names[index] = one_line(s.get("ParameterName", ""))
-        if otype in (0x2, 0x5, 0x7):
-            entries.append(_entry(f, low, index, 0, s))
-        elif "CompactSubObj" in s:  # CiA 306 says ARRAY; Lely's dcfgen writes it for records too
-            entries.extend(_compact(f, low, index, s))
-        else:
-            subs = sorted(k for k in f.sections if re.fullmatch(rf"{low}sub[0-9a-f]+", k))
-            if not subs:
-                raise EdsError(f"[{where}] is an ARRAY/RECORD with no [{where}subN] sections")
-            for k in subs:
-                entries.append(_entry(f, k, index, int(k[len(low) + 3:], 16), f.sections[k]))
+        try:
+            entries.extend(_object(f, low, s, warn))
+        except EdsError as exc:
+            if index in MASTER_OBJECTS:
+                raise
+            del names[index]  # a vendor's harmless mistake: the object no one here uses is left out
+            warnings.append(one_line(_leave_out(f"{f.line(exc.section or low, exc.key)}: {exc}", index,
+                                                {index: s.get('ParameterName', '')})))
     if not entries:
         raise EdsError(f"{path}: no objects")
     dummies = f.get("DummyUsage") or {}
@@ -349,7 +438,16 @@ def load(path: Path) -> Dictionary:
     if commissioning.get("NodeID", "").strip():
         node_id = _int("DeviceComissioning", "NodeID", commissioning["NodeID"])
     d = Dictionary(path, entries, names, listed, dict(f.get("DeviceInfo") or {}), node_id)
-    _check_mappings(d, node_id or 1)
+    for mapping, why in _long_mappings(d, node_id or 1):
+        if mapping in MASTER_OBJECTS:
+            raise EdsError(why, f"{mapping:04X}")
+        comm = mapping - 0x200  # the PDO goes whole: its communication object with its mapping
+        warnings.append(one_line(_leave_out(f"{f.line(f'{mapping:04X}', 'SubNumber')}: {why}", mapping, names)
+                                 + f"; nor its PDO's 0x{comm:04X}"))
+        d = Dictionary(path, [e for e in d.entries if e.index not in (mapping, comm)],
+                       {i: n for i, n in names.items() if i not in (mapping, comm)}, listed, d.device, node_id)
+        names = d.object_names
+    d.warnings = warnings
     return d
 
 
@@ -410,6 +508,8 @@ def main(argv: list[str] | None = None) -> int:
     except EdsError as exc:
         print(f"gen.eds: {exc}", file=sys.stderr)
         return 2
+    for w in d.warnings:  # the file's harmless mistakes: said, not refused
+        print(f"gen.eds: warning: {w}", file=sys.stderr)
     if ns.out is not None:
         write_files_atomically(ns.out, builtin_c(d))
     else:

@@ -12,6 +12,14 @@ CODEC_MAPPING: dict[str, list[tuple[int, int, int]]] = {
 }
 # CiA 301's predefined COB-IDs (+ node id), which the master's boot writes (firmware/canopen co_boot.c)
 PDO_COB = {"tpdo1": 0x180, "rpdo1": 0x200, "tpdo2": 0x280}
+# Every object the master reads, writes or maps (co_boot.c's sequence, the PDOs above): a mistake in
+# any other object of a drive's file is a warning, not a refusal (gen/eds.py)
+MASTER_OBJECTS = frozenset({
+    0x1000, 0x1018, 0x6502, 0x6076, 0x608F, 0x6091, 0x6072, 0x6040, 0x6041,  # identity, modes, units, state
+    0x1400, 0x1600, 0x1800, 0x1A00, 0x1801, 0x1A01,                            # RPDO1, TPDO1, TPDO2
+    0x1006, 0x1017, 0x1016, 0x6060, 0x6061,                                    # cycle, heartbeats, mode
+    *(index for mapping in CODEC_MAPPING.values() for index, _, _ in mapping),
+})
 
 
 def pdo_bytes(name: str) -> int:

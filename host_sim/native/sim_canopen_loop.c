@@ -548,7 +548,7 @@ co_sim_t *sim_co_begin(const sim_config_t *cfg, const sim_co_config_t *co, sim_a
     memcpy(sp->timing, cfg->timelines, sizeof(sp->timing));
     for (int j = sp->n; j < SIM_MAX_JOINTS; ++j) {
         const sim_co_preset_t *own = &co->node_preset[j];
-        if (own->rated_torque_mnm || own->encoder_increments || own->gear_motor) {
+        if (own->rated_torque_mnm || own->encoder_increments || own->gear_motor || own->gear_efficiency > 0.0) {
             snprintf(err, errcap, "--node %d: the arm has %d drives", j + 1, sp->n);
             return NULL;
         }
@@ -564,6 +564,7 @@ co_sim_t *sim_co_begin(const sim_config_t *cfg, const sim_co_config_t *co, sim_a
         const sim_co_preset_t *own = &co->node_preset[j];
         if (own->rated_torque_mnm) pre.rated_torque_mnm = own->rated_torque_mnm;
         if (own->torque_units_per_nm) pre.torque_units_per_nm = own->torque_units_per_nm;
+        if (own->gear_efficiency > 0.0) pre.gear_efficiency = own->gear_efficiency;
         if (own->encoder_increments) pre.encoder_increments = own->encoder_increments;
         if (own->gear_motor) {
             pre.gear_motor = own->gear_motor;

@@ -24,9 +24,13 @@ int sim_cia402_scale(const sim_co_od_t *od, const sim_co_preset_t *own, sim_cia4
     const double motor = value_or(od, 0x6091u, 1u, own->gear_motor);
     const double shaft = value_or(od, 0x6091u, 2u, own->gear_shaft != 0u ? own->gear_shaft : 1u);
     const double rated = value_or(od, 0x6076u, 0u, own->rated_torque_mnm);
-    const int ok = inc > 0.0 && revs > 0.0 && motor > 0.0 && shaft > 0.0 && rated > 0.0;
+    const double efficiency = own->gear_efficiency > 0.0 ? own->gear_efficiency : 1.0;
+    const int ok = inc > 0.0 && revs > 0.0 && motor > 0.0 && shaft > 0.0 && rated > 0.0 && efficiency <= 1.0;
     sc->inc_per_rad = ok ? inc / revs * motor / shaft / TWO_PI : 0.0;
-    sc->rated_nm = ok ? rated / (own->torque_units_per_nm != 0u ? (double)own->torque_units_per_nm : 1000.0) : 0.0;
+    /* CiA 402: 0x6076 is the motor's; the driving shaft gets it times the gear, less the gear's losses */
+    sc->joint_rated_nm = ok ? rated / (own->torque_units_per_nm != 0u ? (double)own->torque_units_per_nm : 1000.0) *
+                                  (motor / shaft) * efficiency
+                            : 0.0;
     return ok ? 0 : -1;
 }
 
@@ -43,14 +47,14 @@ int32_t sim_cia402_increments(const sim_cia402_scale_t *sc, double rad)
 
 int16_t sim_cia402_permille(const sim_cia402_scale_t *sc, double nm)
 {
-    if (sc->rated_nm <= 0.0) return 0;
-    return (int16_t)saturate(nearbyint(nm / sc->rated_nm * 1000.0), -32768.0, 32767.0);
+    if (sc->joint_rated_nm <= 0.0) return 0;
+    return (int16_t)saturate(nearbyint(nm / sc->joint_rated_nm * 1000.0), -32768.0, 32767.0);
 }
 
 double sim_cia402_target_nm(const sim_cia402_scale_t *sc, int32_t target_permille, uint32_t max_permille,
                             double limit_nm)
 {
     const double m = (double)max_permille;
-    const double nm = saturate((double)target_permille, -m, m) * 1e-3 * sc->rated_nm;
+    const double nm = saturate((double)target_permille, -m, m) * 1e-3 * sc->joint_rated_nm;
     return saturate(nm, -limit_nm, limit_nm);
 }

@@ -256,8 +256,9 @@ static int sim_od(void *t, void *c, const argv_opt_t *opt, const char *v, char *
     return 0;
 }
 
-/* --node ID[,rated=N][,encoder=INC][,gear=M/S][,torque_unit=U]: node ID's dictionary preset (arm_controller's
- * --node syntax: the arm's drive table, python -m gen.drives). */
+/* --node ID[,rated=N][,encoder=INC][,gear=M/S][,torque_unit=U][,efficiency=E]: node ID's dictionary preset
+ * and its gear's efficiency (arm_controller's --node syntax: the arm's drive table, python -m gen.drives;
+ * its limit= and accept_no_master_watchdog= are the master's, and taken without effect here). */
 static int sim_node(void *t, void *c, const argv_opt_t *opt, const char *v, char *err, unsigned long errcap)
 {
     sim_options_t *o = t;
@@ -292,12 +293,20 @@ static int sim_node(void *t, void *c, const argv_opt_t *opt, const char *v, char
         } else if (strcmp(tok, "gear") == 0 && slash != NULL) {
             *slash = '\0';
             bad = node_u32(eq + 1, &p->gear_motor) || node_u32(slash + 1, &p->gear_shaft);
+        } else if (strcmp(tok, "efficiency") == 0 || strcmp(tok, "limit") == 0) {
+            char *end = NULL;
+            const double x = strtod(eq + 1, &end);
+            bad = end == eq + 1 || *end != '\0' || !(x > 0.0 && x < 1e9) || (tok[0] == 'e' && x > 1.0);
+            if (tok[0] == 'e') p->gear_efficiency = x;
+        } else if (strcmp(tok, "accept_no_master_watchdog") == 0) {
+            bad = strcmp(eq + 1, "true") != 0;
         } else {
             bad = 1;
         }
         if (bad) {
-            snprintf(err, errcap, "%s '%s': expected ID[,rated=N][,encoder=INC][,gear=M/S][,torque_unit=mNm|uNm], "
-                     "whole numbers >= 1", opt->name, v);
+            snprintf(err, errcap, "%s '%s': expected ID[,rated=N][,encoder=INC][,gear=M/S][,torque_unit=mNm|uNm]"
+                     "[,efficiency=E][,limit=NM][,accept_no_master_watchdog=true], whole numbers >= 1, 0 < E <= 1",
+                     opt->name, v);
             return -1;
         }
     }

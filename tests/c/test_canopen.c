@@ -199,6 +199,7 @@ typedef struct {
     unsigned lacks;      /* LACKS_* */
     uint32_t modes;      /* 0x6502 */
     uint32_t rated, enc, enc_revs, gear_m, gear_s, max_torque;
+    uint32_t heartbeat_high; /* 0x1016.1's highest value it takes (0: any), as a file's HighLimit may say */
     unsigned writes;
 } drive_t;
 
@@ -213,7 +214,7 @@ static void server_init(server_t *s)
     memset(s, 0, sizeof(*s));
     s->device_type = 0x00020192u;
     for (unsigned i = 0; i < 128u; ++i) {
-        s->d[i] = (drive_t){.sw = 0x40u, .modes = 0x000003A5u, .rated = 150000u, .enc = 524288u, .enc_revs = 1u,
+        s->d[i] = (drive_t){.sw = 0x40u, .modes = 0x000003A5u, .rated = 1486u, .enc = 524288u, .enc_revs = 1u,
                             .gear_m = 101u, .gear_s = 1u, .max_torque = 1000u};
     }
 }
@@ -279,6 +280,9 @@ static int serve(server_t *s, const arm_can_frame_t *req, arm_can_frame_t *resp)
             dr->mode = (int8_t)v;
         } else if (index == 0x1400u && sub == 1u) {
             dr->cob_rpdo1 = v;
+        } else if (index == 0x1016u && dr->heartbeat_high != 0u && v > dr->heartbeat_high) {
+            dr->writes--;
+            put_abort(d, 0x06090030u); /* above its limit */
         } else if (index == 0x1600u && !(dr->cob_rpdo1 & ARM_CO_PDO_INVALID)) {
             put_abort(d, 0x08000022u);
         }
@@ -329,9 +333,9 @@ static void test_boot_sequence(void)
     cfg.n_nodes = 2u;
     cfg.node[0] = (arm_co_node_config_t){.node_id = 1u};
     cfg.node[1] = (arm_co_node_config_t){.node_id = 2u, .expect = ARM_CO_EXPECT_RATED | ARM_CO_EXPECT_GEAR,
-                                         .rated_torque = 28000u, .gear_motor_revs = 160u, .gear_shaft_revs = 1u};
+                                         .rated_torque = 175u, .gear_motor_revs = 160u, .gear_shaft_revs = 1u};
     server_init(&s);
-    s.d[2].rated = 28000u;
+    s.d[2].rated = 175u;
     s.d[2].gear_m = 160u;
     s.d[2].sw = 0x27u; /* left operation enabled by an earlier master: gets controlword 0x00 first */
     CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
@@ -356,7 +360,8 @@ static void test_boot_sequence(void)
     }
     CHECK(disable == 1u);
     CHECK(s.d[1].mode == 10 && s.d[2].mode == 10 && s.d[1].sw == 0x27u && s.d[2].sw == 0x27u);
-    /* the units are the drive's: one motor revolution is 2 pi / gear at the joint */
+    /* the units are the drive's: one motor revolution is 2 pi / gear at the joint, and the motor's
+     * rated torque (0x6076, 175 mN m) is 160 times that at the joint */
     arm_co_units_t u;
     CHECK(arm_co_boot_units(&b, 1u, &u) == 0);
     CHECK(fabsf(arm_co_increments_to_rad(&u, 524288) - (float)(6.283185307179586 / 160.0)) < 1e-7f);
@@ -366,7 +371,7 @@ static void test_boot_sequence(void)
     /* the device type is checked on its profile word: a device's own high word passes */
     server_init(&s);
     s.device_type = 0xFFFF0192u;
-    s.d[2].rated = 28000u;
+    s.d[2].rated = 175u;
     s.d[2].gear_m = 160u;
     CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
     CHECK(run_boot(&b, &s, 1000u) == 0);
@@ -379,7 +384,7 @@ static void test_boot_sequence(void)
     /* CiA 301: 0x1018 sub 1 is mandatory, 2-4 are optional: a drive with sub 1 alone boots, its
      * others recorded as 0; unless the configuration checks the product code */
     server_init(&s);
-    s.d[2].rated = 28000u;
+    s.d[2].rated = 175u;
     s.d[2].gear_m = 160u;
     s.identity_subs = 1u;
     CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
@@ -407,10 +412,11 @@ static void test_optional_objects(void)
     static server_t s;
     arm_co_boot_default_config(&cfg);
     cfg.n_nodes = 1u;
-    /* an EPOS4 as its DCF says: no 0x1006, 0x608F, 0x6091; 0x6076 in µN m (maxon's unit) */
+    /* an EPOS4 as its DCF says: no 0x1006, 0x608F, 0x6091; 0x6076 in µN m (maxon's unit). Here
+     * without 0x1016 either, which the drive table accepts */
     cfg.node[0] = (arm_co_node_config_t){.node_id = 4u, .expect = ARM_CO_EXPECT_ENCODER | ARM_CO_EXPECT_GEAR,
                                          .encoder_increments = 3200u, .gear_motor_revs = 26u, .gear_shaft_revs = 1u,
-                                         .torque_units_per_nm = 1000000u};
+                                         .torque_units_per_nm = 1000000u, .accept_no_master_watchdog = 1u};
     server_init(&s);
     s.d[4].lacks = LACKS_1006 | LACKS_1016 | LACKS_608F | LACKS_6091 | LACKS_6072 | LACKS_6502;
     s.d[4].rated = 512871u;
@@ -427,7 +433,9 @@ static void test_optional_objects(void)
     arm_co_units_t u;
     CHECK(arm_co_boot_units(&b, 0u, &u) == 0);
     CHECK(fabsf(arm_co_increments_to_rad(&u, 3200) - (float)(6.283185307179586 / 26.0)) < 1e-6f);
-    CHECK(fabsf(arm_co_permille_to_torque(&u, 1000) - 0.512871f) < 1e-6f); /* 512871 µN m */
+    /* 512871 µN m is the motor's: 100 per-mille is 0.0513 N m at the motor, 1.33 N m behind 26:1 */
+    CHECK(fabsf(arm_co_permille_to_torque(&u, 100) - 1.3334646f) < 1e-5f);
+    CHECK(arm_co_torque_to_permille(&u, 1.3334646f) == 100);
 
     /* without the drive table's encoder, a drive that lacks 0x608F cannot be scaled: named */
     cfg.node[0].expect = ARM_CO_EXPECT_GEAR;
@@ -483,13 +491,98 @@ static void test_units_and_modes_refused(void)
           b.fault.abort_code == 0x06090030u);
 }
 
+/* The contract's defaults and one node. */
+static void one_node(arm_co_boot_config_t *cfg, arm_co_node_config_t node)
+{
+    arm_co_boot_default_config(cfg);
+    cfg->n_nodes = 1u;
+    cfg->node[0] = node;
+}
+
+/* The joint's torque limit must be within what the drive gives there (0x6072 x 0x6076 x gear x
+ * efficiency): refused before anything is written, with the numbers. */
+static void test_torque_limit_checked(void)
+{
+    static arm_co_boot_config_t cfg;
+    static arm_co_boot_t b;
+    static server_t s;
+    /* 1000 per-mille of 1486 mN m behind 101:1 is 150.086 N m: a 150 N m joint boots */
+    one_node(&cfg, (arm_co_node_config_t){.node_id = 2u, .joint_torque_limit_nm = 150.0f});
+    server_init(&s);
+    CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
+    CHECK(run_boot(&b, &s, 1000u) == 0);
+    /* a 151 N m joint does not */
+    cfg.node[0].joint_torque_limit_nm = 151.0f;
+    server_init(&s);
+    CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
+    CHECK(run_boot(&b, &s, 1000u) == -1);
+    CHECK(b.fault.code == ARM_CO_FAULT_TORQUE_LIMIT && b.fault.node == 2u && b.fault.limit_nm == 151.0f &&
+          b.fault.units.rated_torque == 1486u && b.fault.units.max_torque_permille == 1000u &&
+          b.fault.units.gear_motor_revs == 101u);
+    CHECK(s.d[2].writes == 0u);
+    /* nor a 150 N m one behind a gear 90 % efficient (135.08 N m) */
+    cfg.node[0].joint_torque_limit_nm = 150.0f;
+    cfg.node[0].gear_efficiency = 0.9f;
+    server_init(&s);
+    CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
+    CHECK(run_boot(&b, &s, 1000u) == -1 && b.fault.code == ARM_CO_FAULT_TORQUE_LIMIT);
+    /* a drive without 0x6072 is limited by the per-mille's own range, 32767 */
+    s.d[2].lacks = LACKS_6072;
+    CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
+    CHECK(run_boot(&b, &s, 1000u) == 0);
+    arm_co_units_t u;
+    CHECK(arm_co_boot_units(&b, 0u, &u) == 0);
+    CHECK(fabs(u.joint_rated_torque_nm - 1.486 * 101.0 * 0.9) < 1e-5);
+    /* an efficiency out of (0, 1] is a bad configuration */
+    cfg.node[0].gear_efficiency = 1.5f;
+    CHECK(arm_co_boot_init(&b, &cfg, 0u) == -1 && b.fault.code == ARM_CO_FAULT_BAD_CONFIG);
+}
+
+/* 0x1016.1 is the drive's watchdog on the master: a drive that has none, or refuses the master's
+ * value (a file's HighLimit of 65535 leaves no room for the node id), is refused unless the drive
+ * table accepts that; so is a consumer time of 0. */
+static void test_master_watchdog_required(void)
+{
+    static arm_co_boot_config_t cfg;
+    static arm_co_boot_t b;
+    static server_t s;
+    one_node(&cfg, (arm_co_node_config_t){.node_id = 5u});
+    server_init(&s);
+    s.d[5].lacks = LACKS_1016;
+    CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
+    CHECK(run_boot(&b, &s, 1000u) == -1);
+    CHECK(b.fault.code == ARM_CO_FAULT_NO_WATCHDOG && b.fault.node == 5u && b.fault.index == 0x1016u &&
+          b.fault.sub == 1u && b.fault.abort_code == 0x06020000u && s.d[5].sw == 0x40u); /* never enabled */
+    server_init(&s);
+    s.d[5].heartbeat_high = 65535u;
+    CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
+    CHECK(run_boot(&b, &s, 1000u) == -1);
+    CHECK(b.fault.code == ARM_CO_FAULT_NO_WATCHDOG && b.fault.abort_code == 0x06090030u);
+    /* accepted by the table: the drive boots, 0x1016 recorded as what it lacks */
+    cfg.node[0].accept_no_master_watchdog = 1u;
+    server_init(&s);
+    s.d[5].heartbeat_high = 65535u;
+    CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
+    CHECK(run_boot(&b, &s, 1000u) == 0);
+    CHECK((b.node[0].absent & ARM_CO_ABSENT_1016) != 0u && writes_of(&b, 5u, 0x1016u) == 0u);
+    /* a consumer time of 0 turns the watchdog off: refused at init, unless accepted */
+    cfg.consumer_ms = 0u;
+    CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
+    cfg.node[0].accept_no_master_watchdog = 0u;
+    CHECK(arm_co_boot_init(&b, &cfg, 0u) == -1 && b.fault.code == ARM_CO_FAULT_NO_WATCHDOG && b.fault.node == 5u &&
+          b.fault.abort_code == 0u);
+}
+
 static void test_units(void)
 {
     arm_co_units_t u;
-    CHECK(arm_co_units_init(&u, 150000u, 1000u, 1u << 19, 1u, 101u, 1u, 32767) == 0);
-    CHECK(arm_co_units_init(&u, 0u, 1000u, 1u << 19, 1u, 101u, 1u, 32767) == -1);
-    CHECK(arm_co_units_init(&u, 150000u, 1000u, 1u << 19, 1u, 101u, 1u, 32767) == 0);
-    const float quantum_nm = 0.15f;
+    /* a 1486 mN m motor behind 101:1: 0.150086 N m per per-mille at the joint */
+    CHECK(arm_co_units_init(&u, 1486u, 1000u, 1.0, 1u << 19, 1u, 101u, 1u, 32767) == 0);
+    CHECK(arm_co_units_init(&u, 0u, 1000u, 1.0, 1u << 19, 1u, 101u, 1u, 32767) == -1);
+    CHECK(arm_co_units_init(&u, 1486u, 1000u, 0.0, 1u << 19, 1u, 101u, 1u, 32767) == -1);
+    CHECK(arm_co_units_init(&u, 1486u, 1000u, 1.01, 1u << 19, 1u, 101u, 1u, 32767) == -1);
+    CHECK(arm_co_units_init(&u, 1486u, 1000u, 1.0, 1u << 19, 1u, 101u, 1u, 32767) == 0);
+    const float quantum_nm = 0.150086f;
     const double quantum_rad = 2.0 * 3.14159265358979323846 / (524288.0 * 101.0);
     double worst_tau = 0.0, worst_q = 0.0;
     for (int k = -2000; k <= 2000; ++k) {
@@ -503,12 +596,15 @@ static void test_units(void)
     CHECK_MSG(worst_tau <= 0.5 * quantum_nm + 1e-6, "torque round trip off by %g N m", worst_tau);
     /* float q itself carries 2^-24 relative: the round trip is within one increment plus that */
     CHECK_MSG(worst_q <= quantum_rad + 4e-7, "position round trip off by %g rad", worst_q);
-    CHECK(arm_co_torque_to_permille(&u, 150.0f) == 1000);
+    CHECK(arm_co_torque_to_permille(&u, 150.086f) == 1000 && arm_co_torque_to_permille(&u, 150.0f) == 999);
     CHECK(arm_co_torque_to_permille(&u, 0.15f) == 1);
+    CHECK(fabsf(arm_co_permille_to_torque(&u, 1000) - 150.086f) < 1e-4f);
     CHECK(arm_co_torque_to_permille(&u, 1e9f) == 32767 && arm_co_torque_to_permille(&u, -1e9f) == -32767);
     CHECK(arm_co_torque_to_permille(&u, NAN) == 0 && arm_co_torque_to_permille(&u, INFINITY) == 0);
     CHECK(arm_co_increments_to_rad(&u, 524288 * 101) > 6.2831f && arm_co_increments_to_rad(&u, 524288 * 101) < 6.2832f);
-    CHECK(arm_co_units_init(&u, 1000000u, 1000u, 1u << 19, 1u, 101u, 1u, 1000) == 0); /* 1000 N m: 1 N m per-mille */
+    /* 10 N m behind 125:1, 80 % efficient: 1000 N m at the joint, 1 N m per-mille */
+    CHECK(arm_co_units_init(&u, 10000u, 1000u, 0.8, 1u << 19, 1u, 125u, 1u, 1000) == 0);
+    CHECK(fabs(u.joint_rated_torque_nm - 1000.0) < 1e-9 && fabs(arm_co_units_max_joint_torque_nm(&u) - 1000.0) < 1e-9);
     CHECK(arm_co_torque_to_permille(&u, 2.5f) == 3 && arm_co_torque_to_permille(&u, -2.5f) == -3); /* halves away */
     CHECK(arm_co_torque_to_permille(&u, 5000.0f) == 1000); /* max_permille */
 }
@@ -530,10 +626,10 @@ static void test_pdo_codec(void)
     uint16_t sw = 0;
     CHECK(arm_co_unpack_tpdo2(3u, &t2, &tq, &sw) == 0 && tq == -1000 && sw == 0x0227u);
     arm_co_units_t u;
-    CHECK(arm_co_units_init(&u, 150000u, 1000u, 1u << 19, 1u, 101u, 1u, 32767) == 0);
+    CHECK(arm_co_units_init(&u, 1486u, 1000u, 1.0, 1u << 19, 1u, 101u, 1u, 32767) == 0);
     float q, qd, tau;
     arm_co_state_si(&u, pos, vel, tq, &q, &qd, &tau);
-    CHECK(fabsf(tau + 150.0f) < 1e-4f && q > 0.0f && qd < 0.0f);
+    CHECK(fabsf(tau + 150.086f) < 1e-4f && q > 0.0f && qd < 0.0f);
 }
 
 int main(void)
@@ -545,6 +641,8 @@ int main(void)
     test_boot_sequence();
     test_optional_objects();
     test_units_and_modes_refused();
+    test_torque_limit_checked();
+    test_master_watchdog_required();
     test_units();
     test_pdo_codec();
     TEST_MAIN_END();

@@ -17,7 +17,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     static arm_co_boot_t b;
     arm_co_boot_default_config(&cfg);
     cfg.n_nodes = 2u;
-    cfg.node[0] = (arm_co_node_config_t){.node_id = 1u};
+    cfg.node[0] = (arm_co_node_config_t){.node_id = 1u, .joint_torque_limit_nm = 150.0f, .gear_efficiency = 0.9f};
     cfg.node[1] = (arm_co_node_config_t){.node_id = 2u, .expect = ARM_CO_EXPECT_RATED, .rated_torque = 28000u,
                                          .vendor_id = 7u};
     cfg.fault_reset = 1u;

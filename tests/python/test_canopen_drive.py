@@ -194,12 +194,13 @@ def test_target_torque_moves_the_joint(rig: Rig, tmp_path: Path) -> None:
     _configure(rig)
     _run(rig)
     assert rig.node.statusword & 0x6F == 0x27
-    rated_nm = rig.node.sdo[0x6076].raw * 1e-3
-    inc_per_rad = rig.node.sdo[0x608F][1].raw * rig.node.sdo[0x6091][1].raw / rig.node.sdo[0x6091][2].raw / TWO_PI
+    rated_nm = rig.node.sdo[0x6076].raw * 1e-3  # the motor's (CiA 402)
+    gear = rig.node.sdo[0x6091][1].raw / rig.node.sdo[0x6091][2].raw
+    inc_per_rad = rig.node.sdo[0x608F][1].raw * gear / TWO_PI
     p0 = _tpdo_value(rig, 1, "Position actual value")
     assert _tpdo_value(rig, 2, "Torque actual value") == 0
-    permille = 200  # 30 N m on the base joint (rated 150 N m): the arm turns about it
-    assert abs(permille * 1e-3 * rated_nm - 30.0) < 1e-9
+    permille = 200  # 30 N m on the base joint (a 1486 mN m motor behind 101:1): the arm turns about it
+    assert abs(permille * 1e-3 * rated_nm * gear - 30.0172) < 1e-9
     rig.node.rpdo[1]["Target torque"].raw = permille
     _until("torque actual = target", lambda: _tpdo_value(rig, 2, "Torque actual value") == permille)
     # more than a milliradian, the commanded way
@@ -320,6 +321,7 @@ def test_nmt_resets_restore_defaults(rig: Rig) -> None:
     (["--node", "1,rated=5"], "only with --protocol canopen"),
     (["--protocol", "canopen", "--node", "17"], "--node '17': the node id must be a drive, 1..16"),
     (["--protocol", "canopen", "--node", "1,speed=3"], "--node '1,speed=3': expected ID[,rated=N]"),
+    (["--protocol", "canopen", "--node", "1,efficiency=1.5"], "--node '1,efficiency=1.5': expected ID[,rated=N]"),
     (["--od-gear-ratio", "50:1"], "only with --protocol canopen"),
     (["--protocol", "canopen", "--od-gear-ratio", "50:0"], "--od-gear-ratio: '50:0' is not MOTOR:SHAFT"),
     (["--protocol", "canopen", "--inject-overcurrent", "0:1"], "--inject-overcurrent: '0:1' is not NODE:TIME"),

@@ -46,8 +46,10 @@ def test_canopen_sil_run_is_ok_and_records_the_boot(tmp_path: Path, controller_b
         assert [w["value"] for w in ws if w["object"] == "0x6040:00"][-3:] == [0x06, 0x07, 0x0F]
         # the units are the drive's, read at boot and never written
         assert not {"0x6076:00", "0x608F:01", "0x6091:01"} & set(objs), (node, objs)
-    # the bundled table's rule, rated torque = the joint's torque limit, is what the drives report
-    assert [u["rated_torque"] for u in co["units"]] == [150000] * 3 + [28000] * 3  # mN m
+    # the bundled table's rule, the motor that gives the joint's torque limit through the 101:1 gear
+    # (rounded up to the mN m), is what the drives report; at the joint it is 101 times that
+    assert [u["rated_torque"] for u in co["units"]] == [1486] * 3 + [278] * 3  # mN m, the motor's
+    assert [u["joint_rated_torque_nm"] for u in co["units"]] == pytest.approx([150.086] * 3 + [28.078] * 3, rel=1e-9)
     assert all(u["encoder_increments"] == 524288 and u["gear"] == [101, 1] for u in co["units"])
 
 
@@ -65,33 +67,33 @@ def test_canopen_sil_equals_lockstep_udp(tmp_path: Path, controller_bin: Path) -
 
 
 def test_units_rated_150_nm_2_19_increments_gear_101_track_as_si(tmp_path: Path, controller_bin: Path) -> None:
-    """Every drive configured with 0x6076 = 150 N m, 0x608F.1 = 2^19 and 0x6091 = 101:1 (the wrists'
-    28 N m limit then has a 0.15 N m quantum, 5.4x the rule's) tracks as the arm protocol (SI
-    floats) within the quanta.
+    """Every drive configured with 0x6076 = 1486 mN m (the motor's: 150.086 N m at the joint through
+    0x6091 = 101:1) and 0x608F.1 = 2^19 (the wrists' 28 N m limit then has a 0.150086 N m quantum,
+    5.4x the rule's) tracks as the arm protocol (SI floats) within the quanta.
 
     The bound: a joint's position quantum is 2 pi / (2^19 * 101) = 1.19e-7 rad (6.8e-6 deg), the
-    velocity's 1.19e-7 rad/s; the torque's 0.15 N m, so a command is off by at most 0.075 N m. On a
-    joint whose mass-matrix diagonal is at least its rotor armature (0.1 kg m^2) that is at most
-    0.75 rad/s^2 of unmodelled acceleration; tde's estimator takes it as part of w and cancels it
-    one period later, so each period adds at most a T^2 / 2 = 0.75 * 1e-6 / 2 = 3.75e-7 rad before
+    velocity's 1.19e-7 rad/s; the torque's 0.150086 N m, so a command is off by at most 0.075043 N m.
+    On a joint whose mass-matrix diagonal is at least its rotor armature (0.1 kg m^2) that is at most
+    0.75043 rad/s^2 of unmodelled acceleration; tde's estimator takes it as part of w and cancels it
+    one period later, so each period adds at most a T^2 / 2 = 0.75043 * 1e-6 / 2 = 3.7522e-7 rad before
     it is cancelled, and the error it leaves does not accumulate past the estimator's lag (at most
     a few periods): 5 periods' worth, 1.9e-6 rad. The CiA 402 synchronous RPDO's extra period (a
     torque applied at the next SYNC) is common to both configurations of the canopen run and not
     a unit; against the arm protocol it is measured here as at most 0.01 deg on this method. The
     bound per joint is therefore 0.01 deg + 5 x 6.8e-6 deg + 1.1e-4 deg, well below a units error:
     a wrong gear or encoder scales the position by 101x or 2^k, a wrong rated torque the torque by
-    5.4x on the wrists, each a fault or degrees of error."""
+    5.4x on the wrists, and a gear left off the torque by 101x, each a fault or degrees of error."""
     preset = controller_bin.parent.parent.name
     drives = tmp_path / "drives150.toml"
     drives.write_text('eds = "%s"\nheartbeat_ms = 100\nconsumer_ms = 300\nmaster_id = 127\n\n[defaults]\n'
-                      'rated_torque_nm = 150\nencoder_increments = 524288\ngear = [101, 1]\n'
+                      'rated_torque_nm = 1.486\nencoder_increments = 524288\ngear = [101, 1]\n'
                       % (Path(__file__).resolve().parents[2] / "firmware" / "protocol" / "cia402_servo.eds"))
     si = _run(tmp_path, preset, "arm", "tde")
     co = _run(tmp_path, preset, "canopen", "tde", drive_config=drives)
     assert si["results"]["result"] == "ok" and co["results"]["result"] == "ok", co["results"]["verdict_reasons"]
     assert all("0x6076:00" not in [w["object"] for w in ws] for ws in co["environment"]["canopen"]["sdo_writes"].values())
     pos_q_deg = math.degrees(2 * math.pi / (2 ** 19 * 101))
-    bound = 0.01 + 5 * pos_q_deg + math.degrees(5 * 3.75e-7)
+    bound = 0.01 + 5 * pos_q_deg + math.degrees(5 * 3.7522e-7)
     for name, a, b in zip(si["results"]["joint_names"], si["results"]["tracking_max_abs_deg"],
                           co["results"]["tracking_max_abs_deg"]):
         assert abs(a - b) <= bound, f"{name}: arm {a:.5f} deg, canopen at 150 N m {b:.5f} deg (bound {bound:.5f})"
@@ -291,7 +293,7 @@ def test_readme_tracking_table_is_what_hil_gives(tmp_path: Path, controller_bin:
 
     preset = controller_bin.parent.parent.name
     page = (Path(__file__).resolve().parents[2] / "docs" / "drives.md").read_text()
-    section = page[page.index("## CiA 402 through armctl"):page.index("**Units.** Every drive")]
+    section = page[page.index("## CiA 402 through armctl"):page.index("**Units.** CiA 402")]
     rows = re.findall(r"^\| (\S+) \| (arm|canopen) \| ([^|]+?) \| ([\d. ]+) \|$", section, re.M)
     assert len(rows) == 12, rows
     for method, protocol, result, figures in rows:
@@ -336,12 +338,12 @@ def test_a_capture_decodes_in_si_units_with_the_runs_derived_dbc(tmp_path: Path,
     assert all(abs(first[n + 1] - home[n]) <= quantum for n in range(len(home))), (first, home)
     table = tmp_path / "drives.toml"
     table.write_text((Path(__file__).resolve().parents[2] / "firmware" / "protocol" / "drives.toml").read_text()
-                     .replace('rated_torque_nm = "joint_torque_limit"', "rated_torque_nm = 300")
+                     .replace('rated_torque_nm = "joint_torque_limit / gear"', "rated_torque_nm = 3")
                      .replace('eds = "cia402_servo.eds"', f'eds = "{Path(__file__).resolve().parents[2]}'
                                                           '/firmware/protocol/cia402_servo.eds"'))
     other = cantools.database.load_string(canopen_dbc.dbc_text(drives_mod.load(info, table)), database_format="dbc")
     sig = other.get_message_by_name("RPDO1_node1").get_signal_by_name("target_torque")
-    assert sig.scale == 0.3 and sig.unit == "N.m"
+    assert sig.scale == pytest.approx(3 * 101 / 1000) and sig.unit == "N.m"  # the motor's 3 N m, x 101 at the joint
 
 
 def test_canopen_dbc_command_writes_a_dbc_or_one_line(tmp_path: Path, controller_bin: Path,

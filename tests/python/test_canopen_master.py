@@ -78,9 +78,10 @@ def test_boot_brings_every_node_to_operation_enabled(boot_bin: Path, udp_port: i
                                                      monkeypatch: pytest.MonkeyPatch) -> None:
     cfg = gen_drives.load(_arm())
     args = cfg.boot_args("can0")
-    # the bundled table: rated torque = the joint's torque limit, checked against the drive's own
-    assert "3,rated=28000,encoder=524288,gear=101/1" in args
-    drives = [Cia402Drive(1), Cia402Drive(2), Cia402Drive(3, commissioned={(0x6076, 0): 28000})]
+    # the bundled table: the motor that gives the joint's torque limit through the 101:1 gear (28 N m:
+    # 278 mN m, rounded up), checked against the drive's own; the limit for the boot to check
+    assert "3,rated=278,encoder=524288,gear=101/1,limit=28" in args
+    drives = [Cia402Drive(1), Cia402Drive(2), Cia402Drive(3, commissioned={(0x6076, 0): 278})]
     out = tmp_path / "boot.json"
     p, _ = _run(boot_bin, udp_port, [*args, "--json", str(out)], drives, monkeypatch)
     assert p.returncode == 0, p.stderr
@@ -91,7 +92,9 @@ def test_boot_brings_every_node_to_operation_enabled(boot_bin: Path, udp_port: i
         [(i, "operation_enabled", 0x27) for i in (1, 2, 3)]
     assert result["nodes"][0]["identity"][1] == drives[0].stored(0x1018, 2)  # product code, from the EDS
     assert [(n["units"]["rated_torque"], n["units"]["torque_units_per_nm"]) for n in result["nodes"]] == \
-        [(150000, 1000), (150000, 1000), (28000, 1000)]  # read, not written
+        [(1486, 1000), (1486, 1000), (278, 1000)]  # read, not written
+    assert [n["units"]["joint_rated_torque_nm"] for n in result["nodes"]] == \
+        pytest.approx([150.086, 150.086, 28.078], rel=1e-9)  # at the joint: x 101
     assert all(n["units"]["gear"] == [101, 1] and n["absent"] == "" for n in result["nodes"])
     assert [(w["node"], w["index"], w["sub"], w["value"]) for w in result["sdo_writes"] if w["node"] == 1] == \
         [(1, i, s, v) for i, s, v in drives[0].writes]
@@ -221,13 +224,13 @@ def test_gen_drives_boot_args_on_the_command_line(tmp_path: Path) -> None:
     p = subprocess.run([*run, "--boot-args", "can0"], capture_output=True, text=True, cwd=REPO)
     assert p.returncode == 0, p.stderr
     assert p.stdout.split() == ["--cycle-us", "1000", "--heartbeat-ms", "100", "--consumer-ms", "300", "--master-id",
-                                "127", "--node", "1,rated=150000,encoder=524288,gear=101/1",
-                                "--node", "2,rated=150000,encoder=524288,gear=101/1",
-                                "--node", "3,rated=28000,encoder=524288,gear=101/1"]
+                                "127", "--node", "1,rated=1486,encoder=524288,gear=101/1,limit=150",
+                                "--node", "2,rated=1486,encoder=524288,gear=101/1,limit=150",
+                                "--node", "3,rated=278,encoder=524288,gear=101/1,limit=28"]
     p = subprocess.run([*run, "--boot-args", "can7"], capture_output=True, text=True, cwd=REPO)
     assert p.returncode == 2 and "no drive is on bus 'can7'" in p.stderr
     table = json.loads(subprocess.run(run, capture_output=True, text=True, cwd=REPO).stdout)
-    assert [d["rated_torque_mnm"] for d in table["drives"]] == [150000, 150000, 28000]
+    assert [d["rated_torque_mnm"] for d in table["drives"]] == [1486, 1486, 278]
 
 
 def test_unwritable_json_is_refused_before_the_bus(boot_bin: Path, tmp_path: Path) -> None:
@@ -267,7 +270,8 @@ def test_hold_packs_rpdo1_and_decodes_tpdos_in_si_units(boot_bin: Path, udp_port
     """After the boot: RPDO1 (enable operation, the torque in per-mille of the node's rated torque)
     then SYNC every period; the test drive answers each SYNC with TPDO1 and TPDO2 (LocalNode does not
     produce or consume PDOs by itself: its SYNC and RPDO1 subscriptions do it here)."""
-    drive = Cia402Drive(4, commissioned={(0x6076, 0): 28000, (0x608F, 1): 4096, (0x6091, 1): 160})
+    # a 175 mN m motor behind 160:1: 28 N m at the joint at 1000 per-mille
+    drive = Cia402Drive(4, commissioned={(0x6076, 0): 175, (0x608F, 1): 4096, (0x6091, 1): 160})
     pos, vel, tq = -12_345_678, 52_953_088, -250  # increments, increments/s (one joint rev/s), per-mille
     rpdo1: list[bytes] = []
     net = loopback_network(monkeypatch, GROUP, udp_port)
@@ -283,7 +287,7 @@ def test_hold_packs_rpdo1_and_decodes_tpdos_in_si_units(boot_bin: Path, udp_port
 
         net.subscribe(0x080, on_sync)
         p = subprocess.run([str(boot_bin), "--bus", f"udp:{GROUP}:{udp_port}", "--sdo-timeout-ms", "300",
-                            "--node", "4,rated=28000,encoder=4096,gear=160/1", "--hold-periods", "50",
+                            "--node", "4,rated=175,encoder=4096,gear=160/1", "--hold-periods", "50",
                             "--hold-torque", "-3.5", "--json", str(out)], capture_output=True, text=True, timeout=120)
     finally:
         drive.node.nmt.stop_heartbeat()
@@ -291,7 +295,7 @@ def test_hold_packs_rpdo1_and_decodes_tpdos_in_si_units(boot_bin: Path, udp_port
     assert p.returncode == 0, p.stderr
     assert not {i for i, _, _ in drive.writes} & {0x6076, 0x608F, 0x6091}  # the drive's units, read
     assert len(rpdo1) == 50
-    assert all(struct.unpack("<Hh", r) == (0x000F, -125) for r in rpdo1)  # -3.5 N m / 28 N m = -125 per-mille
+    assert all(struct.unpack("<Hh", r) == (0x000F, -125) for r in rpdo1)  # -3.5 N m / (0.175 x 160) = -125 per-mille
     hold = json.loads(out.read_text())["nodes"][0]["hold"]
     assert hold["target_permille"] == -125 and hold["tpdo1"] >= 45 and hold["tpdo2"] >= 45
     inc_per_rad = 4096 * 160 / (2 * math.pi)
@@ -361,8 +365,8 @@ def test_controller_runs_on_the_simulators_cia402_drives(build_dir: Path, udp_po
 
 def test_controller_runs_on_localnode_drives(build_dir: Path, udp_port: int, tmp_path: Path,
                                             monkeypatch: pytest.MonkeyPatch) -> None:
-    """arm_controller --protocol canopen, lockstep, on six LocalNodes: the CANopen boot (the wrists'
-    rated torque, their 28 N m limit, written), then each SYNC answered with TPDO1 (a fixed pose) and
+    """arm_controller --protocol canopen, lockstep, on six LocalNodes: the CANopen boot (each drive's
+    own units, read: the EDS's 1486 mN m motor behind 101:1), then each SYNC answered with TPDO1 (a fixed pose) and
     TPDO2 (the torque of the RPDO1 the drive applied at that SYNC, CiA 301's synchronous RPDO)."""
     ctl = build_dir / "firmware" / "arm_controller"
     if not ctl.exists():
@@ -405,8 +409,8 @@ def test_controller_runs_on_localnode_drives(build_dir: Path, udp_port: int, tmp
     assert p.returncode == 0, p.stderr
     s = json.loads(summary.read_text())
     assert s["final_state"] == "running" and s["frames"]["rx_state"] == 6 * s["bus_periods"], s["reason"]
-    # no drive table: each drive's own units, read (the EDS's 150 N m), never written
-    assert all(drives[i].stored(0x6076) == 150000 and (0x6076, 0) not in {(x, s) for x, s, _ in drives[i].writes}
+    # no drive table: each drive's own units, read (the EDS's 1486 mN m motor), never written
+    assert all(drives[i].stored(0x6076) == 1486 and (0x6076, 0) not in {(x, s) for x, s, _ in drives[i].writes}
                for i in drives)
     assert all(drives[i].sw & 0x6F == 0x27 and drives[i].stored(0x6060) == 10 for i in drives)
     assert rpdo_cw == {0x000F}  # enable operation all along (the NMT stop ends the run)
@@ -478,16 +482,21 @@ def test_drive_config_rule_and_what_the_table_gives(tmp_path: Path) -> None:
     """A field is the joint's, else [defaults]; units the table leaves out are the drive's (the
     file's, here), and only what it gives goes to the boot, to be compared with the drive's."""
     f = tmp_path / "drives.toml"
-    f.write_text(f'eds = "{EDS}"\n[defaults]\ngear = [160, 1]\n[joint.j2]\nnode = 7\nrated_torque_nm = 150\n'
-                 'encoder_increments = 4096\n[joint.j3]\nrated_torque_nm = "joint_torque_limit"\n')
+    f.write_text(f'eds = "{EDS}"\n[defaults]\ngear = [160, 1]\n[joint.j2]\nnode = 7\nrated_torque_nm = 1.5\n'
+                 'encoder_increments = 4096\n[joint.j3]\nrated_torque_nm = "joint_torque_limit / gear"\n'
+                 'gear_efficiency = 0.8\n')
     cfg = gen_drives.load(_arm(), f)
     d1, d2, d3 = cfg.drives
-    assert (d1.node, d1.rated_torque_mnm, d1.encoder_increments, d1.gear, d1.given) == (1, 150000, 524288, (160, 1),
+    assert (d1.node, d1.rated_torque_mnm, d1.encoder_increments, d1.gear, d1.given) == (1, 1486, 524288, (160, 1),
                                                                                         ["0x6091"])
+    assert d1.joint_rated_torque_nm == pytest.approx(1.486 * 160)  # the file's motor, through the table's gear
     assert (d2.node, d2.encoder_increments, d2.given) == (7, 4096, ["0x6076", "0x608F", "0x6091"])
-    assert (d3.rated_torque_mnm, d3.given) == (28000, ["0x6076", "0x6091"])
-    assert cfg.boot_args("can0")[-4:] == ["--node", "7,rated=150000,encoder=4096,gear=160/1",
-                                          "--node", "3,rated=28000,gear=160/1"]
+    # 28 N m at the joint through 160:1 at 80 %: a 218.75 mN m motor, rounded up to the drive's unit
+    assert (d3.rated_torque_mnm, d3.gear_efficiency, d3.given) == (219, 0.8, ["0x6076", "0x6091"])
+    assert d3.joint_rated_torque_nm == pytest.approx(0.219 * 160 * 0.8)
+    assert cfg.boot_args("can0")[-4:] == ["--node", "7,rated=1500,encoder=4096,gear=160/1,limit=150",
+                                          "--node", "3,rated=219,gear=160/1,efficiency=0.8,limit=28"]
+    assert d3.node_spec() == "3,rated=219,gear=160/1,efficiency=0.8"  # arm_controller's: its limit is the arm's
 
 
 @pytest.mark.parametrize("body, message", [
@@ -497,7 +506,18 @@ def test_drive_config_rule_and_what_the_table_gives(tmp_path: Path) -> None:
     ('[defaults]\nspeed = 1\n', "defaults: unknown field(s) speed"),
     ('[joint.j2]\nnode = 1\n', "node: node id 1 is used twice on bus can0"),
     ('[pdo]\nrpdo1 = ["0x6040:0:16"]\n', "pdo.rpdo1: the codec (firmware/canopen co_pdo.c) packs"),
-    ('[joint.j3]\nrated_torque_nm = -1\n', "joint.j3.rated_torque_nm: expected a torque in N m"),
+    ('[joint.j3]\nrated_torque_nm = -1\n', "joint.j3.rated_torque_nm: expected the motor's rated torque in N m"),
+    ('[defaults]\nrated_torque_nm = "joint_torque_limit"\n', "defaults.rated_torque_nm: \"joint_torque_limit\": 0x6076 "
+     "is the motor's rated torque (CiA 402), the joint gets it times the gear"),
+    ('[defaults]\ngear_efficiency = 1.2\n', "defaults.gear_efficiency: expected the gear's efficiency, above 0 and at "
+     "most 1"),
+    ('accept_no_master_watchdog = "yes"\n', "accept_no_master_watchdog: expected true or false"),
+    # 0x6072 1000 per-mille x 1486 mN m x 101 is 150.086 N m: a 150 N m joint behind a 90 % gear is not given
+    ('[defaults]\ngear_efficiency = 0.9\n', "joint j1 (node 1): its torque limit 150 N m is more than its drive gives "
+     "at the joint, 135.077 N m = 0x6072 1000 per-mille x 0x6076 1486 mN m (the motor's) x gear 101/1 x "
+     "efficiency 0.9"),
+    ('consumer_ms = 0\n', "0x1016:01 (consumer heartbeat, the drive's watchdog on the master): a consumer time of 0 "
+     "ms turns it off"),
     ('[pdo]\ntransmission = { tpdo1 = 2 }\n', "pdo.transmission.tpdo1: expected 1 (the joint state, every SYNC)"),
     ('[pdo]\ntransmission = { tpdo2 = 254 }\n', "pdo.transmission.tpdo2: expected 1..240 (every n-th SYNC)"),
     ('[pdo]\ntransmission = { rpdo1 = 250 }\n', "pdo.transmission.rpdo1: expected 1..240, 254 or 255"),
@@ -519,11 +539,11 @@ def test_arm_file_names_its_drive_config(tmp_path: Path) -> None:
     from gen.arm import ArmError, load_arm_file
 
     own = tmp_path / "my_drives.toml"
-    own.write_text(f'eds = "{EDS}"\n[defaults]\nrated_torque_nm = 150\n')
+    own.write_text(f'eds = "{EDS}"\n[defaults]\nrated_torque_nm = 1.5\n')
     arm_file = tmp_path / "arm.toml"
     arm_file.write_text('model = "m.xml"\ndrives = "my_drives.toml"\n')
     assert gen_drives.drives_file_of({"arm_file": str(arm_file)}) == own.resolve()
-    assert gen_drives.load({**_arm(), "arm_file": str(arm_file)}).drives[2].rated_torque_mnm == 150000
+    assert gen_drives.load({**_arm(), "arm_file": str(arm_file)}).drives[2].rated_torque_mnm == 1500
     assert gen_drives.drives_file_of({"arm_file": None}) == gen_drives.DEFAULT_DRIVES
     arm_file.write_text('model = "m.xml"\ndrives = "missing.toml"\n')
     with pytest.raises(ArmError, match="drives: .*missing.toml is not a file"):

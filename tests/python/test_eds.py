@@ -62,7 +62,7 @@ def test_every_entry_as_python_canopen_reads_it(path: Path) -> None:
 
 
 def test_the_projects_own_drive() -> None:
-    contract = {(0x1000, 0): (0x0007, "CONST", 0x00020192), (0x6076, 0): (0x0007, "RW", 150000),
+    contract = {(0x1000, 0): (0x0007, "CONST", 0x00020192), (0x6076, 0): (0x0007, "RW", 1486),
                 (0x608F, 1): (0x0007, "RW", 524288), (0x6091, 1): (0x0007, "RW", 101), (0x6060, 0): (0x0002, "RW", 0),
                 (0x6071, 0): (0x0003, "RW", 0), (0x6041, 0): (0x0006, "RO", 0), (0x1A01, 1): (0x0007, "RW", 0x60770010)}
     d = eds.load(EDS)

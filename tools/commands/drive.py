@@ -2,9 +2,12 @@
 
 Every object the CANopen master's boot reads or writes is checked against the file (present,
 access, data type, limits, PDO mapping rules), its modes (cyclic synchronous torque, 0x6502 bit 9)
-and its units (0x6076, 0x608F, 0x6091, or the drive table's values where it lacks them): one line
-per problem, exit 2 if there is one, else 0; then what the boot will skip or take from the drive
-table (notes). docs/drives-bring-up.md: what the master needs from a drive."""
+and its units (0x6076, the motor's rated torque, 0x608F, 0x6091, or the drive table's values where
+it lacks them): one line per problem, exit 2 if there is one, else 0; then the file's harmless
+mistakes, each naming its line (warnings: an object the master never uses left out, a limit that
+limits nothing or contradicts CiA 301's definition of the object ignored), and what the boot will
+skip or take from the drive table and the torque at the joint (notes). docs/drives-bring-up.md:
+what the master needs from a drive."""
 
 from __future__ import annotations
 
@@ -49,6 +52,8 @@ def run(ns: argparse.Namespace) -> int:
     print(f"{ns.file.name} ({who}): {verdict}")
     for line in report.problems:
         print(f"  problem: {line}")
+    for line in report.warnings:  # the file's own harmless mistakes, by line: not a refusal
+        print(f"  warning: {line}")
     for line in report.notes:
         print(f"  note: {line}")
     return 0 if report.ok else 2

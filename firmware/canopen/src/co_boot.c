@@ -41,6 +41,8 @@ const char *arm_co_fault_name(arm_co_fault_code_t code)
     case ARM_CO_FAULT_UNITS_MISMATCH: return "units_mismatch";
     case ARM_CO_FAULT_UNITS_MISSING: return "units_missing";
     case ARM_CO_FAULT_BAD_UNITS: return "bad_units";
+    case ARM_CO_FAULT_TORQUE_LIMIT: return "torque_limit";
+    case ARM_CO_FAULT_NO_WATCHDOG: return "no_master_watchdog";
     }
     return "unknown";
 }
@@ -103,7 +105,8 @@ static void build(arm_co_node_t *n, const arm_co_boot_config_t *cfg, const arm_c
     add_pdo(n, 0x1400u, 0x1600u, ARM_CO_COB_RPDO1 + id, &cfg->rpdo1);
     add_pdo(n, 0x1800u, 0x1A00u, ARM_CO_COB_TPDO1 + id, &cfg->tpdo1);
     add_pdo(n, 0x1801u, 0x1A01u, ARM_CO_COB_TPDO2 + id, &cfg->tpdo2);
-    /* CiA 301 makes these optional: written where the drive has them */
+    /* CiA 301 makes these optional: written where the drive has them. 0x1016 too, but a drive
+     * without it is refused unless the configuration accepts that (step_node) */
     add_full(n, ARM_CO_ACT_WRITE, 0x1006u, 0u, 4u, cfg->cycle_us, 0u, ARM_CO_ACT_OPTIONAL, ARM_CO_SLOT_NONE);
     add_full(n, ARM_CO_ACT_WRITE, 0x1017u, 0u, 2u, cfg->heartbeat_ms, 0u, ARM_CO_ACT_OPTIONAL, ARM_CO_SLOT_NONE);
     add_full(n, ARM_CO_ACT_WRITE, 0x1016u, 1u, 4u, ((uint32_t)cfg->master_id << 16) | cfg->consumer_ms, 0u,
@@ -157,6 +160,18 @@ int arm_co_boot_init(arm_co_boot_t *b, const arm_co_boot_config_t *cfg, uint64_t
             if (cfg->node[j].node_id == nc->node_id) {
                 return bad_config(b, nc->node_id, nc->node_id);
             }
+        }
+        if (cfg->consumer_ms == 0u && !nc->accept_no_master_watchdog) {
+            /* a consumer time of 0 turns the drive's watchdog on the master off */
+            b->fault = (arm_co_fault_t){0};
+            b->fault.code = ARM_CO_FAULT_NO_WATCHDOG;
+            b->fault.node = nc->node_id;
+            b->fault.index = 0x1016u;
+            b->fault.sub = 1u;
+            return -1;
+        }
+        if (!(nc->gear_efficiency >= 0.0f && nc->gear_efficiency <= 1.0f) || !(nc->joint_torque_limit_nm >= 0.0f)) {
+            return bad_config(b, nc->node_id, nc->node_id);
         }
         arm_co_node_t *n = &b->node[i];
         *n = (arm_co_node_t){0};
@@ -321,8 +336,23 @@ static int settle_units(arm_co_boot_t *b, arm_co_node_t *n, const arm_co_action_
     }
     const uint32_t max = n->read[ARM_CO_SLOT_MAX_TORQUE];
     u->max_torque_permille = !has(n, ARM_CO_SLOT_MAX_TORQUE) ? 32767u : max > 32767u ? 32767u : (uint16_t)max;
+    u->gear_efficiency = nc->gear_efficiency > 0.0f ? nc->gear_efficiency : 1.0f;
     if (u->max_torque_permille == 0u) {
         fail(b, n, ARM_CO_FAULT_BAD_UNITS, a, 0x6072u, 0u, 0u); /* a drive that may give no torque */
+        return -1;
+    }
+    arm_co_units_t si;
+    if (nc->joint_torque_limit_nm > 0.0f &&
+        arm_co_units_init(&si, u->rated_torque, u->torque_units_per_nm, (double)u->gear_efficiency,
+                          u->encoder_increments, u->encoder_revs, u->gear_motor_revs, u->gear_shaft_revs,
+                          (int16_t)u->max_torque_permille) == 0 &&
+        arm_co_units_max_joint_torque_nm(&si) < (double)nc->joint_torque_limit_nm * (1.0 - 1e-6)) {
+        /* the controller would ask for torques the drive cannot give: refused before anything is written */
+        fail(b, n, ARM_CO_FAULT_TORQUE_LIMIT, a, 0x6072u, u->max_torque_permille, 0u);
+        if (b->fault.node == n->sdo.node) {
+            b->fault.limit_nm = nc->joint_torque_limit_nm;
+            b->fault.units = *u;
+        }
         return -1;
     }
     return 0;
@@ -334,8 +364,9 @@ int arm_co_boot_units(const arm_co_boot_t *b, unsigned i, arm_co_units_t *u)
         return -1;
     }
     const arm_co_drive_units_t *d = &b->node[i].units;
-    return arm_co_units_init(u, d->rated_torque, d->torque_units_per_nm, d->encoder_increments, d->encoder_revs,
-                             d->gear_motor_revs, d->gear_shaft_revs, (int16_t)d->max_torque_permille);
+    return arm_co_units_init(u, d->rated_torque, d->torque_units_per_nm, (double)d->gear_efficiency,
+                             d->encoder_increments, d->encoder_revs, d->gear_motor_revs, d->gear_shaft_revs,
+                             (int16_t)d->max_torque_permille);
 }
 
 static void log_value(arm_co_boot_t *b, const arm_co_node_t *n, uint16_t index, uint8_t sub, uint8_t len,
@@ -419,6 +450,19 @@ static void step_node(arm_co_boot_t *b, uint8_t i, uint64_t now)
         /* CiA 301 makes 0x1018.1 mandatory and 2-4 optional (recorded as 0 where the drive lacks
          * them), and 0x1006, 0x1016, 0x1017 too; CiA 402 the unit objects: skipped where absent */
         const int absent = optional_absent(n, a);
+        if (a->kind == ARM_CO_ACT_WRITE && a->index == 0x1016u && n->sdo.status == ARM_CO_SDO_ABORTED) {
+            /* the drive's watchdog on the master cannot be set: without it a dead master leaves the
+             * drive applying its last torque. Refused, unless the drive table accepts that. */
+            if (!b->cfg.node[i].accept_no_master_watchdog) {
+                fail(b, n, ARM_CO_FAULT_NO_WATCHDOG, a, 0x1016u, a->value, 0u);
+                return;
+            }
+            n->answered = 1u;
+            n->absent |= ARM_CO_ABSENT_1016;
+            n->started = 0u;
+            n->next++;
+            continue;
+        }
         if (!absent && !transfer_ok(b, n, a)) {
             return;
         }

@@ -28,29 +28,37 @@ static int64_t round_clamp(double x, int64_t lo, int64_t hi)
 }
 
 int arm_co_units_init(arm_co_units_t *u, uint32_t rated_torque, uint32_t torque_units_per_nm,
-                      uint32_t encoder_increments, uint32_t encoder_revs, uint32_t gear_motor_revs,
-                      uint32_t gear_shaft_revs, int16_t max_permille)
+                      double gear_efficiency, uint32_t encoder_increments, uint32_t encoder_revs,
+                      uint32_t gear_motor_revs, uint32_t gear_shaft_revs, int16_t max_permille)
 {
     if (rated_torque == 0u || torque_units_per_nm == 0u || encoder_increments == 0u || encoder_revs == 0u ||
-        gear_motor_revs == 0u || gear_shaft_revs == 0u || max_permille <= 0) {
+        gear_motor_revs == 0u || gear_shaft_revs == 0u || max_permille <= 0 ||
+        !(gear_efficiency > 0.0 && gear_efficiency <= 1.0)) {
         return -1;
     }
-    u->rated_torque_nm = (double)rated_torque / (double)torque_units_per_nm;
+    const double gear = (double)gear_motor_revs / (double)gear_shaft_revs;
+    /* CiA 402: 0x6076 is the motor's; the driving shaft gets it times the gear, less the gear's losses */
+    u->joint_rated_torque_nm = (double)rated_torque / (double)torque_units_per_nm * gear * gear_efficiency;
     u->increments_per_rad = (double)encoder_increments / (double)encoder_revs * (double)gear_motor_revs /
                             (double)gear_shaft_revs / TWO_PI;
     u->max_permille = max_permille;
     return 0;
 }
 
+double arm_co_units_max_joint_torque_nm(const arm_co_units_t *u)
+{
+    return (double)u->max_permille * u->joint_rated_torque_nm / 1000.0;
+}
+
 int16_t arm_co_torque_to_permille(const arm_co_units_t *u, float torque_nm)
 {
-    return (int16_t)round_clamp((double)torque_nm * 1000.0 / u->rated_torque_nm, -(int64_t)u->max_permille,
+    return (int16_t)round_clamp((double)torque_nm * 1000.0 / u->joint_rated_torque_nm, -(int64_t)u->max_permille,
                                 (int64_t)u->max_permille);
 }
 
 float arm_co_permille_to_torque(const arm_co_units_t *u, int16_t permille)
 {
-    return (float)((double)permille * u->rated_torque_nm / 1000.0);
+    return (float)((double)permille * u->joint_rated_torque_nm / 1000.0);
 }
 
 float arm_co_increments_to_rad(const arm_co_units_t *u, int32_t increments)

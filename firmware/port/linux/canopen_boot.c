@@ -20,15 +20,17 @@
 
 static const char k_usage[] =
     "usage: arm_canopen_boot --bus SPEC --node ID[,rated=N][,encoder=INC][,gear=M/S][,torque_unit=mNm|uNm]\n"
-    "         [,vendor=X][,product=X]...\n"
+    "         [,efficiency=E][,limit=NM][,accept_no_master_watchdog=true][,vendor=X][,product=X]...\n"
     "         [--cycle-us N] [--heartbeat-ms N] [--master-id N] [--consumer-ms N] [--sdo-timeout-ms N]\n"
     "         [--sdo-tries N] [--state-timeout-ms N] [--period-us N] [--timeout-ms N] [--json FILE]\n"
     "         [--hold-periods N] [--hold-torque NM] [--fault-reset]\n"
     "  --bus SPEC         udp | udp:GROUP:PORT | socketcan:IFACE (the drives' bus)\n"
     "  --node ...         a node to configure (repeatable): its id and the units the drive table gives, which\n"
-    "                     the drive's must equal (0x6076 rated torque, in mN m or the torque_unit's, 0x608F.1\n"
-    "                     increments per motor rev, 0x6091 gear; read, never written; they stand in where the\n"
-    "                     drive lacks one)\n"
+    "                     the drive's must equal (0x6076 the motor's rated torque, in mN m or the torque_unit's,\n"
+    "                     0x608F.1 increments per motor rev, 0x6091 gear; read, never written; they stand in\n"
+    "                     where the drive lacks one); the gear's efficiency [1]; the joint's torque limit in N m,\n"
+    "                     which the drive must give (0x6072 x 0x6076 x gear x efficiency) [not checked]; and\n"
+    "                     whether a drive without a settable 0x1016.1 (master watchdog) is accepted [refused]\n"
     "  --cycle-us         0x1006 communication cycle period [1000]\n"
     "  --heartbeat-ms     0x1017 producer heartbeat of the drives [100]\n"
     "  --master-id        the master's node id (its heartbeat, 0x1016.1) [127]\n"
@@ -38,7 +40,7 @@ static const char k_usage[] =
     "  --period-us        the configurator's step period [1000]; --timeout-ms: give up after [10000]\n"
     "  --json FILE        the result as JSON: every SDO write, each node's state and identity, the fault\n"
     "  --hold-periods N   once enabled, N periods of RPDO1 (0x0F, --hold-torque) + SYNC, TPDOs decoded [0]\n"
-    "  --hold-torque NM   the target torque of every node while holding, N m [0]\n"
+    "  --hold-torque NM   the target torque of every node while holding, N m at the joint [0]\n"
     "  --fault-reset      a drive in fault gets one fault reset (0x6040 = 0x00, 0x80) [report the fault]\n";
 
 static uint64_t mono_us(void)
@@ -293,11 +295,14 @@ static int write_json(const char *path, const arm_co_boot_t *b, const hold_state
         fprintf(f, ", \"absent\": \"%s\"", absent);
         if (n->state == ARM_CO_NODE_ENABLED) {
             const arm_co_drive_units_t *u = &n->units;
+            arm_co_units_t si;
+            const double joint_rated = arm_co_boot_units(b, i, &si) == 0 ? si.joint_rated_torque_nm : 0.0;
             fprintf(f, ", \"units\": {\"rated_torque\": %u, \"torque_units_per_nm\": %u, \"encoder_increments\": %u, "
                        "\"encoder_revs\": %u, "
-                       "\"gear\": [%u, %u], \"max_torque_permille\": %u, \"modes\": %u, \"from_table\": %u}",
+                       "\"gear\": [%u, %u], \"gear_efficiency\": %.9g, \"joint_rated_torque_nm\": %.9g, "
+                       "\"max_torque_permille\": %u, \"modes\": %u, \"from_table\": %u}",
                     u->rated_torque, u->torque_units_per_nm, u->encoder_increments, u->encoder_revs, u->gear_motor_revs,
-                    u->gear_shaft_revs,
+                    u->gear_shaft_revs, (double)u->gear_efficiency, joint_rated,
                     u->max_torque_permille, u->modes, u->from_table);
         }
         if (hold_periods > 0u) {
@@ -425,12 +430,16 @@ int main(int argc, char **argv)
                "serial 0x%08X)\n", boot.cfg.node[i].node_id, n->statusword, n->identity[0], n->identity[1],
                n->identity[2], n->identity[3]);
         const arm_co_drive_units_t *u = &n->units;
-        printf("node %u: units: rated torque %u %s%s, encoder %u/%u increments per motor revolution%s, gear %u/%u%s, "
-               "max torque %u per-mille\n", boot.cfg.node[i].node_id, u->rated_torque,
+        arm_co_units_t si;
+        const double joint_rated = arm_co_boot_units(&boot, i, &si) == 0 ? si.joint_rated_torque_nm : 0.0;
+        printf("node %u: units: motor rated torque %u %s%s, encoder %u/%u increments per motor revolution%s, gear "
+               "%u/%u%s, efficiency %.6g, max torque %u per-mille; 1000 per-mille is %.6g N m at the joint\n",
+               boot.cfg.node[i].node_id, u->rated_torque,
                u->torque_units_per_nm == 1000u ? "mN m" : u->torque_units_per_nm == 1000000u ? "uN m" : "units",
                (u->from_table & ARM_CO_EXPECT_RATED) ? " (drive table)" : "", u->encoder_increments, u->encoder_revs,
                (u->from_table & ARM_CO_EXPECT_ENCODER) ? " (drive table)" : "", u->gear_motor_revs, u->gear_shaft_revs,
-               (u->from_table & ARM_CO_EXPECT_GEAR) ? " (drive table)" : "", u->max_torque_permille);
+               (u->from_table & ARM_CO_EXPECT_GEAR) ? " (drive table)" : "", (double)u->gear_efficiency,
+               u->max_torque_permille, joint_rated);
         char absent[80];
         absent_text(n->absent, absent, sizeof(absent));
         if (absent[0] != '\0') {

@@ -30,7 +30,7 @@ void canopen_modes_text(uint32_t modes, char *out, size_t cap)
 /* The unit object's name, and the drive table field that gives it. */
 static void unit_names(uint16_t index, const char **what, const char **field)
 {
-    *what = index == 0x6076u ? "rated torque" : index == 0x608Fu ? "encoder increments per motor revolutions"
+    *what = index == 0x6076u ? "motor rated torque" : index == 0x608Fu ? "encoder increments per motor revolutions"
           : index == 0x6091u ? "gear ratio (motor per shaft revolutions)" : "max torque (per-mille)";
     *field = index == 0x6076u ? "rated_torque_nm" : index == 0x608Fu ? "encoder_increments" : "gear";
 }
@@ -48,7 +48,7 @@ static void ratio_text(uint16_t index, uint32_t num, uint32_t den, char *out, si
 void canopen_fault_text(const arm_co_fault_t *f, char *out, size_t cap)
 {
     const char *what = NULL, *field = NULL;
-    char a[32], b[32], modes[160];
+    char a[96], b[32], modes[160];
     switch (f->code) {
     case ARM_CO_FAULT_SDO_ABORT:
     case ARM_CO_FAULT_CLIENT_ABORT:
@@ -102,6 +102,32 @@ void canopen_fault_text(const arm_co_fault_t *f, char *out, size_t cap)
         snprintf(out, cap, "node %u: 0x%04X %s: the drive has %s, from which no unit can be made", f->node, f->index,
                  what, a);
         break;
+    case ARM_CO_FAULT_TORQUE_LIMIT: {
+        const arm_co_drive_units_t *u = &f->units;
+        arm_co_units_t si;
+        const double max_nm = arm_co_units_init(&si, u->rated_torque, u->torque_units_per_nm, (double)u->gear_efficiency,
+                                                u->encoder_increments, u->encoder_revs, u->gear_motor_revs,
+                                                u->gear_shaft_revs, (int16_t)u->max_torque_permille) == 0
+                                  ? arm_co_units_max_joint_torque_nm(&si) : 0.0;
+        snprintf(out, cap, "node %u: the joint's torque limit %.6g N m is more than the drive gives at the joint, "
+                 "%.6g N m = 0x6072 %u per-mille x 0x6076 %u %s x gear %u/%u x efficiency %.6g", f->node,
+                 (double)f->limit_nm, max_nm, u->max_torque_permille, u->rated_torque,
+                 u->torque_units_per_nm == 1000000u ? "uN m" : "mN m", u->gear_motor_revs, u->gear_shaft_revs,
+                 (double)u->gear_efficiency);
+        break;
+    }
+    case ARM_CO_FAULT_NO_WATCHDOG:
+        if (f->abort_code == ARM_CO_ABORT_NO_OBJECT || f->abort_code == ARM_CO_ABORT_NO_SUB) {
+            snprintf(a, sizeof(a), "the drive has no such object (SDO abort 0x%08X)", f->abort_code);
+        } else if (f->abort_code != 0u) {
+            snprintf(a, sizeof(a), "the drive refused the master's 0x%08X (SDO abort 0x%08X)", f->value, f->abort_code);
+        } else {
+            snprintf(a, sizeof(a), "a consumer time of 0 ms turns it off");
+        }
+        snprintf(out, cap, "node %u: 0x1016:01 (consumer heartbeat, the drive's watchdog on the master): %s; a dead "
+                 "master would leave this drive applying its last torque; refused (a drive table that accepts this "
+                 "says accept_no_master_watchdog = true)", f->node, a);
+        break;
     case ARM_CO_FAULT_STATE_TIMEOUT:
         snprintf(out, cap, "node %u: 0x6041:00: statusword 0x%04X did not reach 0x%02X (under mask 0x%02X)", f->node,
                  f->value, f->expected & 0xFFu, f->expected >> 8);
@@ -129,6 +155,19 @@ int canopen_parse_u32(const char *s, uint32_t lo, uint32_t hi, uint32_t *out)
         return -1;
     }
     *out = (uint32_t)v;
+    return 0;
+}
+
+/* A finite number, as a whole string; -1 otherwise. */
+static int canopen_parse_double(const char *s, double *out)
+{
+    char *end = NULL;
+    errno = 0;
+    const double v = strtod(s, &end);
+    if (errno != 0 || end == s || *end != '\0' || !(v == v) || v - v != 0.0) {
+        return -1;
+    }
+    *out = v;
     return 0;
 }
 
@@ -178,19 +217,33 @@ int canopen_parse_node(const char *arg, arm_co_node_config_t *nc, char *err, siz
         } else if (strcmp(tok, "torque_unit") == 0) {
             bad = strcmp(val, "mNm") != 0 && strcmp(val, "uNm") != 0;
             nc->torque_units_per_nm = strcmp(val, "uNm") == 0 ? 1000000u : 1000u;
+        } else if (strcmp(tok, "efficiency") == 0) {
+            double e = 0.0;
+            bad = canopen_parse_double(val, &e) != 0 || !(e > 0.0 && e <= 1.0);
+            nc->gear_efficiency = (float)e;
+        } else if (strcmp(tok, "limit") == 0) {
+            double l = 0.0;
+            bad = canopen_parse_double(val, &l) != 0 || !(l > 0.0 && l < 1e9);
+            nc->joint_torque_limit_nm = (float)l;
+        } else if (strcmp(tok, "accept_no_master_watchdog") == 0) {
+            bad = strcmp(val, "true") != 0;
+            nc->accept_no_master_watchdog = 1u;
         } else if (strcmp(tok, "vendor") == 0) {
             bad = canopen_parse_u32(val, 0u, UINT32_MAX, &nc->vendor_id);
         } else if (strcmp(tok, "product") == 0) {
             bad = canopen_parse_u32(val, 0u, UINT32_MAX, &nc->product_code);
         } else {
-            snprintf(err, cap, "--node '%s': unknown field '%s' (rated, encoder, gear, torque_unit, vendor, product)", arg,
-                     tok);
+            snprintf(err, cap, "--node '%s': unknown field '%s' (rated, encoder, gear, torque_unit, efficiency, limit, "
+                     "accept_no_master_watchdog, vendor, product)", arg, tok);
             return -1;
         }
         if (bad) {
             snprintf(err, cap, "--node '%s': field %s: expected %s", arg, tok,
                      strcmp(tok, "gear") == 0          ? "MOTOR/SHAFT revolutions, both >= 1"
                      : strcmp(tok, "torque_unit") == 0 ? "mNm or uNm"
+                     : strcmp(tok, "efficiency") == 0  ? "the gear's efficiency, above 0 and at most 1"
+                     : strcmp(tok, "limit") == 0       ? "the joint's torque limit in N m, above 0"
+                     : strcmp(tok, "accept_no_master_watchdog") == 0 ? "true"
                                                        : "an unsigned 32-bit number");
             return -1;
         }

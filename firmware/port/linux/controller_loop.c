@@ -328,9 +328,25 @@ static int boot_canopen(link_t *l, const options_t *opt, const arm_robot_model_t
     return rc;
 }
 
+/* "joint 3: " for the joint whose drive a boot fault about the joint names (bus b: its torque limit,
+ * its watchdog on the master), "" otherwise. */
+static void fault_joint_text(const link_t *l, unsigned b, const arm_co_fault_t *f, char *out, size_t cap)
+{
+    out[0] = '\0';
+    if (f->code != ARM_CO_FAULT_TORQUE_LIMIT && f->code != ARM_CO_FAULT_NO_WATCHDOG) return;
+    for (int j = 0; j < ARM_N_JOINTS; ++j) {
+        const arm_co_boot_t *cb = &co[b];
+        for (unsigned i = 0; l->bus_of[j] == (int)b && i < cb->cfg.n_nodes; ++i) {
+            if (cb->cfg.node[i].node_id == f->node && f->node != 0u) {
+                snprintf(out, cap, "joint %d: ", j + 1);
+            }
+        }
+        if (out[0] != '\0') return;
+    }
+}
+
 static int boot_canopen_run(link_t *l, const options_t *opt, const arm_robot_model_t *model, telemetry_t *telem)
 {
-    (void)model;
     unsigned co_slot[ARM_N_JOINTS] = {0}; /* joint j is node co_slot[j] of its bus's boot */
     const int64_t start = now_ns();
     const int64_t give_up = start + (int64_t)(opt->boot_timeout_s * 1e9);
@@ -356,11 +372,14 @@ static int boot_canopen_run(link_t *l, const options_t *opt, const arm_robot_mod
             arm_co_node_config_t *nc = &cfg.node[cfg.n_nodes++];
             /* the arm's drive table (gen/drives.py), else the drive number and the drive's own units */
             *nc = opt->n_nodes == ARM_N_JOINTS ? opt->node[j] : (arm_co_node_config_t){.node_id = (uint8_t)(j + 1)};
+            /* the controller's own torque limit: a drive that cannot give it at the joint is refused */
+            nc->joint_torque_limit_nm = model->link[j].torque_limit;
         }
         if (arm_co_boot_init(&co[b], &cfg, (uint64_t)(now_ns() / 1000)) != 0) {
-            char text[200];
+            char text[400], joint[24];
             canopen_fault_text(&co[b].fault, text, sizeof(text));
-            snprintf(l->report->reason, sizeof(l->report->reason), "boot: canopen: bus %u: %s", b, text);
+            fault_joint_text(l, b, &co[b].fault, joint, sizeof(joint));
+            snprintf(l->report->reason, sizeof(l->report->reason), "boot: canopen: bus %u: %s%s", b, joint, text);
             return -1;
         }
     }
@@ -373,10 +392,11 @@ static int boot_canopen_run(link_t *l, const options_t *opt, const arm_robot_mod
             arm_can_frame_t f;
             while (arm_co_boot_take_tx(&co[b], &f)) (void)send_frame(l, b, &f);
             if (rc[b] < 0) {
-                char text[200];
+                char text[400], joint[24];
                 canopen_fault_text(&co[b].fault, text, sizeof(text));
-                snprintf(l->report->reason, sizeof(l->report->reason), "boot: canopen: %s: %s",
-                         arm_co_fault_name(co[b].fault.code), text);
+                fault_joint_text(l, b, &co[b].fault, joint, sizeof(joint));
+                snprintf(l->report->reason, sizeof(l->report->reason), "boot: canopen: %s: %s%s",
+                         arm_co_fault_name(co[b].fault.code), joint, text);
                 return -1;
             }
             running |= rc[b] == 1;

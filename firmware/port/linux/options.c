@@ -226,6 +226,11 @@ static int opt_node(void *t, void *c, const argv_opt_t *o, const char *v, char *
         return -1;
     }
     if (canopen_parse_node(v, &opt->node[opt->n_nodes], err, errcap) != 0) return -1;
+    if (opt->node[opt->n_nodes].joint_torque_limit_nm > 0.0f) {
+        /* the drive is checked against the controller's own limit, the arm's (arm_canopen_boot takes limit=) */
+        snprintf(err, errcap, "%s '%s': limit: the joint's torque limit is the arm's, not an option here", o->name, v);
+        return -1;
+    }
     if (opt->node[opt->n_nodes].node_id != opt->n_nodes + 1u) {
         /* heartbeats, EMCY and the PDOs' COB-IDs are matched to joints by the drive number */
         snprintf(err, errcap, "%s '%s': joint %u's node id must be its drive number %u", o->name, v,

@@ -57,12 +57,19 @@ int summary_write(const char *path, const options_t *opt, const run_report_t *r,
         fprintf(f, "\n    ],\n    \"units\": [");
         for (unsigned j = 0; j < ARM_N_JOINTS; ++j) { /* each drive's, read at boot (from_table: the table's) */
             const arm_co_drive_units_t *u = &r->co_units[j];
+            arm_co_units_t si; /* 1000 per-mille at the joint: 0x6076 x gear x efficiency */
+            const double joint_rated =
+                arm_co_units_init(&si, u->rated_torque, u->torque_units_per_nm, (double)u->gear_efficiency,
+                                  u->encoder_increments, u->encoder_revs, u->gear_motor_revs, u->gear_shaft_revs,
+                                  (int16_t)u->max_torque_permille) == 0 ? si.joint_rated_torque_nm : 0.0;
             fprintf(f, "%s\n      {\"rated_torque\": %u, \"torque_units_per_nm\": %u, \"encoder_increments\": %u, "
                        "\"encoder_revs\": %u, "
-                       "\"gear\": [%u, %u], \"max_torque_permille\": %u, \"modes\": %u, \"from_table\": %u}",
+                       "\"gear\": [%u, %u], \"gear_efficiency\": %.9g, \"joint_rated_torque_nm\": %.9g, "
+                       "\"max_torque_permille\": %u, \"modes\": %u, \"from_table\": %u}",
                     j ? "," : "", u->rated_torque, u->torque_units_per_nm, u->encoder_increments, u->encoder_revs,
                     u->gear_motor_revs,
-                    u->gear_shaft_revs, u->max_torque_permille, u->modes, u->from_table);
+                    u->gear_shaft_revs, (double)u->gear_efficiency, joint_rated, u->max_torque_permille, u->modes,
+                    u->from_table);
         }
         fprintf(f, "\n    ],\n    \"q_first_rad\": [");
         for (unsigned j = 0; j < ARM_N_JOINTS; ++j) {

@@ -74,13 +74,29 @@ static void boot_up_and_defaults(void)
     CHECK(n.nmt == SIM_NMT_STATE_PRE_OPERATIONAL);
     CHECK(sim_co_od_get(&n.od, 0x1400u, 1u) == 0x203u);              /* $NODEID+0x200 */
     CHECK(sim_co_od_get(&n.od, 0x1401u, 1u) == 0x80000303u);         /* RPDO2 invalid */
-    CHECK(sim_co_od_get(&n.od, 0x6076u, 0u) == 150000u);
+    CHECK(sim_co_od_get(&n.od, 0x6076u, 0u) == 1486u); /* the motor's, mN m */
     CHECK(sim_co_od_get(&n.od, 0x608Fu, 1u) == 524288u && sim_co_od_get(&n.od, 0x6091u, 1u) == 101u);
-    const sim_co_preset_t p = {28000u, 4096u, 50u, 1u, 0u};
+    const sim_co_preset_t p = {560u, 4096u, 50u, 1u, 0u, 0.0};
     CHECK(init(&n, 3, &p, 28.0) == 0);
     sim_co_node_boot(&n, 0);
-    CHECK(sim_co_od_get(&n.od, 0x6076u, 0u) == 28000u && sim_co_od_get(&n.od, 0x608Fu, 1u) == 4096u);
+    CHECK(sim_co_od_get(&n.od, 0x6076u, 0u) == 560u && sim_co_od_get(&n.od, 0x608Fu, 1u) == 4096u);
     CHECK(sim_co_od_get(&n.od, 0x6091u, 1u) == 50u);
+}
+
+/* CiA 402: 0x6076 is the motor's; the joint gets per-mille x 0x6076 x gear x the gear's efficiency,
+ * and a joint torque is reported back through the same. */
+static void torque_through_the_gear(void)
+{
+    sim_co_node_t n;
+    const sim_co_preset_t p = {0u, 0u, 0u, 0u, 0u, 0.8};
+    CHECK(init(&n, 3, &p, 150.0) == 0);
+    sim_cia402_scale_t sc;
+    CHECK(sim_cia402_scale(&n.od, &n.preset, &sc) == 0);
+    CHECK(fabs(sc.joint_rated_nm - 1.486 * 101.0 * 0.8) < 1e-12);
+    CHECK(fabs(sim_cia402_target_nm(&sc, 100, 1000u, 150.0) - 0.1 * 1.486 * 101.0 * 0.8) < 1e-12);
+    CHECK(sim_cia402_permille(&sc, 0.1 * 1.486 * 101.0 * 0.8) == 100);
+    const sim_co_preset_t bad = {0u, 0u, 0u, 0u, 0u, 1.5}; /* an efficiency above 1: no units */
+    CHECK(sim_cia402_scale(&n.od, &bad, &sc) == -1);
 }
 
 static void expedited_and_segmented_uploads(void)
@@ -204,13 +220,17 @@ static void sync_pdos_and_cst(void)
     n.n_out = 0u;
     sim_co_node_on_sync(&n, 1.0, -0.5, NAN);
     CHECK(n.power == SIM_PS_OPERATION_ENABLED);
-    CHECK(fabs(sim_co_node_torque(&n) - 30.0) < 1e-12); /* 200 per-mille of 150 N m */
+    /* 200 per-mille of the motor's 1486 mN m: the joint feels it times the gear, 101 */
+    CHECK(fabs(sim_co_node_torque(&n) - 0.2 * 1.486 * 101.0) < 1e-12);
     CHECK(sent(&n, 0x283u, &f) == 1u && (int16_t)(f->data[0] | f->data[1] << 8) == 200);
     CHECK(sent(&n, 0x183u, &f) == 1u && f->len == 8u);
     const double inc_per_rad = 524288.0 * 101.0 / 6.283185307179586;
     CHECK((int32_t)u32(&f->data[0]) == (int32_t)nearbyint(inc_per_rad));
     CHECK((int32_t)u32(&f->data[4]) == (int32_t)nearbyint(-0.5 * inc_per_rad));
-    rpdo(&n, 0x0F, 2000); /* beyond max torque (1000 per-mille) and the joint's 150 N m */
+    n.n_out = 0u; /* a joint torque measured is reported in per-mille of the motor's, through the gear */
+    sim_co_node_on_sync(&n, 0.0, 0.0, 0.1 * 1.486 * 101.0);
+    CHECK(sent(&n, 0x283u, &f) == 1u && (int16_t)(f->data[0] | f->data[1] << 8) == 100);
+    rpdo(&n, 0x0F, 2000); /* beyond max torque (1000 per-mille, 150.086 N m) and the joint's 150 N m */
     sim_co_node_on_sync(&n, 0.0, 0.0, NAN);
     CHECK(fabs(sim_co_node_torque(&n) - 150.0) < 1e-12);
     CHECK(write(&n, 0x6076, 0, 1000u, 4u) == 0x08000022u); /* no new scaling while enabled */
@@ -281,7 +301,7 @@ static void heartbeat_producer_and_resets(void)
     CHECK(sim_co_od_get(&n.od, 0x1018u, 4u) == 3u); /* the serial number is the drive's own after it */
     const uint8_t reset_node[2] = {0x81, 0x00};
     frame(&n, 0x000u, reset_node, 2u, 0);
-    CHECK(sim_co_od_get(&n.od, 0x6076u, 0u) == 150000u);
+    CHECK(sim_co_od_get(&n.od, 0x6076u, 0u) == 1486u);
     const uint8_t stop[2] = {0x02, 0x03};
     frame(&n, 0x000u, stop, 2u, 0);
     CHECK(sdo(&n, 0x40, 0x1000, 0, 0)[0] == 0xEEu); /* no SDO in stopped */
@@ -319,6 +339,7 @@ static void arbitrary_frames_are_handled(void)
 
 int main(void)
 {
+    torque_through_the_gear();
     boot_up_and_defaults();
     expedited_and_segmented_uploads();
     downloads_and_abort_codes();

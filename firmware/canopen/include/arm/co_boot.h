@@ -6,15 +6,19 @@
  *
  * Per node, in order: NMT pre-operational; upload 0x1000 (its low word must be the CiA 402 profile,
  * 0x0192) and 0x1018.1-4 (vendor and product checked when the configuration names them); the
- * units, read from the drive and never written: 0x6502 (bit 9, CST, must be set), 0x6076 rated
- * torque, 0x608F.1-2 encoder, 0x6091.1-2 gear, 0x6072 max torque; where the configuration gives
- * one of them the drive's must equal it, and where the drive lacks one (CiA 402 makes 0x608F,
- * 0x6091 and 0x6072 optional) the configuration's stands in (ARM_CO_FAULT_UNITS_* otherwise);
+ * units, read from the drive and never written: 0x6502 (bit 9, CST, must be set), 0x6076 the
+ * motor's rated torque, 0x608F.1-2 encoder, 0x6091.1-2 gear, 0x6072 max torque; where the
+ * configuration gives one of them the drive's must equal it, and where the drive lacks one (CiA 402
+ * makes 0x608F, 0x6091 and 0x6072 optional) the configuration's stands in (ARM_CO_FAULT_UNITS_*
+ * otherwise); the joint's torque limit, where the configuration gives it, must be within what the
+ * drive gives at the joint, 0x6072 x 0x6076 x gear x efficiency (ARM_CO_FAULT_TORQUE_LIMIT);
  * the statusword, and controlword 0x00 if the drive is not switch on disabled (a drive left
  * enabled takes no new mode); for RPDO1, TPDO1, TPDO2: COB-ID invalid (bit 31), mapping count 0,
- * entries, count, transmission type, COB-ID valid; 0x1006 cycle period, 0x1017 heartbeat, 0x1016.1
- * consumer heartbeat of the master, each written only if the drive has it (CiA 301 makes them
- * optional: an abort 0x06020000 or 0x06090011 skips it); 0x6060 = 10 (a refusal is
+ * entries, count, transmission type, COB-ID valid; 0x1006 cycle period, 0x1017 heartbeat, each
+ * written only if the drive has it (CiA 301 makes them optional: an abort 0x06020000 or 0x06090011
+ * skips it); 0x1016.1 consumer heartbeat of the master, the drive's watchdog on the master: a drive
+ * that has none or refuses it is refused (ARM_CO_FAULT_NO_WATCHDOG: a dead master would leave it
+ * applying its last torque), unless the configuration accepts that; 0x6060 = 10 (a refusal is
  * ARM_CO_FAULT_NO_CST), upload 0x6061 must be 10; NMT start; controlword 0x06, 0x07, 0x0F, each
  * confirmed by statusword & 0x6F (0x21, 0x23, 0x27) read back over SDO (a drive in fault: one fault
  * reset if the configuration allows). Every download is logged (arm_co_boot_t.log). */
@@ -72,7 +76,7 @@ typedef struct {
 typedef struct {
     uint8_t node_id;             /* 1..127 */
     uint8_t expect;              /* ARM_CO_EXPECT_*: which of the three below the drive table gives */
-    uint32_t rated_torque;       /* 0x6076, in the drive's torque unit */
+    uint32_t rated_torque;       /* 0x6076, the motor's, in the drive's torque unit */
     /* 0x6076's unit, per N m: 1000 (mN m, CiA 402's; 0 means it) or 1000000 (µN m, as maxon's EPOS4
      * gives it: its firmware specification) */
     uint32_t torque_units_per_nm;
@@ -81,6 +85,15 @@ typedef struct {
     uint32_t gear_shaft_revs;    /* 0x6091.2 */
     uint32_t vendor_id;          /* 0x1018.1 expected; 0: any */
     uint32_t product_code;       /* 0x1018.2 expected; 0: any */
+    /* the gear's efficiency, (0, 1]: the joint gets 0x6076 x gear x it (the drive table's; no object
+     * holds it); 0 means 1, a lossless gear */
+    float gear_efficiency;
+    /* the joint's torque limit, N m: the drive must give it at the joint (0x6072 x 0x6076 x gear x
+     * efficiency), else ARM_CO_FAULT_TORQUE_LIMIT before anything is written; 0: not checked */
+    float joint_torque_limit_nm;
+    /* 1: a drive without a settable 0x1016.1 (consumer heartbeat) boots: the drive table accepts
+     * that a dead master leaves it applying its last torque; 0: such a drive is refused */
+    uint8_t accept_no_master_watchdog;
 } arm_co_node_config_t;
 
 typedef struct {
@@ -121,7 +134,23 @@ typedef enum {
     ARM_CO_FAULT_UNITS_MISMATCH, /* a unit object differs from the drive table (value/value_den, expected/_den) */
     ARM_CO_FAULT_UNITS_MISSING, /* the drive lacks a unit object and the drive table gives none */
     ARM_CO_FAULT_BAD_UNITS,     /* the drive reports a unit of 0 (value/value_den) */
+    ARM_CO_FAULT_TORQUE_LIMIT,  /* the joint's torque limit is more than the drive gives (limit_nm, units) */
+    ARM_CO_FAULT_NO_WATCHDOG,   /* 0x1016.1 cannot be set (abort_code, value written; abort 0: a consumer time of 0) */
 } arm_co_fault_code_t;
+
+/* A node's units as the boot settled them: the drive's objects, or the drive table's value of one
+ * the drive lacks (from_table). */
+typedef struct {
+    uint32_t rated_torque;           /* 0x6076, the motor's, in the drive's unit */
+    uint32_t torque_units_per_nm;    /* that unit: 1000 mN m, 1000000 µN m */
+    uint32_t encoder_increments;     /* 0x608F.1 */
+    uint32_t encoder_revs;           /* 0x608F.2 */
+    uint32_t gear_motor_revs, gear_shaft_revs; /* 0x6091.1, .2 */
+    float gear_efficiency;           /* the drive table's (1: lossless) */
+    uint16_t max_torque_permille;    /* 0x6072; 32767 if the drive has none */
+    uint32_t modes;                  /* 0x6502 (0: the drive has none) */
+    uint8_t from_table;              /* ARM_CO_EXPECT_* bits taken from the configuration */
+} arm_co_drive_units_t;
 
 typedef struct {
     arm_co_fault_code_t code;
@@ -135,6 +164,8 @@ typedef struct {
     uint32_t modes;                   /* NO_CST: 0x6502 as read */
     uint8_t has_modes;                /* NO_CST: 0x6502 was read (else the drive has none) */
     uint8_t tries;
+    float limit_nm;                   /* TORQUE_LIMIT: the joint's torque limit */
+    arm_co_drive_units_t units;       /* TORQUE_LIMIT: the drive's units, as settled */
 } arm_co_fault_t;
 
 const char *arm_co_fault_name(arm_co_fault_code_t code);
@@ -174,19 +205,6 @@ typedef struct {
     uint32_t value;
     uint32_t mask;       /* READ: bits that must equal value; CONTROL, QUIESCE: state | sw mask << 8 */
 } arm_co_action_t;
-
-/* A node's units as the boot settled them: the drive's objects, or the drive table's value of one
- * the drive lacks (from_table). */
-typedef struct {
-    uint32_t rated_torque;           /* 0x6076, in the drive's unit */
-    uint32_t torque_units_per_nm;    /* that unit: 1000 mN m, 1000000 µN m */
-    uint32_t encoder_increments;     /* 0x608F.1 */
-    uint32_t encoder_revs;           /* 0x608F.2 */
-    uint32_t gear_motor_revs, gear_shaft_revs; /* 0x6091.1, .2 */
-    uint16_t max_torque_permille;    /* 0x6072; 32767 if the drive has none */
-    uint32_t modes;                  /* 0x6502 (0: the drive has none) */
-    uint8_t from_table;              /* ARM_CO_EXPECT_* bits taken from the configuration */
-} arm_co_drive_units_t;
 
 typedef enum { ARM_CO_NODE_RUNNING = 0, ARM_CO_NODE_ENABLED, ARM_CO_NODE_FAILED } arm_co_node_state_t;
 
