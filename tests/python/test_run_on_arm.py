@@ -34,28 +34,17 @@ from pathlib import Path
 
 import pytest
 
+from cli_run import ARMCTL, armctl
 from gen.lib.paths import REPO
 from tools.run.procs import communicate_or_kill
 
 pytestmark = pytest.mark.long
 
-ARMCTL = str(REPO / "tools" / "armctl")
 DRIVES = REPO / "firmware" / "protocol" / "drives.toml"
 HOME = [0.0, -1.3, 1.6, -1.87, -1.5708, 0.0]
 NAMES = ["shoulder_pan", "shoulder_lift", "elbow", "wrist_1", "wrist_2", "wrist_3"]
 MOVED_AFTER_STOP_DEG = 1.0  # the most any joint may move in the 2 s after a stop
 FOLLOW_DEG = 1.0            # the most any joint may lag a task's reference
-
-
-def armctl(*args: str, timeout: float = 600.0) -> subprocess.CompletedProcess[str]:
-    p = subprocess.Popen([ARMCTL, *args], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        out, err = p.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        p.send_signal(signal.SIGTERM)
-        out, err = communicate_or_kill(p, 60)
-        raise AssertionError(f"armctl {' '.join(args)}: no end after {timeout:g} s\n{out}\n{err[-3000:]}") from None
-    return subprocess.CompletedProcess(p.args, p.returncode, out, err)
 
 
 class Plant:
@@ -66,7 +55,8 @@ class Plant:
         args = ["plant", "--bus", f"udp:{port}", "--out", str(out)]
         args += ["--truth", str(truth)] if truth else []
         args += ["--drive-config", str(drive_config)] if drive_config else []
-        self.p = subprocess.Popen([ARMCTL, *args], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        self.p = subprocess.Popen([ARMCTL, *args], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                  text=True)
         self.lines: list[str] = []
         self.ready = threading.Event()
         threading.Thread(target=self._read, daemon=True).start()
@@ -111,6 +101,11 @@ def ports() -> Iterator[int]:
 
     with acquire_slot(quiet_ports=True) as s:
         yield s.can_port
+
+
+def table_text() -> str:
+    """The default drive table, its EDS named by its absolute path (so a copy elsewhere finds it)."""
+    return DRIVES.read_text().replace('eds = "cia402_servo.eds"', f'eds = "{DRIVES.parent / "cia402_servo.eds"}"')
 
 
 def trajectory_csv(path: Path, amp: list[float], seconds: float = 4.0, rows: int = 81) -> Path:
@@ -215,7 +210,7 @@ def bad_plant(kind: str, out: Path) -> tuple[Path, Path | None, str]:
         (out / "truth.toml").write_text("[joint.shoulder_lift]\nencoder_offset_deg = 10\n")
         return out / "truth.toml", None, "shoulder_lift"
     # the drive table (and the drives, configured from it) say 202:1; the joint's real gear is 101:1
-    table = DRIVES.read_text().replace('eds = "cia402_servo.eds"', f'eds = "{DRIVES.parent / "cia402_servo.eds"}"')
+    table = table_text()
     (out / "drives.toml").write_text(table + '\n[joint.wrist_3]\ngear = [202, 1]\n')
     (out / "truth.toml").write_text("[joint.wrist_3]\ngear = [101, 1]\n")
     return out / "truth.toml", out / "drives.toml", "wrist_3"
@@ -271,7 +266,8 @@ def test_the_built_in_reference_starts_without_a_fault_from_20_random_poses(port
                        "--out", str(out / "run"))
         finally:
             plant.stop()
-        return i, r, json.loads((out / "run" / "session.json").read_text()) if (out / "run" / "session.json").exists() else {}
+        session = out / "run" / "session.json"
+        return i, r, json.loads(session.read_text()) if session.exists() else {}
 
     results = []
     with ThreadPoolExecutor(max_workers=2) as pool:  # two plants at a time, on the module's two sets of ports
@@ -317,6 +313,21 @@ def test_a_planners_stream_is_moved_to_followed_and_held_when_stale(ports: int, 
     assert max(s["tracking"]["max_abs_deg"].values()) < FOLLOW_DEG, s["tracking"]
 
 
+def test_run_refuses_an_arm_whose_drive_table_changed_since_commissioning(ports: int, tmp_path: Path,
+                                                                          rehearsal: Rehearsal) -> None:
+    """The record is tied to the table's content: the same table with one value changed (a heartbeat
+    period the drives accept as well) is another arm for run, until it is commissioned again."""
+    table = tmp_path / "drives.toml"
+    table.write_text(table_text()
+                     .replace("heartbeat_ms = 100", "heartbeat_ms = 50"))
+    r = armctl("run", "--hold", "--bus", f"udp:{ports + 4}", "--drive-config", str(table), "--record",
+               str(rehearsal.record), "--out", str(tmp_path / "run"))
+    last = r.stderr.strip().splitlines()[-1]
+    assert r.returncode == 1, r.stderr
+    assert last.startswith("armctl run: the drive table changed since the arm was commissioned"), last
+    assert not (tmp_path / "run" / "controller.log").exists()
+
+
 def test_bad_input_is_one_line_before_anything_is_enabled(ports: int, tmp_path: Path, rehearsal: Rehearsal) -> None:
     common = ["--record", str(rehearsal.record)]
     udp = ["--bus", f"udp:{ports + 4}"]
@@ -325,7 +336,8 @@ def test_bad_input_is_one_line_before_anything_is_enabled(ports: int, tmp_path: 
     r = armctl("run", str(far), *udp, *common, "--out", str(tmp_path / "far"))
     assert r.returncode == 2, r.stderr
     last = r.stderr.strip().splitlines()[-1]
-    assert last.startswith(f"armctl run: {far}: row ") and "joint 3 (elbow)" in last and "outside its range" in last, last
+    assert last.startswith(f"armctl run: {far}: row ") and "joint 3 (elbow)" in last, last
+    assert "outside its range" in last, last
     # a trajectory asking more than the model's torque allows (the shoulder swung 2 rad in 1 s)
     fast = trajectory_csv(tmp_path / "fast.csv", [2.0, 2.0, 0.0, 0.0, 0.0, 0.0], seconds=1.0, rows=21)
     r = armctl("run", str(fast), *udp, *common, "--out", str(tmp_path / "fast"))
@@ -338,12 +350,15 @@ def test_bad_input_is_one_line_before_anything_is_enabled(ports: int, tmp_path: 
     for name in ("far", "fast"):
         assert not (tmp_path / name / "controller.log").exists()
     # a drive table that contradicts the drive: the table says wrist_3's gear is 202:1, the drive's 0x6091 101:1
-    _, table, _ = bad_plant("gear", tmp_path / "contradicts")
+    # (its motor's rated torque the drive's own, 278 mN m)
+    table = tmp_path / "contradicts.toml"
+    table.write_text(table_text()
+                     + '\n[joint.wrist_3]\ngear = [202, 1]\nrated_torque_nm = 0.278\n')
     port = ports + 4
     plant = Plant(port, tmp_path / "plant")  # the drives as firmware/protocol/drives.toml configures them
     try:
         r = armctl("commission", "--bus", f"udp:{port}", "--drive-config", str(table), "--record",
-                   str(tmp_path / "record.json"), "--out", str(tmp_path / "contradicts" / "commission"))
+                   str(tmp_path / "record.json"), "--out", str(tmp_path / "contradicts"))
         sessions = plant.sessions()["sessions"]
     finally:
         plant.stop()

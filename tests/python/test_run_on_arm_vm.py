@@ -33,9 +33,10 @@ OUT=$1; TRAJ=$2
 A=tools/armctl
 ip route replace 239.255.76.67/32 dev lo   # the controller's telemetry stays on lo, as on the host
 ip route replace 239.74.163.0/24 dev lo
-wait_for() {  # wait_for FILE TEXT SECONDS
-    local n=0
-    until grep -q "$2" "$1" 2>/dev/null; do sleep 0.5; n=$((n + 1)); [ $n -ge $(( $3 * 2 )) ] && return 1; done
+wait_for() {  # wait_for FILE TEXT SECONDS: until FILE says TEXT, at most SECONDS (the wall clock's)
+    local t0=$SECONDS
+    until grep -q "$2" "$1" 2>/dev/null; do sleep 0.5; [ $((SECONDS - t0)) -ge "$3" ] && return 1; done
+    return 0
 }
 $A plant --bus vcan --out "$OUT/plant" > "$OUT/plant.out" 2>&1 &
 PLANT=$!
@@ -53,13 +54,18 @@ sleep 2
 kill -INT $RUN   # Ctrl-C
 wait $RUN; echo $? > "$OUT/stop.rc"
 # the plant watches the arm for 2 s after the stop: until its record of the last session is final
-n=0; until python3 -c "import json,sys; s=json.load(open('$OUT/plant/sessions.json'))['sessions']; sys.exit(0 if len(s) >= 6 and s[-1]['complete'] else 1)" 2>/dev/null; do
-    sleep 1; n=$((n + 1)); [ $n -ge 600 ] && break; done
+settled() {
+    python3 -c "import json, sys; s = json.load(open('$OUT/plant/sessions.json'))['sessions']
+sys.exit(0 if len(s) >= 6 and s[-1]['complete'] else 1)" 2>/dev/null
+}
+t0=$SECONDS; until settled; do sleep 1; [ $((SECONDS - t0)) -ge 600 ] && break; done
 kill -INT $PLANT; wait $PLANT; echo $? > "$OUT/plant.rc"
 # bad buses: an interface that does not exist, and one that is down
-$A run --hold --bus socketcan:vcan0,vcan1,vcan7 --record "$OUT/record.json" > "$OUT/missing.out" 2>&1; echo $? > "$OUT/missing.rc"
+$A run --hold --bus socketcan:vcan0,vcan1,vcan7 --record "$OUT/record.json" > "$OUT/missing.out" 2>&1
+echo $? > "$OUT/missing.rc"
 ip link add dev vcan9 type vcan
-$A run --hold --bus socketcan:vcan0,vcan1,vcan9 --record "$OUT/record.json" > "$OUT/down.out" 2>&1; echo $? > "$OUT/down.rc"
+$A run --hold --bus socketcan:vcan0,vcan1,vcan9 --record "$OUT/record.json" > "$OUT/down.out" 2>&1
+echo $? > "$OUT/down.rc"
 exit 0
 """
 
@@ -84,7 +90,8 @@ def vm(tmp_path_factory: pytest.TempPathFactory) -> Path:
     for k in range(41):
         t = 2.0 * k / 40
         s = 0.5 * (1 - math.cos(math.pi * t))
-        lines.append(",".join(f"{x:.6f}" for x in [t, *(h + a * s for h, a in zip(HOME, [0.2, 0.1, -0.2, 0.1, 0.2, 0.2]))]))
+        q = [h + a * s for h, a in zip(HOME, [0.2, 0.1, -0.2, 0.1, 0.2, 0.2])]
+        lines.append(",".join(f"{x:.6f}" for x in [t, *q]))
     traj.write_text("\n".join(lines) + "\n")
     with open(out / "vm.log", "w") as log:
         res = run_in_vm(["bash", str(script), str(out), str(traj)], cwd=REPO, env=env_with_repo(),
@@ -104,7 +111,8 @@ def _text(out: Path, name: str) -> str:
 
 def test_the_rehearsal_on_vcan_ends_as_asked(vm: Path) -> None:
     assert not (vm / "plant.failed").exists(), _text(vm, "plant")
-    assert _rc(vm, "commission") == 0 and "armctl commission: passed" in _text(vm, "commission"), _text(vm, "commission")
+    cm = _text(vm, "commission")
+    assert _rc(vm, "commission") == 0 and "armctl commission: passed" in cm, cm
     for name in ("hold", "jog", "reference", "trajectory"):
         assert _rc(vm, name) == 0, _text(vm, name)
         s = json.loads((vm / name / "session.json").read_text())
@@ -124,7 +132,8 @@ def test_ctrl_c_on_vcan_stops_the_arm_and_it_stays(vm: Path) -> None:
 
 def test_a_missing_or_down_interface_is_one_line(vm: Path) -> None:
     missing = _text(vm, "missing").strip().splitlines()
-    assert _rc(vm, "missing") == 2 and missing[-1].startswith("armctl run: --bus socketcan:vcan7: no such interface"), missing
+    assert _rc(vm, "missing") == 2, missing
+    assert missing[-1].startswith("armctl run: --bus socketcan:vcan7: no such interface"), missing
     down = _text(vm, "down").strip().splitlines()
     assert _rc(vm, "down") == 2 and down[-1] == ("armctl run: --bus socketcan:vcan9: the interface is down (as root: "
                                                 "ip link set vcan9 up)"), down

@@ -36,7 +36,6 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(ns: argparse.Namespace) -> int:
-    from tools.build.arm import prepared_model
     from tools.commands.run import describe
     from tools.run.arm_session import arm_on_bus, run_controller, table_digest
     from tools.run.commissioning import default_record, judge, pulses, write_record
@@ -56,7 +55,7 @@ def run(ns: argparse.Namespace) -> int:
         why = (f"stopped by signal {res.interrupted}" if res.interrupted is not None
                else summary.get("reason") or f"the controller ended with exit code {res.code}")
         raise CommandError(f"no verdict: {why}; no record written (log {ns.out / 'controller.log'})", 1)
-    verdicts = judge(summary, info, prepared_model(setup.bdir))
+    verdicts = judge(summary, info)
     findings = [f for v in verdicts for f in v.findings]
     if cm["status"] != "done" and not findings:
         findings.append(f"the sequence ended {cm['status']}: {summary.get('reason', '')}")

@@ -37,6 +37,7 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(ns: argparse.Namespace) -> int:
+    from gen import eds as eds_mod
     from gen.lib.atomic_output import OutputError, write_text_atomic
     from host_sim.launch import sim_argv
     from host_sim.truth import TruthError, load
@@ -59,8 +60,10 @@ def run(ns: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     for stale in ("sessions.json", "plant.log", "plant_summary.json"):
         (out / stale).unlink(missing_ok=True)
-    try:
-        write_text_atomic(out / "canopen_od.txt", setup.od_table)
+    try:  # the emulated drives: the drive table's EDS/DCF as the simulator's table (gen/eds.py)
+        write_text_atomic(out / "canopen_od.txt", eds_mod.table_text(eds_mod.load(Path(setup.table.eds))))
+    except eds_mod.EdsError as exc:
+        raise UsageError(str(exc)) from None
     except OutputError as exc:
         raise CommandError(str(exc)) from None
     substeps = info["substeps"]

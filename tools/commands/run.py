@@ -39,15 +39,18 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
     what = p.add_mutually_exclusive_group()
     what.add_argument("--hold", action="store_true", help="hold the pose the arm is in, with gravity compensation")
     what.add_argument("--jog", metavar="JOINT=DEG", default=None,
-                      help=f"move one joint (name or number) by DEG (at most {JOG_MAX_DEG:.0f}), slowly, the others held")
+                      help=f"move one joint (name or number) by DEG (at most {JOG_MAX_DEG:.0f} deg either way), "
+                           "slowly, the others held")
     what.add_argument("--stream", nargs="?", const=param("controller", "stream-url").default, default=None,
                       metavar="URL", help="follow a planner's reference over LCM (channel ARM_PLAN, armlcm.plan_t) "
                                           "[%(const)s]")
     p.add_argument("--duration", type=float, default=None, metavar="S",
-                   help=f"the built-in reference's length [{REFERENCE_S:g}]; --hold and --stream: until Ctrl-C unless given")
+                   help=f"the built-in reference's length [{REFERENCE_S:g}]; --hold and --stream: until Ctrl-C "
+                        "unless given")
     add_bus_arguments(p, None, "; the arm's interfaces [socketcan:can0,can1,...]")
     p.add_argument("--record", type=Path, default=None, metavar="FILE",
-                   help="the arm's commissioning record [runs/commission/ARM-HASH.json, where armctl commission keeps it]")
+                   help="the arm's commissioning record [runs/commission/ARM-HASH.json, where armctl commission "
+                        "keeps it]")
     p.add_argument("--mode", choices=("realtime", "lockstep"), default=None,
                    help="realtime on real interfaces; lockstep against armctl plant (udp, vcan), whose arm steps on "
                         "the controller's SYNC [by the bus]")
@@ -68,7 +71,7 @@ def _jog(text: str, names: list[str]) -> tuple[int, float]:
         deg = float(deg_s)
     except ValueError:
         raise UsageError(f"--jog {text}: '{deg_s}' is not a number of degrees") from None
-    if not (math.isfinite(deg) and abs(deg) <= JOG_MAX_DEG):
+    if not (math.isfinite(deg) and abs(deg) <= JOG_MAX_DEG + 1e-9):
         raise UsageError(f"--jog {text}: at most {JOG_MAX_DEG:.0f} deg either way")
     return j, math.radians(deg)
 
@@ -85,7 +88,8 @@ def task_args(ns: argparse.Namespace, setup: object, out: Path) -> tuple[list[st
         from tools.run.trajectory import TrajectoryError, check, write_knots
 
         try:
-            traj = check(ns.trajectory, info, prepared_model(setup.bdir), info["loop_rate_hz"])  # type: ignore[attr-defined]
+            model = prepared_model(setup.bdir)  # type: ignore[attr-defined]
+            traj = check(ns.trajectory, info, model, info["loop_rate_hz"])
             out.mkdir(parents=True, exist_ok=True)
             write_knots(traj, out / "trajectory.knots", ns.trajectory)
         except TrajectoryError as exc:
@@ -100,8 +104,9 @@ def task_args(ns: argparse.Namespace, setup: object, out: Path) -> tuple[list[st
     if ns.jog is not None:
         j, rad = _jog(ns.jog, names)
         return (["--task", "jog", "--jog", f"{j + 1}:{rad!r}"],
-                f"jog {names[j]} by {math.degrees(rad):+g} deg at {math.degrees(param('controller', 'jog-speed').default):.0f} "
-                "deg/s, the other joints held, then hold it a moment")
+                f"jog {names[j]} by {math.degrees(rad):+g} deg at "
+                f"{math.degrees(param('controller', 'jog-speed').default):.0f} deg/s, the other joints held, then hold "
+                "it a moment")
     if ns.hold:
         d = ns.duration if ns.duration is not None else OPEN_ENDED_S
         return (["--task", "hold", "--duration", f"{d:g}"],
@@ -142,19 +147,29 @@ def describe(setup: object, mode: str, task: str, prog: str) -> None:
     sys.stdout.flush()
 
 
+def tracking(summary: dict, names: list[str]) -> dict:
+    """How closely each joint followed the task (the controller's own count: |q_d - q| while it ran
+    the task), in degrees."""
+    t = (summary.get("task") or {}).get("tracking") or {}
+    if not t.get("periods"):
+        return {"periods": 0}
+    return {"periods": t["periods"],
+            "max_abs_deg": {n: round(math.degrees(x), 4) for n, x in zip(names, t["max_abs_rad"])},
+            "rms_deg": {n: round(math.degrees(x), 4) for n, x in zip(names, t["rms_rad"])}}
+
+
 def finish(res: object, setup: object, task: str, prog: str) -> int:
     """The session's end: its record (OUT/session.json: the task, how it ended, how closely each joint
     followed), one line, and the command's exit code: 0 when the task ended or the user stopped it
     (Ctrl-C), else the controller's."""
     from gen.lib.atomic_output import write_json_atomic
-    from tools.run.arm_session import tracking
 
     summary = res.summary  # type: ignore[attr-defined]
     code = res.code  # type: ignore[attr-defined]
     out = res.out  # type: ignore[attr-defined]
     reason = summary.get("reason") or f"the controller ended with exit code {code}"
     user_stop = res.interrupted is not None and code == EXIT_INTERRUPTED  # type: ignore[attr-defined]
-    follow = tracking(out / "telemetry.lcmlog", setup.joint_names)  # type: ignore[attr-defined]
+    follow = tracking(summary, setup.joint_names)  # type: ignore[attr-defined]
     write_json_atomic(out / "session.json", {
         "task": task, "controller_exit": code, "stopped_by_user": user_stop, "reason": reason,
         "final_state": summary.get("final_state"), "task_report": summary.get("task"),

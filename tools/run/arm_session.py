@@ -47,7 +47,6 @@ class ArmOnBus:
     table: Any                  # gen/drives.py DriveConfig
     node_args: list[str]        # arm_controller's --node ... --rpdo-type/--tpdo2-type (the table's)
     sim_node_args: list[str]    # arm_sim's --node presets
-    od_table: str               # the drives' dictionary for arm_sim --od (gen/eds.py)
     topology: list[busload.Bus]
     wiring: str                 # where the wiring comes from
     kind: str                   # socketcan | vcan | udp
@@ -149,7 +148,6 @@ def arm_on_bus(ns: Any, prog: str) -> ArmOnBus:
     """The arm of --model/--arm, built (release), its drive table, wiring and buses, all checked
     before anything starts: bad input is UsageError (one line naming the file, object or value)."""
     from gen import drives as drives_mod
-    from gen import eds as eds_mod
     from tools.run.hil import HilError, canopen_args, canopen_topology
 
     arm = arm_from_args(ns)
@@ -160,9 +158,8 @@ def arm_on_bus(ns: Any, prog: str) -> ArmOnBus:
         raise UsageError(f"--drive-config {ns.drive_config}: no such file")
     try:
         node_args, sim_node_args, table = canopen_args(info, ns.drive_config)
-        od_table = eds_mod.table_text(eds_mod.load(Path(table.eds)))
         topology, wiring = canopen_topology(ns.topology, info, info["loop_rate_hz"], table.transmission)
-    except (HilError, drives_mod.DrivesError, eds_mod.EdsError) as exc:
+    except (HilError, drives_mod.DrivesError) as exc:
         raise UsageError(str(exc).removeprefix("drive configuration: ")) from None
     bus = ns.bus if ns.bus is not None else "socketcan:" + ",".join(f"can{i}" for i in range(len(topology)))
     kind, ifaces = parse_bus(bus, len(topology))
@@ -173,7 +170,7 @@ def arm_on_bus(ns: Any, prog: str) -> ArmOnBus:
         for i, b in zip(ifaces, topology):
             if not check_interface(i, b):
                 raise UsageError(f"--bus vcan: {i} is not a vcan interface")
-    setup = ArmOnBus(arm, bdir, info, table, node_args, sim_node_args, od_table, topology, wiring, kind,
+    setup = ArmOnBus(arm, bdir, info, table, node_args, sim_node_args, topology, wiring, kind,
                      [i.replace("udp:", "") if kind == "udp" else i for i in ifaces], rehearsal)
     specs = ifaces if kind == "udp" else [f"socketcan:{i}" for i in ifaces]
     setup.buses = [f"{spec}@{','.join(map(str, b.drives))}" for spec, b in zip(specs, topology)]
@@ -253,14 +250,7 @@ def run_controller(setup: ArmOnBus, ctl_args: list[str], out: Path, mode: str) -
                 reader.join(timeout=5)
                 procs_mod.forget(p)
             finally:
-                if logger.poll() is None:
-                    logger.send_signal(2)
-                    try:
-                        logger.wait(timeout=10)
-                    except subprocess.TimeoutExpired:
-                        logger.kill()
-                        logger.wait()
-                procs_mod.forget(logger)
+                procs_mod.interrupt_and_reap(logger, 10)
                 if logger.stdout is not None:
                     logger.stdout.close()
     try:
@@ -269,24 +259,3 @@ def run_controller(setup: ArmOnBus, ctl_args: list[str], out: Path, mode: str) -
         summary = {}
     return SessionResult(p.returncode, summary, out, procs_mod.interrupted)
 
-
-def tracking(log: Path, names: list[str]) -> dict[str, Any]:
-    """From a session's telemetry (ARM_CTL): each joint's largest and RMS |q_d - q| while the
-    controller ran the task (state running), in degrees, and how many periods that covers."""
-    import numpy as np
-
-    from tools.run.telemetry_log import read_log
-
-    try:
-        ctl = read_log(log, ("ARM_CTL",))["ARM_CTL"].messages
-    except OSError:
-        return {}
-    if len(ctl) == 0:
-        return {"periods": 0}
-    running = ctl[ctl["state"] == 1]
-    if len(running) == 0:
-        return {"periods": 0}
-    e = np.degrees(np.abs(np.asarray(running["q_d"], float) - np.asarray(running["q"], float)))
-    return {"periods": int(len(running)),
-            "max_abs_deg": {n: round(float(x), 4) for n, x in zip(names, e.max(axis=0))},
-            "rms_deg": {n: round(float(x), 4) for n, x in zip(names, np.sqrt((e ** 2).mean(axis=0)))}}

@@ -61,41 +61,21 @@ class JointVerdict:
     findings: list[str] = field(default_factory=list)
 
 
-def _nominal(model_xml: Path):  # noqa: ANN202 - mujoco's types
-    import mujoco
-
-    m = mujoco.MjModel.from_xml_path(str(model_xml))
-    m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT) | int(mujoco.mjtDisableBit.mjDSBL_SPRING)
-    return m, mujoco.MjData(m)
-
-
-def judge(summary: dict[str, Any], info: dict[str, Any], model_xml: Path) -> list[JointVerdict]:
-    """Every joint's verdict from the controller's summary of a --task commission run."""
-    import mujoco
-    import numpy as np
-
+def judge(summary: dict[str, Any], info: dict[str, Any]) -> list[JointVerdict]:
+    """Every joint's verdict from the controller's summary of a --task commission run: its
+    measurements, and its own model's gravity, gravity slope and inertia at them."""
     cm = summary["task"]["commission"]
+    model = cm["model"]
     joints = info["joints"]
     names = [j["name"] for j in joints]
     n = len(joints)
-    m, d = _nominal(model_xml)
-    q0 = np.asarray([x["q0"] for x in cm["joints"]])
-
-    def gravity(q: Any) -> Any:
-        d.qpos[:n], d.qvel[:n], d.qacc[:n] = q, 0.0, 0.0
-        mujoco.mj_inverse(m, d)
-        return d.qfrc_inverse[:n].copy()
-
-    d.qpos[:n] = q0
-    mujoco.mj_forward(m, d)
-    mass = np.zeros((m.nv, m.nv))
-    mujoco.mj_fullM(m, d, mass)
     out = []
     status, why_joint = cm["status"], cm["why_joint"]
     for j, (spec, rec) in enumerate(zip(joints, cm["joints"])):
         v = JointVerdict(names[j], bool(rec["tested"]))
         lim = spec["torque_limit"]
         pos, neg, sweep = rec["pulse_pos"], rec["pulse_neg"], rec["sweep"]
+        inertia_model = model["inertia"][j]
         if status != "done" and why_joint == j:
             moved = abs(cm["why_value"]) * DEG
             if status == "reversed":
@@ -105,15 +85,13 @@ def judge(summary: dict[str, Any], info: dict[str, Any], model_xml: Path) -> lis
             elif status == "stuck":
                 v.direction = "did not move"
                 t = cm["config"]["pulse_max_s"]
-                d.qpos[:n] = q0
-                mujoco.mj_forward(m, d)
-                mass0 = np.zeros((m.nv, m.nv))
-                mujoco.mj_fullM(m, d, mass0)
-                expect = 0.5 * max(abs(pos["delta_nm"]) - float(m.dof_frictionloss[j]), 0.0) / mass0[j, j] * t * t * DEG
+                net = max(abs(pos["delta_nm"]) - spec.get("frictionloss", 0.0), 0.0)
+                expect = 0.5 * net / inertia_model * t * t * DEG
                 v.findings.append(f"{names[j]} moved {moved:.2g} deg under a {pos['delta_nm']:+.3g} N m pulse in "
                                   f"{t:g} s, where the model moves it {expect:.2g} deg: a gear or torque unit wrong "
-                                  "(the drive table's gear, rated torque, torque_unit), friction above the pulse, a brake "
-                                  "that did not open, or no torque reaching it (the drive's enable, its max torque 0x6072)")
+                                  "(the drive table's gear, rated torque, torque_unit), friction above the pulse, a "
+                                  "brake that did not open, or no torque reaching it (the drive's enable, its max "
+                                  "torque 0x6072)")
             else:
                 tested = cm["joint_under_test"]
                 v.findings.append(f"{names[j]} left its start pose by {moved:.2g} deg (the bound is "
@@ -126,22 +104,16 @@ def judge(summary: dict[str, Any], info: dict[str, Any], model_xml: Path) -> lis
         v.direction = "ok" if pos["moved"] > 0 > neg["moved"] else "reversed"
         if v.direction != "ok":
             v.findings.append(f"{names[j]} moved {pos['moved'] * DEG:+.2g} and {neg['moved'] * DEG:+.2g} deg under "
-                              f"{pos['delta_nm']:+.3g} and {neg['delta_nm']:+.3g} N m: its motor or encoder is reversed")
+                              f"{pos['delta_nm']:+.3g} and {neg['delta_nm']:+.3g} N m: its motor or encoder is "
+                              "reversed")
         if sweep["n_up"] and sweep["n_down"]:
             g_meas = 0.5 * (sweep["tau_up"] + sweep["tau_down"])
-            q = q0.copy()
-            q[j] = 0.5 * (sweep["q_up"] + sweep["q_down"])
-            g_model = float(gravity(q)[j])
-            damping = float(m.dof_damping[j])
+            g_model, slope = model["gravity_nm"][j], model["gravity_slope_nm_per_rad"][j]
+            damping = spec.get("damping", 0.0)  # the model's, which the commanded torque includes
             v.gravity_nm, v.gravity_model_nm = round(g_meas, 4), round(g_model, 4)
             v.friction_nm = round(0.5 * (sweep["tau_up"] - sweep["tau_down"]) - damping * sweep["speed"], 4)
             err = g_meas - g_model
             if abs(err) > max(GRAVITY_TOLERANCE * abs(g_model), GRAVITY_FLOOR * lim):
-                step = 1e-3
-                qa, qb = q.copy(), q.copy()
-                qa[j] -= step
-                qb[j] += step
-                slope = float(gravity(qb)[j] - gravity(qa)[j]) / (2 * step)
                 offset = ""
                 if abs(slope) > GRAVITY_FLOOR * lim:  # gravity changes with this joint's angle: an offset shows
                     v.offset_deg_if_zero = round(-err / slope * DEG, 2)
@@ -156,15 +128,16 @@ def judge(summary: dict[str, Any], info: dict[str, Any], model_xml: Path) -> lis
                     net = p["tau_hold_nm"] + p["delta_nm"] - g_meas - sign * v.friction_nm
                     inertias.append(net / p["accel"])
             if inertias and all(x > 0 for x in inertias):
-                v.inertia = round(float(np.mean(inertias)), 5)
-                v.inertia_model = round(float(mass[j, j]), 5)
+                v.inertia = round(sum(inertias) / len(inertias), 5)
+                v.inertia_model = round(inertia_model, 5)
                 r = v.inertia / v.inertia_model
                 if not 1 / SCALE_TOLERANCE <= r <= SCALE_TOLERANCE:
+                    off = r if r > 1 else 1 / r  # a gear wrong by g: g^2 (positions and torques); a unit: itself
                     v.findings.append(f"{names[j]}: it accelerates {1 / r:.2g} x what the model predicts under a known "
                                       f"torque (inertia {v.inertia:.3g} kg m^2, the model's {v.inertia_model:.3g}): a "
-                                      f"gear or torque unit wrong by about {math.sqrt(r) if r > 1 else 1 / math.sqrt(r):.2g}"
-                                      f" x (gear) or {r if r > 1 else 1 / r:.2g} x (torque unit): check its gear, "
-                                      "encoder_increments, rated torque and torque_unit in the drive table")
+                                      f"gear or torque unit wrong by about {math.sqrt(off):.2g} x (gear) or "
+                                      f"{off:.2g} x (torque unit): check its gear, encoder_increments, rated torque "
+                                      "and torque_unit in the drive table")
         out.append(v)
     return out
 
@@ -196,8 +169,9 @@ def check_record(path: Path, info: dict[str, Any], table: Any, digest: str) -> d
     except (OSError, ValueError) as exc:
         raise RecordError(f"{path}: not a commissioning record ({exc}): run tools/armctl commission again") from None
     if not isinstance(rec, dict) or rec.get("model_hash") != info["model_hash"]:
-        raise RecordError(f"{path}: made for another arm (model hash {rec.get('model_hash') if isinstance(rec, dict) else '?'}, "
-                          f"this one {info['model_hash']}): run tools/armctl commission again")
+        theirs = rec.get("model_hash") if isinstance(rec, dict) else "?"
+        raise RecordError(f"{path}: made for another arm (model hash {theirs}, this one {info['model_hash']}): run "
+                          "tools/armctl commission again")
     if rec.get("drive_table_sha256") != digest:
         raise RecordError(f"the drive table changed since the arm was commissioned ({table.path} or "
                           f"{Path(table.eds).name}, {rec.get('date_utc')}): run tools/armctl commission again")

@@ -601,6 +601,7 @@ static int64_t control(link_t *l, loop_t *p)
         rt_debug_busy_wait_us(p->opt->rt.debug_slow_step_us); /* TEST HOOK: forces overruns */
     }
     const int64_t compute = now_ns() - c0;
+    if (p->out.state == ARM_STATE_RUNNING && p->task_over == 0) task_track(&p->task, p->out.e);
     send_commands(l, &p->out);
     return compute;
 }

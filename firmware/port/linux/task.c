@@ -4,6 +4,7 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "arm/rnea.h"
 #include "arm_robot_model_data.h"
 
 #define STREAM_STOP_S 0.2f     /* a stale stream's reference stops within this (constant deceleration) */
@@ -372,9 +373,48 @@ int task_step(task_t *t, float time_s, uint32_t k_run, const float q[ARM_N_JOINT
     return over;
 }
 
+void task_track(task_t *t, const float e[ARM_N_JOINTS])
+{
+    task_report_t *r = t->report;
+    for (int j = 0; j < ARM_N_JOINTS; ++j) {
+        const float a = fabsf(e[j]);
+        if (a > r->track_max[j]) r->track_max[j] = a;
+        r->track_sumsq[j] += (double)a * (double)a;
+    }
+    r->track_n++;
+}
+
+/* The model's side of commissioning: the controller's own nominal model (its RNEA) at the poses
+ * each joint was measured at. Gravity: tau(q, 0, 0); inertia M_jj: tau(q, 0, e_j) - gravity. */
+static void commission_model(task_t *t)
+{
+    task_report_t *r = t->report;
+    const arm_commission_t *c = &t->cm;
+    const float zero[ARM_N_JOINTS] = {0};
+    for (int j = 0; j < ARM_N_JOINTS; ++j) {
+        const arm_cm_joint_t *x = &c->j[j];
+        float q[ARM_N_JOINTS], g[ARM_N_JOINTS], hi[ARM_N_JOINTS], lo[ARM_N_JOINTS], unit[ARM_N_JOINTS] = {0}, m[ARM_N_JOINTS];
+        memcpy(q, c->q0, sizeof(q));
+        if (x->sweep.n_up > 0u && x->sweep.n_down > 0u) q[j] = 0.5f * (x->sweep.q_up + x->sweep.q_down);
+        arm_rnea(&ARM_ROBOT_MODEL, q, zero, zero, g);
+        const float step = 1e-3f;
+        q[j] += step;
+        arm_rnea(&ARM_ROBOT_MODEL, q, zero, zero, hi);
+        q[j] -= 2.0f * step;
+        arm_rnea(&ARM_ROBOT_MODEL, q, zero, zero, lo);
+        r->cm_gravity_model[j] = g[j];
+        r->cm_gravity_slope[j] = (hi[j] - lo[j]) / (2.0f * step);
+        unit[j] = 1.0f;
+        arm_rnea(&ARM_ROBOT_MODEL, c->q0, zero, unit, m);
+        arm_rnea(&ARM_ROBOT_MODEL, c->q0, zero, zero, g);
+        r->cm_inertia_model[j] = m[j] - g[j];
+    }
+}
+
 void task_end(task_t *t)
 {
     if ((task_kind_t)t->opt->task == TASK_COMMISSION) {
+        commission_model(t);
         task_report_t *r = t->report;
         const arm_commission_t *c = &t->cm;
         r->cm_status = c->status;

@@ -43,6 +43,10 @@ typedef struct {
     uint64_t plans_taken, plans_refused, stale_events;
     int64_t last_seq;
     char last_refusal[160];
+    /* how closely the arm followed while the controller ran the task: |q_d - q| per joint */
+    float track_max[ARM_N_JOINTS];    /* rad */
+    double track_sumsq[ARM_N_JOINTS]; /* rad^2 */
+    uint32_t track_n;                 /* periods */
     /* commission: how it ended, and each joint's measurements (task_end copies them) */
     arm_cm_status_t cm_status;
     int cm_why_joint;
@@ -51,6 +55,10 @@ typedef struct {
     int cm_joint_under_test;
     arm_cm_config_t cm_config;
     arm_cm_joint_t cm_joint[ARM_N_JOINTS];
+    /* the controller's own model at what commissioning measured (its RNEA): each joint's gravity
+     * torque where its sweep crossed its start pose and that torque's slope in its angle, and its
+     * inertia (M_jj) at the start pose: what the measurements are judged against */
+    float cm_gravity_model[ARM_N_JOINTS], cm_gravity_slope[ARM_N_JOINTS], cm_inertia_model[ARM_N_JOINTS];
 } task_report_t;
 
 typedef struct {
@@ -90,6 +98,8 @@ int task_begin(task_t *t, const options_t *opt, const float q[ARM_N_JOINTS], tel
  * -1 when it stopped the arm itself (commissioning's bound: the reason in err), else 0. */
 int task_step(task_t *t, float time_s, uint32_t k_run, const float q[ARM_N_JOINTS], const float tau_last[ARM_N_JOINTS],
               arm_ctl_input_t *in, char *err, unsigned long errcap);
+/* After each period's step: while the controller runs the task, how closely the arm follows. */
+void task_track(task_t *t, const float e[ARM_N_JOINTS]);
 void task_end(task_t *t);
 const char *task_name(int kind);
 

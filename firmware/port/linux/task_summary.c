@@ -1,5 +1,7 @@
 #include "task_summary.h"
 
+#include <math.h>
+
 #include "json_file.h"
 
 static void floats(FILE *f, const char *name, const float *v, int n, const char *tail)
@@ -23,7 +25,12 @@ void task_summary_write(FILE *f, const options_t *opt, const task_report_t *r)
             (double)r->start_move_s, (double)r->start_move_rad);
     floats(f, "start_pose", r->start_pose, ARM_N_JOINTS, ", ");
     floats(f, "first_point", r->first_point, ARM_N_JOINTS, ", ");
-    fprintf(f, "\"task_s\": %.9g, \"ended\": %s", (double)r->task_s, r->ended ? "true" : "false");
+    fprintf(f, "\"task_s\": %.9g, \"ended\": %s,\n    \"tracking\": {\"periods\": %u, ", (double)r->task_s,
+            r->ended ? "true" : "false", (unsigned)r->track_n);
+    floats(f, "max_abs_rad", r->track_max, ARM_N_JOINTS, ", ");
+    float rms[ARM_N_JOINTS];
+    for (int j = 0; j < ARM_N_JOINTS; ++j) rms[j] = r->track_n > 0u ? (float)sqrt(r->track_sumsq[j] / r->track_n) : 0.0f;
+    floats(f, "rms_rad", rms, ARM_N_JOINTS, "}");
     if (opt->task == TASK_STREAM) {
         fprintf(f, ",\n    \"stream\": {\"plans_taken\": %llu, \"plans_refused\": %llu, \"stale_events\": %llu, "
                    "\"last_seq\": %lld, \"last_refusal\": ",
@@ -42,7 +49,10 @@ void task_summary_write(FILE *f, const options_t *opt, const task_report_t *r)
                    "\"sweep_rad\": %.9g, \"sweep_speed\": %.9g, \"sweep_window_rad\": %.9g, ",
                 (double)c->bound_rad, (double)c->trip_rad, (double)c->pulse_max_s, (double)c->settle_s,
                 (double)c->sweep_rad, (double)c->sweep_speed, (double)c->sweep_window_rad);
-        floats(f, "pulse_nm", c->pulse_nm, ARM_N_JOINTS, "},\n      \"joints\": [");
+        floats(f, "pulse_nm", c->pulse_nm, ARM_N_JOINTS, "},\n      \"model\": {");
+        floats(f, "gravity_nm", r->cm_gravity_model, ARM_N_JOINTS, ", ");
+        floats(f, "gravity_slope_nm_per_rad", r->cm_gravity_slope, ARM_N_JOINTS, ", ");
+        floats(f, "inertia", r->cm_inertia_model, ARM_N_JOINTS, "},\n      \"joints\": [");
         for (int j = 0; j < ARM_N_JOINTS; ++j) {
             const arm_cm_joint_t *x = &r->cm_joint[j];
             const arm_cm_sweep_t *w = &x->sweep;
