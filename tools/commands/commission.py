@@ -46,7 +46,8 @@ def run(ns: argparse.Namespace) -> int:
     pulse = pulses(info)
     mode = ns.mode or ("lockstep" if setup.rehearsal else "realtime")
     describe(setup, mode, "commission each joint in turn, the others held, none leaving its start pose by more than "
-             f"2 deg: pulses of {', '.join(f'{x:.3g}' for x in pulse)} N m, a 1.5 deg sweep", "armctl commission")
+             f"2 deg: pulses of {', '.join(f'{x:.3g}' for x in pulse)} N m, a 1.5 deg sweep", "armctl commission",
+             method="pd (a plain hold: no estimator adds to the torques measured)")
     res = run_controller(setup, ["--method", "pd", "--task", "commission", "--end-hold", f"{END_HOLD_S:g}",
                                  "--commission-pulse", ",".join(f"{x!r}" for x in pulse)], ns.out, mode)
     summary = res.summary

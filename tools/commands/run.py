@@ -123,7 +123,7 @@ def task_args(ns: argparse.Namespace, setup: object, out: Path) -> tuple[list[st
             f"the built-in reference: a bounded move home, then the arm's reference for {d:g} s")
 
 
-def describe(setup: object, mode: str, task: str, prog: str) -> None:
+def describe(setup: object, mode: str, task: str, prog: str, method: str = "pm") -> None:
     """What the command will do, before it does it."""
     s = setup  # ArmOnBus
     info = s.info  # type: ignore[attr-defined]
@@ -131,7 +131,7 @@ def describe(setup: object, mode: str, task: str, prog: str) -> None:
     lims = ", ".join(f"{j['torque_limit']:g}" for j in info["joints"])
     rt = "" if mode != "realtime" else " (SCHED_FIFO, the last CPU; as root)"
     print(f"{prog}: arm {info['name']} ({info['n_joints']} joints: {', '.join(j['name'] for j in info['joints'])}), "
-          f"build {s.bdir}, design {design.get('config', 'built in')} (pm)")  # type: ignore[attr-defined]
+          f"build {s.bdir}, design {design.get('config', 'built in')}; method {method}")  # type: ignore[attr-defined]
     print(f"  drive table: {s.table.path} ({Path(s.table.eds).name}); wiring: {s.wiring}")  # type: ignore[attr-defined]
     for line in s.describe_buses():  # type: ignore[attr-defined]
         print(f"  bus {line}")
