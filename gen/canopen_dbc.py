@@ -15,7 +15,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import re
 import sys
 from pathlib import Path
 
@@ -27,6 +26,8 @@ from gen import drives as drives_mod
 from gen import eds as eds_mod
 from gen.lib.atomic_output import exit_on_output_error, write_text_atomic
 from gen.lib.cia402 import CODEC_MAPPING, PDO_COB
+from gen.lib.escape import EscapeError, Identifiers, dbc_string
+from gen.lib.one_line import one_line
 
 POSITION_OBJECTS = {0x6064, 0x606C}  # increments, increments/s: at the joint through encoder and gear
 TORQUE_OBJECTS = {0x6071, 0x6077}    # per mille of the motor's rated torque 0x6076: at the joint through the gear
@@ -36,8 +37,6 @@ class DbcError(ValueError):
     pass
 
 
-def _signal_name(text: str) -> str:
-    return re.sub(r"[^0-9a-zA-Z]+", "_", text.strip()).strip("_").lower()
 
 
 def _scaling(index: int, d: drives_mod.Drive) -> tuple[float, str | None]:
@@ -49,8 +48,9 @@ def _scaling(index: int, d: drives_mod.Drive) -> tuple[float, str | None]:
     return 1.0, None
 
 
-def _sig(name: str, start: int, bits: int, signed: bool, scale: float = 1.0, unit: str | None = None) -> Signal:
-    return Signal(name, start, bits, is_signed=signed, unit=unit,
+def _sig(name: str, start: int, bits: int, signed: bool, scale: float = 1.0, unit: str | None = None,
+         comment: str | None = None) -> Signal:
+    return Signal(name, start, bits, is_signed=signed, unit=unit, comment=comment,
                   conversion=BaseConversion.factory(scale=scale, offset=0, is_float=False))
 
 
@@ -64,16 +64,24 @@ def build(cfg: drives_mod.DriveConfig) -> Database:
         n = d.node
         for pdo, mapping in CODEC_MAPPING.items():
             sigs, start = [], 0
+            names = Identifiers(f"{pdo.upper()}_node{n}")
             for index, sub, bits in mapping:
                 e = objects.get((index, sub))
                 if e is None:
                     raise DbcError(f"{cfg.eds}: PDO {pdo} maps 0x{index:04X}:{sub:02X}, which the EDS does not define")
                 scale, unit = _scaling(index, d)
-                sigs.append(_sig(_signal_name(e.name), start, bits, e.type.kind == "int", scale, unit))
+                try:  # the EDS's name made an identifier (its index where no letter is left); the name itself kept
+                    # beside it, as the comment
+                    ident = names.add(e.name, f"{cfg.eds}: 0x{index:04X}:{sub:02X} ParameterName",
+                                      fallback=f"object_{index:04x}_{sub:02x}")
+                except EscapeError as exc:
+                    raise DbcError(str(exc)) from None
+                sigs.append(_sig(ident, start, bits, e.type.kind == "int", scale, unit,
+                                 comment=dbc_string(f"0x{index:04X}:{sub:02X} {e.name}")))
                 start += bits
             msgs.append(Message(PDO_COB[pdo] + n, f"{pdo.upper()}_node{n}", start // 8, sigs,
                                 senders=["master" if pdo.startswith("r") else f"node{n}"],
-                                comment=f"joint {d.joint}: transmission type {cfg.transmission[pdo]}"))
+                                comment=dbc_string(f"joint {d.joint}: transmission type {cfg.transmission[pdo]}")))
         msgs.append(Message(0x080 + n, f"EMCY_node{n}", 8, [_sig("error_code", 0, 16, False),
                                                              _sig("error_register", 16, 8, False),
                                                              _sig("manufacturer", 24, 40, False)], senders=[f"node{n}"]))
@@ -104,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
         arm = json.loads(ns.arm_json.read_text())
         text = dbc_text(drives_mod.load(arm, ns.drive_config))
     except (OSError, ValueError, KeyError) as exc:
-        print(f"gen.canopen_dbc: {exc}", file=sys.stderr)
+        print(f"gen.canopen_dbc: {one_line(str(exc))}", file=sys.stderr)
         return 2
     write_text_atomic(ns.out, text)
     cantools.database.load_string(text, database_format="dbc")  # what readers will do with it

@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import shlex
 import sys
 import tomllib
 from collections.abc import Callable
@@ -35,6 +34,7 @@ from gen import drive_check
 from gen import eds as eds_mod
 from gen.lib.cia402 import CODEC_MAPPING
 from gen.lib import toml_input
+from gen.lib.escape import shell_command
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_DRIVES = ROOT / "firmware" / "protocol" / "drives.toml"
@@ -417,7 +417,7 @@ def main(argv: list[str] | None = None) -> int:
             raise DrivesError(f"--arm-json {a.arm_json}: {exc}") from exc
         cfg = load(arm, a.drives)
         if a.boot_args is not None:
-            print(shlex.join(cfg.boot_args(a.boot_args)))
+            print(shell_command(cfg.boot_args(a.boot_args)))
         else:
             print(json.dumps(asdict(cfg), indent=2))
     except DrivesError as exc:

@@ -25,6 +25,8 @@ from pathlib import Path
 import numpy as np
 
 from gen.lib.atomic_output import exit_on_output_error, write_files_atomically
+from gen.lib.escape import c_comment
+from gen.lib.one_line import one_line
 from gen.robot_model import ModelError, RobotModel, extract, fnv1a64
 
 SNAP = 1e-7
@@ -56,7 +58,7 @@ class Emitter:
         self.lines: list[str] = []
 
     def comment(self, text: str) -> None:
-        self.lines.append(f"    /* {text} */")
+        self.lines.append(f"    /* {c_comment(text)} */")
 
     def sop(self, name: str, terms: list[tuple[float, X, X]]) -> X:
         """sum of sign * a * b, folded: zeros dropped, constants multiplied out, +-1 dropped."""
@@ -164,6 +166,7 @@ def _rotation(e: Emitter, i: int, rot: np.ndarray, axis: np.ndarray) -> list[lis
 
 
 DEF = re.compile(r"^    const float (\w+) = (.*);$")
+COMMENT = re.compile(r"^\s*/\*")
 
 
 def _live(lines: list[str]) -> list[str]:
@@ -172,6 +175,8 @@ def _live(lines: list[str]) -> list[str]:
     while True:
         used: dict[str, int] = {}
         for ln in lines:
+            if COMMENT.match(ln):
+                continue  # a comment names a joint, whatever its name: it uses nothing
             m = DEF.match(ln)
             for name in re.findall(r"\b[A-Za-z_]\w*\b", m.group(2) if m else ln):
                 used[name] = used.get(name, 0) + 1
@@ -235,7 +240,7 @@ def kernel_source(model: RobotModel, model_hash: int) -> tuple[str, str]:
     # first joint's velocity terms): the compiler makes a pair one sincosf where the C library
     # has it (glibc, newlib); C11 itself has no sincos
     e.lines = _live(e.lines)
-    body = "\n".join(e.lines)
+    body = "\n".join(ln for ln in e.lines if not COMMENT.match(ln))
     trig = []
     for i in range(n):
         used = [f"{f} = {fn}(q[{i}])" for f, fn in ((f"s{i}", "sinf"), (f"c{i}", "cosf"))
@@ -284,7 +289,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         model = extract(ns.mjcf)
     except (ModelError, ValueError) as exc:
-        print(f"rnea kernel: {exc}", file=sys.stderr)
+        print(f"rnea kernel: {one_line(str(exc))}", file=sys.stderr)
         return 2
     header, source = kernel_source(model, fnv1a64(ns.mjcf.read_bytes()))
     write_files_atomically(ns.out, {"arm_rnea_kernel.h": header, "arm_rnea_kernel.c": source})

@@ -7,6 +7,7 @@ import os
 import sys
 from collections.abc import Callable
 
+from gen.lib.one_line import one_line
 from gen.lib.paths import REPO
 
 
@@ -22,6 +23,7 @@ COMMAND_MODULES = {
     "busload": "tools.busload", "drive": "tools.commands.drive", "study": "tools.study", "tune": "tools.study",
     "faults": "tools.bench.faults", "fuzz": "tools.bench.fuzz", "bench": "tools.bench", "docs": "tools.commands.docs",
     "arms": "tools.commands.arms", "render": "tools.commands.render", "export": "tools.commands.export",
+    "lock": "tools.commands.lock",
 }
 
 
@@ -41,6 +43,7 @@ def _errors() -> list[tuple[tuple[type[BaseException], ...], int | Callable[[Bas
     command's set_defaults(prefix=...)); a command may change a code with set_defaults(exit_codes=...)."""
     from gen.arm import ArmError
     from gen.lib.busload import ConfigError as BusConfigError
+    from gen.lib.escape import EscapeError
     from gen.lib.outdir import OutDirError
     from tools.run import procs
     from tools.build.arm import ArmChoiceError
@@ -60,7 +63,8 @@ def _errors() -> list[tuple[tuple[type[BaseException], ...], int | Callable[[Bas
         ((CommandError,), lambda exc: exc.code, "{prefix}: {exc}"),
         ((BuildError,), 1, "{exc}"),  # it names the build and its log itself
         # Bad input: a value, a file it names, the arm, the output folder, the cluster.
-        ((StudyConfigError, ArmChoiceError, ArmError, OutDirError, ClusterError, BusConfigError, RecordError), 2, "{prefix}: {exc}"),
+        ((StudyConfigError, ArmChoiceError, ArmError, OutDirError, ClusterError, BusConfigError, RecordError,
+          EscapeError), 2, "{prefix}: {exc}"),
         # The run or the machine: a run that cannot run, the VM, a compiler, a full disk (OutputError is an OSError).
         ((HilError, VmError, FuzzError, PilBenchError, OSError), 1, "{prefix}: {exc}"),
     ]
@@ -74,7 +78,9 @@ def exit_code(exc: BaseException, ns: argparse.Namespace) -> int | None:
             code = next((c for t, c in overrides.items() if isinstance(exc, t)), code)
             command = getattr(ns, "command", None) or "?"
             prefix = getattr(ns, "prefix", None) or f"armctl {command}"
-            print(how.format(command=command, prefix=prefix, exc=exc), file=sys.stderr)
+            # bad input (a ValueError) is one line, whatever line breaks the user's names hold
+            shown = one_line(str(exc)) if isinstance(exc, ValueError) else exc
+            print(how.format(command=command, prefix=prefix, exc=shown), file=sys.stderr)
             return code(exc) if callable(code) else code
     return None
 

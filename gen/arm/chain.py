@@ -12,6 +12,7 @@ import mujoco
 
 from gen.arm.arm_file import ArmFile
 from gen.arm.errors import ArmError
+from gen.lib.escape import EscapeError, c_string
 
 MAX_JOINTS = 16  # the firmware's bound (arm/robot_model.h); the DBC's drive slots bound it too
 
@@ -53,7 +54,19 @@ def find_chain(m0: mujoco.MjModel, af: ArmFile, path: Path) -> Chain:
     _check_serial(m0, chain, af, path)
     _check_arm_file_names(m0, chain, af, path)
     _check_loops(m0, chain, path)
+    _check_representable(chain, path)
     return chain
+
+
+def _check_representable(chain: Chain, path: Path) -> None:
+    """Every controlled joint's name goes into the generated C (gen/robot_model.py, escaped as
+    gen/lib/escape.py says): one C cannot hold (a NUL, a literal over C11's limit) is refused here,
+    before anything is built, never cut."""
+    for i, name in enumerate(chain.names):
+        try:
+            c_string(name, f"model {path}: joint {i + 1}'s name")
+        except EscapeError as exc:
+            raise ArmError(f"{exc}: rename the joint") from None
 
 
 def _top(m: mujoco.MjModel, b: int) -> int:

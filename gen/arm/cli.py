@@ -15,6 +15,8 @@ from gen.arm.errors import ArmError
 from gen.arm.prepare import Prepared, prepare
 from gen.arm.wiring import DEFAULT_TOPOLOGY
 from gen.lib.atomic_output import OutputError, write_files_atomically
+from gen.lib.escape import EscapeError, depfile_path
+from gen.lib.one_line import one_line
 
 
 FILES = ("arm.xml", "arm.json", "design.toml", "plant.xml")
@@ -101,7 +103,12 @@ def main(argv: list[str] | None = None) -> int:
 
         deps += [str(DEFAULT_DBC), str(DEFAULT_TOPOLOGY)]  # the drive slots; the six-drive wiring
         target = ns.out / "arm.xml"
-        ns.depfile.write_text(f"{target}: " + " ".join(d.replace(" ", "\\ ") for d in deps) + "\n")
+        try:
+            head, *rest = (depfile_path(str(d), "a file the arm is made of") for d in [str(target), *deps])
+        except EscapeError as exc:
+            print(f"gen.arm: {exc}", file=sys.stderr)
+            return 2
+        ns.depfile.write_text(f"{head}: {' '.join(rest)}\n")
     for w in info["warnings"]:
-        print(f"gen.arm: {info['name']}: {w}", file=sys.stderr)
+        print(f"gen.arm: {info['name']}: {one_line(w)}", file=sys.stderr)
     return 0

@@ -4,9 +4,6 @@ drives within the bus budget at the loop rate; refused when a bus is over the bu
 
 from __future__ import annotations
 
-import json
-import tempfile
-from pathlib import Path
 from typing import Any
 
 from gen.arm.arm_file import ArmFile
@@ -22,8 +19,7 @@ BUS_BUDGET: float = constant("bus-budget")  # the highest bus load the wiring ma
 def wiring(af: ArmFile, n: int, rate: float) -> list[dict[str, Any]]:
     try:
         if af.buses is not None:
-            tmp = "".join(_bus_toml(b) for b in af.buses)
-            buses = _load_topology_text(tmp, f"arm file {af.path}: buses", n)
+            buses = busload.topology_from_doc({"bus": af.buses}, f"arm file {af.path}: buses", n)
         elif af.topology is not None:
             buses = busload.load_topology(af.topology, n)
         elif n == 6:
@@ -42,20 +38,3 @@ def wiring(af: ArmFile, n: int, rate: float) -> list[dict[str, Any]]:
         raise ArmError(f"bus wiring: {exc}") from exc
     return [{"name": b.name, "kind": "fd" if b.fd else "classic", "nominal": b.nominal_bps, "data": b.data_bps,
              "drives": b.drives} for b in buses]
-
-
-def _bus_toml(b: dict[str, Any]) -> str:
-    lines = ["[[bus]]"]
-    for k, v in b.items():
-        lines.append(f"{k} = {json.dumps(v)}")
-    return "\n".join(lines) + "\n"
-
-
-def _load_topology_text(text: str, where: str, n: int) -> list[Any]:
-    with tempfile.NamedTemporaryFile("w", suffix=".toml", delete=True) as fh:
-        fh.write(text)
-        fh.flush()
-        try:
-            return busload.load_topology(Path(fh.name), n)
-        except busload.ConfigError as exc:
-            raise busload.ConfigError(str(exc).replace(fh.name, where)) from exc

@@ -43,6 +43,7 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from gen.lib.cia402 import CODEC_MAPPING, pdo_bytes
 from gen.lib.params import constant, default
@@ -192,6 +193,11 @@ def load_topology(path: Path = DEFAULT_TOPOLOGY, n_drives: int = 6) -> list[Bus]
         doc = toml_input.loads(Path(path).read_text())
     except (OSError, tomllib.TOMLDecodeError) as exc:
         raise ConfigError(f"{path}: {exc}") from exc
+    return topology_from_doc(doc, str(path), n_drives)
+
+
+def topology_from_doc(doc: dict[str, Any], path: str, n_drives: int = 6) -> list[Bus]:
+    """load_topology() of a document already read (an arm file's buses); `path` names it in errors."""
     unknown = set(doc) - {"bus"}
     if unknown:
         raise ConfigError(f"{path}: unknown top-level key(s) {', '.join(sorted(unknown))} (expected [[bus]] tables)")

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from gen.lib.atomic_output import write_text_atomic
+from gen.lib.escape import toml_string
 from gen.synth.cli import DEFAULT_CONFIG
 from gen.synth.config import DesignConfig, load_config
 from gen.synth.hinf import hinf_synthesis
@@ -36,7 +37,7 @@ def _time_synth(structure: str, repeats: int, out_dir: Path) -> dict[str, Any]:
     from gen.synth.cli import synth_to_dir
 
     cfg_path = out_dir / f"bench_{structure}.toml"
-    text = DEFAULT_CONFIG.read_text().replace('structure = "auto"', f'structure = "{structure}"')
+    text = DEFAULT_CONFIG.read_text().replace('structure = "auto"', f"structure = {toml_string(structure)}")
     cfg_path.write_text(text)
     times, manifest = [], {}
     for _ in range(repeats):

@@ -150,3 +150,30 @@ class Browser:
         if self.proc.stderr:
             self.proc.stderr.close()
         shutil.rmtree(self.profile, ignore_errors=True)
+
+
+def page_facts(browser: Browser, page: Path) -> dict[str, Any]:
+    """What a reader's browser made of a page once its figures are drawn (if it has any): its title,
+    the scripts but those with JSON, images not inlined, elements with an event handler, links out,
+    every element's kind, its text and its figures' SVG text (tests/python/test_attacks.py,
+    test_hostile_names.py: no element of a name's)."""
+    browser.events.clear()  # a browser used before holds the last page's load event
+    browser.open(page)
+    for _ in range(600):
+        if browser.evaluate("document.body.dataset.figures") == "drawn" or not browser.evaluate(
+                "document.querySelector('div.figure[data-figure]')"):
+            break
+        browser.call("Runtime.evaluate", {"expression": "new Promise(r => setTimeout(r, 100))", "awaitPromise": True},
+                     session=True)
+    return browser.evaluate("""({
+        title: document.title,
+        scripts: Array.from(document.scripts).filter(s => s.type !== 'application/json').length,
+        elements: Array.from(document.querySelectorAll('main *')).map(e => e.tagName.toLowerCase()),
+        foreign_images: document.querySelectorAll('img:not([src^="data:"])').length,
+        handlers: Array.from(document.querySelectorAll('*')).filter(e => Array.from(e.attributes).some(
+            a => a.name.startsWith('on'))).length,
+        links: document.querySelectorAll('a[href]:not([href^="#"])').length,
+        svg_links: document.querySelectorAll('svg a').length,
+        text: document.body.innerText,
+        svg_text: Array.from(document.querySelectorAll('svg text, svg tspan')).map(t => t.textContent).join('\\n'),
+    })""")

@@ -60,3 +60,19 @@ def wait_exit(p: subprocess.Popen[str], timeout: float) -> tuple[int, float, str
         _, err = p.communicate()
         raise AssertionError(f"{p.args[0]} still running after {timeout} s; stderr: {err}") from None
     return p.returncode, time.monotonic() - t0, err
+
+
+def armctl(*args: str, timeout: float = 600.0) -> subprocess.CompletedProcess[str]:
+    """tools/armctl as a user runs it; past `timeout` it is stopped (its children in order) and the
+    test fails with what it printed."""
+    from tools.run.procs import communicate_or_kill
+
+    p = subprocess.Popen([str(REPO / "tools" / "armctl"), *args], cwd=REPO, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True)
+    try:
+        out, err = p.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        p.terminate()
+        out, err = communicate_or_kill(p, 60)
+        raise AssertionError(f"armctl {' '.join(args)}: no end after {timeout:g} s\n{out}\n{err[-3000:]}") from None
+    return subprocess.CompletedProcess(p.args, p.returncode, out, err)

@@ -25,7 +25,7 @@ def test_every_command_is_a_module_with_add_subparser_and_run() -> None:
     assert list(sub.choices) == ["setup", "build", "cluster-certs", "timing", "hil", "plant", "commission", "run",
                                  "demo", "test", "synth", "vcan",
                                  "busload", "drive", "study", "tune", "faults", "fuzz", "bench", "docs", "arms", "render",
-                                 "export"]
+                                 "export", "lock"]
     for name, parser in sub.choices.items():
         assert callable(parser.get_default("run")), name
     for module in cli._commands():  # noqa: SLF001

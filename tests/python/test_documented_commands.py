@@ -61,6 +61,7 @@ EXERCISED: dict[str, str] = {
     "demo --model|--arm": "test_documented_commands.py::test_demo_on_another_arm",
     "render": "test_seeing_runs.py::test_render_writes_the_video_and_strip_of_a_run",
     "export": "test_seeing_runs.py::test_mcap_export_reads_back_message_for_message",
+    "lock": "test_lock.py::test_the_lock_is_what_armctl_lock_makes_from_the_requirements",
 }
 
 

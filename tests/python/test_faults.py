@@ -68,3 +68,11 @@ def test_no_process_is_left_behind(matrix: dict[str, dict], faults_out: Path) ->
     r = subprocess.run(["pgrep", "-af", "arm_controller|arm_sim|arm_lcm_logger"], capture_output=True, text=True)
     leftovers = [ln for ln in r.stdout.splitlines() if str(faults_out) in ln]
     assert not leftovers, leftovers
+
+
+def test_hostile_names_are_data_the_run_is_normal_and_nothing_of_the_file_ran(matrix: dict[str, dict]) -> None:
+    from tools.bench.faults import HOSTILE_MARKER
+
+    row = matrix["hostile-names"]
+    assert row["verdict"] == "ok" and row["telemetry_lost"] == 0, row
+    assert row["input_ran_code"] is False and not HOSTILE_MARKER.exists()

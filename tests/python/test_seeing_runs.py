@@ -23,25 +23,14 @@ import pytest
 
 from gen.lib.paths import REPO
 from headless_browser import Browser, browser_path
+from hil_procs import armctl
 from study_configs import with_tuning
-from tools.run.procs import communicate_or_kill
 
 pytestmark = pytest.mark.long  # a study, its renders, a browser: a minute or two
 
 ARMCTL = str(REPO / "tools" / "armctl")
 SCENARIO = "realistic"
 METHODS = "pm,tde,usde-smc"
-
-
-def armctl(*args: str, timeout: float = 600.0) -> subprocess.CompletedProcess[str]:
-    p = subprocess.Popen([ARMCTL, *args], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        out, err = p.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        p.terminate()
-        out, err = communicate_or_kill(p, 60)
-        raise AssertionError(f"armctl {' '.join(args)}: no end after {timeout:g} s\n{out}\n{err[-3000:]}") from None
-    return subprocess.CompletedProcess(p.args, p.returncode, out, err)
 
 
 @pytest.fixture(scope="module")

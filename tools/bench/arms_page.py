@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from gen.lib.escape import markdown_code, markdown_text
 from gen.lib.paths import REPO
 
 PAGE = REPO / "docs" / "arm-compatibility.md"
@@ -35,7 +36,7 @@ def summary(doc: dict[str, Any]) -> dict[str, Any]:
 
 
 def _cell(text: str) -> str:
-    return text.replace("|", "\\|").replace("\n", " ")
+    return markdown_text(str(text))
 
 
 def render(doc: dict[str, Any]) -> str:
@@ -55,15 +56,16 @@ def render(doc: dict[str, Any]) -> str:
         result = r["result"] if r["result"] == "ok" else f"{r['result']}: {r.get('reason') or ''}"
         err = f"{r['max_error_deg']:.3g}" if r.get("max_error_deg") is not None else "-"
         t = f"{r['first_result_s']:.1f}" if r.get("first_result_s") is not None else "-"
-        lines.append(f"| {_cell(arm)} | {r['set']} | {len(r['joints'])} | {_cell(result)} | {err} | {t} |")
+        lines.append(f"| {_cell(arm)} | {_cell(r['set'])} | {len(r['joints'])} | {_cell(result)} | {err} | {t} |")
     lines += ["", "The sets taken (installed with `pip install --no-deps`; their files read, their Python never run):",
               "", "| set | package | licence | files looked at | arms | files without an arm, by reason |",
               "|---|---|---|---|---|---|"]
     for st in doc["sets"]:
         why = "; ".join(f"{n}: {k}" for k, n in sorted(st["not_arms"].items(), key=lambda kv: -kv[1]))
-        lines.append(f"| {st['name']} | `{st['requirement']}` | {_cell(st['licence'])} | {st['files']} | "
+        lines.append(f"| {_cell(st['name'])} | {markdown_code(st['requirement'])} | {_cell(st['licence'])} | {st['files']} | "
                      f"{st['arms']} | {_cell(why)} |")
-    lines += ["", "Left out:", ""] + [f"- **{x['name']}**: {x['why']}" for x in doc["left_out"]] + ["", END]
+    # why a set is left out: the project's own prose (tools/bench/model_sets.toml), Markdown by intent
+    lines += ["", "Left out:", ""] + [f"- **{_cell(x['name'])}**: {x['why']}" for x in doc["left_out"]] + ["", END]
     return "\n".join(lines) + "\n"
 
 

@@ -7,7 +7,10 @@ spoofed joint states or torque commands, a flood), a drive reporting a fault, a 
 simulator's --debug-lose-bus test hook), a stalled logger. The table says, from the bus and the
 run's own records: after how many periods the arm was stopped (the first zero-torque shutdown
 command or NMT stop, or the drives faulting), whether a safe state was reached, the run's
-verdict, and whether the telemetry is complete. tests/python/test_faults.py holds every row.
+verdict, and whether the telemetry is complete. One row's fault is in the input itself
+(hostile-names: the arm's model names its joints with C, a script and a shell command, as a
+downloaded file may): its arm is built and run like any other, its names are data (gen/lib/escape.py),
+and the row fails if anything of the file ran. tests/python/test_faults.py holds every row.
 """
 
 from __future__ import annotations
@@ -47,6 +50,7 @@ class Fault:
     expect_stop: bool                          # the arm must end stopped (a named fault, never ok)
     sim_args: tuple[str, ...] = ()
     mode: str = "lockstep"                     # the run's mode (tools/run/hil.py)
+    arm: Callable[[], Any] | None = None       # the arm to run (a tools.build.arm.ArmRef): None, the bundled one
 
 
 class Injector:
@@ -138,7 +142,43 @@ FAULTS = [
           "on the run's telemetry port, with the simulator's own sequence numbers", lambda i: _forge_truth(i), False),
     Fault("second-master", "realtime: a second master sends its own SYNC periods on bus 1, each with a "
           "DRIVE_6_CMD of 0.2 N m, three times", lambda i: _second_master(i), True, mode="realtime"),
+    Fault("hostile-names", "the model's joint names carry C (a constructor that touches a file), a script and a "
+          "shell command substitution", lambda i: setattr(i, "acted", True), False, arm=lambda: _hostile_arm()),
 ]
+
+# hostile-names: the model a user might have downloaded, and what its C would touch if it ever ran
+HOSTILE_DIR = REPO / "build" / "faults"
+HOSTILE_MARKER = HOSTILE_DIR / "hostile-names.ran"
+
+
+def hostile_names() -> dict[str, str]:
+    """The bundled arm's joint names as an attacker would set them (old name -> new)."""
+    return {"elbow": ('a"}; extern int system(const char *); __attribute__((constructor)) static void '
+                      f'hostile_ctor(void) {{ system("touch {HOSTILE_MARKER}"); }} static const char *const '
+                      'hostile_tail[] __attribute__((used)) = {"b'),
+            "shoulder_lift": "lift<script>document.title='hostile'</script>",
+            "wrist_1": "w1*/ int hostile_c; /* $(touch /tmp/hostile) `id` %s%n",
+            "wrist_2": "w2\\\" \\n ??/ é"}
+
+
+def _hostile_arm() -> Any:
+    """The bundled arm's MJCF with hostile_names(), at a fixed path (one build folder for every run)."""
+    import xml.etree.ElementTree as ET
+
+    from tools.build.arm import ArmRef
+
+    names = hostile_names()
+    root = ET.parse(REPO / "host_sim" / "models" / "ur5e_arm.xml").getroot()
+    for el in root.iter():
+        for attr in ("name", "joint"):
+            if el.tag in ("joint", "motor") and el.get(attr) in names:
+                el.set(attr, names[el.get(attr, "")])
+    text = ET.tostring(root, encoding="unicode")
+    path = HOSTILE_DIR / "hostile-names.xml"
+    HOSTILE_DIR.mkdir(parents=True, exist_ok=True)
+    if not path.exists() or path.read_text() != text:
+        path.write_text(text)
+    return ArmRef(path.resolve())
 
 
 def _forge_truth(i: Injector) -> None:
@@ -197,6 +237,12 @@ def _garbage(i: Injector) -> None:
 
 
 def run_fault(f: Fault, out: Path) -> dict[str, Any]:
+    from tools.build.arm import DEFAULT_ARM, HIL_TARGETS, build_arm
+
+    arm = f.arm() if f.arm is not None else DEFAULT_ARM
+    if f.arm is not None:
+        HOSTILE_MARKER.unlink(missing_ok=True)
+        build_arm("release", arm, targets=HIL_TARGETS)
     with acquire_slot() as slot:
         inj = Injector(slot.can_port)
         inj.lcm_port = slot.lcm_port
@@ -240,7 +286,7 @@ def run_fault(f: Fault, out: Path) -> dict[str, Any]:
             # the arm protocol's frames are what the injectors forge (its DBC); the CiA 402 drives'
             # faults are tests/python/test_canopen_hil.py's and test_canopen_master.py's
             run = run_hil(HilOptions(out=out, duration_s=8.0, method="pm", can_port=slot.can_port, protocol="arm",
-                                     lcm_port=slot.lcm_port, sim_args=f.sim_args, mode=f.mode))
+                                     lcm_port=slot.lcm_port, sim_args=f.sim_args, mode=f.mode, arm=arm))
         finally:
             inj.stop_event.set()
             for t in threads:
@@ -265,6 +311,8 @@ def run_fault(f: Fault, out: Path) -> dict[str, Any]:
             "reasons": r.get("verdict_reasons", []), "telemetry_lost": lost, "telemetry_foreign": foreign, "expect_stop": f.expect_stop,
             "injected": inj.acted, "harness_problem": inj.problem or (None if inj.acted else
                                                                      "nothing sent while the arm ran"),
+            # a file of the input's ran code on this machine (hostile-names: its constructor touched the marker)
+            "input_ran_code": f.arm is not None and HOSTILE_MARKER.exists(),
             "counters": {"controller": run.get("transport", {}).get("controller_frames", {}),
                          "simulator": run.get("transport", {}).get("simulator_frames", {})}}
 
@@ -286,7 +334,8 @@ def table(rows: list[dict[str, Any]]) -> str:
         tel = f"{x['telemetry_foreign']} foreign" if x.get("telemetry_foreign") else \
             "complete" if x["telemetry_lost"] == 0 else f"{x['telemetry_lost']} lost" \
             if x["telemetry_lost"] is not None else "unknown"
-        lines.append(f"{x['fault']:<18}{det:>12}  {safe:<28}{str(x['verdict']):<26}{tel:<12}")
+        verdict = "the input ran code" if x.get("input_ran_code") else str(x["verdict"])
+        lines.append(f"{x['fault']:<18}{det:>12}  {safe:<28}{verdict:<26}{tel:<12}")
     return "\n".join(lines)
 
 
@@ -338,6 +387,7 @@ def run(ns: argparse.Namespace) -> int:
         record("faults", doc, "tools/armctl faults --record")
     # The matrix's promise: every fault that must stop the arm stopped it, under a named verdict.
     broken = [x["fault"] for x in rows if x["expect_stop"] and (not x["safe_state"] or x["verdict"] == "ok")]
+    broken += [f"{x['fault']} (the input ran code)" for x in rows if x.get("input_ran_code")]
     broken += [f"{x['fault']} (never injected: {x['harness_problem']})" for x in rows
                if not x["injected"] and x["fault"] not in broken]
     if broken:

@@ -99,6 +99,13 @@ def arm_from_args(ns: argparse.Namespace) -> ArmRef:
             raise ArmChoiceError(f"arm file {arm_file}: model {model}: no such file")
     ref = ArmRef(model.resolve() if model else None, arm_file.resolve() if arm_file else None,
                  design.resolve() if design else None)
+    from gen.lib.escape import EscapeError, cmake_value
+
+    for opt, p in (("--model", ref.model), ("--arm", ref.arm_file), ("--design", ref.design)):
+        try:  # the build takes each path as a CMake value (ArmRef.cache)
+            cmake_value(str(p or ""), opt)
+        except EscapeError as exc:
+            raise ArmChoiceError(str(exc)) from None
     if not ref.is_default:
         _check_importable(ref)
     return ref

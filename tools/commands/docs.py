@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from gen.lib.atomic_output import write_text_atomic
+from gen.lib.escape import markdown_code as code, markdown_fence, markdown_text as md
 from gen.lib.paths import DOCS, DOCS_RESULTS, REPO
 from tools.commands import CommandError
 
@@ -59,13 +60,13 @@ def _made_by(r: dict[str, Any]) -> str:
     m = rec["machine"]
     kind = "virtual machine" if m.get("virtual") else "machine"
     commit = (rec.get("commit") or "?")[:10] + (" with local changes" if rec.get("dirty") else "")
-    return (f"*`{rec['command']}`, {rec['date_utc'][:10]}, on a {m['cores']}-core {kind} ({m['cpu']}, "
-            f"{m['memory_gib']} GiB, {m['os']}, Linux {m['kernel']}; load average {m['load_average_1min']} at the "
-            f"start), code {commit}.*")
+    return (f"*{code(rec['command'])}, {rec['date_utc'][:10]}, on a {m['cores']}-core {kind} ({md(m['cpu'])}, "
+            f"{m['memory_gib']} GiB, {md(m['os'])}, Linux {m['kernel']}; load average {m['load_average_1min']} at "
+            f"the start), code {md(commit)}.*")
 
 
 def _block(text: str) -> str:
-    return f"```\n{text}\n```"
+    return markdown_fence(text.splitlines())
 
 
 def bench_step(r: dict[str, Any]) -> str:
@@ -137,7 +138,7 @@ def timing(r: dict[str, Any]) -> str:
     from tools.bench.timing import table
 
     verdict = r["verdict"] + (f": {r['verdict_reason']}" if r.get("verdict_reason") else "")
-    return _block(table(r)) + f"\n\nVerdict: `{verdict}`.\n\n" + _made_by(r)
+    return _block(table(r)) + f"\n\nVerdict: {code(verdict)}.\n\n" + _made_by(r)
 
 
 def faults(r: dict[str, Any]) -> str:
@@ -170,7 +171,7 @@ def headline_table(record: dict[str, Any]) -> str:
 
 def _study_made_by(record: dict[str, Any]) -> str:
     return (f"*`tools/armctl study --record`: {len(record['seeds'])} seeds, {record['duration_s']:g} s trajectory, "
-            f"the bundled arm ({record['arm']['name']}), code identity {record['code']}.*")
+            f"the bundled arm ({md(record['arm']['name'])}), code identity {md(record['code'])}.*")
 
 
 def findings(record: dict[str, Any]) -> str:
@@ -181,7 +182,7 @@ def findings(record: dict[str, Any]) -> str:
         if not sc.get("pm_versus"):
             raise DocsError("tools/studies/paper.headline.json keeps no comparisons: tools/armctl study --record "
                             "writes them")
-        out += [f"**{name}**", "", *_claims(sc), *_verdict(record, sc, _labels(record, False)), ""]
+        out += [f"**{md(name)}**", "", *_claims(sc), *_verdict(record, sc, _labels(record, False)), ""]
     return "\n".join(out) + "\n" + _study_made_by(record)
 
 
@@ -215,7 +216,7 @@ def protocols(record: dict[str, Any]) -> str:
             ratio = f"{a / b:.2f}" if a is not None and b else "-"
             ends = sc["stats"][m]["results"]
             note = "" if all(r == "ok" for r in ends) else f" ({sum(r != 'ok' for r in ends)} not ok)"
-            rows.append(f"| {name} | {m} | {cell(a)}{note} | {cell(b)} | {ratio} |")
+            rows.append(f"| {md(name)} | {md(m)} | {cell(a)}{note} | {cell(b)} | {ratio} |")
     return "\n".join(rows) + "\n\n" + _study_made_by(record) + " " + _study_made_by(other).replace(
         "study --record", "study --protocol arm --record")
 
@@ -225,14 +226,14 @@ def tuning(record: dict[str, Any]) -> str:
     converged = sum(r.get("status") == "converged" for _, _, r in pairs)
     trials = [r["trials_run"] for _, _, r in pairs]
     methods = list(dict.fromkeys(m for _, m, _ in pairs))
-    rows = ["| method | " + " | ".join(record["scenarios"]) + " |", "|---|" + "---|" * len(record["scenarios"])]
+    rows = ["| method | " + " | ".join(map(md, record["scenarios"])) + " |", "|---|" + "---|" * len(record["scenarios"])]
     for m in methods:
-        cells = [f"{r['status']}, {r['trials_run']} trials" if (r := record["scenarios"][s].get(m)) else "-"
+        cells = [f"{md(str(r['status']))}, {r['trials_run']} trials" if (r := record["scenarios"][s].get(m)) else "-"
                  for s in record["scenarios"]]
-        rows.append(f"| {m} | " + " | ".join(cells) + " |")
+        rows.append(f"| {md(m)} | " + " | ".join(cells) + " |")
     caps = sorted({r["cap"] for _, _, r in pairs})
     held = [(s, m, r) for s, m, r in pairs if (r.get("validation") or {}).get("picked_rank") is not None]
-    not_held = [f"{m} in {s}" for s, m, r in pairs if (r.get("validation") or {}).get("picked_rank") is None]
+    not_held = [f"{md(m)} in {md(s)}" for s, m, r in pairs if (r.get("validation") or {}).get("picked_rank") is None]
     robust = (f" {len(held)} of {len(pairs)} picks ran ok on every validation seed and robust corner"
               + (f" (the best by objective in {sum(r['validation']['picked_rank'] == 0 for _, _, r in held)}, the next "
                  "best in the others)" if held else "")

@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from gen.lib.one_line import one_line
 from tools.commands import UsageError
 
 
@@ -49,11 +50,12 @@ def run(ns: argparse.Namespace) -> int:
     report = drive_check.check(d, plan)
     who = ", ".join(v for v in (d.device.get("VendorName", ""), d.device.get("ProductName", "")) if v) or "a drive"
     verdict = "this controller can run it" if report.ok else "this controller cannot run it"
-    print(f"{ns.file.name} ({who}): {verdict}")
+    # the file's own strings (ProductName, ParameterName) reach a terminal: one line each, no control character
+    print(one_line(f"{ns.file.name} ({who}): {verdict}"))
     for line in report.problems:
-        print(f"  problem: {line}")
+        print(f"  problem: {one_line(line)}")
     for line in report.warnings:  # the file's own harmless mistakes, by line: not a refusal
-        print(f"  warning: {line}")
+        print(f"  warning: {one_line(line)}")
     for line in report.notes:
-        print(f"  note: {line}")
+        print(f"  note: {one_line(line)}")
     return 0 if report.ok else 2

@@ -35,4 +35,9 @@ def run(ns: argparse.Namespace) -> int:
           + f"; timeline: {r.timeline}")
     for ch, k in sorted(r.undecodable.items()):
         print(f"armctl export: {ch}: {k} message(s) no telemetry type decodes, left out")
+    damaged = [d for d in (f"{ns.run_dir / 'telemetry.lcmlog'}: {r.log_damage.describe()} (the export holds "
+                           f"{lcm} of them)" if r.log_damage else None,
+                           r.capture_damage) if d]
+    if damaged:  # exported as far as it reads: said, and not a success
+        raise CommandError("damaged input, exported as far as it reads: " + " | ".join(damaged), 1)
     return 0

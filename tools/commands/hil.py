@@ -7,6 +7,7 @@ import argparse
 import math
 from pathlib import Path
 
+from gen.lib.one_line import one_line
 from gen.lib.outdir import check_out_dir
 from gen.lib.params import param
 from gen.lib.paths import REPO
@@ -165,7 +166,7 @@ def _study_run(ns: argparse.Namespace) -> int:
     spec, traj, notes = study.study_run_spec(cfg, arm, ns.scenario, ns.method or "pm", seed, ns.duration, knobs,
                                              ns.tuned is not None, ns.out.resolve(), ns.bus)
     for n in notes:
-        print(f"armctl hil: {n}", file=sys.stderr)
+        print(f"armctl hil: {one_line(n)}", file=sys.stderr)
     print(f"armctl hil: {ns.method or 'pm'} in scenario {ns.scenario} of {cfg.path}, seed {seed}, "
           f"{spec.duration_s:g} s, knobs {json.dumps(spec.labels['knobs'])}; trajectory ({traj['from']}) amplitudes "
           f"{traj['amp']} rad, frequencies {traj['freq_hz']} Hz")
@@ -224,7 +225,7 @@ def run(ns: argparse.Namespace) -> int:
     if info.get("design"):
         print(f"design: {info['design']['config']} ({info['design']['why']})")
     for w in warnings:
-        print(f"armctl hil: {w}", file=sys.stderr)
+        print(f"armctl hil: {one_line(w)}", file=sys.stderr)  # a file's names, to a terminal
     ref = ("--ref-amp", ",".join(f"{a:g}" for a in amp), "--ref-freq", ",".join(f"{f:g}" for f in freq),
            "--ref-hold", f"{ns.ref_hold:g}", *(("--rate", f"{ns.rate:g}") if ns.rate is not None else ()))
     result = run_hil(HilOptions(out=ns.out, duration_s=ns.duration, method=ns.method, mode=ns.mode, arm=arm,
@@ -235,7 +236,7 @@ def run(ns: argparse.Namespace) -> int:
                              drive_config=ns.drive_config, target=ns.target))
     print(f"bus: {result['environment']['bus_choice']}; wiring: {result['environment']['topology']['source']}")
     for note in result["environment"].get("canopen_drive_notes", []):
-        print(f"drive table: {note}")
+        print(f"drive table: {one_line(note)}")
     for name, pct in result["environment"]["bus_load_pct"].items():
         if pct > 100.0:
             print(f"armctl hil: bus {name} needs {pct:g} % of its time at 1 kHz (tools/armctl busload): the "

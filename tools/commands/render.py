@@ -44,4 +44,7 @@ def run(ns: argparse.Namespace) -> int:
             print(f"video: {video}")
     except RenderError as exc:
         raise CommandError(str(exc), exc.code) from None
+    if rec.get("log_damage"):  # drawn from what could be read: said, and not a success
+        raise CommandError(f"the run's telemetry log is damaged: {rec['log_damage']}; the strip"
+                           + (" and the video show" if ns.video else " shows") + " the periods read", 1)
     return 0

@@ -15,6 +15,12 @@ Lichtblick, PlotJuggler's MCAP loader, the `mcap` CLI.
   message's publish_time is the LCM logger's receive time; its sequence is its `seq`.
 
 Non-finite floats (a faulted run's) are JSON null: JSON has no NaN.
+
+A damaged log or capture is exported as far as it can be read and named: where it breaks (the
+log's byte offset and event number, the capture's line), what was skipped and what was left unread
+(Exported.log_damage, .capture_damage; `armctl export` says so and exits 1). The log is read
+through the events tools/run/telemetry_log.py finds, bytes that are no event skipped, so the
+export and the run's analysis read the same events.
 """
 
 from __future__ import annotations
@@ -30,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from gen import lcmtypes
+from tools.run.telemetry_log import LogDamage, log_damage
 
 MCAP_FILE = "telemetry.mcap"
 CAN_PREFIX = "can"
@@ -56,6 +63,29 @@ class Exported:
     capture: Path | None = None
     dbc: Path | None = None
     timeline: str = ""
+    log_damage: LogDamage | None = None      # where the log breaks (None: it is whole)
+    capture_damage: str | None = None        # where the capture breaks and what was left unread
+    capture_damage_of: Any = field(default_factory=lambda: CaptureDamage())  # read as the capture is
+
+
+@dataclass
+class CaptureDamage:
+    """Where a capture breaks: lines no frame (line number, byte offset), an end inside the file."""
+    lines_read: int = 0
+    bad_lines: list[tuple[int, int, str]] = field(default_factory=list)  # (line, byte offset, why)
+    stop: str | None = None                  # why reading ended before the file did
+    unread: int = 0                          # bytes of the file (compressed, for a .gz) not read
+
+    def describe(self, path: Path, size: int) -> str | None:
+        parts = []
+        if self.bad_lines:
+            line, at, why = self.bad_lines[0]
+            parts.append(f"{len(self.bad_lines)} line(s) that are no frame skipped, the first line {line} at byte "
+                         f"{at} ({why})")
+        if self.stop:
+            parts.append(f"it breaks after line {self.lines_read}: {self.stop}; " + (
+                f"{self.unread} of its {size} bytes left unread" if self.unread else "what followed is lost"))
+        return f"{path}: " + "; ".join(parts) + f"; {self.lines_read} lines read" if parts else None
 
 
 def _schema_of(cls: Any, types: Any) -> dict[str, Any]:
@@ -86,23 +116,37 @@ def _value(v: Any) -> Any:
     return v
 
 
-def lcm_events(path: Path) -> Iterator[tuple[str, int, bytes]]:
+def lcm_events(path: Path, damage: LogDamage | None = None) -> Iterator[tuple[str, int, bytes]]:
     """(channel, logger timestamp in us, data) of every event of an LCM log, in log order, read by
-    liblcm's own reader (the lcm package)."""
+    liblcm's own reader (the lcm package); where `damage` (tools/run/telemetry_log.py's reading of
+    the same file) found bytes that are no event, on after them, as that reader goes on."""
     import lcm
 
+    # liblcm gives up on an event not followed by a sync word: on at the next event found after it
+    resume = sorted((k["offset"], k["offset"] + k["bytes"]) for k in (damage.skipped if damage else []))
     try:
         log = lcm.EventLog(str(path), "r")
     except (OSError, ValueError) as exc:
         raise ExportError(f"{path}: not an LCM log ({exc})") from None
     try:
-        for ev in log:
+        at = 0
+        while True:
+            ev = log.read_next_event()
+            if ev is None:
+                after = next((i for i, (skip_at, _) in enumerate(resume) if skip_at >= at), None)
+                if after is None:
+                    break
+                at = resume.pop(after)[1]
+                log.seek(at)
+                continue
+            at = log.tell()
             yield ev.channel, int(ev.timestamp), bytes(ev.data)
     finally:
         log.close()
 
 
-def _decode_lcm(path: Path) -> tuple[list[tuple[str, int, Any]], dict[str, int], dict[str, Any]]:
+def _decode_lcm(path: Path, damage: LogDamage | None = None) -> tuple[list[tuple[str, int, Any]], dict[str, int],
+                                                                    dict[str, Any]]:
     """Every message of the log decoded by its fingerprint: (channel, logger us, message) in log
     order; per channel the messages no type decodes; per channel its type's class."""
     types = lcmtypes.load()
@@ -112,7 +156,7 @@ def _decode_lcm(path: Path) -> tuple[list[tuple[str, int, Any]], dict[str, int],
         if hasattr(cls, "_get_packed_fingerprint"):
             by_fp[cls._get_packed_fingerprint()] = cls
     out, undecodable, classes = [], {}, {}
-    for channel, stamp, data in lcm_events(path):
+    for channel, stamp, data in lcm_events(path, damage):
         cls = by_fp.get(data[:8])
         try:
             if cls is None:
@@ -163,13 +207,58 @@ def _run_file(run_dir: Path, recorded: str | None) -> Path | None:
     return here if here.exists() else None
 
 
-def _frames(capture: Path) -> Iterator[Any]:
-    import can
+class _Lines:
+    """A capture's lines, counted: python-can's candump reader reads through it, and a reader that
+    gave up on a bad line is followed by a new one on the next line."""
+
+    def __init__(self, capture: Path) -> None:
+        import gzip
+
+        self.raw = open(capture, "rb")
+        self.stream = gzip.GzipFile(fileobj=self.raw) if capture.suffix == ".gz" else self.raw
+        self.line = 0
+        self.offset = 0  # of the line being read, in the (uncompressed) text
+        self.next_offset = 0
+
+    def __iter__(self) -> Iterator[str]:
+        for raw in self.stream:
+            self.line += 1
+            self.offset, self.next_offset = self.next_offset, self.next_offset + len(raw)
+            yield raw.decode("utf-8", "replace")
+
+    def close(self) -> None:
+        self.stream.close()
+        self.raw.close()
+
+
+def _frames(capture: Path, damage: CaptureDamage) -> Iterator[Any]:
+    """Every frame of a candump log (or its .gz), in its order: a line that is no frame skipped and
+    named, an end inside the file (a torn gzip stream, bytes that are no text) named."""
+    import zlib
+
+    from can.io.canutils import CanutilsLogReader
 
     try:
-        yield from can.LogReader(str(capture))
-    except (OSError, ValueError, EOFError) as exc:
-        raise ExportError(f"{capture}: not a candump log ({type(exc).__name__}: {exc})") from None
+        lines = _Lines(capture)
+    except OSError as exc:
+        raise ExportError(f"{capture}: {exc.strerror or exc}") from None
+    try:
+        while True:
+            reader = CanutilsLogReader(lines)
+            try:
+                for fr in reader:
+                    damage.lines_read = lines.line
+                    yield fr
+                return
+            except (ValueError, IndexError) as exc:  # python-can's parser on a line that is no frame
+                damage.bad_lines.append((lines.line, lines.offset, f"{type(exc).__name__}: {exc}"))
+                damage.lines_read = lines.line
+            except (EOFError, OSError, zlib.error) as exc:  # a gzip stream cut short or corrupt
+                damage.stop = f"{type(exc).__name__}: {exc}"
+                damage.unread = max(0, capture.stat().st_size - lines.raw.tell())
+                return
+    finally:
+        lines.close()
 
 
 FRAME_SCHEMA = {"type": "object", "properties": {
@@ -213,7 +302,9 @@ def export_mcap(run_dir: Path, out: Path | None = None,
                       f"simulated time, s (the loop period {1e3 / rate:g} ms a step)")
 
     say(f"reading {log_path}")
-    msgs, result.undecodable, classes = _decode_lcm(log_path)
+    damage = log_damage(log_path)
+    result.log_damage = damage if damage.damaged else None
+    msgs, result.undecodable, classes = _decode_lcm(log_path, damage)
     times_ns = ([stamp * 1000 for _, stamp, _ in msgs] if realtime else
                 [round(t * 1e9) for t in _lockstep_times(msgs, 1.0 / rate)])
 
@@ -240,7 +331,8 @@ def export_mcap(run_dir: Path, out: Path | None = None,
             w.add_metadata("run", {"run_dir": str(run_dir), "method": str(res.get("method")),
                                    "result": str(res.get("result")), "mode": mode, "rate_hz": f"{rate:g}",
                                    "arm": str(res.get("arm", {}).get("name")), "timeline": result.timeline,
-                                   "joint_names": ",".join(res.get("joint_names") or [])})
+                                   "joint_names": ",".join(res.get("joint_names") or []),
+                                   "telemetry_log": damage.describe()})
             channel_ids = {}
             for ch, cls in classes.items():
                 sid = w.register_schema(name=f"armlcm.{cls.__name__}", encoding="jsonschema",
@@ -264,6 +356,10 @@ def export_mcap(run_dir: Path, out: Path | None = None,
             while nxt is not None:
                 w.add_message(nxt[1], log_time=nxt[0], data=nxt[2], publish_time=nxt[0])
                 nxt = next(pending, None)
+            if capture is not None:
+                result.capture_damage = result.capture_damage_of.describe(capture, capture.stat().st_size)
+                if result.capture_damage:
+                    w.add_metadata("capture", {"damage": result.capture_damage})
             w.finish()
             f.flush()
             os.fsync(f.fileno())
@@ -280,7 +376,7 @@ def _can_messages(capture: Path, db: Any, w: Any, realtime: bool, result: Export
     by_id = {(m.frame_id, m.is_extended_frame): m for m in db.messages}
     channels: dict[str, int] = {}
     schemas: dict[str, int] = {}
-    for fr in _frames(capture):
+    for fr in _frames(capture, result.capture_damage_of):
         bus = str(fr.channel)
         msg = by_id.get((fr.arbitration_id, fr.is_extended_id))
         body: dict[str, Any] = {"frame": {"bus": bus, "id": int(fr.arbitration_id), "data": bytes(fr.data).hex(),

@@ -23,8 +23,9 @@ from typing import Any, Callable
 import numpy as np
 
 from gen.lib.atomic_output import write_bytes_atomic, write_json_atomic
+from gen.lib.one_line import one_line
 from tools.build.arm import prepared_model
-from tools.run.telemetry_log import read_log, truth_rows
+from tools.run.telemetry_log import LogDamage, read_log, truth_rows
 
 STRIP_FILE = "arm-strip.png"
 VIDEO_FILE = "arm.mp4"
@@ -65,6 +66,7 @@ class Motion:
     method: str
     hold_s: float          # the reference holds its start this long before the trajectory begins
     stopped: bool          # the run ended before its trajectory did (the safety layer stopped it)
+    damage: str | None = None  # where its telemetry log breaks and what was left unread (None: whole)
 
 
 def load_run(run_dir: Path) -> tuple[dict[str, Any], Path]:
@@ -96,7 +98,8 @@ def load_motion(run_dir: Path, run: dict[str, Any]) -> Motion:
     log_path = run_dir / "telemetry.lcmlog"
     if not log_path.exists():
         raise RenderError(f"{log_path}: no such file: the run kept no telemetry")
-    log = read_log(log_path, channels=("ARM_CTL", "ARM_SIM"))
+    damage = LogDamage()
+    log = read_log(log_path, channels=("ARM_CTL", "ARM_SIM"), damage=damage)
     ctl, sim = log["ARM_CTL"].messages, log["ARM_SIM"].messages
     res = run["results"]
     ctl = ctl[ctl.state == 1]
@@ -108,7 +111,8 @@ def load_motion(run_dir: Path, run: dict[str, Any]) -> Motion:
     end = hold + float(res.get("duration_s") or 0.0)
     return Motion(t=ctl.t.astype(float), q=q.astype(float), q_d=ctl.q_d.astype(float), e=ctl.e.astype(float),
                   joint_names=list(res.get("joint_names") or []), result=str(res.get("result")),
-                  method=str(res.get("method")), hold_s=hold, stopped=float(ctl.t[-1]) < end - 2.0 / rate)
+                  method=str(res.get("method")), hold_s=hold, stopped=float(ctl.t[-1]) < end - 2.0 / rate,
+                  damage=f"{log_path}: {damage.describe()}" if damage.damaged else None)
 
 
 def moments(mo: Motion) -> list[tuple[str, int]]:
@@ -272,7 +276,7 @@ def _font(size: int) -> Any:
 def _caption(mo: Motion, label: str, i: int) -> str:
     worst = int(np.argmax(np.abs(mo.e[i])))
     name = mo.joint_names[worst] if worst < len(mo.joint_names) else f"joint {worst + 1}"
-    return f"{label}: t {mo.t[i]:.3f} s, largest |e| {np.degrees(abs(mo.e[i, worst])):.3g} deg ({name})"
+    return f"{label}: t {mo.t[i]:.3f} s, largest |e| {np.degrees(abs(mo.e[i, worst])):.3g} deg ({one_line(name)})"
 
 
 def write_strip(run_dir: Path, out: Path | None = None, name: str = STRIP_FILE) -> dict[str, Any]:
@@ -295,9 +299,11 @@ def write_strip(run_dir: Path, out: Path | None = None, name: str = STRIP_FILE) 
     draw = ImageDraw.Draw(img)
     parts = run_dir.resolve().parts
     where = str(run_dir.resolve()) if len(parts) <= 4 else "/".join(parts[-3:])  # a study's SCENARIO/METHOD/seed-N
-    draw.text((6, 4), f"{where}: {mo.method}, {mo.result}. Solid blue: the arm as simulated (orange: its joint axes); "
+    draw.text((6, 4), f"{one_line(where)}: {mo.method}, {mo.result}. Solid blue: the arm as simulated (orange: its joint axes); "
                       "translucent green, beside it: the commanded reference. t from the run's start (the "
-                      f"trajectory begins after a {mo.hold_s:g} s hold)", fill=(0, 0, 0), font=_font(13))
+                      f"trajectory begins after a {mo.hold_s:g} s hold)"
+                      + ("; ITS TELEMETRY LOG IS DAMAGED: the periods read (the .json says where it breaks)"
+                         if mo.damage else ""), fill=(0, 0, 0), font=_font(13))
     boxes = []
     names = [(view.pixel(view.base), "arm"), (view.pixel(view.base + view.offset), "reference")]
     for k, (label, i, rgb) in enumerate(panels):
@@ -319,7 +325,8 @@ def write_strip(run_dir: Path, out: Path | None = None, name: str = STRIP_FILE) 
     img.save(buf, format="PNG")
     write_bytes_atomic(out / name, buf.getvalue())
     record = {"run": str(run_dir), "model": str(model), "method": mo.method, "result": mo.result,
-              "panels": boxes, "arm_rgba": ARM_RGBA, "ghost_rgba": GHOST_RGBA, "ghost_offset_m": view.offset.tolist()}
+              "panels": boxes, "arm_rgba": ARM_RGBA, "ghost_rgba": GHOST_RGBA, "ghost_offset_m": view.offset.tolist(),
+              "log_damage": mo.damage}
     write_json_atomic((out / name).with_suffix(".json"), record)
     return record
 

@@ -13,8 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from tools.run.telemetry_log import CHUNK_BYTES, EVENT_CHANNELS, FIXED_CHANNELS, Chunk, iter_chunks
+from tools.run.telemetry_log import CHUNK_BYTES, EVENT_CHANNELS, FIXED_CHANNELS, Chunk, LogDamage, iter_chunks
 from tools.run.verdict import Bounds, judge
+from gen.lib.one_line import one_line
 from gen.lib.params import constant, default as param_default
 
 # The controller's states as telemetry numbers them (the registry's, firmware/params/params.toml).
@@ -211,6 +212,7 @@ class LogScan:
         self.pairing = _Pairing()
         self.high = [-(1 << 62), -(1 << 62)]
         self.last_state: int | None = None
+        self.damage = LogDamage()  # where the log breaks, if it does
         self.power_total: np.float64 | None = None
         self.tau_sq_total: np.float64 | None = None
 
@@ -269,7 +271,7 @@ def scan_log(path: Path, hold_s: float, rate_hz: float, sent: dict[str, int], ex
     pairwise-summed means need the count before they start)."""
     scan = LogScan(hold_s, rate_hz, sent, max(int(expected_periods), 0))
     if path.exists():
-        for chunk in iter_chunks(path, chunk_bytes):
+        for chunk in iter_chunks(path, chunk_bytes, scan.damage):
             scan.feed(chunk)
     scan.finish()
     if scan.running and scan.running != scan.expected:
@@ -386,6 +388,8 @@ def analyse(out_dir: Path, controller: dict[str, Any], sim: dict[str, Any], conf
         "telemetry_lost_total": int(sum(v["lost"] for v in tele.values())) if tele else None,
         "telemetry_gaps_total": int(sum(v["sequence_gaps"] for v in tele.values())) if tele else None,
         "telemetry_foreign": foreign_telemetry(tele),
+        # where the log breaks and what was left unread (a damaged log: the run is incomplete, never ok)
+        "telemetry_log": scan.damage.as_dict(),
     }
     verdict, reasons = judge(results, transport, controller, sim, environment.get("exit_codes", {}), bounds)
     results["result"] = verdict
@@ -401,12 +405,12 @@ def table(run: dict[str, Any]) -> str:
     for i, name in enumerate(names[: len(r.get("tracking_max_abs_deg", []))]):
         est = r.get("estimation_error_rms")
         est_s = f"{est[i]:>14.4f}" if est else f"{'-':>14}"
-        lines.append(f"{name:<14}{r['tracking_max_abs_deg'][i]:>15.4f}{r['tracking_rms_deg'][i]:>14.4f}{est_s}")
+        lines.append(f"{one_line(name):<14}{r['tracking_max_abs_deg'][i]:>15.4f}{r['tracking_rms_deg'][i]:>14.4f}{est_s}")
     # a run whose controller died has no final state nor step count: its result says so
     lines.append(f"result {r['result']}: method {r.get('method', '?')}, controller {r.get('final_state', 'unknown')} "
                  f"after {r.get('steps', '?')} of {r.get('steps_requested', '?')} periods")
     for why in r.get("verdict_reasons", []):
-        lines.append(f"  {why}")
+        lines.append(f"  {one_line(why)}")
     cf, sf = t["controller_frames"], t["simulator_frames"]
     lines.append(f"frames: controller sent {cf.get('tx', '?')} / received {cf.get('rx', '?')}, "
                  f"simulator sent {sf['frames_tx']} / received {sf['frames_rx']}")

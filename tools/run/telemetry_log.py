@@ -11,7 +11,11 @@ iter_chunks() reads the file a few MB at a time and yields each chunk's messages
 memory does not grow with the log. A message whose size is not its type's for its n (or for the
 channel's n, fixed by its first good message), or whose fingerprint is not its type's, is counted
 as undecodable. A torn last event (a killed writer) is read up to the last whole event, and bytes
-between events that are not an event are skipped up to the next sync word, as liblcm does.
+between events that are not an event are skipped up to the next sync word, as liblcm does; an
+event header no event has (a channel or data length out of range) ends the reading, as in liblcm.
+What was not read is named in a LogDamage: where (byte offset, the event number before it), why,
+and how much (bytes left unread; event numbers missing between the events read, since a writer
+numbers its events 0, 1, 2, ...).
 
 read_log() loads a whole run through the same reader (for the figures of a kept run and for
 tests): its memory grows with the run; the analysis (tools/run/run_analysis.py) streams instead.
@@ -92,6 +96,71 @@ LAYOUTS = {
               ("compute_ns", "i4"), ("cycle_ns", "i4"), ("overruns", "i8"), ("telemetry_dropped", "i8"))),
 }
 FIXED_CHANNELS = {ch: t for ch, t in CHANNEL_TYPES.items() if t in LAYOUTS}
+
+
+@dataclass
+class LogDamage:
+    """Where a log breaks and what was left unread (iter_chunks fills it as it reads)."""
+    size: int = 0                     # the file's bytes
+    events: int = 0                   # whole events read
+    last_event: int | None = None     # the event number of the last event read
+    skipped: list[dict[str, Any]] = field(default_factory=list)  # bytes that are no event: offset, bytes, after_event
+    missing_events: int = 0           # event numbers skipped between events read
+    first_missing: dict[str, int] | None = None  # the first: its offset and the event number expected there
+    stop: dict[str, Any] | None = None  # reading ended before the file did: offset, after_event, why
+    unread: int = 0                   # bytes from `stop` to the end of the file
+
+    @property
+    def damaged(self) -> bool:
+        return bool(self.skipped or self.missing_events or self.stop)
+
+    def describe(self) -> str:
+        """One line: where the log breaks and how much of it was not read."""
+        parts = []
+        if self.stop is not None:
+            after = "at its start" if self.stop["after_event"] is None else f"after event {self.stop['after_event']}"
+            parts.append(f"it breaks at byte {self.stop['offset']} ({after}): {self.stop['why']}; {self.unread} of its "
+                         f"{self.size} bytes ({100 * self.unread / max(self.size, 1):.1f} %) left unread")
+        if self.skipped:
+            k = self.skipped[0]
+            after = "at its start" if k["after_event"] is None else f"after event {k['after_event']}"
+            parts.append(f"{sum(x['bytes'] for x in self.skipped)} bytes that are no event skipped in "
+                         f"{len(self.skipped)} place(s), the first {k['bytes']} at byte {k['offset']} ({after})")
+        if self.missing_events:
+            f = self.first_missing or {}
+            parts.append(f"{self.missing_events} event(s) missing between those read, the first event "
+                         f"{f.get('event')} at byte {f.get('offset')}")
+        return "; ".join(parts) + f"; {self.events} events read" if parts else f"whole: {self.events} events read"
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"damaged": self.damaged, "size_bytes": self.size, "events_read": self.events,
+                "last_event": self.last_event, "skipped": self.skipped, "missing_events": self.missing_events,
+                "first_missing": self.first_missing, "stop": self.stop, "unread_bytes": self.unread,
+                "description": self.describe()}
+
+    def _read(self, base: int, starts: np.ndarray, ends: np.ndarray, numbers: np.ndarray, prev_end: int) -> int:
+        """Events read from a buffer at file offset `base`: what lies between them, their numbers."""
+        starts, ends = starts + base, ends + base
+        gaps_from = np.concatenate([[prev_end], ends[:-1]])
+        for at in np.flatnonzero(starts > gaps_from):
+            before = self.last_event if at == 0 else int(numbers[at - 1])
+            self.skipped.append({"offset": int(gaps_from[at]), "bytes": int(starts[at] - gaps_from[at]),
+                                 "after_event": before})
+        prev = np.concatenate([[self.last_event if self.last_event is not None else -1], numbers[:-1]])
+        jump = numbers - prev - 1
+        lost = np.flatnonzero(jump > 0)
+        if len(lost):
+            self.missing_events += int(jump[lost].sum())
+            if self.first_missing is None:
+                self.first_missing = {"offset": int(starts[lost[0]]), "event": int(prev[lost[0]] + 1)}
+        self.events += len(numbers)
+        self.last_event = int(numbers[-1])
+        return int(ends[-1])
+
+    def _stopped(self, offset: int, why: str) -> None:
+        if self.stop is None:
+            self.stop = {"offset": offset, "after_event": self.last_event, "why": why}
+            self.unread = self.size - offset
 
 
 @dataclass
@@ -197,14 +266,19 @@ def _chain(pos: np.ndarray, ends: np.ndarray, valid: np.ndarray, start: int) -> 
     return np.array(out, dtype=np.int64)
 
 
-def iter_chunks(path: Path, chunk_bytes: int = CHUNK_BYTES) -> Iterator[Chunk]:
-    """Every known channel's messages, chunk by chunk, in log order within each channel."""
+def iter_chunks(path: Path, chunk_bytes: int = CHUNK_BYTES, damage: LogDamage | None = None) -> Iterator[Chunk]:
+    """Every known channel's messages, chunk by chunk, in log order within each channel; `damage`
+    (when given) says afterwards where the log breaks and what was not read."""
     dec = _Decoder()
+    damage = damage if damage is not None else LogDamage()
     with open(path, "rb") as f:
         file_size = os.fstat(f.fileno()).st_size
+        damage.size = file_size
         carry = b""
         eof = False
         want = chunk_bytes
+        base = 0       # the file offset of the buffer's first byte
+        prev_end = 0   # the file offset where the last event read ends
         while not eof:
             data = f.read(max(want, chunk_bytes))
             eof = len(data) < max(want, chunk_bytes) or f.tell() >= file_size
@@ -226,6 +300,9 @@ def iter_chunks(path: Path, chunk_bytes: int = CHUNK_BYTES) -> Iterator[Chunk]:
             # where the next buffer starts: at the first event that is not whole here (or whose
             # header is not), else after the last whole event, keeping a sync word split by the read
             last_end = int(ends[events[-1]]) if len(events) else 0
+            if len(events):
+                numbers = _rows(b, hdr_at[events] + 4, 8).view(">i8").astype(np.int64).reshape(-1)
+                prev_end = damage._read(base, hdr_at[events], ends[events], numbers, prev_end)
             stop = None
             if len(events):
                 after = int(np.searchsorted(hdr_at, last_end))
@@ -233,25 +310,47 @@ def iter_chunks(path: Path, chunk_bytes: int = CHUNK_BYTES) -> Iterator[Chunk]:
                     stop = int(hdr_at[after])
                 elif after < len(hdr_at):  # an invalid header on the chain: liblcm stops reading
                     eof, stop = True, L
+                    damage._stopped(base + int(hdr_at[after]), _bad_header(chlen[after], datalen[after]))
             elif len(hdr_at) and valid[0]:
                 stop = int(hdr_at[0])
             elif len(hdr_at):
                 eof, stop = True, L
+                damage._stopped(base + int(hdr_at[0]), _bad_header(chlen[0], datalen[0]))
             if stop is None:
                 partial = c[~whole]
                 stop = int(partial[0]) if len(partial) and partial[0] >= last_end else max(last_end, L - 3)
             if len(events):
                 yield dec.decode(b, hdr_at[events], chlen[events], datalen[events])
             carry = buf[stop:]
+            base += stop
             want = chunk_bytes
             if len(carry) >= HEADER and carry[:4] == SYNC:
                 cl, dl = int.from_bytes(carry[20:24], "big", signed=True), int.from_bytes(carry[24:28], "big", signed=True)
                 need = HEADER + cl + dl - len(carry)
                 if need > file_size - f.tell():
-                    break  # a torn last event (or a length no file this size can hold)
+                    # a torn last event (or a length no file this size can hold)
+                    damage._stopped(base, f"an event of {HEADER + cl + dl} bytes, only {file_size - base} left in "
+                                          "the file (cut short: a writer killed, a file truncated)")
+                    break
                 want = need
             if eof:
-                break  # what is left is a torn last event
+                if carry and stop < L:  # what is left is a torn last event, or bytes that are none
+                    damage._stopped(base, "the file ends inside an event" if carry[:4] == SYNC[:len(carry[:4])]
+                                    else "bytes after the last event that are no event")
+                break
+
+
+def _bad_header(chlen: int, datalen: int) -> str:
+    return (f"an event header no event has (channel length {int(chlen)}, data length {int(datalen)}: flipped or "
+            "overwritten bytes)")
+
+
+def log_damage(path: Path) -> LogDamage:
+    """Read a whole log only to say whether, and where, it breaks."""
+    damage = LogDamage()
+    for _ in iter_chunks(path, damage=damage):
+        pass
+    return damage
 
 
 @dataclass
@@ -262,13 +361,14 @@ class ChannelLog:
     undecodable: int = 0
 
 
-def read_log(path: Path, channels: tuple[str, ...] | None = None) -> dict[str, ChannelLog]:
+def read_log(path: Path, channels: tuple[str, ...] | None = None,
+             damage: LogDamage | None = None) -> dict[str, ChannelLog]:
     """A whole run's messages per channel (fixed-layout ones as numpy record arrays: m.seq, m.w_true
     ...), through iter_chunks. Memory grows with the run: for one run's series, not the analysis."""
     wanted = set(channels or CHANNEL_TYPES)
     parts: dict[str, list[Any]] = {ch: [] for ch in CHANNEL_TYPES}
     out = {ch: ChannelLog() for ch in CHANNEL_TYPES}
-    for chunk in iter_chunks(path):
+    for chunk in iter_chunks(path, damage=damage):
         for ch, arr in chunk.arrays.items():
             if ch in wanted:
                 parts[ch].append(arr)

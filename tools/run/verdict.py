@@ -109,6 +109,9 @@ def judge(results: dict[str, Any], transport: dict[str, Any], controller: dict[s
     foreign = transport.get("telemetry_foreign")
     if foreign:
         add("incomplete", f"foreign telemetry: {'; '.join(foreign)}")
+    log = transport.get("telemetry_log") or {}
+    if log.get("damaged"):
+        add("incomplete", f"the telemetry log is damaged: {log.get('description')}")
     # Software in the loop writes its log in-process (no logger): what it lacks shows as lost above.
     if "sil" not in exit_codes and (exit_codes.get("logger") not in (0, None) or "logger" not in exit_codes):
         add("incomplete", f"the telemetry logger failed (exit {exit_codes.get('logger')}): the log may miss data")

@@ -28,6 +28,7 @@ from tools.build.code_identity import code_identity
 from gen.lib.atomic_output import write_json_atomic
 from tools.run.hil import SIL
 from gen.lib.locks import LockHeld, flocked
+from gen.lib.one_line import one_line
 from gen.lib.outdir import OutDirError, check_out_dir
 from gen.lib.paths import REPO
 from tools.run.runner import METRICS, RunSpec, run_all
@@ -296,7 +297,7 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
         notes.append(f"the kept tuning of {', '.join(stale)} was made with other firmware or simulator code "
                      f"(tools/build/code_identity.py); `armctl study --retune` tunes again")
     for n in notes:
-        print(f"armctl study: {n}", file=sys.stderr)
+        print(f"armctl study: {one_line(n)}", file=sys.stderr)  # a file's names, to a terminal
     paper_text = None if Path(info["design_config"]).resolve() == DEFAULT_DESIGN.resolve() else DEFAULT_DESIGN.read_text()
     specs: list[RunSpec] = []
     where: list[tuple[str, str, int]] = []
@@ -364,7 +365,7 @@ def run_command(cfg: StudyConfig, arm: ArmRef, scenario: str, method: str, seed:
                 knobs: dict[str, Any] | None, bus: str, out: str) -> str:
     """The `armctl hil` command that runs one run of a study again on its own (the same run.json
     results: tests/python/test_study_rerun.py)."""
-    import shlex
+    from gen.lib.escape import shell_command
 
     parts = ["tools/armctl", "hil", "--bus", bus, "--config", _rel(cfg.path), "--scenario", scenario,
              "--method", method, "--seed", str(seed), "--duration", f"{duration:g}"]
@@ -374,7 +375,7 @@ def run_command(cfg: StudyConfig, arm: ArmRef, scenario: str, method: str, seed:
                    ("--design", arm.design)):
         if p is not None:
             parts += [opt, _rel(p)]
-    return " ".join(shlex.quote(x) for x in [*parts, "--out", out])
+    return shell_command([*parts, "--out", out])
 
 
 def _rel(p: Path) -> str:
@@ -627,7 +628,7 @@ def cmd_tune(ns: argparse.Namespace) -> int:
                        retune=True, trials=ns.trials)
     for s, recs in result.items():
         for m, rec in recs.items():
-            print(f"{s:<40} {m:<10} objective {rec['objective']:.4g}  {rec['status']} "
+            print(f"{one_line(s):<40} {m:<10} objective {rec['objective']:.4g}  {rec['status']} "
                   f"({rec['trials_run']} of at most {rec['cap']} trials)  {json.dumps(rec['knobs'])}"
                   + (f"  ({rec['edge_note']})" if rec["edge_note"] else "")
                   + (f"  validation: {rec['validation']['note']}" if rec.get("validation") else ""))

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from gen.lib import toml_input
+from gen.lib.escape import EscapeError, file_stem, path_component
 from gen.lib.one_line import one_line
 from gen.lib.params import param
 from host_sim.drive_model import REALISTIC, DriveModel
@@ -224,6 +225,10 @@ def _trajectory(d: dict[str, Any], where: str) -> Trajectory:
 
 def _scenario(name: str, d: Any) -> Scenario:
     where = f"scenario.{name}"
+    try:  # a scenario's name names its runs' folder and its figures' files, as it is
+        path_component(name, "scenario")
+    except EscapeError as exc:
+        raise StudyConfigError(str(exc)) from None
     if not isinstance(d, dict):
         raise StudyConfigError(f"{where}: expected a table")
     unknown = set(d) - {"description", "uncertainty", "drives", "bus_timing", "protocol"}
@@ -395,6 +400,12 @@ def load(path: Path) -> StudyConfig:
         raise StudyConfigError(f"study.methods: unknown or repeated {bad or methods} (known: {', '.join(METHODS)})")
     tables = _get(data, "scenario", "study", dict)
     scenarios = {name: _scenario(name, d) for name, d in tables.items()}
+    stems: dict[str, str] = {}
+    for name in scenarios:  # each scenario's figures are files of their own (fig_KIND_STEM.png)
+        other = stems.setdefault(file_stem(name).lower(), name)
+        if other != name:
+            raise StudyConfigError(f"scenario.{name}: its figures would be the files of scenario.{other} "
+                                   f"(fig_*_{file_stem(name)}.png): rename one")
     chosen = _get(data, "scenarios", "study", list, list(scenarios))
     _names(chosen, "study.scenarios")
     missing = [s for s in chosen if s not in scenarios]

@@ -24,6 +24,8 @@ from tools.study.figure_data import (BAR_METRICS, ENVELOPE_S, METRIC_UNITS, colo
 from tools.study.html_figures import (distribution_figure, envelope_figure, metrics_figure,  # noqa: E402
                                       tuning_figure)
 from tools.study.report import ESTIMATING, METRIC_TEXT, fig_name, worst_kept_run  # noqa: E402
+from gen.lib.escape import matplotlib_text as mt  # noqa: E402
+from gen.lib.one_line import one_line  # noqa: E402
 
 
 def _time_figures(out: Path, study: dict[str, Any], scenario: str) -> list[tuple[str, str | None]]:
@@ -43,7 +45,7 @@ def _time_figures(out: Path, study: dict[str, Any], scenario: str) -> list[tuple
 
     def label(m: str) -> str:
         r = runs[m][0].get("result") if runs.get(m) else None
-        return m if r == "ok" else f"{m} ({r}{', stopped' if stopped_early(series[m]['t'], study) else ''})"
+        return mt(m if r == "ok" else f"{m} ({r}{', stopped' if stopped_early(series[m]['t'], study) else ''})")
 
     def finish(fig: Any, axes: Any, title: str, kind: str, shown: list[str], at: Any = None,
                interactive: str | None = None) -> None:
@@ -53,7 +55,7 @@ def _time_figures(out: Path, study: dict[str, Any], scenario: str) -> list[tuple
                     ax.axvline(series[m]["t"][-1], color=colour[m], lw=0.8, ls=":")
                     if at is not None:  # and a cross on its line, where it ended
                         ax.plot([series[m]["t"][-1]], [at(m, j)], marker="X", ms=8, color=colour[m], mec="k", zorder=5)
-        fig.suptitle(title + (f"; {', '.join(empty)}" if empty else ""), fontsize=9, y=0.995)
+        fig.suptitle(title + (f"; {mt(', '.join(empty))}" if empty else ""), fontsize=9, y=0.995)
         axes[-1].set_xlabel("t (s)")
         made.append((_save(fig, out / fig_name(kind, scenario), tight=False), interactive))
 
@@ -62,7 +64,7 @@ def _time_figures(out: Path, study: dict[str, Any], scenario: str) -> list[tuple
         for j in range(n):
             axes[j].plot(series["pm"]["t"], series["pm"]["w"][:, j], lw=0.6, color=colour["pm"])
             axes[j].set_ylabel(f"w{j + 1}")
-        finish(fig, axes, f"Total uncertainty w (rad/s^2) during the PM run, {scenario} (cf. the paper's Fig. 6)",
+        finish(fig, axes, f"Total uncertainty w (rad/s^2) during the PM run, {mt(scenario)} (cf. the paper's Fig. 6)",
                "uncertainty", ["pm"])
     for kind, methods, unit, what, fig_of in (
             ("estimation", [m for m in ESTIMATING if m in series], "rad/s^2", "Estimation error: max |w - w_hat|",
@@ -83,7 +85,7 @@ def _time_figures(out: Path, study: dict[str, Any], scenario: str) -> list[tuple
                     ax.axhline(bound, color="k", lw=0.7, ls="--", label=f"tracking bound {bound:g} deg")
         # above the panels, where it hides no line
         axes[0].legend(loc="lower left", bbox_to_anchor=(0.0, 1.0), fontsize=7, ncol=4, frameon=False)
-        finish(fig, axes, f"{what} over {ENVELOPE_S * 1e3:g} ms, {scenario}, seed {study['seeds'][0]} "
+        finish(fig, axes, f"{what} over {ENVELOPE_S * 1e3:g} ms, {mt(scenario)}, seed {study['seeds'][0]} "
                f"(cf. the paper's {fig_of}); x: where the safety layer stopped a run",
                "estimation_error" if kind == "estimation" else "tracking_error", methods,
                at=lambda m, j, kind=kind: env[kind][m][-1, j],
@@ -136,10 +138,10 @@ def _distribution_figure(out: Path, study: dict[str, Any], scenario: str) -> str
             ax.set_yscale("log")
         else:
             ax.text(0.5, 0.5, "no run measured", ha="center", va="center", transform=ax.transAxes, fontsize=7)
-        ax.set_xticks(range(1, len(methods) + 1), methods, rotation=70, fontsize=7)
-        ax.set_title(study["arm"]["joint_names"][j], fontsize=8)
+        ax.set_xticks(range(1, len(methods) + 1), [mt(m) for m in methods], rotation=70, fontsize=7)
+        ax.set_title(mt(study["arm"]["joint_names"][j]), fontsize=8)
     axes[0].set_ylabel("L-inf tracking error (deg), one point per seed")
-    fig.suptitle(f"{scenario}: {len(study['seeds'])} seed(s); dot: a run that ended ok, x: one that did not")
+    fig.suptitle(f"{mt(scenario)}: {len(study['seeds'])} seed(s); dot: a run that ended ok, x: one that did not")
     return _save(fig, out / fig_name("distribution", scenario))
 
 
@@ -160,18 +162,18 @@ def _metrics_figure(out: Path, study: dict[str, Any], scenario: str) -> str:
             bad = b["not_ok"] > 0
             ax.bar(x, b["mean"], width, color=colour[m], edgecolor="k" if bad else colour[m], lw=0.6,
                    hatch="///" if bad else None, alpha=0.9,
-                   label=m + (f" ({b['not_ok']} of {b['runs']} runs not ok)" if bad else ""))
+                   label=mt(m + (f" ({b['not_ok']} of {b['runs']} runs not ok)" if bad else "")))
             ax.errorbar(x, b["mean"], yerr=[b["below"], b["above"]], fmt="none", ecolor="k", lw=0.8, capsize=2)
         vals = np.concatenate([b["mean"] for b in bars.values()]) if bars else np.array([])
         vals = vals[np.isfinite(vals) & (vals > 0)]
         if len(vals) and vals.max() / vals.min() > 30:
             ax.set_yscale("log")
-        ax.set_xticks(x0, groups, fontsize=8)
+        ax.set_xticks(x0, [mt(g) for g in groups], fontsize=8)
         ax.set_ylabel(METRIC_UNITS[metric])
         ax.set_title(f"{METRIC_TEXT[metric]}: mean over {len(study['seeds'])} seed(s), 95 % interval", fontsize=9)
         ax.grid(axis="y", lw=0.3, alpha=0.6)
     axes[0].legend(fontsize=7, ncol=min(len(study["methods"]), 4), loc="upper left")
-    fig.suptitle(f"{scenario}: every metric per joint (hatched: a method some of whose runs did not end ok)",
+    fig.suptitle(f"{mt(scenario)}: every metric per joint (hatched: a method some of whose runs did not end ok)",
                  fontsize=10)
     return _save(fig, out / fig_name("metrics", scenario))
 
@@ -190,8 +192,8 @@ def convergence_figure(out: Path, scenario: str, recs: dict[str, dict[str, Any]]
         x = np.arange(1, curve.size + 1)
         c = colour.get(m)
         status = r.get("status", "?")
-        ax.step(x, curve, where="post", color=c, label=f"{m}: {status}, {curve.size} of at most {r.get('cap')} "
-                                                         f"trials, best {curve[-1]:.4g}")
+        ax.step(x, curve, where="post", color=c, label=mt(f"{m}: {status}, {curve.size} of at most {r.get('cap')} "
+                                                            f"trials, best {curve[-1]:.4g}"))
         ax.scatter([x[-1]], [curve[-1]], color=c, marker="o" if status == "converged" else "x", s=40, zorder=3)
         starts = np.cumsum([len(rd["trials"]) for rd in r.get("rounds", [])])[:-1]
         for st in starts:
@@ -203,7 +205,7 @@ def convergence_figure(out: Path, scenario: str, recs: dict[str, dict[str, Any]]
     ax.axhline(1000.0, color="red", lw=0.6, ls="-.")  # at and above: no trial ended well (tools/study/tuning.py)
     ax.set_xlabel("trial (every round, in order)")
     ax.set_ylabel("best objective so far (sum L-inf, rad; >= 1000: failed)")
-    ax.set_title(f"{scenario}: tuning, best so far (o converged, x capped; dotted: a widening round starts)",
+    ax.set_title(f"{mt(scenario)}: tuning, best so far (o converged, x capped; dotted: a widening round starts)",
                  fontsize=9)
     ax.legend(fontsize=7)
     return _save(fig, out / fig_name("tuning", scenario))
@@ -220,7 +222,7 @@ def _arm_strip(out: Path, study: dict[str, Any], scenario: str) -> list[tuple[st
     try:
         write_strip_apart(out / scenario / worst[0] / f"seed-{worst[1]}", out, name)
     except RenderError as exc:  # the report says why it has no strip, and the study goes on
-        print(f"armctl study: no arm strip for {scenario}: {exc}", file=sys.stderr)
+        print(f"armctl study: no arm strip for {one_line(scenario)}: {one_line(str(exc))}", file=sys.stderr)
         return []
     return [(name, None)]
 

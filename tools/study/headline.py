@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from gen.lib.atomic_output import write_json_atomic, write_text_atomic
+from gen.lib.escape import markdown_fence
 from tools.build.code_identity import code_identity
 from gen.lib.paths import REPO
 
@@ -50,7 +51,7 @@ def record_of(study: dict[str, Any]) -> dict[str, Any]:
 def render(record: dict[str, Any]) -> str:
     from tools.study.report import summary_table
 
-    return "```\n" + summary_table(record) + "\n```"
+    return markdown_fence(summary_table(record).splitlines())
 
 
 def marked_block(text: str, begin: str, end: str) -> str | None:

@@ -12,6 +12,7 @@ import numpy as np
 from tools.study.figure_data import (BAR_METRICS, ENVELOPE_S, METRIC_UNITS, colour_of, decimate, metric_bars,
                                      stopped_early)
 from tools.study.report import ESTIMATING, METRIC_TEXT
+from gen.lib.escape import plotly_text as pt
 
 POINTS = 600  # samples per envelope trace: each the max over its block, so no peak is lost
 FONT = {"size": 11}
@@ -43,7 +44,7 @@ def envelope_figure(study: dict[str, Any], scenario: str, kind: str, series: dic
     import plotly.graph_objects as go
 
     n = study["arm"]["n_joints"]
-    names = study["arm"]["joint_names"]
+    names = [pt(x) for x in study["arm"]["joint_names"]]
     colour = colour_of(study)
     runs = study["scenarios"][scenario]["runs"]
     methods = [m for m in (ESTIMATING if kind == "estimation" else study["methods"]) if m in env]
@@ -53,17 +54,17 @@ def envelope_figure(study: dict[str, Any], scenario: str, kind: str, series: dic
         t, y = decimate(series[m]["t"], env[m], POINTS)
         r = runs[m][0].get("result") if runs.get(m) else None
         stopped = stopped_early(series[m]["t"], study)
-        label = m if r == "ok" else f"{m} ({r}{', stopped' if stopped else ''})"
+        label = pt(m if r == "ok" else f"{m} ({r}{', stopped' if stopped else ''})")
         for j in range(n):
             fig.add_trace(go.Scatter(x=t.astype(np.float32), y=y[:, j].astype(np.float32), mode="lines", name=label,
                                      legendgroup=m, showlegend=j == 0, line={"color": colour[m], "width": 1.3},
-                                     hovertemplate=f"{m}, {names[j]}: %{{y:.3g}} {unit} at %{{x:.3f}} s<extra></extra>"),
+                                     hovertemplate=f"{pt(m)}, {names[j]}: %{{y:.3g}} {unit} at %{{x:.3f}} s<extra></extra>"),
                           row=j + 1, col=1)
             if stopped:
                 fig.add_trace(go.Scatter(x=[float(t[-1])], y=[float(y[-1, j])], mode="markers", legendgroup=m,
                                          showlegend=False, marker={"symbol": "x", "size": 11, "color": colour[m],
                                                                    "line": {"width": 1, "color": "black"}},
-                                         hovertemplate=f"{m} stopped here: %{{x:.3f}} s<extra></extra>"),
+                                         hovertemplate=f"{pt(m)} stopped here: %{{x:.3f}} s<extra></extra>"),
                               row=j + 1, col=1)
     bound = next((r[0]["bounds"]["max_error_deg"] for r in runs.values() if r and r[0].get("bounds")), None)
     for j in range(n):
@@ -74,7 +75,7 @@ def envelope_figure(study: dict[str, Any], scenario: str, kind: str, series: dic
             fig.add_hline(y=bound, line={"dash": "dash", "width": 1, "color": "black"}, row=j + 1, col=1)
     fig.update_xaxes(title_text="t (s), after the hold", row=n, col=1)
     what = "max |e|" if kind == "tracking" else "max |w - w_hat|"
-    return _layout(fig, f"{scenario}: {what} over {ENVELOPE_S * 1e3:g} ms ({unit}), seed {study['seeds'][0]}"
+    return _layout(fig, f"{pt(scenario)}: {what} over {ENVELOPE_S * 1e3:g} ms ({unit}), seed {study['seeds'][0]}"
                         + (f"; dashed: the tracking bound {bound:g} deg" if kind == "tracking" and bound else "")
                         + "; x: where the safety layer stopped a run", 130 * n + 120)
 
@@ -90,15 +91,16 @@ def metrics_figure(study: dict[str, Any], scenario: str) -> str:
     shown: set[str] = set()
     for row, metric in enumerate(BAR_METRICS, start=1):
         groups, bars = metric_bars(study, scenario, metric)
+        groups = [pt(g) for g in groups]
         for m, b in bars.items():
             bad = b["not_ok"] > 0
-            fig.add_trace(go.Bar(x=groups, y=b["mean"], name=m + (f" ({b['not_ok']} of {b['runs']} runs not ok)"
-                                                                  if bad else ""),
+            fig.add_trace(go.Bar(x=groups, y=b["mean"], name=pt(m + (f" ({b['not_ok']} of {b['runs']} runs not ok)"
+                                                                     if bad else "")),
                                  legendgroup=m, showlegend=m not in shown, marker_color=colour[m],
                                  marker_pattern_shape="/" if bad else "",
                                  error_y={"type": "data", "array": np.nan_to_num(b["above"]),
                                           "arrayminus": np.nan_to_num(b["below"]), "thickness": 1, "width": 3},
-                                 hovertemplate=f"{m}, %{{x}}: %{{y:.4g}} {METRIC_UNITS[metric]}<extra></extra>"),
+                                 hovertemplate=f"{pt(m)}, %{{x}}: %{{y:.4g}} {METRIC_UNITS[metric]}<extra></extra>"),
                           row=row, col=1)
             shown.add(m)
         vals = np.concatenate([b["mean"] for b in bars.values()]) if bars else np.array([])
@@ -107,7 +109,7 @@ def metrics_figure(study: dict[str, Any], scenario: str) -> str:
         fig.update_yaxes(title_text=METRIC_UNITS[metric], type="log" if log else "linear", dtick=1 if log else None,
                          row=row, col=1)
     fig.update_layout(barmode="group")
-    return _layout(fig, f"{scenario}: every metric per joint over {len(study['seeds'])} seed(s) (hatched: a method "
+    return _layout(fig, f"{pt(scenario)}: every metric per joint over {len(study['seeds'])} seed(s) (hatched: a method "
                         "some of whose runs did not end ok)", 1100)
 
 
@@ -117,7 +119,7 @@ def distribution_figure(study: dict[str, Any], scenario: str) -> str:
     import plotly.graph_objects as go
 
     sc = study["scenarios"][scenario]
-    names = study["arm"]["joint_names"]
+    names = [pt(x) for x in study["arm"]["joint_names"]]
     colour = colour_of(study)
     fig = _figure(1, len(names), subplot_titles=names, horizontal_spacing=0.03)
     for j in range(len(names)):
@@ -128,21 +130,21 @@ def distribution_figure(study: dict[str, Any], scenario: str) -> str:
                    if v is not None and np.isfinite(v)]
             if not pts:
                 continue
-            fig.add_trace(go.Box(y=[p[1] for p in pts], name=m, legendgroup=m, showlegend=j == 0, boxpoints="all",
-                                 jitter=0.3, pointpos=0, marker={"color": colour[m], "size": 4},
-                                 line={"color": colour[m]}, text=[f"seed {p[0]}: {p[2]}" for p in pts],
-                                 hovertemplate=f"{m}, {names[j]}: %{{y:.4g}} deg, %{{text}}<extra></extra>"),
+            fig.add_trace(go.Box(y=[p[1] for p in pts], name=pt(m), legendgroup=m, showlegend=j == 0,
+                                 boxpoints="all", jitter=0.3, pointpos=0, marker={"color": colour[m], "size": 4},
+                                 line={"color": colour[m]}, text=[pt(f"seed {p[0]}: {p[2]}") for p in pts],
+                                 hovertemplate=f"{pt(m)}, {names[j]}: %{{y:.4g}} deg, %{{text}}<extra></extra>"),
                           row=1, col=j + 1)
             bad = [p for p in pts if p[2] != "ok"]
             if bad:
-                fig.add_trace(go.Scatter(x=[m] * len(bad), y=[p[1] for p in bad], mode="markers", showlegend=False,
+                fig.add_trace(go.Scatter(x=[pt(m)] * len(bad), y=[p[1] for p in bad], mode="markers", showlegend=False,
                                          legendgroup=m, marker={"symbol": "x", "size": 10, "color": "black"},
-                                         text=[f"seed {p[0]}: {p[2]}" for p in bad],
+                                         text=[pt(f"seed {p[0]}: {p[2]}") for p in bad],
                                          hovertemplate="%{text}<extra></extra>"), row=1, col=j + 1)
         fig.update_yaxes(type="log", dtick=1, row=1, col=j + 1)
         fig.update_xaxes(showticklabels=False, row=1, col=j + 1)
     fig.update_yaxes(title_text="L-inf tracking error (deg)", row=1, col=1)
-    return _layout(fig, f"{scenario}: L-infinity tracking error per joint, one point per seed (x: a run that did "
+    return _layout(fig, f"{pt(scenario)}: L-infinity tracking error per joint, one point per seed (x: a run that did "
                         "not end ok)", 460)
 
 
@@ -156,9 +158,9 @@ def tuning_figure(scenario: str, recs: dict[str, dict[str, Any]], colour: dict[s
         if not curve.size:
             continue
         fig.add_trace(go.Scatter(x=np.arange(1, curve.size + 1), y=curve, mode="lines", line_shape="hv",
-                                 name=f"{m}: {r.get('status', '?')}, best {curve[-1]:.4g}",
+                                 name=pt(f"{m}: {r.get('status', '?')}, best {curve[-1]:.4g}"),
                                  line={"color": colour.get(m, "#333")},
-                                 hovertemplate=f"{m}: trial %{{x}}, best so far %{{y:.4g}}<extra></extra>"))
+                                 hovertemplate=f"{pt(m)}: trial %{{x}}, best so far %{{y:.4g}}<extra></extra>"))
     fig.update_yaxes(type="log", dtick=1, title_text="best objective so far (sum L-inf, rad; >= 1000: failed)")
     fig.update_xaxes(title_text="trial (every round, in order)")
-    return _layout(fig, f"{scenario}: tuning, the best objective so far", 420)
+    return _layout(fig, f"{pt(scenario)}: tuning, the best objective so far", 420)

@@ -7,12 +7,12 @@ figures' data, the images and the style are all inside the page: no CDN, no file
 from __future__ import annotations
 
 import base64
-import html
 import re
 from pathlib import Path
 from typing import Any
 
 from gen.lib.atomic_output import write_text_atomic
+from gen.lib.escape import html_text, markdown_html, script_json
 
 HTML_FILE = "report.html"
 STYLE = """
@@ -41,17 +41,12 @@ Promise.all(drawing).then(() => { document.body.dataset.figures = "drawn"; });
 IMAGE = re.compile(r'<p><img alt="([^"]*)" src="([^"]+\.png)" ?/?></p>')
 
 
-def _script_json(text: str) -> str:
-    """JSON safe inside a <script> element: no "</" can end it early."""
-    return text.replace("</", "<\\/")
-
-
 def page(title: str, body: str, plotly: bool) -> str:
     from plotly.offline import get_plotlyjs
 
     scripts = f"<script>{get_plotlyjs()}</script>" if plotly else ""
     return (f'<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
-            f'<meta name="viewport" content="width=device-width, initial-scale=1">\n<title>{html.escape(title)}</title>\n'
+            f'<meta name="viewport" content="width=device-width, initial-scale=1">\n<title>{html_text(title)}</title>\n'
             f"<style>{STYLE}</style>\n{scripts}\n</head>\n<body>\n<main>\n{body}\n</main>\n"
             + (f"<script>{RENDER}</script>\n" if plotly else "") + "</body>\n</html>\n")
 
@@ -59,9 +54,7 @@ def page(title: str, body: str, plotly: bool) -> str:
 def write_html(out: Path, study: dict[str, Any], markdown_text: str, interactive: dict[str, str]) -> Path:
     """OUT/report.html from report.md's text: each figure interactive where `interactive` has it
     (file name -> plotly JSON), else its PNG inlined."""
-    import markdown
-
-    body = markdown.markdown(markdown_text, extensions=["tables", "fenced_code", "toc"])
+    body = markdown_html(markdown_text)  # raw HTML off: report.md's data is escaped, and the renderer adds none
     used: list[str] = []
 
     def figure(m: re.Match[str]) -> str:
@@ -69,13 +62,13 @@ def write_html(out: Path, study: dict[str, Any], markdown_text: str, interactive
         if src in interactive:
             key = f"figure-{len(used)}"
             used.append(key)
-            return (f'<div class="figure" data-figure="{key}" title="{html.escape(alt)}"></div>\n'
-                    f'<script type="application/json" id="{key}">{_script_json(interactive[src])}</script>')
+            return (f'<div class="figure" data-figure="{html_text(key)}" title="{html_text(alt)}"></div>\n'
+                    f'<script type="application/json" id="{html_text(key)}">{script_json(interactive[src])}</script>')
         try:
             data = base64.b64encode((out / src).read_bytes()).decode()
         except OSError:
             return m.group(0)  # report.md names it and it is gone: the page says so as the Markdown does
-        return f'<p><img class="figure" alt="{html.escape(alt)}" src="data:image/png;base64,{data}"></p>'
+        return f'<p><img class="figure" alt="{html_text(alt)}" src="data:image/png;base64,{data}"></p>'
 
     body = IMAGE.sub(figure, body)
     path = out / HTML_FILE

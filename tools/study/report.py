@@ -11,6 +11,8 @@ from typing import Any
 import numpy as np
 
 from gen.lib.atomic_output import write_text_atomic
+from gen.lib.escape import file_stem, markdown_code as code, markdown_fence, markdown_text as md, shell_command
+from gen.lib.one_line import one_line
 from tools.run.verdict import FOLLOWING_ERROR_STOP_DEG, left_tracking_bound, stopped_by_following_error
 from gen.lib.params import default
 from tools.study.config import STUDY_PROTOCOL
@@ -71,7 +73,7 @@ def _tuning_status(r: dict[str, Any]) -> str:
 
 def _labels(study: dict[str, Any], paper: bool) -> list[str]:
     names = study["arm"]["joint_names"]
-    return [f"joint {j + 1}" if paper else f"{j + 1} {names[j]}" for j in range(len(names))]
+    return [f"joint {j + 1}" if paper else f"{j + 1} {md(names[j])}" for j in range(len(names))]
 
 
 def in_degrees(s: dict[str, Any], metric: str) -> dict[str, Any]:
@@ -85,11 +87,11 @@ def in_degrees(s: dict[str, Any], metric: str) -> dict[str, Any]:
 def _stats_table(study: dict[str, Any], sc: dict[str, Any], metric: str, labels: list[str]) -> str:
     methods = [m for m in study["methods"] if metric != "est" or m in ESTIMATING]
     if metric == "power":
-        return _md_table(["method", "mean ± 95 % CI"], [[m, _ci(sc["stats"][m]["power"]["total"])] for m in methods])
+        return _md_table(["method", "mean ± 95 % CI"], [[md(m), _ci(sc["stats"][m]["power"]["total"])] for m in methods])
     rows = [[labels[j]] + [_ci(in_degrees(sc["stats"][m][metric]["per_joint"][j], metric)) for m in methods]
             for j in range(len(labels))]
     rows.append(["sum of joints"] + [_ci(in_degrees(sc["stats"][m][metric]["total"], metric)) for m in methods])
-    return _md_table(["joint", *methods], rows)
+    return _md_table(["joint", *map(md, methods)], rows)
 
 
 def _paired_table(study: dict[str, Any], sc: dict[str, Any], metric: str, labels: list[str]) -> str:
@@ -103,10 +105,10 @@ def _paired_table(study: dict[str, Any], sc: dict[str, Any], metric: str, labels
                (f", p {p:.2g}" if p is not None else "")
 
     if metric == "power":
-        return _md_table(["", *bases], [["total", *[cell(sc["pm_versus"][b]["power"]["total"]) for b in bases]]])
+        return _md_table(["", *map(md, bases)], [["total", *[cell(sc["pm_versus"][b]["power"]["total"]) for b in bases]]])
     rows = [[labels[j], *[cell(sc["pm_versus"][b][metric]["per_joint"][j]) for b in bases]] for j in range(len(labels))]
     rows.append(["sum of joints", *[cell(sc["pm_versus"][b][metric]["total"]) for b in bases]])
-    return _md_table(["PM vs", *bases], rows)
+    return _md_table(["PM vs", *map(md, bases)], rows)
 
 
 def _verdict(study: dict[str, Any], sc: dict[str, Any], labels: list[str]) -> list[str]:
@@ -119,9 +121,10 @@ def _verdict(study: dict[str, Any], sc: dict[str, Any], labels: list[str]) -> li
             kinds = sorted({r for _, r in bad}, key=str)
             why = next((reasons[0] for r in sc["runs"][m] if r.get("result") == "failed"
                         for reasons in [r.get("verdict_reasons") or []] if reasons), None)
-            lines.append(f"- {m}: {len(bad)} of {len(st['results'])} runs did not end ok ("
-                         + "; ".join(f"{k} on seed(s) {', '.join(str(s) for s, r in bad if r == k)}" for k in kinds)
-                         + (f"; the first failure: {why}" if why else "")
+            lines.append(f"- {md(m)}: {len(bad)} of {len(st['results'])} runs did not end ok ("
+                         + "; ".join(f"{md(str(k))} on seed(s) {', '.join(str(s) for s, r in bad if r == k)}"
+                                     for k in kinds)
+                         + (f"; the first failure: {md(why)}" if why else "")
                          + ("); its runs stopped before the trajectory ended have no metrics: means and "
                             "comparisons cover the runs that have them, and the comparisons say on how many seeds."
                             if any(not r.get("tracking_max_abs_rad") for r in sc["runs"][m]) else
@@ -219,8 +222,9 @@ def _confirmation(study: dict[str, Any]) -> list[str]:
             f"({rows[0]['bus'] if rows else '-'}) gave the same results bit for bit"
             if conf["all_match"] else
             f"**Software in the loop and lockstep HIL disagree**: {len(rows) - ok} of {len(rows)} repeated runs differ")
-    return [head + ":", "", *[f"- {r['method']} in `{r['scenario']}`, seed {r['seed']}: "
-                              + ("same" if r["match"] else "differs in " + ", ".join(r["differences"])) for r in rows], ""]
+    return [head + ":", "", *[f"- {md(r['method'])} in {code(r['scenario'])}, seed {r['seed']}: "
+                              + ("same" if r["match"] else "differs in " + md(", ".join(r["differences"]))) for r in rows],
+            ""]
 
 
 def _trajectory_lines(study: dict[str, Any]) -> list[str]:
@@ -229,17 +233,17 @@ def _trajectory_lines(study: dict[str, Any]) -> list[str]:
     if not t.get("amp"):
         return []
     names = study["arm"]["joint_names"]
-    return [f"Trajectory ({t.get('from', 'the config')}): q_d = home + a (1 - cos 2 pi f t), "
-            + "; ".join(f"{n} a {a:g} rad, f {f:g} Hz" for n, a, f in zip(names, t["amp"], t["freq_hz"])) + "."]
+    return [f"Trajectory ({md(str(t.get('from', 'the config')))}): q_d = home + a (1 - cos 2 pi f t), "
+            + "; ".join(f"{code(n)} a {a:g} rad, f {f:g} Hz" for n, a, f in zip(names, t["amp"], t["freq_hz"])) + "."]
 
 
 def drivetrain_table(study: dict[str, Any]) -> str:
     """The arm's joints as the simulator makes them (gen/drivetrain.py) and each one's first
     resonance at home: what bounds the gains a real arm survives."""
-    rows = [[j["name"], str(j["size"]), f"{j['stiffness']:.3g}", f"{j['damping']:.3g}", f"{j['rotor_inertia']:.3g}",
+    rows = [[md(j["name"]), md(str(j["size"])), f"{j['stiffness']:.3g}", f"{j['damping']:.3g}", f"{j['rotor_inertia']:.3g}",
              f"{j['link_inertia_at_home']:.3g}", f"{j['resonance_locked_hz']:.1f}",
              f"{j['resonance_free_hz']:.1f}" if j["resonance_free_hz"] is not None else "-",
-             "flexible" if j["flexible"] else f"rigid: {j['rigid_because']}"] for j in study["arm"]["drivetrain"]]
+             "flexible" if j["flexible"] else f"rigid: {md(str(j['rigid_because']))}"] for j in study["arm"]["drivetrain"]]
     return _md_table(["joint", "gear size", "stiffness (N m/rad)", "damping (N m s/rad)", "rotor inertia (kg m^2)",
                       "link inertia at home (kg m^2)", "resonance, motor locked (Hz)", "motor free (Hz)", "simulated"],
                      rows)
@@ -257,7 +261,7 @@ def _drivetrain_lines(study: dict[str, Any]) -> list[str]:
             "sqrt(K (1 / J_link + 1 / J_rotor)).", "", drivetrain_table(study), "",
             f"The arm's first resonance: {arm['first_resonance_hz']:.1f} Hz ({2 * np.pi * arm['first_resonance_hz']:.0f} "
             "rad/s). Every tuned pick's closed-loop bandwidth is kept below it (each scenario's tuning table). Rated "
-            f"payload {pay.get('rated_kg', 0):g} kg, at {pay.get('at', '-')}.", ""]
+            f"payload {pay.get('rated_kg', 0):g} kg, at {md(str(pay.get('at', '-')))}.", ""]
 
 
 def recommendation(study: dict[str, Any], name: str) -> str:
@@ -271,26 +275,26 @@ def recommendation(study: dict[str, Any], name: str) -> str:
     clean = [m for m in study["methods"] if all(r == "ok" for r in sc["stats"][m]["results"])
              and total[m]["mean"] is not None]
     others = [m for m in study["methods"] if m not in clean]
-    why_not = f" ({', '.join(f'{m}: not every run ended ok' for m in others)})" if others else ""
+    why_not = f" ({', '.join(f'{md(m)}: not every run ended ok' for m in others)})" if others else ""
     if not clean:
-        return f"- `{name}`: no method ran ok on every seed{why_not}."
+        return f"- {code(name)}: no method ran ok on every seed{why_not}."
     ranked = sorted(clean, key=lambda m: total[m]["mean"])
     best = ranked[0]
 
     def against(m: str) -> str:
         c = paired(total[best]["values"], total[m]["values"])
         p = f", p {c['t_test_p']:.2g}" if c.get("t_test_p") is not None else ""
-        return f"{c['ratio_of_means']:.2f}x {m}'s (lower on {c['a_lower']}/{c['n']} seeds{p})"
+        return f"{c['ratio_of_means']:.2f}x {md(m)}'s (lower on {c['a_lower']}/{c['n']} seeds{p})"
 
     bw = (sc.get("bandwidth_hz") or {}).get(best)
     res = study["arm"].get("first_resonance_hz")
     band = f"; its closed-loop bandwidth {bw:.3g} Hz, {bw / res:.2f}x the first resonance" if bw and res else ""
     cmp = [against(m) for m in ranked[1:2]] + ([against("pm")] if best != "pm" and "pm" in clean[1:] and
                                                ranked[1] != "pm" else [])
-    return (f"- `{name}`: pick **{best}**: its L-infinity tracking error summed over the joints is "
+    return (f"- {code(name)}: pick **{md(best)}**: its L-infinity tracking error summed over the joints is "
             f"{np.degrees(total[best]['mean']):.3g} deg on average over {total[best]['n']} seeds"
             + (", " + " and ".join(cmp) if cmp else "") + f"{band}. Every run ended ok for "
-            f"{', '.join(ranked)}{why_not}.")
+            f"{', '.join(map(md, ranked))}{why_not}.")
 
 
 def _bandwidth_cell(sc: dict[str, Any], m: str, resonance: float | None) -> str:
@@ -304,7 +308,7 @@ def _bandwidth_cell(sc: dict[str, Any], m: str, resonance: float | None) -> str:
 
 def fig_name(kind: str, scenario: str) -> str:
     """fig_KIND_SCENARIO.png, the scenario's name made a file name."""
-    return f"fig_{kind}_{''.join(c if c.isalnum() else '-' for c in scenario)}.png"
+    return f"fig_{kind}_{file_stem(scenario)}.png"
 
 
 def _shown(path: Path) -> str:
@@ -364,88 +368,88 @@ def write_report(out: Path, study: dict[str, Any], figures: bool = True) -> None
     n = arm["n_joints"]
     paper = arm["is_default"] and n == 6  # the paper's numbers are for its six-joint arm
     labels = _labels(study, paper)
-    wiring = ", ".join(f"{b['name']}: drives {','.join(map(str, b['drives']))}" for b in arm["buses"])
-    md = [f"# Study: {study['description']}", "",
-          f"Arm `{arm['name']}` ({n} joints: {', '.join(arm['joint_names'])}; model `{arm['model']}`, hash "
-          f"{arm['model_hash']}), its CAN buses {wiring}, {_how_run(study)} at "
-          f"{default('controller', 'rate') / 1000:g} kHz. Config `{study['config']}`; "
-          f"seeds {study['seeds']}; trajectory {study['duration_s']:g} s after a {study['hold_s']:g} s hold on the "
-          "start pose (metrics cover the trajectory only). Intervals are 95 % confidence intervals of the mean over "
-          "the seeds (Student's t); PM against another method is paired on the same seeds: the ratio of the means, "
-          "on how many seeds PM was lower, and the p-value of the paired t-test (two-sided; study.json also has "
-          "Wilcoxon's signed-rank p, which with 5 seeds cannot go below 0.0625).",
-          "", *_trajectory_lines(study),
-          "", f"Tuning: {study['tuning_procedure']}", "", *_confirmation(study),
-          *([] if figures else ["Figures: not drawn (`--no-figures`).", ""]),
-          *(["Notes:", "", *[f"- {x}" for x in study.get("notes", [])], ""] if study.get("notes") else []),
-          *_drivetrain_lines(study),
-          "## What to pick", "",
-          "Per scenario, the method with the lowest mean tracking error (the sum over joints of the L-infinity "
-          "error, the tuning's objective) among those whose every run ended ok, against the next best and PM on the "
-          "same seeds (paired t-test):", "",
-          *[recommendation(study, name) for name in study["scenarios"]], ""]
+    wiring = ", ".join(f"{md(b['name'])}: drives {','.join(map(str, b['drives']))}" for b in arm["buses"])
+    text = [f"# Study: {md(study['description'])}", "",
+            f"Arm {code(arm['name'])} ({n} joints: {', '.join(map(code, arm['joint_names']))}; model "
+            f"{code(arm['model'])}, hash {md(arm['model_hash'])}), its CAN buses {wiring}, {md(_how_run(study))} at "
+            f"{default('controller', 'rate') / 1000:g} kHz. Config {code(study['config'])}; "
+            f"seeds {study['seeds']}; trajectory {study['duration_s']:g} s after a {study['hold_s']:g} s hold on the "
+            "start pose (metrics cover the trajectory only). Intervals are 95 % confidence intervals of the mean over "
+            "the seeds (Student's t); PM against another method is paired on the same seeds: the ratio of the means, "
+            "on how many seeds PM was lower, and the p-value of the paired t-test (two-sided; study.json also has "
+            "Wilcoxon's signed-rank p, which with 5 seeds cannot go below 0.0625).",
+            "", *_trajectory_lines(study),
+            "", f"Tuning: {md(study['tuning_procedure'])}", "", *_confirmation(study),
+            *([] if figures else ["Figures: not drawn (`--no-figures`).", ""]),
+            *(["Notes:", "", *[f"- {md(x)}" for x in study.get("notes", [])], ""] if study.get("notes") else []),
+            *_drivetrain_lines(study),
+            "## What to pick", "",
+            "Per scenario, the method with the lowest mean tracking error (the sum over joints of the L-infinity "
+            "error, the tuning's objective) among those whose every run ended ok, against the next best and PM on the "
+            "same seeds (paired t-test):", "",
+            *[recommendation(study, name) for name in study["scenarios"]], ""]
     for i, (name, sc) in enumerate(study["scenarios"].items()):
         d = sc["definition"]
-        md += [f"## Scenario `{name}`", "", d["description"], "",
-               f"Uncertainty `{d['uncertainty']}`; drives `{d['drives']}`, speaking "
-               f"{PROTOCOL_TEXT[study.get('protocol') or d.get('protocol', STUDY_PROTOCOL)]}"
-               + (" (every scenario's runs, with the picks tuned on its own protocol)" if study.get("protocol") else "")
-               + f"; bus timing {'emulated' if d['bus_timing'] else 'not emulated'}.", "",
-               *([f"Per-joint values on this arm from the config's `{d['per_joint_from']}`.", ""]
-                 if d.get("per_joint_from") else []), "### Verdict", ""]
-        md += _verdict(study, sc, labels) + [""]
+        text += [f"## Scenario {code(name)}", "", md(d["description"]), "",
+                 f"Uncertainty {code(str(d['uncertainty']))}; drives {code(str(d['drives']))}, speaking "
+                 f"{PROTOCOL_TEXT[study.get('protocol') or d.get('protocol', STUDY_PROTOCOL)]}"
+                 + (" (every scenario's runs, with the picks tuned on its own protocol)" if study.get("protocol") else "")
+                 + f"; bus timing {'emulated' if d['bus_timing'] else 'not emulated'}.", "",
+                 *([f"Per-joint values on this arm from the config's {code(str(d['per_joint_from']))}.", ""]
+                   if d.get("per_joint_from") else []), "### Verdict", ""]
+        text += _verdict(study, sc, labels) + [""]
         if study.get("commands", {}).get(name):
-            md += [f"One run again on its own (SEED: one of {study['seeds']}; the same run.json results):", "", "```sh",
-                   *study["commands"][name].values(), "```", ""]
-        md += ["The paper's claims, with this scenario's evidence:", ""] + _claims(sc) + [""]
+            text += [f"One run again on its own (SEED: one of {study['seeds']}; the same run.json results):", "",
+                     markdown_fence(study["commands"][name].values(), "sh"), ""]
+        text += ["The paper's claims, with this scenario's evidence:", ""] + _claims(sc) + [""]
         resonance = arm.get("first_resonance_hz")
-        md += ["### Tuning", "", _md_table(
-            ["method", "knobs", "closed-loop bandwidth", "objective (worst seed's sum L-inf, rad)", "trials",
-             "validation", "source", "note"],
-            [[m, f"`{ {k: (round(v, 4) if isinstance(v, float) else v) for k, v in r['knobs'].items()} }`",
-              _bandwidth_cell(sc, m, resonance), _fmt(r["objective"]), _tuning_status(r),
-              (r.get("validation") or {}).get("note", "-"), r.get("source", ""),
-              r.get("edge_note") or (f"no trial ended well; the best: {r['failed']}" if r.get("failed") else "")]
-             for m, r in sc["tuning"].items()]), "",
-            "pm-paper-weights: the paper's own weights (gen/configs/paper.toml), not tuned; its closed-loop "
-            f"bandwidth: {_bandwidth_cell(sc, 'pm-paper-weights', resonance)}. Every trial is in "
-            "study.json; the Optuna studies in the tuning's SQLite storage (optuna-dashboard opens it).", "",
-            *images(name, "tuning"), ""]
+        text += ["### Tuning", "", _md_table(
+              ["method", "knobs", "closed-loop bandwidth", "objective (worst seed's sum L-inf, rad)", "trials",
+               "validation", "source", "note"],
+              [[md(m), code(str({k: (round(v, 4) if isinstance(v, float) else v) for k, v in r['knobs'].items()})),
+                _bandwidth_cell(sc, m, resonance), _fmt(r["objective"]), md(_tuning_status(r)),
+                md(str((r.get("validation") or {}).get("note", "-"))), md(str(r.get("source", ""))),
+                md(str(r.get("edge_note") or (f"no trial ended well; the best: {r['failed']}" if r.get("failed") else "")))]
+               for m, r in sc["tuning"].items()]), "",
+              "pm-paper-weights: the paper's own weights (gen/configs/paper.toml), not tuned; its closed-loop "
+              f"bandwidth: {_bandwidth_cell(sc, 'pm-paper-weights', resonance)}. Every trial is in "
+              "study.json; the Optuna studies in the tuning's SQLite storage (optuna-dashboard opens it).", "",
+              *images(name, "tuning"), ""]
         for metric in ("linf", "rms", "est", "power"):
-            md += [f"### {METRIC_TEXT[metric]}", "", _stats_table(study, sc, metric, labels), "",
-                   f"PM against each method (ratio of means PM/other, seeds PM lower, p):", "",
-                   _paired_table(study, sc, metric, labels), ""]
-        md += [*images(name, "metrics"), ""]
+            text += [f"### {METRIC_TEXT[metric]}", "", _stats_table(study, sc, metric, labels), "",
+                     f"PM against each method (ratio of means PM/other, seeds PM lower, p):", "",
+                     _paired_table(study, sc, metric, labels), ""]
+        text += [*images(name, "metrics"), ""]
         if paper and name == next(iter(study["scenarios"])):
-            md += ["### Beside the paper's numbers", "",
-                   "The paper's Table 1 is its simulation (its units and uncertainty), Tables 2-3 its hardware "
-                   "experiment; ours are this scenario's means.", "",
-                   _md_table(["joint", "est PM", "est TDE", "est USDE-SMC", "paper PM", "paper TDE", "paper EUSDE-SMC"],
-                             [[labels[j], *[_fmt(sc["stats"][m]["est"]["per_joint"][j]["mean"]) if m in sc["stats"] else "-"
-                                            for m in ("pm", "tde", "usde-smc")],
-                               *[_fmt(PAPER_TABLE1[m][j]) for m in ("pm", "tde", "usde-smc")]] for j in range(n)]), "",
-                   _md_table(["joint", "L-inf PM", "L-inf TDE", "L-inf USDE-SMC", "paper PM", "paper TDE",
-                              "paper EUSDE-SMC"],
-                             [[labels[j], *[_fmt(sc["stats"][m]["linf"]["per_joint"][j]["mean"]) if m in sc["stats"] else "-"
-                                            for m in ("pm", "tde", "usde-smc")],
-                               *[_fmt(PAPER_TABLE2[m][j]) for m in ("pm", "tde", "usde-smc")]] for j in range(n)]), "",
-                   f"Torque power, the paper: PM {PAPER_TABLE3['pm']} W, TDE {PAPER_TABLE3['tde']} W, EUSDE-SMC "
-                   f"{PAPER_TABLE3['usde-smc']} W.", ""]
+            text += ["### Beside the paper's numbers", "",
+                     "The paper's Table 1 is its simulation (its units and uncertainty), Tables 2-3 its hardware "
+                     "experiment; ours are this scenario's means.", "",
+                     _md_table(["joint", "est PM", "est TDE", "est USDE-SMC", "paper PM", "paper TDE", "paper EUSDE-SMC"],
+                               [[labels[j], *[_fmt(sc["stats"][m]["est"]["per_joint"][j]["mean"]) if m in sc["stats"] else "-"
+                                              for m in ("pm", "tde", "usde-smc")],
+                                 *[_fmt(PAPER_TABLE1[m][j]) for m in ("pm", "tde", "usde-smc")]] for j in range(n)]), "",
+                     _md_table(["joint", "L-inf PM", "L-inf TDE", "L-inf USDE-SMC", "paper PM", "paper TDE",
+                                "paper EUSDE-SMC"],
+                               [[labels[j], *[_fmt(sc["stats"][m]["linf"]["per_joint"][j]["mean"]) if m in sc["stats"] else "-"
+                                              for m in ("pm", "tde", "usde-smc")],
+                                 *[_fmt(PAPER_TABLE2[m][j]) for m in ("pm", "tde", "usde-smc")]] for j in range(n)]), "",
+                     f"Torque power, the paper: PM {PAPER_TABLE3['pm']} W, TDE {PAPER_TABLE3['tde']} W, EUSDE-SMC "
+                     f"{PAPER_TABLE3['usde-smc']} W.", ""]
         if figures:
-            md += [*images(name, "distribution"), "", f"Time series, the first seed of `{name}`:", "",
-                   *images(name, "time"), ""]
+            text += [*images(name, "distribution"), "", f"Time series, the first seed of {code(name)}:", "",
+                     *images(name, "time"), ""]
             worst = worst_kept_run(study, name)
             if worst and drawn.get((name, "arm")):
-                md += [f"The arm in the worst run of `{name}` whose telemetry is kept (seed {worst[1]}): "
-                       f"{worst[0]}, {worst[2]}. Solid: the arm as simulated; translucent, beside it: the "
-                       f"commanded reference (`tools/armctl render {_shown(out / name / worst[0])}/seed-{worst[1]}` "
-                       "makes its video):", "", *images(name, "arm"), ""]
-    md += ["## Summary", "", "```", summary_table(study), "```", ""]
-    write_text_atomic(out / "report.md", "\n".join(md))
+                render = shell_command(["tools/armctl", "render", _shown(out / name / worst[0] / f"seed-{worst[1]}")])
+                text += [f"The arm in the worst run of {code(name)} whose telemetry is kept (seed {worst[1]}): "
+                         f"{md(worst[0])}, {md(worst[2])}. Solid: the arm as simulated; translucent, beside it: the "
+                         f"commanded reference ({code(render)} makes its video):", "", *images(name, "arm"), ""]
+    text += ["## Summary", "", markdown_fence(summary_table(study).splitlines()), ""]
+    write_text_atomic(out / "report.md", "\n".join(text))
     write_text_atomic(out / "summary.txt", summary_table(study) + "\n")
     from tools.study.html_report import write_html
 
-    write_html(out, study, "\n".join(md), {f: fig for figs in drawn.values() for f, fig in figs if fig is not None})
+    write_html(out, study, "\n".join(text), {f: fig for figs in drawn.values() for f, fig in figs if fig is not None})
 
 
 def summary_table(study: dict[str, Any]) -> str:
@@ -455,7 +459,7 @@ def summary_table(study: dict[str, Any]) -> str:
     width = 7 * n + 2
     lines = []
     for name, sc in study["scenarios"].items():
-        lines.append(f"{name} ({len(study['seeds'])} seed(s); means)")
+        lines.append(f"{one_line(name)} ({len(study['seeds'])} seed(s); means)")
         lines.append(f"  {'method':<17}{f'Linf e (deg), joints 1-{n}':<{width}}{'RMS w-w_hat':>12}{'power W':>9}  runs")
         for m in study["methods"]:
             st = sc["stats"][m]
@@ -467,7 +471,7 @@ def summary_table(study: dict[str, Any]) -> str:
             pw_s = f"{pw:.2f}" if pw is not None and np.isfinite(pw) else "-"
             res = st["results"]
             ends = ", ".join(f"{res.count(r)} {r}" for r in sorted(set(res), key=str))
-            lines.append(f"  {m:<17}{linf:<{width}}{est_s:>12}{pw_s:>9}  {ends}")
+            lines.append(f"  {one_line(m):<17}{linf:<{width}}{est_s:>12}{pw_s:>9}  {one_line(ends)}")
     return "\n".join(lines)
 
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 import io
 import os
 import re
-import shlex
 import shutil
 import subprocess
 import sys
@@ -23,6 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO, TextIO
 
+from gen.lib.escape import shell_word
 from tools.run import procs
 from tools.vm.image import CACHE, QEMU, Image, VmError, ensure_image
 
@@ -56,7 +56,7 @@ class VmResult:
 
 
 def _script(run_dir: Path, argv: Sequence[str], cwd: Path, env: Mapping[str, str]) -> str:
-    q = shlex.quote
+    q = shell_word
     rd = q(str(run_dir))
     env_args = " ".join(q(f"{k}={v}") for k, v in sorted(env.items()) if _ENV_NAME.match(k))
     return f"""#!/bin/sh
