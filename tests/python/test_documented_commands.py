@@ -8,17 +8,20 @@ import ast
 import json
 import re
 import shutil
+import signal
+import subprocess
 import tomllib
 from pathlib import Path
 
 import pytest
 
-from cli_run import armctl
 from study_configs import with_tuning
 from gen.lib.paths import DOCS, REPO
+from tools.run.procs import communicate_or_kill
 
 pytestmark = pytest.mark.long  # minutes: every documented command
 
+ARMCTL = str(REPO / "tools" / "armctl")
 COMMANDS_PAGE = DOCS / "reference" / "commands.md"
 
 # Documented command -> the test that runs it through the CLI ("file::function"), or "CI".
@@ -89,6 +92,19 @@ def documented_commands() -> set[str]:
         if "--model FILE" in cell or "--arm FILE" in cell:  # one code path for both (tools/build/arm.py)
             out.add(f"{sub} --model|--arm")
     return out
+
+
+def armctl(*args: str, timeout: float = 900.0) -> subprocess.CompletedProcess[str]:
+    """armctl, stopped with SIGTERM on a timeout: it then stops its own children (tools/run/procs.py),
+    so a hung command fails this test and leaves no process behind to fail the others."""
+    p = subprocess.Popen([ARMCTL, *args], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        out, err = p.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        p.send_signal(signal.SIGTERM)
+        out, err = communicate_or_kill(p, 60)
+        raise AssertionError(f"armctl {' '.join(args)}: no end after {timeout:g} s\n{out}\n{err[-3000:]}") from None
+    return subprocess.CompletedProcess(p.args, p.returncode, out, err)
 
 
 def test_every_documented_command_is_exercised() -> None:

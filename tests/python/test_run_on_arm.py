@@ -34,11 +34,13 @@ from pathlib import Path
 
 import pytest
 
-from cli_run import ARMCTL, armctl
+from hil_procs import armctl
 from gen.lib.paths import REPO
 from tools.run.procs import communicate_or_kill
 
 pytestmark = pytest.mark.long
+
+ARMCTL = str(REPO / "tools" / "armctl")
 
 DRIVES = REPO / "firmware" / "protocol" / "drives.toml"
 HOME = [0.0, -1.3, 1.6, -1.87, -1.5708, 0.0]
