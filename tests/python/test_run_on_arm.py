@@ -110,12 +110,13 @@ def table_text() -> str:
     return DRIVES.read_text().replace('eds = "cia402_servo.eds"', f'eds = "{DRIVES.parent / "cia402_servo.eds"}"')
 
 
-def trajectory_csv(path: Path, amp: list[float], seconds: float = 4.0, rows: int = 81) -> Path:
+def trajectory_csv(path: Path, amp: list[float], seconds: float = 4.0, rows: int = 81,
+                   start: list[float] = HOME) -> Path:
     lines = ["t," + ",".join(NAMES)]
     for k in range(rows):
         t = seconds * k / (rows - 1)
         s = 0.5 * (1 - math.cos(2 * math.pi * t / seconds))
-        lines.append(",".join(f"{x:.6f}" for x in [t, *(h + a * s for h, a in zip(HOME, amp))]))
+        lines.append(",".join(f"{x:.6f}" for x in [t, *(h + a * s for h, a in zip(start, amp))]))
     path.write_text("\n".join(lines) + "\n")
     return path
 
@@ -340,16 +341,19 @@ def test_bad_input_is_one_line_before_anything_is_enabled(ports: int, tmp_path: 
     last = r.stderr.strip().splitlines()[-1]
     assert last.startswith(f"armctl run: {far}: row ") and "joint 3 (elbow)" in last, last
     assert "outside its range" in last, last
-    # a trajectory asking more than the model's torque allows (the shoulder swung 2 rad in 1 s)
-    fast = trajectory_csv(tmp_path / "fast.csv", [2.0, 2.0, 0.0, 0.0, 0.0, 0.0], seconds=1.0, rows=21)
-    r = armctl("run", str(fast), *udp, *common, "--out", str(tmp_path / "fast"))
+    # a trajectory within the speed and acceleration a trajectory may ask (pi rad/s, 20 rad/s^2), whose
+    # shoulder, swung 0.5 rad in 1 s with the arm stretched out level, needs more torque than it may take
+    heavy = trajectory_csv(tmp_path / "heavy.csv", [0.0, 0.5, 0.0, 0.0, 0.0, 0.0], seconds=1.0, rows=41,
+                           start=[0.0, 0.0, 0.0, -1.87, -1.5708, 0.0])
+    r = armctl("run", str(heavy), *udp, *common, "--out", str(tmp_path / "heavy"))
     last = r.stderr.strip().splitlines()[-1]
-    assert r.returncode == 2 and last.startswith(f"armctl run: {fast}: row ") and "joint 1 (shoulder_pan)" in last, last
+    assert r.returncode == 2 and last.startswith(f"armctl run: {heavy}: row "), last
+    assert "joint 2 (shoulder_lift) needs" in last and "of its 150 N m limit" in last, last
     # an interface this machine does not have
     r = armctl("run", "--hold", "--bus", "socketcan:can7,can8,can9", *common)
     assert r.returncode == 2 and r.stderr.strip().splitlines()[-1].startswith(
         "armctl run: --bus socketcan:can7: no such interface"), r.stderr
-    for name in ("far", "fast"):
+    for name in ("far", "heavy"):
         assert not (tmp_path / name / "controller.log").exists()
     # a drive table that contradicts the drive: the table says wrist_3's gear is 202:1, the drive's 0x6091 101:1
     # (its motor's rated torque the drive's own, 278 mN m)
