@@ -48,6 +48,7 @@ def _errors() -> list[tuple[tuple[type[BaseException], ...], int | Callable[[Bas
     from tools.run import procs
     from tools.build.arm import ArmChoiceError
     from tools.build import BuildError
+    from tools.build.packages import PackagesMissing
     from tools.run.cluster import ClusterError
     from tools.commands import CommandError
     from tools.bench.fuzz import FuzzError
@@ -66,7 +67,7 @@ def _errors() -> list[tuple[tuple[type[BaseException], ...], int | Callable[[Bas
         ((StudyConfigError, ArmChoiceError, ArmError, OutDirError, ClusterError, BusConfigError, RecordError,
           EscapeError), 2, "{prefix}: {exc}"),
         # The run or the machine: a run that cannot run, the VM, a compiler, a full disk (OutputError is an OSError).
-        ((HilError, VmError, FuzzError, PilBenchError, OSError), 1, "{prefix}: {exc}"),
+        ((HilError, VmError, FuzzError, PilBenchError, PackagesMissing, OSError), 1, "{prefix}: {exc}"),
     ]
 
 

@@ -1,5 +1,6 @@
 /* A minimal test harness: CHECK records failures and keeps going; TEST_MAIN_END prints the
- * "N passed, N failed" line that CI reads and sets the exit code. */
+ * "N passed, N failed" line that CI reads and sets the exit code (non-zero on a failure, or when
+ * no check ran at all). */
 #ifndef ARM_TEST_CHECK_H
 #define ARM_TEST_CHECK_H
 
@@ -33,10 +34,15 @@ static inline int check_record(int ok, const char *file, int line, const char *c
         }                                                                               \
     } while (0)
 
+/* A binary that ran no check proved nothing: it fails too (a test whose checks were skipped or
+ * never reached, e.g. by an early return, is not a pass). */
 #define TEST_MAIN_END()                                                                 \
     do {                                                                                \
         printf("%d passed, %d failed\n", g_checks_passed, g_checks_failed);             \
-        return g_checks_failed == 0 ? 0 : 1;                                            \
+        if (g_checks_passed + g_checks_failed == 0) {                                   \
+            fprintf(stderr, "no check ran: a test that checks nothing fails\n");        \
+        }                                                                               \
+        return g_checks_failed == 0 && g_checks_passed > 0 ? 0 : 1;                     \
     } while (0)
 
 #endif

@@ -41,6 +41,7 @@ int main(int argc, char **argv)
                 scale[0] = fmax(scale[0], fabs((double)g_data[k][col]));
                 scale[1] = fmax(scale[1], fabs((double)g_data[k][col + 1]));
             }
+            CHECK_MSG(scale[0] > 0.0, "%s: the golden u_o column is all zeros (a golden of nothing)", names[s]);
             double worst[2] = {0.0, 0.0};
             long mismatches = 0;
             for (size_t k = 0; k < steps; ++k) {
@@ -56,8 +57,11 @@ int main(int argc, char **argv)
                         const double want = (double)g_data[k][col + o];
                         if (numeric) {
                             mismatches += got[o] != (float)want;
-                        } else if (scale[o] > 0.0) {
-                            worst[o] = fmax(worst[o], fabs((double)got[o] - want) / scale[o]);
+                        } else {
+                            /* relative to the column's largest value; a column of zeros (w_hat
+                             * without an estimator) must come out zeros: absolute */
+                            const double err = fabs((double)got[o] - want);
+                            worst[o] = fmax(worst[o], scale[o] > 0.0 ? err / scale[o] : err);
                         }
                     }
                 }

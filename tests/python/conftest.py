@@ -79,13 +79,30 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     items.sort(key=lambda item: item.get_closest_marker("long") is None)
 
 
+def _strict() -> bool:
+    return os.environ.get("ARM_TEST_STRICT") == "1"
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_make_collect_report(collector: pytest.Collector):  # noqa: ANN201 - pytest hook
+    """ARM_TEST_STRICT=1 covers collection too: a test file that skips itself whole (a module-level
+    importorskip of a package armctl installs, a missing build) fails, naming the file and why,
+    instead of taking its tests out of the run unseen."""
+    outcome = yield
+    report = outcome.get_result()
+    if _strict() and report.skipped:
+        reason = report.longrepr[2] if isinstance(report.longrepr, tuple) else str(report.longrepr)
+        report.outcome = "failed"
+        report.longrepr = f"{collector.nodeid}: skipped whole under ARM_TEST_STRICT=1 (everything should be installed): {reason}"
+
+
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]):  # noqa: ANN201 - pytest hook
     """Under `armctl test` as root on Debian (ARM_TEST_STRICT=1), armctl has installed every
     package the tests need, so a test that skips for a missing tool is a failure, not a pass."""
     outcome = yield
     report = outcome.get_result()
-    if os.environ.get("ARM_TEST_STRICT") == "1" and report.skipped and not hasattr(report, "wasxfail"):
+    if _strict() and report.skipped and not hasattr(report, "wasxfail"):
         reason = report.longrepr[2] if isinstance(report.longrepr, tuple) else str(report.longrepr)
         report.outcome = "failed"
         report.longrepr = f"skipped under ARM_TEST_STRICT=1 (everything should be installed): {reason}"

@@ -38,6 +38,41 @@ def test_the_matrix_is_large_and_every_row_says_what_happened() -> None:
     assert len(jaco) == 1 and jaco[0]["set"] == "dm_control" and jaco[0]["result"] == "ok", jaco
 
 
+# Every arm of the committed matrix that is not ok, and how it ended: the floor the matrix holds
+# (one more arm not ok, or another outcome, fails here until this list says so; an arm made ok
+# fails too, so that the list shrinks with the fixes). The 90 % target is the xfail below.
+MATRIX_NOT_OK = {
+    "dm-robotics-panda/dm_robotics/panda/assets/panda/panda.xml": "failed",
+    "example-robot-data/cmeel.prefix/share/example-robot-data/robots/baxter_description/urdf/baxter.urdf#left_s0":
+        "tracking-bound-exceeded",
+    "example-robot-data/cmeel.prefix/share/example-robot-data/robots/baxter_description/urdf/baxter.urdf#right_s0":
+        "tracking-bound-exceeded",
+    "example-robot-data/cmeel.prefix/share/example-robot-data/robots/finger_edu_description/robots/finger_edu.urdf":
+        "refused",
+    "example-robot-data/cmeel.prefix/share/example-robot-data/robots/so_arm_description/urdf/so100.urdf": "failed",
+    "example-robot-data/cmeel.prefix/share/example-robot-data/robots/talos_data/robots/talos_left_arm.urdf":
+        "tracking-bound-exceeded",
+    "gymnasium-robotics/gymnasium_robotics/envs/assets/adroit_hand/adroit_hammer.xml": "refused",
+    "robosuite-models/robosuite_models/assets/robots/aloha/robot.xml#left/waist": "refused",
+    "robosuite-models/robosuite_models/assets/robots/aloha/robot.xml#right/waist": "refused",
+    "robosuite/robosuite/models/assets/robots/jaco/robot.xml": "tracking-bound-exceeded",
+    "rtb-data/rtbdata/xacro/abb_irb140_description/urdf/irb140.urdf": "refused",
+    "rtb-data/rtbdata/xacro/kuka_description/kuka_lbr_iiwa/urdf/lbr_iiwa_14_r820.urdf": "refused",
+    "rtb-data/rtbdata/xacro/lynxmotion_al5d_description/urdf/al5d_robot.urdf": "refused",
+    "rtb-data/rtbdata/xacro/unimation_puma560_description/urdf/puma560_robot.urdf": "refused",
+}
+
+
+def test_every_arm_not_ok_is_known_and_the_rest_are_ok() -> None:
+    """The floor: the matrix's arms that are not ok are exactly the known ones, each ending as it
+    did (51 of 65 ok); any other arm is ok."""
+    got = {r["id"]: r["result"] for r in DOC["arms"] if r["result"] != "ok"}
+    assert got == MATRIX_NOT_OK, {"newly not ok": {k: v for k, v in got.items() if MATRIX_NOT_OK.get(k) != v},
+                                  "no longer as listed": {k: v for k, v in MATRIX_NOT_OK.items() if got.get(k) != v}}
+    s = arms_page.summary(DOC)
+    assert s["ok"] == s["arms"] - len(MATRIX_NOT_OK) and s["arms"] >= 65
+
+
 @pytest.mark.xfail(strict=True, reason="issue 38's 90 %: 51 of 65 ok on the committed matrix; 4 runs over the 2 deg "
                                        "bound (robosuite Jaco, Baxter x2, TALOS arm) and 2 failed runs (SO-100, "
                                        "dm_robotics Panda) are open")

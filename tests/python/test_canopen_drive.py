@@ -281,6 +281,11 @@ def test_a_nodes_own_preset_from_the_drive_table(rig: Rig) -> None:
     assert node.sdo[0x6076].raw == 28000
     assert node.sdo[0x608F][1].raw == 4096
     assert node.sdo[0x6091][1].raw == 160 and node.sdo[0x6091][2].raw == 1
+    # node 2 (the same bus: drives 1 and 2) reads its own rated torque, and none of node 1's scaling
+    two = rig.net.add_node(2, str(EDS))
+    assert two.sdo[0x1018][4].raw == 2  # its serial number is its node id: it is node 2 that answers
+    assert two.sdo[0x6076].raw == 5000
+    assert two.sdo[0x608F][1].raw != 4096 and two.sdo[0x6091][1].raw != 160
 
 
 def test_quick_stop_and_the_shortcut_to_operation_enabled_as_python_canopen_asks(rig: Rig) -> None:

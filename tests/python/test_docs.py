@@ -55,9 +55,16 @@ def test_the_strict_build_fails_on_a_broken_link_anchor_or_page(guide_copy: Path
 
 
 def test_armctl_docs_check_finds_every_figure_rendered_from_its_results_file() -> None:
+    """docs --check renders every region of every page (counted here from the pages themselves)
+    and finds each as its results file renders it."""
     r = subprocess.run([str(REPO / "tools" / "armctl"), "docs", "--check"], cwd=REPO, capture_output=True, text=True,
                        timeout=300)
     assert r.returncode == 0, r.stdout + r.stderr
+    found = {str(p.relative_to(REPO)): len(docs_cmd.REGION.findall(p.read_text())) for p in docs_cmd.pages()}
+    found = {p: n for p, n in found.items() if n}
+    assert sum(found.values()) >= len(docs_cmd.RENDERERS)
+    assert (f"armctl docs: {sum(found.values())} region(s) on {len(found)} page(s) rendered from their results "
+            f"files, each as it stands: {', '.join(sorted(found))}") in r.stdout, r.stdout
 
 
 def test_every_region_renders_and_a_typed_figure_is_caught() -> None:

@@ -10,6 +10,7 @@ import subprocess
 from pathlib import Path
 
 import mujoco
+import numpy as np
 import pytest
 
 from arm_models import heavy_wrist_variant
@@ -23,12 +24,47 @@ def _prepared(model: Path):
     return prep, mujoco.MjModel.from_xml_string(prep.xml)
 
 
+def _peak_torque(m: mujoco.MjModel, home: list[float], amp: list[float], freq: list[float]) -> np.ndarray:
+    """Each joint's largest |torque| along the reference, computed here and not read from arm.json:
+    every millisecond of the whole trajectory's period (0.05 Hz: 20 s), MuJoCo's inverse dynamics
+    (constraints off) plus each joint's frictionloss at the velocity's sign."""
+    d = mujoco.MjData(m)
+    a, w = np.asarray(amp), 2 * np.pi * np.asarray(freq)
+    m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
+    worst = np.zeros(m.nv)
+    for t in np.arange(0.0, 20.0, 1e-3):
+        d.qpos[:] = np.asarray(home) + a * (1 - np.cos(w * t))
+        d.qvel[:] = a * w * np.sin(w * t)
+        d.qacc[:] = a * w * w * np.cos(w * t)
+        mujoco.mj_inverse(m, d)
+        worst = np.maximum(worst, np.abs(d.qfrc_inverse + m.dof_frictionloss * np.sign(d.qvel)))
+    return worst
+
+
 def test_the_bundled_arms_default_reference_is_unchanged() -> None:
-    prep, _ = _prepared(DEFAULT_MODEL)
-    ref = prep.info["reference"]
+    """The bundled arm's reference, and its peak torque against the limits computed here: under
+    REF_TORQUE_FRACTION of every limit, and what arm.json says it is."""
+    prep, m = _prepared(DEFAULT_MODEL)
+    ref, joints = prep.info["reference"], prep.info["joints"]
     assert ref["amp"] == [0.25, 0.28, 0.31, 0.34, 0.37, 0.4]
     assert ref["freq_hz"] == [0.2, 0.25, 0.3, 0.35, 0.4, 0.45]
-    assert max(ref["peak_torque_fraction"]) < REF_TORQUE_FRACTION
+    frac = _peak_torque(m, [j["home"] for j in joints], ref["amp"], ref["freq_hz"]) / np.array(
+        [j["torque_limit"] for j in joints])
+    assert frac.max() < REF_TORQUE_FRACTION, frac
+    # the code's own figure never claims more than the true peak (arm.json keeps 4 decimals)
+    assert np.all(np.asarray(ref["peak_torque_fraction"]) <= frac + 5e-5), (ref["peak_torque_fraction"], frac)
+
+
+@pytest.mark.xfail(strict=True, reason="gen/arm/reference.py reference_torque samples the slowest joint's period "
+                                       "(5 s here), not the trajectory's (20 s): the coupled peaks later in it are "
+                                       "missed, wrist_1's by 29 % (0.1025 of its limit reported, 0.1323 true); "
+                                       "fixing it refits the study's trajectories (a retune)")
+def test_the_reported_peak_torque_is_the_trajectorys_peak() -> None:
+    prep, m = _prepared(DEFAULT_MODEL)
+    ref, joints = prep.info["reference"], prep.info["joints"]
+    frac = _peak_torque(m, [j["home"] for j in joints], ref["amp"], ref["freq_hz"]) / np.array(
+        [j["torque_limit"] for j in joints])
+    assert np.allclose(ref["peak_torque_fraction"], frac, rtol=1e-3), (ref["peak_torque_fraction"], frac)
 
 
 def test_a_heavy_wrists_default_reference_fits_its_torque_limits(tmp_path: Path) -> None:

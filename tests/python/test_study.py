@@ -50,10 +50,27 @@ def small_config(dirpath: Path, seeds: int = 2, methods: str = SMALL["methods"],
     return cfg
 
 
+def kept_config(dirpath: Path, seeds: int = 2, methods: str = SMALL["methods"],
+                scenarios: str = SMALL["scenarios"]) -> Path:
+    """The default study with fewer methods, scenarios and seeds, and the kept tuning beside it (its
+    [tuning] as it is: the same tuning keys): the study runs the kept, verified picks and tunes
+    nothing (tests/python/test_tuning_verify.py holds the kept tuning to the code)."""
+    text = DEFAULT_CONFIG.read_text()
+    text = re.sub(r"(?m)^methods = .*$", f"methods = {methods}", text)
+    text = re.sub(r"(?m)^scenarios = .*$", f"scenarios = {scenarios}", text)
+    text = re.sub(r"(?m)^seeds = \d+ .*$", f"seeds = {seeds}", text)
+    dirpath.mkdir(parents=True, exist_ok=True)
+    cfg = dirpath / DEFAULT_CONFIG.name
+    cfg.write_text(text)
+    kept = load(DEFAULT_CONFIG).tuning_file
+    shutil.copyfile(kept, dirpath / kept.name)
+    return cfg
+
+
 @pytest.fixture(scope="module")
 def study(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict, Path]:
     base = tmp_path_factory.mktemp("study")
-    cfg_path = small_config(base / "cfg")
+    cfg_path = kept_config(base / "cfg")
     out = base / "jobs2"
     return out, run_study(load(cfg_path), out, duration_s=0.5, jobs=2), cfg_path
 
@@ -88,13 +105,14 @@ def test_every_method_scenario_and_seed_is_reported(study: tuple[Path, dict, Pat
 
 def test_every_tuned_method_has_its_tuning_record(study: tuple[Path, dict, Path]) -> None:
     """pm is tuned like the baselines (its synthesis weights); every trial is recorded; the
-    paper's own weights stay as a variant."""
-    _, s, _ = study
+    paper's own weights stay as a variant; the kept tuning is used, nothing tuned again."""
+    _, s, cfg_path = study
     for sc in s["scenarios"].values():
         assert set(sc["tuning"]) == {"pm", "tde"}  # pm-paper-weights is not tuned
         for m, rec in sc["tuning"].items():
+            assert rec["source"] == f"tuned earlier, kept in {load(cfg_path).tuning_file}", rec["source"]
             trials = [t for r in rec["rounds"] for t in r["trials"]]
-            assert len(trials) == 2 and all("knobs" in t and "objective" in t for t in trials)
+            assert len(trials) == rec["trials_run"] and all("knobs" in t and "objective" in t for t in trials)
             assert rec["best_by_objective"]["objective"] == min(t["objective"] for t in trials)
             assert rec["status"] in ("converged", "capped") and len(rec["best_so_far"]) == rec["trials_run"]
             assert rec["validation"]["seeds"] == load(study[2]).validation_seeds
@@ -137,7 +155,7 @@ def test_tuning_is_the_same_whatever_jobs(tmp_path: Path) -> None:
     recs = []
     for jobs in (2, 3):  # batches of min(batch, --jobs): the same at any --jobs of at least the batch (2)
         setup, _, _ = setup_for(cfg, DEFAULT_ARM, tmp_path / f"tune{jobs}", jobs, None)
-        recs.append([tune_method(setup, cfg.scenarios["ideal"], m, trials=3) for m in ("pm", "tde")])
+        recs.append([tune_method(setup, cfg.scenarios["ideal"], "pm", trials=3)])  # one pair, a short budget
     for a, b in zip(*recs):
         assert a["knobs"] == b["knobs"] and a["objective"] == b["objective"]
         assert [t["objective"] for t in a["rounds"][0]["trials"]] == [t["objective"] for t in b["rounds"][0]["trials"]]
@@ -735,7 +753,7 @@ def test_a_study_confirms_its_designs_over_the_bus_with_the_files_its_sil_runs_l
     """A SIL study's confirmation repeats a run of a tuned design (pm) and one of gains (pd) in
     lockstep HIL over a bus; the design run loads the very file its SIL run loaded (no build of
     its own), and every result is the same."""
-    cfg = load(small_config(tmp_path / "cfg", seeds=1, methods='["pm", "pd"]', scenarios='["ideal"]'))
+    cfg = load(kept_config(tmp_path / "cfg", seeds=1, methods='["pm", "pd"]', scenarios='["ideal"]'))
     study = run_study(cfg, tmp_path / "study", duration_s=0.3, jobs=2, confirm=2, figures=False)
     conf = study["confirmation"]
     assert conf["all_match"] and [(r["method"], r["match"]) for r in conf["runs"]] == [("pm", True), ("pd", True)]

@@ -255,9 +255,11 @@ def test_every_contract_name_is_emitted(out: Path) -> None:
     assert len(re.findall(r"#include", fx)) == 1
 
 
-def _worst_case_run(fx: dict[str, Any], y_frac: int, steps: int, target: tuple[str, int]) -> tuple[int, int]:
+def _worst_case_run(fx: dict[str, Any], y_frac: int, steps: int, target: tuple[str, int]) -> tuple[
+        list[int], list[int]]:
     """Drive the documented integer recursion with the input sign sequence that maximises one
-    state or output at the last step; return (peak |state|, peak |output|) seen, in Q units."""
+    state or output at the last step; return each state's and each output's peak |value| seen,
+    in Q units."""
     A, B = np.array(fx["A_Q"], dtype=object), np.array(fx["B_Q"], dtype=object)
     C, D = np.array(fx["C_Q"], dtype=object), np.array(fx["D_Q"], dtype=object)
     lim = [int(np.floor(r * 2.0**y_frac)) for r in fx["input_max"]]
@@ -277,18 +279,37 @@ def _worst_case_run(fx: dict[str, Any], y_frac: int, steps: int, target: tuple[s
         v = (acc + (1 << (s - 1))) >> s if s > 0 else acc
         return max(-(2**31 - 1), min(2**31 - 1, v))
 
-    peak_x = peak_u = 0
+    peak_x, peak_u = [0] * A.shape[0], [0] * C.shape[0]
     for k in range(steps):
         hk = h[steps - 1 - k] if kind == "x" else (h[steps - 2 - k] if k < steps - 1 else np.array(fx["D_Q"], dtype=float)[i])
         y = [lim[j] * (1 if hk[j] >= 0 else -1) for j in range(len(lim))]
         u = [shr(sum(int(C[r, j]) * x[j] for j in range(len(x))) + sum(int(D[r, j]) * y[j] for j in range(len(y))), su) for r in range(C.shape[0])]
         x = [shr(sum(int(A[r, j]) * x[j] for j in range(len(x))) + sum(int(B[r, j]) * y[j] for j in range(len(y))), sx) for r in range(A.shape[0])]
-        peak_x = max(peak_x, max(abs(v) for v in x))
-        peak_u = max(peak_u, max(abs(v) for v in u))
+        peak_x = [max(p, abs(v)) for p, v in zip(peak_x, x)]
+        peak_u = [max(p, abs(v)) for p, v in zip(peak_u, u)]
     return peak_x, peak_u
 
 
-def test_fixed_point_bounds_hold_for_worst_case_inputs(manifest: dict[str, Any]) -> None:
+@pytest.fixture(scope="module")
+def two_state_manifest(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """The paper's weights with a second-order F: an estimator of two states per joint, each with a
+    bound of its own (the paper's F gives one state, where the largest bound is its own)."""
+    base = tmp_path_factory.mktemp("synth2")
+    text, n = re.subn(r"(?m)^F = \{[^}]*\}", "F = { num = [100.0], den = [1.0, 14.0, 100.0] }",
+                      DEFAULT_CONFIG.read_text())
+    assert n == 1
+    (base / "f2.toml").write_text(text)
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    assert run(parser.parse_args(["--config", str(base / "f2.toml"), "--out", str(base / "design"), "--quiet"])) == 0
+    m = json.loads((base / "design" / "manifest.json").read_text())
+    assert len(m["fixed_point"]["estimator"]["state_bound"]) == 2
+    return m
+
+
+@pytest.mark.parametrize("which", ["manifest", "two_state_manifest"])
+def test_fixed_point_bounds_hold_for_worst_case_inputs(which: str, request: pytest.FixtureRequest) -> None:
+    manifest = request.getfixturevalue(which)
     y_frac = manifest["fixed_point"]["Y_FRAC"]
     for name in ("estimator", "controller"):
         fx = manifest["fixed_point"][name]
@@ -296,11 +317,13 @@ def test_fixed_point_bounds_hold_for_worst_case_inputs(manifest: dict[str, Any])
         ub = [int(np.floor(b * 2.0 ** fx["U_FRAC"])) for b in fx["output_bound"]]
         for target in [("x", i) for i in range(len(xb))] + [("u", i) for i in range(len(ub))]:
             peak_x, peak_u = _worst_case_run(fx, y_frac, 4000, target)
-            assert peak_x <= max(xb) + 1 and peak_u <= max(ub) + 1
-            assert peak_x < 2**31 - 1 and peak_u < 2**31 - 1
+            # every state and output within its own bound (not the largest of them), whatever input
+            assert all(p <= b + 1 for p, b in zip(peak_x, xb)), (name, target, peak_x, xb)
+            assert all(p <= b + 1 for p, b in zip(peak_u, ub)), (name, target, peak_u, ub)
+            assert max(peak_x) < 2**31 - 1 and max(peak_u) < 2**31 - 1
         # The bound is tight, not just safe: the worst case reaches most of it.
         if name == "estimator":
-            assert _worst_case_run(fx, y_frac, 4000, ("u", 0))[1] > 0.5 * max(ub)
+            assert _worst_case_run(fx, y_frac, 4000, ("u", 0))[1][0] > 0.5 * ub[0]
 
 
 def test_l1_gain_of_a_first_order_system_is_exact() -> None:

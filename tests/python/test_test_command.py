@@ -4,8 +4,11 @@ random (side by side, two tests would meet on one)."""
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
+import sys
+from pathlib import Path
 
 from gen.lib.paths import REPO
 from tools.commands.test import pytest_passes
@@ -43,3 +46,33 @@ def test_a_worker_count_below_one_is_refused_before_anything_builds() -> None:
                        text=True, timeout=120)
     assert r.returncode != 0 and r.stderr.strip().splitlines() == [
         "armctl test: --workers: 0 is not a worker count (1 or more)"], r.stderr
+
+
+# The test files that skip themselves whole when a package they import is missing (a module-level
+# importorskip), and the package each needs.
+SELF_SKIPPING = {"test_canopen_drive.py": "canopen", "test_canopen_master.py": "canopen",
+                 "test_canopen_vendor.py": "canopen", "test_pycan_wire.py": "can", "test_slcan.py": "can"}
+
+
+def test_strict_fails_a_file_that_skips_itself_at_collection(tmp_path: Path) -> None:
+    """python-canopen (and python-can, which it brings) uninstalled, simulated by a shadow on
+    PYTHONPATH: the files skip themselves quietly, unless ARM_TEST_STRICT=1 (armctl test as root),
+    where the run fails naming each of them."""
+    for name in ("canopen", "can", "msgpack"):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "__init__.py").write_text(
+            f"raise ModuleNotFoundError(\"No module named {name} (uninstalled: a test shadow)\", name={name!r})\n")
+    files = [str(TESTS / f) for f in SELF_SKIPPING]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(REPO)])}
+    env.pop("ARM_TEST_STRICT", None)
+    quiet = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                            "--collect-only", *files], cwd=REPO, env=env, capture_output=True, text=True, timeout=120)
+    # 5: nothing collected, and no error: the five skipped themselves unseen
+    assert quiet.returncode == 5 and "error" not in quiet.stdout.lower(), quiet.stdout + quiet.stderr
+    strict = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "--collect-only",
+                             *files], cwd=REPO, env={**env, "ARM_TEST_STRICT": "1"}, capture_output=True, text=True,
+                            timeout=120)
+    assert strict.returncode not in (0, 5), strict.stdout
+    for f, package in SELF_SKIPPING.items():
+        assert (f"tests/python/{f}: skipped whole under ARM_TEST_STRICT=1" in strict.stdout
+                and f"could not import '{package}'" in strict.stdout), (f, strict.stdout[-3000:])

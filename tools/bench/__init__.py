@@ -36,6 +36,9 @@ WARMUP = 1000  # the measured count is (N2 - N1) / (STEPS2 - STEPS1): start-up c
 
 def _callgrind(fn: str, argv: list[str]) -> int:
     """Instructions callgrind counts inside fn (a --toggle-collect pattern) over the whole run."""
+    from tools.build.packages import ensure
+
+    ensure("bench")
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "callgrind.out"
         subprocess.run(["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}", f"--toggle-collect={fn}",

@@ -355,6 +355,9 @@ def run(ns: argparse.Namespace) -> int:
         raise UsageError(f"--duration: must be > 0, got {ns.duration}")
     if not 10 <= ns.rate <= 20000:
         raise UsageError(f"--rate: must be in [10, 20000] Hz, got {ns.rate}")
+    from tools.build.packages import ensure
+
+    ensure("timing")
     build("release")
     d = measure(ns.out, ns.duration, ns.rate, ns.rt_priority, ns.cpu, ns.method)
     print(table(d))

@@ -29,7 +29,8 @@ PRESETS = ("debug", "release")
 CROSS_PRESETS = ("aarch64", "cortex-m4", "cortex-m7", "cortex-m3")
 # `armctl build --target T`: T -> preset ("host" is the release build of this machine).
 TARGETS = {"host": "release", **{p: p for p in CROSS_PRESETS}}
-# Cross compilers and the Debian packages that bring them (tools/apt-packages.txt lists them).
+# Cross compilers and the Debian packages that bring them (tools/apt-packages-aarch64.txt and
+# -cortex-m.txt list them: installed by the first build that needs them, tools/build/packages.py).
 _COMPILERS = {
     "aarch64": ("aarch64-linux-gnu-gcc", "gcc-aarch64-linux-gnu"),
     "cortex-m4": ("arm-none-eabi-gcc", "gcc-arm-none-eabi libnewlib-arm-none-eabi"),
@@ -194,6 +195,10 @@ def build(preset: str = "release", quiet: bool = True, bdir: Path | None = None,
     targets: only these (and what they need), else everything."""
     if preset not in PRESETS + CROSS_PRESETS:
         raise ValueError(f"preset '{preset}': expected one of {', '.join(PRESETS + CROSS_PRESETS)}")
+    if preset in _COMPILERS:  # its cross compiler (and QEMU for its runs), installed at first need
+        from tools.build.packages import ensure
+
+        ensure("aarch64" if preset == "aarch64" else "cortex-m")
     missing = toolchain_missing(preset)
     if missing:
         raise ToolchainMissing(f"armctl: build ({preset}): {missing}")

@@ -1,7 +1,8 @@
 """The identity of the code that decides a HIL run's result: a hash over the firmware, the
 simulator, the synthesis and the run's own tooling (their sources, not their documentation). A kept run (tools/run/runner.py) is reused only
 when this is unchanged, so changing the controller or the simulator never leaves stale results in
-a resumed study or tuning."""
+a resumed study or tuning. A kept tuning stamped with another identity is verified by what it
+does on this one (tools/study/verify.py), not taken for stale."""
 
 from __future__ import annotations
 
@@ -27,11 +28,22 @@ def _files(root: Path) -> list[Path]:
                   and p.suffix not in DOCS and p.name != "LICENSE")
 
 
-@functools.cache
-def code_identity() -> str:
+def identity_of(names: tuple[str, ...]) -> str:
     h = hashlib.sha256()
-    for name in SOURCES:
+    for name in names:
         for p in _files(REPO / name):
             h.update(str(p.relative_to(REPO)).encode() + b"\0")
             h.update(hashlib.sha256(p.read_bytes()).digest())
     return h.hexdigest()[:16]
+
+
+@functools.cache
+def code_identity() -> str:
+    return identity_of(SOURCES)
+
+
+@functools.cache
+def synthesis_identity() -> str:
+    """The synthesis's own code (gen/): a design made from a design text by other code is made
+    again (tools/run/runner.py sil_design), or a verification could run a design of the old code."""
+    return identity_of(("gen",))

@@ -68,6 +68,9 @@ def run_image(preset: str, timeout: float = 600) -> subprocess.CompletedProcess[
     """The preset's golden image under qemu-system-arm with semihosting (exit code = verdict),
     with -icount shift=0: one instruction per virtual nanosecond, so its SysTick counts
     instructions (step_count.c)."""
+    from tools.build.packages import ensure
+
+    ensure("cortex-m")
     elf = build_dir(preset) / "firmware" / "port" / "cortex_m" / f"golden_{preset}.elf"
     return subprocess.run(["qemu-system-arm", "-M", MACHINES[preset], "-nographic", "-monitor", "none",
                            "-serial", "none", "-icount", "shift=0", "-semihosting-config",

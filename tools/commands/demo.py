@@ -1,4 +1,7 @@
-"""armctl demo: the main job, a short study of every method on the default config, and its table."""
+"""armctl demo: the main job, a short study of every method on the default config, and its table.
+
+It installs nothing beyond every command's packages (tools/apt-packages.txt) and builds only the
+programs its runs start."""
 
 from __future__ import annotations
 
@@ -6,7 +9,7 @@ import argparse
 from pathlib import Path
 
 from gen.lib.paths import REPO
-from tools.build.arm import add_arm_arguments
+from tools.build.arm import add_arm_arguments, arm_from_args, targets_for
 from tools.study import BUSES as SIL_OR_BUS, DEFAULT_CONFIRM, add_figures_argument
 
 
@@ -30,12 +33,17 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
 
 def run(ns: argparse.Namespace) -> int:
     from tools import study
+    from tools.study.config import load
 
     arm = "the default arm" if ns.model is None and ns.arm is None else (ns.arm or ns.model)
     how = "in software in the loop" if ns.bus == "sil" else f"in lockstep HIL over {ns.bus}"
     print(f"armctl demo: a short study on {arm}: every method, tuned alike, {ns.duration:g} s {how} in "
           f"each scenario of {study.DEFAULT_CONFIG.relative_to(REPO)}, one seed -> {ns.out}")
-    ns.config, ns.methods, ns.seeds, ns.retune, ns.cluster = study.DEFAULT_CONFIG, None, 1, False, None
-    ns.record = False  # the headline is the full study's (study --record)
-    ns.protocol = None  # each scenario's own drive protocol
-    return study.cmd_study(ns)
+    cfg = load(study.DEFAULT_CONFIG)
+    scenarios = None if ns.scenarios is None else study.subset(ns.scenarios, list(cfg.scenarios), "scenarios")
+    # every method, one seed, each scenario's own drive protocol; the headline is the full study's
+    # (study --record); the confirmation over the bus needs the HIL programs, SIL alone arm_sil
+    return study.study_and_summary(cfg, arm_from_args(ns), ns.out, scenarios=scenarios, seeds=1,
+                                   duration_s=ns.duration, jobs=ns.jobs, trials=ns.trials, bus=ns.bus,
+                                   confirm=ns.confirm, figures=ns.figures, prefix="armctl demo",
+                                   targets=targets_for("udp" if ns.confirm or ns.bus != "sil" else "sil"))

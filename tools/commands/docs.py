@@ -270,9 +270,10 @@ RENDERERS: dict[str, tuple[Callable[[], dict[str, Any]], Callable[[dict[str, Any
 }
 
 
-def rendered(text: str, where: str, skipped: list[str] | None = None) -> str:
+def rendered(text: str, where: str, skipped: list[str] | None = None, done: list[str] | None = None) -> str:
     """text with every numbers region rendered from its results file. With `skipped`, a region that
-    cannot be rendered keeps its text and its error is added there; without, it raises DocsError."""
+    cannot be rendered keeps its text and its error is added there; without, it raises DocsError.
+    `done`: each region rendered is added there ("page: name")."""
     def one(m: re.Match[str]) -> str:
         name = m.group("name")
         try:
@@ -288,18 +289,20 @@ def rendered(text: str, where: str, skipped: list[str] | None = None) -> str:
                 raise DocsError(f"{where}: {exc}") from None
             skipped.append(f"{where}: {exc}")
             return m.group(0)
+        if done is not None:
+            done.append(f"{where}: {name}")
         return f"{m.group(1)}{body}\n{m.group(4)}"
 
     return REGION.sub(one, text)
 
 
-def render(check: bool = False, skipped: list[str] | None = None) -> list[Path]:
-    """Render every page's regions; the pages that differed (written unless check). `skipped`:
-    as for rendered()."""
+def render(check: bool = False, skipped: list[str] | None = None, done: list[str] | None = None) -> list[Path]:
+    """Render every page's regions; the pages that differed (written unless check). `skipped`,
+    `done`: as for rendered()."""
     changed = []
     for page in pages():
         text = page.read_text()
-        new = rendered(text, str(page.relative_to(REPO)), skipped)
+        new = rendered(text, str(page.relative_to(REPO)), skipped, done)
         if new != text:
             changed.append(page)
             if not check:
@@ -316,7 +319,12 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(ns: argparse.Namespace) -> int:
-    changed = render(check=ns.check)
+    done: list[str] = []
+    changed = render(check=ns.check, done=done)
     if ns.check and changed:
         raise DocsError(f"{len(changed)} page(s) differ from their results files: tools/armctl docs renders them")
+    pages_done = sorted({d.split(": ")[0] for d in done})
+    print(f"armctl docs: {len(done)} region(s) on {len(pages_done)} page(s) "
+          + ("rendered from their results files, each as it stands" if ns.check else "rendered") + ": "
+          + ", ".join(pages_done))
     return 0

@@ -159,15 +159,14 @@ def slot_arm(base: ArmRef, slot: int, design_text: str) -> ArmRef:
 def sil_design(base: ArmRef, design_text: str, n_joints: int) -> Path:
     """The folder holding this design synthesised for the arm (gen.synth's pm_design.txt and
     manifest.json, from the design.toml a slot build would synthesise: the same design hash),
-    made once per design text and arm: the seeds of a trial share it. A design the synthesis
+    made once per design text, arm and synthesis code: the seeds of a trial share it. A design the synthesis
     refuses raises BuildError, as its slot build would."""
     from gen.arm import design_for
-    from gen.synth.cli import synth_to_dir
-    from gen.synth.config import ConfigError
-    from gen.synth.lmi import SynthesisError
     from gen.synth.manifest import DESIGN_FILE
+    from tools.build.code_identity import synthesis_identity
 
-    digest = hashlib.sha256(design_text.encode()).hexdigest()[:16]
+    # the synthesis's code in the key: a design text made into a design by other code is made again
+    digest = hashlib.sha256(f"{design_text}\0{synthesis_identity()}".encode()).hexdigest()[:16]
     folder = SIL_DESIGNS / (base.key() if not base.is_default else "default") / digest
     config = folder / "design.toml"
     text = design_for(design_text, n_joints, config)
@@ -177,6 +176,11 @@ def sil_design(base: ArmRef, design_text: str, n_joints: int) -> Path:
                 return folder
         except OSError:
             pass
+        # the solver's imports only when it must solve (cvxpy: 2-4 s of a worker's first run)
+        from gen.synth.cli import synth_to_dir
+        from gen.synth.config import ConfigError
+        from gen.synth.lmi import SynthesisError
+
         write_text_atomic(config, text)
         try:
             with warnings.catch_warnings():

@@ -199,7 +199,7 @@ def keep_tuning_time(path: Path, record: dict[str, Any]) -> None:
 
 def tuned(cfg: StudyConfig, arm: ArmRef, setup: TuneSetup, info: dict[str, Any], scenarios: list[str],
           methods: list[str], *, retune: bool = False, trials: int | None = None,
-          in_study: bool = False) -> dict[str, dict[str, Any]]:
+          in_study: bool = False, only: set[tuple[str, str]] | None = None) -> dict[str, dict[str, Any]]:
     """The tuning of every tuned method in every scenario: the kept one when it was made for the
     same arm, scenario and tuning settings, else tuned now (and kept, method by method, so an
     interrupted tuning resumes). `armctl tune` wants the config's cap (or --trials) exactly; a
@@ -211,7 +211,7 @@ def tuned(cfg: StudyConfig, arm: ArmRef, setup: TuneSetup, info: dict[str, Any],
     todo = []
     for s in scenarios:
         for m in methods:
-            if METHODS[m][1] is None:
+            if METHODS[m][1] is None or (only is not None and (s, m) not in only):
                 continue
             key = tuning_key(cfg, info, setup, s, m)
             scen = doc["scenarios"].get(s)
@@ -240,7 +240,7 @@ def tuned(cfg: StudyConfig, arm: ArmRef, setup: TuneSetup, info: dict[str, Any],
             bar.set_postfix_str(f"{m} / {s} done")
             bar.update(cap - rec["trials_run"])  # a converged tuning ends before its cap
             rec["key"] = key
-            rec["code"] = code_identity()
+            rec["code"] = rec["tuned_code"] = code_identity()  # tuned on it (verify.py restamps "code")
             keep_tuning(path, s, m, rec, {"arm": {"name": info["name"], "model_hash": info["model_hash"]},
                                           "procedure": procedure(cfg, cap, setup.jobs)})
             out[s][m] = {**rec, "source": f"tuned now, kept in {path}"}
@@ -252,6 +252,19 @@ def tuned(cfg: StudyConfig, arm: ArmRef, setup: TuneSetup, info: dict[str, Any],
                                 "when": datetime.now(timezone.utc).isoformat(timespec="seconds")})
     # in the config's order, however the pairs finished
     return {s: {m: out[s][m] for m in methods if m in out[s]} for s in scenarios}
+
+
+def verified_notes(setup: TuneSetup, path: Path, tuning: dict[str, dict[str, Any]],
+                   prefix: str = "armctl study") -> list[str]:
+    """The kept pairs stamped with other code, verified on this one (tools/study/verify.py: once per
+    code, kept in the build folder); a note naming the pairs whose picks moved, none when none did."""
+    from tools.study import verify
+
+    stale = verify.stale_pairs(tuning, code_identity())
+    if not stale:
+        return []
+    note = verify.moved_note(verify.verify_for_study(setup, path, stale, prefix), path)
+    return [note] if note else []
 
 
 def procedure(cfg: StudyConfig, trials: int | None = None, jobs: int | None = None) -> str:
@@ -279,9 +292,9 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
               methods: list[str] | None = None, scenarios: list[str] | None = None, arm: ArmRef = DEFAULT_ARM,
               jobs: int = 1, cluster: Cluster | None = None, retune: bool = False,
               trials: int | None = None, bus: str = SIL, confirm: int = DEFAULT_CONFIRM,
-              figures: bool = True, protocol: str | None = None) -> dict[str, Any]:
+              figures: bool = True, protocol: str | None = None, prefix: str = "armctl study") -> dict[str, Any]:
     """protocol: every scenario's runs over this drive protocol instead of its own, with the picks
-    tuned on its own (what the protocol alone changes)."""
+    tuned on its own (what the protocol alone changes); prefix: how its notes begin."""
     methods = methods or cfg.methods
     scen_names = scenarios or list(cfg.scenarios)
     seed_list = cfg.seed_list(seeds)
@@ -292,12 +305,9 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
     traj_args, traj_used, traj_notes = trajectory_for(info, cfg.trajectory, "trajectory", arm_build_dir("release", arm),
                                                       scenario_friction(cfg))
     notes += traj_notes
-    stale = sorted(f"{m} in {s}" for s in tuning for m, rec in tuning[s].items() if rec.get("code") != code_identity())
-    if stale:
-        notes.append(f"the kept tuning of {', '.join(stale)} was made with other firmware or simulator code "
-                     f"(tools/build/code_identity.py); `armctl study --retune` tunes again")
+    notes += verified_notes(setup, tuning_file(cfg, arm), tuning, prefix)
     for n in notes:
-        print(f"armctl study: {one_line(n)}", file=sys.stderr)  # a file's names, to a terminal
+        print(f"{prefix}: {one_line(n)}", file=sys.stderr)  # a file's names, to a terminal
     paper_text = None if Path(info["design_config"]).resolve() == DEFAULT_DESIGN.resolve() else DEFAULT_DESIGN.read_text()
     specs: list[RunSpec] = []
     where: list[tuple[str, str, int]] = []
@@ -508,9 +518,17 @@ def add_figures_argument(p: argparse.ArgumentParser) -> None:
 def add_tune_arguments(p: argparse.ArgumentParser) -> None:
     add_common_arguments(p)
     p.add_argument("--out", type=Path, default=REPO / "runs" / "tune")
+    what = p.add_mutually_exclusive_group()
+    what.add_argument("--verify", action="store_true",
+                      help="tune nothing: run each kept pick's recorded validation runs again on this code and "
+                           "compare them number for number; equal: stamp the pair with this code's identity; "
+                           "moved: say by how much and whether the pick still ranks ahead of its runner-up "
+                           "(exit 1; the pairs to tune again are named)")
+    what.add_argument("--retune", nargs="+", metavar="SCENARIO/METHOD", default=None,
+                      help="tune these pairs alone (e.g. realistic/pm ideal/gh2), keeping every other pair's record")
 
 
-def _subset(text: str | None, allowed: list[str], what: str) -> list[str] | None:
+def subset(text: str | None, allowed: list[str], what: str) -> list[str] | None:
     if text is None:
         return None
     items = [x for x in text.split(",") if x]
@@ -523,19 +541,26 @@ def _subset(text: str | None, allowed: list[str], what: str) -> list[str] | None
 def _common(ns: argparse.Namespace) -> tuple[StudyConfig, ArmRef, list[str] | None, list[str] | None,
                                           Cluster | None]:
     cfg = load(ns.config)
-    methods = _subset(ns.methods, cfg.methods, "methods")
-    scenarios = _subset(ns.scenarios, list(cfg.scenarios), "scenarios")
+    methods = subset(ns.methods, cfg.methods, "methods")
+    scenarios = subset(ns.scenarios, list(cfg.scenarios), "scenarios")
     if ns.jobs is None:
         ns.jobs = default_jobs(ns.bus)
-    if not 1 <= ns.jobs <= 256:
-        raise StudyConfigError(f"--jobs: must be in [1, 256], got {ns.jobs}")
-    if ns.trials is not None and not 1 <= ns.trials <= 100000:
-        raise StudyConfigError(f"--trials: must be in [1, 100000], got {ns.trials}")
     cluster = cluster_from_args(ns)
-    check_out_dir(ns.out)
     arm = arm_from_args(ns)
-    print_arm_warnings(arm_info(build_arm("release", arm)), f"armctl {getattr(ns, 'command', 'study')}")
+    prepare(arm, ns.out, ns.jobs, ns.trials, f"armctl {getattr(ns, 'command', 'study')}")
     return cfg, arm, methods, scenarios, cluster
+
+
+def prepare(arm: ArmRef, out: Path, jobs: int, trials: int | None, prefix: str,
+            targets: list[str] | None = None) -> None:
+    """What a study or tuning checks before it runs: --jobs, --trials, --out; then the arm built
+    (only `targets`, if given) and its warnings said."""
+    if not 1 <= jobs <= 256:
+        raise StudyConfigError(f"--jobs: must be in [1, 256], got {jobs}")
+    if trials is not None and not 1 <= trials <= 100000:
+        raise StudyConfigError(f"--trials: must be in [1, 100000], got {trials}")
+    check_out_dir(out)
+    print_arm_warnings(arm_info(build_arm("release", arm, targets=targets)), prefix)
 
 
 OUT_LOCK = ".armctl-out.lock"  # in a study's or tuning's --out: held while the command writes there
@@ -568,43 +593,112 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
 
 def cmd_study(ns: argparse.Namespace) -> int:
     """armctl study (a bad config, arm, --out or cluster exits 2; a run that cannot run, 1: tools/cli.py)."""
-    if ns.seeds is not None and not 1 <= ns.seeds <= 1000:
-        raise StudyConfigError(f"--seeds: must be in [1, 1000], got {ns.seeds}")
-    if ns.duration is not None and not (0.001 <= ns.duration <= 86400):
-        raise StudyConfigError(f"--duration: must be in [0.001, 86400] s, got {ns.duration}")
-    if not 0 <= ns.confirm <= 1000:
-        raise StudyConfigError(f"--confirm: must be in [0, 1000], got {ns.confirm}")
-    cfg, arm, methods, scenarios, cluster = _common(ns)
-    if ns.record and (cfg.path.resolve() != DEFAULT_CONFIG.resolve() or not arm.is_default or ns.seeds or
-                      ns.duration or methods or scenarios or ns.trials):
+    cfg = load(ns.config)
+    methods = subset(ns.methods, cfg.methods, "methods")
+    scenarios = subset(ns.scenarios, list(cfg.scenarios), "scenarios")
+    return study_and_summary(cfg, arm_from_args(ns), ns.out, methods=methods, scenarios=scenarios, seeds=ns.seeds,
+                             duration_s=ns.duration, jobs=ns.jobs, cluster=cluster_from_args(ns), retune=ns.retune,
+                             trials=ns.trials, bus=ns.bus, confirm=ns.confirm, figures=ns.figures,
+                             protocol=ns.protocol, record=ns.record)
+
+
+def study_and_summary(cfg: StudyConfig, arm: ArmRef, out: Path, *, methods: list[str] | None = None,
+                      scenarios: list[str] | None = None, seeds: int | None = None, duration_s: float | None = None,
+                      jobs: int | None = None, cluster: Cluster | None = None, retune: bool = False,
+                      trials: int | None = None, bus: str = SIL, confirm: int = DEFAULT_CONFIRM, figures: bool = True,
+                      protocol: str | None = None, record: bool = False, prefix: str = "armctl study",
+                      targets: list[str] | None = None) -> int:
+    """A study as `armctl study` runs it (and `armctl demo`): its options checked, the arm built
+    (`targets` only, if given), the study run holding `out`, its summary printed; the exit code
+    (1: a run measured nothing trustworthy, or SIL and the bus disagreed)."""
+    if seeds is not None and not 1 <= seeds <= 1000:
+        raise StudyConfigError(f"--seeds: must be in [1, 1000], got {seeds}")
+    if duration_s is not None and not (0.001 <= duration_s <= 86400):
+        raise StudyConfigError(f"--duration: must be in [0.001, 86400] s, got {duration_s}")
+    if not 0 <= confirm <= 1000:
+        raise StudyConfigError(f"--confirm: must be in [0, 1000], got {confirm}")
+    jobs = default_jobs(bus) if jobs is None else jobs
+    prepare(arm, out, jobs, trials, prefix, targets)
+    if record and (cfg.path.resolve() != DEFAULT_CONFIG.resolve() or not arm.is_default or seeds or
+                   duration_s or methods or scenarios or trials):
         raise StudyConfigError("--record: the headline is the default study as it stands (no --config, "
                                "--model/--arm, --seeds, --duration, --methods, --scenarios or --trials)")
     with ExitStack() as stack:
-        _hold_out(stack, ns.out)
-        study = run_study(cfg, ns.out, seeds=ns.seeds, duration_s=ns.duration, methods=methods,
-                          scenarios=scenarios, arm=arm, jobs=ns.jobs, cluster=cluster, retune=ns.retune,
-                          trials=ns.trials, bus=ns.bus, confirm=ns.confirm, figures=ns.figures, protocol=ns.protocol)
-    if ns.record:
+        _hold_out(stack, out)
+        study = run_study(cfg, out, seeds=seeds, duration_s=duration_s, methods=methods,
+                          scenarios=scenarios, arm=arm, jobs=jobs, cluster=cluster, retune=retune,
+                          trials=trials, bus=bus, confirm=confirm, figures=figures, protocol=protocol, prefix=prefix)
+    if record:
         from tools.study import headline
 
         headline.write(study)
-        print(f"armctl study: recorded in {headline.RECORD_BY_PROTOCOL[ns.protocol]}" if ns.protocol else
-              f"armctl study: the headline recorded in {headline.RECORD} and README.md's result tables")
-    print((ns.out / "summary.txt").read_text())
-    print(f"report: {ns.out / 'report.md'}")
+        print(f"{prefix}: recorded in {headline.RECORD_BY_PROTOCOL[protocol]}" if protocol else
+              f"{prefix}: the headline recorded in {headline.RECORD} and README.md's result tables")
+    print((out / "summary.txt").read_text())
+    print(f"report: {out / 'report.md'}")
     unmeasured = [f"{m} in {s} (seed {seed}): {r.get('result')}" for s, sc in study["scenarios"].items()
                   for m, runs in sc["runs"].items() for seed, r in zip(study["seeds"], runs) if not measured(r)]
     conf = study.get("confirmation")
     if conf is not None and not conf["all_match"]:
         bad = [f"{r['method']} in {r['scenario']} (seed {r['seed']}): {', '.join(r['differences'][:6])}"
                for r in conf["runs"] if not r["match"]]
-        print(f"armctl study: software in the loop and lockstep HIL disagree on {len(bad)} run(s): "
+        print(f"{prefix}: software in the loop and lockstep HIL disagree on {len(bad)} run(s): "
               + "; ".join(bad), file=sys.stderr)
         return 1
     if unmeasured:
-        print(f"armctl study: incomplete: {len(unmeasured)} run(s) measured nothing trustworthy: "
+        print(f"{prefix}: incomplete: {len(unmeasured)} run(s) measured nothing trustworthy: "
               + "; ".join(unmeasured[:8]) + (" ..." if len(unmeasured) > 8 else ""), file=sys.stderr)
     return 0 if not unmeasured else 1
+
+
+def _cmd_verify(ns: argparse.Namespace, cfg: StudyConfig, arm: ArmRef, methods: list[str] | None,
+                scenarios: list[str] | None, cluster: Cluster | None) -> int:
+    """armctl tune --verify: every kept pair (of --scenarios, --methods) verified on this code
+    (tools/study/verify.py); the equal ones restamped; exit 1 when any moved."""
+    from tools.study import verify
+
+    if ns.bus != SIL:
+        raise StudyConfigError("--verify: the kept tuning's runs are software in the loop (--bus sil)")
+    path = tuning_file(cfg, arm)
+    with ExitStack() as stack:
+        _hold_out(stack, ns.out)
+        setup, info, _ = setup_for(cfg, arm, ns.out, ns.jobs, cluster, ns.bus)
+        doc = _read_tuning(path)
+        recs: dict[tuple[str, str], dict[str, Any]] = {}
+        unkept = []
+        for s in scenarios or list(cfg.scenarios):
+            for m in methods or cfg.methods:
+                if METHODS[m][1] is None:
+                    continue
+                rec = (doc["scenarios"].get(s) or {}).get(m)
+                if not isinstance(rec, dict) or rec.get("key") != tuning_key(setup.cfg, info, setup, s, m):
+                    unkept.append(f"{s}/{m}")
+                else:
+                    recs[(s, m)] = rec
+        if unkept:
+            raise StudyConfigError(f"--verify: {path} keeps no tuning of {', '.join(unkept)} for this arm and these "
+                                   f"settings: `armctl tune --retune {' '.join(unkept)}` tunes them")
+        bar = tqdm(total=sum(len(verify.recorded_runs(r, setup.cfg.tuning_seeds)[2]) for r in recs.values()),
+                   desc="verify", unit="run")
+        started = time.monotonic()
+        checks = verify.verify_pairs(setup, recs, ns.out / "verify", progress=lambda spec, run: bar.update(1))
+        bar.close()
+        stamped = verify.restamp(path, checks)
+    for c in checks:
+        print(c.line())
+    moved = [c for c in checks if not c.equal]
+    retune = [c.pair for c in moved if c.retune]
+    print(f"armctl tune --verify: {len(checks)} pair(s), {sum(c.runs for c in checks)} runs in "
+          f"{time.monotonic() - started:.0f} s on {ns.jobs} core(s): {len(checks) - len(moved)} as recorded"
+          + (f" (stamped with this code, {code_identity()}, in {_rel(path)})" if stamped else "")
+          + (f"; {len(moved)} moved" if moved else ""))
+    if retune:
+        print(f"armctl tune --verify: the pick no longer holds in {len(retune)} pair(s): "
+              f"tools/armctl tune --retune {' '.join(retune)}")
+    elif moved:
+        print("armctl tune --verify: every moved pick still ranks ahead of its runner-up; its record's numbers are "
+              f"another code's: tools/armctl tune --retune {' '.join(c.pair for c in moved)} records them anew")
+    return 1 if moved else 0
 
 
 # A method's own outcome, which the comparison reports: the run itself was complete.
@@ -618,14 +712,35 @@ def measured(r: dict[str, Any]) -> bool:
     return r.get("result") in OUTCOMES or (r.get("result") == "failed" and r.get("final_state") in ("safe-stop", "fault"))
 
 
+def _pairs(text: list[str], cfg: StudyConfig) -> list[tuple[str, str]]:
+    """--retune's SCENARIO/METHOD pairs, each a tuned method of a scenario of the config."""
+    out = []
+    for item in text:
+        s, _, m = item.rpartition("/")
+        if s not in cfg.scenarios or m not in cfg.methods or METHODS[m][1] is None:
+            tuned_methods = [x for x in cfg.methods if METHODS[x][1] is not None]
+            raise StudyConfigError(f"--retune {item!r}: not SCENARIO/METHOD of the config (scenarios: "
+                                   f"{', '.join(cfg.scenarios)}; tuned methods: {', '.join(tuned_methods)})")
+        out.append((s, m))
+    return list(dict.fromkeys(out))
+
+
 def cmd_tune(ns: argparse.Namespace) -> int:
-    """armctl tune (its errors as the study's)."""
+    """armctl tune (its errors as the study's); --verify: the kept tuning checked on this code."""
     cfg, arm, methods, scenarios, cluster = _common(ns)
+    if getattr(ns, "verify", False):
+        return _cmd_verify(ns, cfg, arm, methods, scenarios, cluster)
+    pairs = _pairs(ns.retune, cfg) if getattr(ns, "retune", None) else None
     with ExitStack() as stack:
         _hold_out(stack, ns.out)
         setup, info, _ = setup_for(cfg, arm, ns.out, ns.jobs, cluster, ns.bus)
-        result = tuned(setup.cfg, arm, setup, info, scenarios or list(cfg.scenarios), methods or cfg.methods,
-                       retune=True, trials=ns.trials)
+        if pairs is None:
+            result = tuned(setup.cfg, arm, setup, info, scenarios or list(cfg.scenarios), methods or cfg.methods,
+                           retune=True, trials=ns.trials)
+        else:  # the pairs side by side, as a whole tuning's (tools/study/pairs.py)
+            result = tuned(setup.cfg, arm, setup, info, list(dict.fromkeys(s for s, _ in pairs)),
+                           list(dict.fromkeys(m for _, m in pairs)), retune=True, trials=ns.trials, only=set(pairs))
+            result = {s: recs for s, recs in result.items() if recs}
     for s, recs in result.items():
         for m, rec in recs.items():
             print(f"{one_line(s):<40} {m:<10} objective {rec['objective']:.4g}  {rec['status']} "

@@ -287,6 +287,9 @@ def load_image() -> Image | None:
 def ensure_image(refresh: bool = False, log=print) -> Image:  # noqa: ANN001
     """The cached VM image, built on first use (download + unpack + initramfs). The initramfs is
     rebuilt whenever its content (init script, busybox, modules) changes."""
+    from tools.build.packages import ensure
+
+    ensure("vm")
     missing = missing_tools()
     if missing:
         raise VmError(f"missing {', '.join(missing)}: {APT_HINT}")
