@@ -1,12 +1,14 @@
 """A planner for the stream task (armctl run --stream URL): publishes armlcm.plan_t on ARM_PLAN every
 5 ms: the bundled arm's home for HOLD s, then the elbow and wrist_2 moving slowly for MOVE s, then
-nothing (the stream goes stale: the controller holds the pose).
+nothing (the stream goes stale: the controller holds the pose). Its last line: the last plan's q (rad,
+JSON), where the arm is to be held.
 
     python tests/python/lcm_planner.py URL HOLD MOVE
 """
 
 from __future__ import annotations
 
+import json
 import math
 import sys
 import time
@@ -43,6 +45,7 @@ def main(argv: list[str]) -> int:
         seq += 1
         time.sleep(0.005)
     print(f"lcm_planner: {seq} plans")
+    print(json.dumps(q))
     return 0
 
 

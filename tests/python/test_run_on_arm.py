@@ -47,6 +47,7 @@ HOME = [0.0, -1.3, 1.6, -1.87, -1.5708, 0.0]
 NAMES = ["shoulder_pan", "shoulder_lift", "elbow", "wrist_1", "wrist_2", "wrist_3"]
 MOVED_AFTER_STOP_DEG = 1.0  # the most any joint may move in the 2 s after a stop
 FOLLOW_DEG = 1.0            # the most any joint may lag a task's reference
+STREAM_HELD_DEG = 3.0       # the most a stale stream's held pose may be from the last plan
 
 
 class Plant:
@@ -238,6 +239,9 @@ def test_commission_names_the_joint_and_run_refuses_the_arm(kind: str, ports: in
     assert expect[kind] in last, last
     rec = json.loads((tmp_path / "record.json").read_text())
     assert not rec["passed"] and joint in rec["findings"][0]
+    verdict = {j["name"]: j for j in rec["joints"]}[joint]
+    if kind == "reversed":  # found by its torque pulse (not merely by a hold that ran away)
+        assert verdict["direction"] == "reversed", verdict
     assert run.returncode == 1 and run.stderr.strip().splitlines()[-1].startswith(
         "armctl run: the arm did not pass commissioning"), run.stderr
     assert not (tmp_path / "run" / "controller.log").exists()  # refused before a controller started
@@ -304,10 +308,17 @@ def test_a_planners_stream_is_moved_to_followed_and_held_when_stale(ports: int, 
             planner = subprocess.run([sys.executable, str(Path(__file__).parent / "lcm_planner.py"), url, "1.5", "3"],
                                      cwd=REPO, capture_output=True, text=True, timeout=120)
             o, e = communicate_or_kill(run, 300)
+        held = plant.settled(1)  # the plant's pose after its 2 s watch past the stop
     finally:
         plant.stop()
     assert planner.returncode == 0, planner.stderr
     assert run.returncode == 0, o + e
+    # held where the stream went stale: the last plan's pose, plus what its speed (at most 0.16 rad/s) runs
+    # on in the stale time and the 0.2 s stop (about 1.5 deg); a reference that ran on, or went back to
+    # the pose held before the stream began, is 5 deg or more away
+    last_plan = json.loads(planner.stdout.strip().splitlines()[-1])
+    off = [math.degrees(abs(a - b)) for a, b in zip(plant.sessions()["q"], last_plan)]
+    assert max(off) < STREAM_HELD_DEG, (off, held)
     s = json.loads((tmp_path / "run" / "session.json").read_text())
     rep = s["task_report"]
     assert rep["start_move_rad"] > 0.1 and rep["stream"]["plans_taken"] > 100, rep
