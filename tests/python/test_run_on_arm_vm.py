@@ -1,15 +1,16 @@
 """The rehearsal of your arm on real SocketCAN: vcan0..vcan2 inside the qemu VM (tools/vm), one boot
 for all of it. `armctl plant --bus vcan` (a process of its own), then `armctl commission`,
 `armctl run --hold` for 5 s, `--jog`, the built-in reference, a trajectory file and `--hold` ended by
-Ctrl-C, each through the documented command, inside the VM on this very checkout; then two bad
-buses: an interface that does not exist and one that is down, each one line and refused before
-anything starts.
+Ctrl-C, each through the documented command, inside the VM on this very checkout; then an
+interface that is down, refused in one line before anything starts (one that does not exist is
+test_run_on_arm.py's, on this machine).
 
-Inside the VM programs run 20-260x slower (tools/vm/README.md): the rehearsal is lockstep (the plant
-steps on the controller's SYNC), so it takes longer but ends the same. One boot; on the 2-core
-machine under load about 15 minutes of wall time, two thirds of it each armctl's start-up (bash,
-Python, the build's check) in the emulated machine, a third the controller's periods (commissioning
-is 24 simulated seconds). Skipped (with the reason) only if the VM cannot be set up on this machine."""
+Inside the VM programs run about 10x slower than here (20-260x under load, tools/vm/README.md):
+the rehearsal is lockstep (the plant steps on the controller's SYNC), so it takes longer but ends
+the same. One boot; 643 s on the 2-core machine, alone on it: about 400 s are the rehearsal's 40
+simulated seconds at 1 kHz over three vcan buses (commissioning alone is 24 of them), about 180 s
+the eight armctl start-ups (Python, MuJoCo, the build's check) in the emulated machine. Skipped
+(with the reason) only if the VM cannot be set up on this machine."""
 
 from __future__ import annotations
 
@@ -62,9 +63,7 @@ sys.exit(0 if len(s) >= 6 and s[-1]['complete'] else 1)" 2>/dev/null
 }
 t0=$SECONDS; until settled; do sleep 1; [ $((SECONDS - t0)) -ge 600 ] && break; done
 kill -INT $PLANT; wait $PLANT; echo $? > "$OUT/plant.rc"
-# bad buses: an interface that does not exist, and one that is down
-$A run --hold --bus socketcan:vcan0,vcan1,vcan7 --record "$OUT/record.json" > "$OUT/missing.out" 2>&1
-echo $? > "$OUT/missing.rc"
+# a bus that is down
 ip link add dev vcan9 type vcan
 $A run --hold --bus socketcan:vcan0,vcan1,vcan9 --record "$OUT/record.json" > "$OUT/down.out" 2>&1
 echo $? > "$OUT/down.rc"
@@ -132,10 +131,7 @@ def test_ctrl_c_on_vcan_stops_the_arm_and_it_stays(vm: Path) -> None:
     assert _rc(vm, "plant") == 0, _text(vm, "plant")
 
 
-def test_a_missing_or_down_interface_is_one_line(vm: Path) -> None:
-    missing = _text(vm, "missing").strip().splitlines()
-    assert _rc(vm, "missing") == 2, missing
-    assert missing[-1].startswith("armctl run: --bus socketcan:vcan7: no such interface"), missing
+def test_a_down_interface_is_one_line(vm: Path) -> None:
     down = _text(vm, "down").strip().splitlines()
     assert _rc(vm, "down") == 2 and down[-1] == ("armctl run: --bus socketcan:vcan9: the interface is down (as root: "
                                                 "ip link set vcan9 up)"), down
