@@ -29,6 +29,7 @@ the rotor. `resonances` gives each joint's first resonance at home, motor locked
 from __future__ import annotations
 
 import math
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -36,8 +37,9 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from gen.lib import mjcf_defaults
 from gen.lib.params import param
-from gen.lib.paths import REPO
+from gen.lib.paths import BUNDLED_DRIVETRAIN
 
 
 @dataclass(frozen=True)
@@ -70,10 +72,10 @@ MAX_OMEGA_DT = 1.0
 PAYLOAD_SITE = "payload"   # the flange site the simulator hangs the payload on (arm.xml)
 FLANGE_HINTS = ("flange", "tool", "tcp", "attachment", "ee", "end_effector", "eef", "gripper", "hand")
 ROTOR_PREFIX, GEAR_PREFIX = "rotor_", "gear_"
+PLANT_KINDS = ("joint", "tendon", "actuator", "site")  # the kinds of element plant_xml adds or moves
 # the rotor's body: its inertia is the hinge's armature; MuJoCo wants a moving body to have some mass
 ROTOR_BODY_MASS, ROTOR_BODY_INERTIA = 1e-3, 1e-9
 DRIVETRAIN_FIELDS = {"size", "stiffness", "damping", "damping_ratio", "rotor_inertia"}
-BUNDLED_DRIVETRAIN = REPO / "host_sim" / "models" / "ur5e_arm_drivetrain.toml"
 
 
 class DrivetrainError(ValueError):
@@ -216,6 +218,10 @@ def plant_xml(arm_xml: str, drivetrain: list[dict[str, Any]]) -> str:
     """The simulator's true arm: arm.xml with every flexible joint made a two-mass system (the
     module's docstring). The link joints keep their order and come first (qpos 0..n-1)."""
     spec = mujoco.MjSpec.from_string(arm_xml)
+    # the rotors, their joints, the gears' tendons and the moved motors take nothing from the
+    # model's classes (a joint class's range or a tendon class's friction): MuJoCo's own defaults
+    classes = mjcf_defaults.default_classes(spec, mjcf_defaults.class_names_in(ET.fromstring(arm_xml)))
+    mjcf_defaults.reset_to_builtin(classes, PLANT_KINDS)
     taken = {kind: {e.name for e in elems} for kind, elems in
              (("body", spec.bodies), ("joint", spec.joints), ("tendon", spec.tendons))}
     acts = {a.target: a for a in spec.actuators}
@@ -228,12 +234,11 @@ def plant_xml(arm_xml: str, drivetrain: list[dict[str, Any]]) -> str:
         body.explicitinertial = True
         body.mass, body.inertia, body.ipos, body.iquat = ROTOR_BODY_MASS, [ROTOR_BODY_INERTIA] * 3, [0, 0, 0], [1, 0, 0, 0]
         body.fullinertia = [math.nan, 0, 0, 0, 0, 0]  # unset: inertia and iquat are the ones
-        # every property explicit: the model's joint defaults (a range, above all) are the link's, not the rotor's
+        # the rotor carries the link joint's drive-side properties; nothing else (no range, no spring)
         rotor = body.add_joint(name=_unique(taken["joint"], ROTOR_PREFIX + j["name"]), type=mujoco.mjtJoint.mjJNT_HINGE,
                                axis=[0, 0, 1], armature=j["rotor_inertia"], damping=link.damping,
                                frictionloss=link.frictionloss, actfrclimited=link.actfrclimited,
-                               actfrcrange=link.actfrcrange, limited=mujoco.mjtLimited.mjLIMITED_FALSE,
-                               stiffness=[0.0, 0.0, 0.0])
+                               actfrcrange=link.actfrcrange)
         link.armature = link.frictionloss = 0.0
         link.damping = [0.0, 0.0, 0.0]
         link.actfrclimited = mujoco.mjtLimited.mjLIMITED_FALSE

@@ -17,27 +17,37 @@ that the generator, the firmware, the simulator and the study all use.
   the strain-wave gear's spring and damper, the link); arm.json holds each joint's drive train, the
   first resonance and the rated payload, and arm.xml a site "payload" at the flange.
 
-prepare() (prepare.py) is one call per stage, each a module: load, compile, chain, home, the
+prepare() (preparation.py) is one call per stage, each a module: load, compile, chain, home, the
 dynamics-only model and the torque limits, write, reference, design, drive train. Errors name the element and
 say what to change (exit 2); nothing is written then.
 """
 
-from gen.arm.arm_file import ARM_FILE_FIELDS, DEFAULT_MODEL, ArmFile, arm_name, arm_name_of, load_arm_file
-from gen.arm.cli import main
-from gen.arm.design import (AUTO_WN_MAX, AUTO_WN_MIN, DEFAULT_DESIGN, auto_bandwidth, design_for,
-                            with_static_controller)
-from gen.arm.errors import ArmError
-from gen.arm.prepare import Prepared, prepare
-from gen.arm.reference import (RANGE_MARGIN, REF_MAX_ACCELERATION, REF_MAX_VELOCITY, REF_TORQUE_FRACTION,
-                               clip_amplitude, default_reference, fit_reference, reference_peak_fraction,
-                               reference_rule, reference_torque)
-from gen.arm.wiring import BUS_BUDGET, DEFAULT_TOPOLOGY
-from gen.arm.write import inverse_dynamics_difference, inverse_forces
-from gen.lib.model_hash import fnv1a64
+# Each name is imported from its module when first asked for (PEP 562): `python -m gen.arm` in a
+# build that finds its arm prepared already (gen/arm/cli.py) reads a key file, not MuJoCo.
+_FROM = {
+    "gen.arm.arm_file": ("ARM_FILE_FIELDS", "DEFAULT_DESIGN", "DEFAULT_MODEL", "ArmFile", "arm_name", "arm_name_of",
+                         "load_arm_file"),
+    "gen.arm.cli": ("main",),
+    "gen.arm.design": ("AUTO_WN_MAX", "AUTO_WN_MIN", "auto_bandwidth", "design_for",
+                       "with_static_controller"),
+    "gen.arm.errors": ("ArmError",),
+    "gen.arm.preparation": ("Prepared", "prepare"),
+    "gen.arm.reference": ("RANGE_MARGIN", "REF_MAX_ACCELERATION", "REF_MAX_VELOCITY", "REF_TORQUE_FRACTION",
+                          "clip_amplitude", "default_reference", "fit_reference", "reference_peak_fraction",
+                          "reference_rule", "reference_torque"),
+    "gen.arm.wiring": ("BUS_BUDGET", "DEFAULT_TOPOLOGY"),
+    "gen.arm.write": ("inverse_dynamics_difference", "inverse_forces"),
+    "gen.lib.model_hash": ("fnv1a64",),
+}
+_MODULE_OF = {name: module for module, names in _FROM.items() for name in names}
+__all__ = sorted(_MODULE_OF)
 
-__all__ = ["ARM_FILE_FIELDS", "AUTO_WN_MAX", "AUTO_WN_MIN", "BUS_BUDGET", "DEFAULT_DESIGN", "DEFAULT_MODEL",
-           "DEFAULT_TOPOLOGY", "RANGE_MARGIN", "REF_MAX_ACCELERATION", "REF_MAX_VELOCITY", "REF_TORQUE_FRACTION",
-           "ArmError", "ArmFile", "Prepared", "arm_name", "arm_name_of", "auto_bandwidth", "clip_amplitude",
-           "default_reference", "design_for", "fit_reference", "fnv1a64", "inverse_dynamics_difference",
-           "inverse_forces", "load_arm_file", "main", "prepare", "reference_peak_fraction", "reference_rule",
-           "reference_torque", "with_static_controller"]
+
+def __getattr__(name: str) -> object:
+    import importlib
+
+    if name not in _MODULE_OF:
+        raise AttributeError(f"module 'gen.arm' has no attribute '{name}'")
+    value = getattr(importlib.import_module(_MODULE_OF[name]), name)
+    globals()[name] = value
+    return value

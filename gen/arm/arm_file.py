@@ -8,16 +8,17 @@ import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import mujoco
-
-from gen import drivetrain
 from gen.arm.errors import ArmError, number
 from gen.lib import toml_input
-from gen.lib.paths import REPO
+from gen.lib.paths import BUNDLED_DRIVETRAIN, REPO
+
+if TYPE_CHECKING:
+    import mujoco
 
 DEFAULT_MODEL = REPO / "host_sim" / "models" / "ur5e_arm.xml"
+DEFAULT_DESIGN = REPO / "gen" / "configs" / "paper.toml"
 ARM_FILE_FIELDS = {"name", "model", "joints", "locked", "home", "keyframe", "torque_limits", "buses",
                    "topology", "design", "contacts", "timestep", "drives", "drivetrain", "rated_payload_kg", "flange"}
 GENERIC_STEMS = ("robot", "model", "arm")  # a file named so says less than its folder
@@ -59,8 +60,11 @@ def _table_of_numbers(v: Any, where: str) -> dict[str, float]:
 
 def load_arm_file(path: Path | None, model: Path | None = None) -> ArmFile:  # noqa: C901 - one check a field
     """The arm file (TOML) validated field by field, or the defaults for a bare model."""
+    # gen.drivetrain (MuJoCo) only where it is needed: `python -m gen.arm` finds a prepared folder without it
     if path is None:
         if (model or DEFAULT_MODEL).resolve() == DEFAULT_MODEL.resolve():
+            from gen import drivetrain
+
             # the bundled arm: its drive train and rated payload are cited in a file of their own
             table, payload = drivetrain.load_bundled()
             return ArmFile(None, None, DEFAULT_MODEL, drivetrain=table, rated_payload_kg=payload)
@@ -133,6 +137,8 @@ def load_arm_file(path: Path | None, model: Path | None = None) -> ArmFile:  # n
                            f"(the model's own, an integer fraction of the period), got {doc['timestep']!r}")
         af.timestep = doc["timestep"]
     if "drivetrain" in doc:
+        from gen import drivetrain
+
         try:
             af.drivetrain = drivetrain.check_table(doc["drivetrain"], f"arm file {path}: drivetrain")
         except drivetrain.DrivetrainError as exc:
@@ -146,6 +152,11 @@ def load_arm_file(path: Path | None, model: Path | None = None) -> ArmFile:  # n
             raise ArmError(f"arm file {path}: flange: expected the name of a site on the last link")
         af.flange = doc["flange"]
     return af
+
+
+def drivetrain_inputs(af: ArmFile) -> list[Path]:
+    """The files the drive train is read from besides the arm file: the bundled arm's own."""
+    return [BUNDLED_DRIVETRAIN] if af.path is None and af.drivetrain is not None else []
 
 
 def slug(text: str) -> str:

@@ -5,10 +5,11 @@ Jaco's common.xml gives every site `material="reference_site"` that way)."""
 
 from __future__ import annotations
 
-import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import mujoco
+
+from gen.lib import mjcf_defaults
 
 ASSET_KINDS = ("mesh", "hfield", "texture", "material", "skin")
 
@@ -28,38 +29,7 @@ _LISTS = {"mesh": "meshes", "hfield": "hfields", "texture": "textures", "materia
 def default_classes(spec: mujoco.MjSpec, path: Path) -> list[mujoco.MjsDefault]:
     """Every default class of the model: `main` and each <default class=...> of the file and its
     includes, nested or not, used by an element or only by other classes (childclass included)."""
-    names: set[str] = set()
-    _class_names(path, path, names, set())
-    for elist in ("bodies", "geoms", "sites", "joints", "tendons", "actuators", "cameras", "lights", "meshes",
-                  "materials", "textures", "equalities", "pairs"):
-        for e in getattr(spec, elist, []):
-            for attr in ("classname", "childclass"):
-                d = getattr(e, attr, None)
-                if isinstance(d, mujoco.MjsDefault) and d.name:
-                    names.add(d.name)
-                elif isinstance(d, str) and d:
-                    names.add(d)
-    out = [spec.default]
-    for name in sorted(names - {"main"}):
-        d = spec.find_default(name)
-        if d is not None:
-            out.append(d)
-    return out
-
-
-def _class_names(path: Path, top: Path, names: set[str], seen: set[Path]) -> None:
-    seen.add(path)
-    try:
-        root = ET.parse(path).getroot()
-    except (ET.ParseError, OSError):
-        return  # MuJoCo read it (load), so this is a file ElementTree cannot: its classes are found by use
-    for el in root.iter():
-        if el.tag == "default" and el.get("class"):
-            names.add(el.get("class", ""))
-        elif el.tag == "include" and el.get("file"):
-            inc = (top.parent / el.get("file", "")).resolve()
-            if inc.is_file() and inc not in seen:
-                _class_names(inc, top, names, seen)
+    return mjcf_defaults.default_classes(spec, mjcf_defaults.class_names_in_file(path))
 
 
 def remove_assets(spec: mujoco.MjSpec, kinds: set[str], classes: list[mujoco.MjsDefault],

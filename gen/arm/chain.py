@@ -5,6 +5,7 @@ equality constraint may close a loop through the arm or couple its joints."""
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -183,10 +184,17 @@ def _joints_inside_chain(m: mujoco.MjModel, bodies: list[int], controlled: list[
 
 
 def _dbc_drive_slots() -> int:
-    from gen.drive_ids import drive_slots
     from gen.lib.busload import DEFAULT_DBC
 
-    return len(drive_slots(DEFAULT_DBC)["STATE"])
+    return _drive_slots(DEFAULT_DBC, DEFAULT_DBC.stat().st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=4)
+def _drive_slots(dbc: Path, mtime_ns: int) -> int:
+    """Read once per version of the file (cantools parses a DBC in a tenth of a second)."""
+    from gen.drive_ids import drive_slots
+
+    return len(drive_slots(dbc)["STATE"])
 
 
 def _check_arm_file_names(m0: mujoco.MjModel, chain: Chain, af: ArmFile, path: Path) -> None:

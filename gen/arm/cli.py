@@ -8,15 +8,17 @@ import json
 import sys
 from pathlib import Path
 
-from gen.arm.arm_file import load_arm_file
-from gen.arm.design import DEFAULT_DESIGN
-from gen.arm.drive_train import inputs as drive_train_inputs
+from typing import TYPE_CHECKING
+
+from gen.arm.arm_file import DEFAULT_DESIGN, drivetrain_inputs, load_arm_file
 from gen.arm.errors import ArmError
-from gen.arm.prepare import Prepared, prepare
-from gen.arm.wiring import DEFAULT_TOPOLOGY
 from gen.lib.atomic_output import OutputError, write_files_atomically
+from gen.lib.busload import DEFAULT_DBC, DEFAULT_TOPOLOGY
 from gen.lib.escape import EscapeError, depfile_path
 from gen.lib.one_line import one_line
+
+if TYPE_CHECKING:
+    from gen.arm.preparation import Prepared
 
 
 FILES = ("arm.xml", "arm.json", "design.toml", "plant.xml")
@@ -37,7 +39,7 @@ def inputs_key(model: Path | None, arm_file: Path | None, design: Path | None) -
         h.update(f"{label}={p}\0".encode())
         if p is not None and p.is_file():
             h.update(p.read_bytes())
-    from gen.drivetrain import BUNDLED_DRIVETRAIN
+    from gen.lib.paths import BUNDLED_DRIVETRAIN
 
     for src in sorted((REPO / "gen" / "arm").glob("*.py")) + [REPO / "gen" / "drivetrain.py", BUNDLED_DRIVETRAIN,
                                                                REPO / "firmware" / "params" / "params.toml",
@@ -81,7 +83,11 @@ def main(argv: list[str] | None = None) -> int:
         af = load_arm_file(ns.arm_file.resolve() if ns.arm_file else None, ns.model)
         key = inputs_key(af.model.resolve(), af.path, ns.design.resolve() if ns.design else None)
         info = already_prepared(ns.out, key)
-        prep = None if info is not None else prepare(af, ns.design)
+        prep = None
+        if info is None:  # imported only now: a folder prepared already is found without MuJoCo
+            from gen.arm.preparation import prepare
+
+            prep = prepare(af, ns.design)
     except ArmError as exc:
         print(f"gen.arm: {exc}", file=sys.stderr)
         return 2
@@ -98,9 +104,7 @@ def main(argv: list[str] | None = None) -> int:
             deps.append(str(af.path.resolve()))
         if af.topology:
             deps.append(str(af.topology.resolve()))
-        deps += [str(p) for p in drive_train_inputs(af)]
-        from gen.lib.busload import DEFAULT_DBC
-
+        deps += [str(p) for p in drivetrain_inputs(af)]
         deps += [str(DEFAULT_DBC), str(DEFAULT_TOPOLOGY)]  # the drive slots; the six-drive wiring
         target = ns.out / "arm.xml"
         try:

@@ -33,9 +33,14 @@ def compile_model(spec: mujoco.MjSpec, path: Path, contacts: bool) -> tuple[mujo
     vendor's file) balanced. Every body and joint is named (the later stages find them by name)."""
     warnings: list[str] = []
     stripped = False
+    _name_everything(spec)
     while True:
         try:
-            spec.compile()
+            # a copy: deleting elements from a spec that compiled its meshes takes MuJoCo seconds,
+            # and the later stages delete the geometry, the actuators and the locked joints
+            m0 = spec.copy().compile()
+            if spec.compiler.fusestatic:  # what compiling the spec itself does to it (URDF's default)
+                spec.fuse_static()
             break
         except Exception as exc:  # noqa: BLE001 - MuJoCo's compiler raises ValueError with its message
             msg = joined_lines(str(exc))
@@ -56,8 +61,6 @@ def compile_model(spec: mujoco.MjSpec, path: Path, contacts: bool) -> tuple[mujo
             stripped = True
             warnings.insert(0, f"mesh files not found ({msg[:120]}): {n} mesh geoms dropped; the dynamics "
                                "come from the bodies' inertials")
-    _name_everything(spec)
-    m0 = compile_spec(spec, path, "compiling it")
     check_depth(m0, path)
     return m0, warnings
 

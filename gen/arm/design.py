@@ -17,15 +17,13 @@ from typing import Any
 
 import numpy as np
 
-from gen.arm.arm_file import DEFAULT_MODEL, ArmFile
+from gen.arm.arm_file import DEFAULT_DESIGN, DEFAULT_MODEL, ArmFile
 from gen.arm.errors import ArmError
 from gen.arm.reference import REF_TORQUE_FRACTION
 from gen.arm.write import MIN_JOINT_INERTIA
 from gen.lib import toml_input
 from gen.lib.bounds import DEFAULT_MAX_ERROR_DEG
-from gen.lib.paths import REPO
 
-DEFAULT_DESIGN = REPO / "gen" / "configs" / "paper.toml"
 AUTO_WN_MIN, AUTO_WN_MAX = 5.0, 40.0
 
 

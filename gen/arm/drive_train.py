@@ -5,7 +5,6 @@ the plant with flexible joints the simulator runs."""
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
 import mujoco
@@ -50,7 +49,3 @@ def drive_train(af: ArmFile, m: mujoco.MjModel, xml: str, chain: Chain, home: li
             "payload": {"rated_kg": af.rated_payload_kg, "at": flange_from}}
     return info, drivetrain.plant_xml(xml, joints)
 
-
-def inputs(af: ArmFile) -> list[Path]:
-    """The files the drive train is read from besides the arm file: the bundled arm's own."""
-    return [drivetrain.BUNDLED_DRIVETRAIN] if af.path is None and af.drivetrain is not None else []

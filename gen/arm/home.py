@@ -18,6 +18,9 @@ from gen.arm.errors import ArmError
 from gen.arm.reference import RANGE_MARGIN
 
 
+MID_RANGE = "mid-range (no keyframe 'home' in the model, none in the arm file)"
+
+
 @dataclass
 class Pose:
     home: list[float]
@@ -59,7 +62,7 @@ def home_pose(m0: mujoco.MjModel, chain: Chain, af: ArmFile, path: Path, warning
     else:
         home = [0.5 * (r[0] + r[1]) if r else float(m0.qpos0[m0.jnt_qposadr[j]])
                 for j, r in zip(chain.joints, ranges)]
-        source = "mid-range (no keyframe 'home' in the model, none in the arm file)"
+        source = MID_RANGE
         warnings.append(f"home pose: {source}")
     for name, h, r in zip(names, home, ranges):
         if r and r[1] - r[0] < 2 * RANGE_MARGIN:

@@ -15,8 +15,9 @@ import numpy as np
 from gen.arm.arm_file import ArmFile
 from gen.arm.chain import Chain
 from gen.arm.errors import ArmError
-from gen.arm.home import Pose
-from gen.arm.reference import REF_TORQUE_FRACTION, default_reference, reference_torque
+from gen.arm.home import MID_RANGE, Pose
+from gen.arm.reference import (RANGE_MARGIN, REF_MAX_ACCELERATION, REF_TORQUE_FRACTION, default_reference,
+                               reference_torque)
 
 GRAVITY_SAMPLES = 256  # poses within the joint ranges at which an assumed limit must hold the arm
 
@@ -37,11 +38,49 @@ def torque_limits(m0: mujoco.MjModel, m1: mujoco.MjModel, chain: Chain, pose: Po
         warnings.append("torque limits assumed (the model gives none: no actuatorfrcrange, no actuator with a "
                         "ctrlrange or forcerange, in URDF no <limit effort>): " + ", ".join(notes) +
                         f"; each is {1 / REF_TORQUE_FRACTION:g} x what the joint needs to hold the arm anywhere in "
-                        "its ranges and to follow the default reference; give your drives' limits in an arm file "
-                        "(torque_limits)")
+                        f"its ranges while accelerating at {REF_MAX_ACCELERATION:g} rad/s^2, and to follow the default "
+                        "reference; give your drives' limits in an arm file (torque_limits)")
     out = [(float(lim), src) for lim, src in limits if lim is not None]
+    if pose.source == MID_RANGE:
+        _lighter_home(m1, chain, pose, [lim for lim, _ in out], warnings)
     _check_gravity_at_home(m1, chain, pose, out, path)
     return out
+
+
+def _gravity_fraction(m: mujoco.MjModel, q: np.ndarray, limits: np.ndarray, d: mujoco.MjData) -> np.ndarray:
+    return np.abs(holding_torque(m, q, d)) / limits
+
+
+def _lighter_home(m1: mujoco.MjModel, chain: Chain, pose: Pose, limits: list[float], warnings: list[str]) -> None:
+    """A home the importer chose (mid-range: neither the model nor the arm file gives one) where
+    holding the arm against gravity takes more than REF_TORQUE_FRACTION of a joint's torque limit
+    leaves the controller no room to follow a reference or reject a disturbance: it moves, inside
+    the ranges, to the pose nearby where gravity asks least of the limits (the arm let down).
+    A home the user gave is never moved."""
+    lim = np.asarray(limits, float)
+    d = mujoco.MjData(m1)
+    home = np.asarray(pose.home, float)
+    before = _gravity_fraction(m1, home, lim, d)
+    if before.max() <= REF_TORQUE_FRACTION:
+        return
+    bounds = [(r[0] + RANGE_MARGIN, r[1] - RANGE_MARGIN) if r else (h - math.pi, h + math.pi)
+              for h, r in zip(home, pose.ranges)]
+    from scipy.optimize import minimize
+
+    found = minimize(lambda q: float(np.sum(_gravity_fraction(m1, q, lim, d) ** 2)), home, method="L-BFGS-B",
+                     bounds=bounds)
+    q = np.clip(found.x, [b[0] for b in bounds], [b[1] for b in bounds])
+    after = _gravity_fraction(m1, q, lim, d)
+    if after.max() >= before.max():
+        return
+    worst = int(np.argmax(before))
+    pose.home = [round(float(x), 4) for x in q]
+    pose.source = f"mid-range moved to where gravity asks less (at most {after.max():.0%} of a torque limit)"
+    warnings.append(f"home pose: at mid-range, holding the arm against gravity takes {before[worst]:.0%} of "
+                    f"{chain.names[worst]}'s torque limit, more than the {REF_TORQUE_FRACTION:.0%} that leaves the "
+                    f"controller room; moved to where it takes at most {after.max():.0%}: "
+                    + ", ".join(f"{n} {h:g}" for n, h in zip(chain.names, pose.home))
+                    + " rad (give the arm's own home in an arm file, home = [...])")
 
 
 def model_limit(m: mujoco.MjModel, j: int, override: float | None) -> tuple[float | None, str]:
@@ -87,16 +126,22 @@ def holding_torque(m: mujoco.MjModel, q: np.ndarray, d: mujoco.MjData | None = N
 
 
 def arm_needs(m: mujoco.MjModel, pose: Pose) -> np.ndarray:
-    """Each joint's largest |torque| to hold the arm still anywhere in its ranges (home and
-    GRAVITY_SAMPLES poses drawn in them; an unlimited joint anywhere in a turn) and to follow the
-    default reference from home (frictionloss included)."""
+    """Each joint's largest |torque| to hold the arm anywhere in its ranges while accelerating the
+    joint at REF_MAX_ACCELERATION (home and GRAVITY_SAMPLES poses drawn in the ranges; an unlimited
+    joint anywhere in a turn: |gravity| + M_jj a), and to follow the default reference from home
+    (frictionloss included). The acceleration gives a joint that gravity does not load (a base
+    turning about the vertical) a drive that can move its links, not one sized for the reference
+    alone: the joints beyond it pass their motion through it."""
     rng = np.random.default_rng(0)
     lo = np.array([r[0] if r else -math.pi for r in pose.ranges])
     hi = np.array([r[1] if r else math.pi for r in pose.ranges])
     d = mujoco.MjData(m)
-    worst = np.abs(holding_torque(m, np.asarray(pose.home, float), d))
-    for _ in range(GRAVITY_SAMPLES):
-        worst = np.maximum(worst, np.abs(holding_torque(m, rng.uniform(lo, hi), d)))
+    mass = np.zeros((m.nv, m.nv))
+    worst = np.zeros(m.nv)
+    for q in [np.asarray(pose.home, float)] + [rng.uniform(lo, hi) for _ in range(GRAVITY_SAMPLES)]:
+        hold = np.abs(holding_torque(m, q, d))
+        mujoco.mj_fullM(m, d, mass)
+        worst = np.maximum(worst, hold + np.diag(mass) * REF_MAX_ACCELERATION)
     ref = default_reference(pose.home, pose.ranges)
     worst = np.maximum(worst, reference_torque(m, pose.home, ref["amp"], ref["freq_hz"]))
     return worst
@@ -118,3 +163,33 @@ def _check_gravity_at_home(m1: mujoco.MjModel, chain: Chain, pose: Pose, limits:
                            f"hold the arm at home ({pose.source}) against gravity (needs {need[i]:.3g} N m): give "
                            "the drive's real limit (arm file torque_limits) or a home pose where gravity asks less "
                            "(arm file home)")
+
+
+# CiA 402 commands torque in steps of 1 per mille of the motor's rated torque (0x6071), which the
+# emulated drives give the joint's torque limit through the gear (firmware/protocol/drives.toml:
+# "joint_torque_limit / gear"): a step of a thousandth of the limit at the joint. One step that
+# changes a joint's speed by more than MAX_STEP_SPEED within one loop period leaves the loop
+# nothing finer to hold it with: it cycles between steps, up to the safety layer's 2 pi rad/s
+# stop (SO-100's gripper in docs/arm-compatibility.md: 1.6 rad/s a step; SO-101's, 0.6, runs).
+TORQUE_STEP = 1e-3
+MAX_STEP_SPEED = 1.0  # rad/s
+
+
+def coarse_torque_steps(names: list[str], limits: list[float], inertia_at_home: np.ndarray,
+                        period: float) -> list[dict[str, object]]:
+    """The joints whose drive, giving the joint's torque limit at its rated torque, changes the
+    joint's speed within one period by more than MAX_STEP_SPEED with one torque step (M_jj at
+    home): arm.json's limitations, each with what to change."""
+    out: list[dict[str, object]] = []
+    for name, lim, mjj in zip(names, limits, inertia_at_home):
+        step = TORQUE_STEP * lim
+        speed = step / float(mjj) * period
+        if speed > MAX_STEP_SPEED:
+            out.append({"joint": name, "kind": "torque-step", "text": (
+                f"joint '{name}': one torque step of a drive whose rated torque gives its {lim:g} N m limit "
+                f"(CiA 402 commands 1 per mille of the rated torque: {step:.3g} N m at the joint) changes its "
+                f"speed by {speed:.2g} rad/s within a {period * 1e3:g} ms period (it moves {float(mjj):.2g} kg m^2 "
+                f"at home), more than {MAX_STEP_SPEED:g} rad/s: the loop has nothing finer to hold it with; give "
+                "it a drive with a finer step (the arm file's drives: a lower rated_torque_nm, or more gear) or "
+                "its drive's real torque limit (torque_limits)")})
+    return out

@@ -9,10 +9,9 @@ from typing import Any
 from gen.arm.arm_file import ArmFile
 from gen.arm.errors import ArmError
 from gen.lib import busload
+from gen.lib.busload import DEFAULT_TOPOLOGY
 from gen.lib.params import constant
-from gen.lib.paths import REPO
 
-DEFAULT_TOPOLOGY = REPO / "firmware" / "protocol" / "buses.toml"
 BUS_BUDGET: float = constant("bus-budget")  # the highest bus load the wiring may reach (the registry's)
 
 

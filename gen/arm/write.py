@@ -19,11 +19,13 @@ from gen.arm.assets import ASSET_KINDS, remove_assets
 from gen.arm.chain import Chain
 from gen.arm.compile import compile_spec
 from gen.arm.errors import ArmError, float32
+from gen.lib import mjcf_defaults
 from gen.lib.one_line import joined_lines
 
 MIN_JOINT_INERTIA = 1e-7   # kg m^2: a joint that moves less than this cannot be controlled
 LIGHT_LINK_KG = 1e-6       # a link lighter than this (its children may still be heavy): a warning
 WRITTEN_TOLERANCE = 1e-4   # relative change of the inverse dynamics that writing to XML may cost
+OWN_KINDS = ("actuator", "site")  # the kinds of element the importer adds to arm.xml
 
 
 @dataclass
@@ -51,9 +53,13 @@ def dynamics_only(spec: mujoco.MjSpec, m0: mujoco.MjModel, af: ArmFile, path: Pa
         body.iquat = m0.body_iquat[b].copy()
         body.inertia = m0.body_inertia[b].copy()
         body.fullinertia = [math.nan, 0, 0, 0, 0, 0]  # unset: inertia + iquat are the ones
+    _drop_gravity_compensation(spec, m0, warnings)
     for elist in (spec.actuators, spec.sensors, spec.tendons, spec.equalities, spec.keys, spec.excludes, spec.pairs):
         for e in list(elist):
             spec.delete(e)
+    # the motors and the payload site the importer adds take nothing from the model's classes (a
+    # class that makes every `general` a position servo); the model's own sites keep their values
+    mjcf_defaults.reset_to_builtin(classes, OWN_KINDS)
     if not af.contacts:
         for g in list(spec.geoms):
             spec.delete(g)
@@ -79,6 +85,20 @@ def dynamics_only(spec: mujoco.MjSpec, m0: mujoco.MjModel, af: ArmFile, path: Pa
     spec.option.timestep = dt
     spec.compiler.fusestatic = True
     return Dynamics(compile_spec(spec, path, "preparing it"), dt, substeps)
+
+
+def _drop_gravity_compensation(spec: mujoco.MjSpec, m0: mujoco.MjModel, warnings: list[str]) -> None:
+    """MuJoCo's body gravcomp is a force from nowhere that holds a body up (a simulation's stand-in
+    for a robot's own gravity compensation). On a real arm the drives carry gravity, and this
+    controller's model compensates it itself: with gravcomp the simulated arm would float and the
+    assumed torque limits would leave gravity out."""
+    held = [mujoco.mj_id2name(m0, mujoco.mjtObj.mjOBJ_BODY, b) for b in range(1, m0.nbody) if m0.body_gravcomp[b]]
+    for name in held:
+        spec.body(name).gravcomp = 0.0
+    if held:
+        warnings.append(f"gravcomp (MuJoCo's gravity compensation, a force no drive gives) removed from "
+                        f"{len(held)} bodies ({', '.join(held[:3])}{' ...' if len(held) > 3 else ''}): the drives "
+                        "carry the arm's weight, as on the real arm, and the controller's model compensates it")
 
 
 def write(spec: mujoco.MjSpec, dyn: Dynamics, chain: Chain, home: list[float], limits: list[tuple[float, str]],

@@ -10,6 +10,8 @@ BUILD = REPO / "build"
 DOCS = REPO / "docs"  # the user guide (MkDocs, mkdocs.yml)
 DOCS_RESULTS = DOCS / "results"  # the results files the docs' figures are rendered from (`--record`)
 PARAMETERS_PAGE = DOCS / "reference" / "parameters.md"  # the option tables generated from the registry
+# the bundled arm's drive train and rated payload, cited (gen/drivetrain.py)
+BUNDLED_DRIVETRAIN = REPO / "host_sim" / "models" / "ur5e_arm_drivetrain.toml"
 
 
 def build_dir(preset: str) -> Path:

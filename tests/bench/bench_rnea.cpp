@@ -2,7 +2,8 @@
 // count the instructions per call:
 //   bench_rnea ours|kernel|pinocchio-double|pinocchio-float N
 // (ours: the general arm_rnea; kernel: the arm's generated arm_rnea_kernel, what the controller runs)
-//   bench_rnea check        (Pinocchio's torques against ours on 200 states; prints the worst)
+//   bench_rnea check        (Pinocchio's torques against ours on 200 states; prints the worst;
+//                            tests/python/test_bench_rnea.py makes the same comparison without compiling Pinocchio)
 // Pinocchio's model is built from the same generated header the firmware uses: the same link
 // frames, axes, masses, centres of mass, inertias, armature (model.armature, which Pinocchio's
 // rnea adds as armature * a) and joint damping (model.damping, which its rnea leaves out: our
@@ -21,6 +22,7 @@ extern "C" {
 #include "arm_rnea_kernel.h"
 #include "arm_robot_model_data.h"
 }
+#include "rnea_states.h"
 
 namespace {
 
@@ -59,16 +61,6 @@ pinocchio::ModelTpl<S> build_model()
     return m;
 }
 
-void state(int k, float q[ARM_N_JOINTS], float qd[ARM_N_JOINTS], float qdd[ARM_N_JOINTS])
-{
-    const float t = 0.001f * float(k);  // the inputs of bench_step's steps
-    for (int j = 0; j < ARM_N_JOINTS; ++j) {
-        q[j] = 0.5f * std::sin(t + float(j));
-        qd[j] = 0.5f * std::cos(t + float(j));
-        qdd[j] = 0.1f + 0.3f * std::sin(3.0f * t + float(j));
-    }
-}
-
 }  // namespace
 
 // Kept out of line so callgrind's --toggle-collect can name them.
@@ -101,7 +93,7 @@ double run_pinocchio(int n)
     double sink = 0.0;
     for (int k = 0; k < n; ++k) {
         float fq[ARM_N_JOINTS], fv[ARM_N_JOINTS], fa[ARM_N_JOINTS];
-        state(k, fq, fv, fa);
+        arm_rnea_state(k, fq, fv, fa);
         for (int j = 0; j < ARM_N_JOINTS; ++j) {
             q[j] = S(fq[j]);
             v[j] = S(fv[j]);
@@ -119,9 +111,9 @@ int main(int argc, char **argv)
         const auto m = build_model<double>();
         pinocchio::Data d(m);
         double worst = 0.0;
-        for (int k = 0; k < 200; ++k) {
+        for (int k = 0; k < ARM_RNEA_CHECK_STATES; ++k) {
             float q[ARM_N_JOINTS], qd[ARM_N_JOINTS], qdd[ARM_N_JOINTS], tau[ARM_N_JOINTS];
-            state(37 * k, q, qd, qdd);
+            arm_rnea_state(ARM_RNEA_CHECK_STRIDE * k, q, qd, qdd);
             Eigen::VectorXd vq(ARM_N_JOINTS), vv(ARM_N_JOINTS), va(ARM_N_JOINTS);
             for (int j = 0; j < ARM_N_JOINTS; ++j) {
                 vq[j] = q[j];
@@ -156,7 +148,7 @@ int main(int argc, char **argv)
         const bool kernel = std::strcmp(argv[1], "kernel") == 0;
         for (int k = 0; k < n; ++k) {
             float q[ARM_N_JOINTS], qd[ARM_N_JOINTS], qdd[ARM_N_JOINTS], tau[ARM_N_JOINTS];
-            state(k, q, qd, qdd);
+            arm_rnea_state(k, q, qd, qdd);
             if (kernel) {
                 bench_rnea_kernel(q, qd, qdd, tau);
             } else {

@@ -153,7 +153,8 @@ class Browser:
 
 
 def page_facts(browser: Browser, page: Path) -> dict[str, Any]:
-    """What a reader's browser made of a page once its figures are drawn (if it has any): its title,
+    """What a reader's browser made of a page once every folded section is opened and its figures are
+    drawn (if it has any): its title,
     the scripts but those with JSON, images not inlined, elements with an event handler, links out,
     every element's kind, its text and its figures' SVG text (tests/python/test_attacks.py,
     test_hostile_names.py: no element of a name's)."""
@@ -162,6 +163,13 @@ def page_facts(browser: Browser, page: Path) -> dict[str, Any]:
     for _ in range(600):
         if browser.evaluate("document.body.dataset.figures") == "drawn" or not browser.evaluate(
                 "document.querySelector('div.figure[data-figure]')"):
+            break
+        browser.call("Runtime.evaluate", {"expression": "new Promise(r => setTimeout(r, 100))", "awaitPromise": True},
+                     session=True)
+    browser.evaluate("document.querySelectorAll('details').forEach(d => { d.open = true; })")  # a reader opens them
+    for _ in range(600):  # and their figures are drawn then
+        if browser.evaluate("document.querySelectorAll('div.figure[data-figure]').length === "
+                            "document.querySelectorAll('div.figure[data-drawn=\"yes\"]').length"):
             break
         browser.call("Runtime.evaluate", {"expression": "new Promise(r => setTimeout(r, 100))", "awaitPromise": True},
                      session=True)

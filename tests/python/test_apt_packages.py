@@ -94,6 +94,7 @@ REQUIRED: list[tuple[str | None, str, str]] = [
      "/usr/lib/x86_64-linux-gnu/dri/swrast_dri.so"),
     (None, "armctl render: OpenGL for PyOpenGL on EGL", _library("libOpenGL.so.0")),
     ("test", "test_report_html: headless Chromium", _program("chromium-headless-shell")),
+    ("docs", "the user guide's diagrams: Graphviz's dot (tools/commands/docs_hooks.py)", _program("dot")),
 ]
 
 

@@ -366,15 +366,18 @@ def test_a_massless_link_says_what_carries_its_joints_inertia(tmp_path: Path) ->
 
 def test_a_joint_without_a_torque_limit_gets_one_sized_from_the_arm_with_a_warning(tmp_path: Path) -> None:
     """dm_control's Jaco carries no actuator: each limit is assumed, 1 / REF_TORQUE_FRACTION times what
-    the joint needs to hold the arm anywhere in its ranges and to follow the default reference, and
-    the warning says so and how to give the drives' own."""
+    the joint needs to hold the arm anywhere in its ranges while accelerating at REF_MAX_ACCELERATION
+    and to follow the default reference, and the warning says so and how to give the drives' own."""
     model = write(tmp_path, chain_mjcf(actuators=False))
     p = prep(model)
     limits = [j["torque_limit"] for j in p.info["joints"]]
     assert all(j["torque_limit_from"] == "assumed: no limit in the model" for j in p.info["joints"])
-    # j1 (axis y) holds two 1 kg links 0.1 and 0.3 m out when laid flat: about 3.9 N m, times 2
-    assert limits[1] == pytest.approx(2 * 9.81 * 0.4, rel=0.05)
-    assert limits[0] < limits[1] and all(x > 0 for x in limits)
+    # j1 (axis y) holds two 1 kg links 0.1 and 0.3 m out when laid flat (3.9 N m) and accelerates them,
+    # M11 = 0.01 + 0.1^2 + 0.01 + 0.3^2 = 0.12 kg m^2, at 20 rad/s^2 (2.4 N m): 6.3 N m, times 2
+    assert limits[1] == pytest.approx(2 * (9.81 * 0.4 + 0.12 * gen_arm.REF_MAX_ACCELERATION), rel=0.05)
+    # j0 (the vertical axis): gravity never loads it, and still it moves the links beyond it
+    assert 0 < limits[0] < limits[1]
+    assert limits[0] >= 2 * 0.12 * gen_arm.REF_MAX_ACCELERATION * 0.5
     w = [x for x in p.info["warnings"] if x.startswith("torque limits assumed")]
     assert len(w) == 1 and "j0" in w[0] and "torque_limits" in w[0]
     assert max(p.info["reference"]["peak_torque_fraction"]) <= 0.5 + 1e-6
@@ -383,14 +386,81 @@ def test_a_joint_without_a_torque_limit_gets_one_sized_from_the_arm_with_a_warni
 def test_a_folder_prepared_from_the_same_inputs_is_not_prepared_again(tmp_path: Path, monkeypatch) -> None:
     """The build's gen.arm step finds the preparation the check before the build made (tools/build/arm.py
     seed_prepared): same inputs, nothing prepared; another model, prepared again."""
-    from gen.arm import cli
+    from gen.arm import preparation as stage  # the CLI imports prepare() from it when it needs it
 
     model = write(tmp_path, chain_mjcf())
     out = tmp_path / "out"
     assert gen_arm.main(["--model", str(model), "--out", str(out)]) == 0
     calls = []
-    monkeypatch.setattr(cli, "prepare", lambda *a: calls.append(a) or prepare(*a))
+    monkeypatch.setattr(stage, "prepare", lambda *a: calls.append(a) or prepare(*a))
     assert gen_arm.main(["--model", str(model), "--out", str(out)]) == 0 and calls == []
     model.write_text(chain_mjcf(n=4))
     assert gen_arm.main(["--model", str(model), "--out", str(out)]) == 0 and len(calls) == 1
     assert json.loads((out / "arm.json").read_text())["n_joints"] == 4
+
+
+# ---- physics the controller must meet as it is -------------------------------------------------
+def test_gravity_compensation_is_taken_out_and_said(tmp_path: Path) -> None:
+    """dm-robotics' Panda floats: MuJoCo's body gravcomp holds every link up. The prepared arm carries
+    its weight on its drives (the controller's model compensates gravity), and the assumed limits
+    hold it: the same arm as without gravcomp, with a warning."""
+    plain = prep(write(tmp_path, chain_mjcf(actuators=False), "plain.xml"))
+    held = prep(write(tmp_path, chain_mjcf(actuators=False).replace("<body name=", '<body gravcomp="1" name='),
+                      "held.xml"))
+    assert "gravcomp" not in held.xml and not np.any(mujoco.MjModel.from_xml_string(held.xml).body_gravcomp)
+    assert [j["torque_limit"] for j in held.info["joints"]] == [j["torque_limit"] for j in plain.info["joints"]]
+    w = [x for x in held.info["warnings"] if x.startswith("gravcomp")]
+    assert len(w) == 1 and "4 bodies (mount, l0, l1 ..." in w[0]
+
+
+def test_a_mid_range_home_that_gravity_loads_past_half_a_limit_is_let_down(tmp_path: Path) -> None:
+    """Neither the model nor an arm file gives a home, and at mid-range j1 holds the arm out flat with
+    4 of its 5 N m: the home moves inside the ranges to where gravity asks at most half of every
+    limit. A home the user gave stays where it is."""
+    text = chain_mjcf().replace('ctrlrange="-50 50"', 'ctrlrange="-5 5"').replace(
+        '<joint name="j1" axis="0 1 0" range="-2 2"', '<joint name="j1" axis="0 1 0" range="0 3.1"')
+    p = prep(write(tmp_path, text))
+    home = [j["home"] for j in p.info["joints"]]
+    assert home[1] != pytest.approx(1.55) and 0.05 <= home[1] <= 3.05, home
+    assert max(abs(x) for x in holding(p.xml, home)[:2]) <= 0.5 * 5
+    assert p.info["home_from"].startswith("mid-range moved")
+    w = [x for x in p.info["warnings"] if "more than the 50%" in x]
+    assert len(w) == 1 and "j1's torque limit" in w[0] and "home = [...]" in w[0]
+    given = prep(write(tmp_path, text, "given.xml"), home=[0.0, 1.55, 0.0])
+    assert [j["home"] for j in given.info["joints"]] == [0.0, 1.55, 0.0]
+
+
+def holding(xml: str, q: list[float]) -> np.ndarray:
+    from gen.arm.limits import holding_torque
+
+    return holding_torque(mujoco.MjModel.from_xml_string(xml), np.asarray(q))
+
+
+def test_a_drive_too_coarse_for_its_link_is_named_in_the_limitations(tmp_path: Path) -> None:
+    """SO-100's gripper: a 35 N m drive on a 2e-5 kg m^2 link. One step of a CiA 402 drive rated at the
+    limit (1 per mille: 0.035 N m) changes its speed by 1.6 rad/s in a period; the importer names the
+    joint and what to change (the run cycles between steps up to the safety layer's stop)."""
+    text = chain_mjcf(tip_mass=2e-3).replace('<motor joint="j2" ctrlrange="-50 50"/>',
+                                             '<motor joint="j2" ctrlrange="-35 35"/>')
+    p = prep(write(tmp_path, text))
+    [lim] = p.info["limitations"]
+    assert lim["joint"] == "j2" and lim["kind"] == "torque-step"
+    assert "0.035 N m" in lim["text"] and "rated_torque_nm" in lim["text"] and lim["text"] in p.info["warnings"]
+    assert prep(write(tmp_path, chain_mjcf(), "heavy.xml")).info["limitations"] == []
+
+
+def test_a_build_that_finds_its_arm_prepared_does_not_load_mujoco(tmp_path: Path) -> None:
+    """The build's gen.arm step on a folder the check before the build prepared (every first build of
+    an arm: tools/build/arm.py seed_prepared) reads the key, not MuJoCo and the importer: it sits
+    before the synthesis on the first build's critical path."""
+    import subprocess
+    import sys
+
+    model = write(tmp_path, chain_mjcf())
+    out = tmp_path / "out"
+    assert gen_arm.main(["--model", str(model), "--out", str(out)]) == 0
+    probe = ("import sys; from gen.arm.cli import main; rc = main(['--model', sys.argv[1], '--out', sys.argv[2]]); "
+             "print(rc, sorted(m for m in ('mujoco', 'numpy', 'gen.arm.preparation') if m in sys.modules))")
+    r = subprocess.run([sys.executable, "-c", probe, str(model), str(out)], cwd=REPO, capture_output=True, text=True,
+                       env={**__import__("os").environ, "PYTHONPATH": str(REPO)}, timeout=120)
+    assert r.stdout.strip() == "0 []", (r.stdout, r.stderr)

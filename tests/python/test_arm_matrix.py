@@ -40,22 +40,16 @@ def test_the_matrix_is_large_and_every_row_says_what_happened() -> None:
 
 # Every arm of the committed matrix that is not ok, and how it ended: the floor the matrix holds
 # (one more arm not ok, or another outcome, fails here until this list says so; an arm made ok
-# fails too, so that the list shrinks with the fixes). The 90 % target is the xfail below.
+# fails too, so that the list shrinks with the fixes). Issue 50's target is the xfail below.
 MATRIX_NOT_OK = {
-    "dm-robotics-panda/dm_robotics/panda/assets/panda/panda.xml": "failed",
-    "example-robot-data/cmeel.prefix/share/example-robot-data/robots/baxter_description/urdf/baxter.urdf#left_s0":
-        "tracking-bound-exceeded",
-    "example-robot-data/cmeel.prefix/share/example-robot-data/robots/baxter_description/urdf/baxter.urdf#right_s0":
-        "tracking-bound-exceeded",
     "example-robot-data/cmeel.prefix/share/example-robot-data/robots/finger_edu_description/robots/finger_edu.urdf":
         "refused",
     "example-robot-data/cmeel.prefix/share/example-robot-data/robots/so_arm_description/urdf/so100.urdf": "failed",
-    "example-robot-data/cmeel.prefix/share/example-robot-data/robots/talos_data/robots/talos_left_arm.urdf":
-        "tracking-bound-exceeded",
     "gymnasium-robotics/gymnasium_robotics/envs/assets/adroit_hand/adroit_hammer.xml": "refused",
     "robosuite-models/robosuite_models/assets/robots/aloha/robot.xml#left/waist": "refused",
     "robosuite-models/robosuite_models/assets/robots/aloha/robot.xml#right/waist": "refused",
     "robosuite/robosuite/models/assets/robots/jaco/robot.xml": "tracking-bound-exceeded",
+    "robosuite/robosuite/models/assets/robots/spot_arm/robot.xml": "failed",
     "rtb-data/rtbdata/xacro/abb_irb140_description/urdf/irb140.urdf": "refused",
     "rtb-data/rtbdata/xacro/kuka_description/kuka_lbr_iiwa/urdf/lbr_iiwa_14_r820.urdf": "refused",
     "rtb-data/rtbdata/xacro/lynxmotion_al5d_description/urdf/al5d_robot.urdf": "refused",
@@ -65,7 +59,7 @@ MATRIX_NOT_OK = {
 
 def test_every_arm_not_ok_is_known_and_the_rest_are_ok() -> None:
     """The floor: the matrix's arms that are not ok are exactly the known ones, each ending as it
-    did (51 of 65 ok); any other arm is ok."""
+    did (54 of 65 ok); any other arm is ok."""
     got = {r["id"]: r["result"] for r in DOC["arms"] if r["result"] != "ok"}
     assert got == MATRIX_NOT_OK, {"newly not ok": {k: v for k, v in got.items() if MATRIX_NOT_OK.get(k) != v},
                                   "no longer as listed": {k: v for k, v in MATRIX_NOT_OK.items() if got.get(k) != v}}
@@ -73,13 +67,53 @@ def test_every_arm_not_ok_is_known_and_the_rest_are_ok() -> None:
     assert s["ok"] == s["arms"] - len(MATRIX_NOT_OK) and s["arms"] >= 65
 
 
-@pytest.mark.xfail(strict=True, reason="issue 38's 90 %: 51 of 65 ok on the committed matrix; 4 runs over the 2 deg "
-                                       "bound (robosuite Jaco, Baxter x2, TALOS arm) and 2 failed runs (SO-100, "
-                                       "dm_robotics Panda) are open")
-def test_nine_in_ten_arms_are_ok_and_the_others_refused_with_a_physical_reason() -> None:
+# Arms whose files give their physics that fail with no physical reason the importer can name: a
+# defect of this controller each, kept here so that one more, or a fix, fails the test below.
+CONTROLLER_DEFECTS = {
+    # the start-up transient (the drives slew from zero to the gravity torque at the safety layer's
+    # limit / 10 ms, the arm sags for 4 periods) grows the light wrist roll's (9.2e-4 kg m^2)
+    # estimator loop past the 2 pi rad/s stop at period 45; ok before the torque units of issue 46
+    # moved its drive's step by 0.1 %, and ok with that wrist's limit at 3.4 N m: per-joint tuning
+    # (issue 47). The firmware's pd and tde run it ok (armctl hil --method pd|tde): the defect is pm's
+    "robosuite/robosuite/models/assets/robots/spot_arm/robot.xml": "failed",
+}
+
+
+def test_every_arm_that_gives_its_physics_runs_or_says_why_and_refusals_name_the_files_defect() -> None:
+    """Issue 50: every arm whose file gives mass, inertia and ranges runs, or the importer names the
+    physical reason it cannot (arm.json limitations: a drive too coarse for its link); a refusal
+    names a defect of the file, never the importer's own limit."""
     s = arms_page.summary(DOC)
-    assert s["ok_fraction"] >= 0.9
-    assert all(r["result"] in ("ok", "refused") for r in DOC["arms"])
+    unexplained = {r["id"]: r["result"] for r in s["not_ok_with_physics"] if not r.get("limitations")}
+    assert unexplained == CONTROLLER_DEFECTS, s["not_ok_with_physics"]
+    assert all(arms.file_defect(r["reason"]) for r in DOC["arms"] if r["result"] == "refused")
+
+
+@pytest.mark.xfail(strict=True, reason="issue 50's 95 %: 54 of the 57 arms that give their physics are ok (94.7 %): "
+                                       "SO-100 and robosuite's Jaco are named (a drive too coarse for a link), "
+                                       "robosuite's Spot arm is CONTROLLER_DEFECTS' (per-joint tuning, issue 47)")
+def test_of_the_arms_that_give_their_physics_95_percent_run_ok() -> None:
+    assert arms_page.summary(DOC)["ok_fraction_with_physics"] >= 0.95
+
+
+def test_the_page_groups_refusals_by_the_files_defect_and_names_why_an_arm_is_not_ok() -> None:
+    row = {"set": "s", "joints": ["a", "b", "c"], "first_result_s": 1.0}
+    doc = {"machine": {"cores": 2, "cpu": "x"}, "commit": "c", "date": "d", "bound_deg": 2.0, "sets": [],
+           "left_out": [], "arms": [
+               row | {"id": "s/a", "model": "a.urdf", "result": "refused", "reason": "model MODEL: body 'l1' moves but "
+                      "has no mass and inertia (a URDF link ...): give it its mass and inertia"},
+               row | {"id": "s/b", "model": "b.xml", "result": "ok", "max_error_deg": 0.1},
+               row | {"id": "s/c", "model": "c.xml", "result": "failed", "reason": "failed: controller: period 105: "
+                      "joint velocity above its limit", "limitations": ["joint 'g': one torque step ..."]},
+               row | {"id": "s/d", "model": "d.xml", "result": "tracking-bound-exceeded", "reason": "j: 3 deg"},
+               row | {"id": "s/e", "model": "e.xml", "result": "refused", "reason": "model MODEL: something new"}]}
+    s = arms_page.summary(doc)
+    assert (s["with_physics"], s["ok"]) == (4, 1) and s["ok_fraction_with_physics"] == 0.25
+    page = arms_page.render(doc)
+    assert "- a link without mass and inertia: a.urdf" in page
+    assert "- the importer's own limit (not the file's: a defect to fix): e.xml" in page
+    assert "- c.xml (s): failed: joint 'g': one torque step ..." in page
+    assert "- d.xml (s): tracking-bound-exceeded: no physical reason found: a defect of this controller" in page
 
 
 def _local_arms() -> list[tuple[str, Path, arms.Candidate]]:
@@ -119,11 +153,7 @@ def test_one_arm_of_each_set_imports(name: str, folder: Path, cand: arms.Candida
 # Copied arms the matrix (runs/bench/arms.json) records as not ok, each with why: the product's
 # open failures on public arms (docs/arm-compatibility.md), kept here so that one more, or a fix,
 # fails this test until this list says so.
-NOT_YET_OK = {
-    # no actuators in the file: the torque limits are assumed from the inertials (meshes absent),
-    # and joint 4's 4.4 N m cannot follow the reference (torque-limited, then the following error)
-    "dm-robotics-panda/dm_robotics/panda/assets/panda/panda.xml": "failed",
-}
+NOT_YET_OK: dict[str, str] = {}
 
 
 @pytest.mark.long
@@ -150,3 +180,57 @@ def test_a_sets_file_that_is_not_one_is_named(tmp_path: Path) -> None:
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and r.stderr.strip().count("\n") == 0, r.stderr
     assert "set x: give a requirement (name==version) or a path" in r.stderr
+
+
+def _folder_of_models(root: Path) -> Path:
+    """A clone of a model collection in small: an arm in a vendor's folder and its scene (the same
+    arm), a URDF arm whose link has no inertial (refused), and an object (no arm)."""
+    (root / "vendor_arm").mkdir(parents=True)
+    arm = (root / "vendor_arm" / "arm.xml")
+    body = ""
+    for i in reversed(range(3)):
+        body = (f'<body name="l{i}" pos="0 0 0.2"><joint name="j{i}" axis="{"0 0 1" if i == 0 else "0 1 0"}" '
+                f'range="-2 2"/><inertial pos="0 0 0.1" mass="1" diaginertia="0.01 0.01 0.01"/>{body}</body>')
+    arm.write_text(f'<mujoco model="vendor_arm"><compiler angle="radian"/><worldbody>{body}</worldbody><actuator>'
+                   + "".join(f'<motor joint="j{i}" ctrlrange="-30 30"/>' for i in range(3)) + "</actuator></mujoco>")
+    (root / "vendor_arm" / "scene.xml").write_text('<mujoco><include file="arm.xml"/><worldbody><light pos="0 0 3"/>'
+                                                    "</worldbody></mujoco>")
+    links = "".join(f'<link name="k{i}">' + ("" if i == 2 else '<inertial><mass value="1"/><inertia ixx="0.01" '
+                                              'ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial>') + "</link>"
+                    for i in range(4))
+    joints = "".join(f'<joint name="q{i}" type="revolute"><parent link="k{i}"/><child link="k{i + 1}"/>'
+                     '<axis xyz="0 0 1"/><limit lower="-2" upper="2" effort="20" velocity="2"/></joint>' for i in range(3))
+    (root / "urdf").mkdir()
+    (root / "urdf" / "massless.urdf").write_text(f'<robot name="massless">{links}{joints}</robot>')
+    (root / "box.xml").write_text('<mujoco><worldbody><body><freejoint/><geom size="0.1"/></body></worldbody></mujoco>')
+    return root
+
+
+def test_armctl_arms_path_finds_every_arm_under_a_folder(tmp_path: Path) -> None:
+    folder = _folder_of_models(tmp_path / "collection")
+    r = subprocess.run([str(REPO / "tools" / "armctl"), "arms", "--path", str(folder), "--list"], cwd=REPO,
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.splitlines() == ["collection/urdf/massless.urdf  3 joints", "collection/vendor_arm/arm.xml  3 joints"]
+    bad = subprocess.run([str(REPO / "tools" / "armctl"), "arms", "--path", str(tmp_path / "nothing"), "--list"],
+                         cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "nothing: not a folder" in bad.stderr
+
+
+@pytest.mark.long
+def test_armctl_arms_path_runs_the_matrix_over_a_folder(tmp_path: Path) -> None:
+    """The same rows, page and results file as the model sets' matrix, for a folder: the arm runs ok,
+    the URDF without an inertial is refused for its file's defect, the page groups it so."""
+    folder = _folder_of_models(tmp_path / "collection")
+    out, page = tmp_path / "out" / "arms.json", tmp_path / "out" / "page.md"
+    r = subprocess.run([str(REPO / "tools" / "armctl"), "arms", "--path", str(folder), "--out", str(out), "--page",
+                        str(page)], cwd=REPO, capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stderr[-3000:]
+    doc = json.loads(out.read_text())
+    rows = {x["model"]: x for x in doc["arms"]}
+    assert rows["vendor_arm/arm.xml"]["result"] == "ok", rows
+    assert rows["urdf/massless.urdf"]["result"] == "refused" and rows["urdf/massless.urdf"]["defect"] == \
+        "a link without mass and inertia"
+    assert [st["path"] for st in doc["sets"]] == [str(folder)]
+    text = page.read_text()
+    assert arms_page.render(doc) in text and "- a link without mass and inertia: urdf/massless.urdf" in text

@@ -12,6 +12,7 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -20,22 +21,32 @@ from tools.commands import docs as docs_cmd
 
 
 def mkdocs_build(root: Path, site: Path) -> subprocess.CompletedProcess[str]:
-    # not -q: a quiet build does not count its warnings, so --strict would let them pass
+    # not -q: a quiet build does not count its warnings, so --strict would let them pass.
+    # PYTHONPATH: a copied guide's hooks import tools.build from the repository.
     return subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-f", str(root / "mkdocs.yml"),
                            "-d", str(site)], cwd=root, capture_output=True, text=True, timeout=300,
-                          env={**os.environ, "NO_MKDOCS_2_WARNING": "1"})
+                          env={**os.environ, "NO_MKDOCS_2_WARNING": "1", "PYTHONPATH": str(REPO)})
 
 
-def test_the_guide_builds_strictly(tmp_path: Path) -> None:
-    r = mkdocs_build(REPO, tmp_path / "site")
+def test_the_guide_builds_strictly_and_the_site_fetches_nothing(tmp_path: Path) -> None:
+    """The strict build passes; its diagram is drawn into the site; no page loads a script, style,
+    font or image from elsewhere (links a reader follows are not loads)."""
+    site = tmp_path / "site"
+    r = mkdocs_build(REPO, site)
     assert r.returncode == 0, r.stdout + r.stderr
-    assert (tmp_path / "site" / "reference" / "commands" / "index.html").is_file()
+    assert (site / "reference" / "commands" / "index.html").is_file()
+    assert (site / "diagrams" / "data-flow.svg").read_text().lstrip().startswith(("<?xml", "<svg", "<!--"))
+    fetched = {m for page in site.rglob("*.html") for m in re.findall(
+        r"""<(?:script|link|img|iframe|source)\b[^>]*\b(?:src|href)=["']?((?:https?:)?//[^"' >]+)""", page.read_text())}
+    assert fetched == set()
 
 
 @pytest.fixture
 def guide_copy(tmp_path: Path) -> Path:
     """mkdocs.yml and docs/ copied, to break."""
     shutil.copy(REPO / "mkdocs.yml", tmp_path / "mkdocs.yml")
+    (tmp_path / "tools" / "commands").mkdir(parents=True)
+    shutil.copy(REPO / "tools" / "commands" / "docs_hooks.py", tmp_path / "tools" / "commands")  # mkdocs.yml's hooks
     shutil.copytree(DOCS, tmp_path / "docs", ignore=shutil.ignore_patterns("results"))
     return tmp_path
 
@@ -101,3 +112,243 @@ def test_no_timing_figure_is_typed_outside_a_rendered_region() -> None:
                                                (42.2, "42 s")])
 def test_a_duration_reads_in_whole_minutes_and_seconds(seconds: float, text: str) -> None:
     assert docs_cmd._minutes(seconds) == text
+
+
+# ---- the guide as a newcomer reads it: every word explained, nothing of a machine or a lab notebook
+
+from tools.bench import arms_page  # noqa: E402
+from tools.commands.docs_hooks import glossary_terms, render_diagram  # noqa: E402
+
+GLOSSARY = DOCS / "glossary.md"
+# Parts a command writes: the numbers regions (tools/armctl docs), the parameter tables (gen.params),
+# README's headline table (study --record) and the arm matrix (tools.bench.arms_page).
+RENDERED = re.compile(r"<!-- (numbers|params):([a-z0-9-]+)\b.*?-->.*?<!-- /\1:\2 -->|<!-- headline:.*?<!-- /headline -->|"
+                      + re.escape(arms_page.BEGIN) + ".*?" + re.escape(arms_page.END), re.S)
+FENCE = re.compile(r"^(`{3,}).*?^\1", re.S | re.M)
+CODE_SPAN = re.compile(r"(`+)(?!`).*?(?<!`)\1(?!`)", re.S)
+COMMENT = re.compile(r"<!--.*?-->", re.S)
+LINK_TARGET = re.compile(r"\]\([^)]*\)")
+WORD = re.compile(r"(?<![\w/.-])[A-Z][A-Z0-9]*(?:-[A-Z0-9]+)*s?(?![\w/]|\.\w)")  # not a file name (README.md)
+
+
+def prose(text: str) -> str:
+    """What a page says in its own words: no rendered region, code block, code span, comment or
+    link target."""
+    for pattern in (RENDERED, FENCE, COMMENT, CODE_SPAN, LINK_TARGET):
+        text = pattern.sub(" ", text)
+    return text
+
+
+def acronym(word: str) -> str | None:
+    """An all-capital word as the glossary lists it (TPDOs, TPDO1: TPDO; STM32F407: STM; SHA-256:
+    SHA); None for a single letter with digits (H2, M4, K2)."""
+    letters = re.match(r"[A-Z]+", word.removesuffix("s") if word[:-1].isupper() else word)
+    return letters.group(0) if letters and len(letters.group(0)) >= 2 else None
+
+
+def glossary_acronyms(text: str) -> set[str]:
+    return {a for t in glossary_terms(text) for w in WORD.findall(t) if (a := acronym(w))}
+
+
+def missing_acronyms(pages: dict[str, str], glossary: str) -> dict[str, list[str]]:
+    """acronym -> the pages that use it in their own words and the glossary lacks."""
+    known = glossary_acronyms(glossary)
+    out: dict[str, list[str]] = {}
+    for name, text in pages.items():
+        for w in WORD.findall(prose(text)):
+            a = acronym(w)
+            if a and a not in known:
+                out.setdefault(a, []).append(name)
+    return out
+
+
+def guide_pages() -> dict[str, str]:
+    return {str(p.relative_to(REPO)): p.read_text() for p in docs_cmd.pages()}
+
+
+def test_every_acronym_of_the_guide_is_in_the_glossary() -> None:
+    missing = missing_acronyms(guide_pages(), GLOSSARY.read_text())
+    assert missing == {}, {a: sorted(set(p)) for a, p in missing.items()}
+
+
+def test_an_acronym_the_glossary_lacks_is_named() -> None:
+    """The check itself: a glossary without SDO's row, and a page with a new acronym."""
+    glossary = GLOSSARY.read_text()
+    without = "\n".join(line for line in glossary.splitlines() if not line.startswith("| **SDO**"))
+    pages = guide_pages()
+    assert "SDO" in missing_acronyms(pages, without)
+    assert missing_acronyms({"x.md": "The XYZQ bus, the `ABCD` code, the TPDO2s."}, glossary) == {"XYZQ": ["x.md"]}
+
+
+# The product's own terms: a page that uses one must find it in the glossary. Those the code defines
+# are read from it (methods, scenarios, controller states); the coined phrases are listed here.
+COINED = ("lockstep", "realtime", "software in the loop", "hardware in the loop", "processor in the loop", "run slot",
+          "kept tuning", "code identity", "safe stop", "safety layer", "following error", "tracking bound",
+          "drive table", "arm file", "design config", "default design", "prepared model", "model hash",
+          "first resonance", "closed-loop bandwidth", "confirmation", "rendered region", "results file", "run folder",
+          "headline record", "bundled arm", "drive slot", "bus timing", "bus load", "wiring", "per-mille",
+          "nominal model", "total uncertainty", "golden vectors", "scenario", "seed", "verdict", "arm protocol",
+          "consumer heartbeat", "transmission type", "capture", "telemetry", "study", "tuning")
+
+
+def product_terms() -> set[str]:
+    import tomllib
+
+    from gen.lib.params import constant
+    from tools.study.config import METHODS
+
+    study = tomllib.loads((REPO / "tools" / "studies" / "paper.toml").read_text())
+    return {*COINED, *METHODS, *study["scenarios"], *constant("controller-states")}
+
+
+def test_every_product_term_the_guide_uses_is_in_the_glossary() -> None:
+    glossary = GLOSSARY.read_text()
+    defined = {t.lower() for t in glossary_terms(glossary)}
+    text = " ".join(guide_pages().values()).lower()
+    used = {t for t in product_terms() if re.search(rf"(?<![\w-]){re.escape(t.lower())}(?![\w-])", text)}
+    assert used >= set(COINED) - {"headline record"}, set(COINED) - used
+    lacking = {t for t in used if t.lower() not in defined and not re.search(
+        rf"`{re.escape(t)}`", glossary)}
+    assert lacking == set(), sorted(lacking)
+
+
+def markdown_files() -> list[Path]:
+    """Every Markdown file of the repository but the changelog, which is its history."""
+    out = subprocess.run(["git", "-C", str(REPO), "ls-files", "*.md"], capture_output=True, text=True, check=True)
+    return [REPO / f for f in out.stdout.split() if f != "CHANGELOG.md"]
+
+
+# A path of one machine (the repository's own checkout, a home or work folder, a temporary file)
+# and the phrases of a lab notebook: the documents describe the product, not where or when it was made.
+MACHINE_PATH = re.compile(r"(?<![\w.])/(?:work|home|root|Users|mnt|srv)/\w|(?<![\w.])/tmp/[\w.-]+\.\w+|C:\\\\")
+NOTEBOOK = re.compile(r"\bthis round\b|\bCI once\b|\bonce saw\b|cost time to find|could not be read here|"
+                      r"\bon this machine\b|this machine's kernel|machine that builds these docs|\bwith local changes\b|"
+                      r"\bthe lead\b|\bhelper\b", re.I)
+
+
+def test_no_machine_path_or_lab_notebook_prose_in_any_document() -> None:
+    found = []
+    for f in markdown_files():
+        text = RENDERED.sub(" ", f.read_text()) if f.parent.is_relative_to(DOCS) or f.name == "README.md" else f.read_text()
+        for pattern in (MACHINE_PATH, NOTEBOOK):
+            for m in pattern.finditer(text):
+                line = text.count("\n", 0, m.start()) + 1
+                found.append(f"{f.relative_to(REPO)}:{line}: {text[max(0, m.start() - 30):m.end() + 30]!r}")
+    assert str(REPO) not in "".join(f.read_text() for f in markdown_files())
+    assert found == []
+    assert MACHINE_PATH.search("see /work/shared/notes/machine.md") and NOTEBOOK.search("not taken in this round")
+
+
+# A measured figure: a number with a fraction (or thousands) and the unit of a result (an error, a
+# share, a time, a ratio, a size, a rate). Outside a rendered region it was typed by hand, unless it
+# is a value the product defines in a file (the parameter registry, the study config, the drive
+# model and the drive table), which the page then quotes.
+MEASURED = re.compile(r"(?<![\w.])(\d{1,3}(?:,\d{3})+|\d+\.\d+)\s?(deg\b|%|µs|us\b|ms\b|s\b|min\b|x\b|KiB\b|MiB\b|kB\b|"
+                      r"bytes\b|instructions\b|W\b|Hz\b|kHz\b|rad/s\^2)")
+DEFINING = ("firmware/params/params.toml", "tools/studies/paper.toml", "host_sim/drive_model.py",
+            "firmware/protocol/drives.toml")
+
+
+def _numbers(x: Any) -> list[float]:
+    if isinstance(x, bool):
+        return []
+    if isinstance(x, (int, float)):
+        return [float(x)]
+    if isinstance(x, dict):
+        return [v for y in x.values() for v in _numbers(y)]
+    if isinstance(x, list):
+        return [v for y in x for v in _numbers(y)]
+    return []
+
+
+def defined_values() -> set[float]:
+    """Every number the defining files give (their values, not their comments), also as a percentage,
+    a thousandth, a thousandfold and in degrees."""
+    import ast
+    import math
+    import tomllib
+
+    values: list[float] = []
+    for f in DEFINING:
+        text = (REPO / f).read_text()
+        if f.endswith(".toml"):
+            values += _numbers(tomllib.loads(text))
+        else:
+            values += [float(n.value) for n in ast.walk(ast.parse(text)) if isinstance(n, ast.Constant)
+                       and isinstance(n.value, (int, float)) and not isinstance(n.value, bool)]
+    return {y for x in values for y in (abs(x), abs(x) * 100, abs(x) / 1000, abs(x) * 1000, math.degrees(abs(x)))}
+
+
+def typed_figures(text: str, defined: set[float]) -> list[str]:
+    found = []
+    for m in MEASURED.finditer(prose(text)):
+        figure = m.group(1).replace(",", "")
+        digits = len(figure.split(".")[1]) if "." in figure else 0
+        if any(abs(float(figure) - v) <= 0.5 * 10 ** -digits for v in defined):
+            continue
+        found.append(m.group(0))
+    return found
+
+
+def test_no_measured_figure_is_typed_outside_a_rendered_region() -> None:
+    defined = defined_values()
+    found = {name: f for name, text in guide_pages().items() if (f := typed_figures(text, defined))}
+    assert found == {}
+    assert typed_figures("pm tracks within 0.44 deg, 61.1 % of a bus, 2.4x mj_step, 1,208 instructions", defined) == [
+        "0.44 deg", "61.1 %", "2.4x", "1,208 instructions"]
+    assert typed_figures("the 0.5 s hold (the registry's), `0.44 deg` in code", defined) == []
+
+
+TROUBLE_KEY = re.compile(r"^\| `([^`]+)` \|", re.M)
+SOURCES = ("firmware", "gen", "host_sim", "tools")
+
+
+def test_every_troubleshooting_line_is_one_the_product_prints() -> None:
+    """Each key of docs/troubleshooting.md is the start of a message in the sources: its longest
+    literal piece (between the `...` of the names and values) is in a C or Python file."""
+    keys = TROUBLE_KEY.findall((DOCS / "troubleshooting.md").read_text())
+    assert len(keys) >= 20, keys
+    sources = "\n".join(p.read_text(errors="replace") for d in SOURCES for p in (REPO / d).rglob("*")
+                        if p.suffix in (".c", ".h", ".py") and "__pycache__" not in p.parts)
+    sources = re.sub(r'"\s*\n\s*[rf]?"', "", sources)  # a literal continued on the next line, joined
+    absent = []
+    for k in keys:  # its distinctive parts: those with a space, an underscore or a hyphen, between the values
+        parts = [p.strip(" '()") for p in re.split(r"\.\.\.|: ", k)]
+        distinctive = [p for p in parts if len(p) >= 6 and re.search(r"[ _-]", p)]
+        if not distinctive or any(p not in sources for p in distinctive):
+            absent.append(k)
+    assert absent == []
+
+
+def test_the_data_flow_diagram_is_drawn_from_its_source(tmp_path: Path) -> None:
+    """docs/diagrams/data-flow.dot, rendered by Graphviz when the guide is built: an SVG naming
+    every stage of the data's way, which the overview shows; a broken source is named."""
+    svg = render_diagram(DOCS / "diagrams" / "data-flow.dot")
+    for stage in ("synthesis", "C headers", "firmware", "CAN bus", "CiA 402 drives", "the arm", "telemetry"):
+        assert stage in svg, stage
+    assert "diagrams/data-flow.svg" in (DOCS / "index.md").read_text()
+    bad = tmp_path / "bad.dot"
+    bad.write_text("digraph { a -> }")
+    from tools.commands.docs_hooks import DiagramError
+
+    with pytest.raises(DiagramError, match="bad.dot: dot failed"):
+        render_diagram(bad)
+
+
+def test_the_guide_build_installs_graphviz_as_its_own_need(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The diagrams ask for the docs need (tools/apt-packages-docs.txt), not the base list every
+    command installs; where it cannot be installed, the build's error gives the apt-get line."""
+    from tools.build import packages
+    from tools.commands.docs_hooks import DiagramError
+
+    assert "graphviz" in packages.listed("docs") and "graphviz" not in packages.listed(None)
+    asked: list[str] = []
+
+    def refuse(need: str) -> None:
+        asked.append(need)
+        raise packages.PackagesMissing("run: sudo apt-get install -y --no-install-recommends graphviz")
+
+    monkeypatch.setattr(packages, "ensure", refuse)
+    with pytest.raises(DiagramError, match=r"data-flow.dot: Graphviz's dot is missing: run: sudo apt-get .* graphviz"):
+        render_diagram(DOCS / "diagrams" / "data-flow.dot")
+    assert asked == ["docs"]

@@ -228,10 +228,56 @@ def test_export_refuses_a_folder_that_is_no_run(tmp_path: Path) -> None:
 
 
 @pytest.mark.skipif(browser_path() is None, reason="no headless Chromium (tools/apt-packages-test.txt)")
+def _wait(b: Browser, js: str) -> None:
+    """Until the page's `js` is true (at most a minute)."""
+    for _ in range(600):
+        if b.evaluate(js):
+            return
+        b.call("Runtime.evaluate", {"expression": "new Promise(r => setTimeout(r, 100))", "awaitPromise": True},
+               session=True)
+    assert b.evaluate(js), js
+
+
+def test_report_html_answers_on_its_first_screen(study: tuple[Path, dict[str, Any]]) -> None:
+    """On a laptop's screen (1280 x 800), report.html opens with the answer: every scenario's pick
+    whole within the first screen, the table of means and the answer's figure starting on it; every
+    later section (how the study was run, each scenario's detail) folded, its figures not drawn
+    until it is opened."""
+    from tools.study.answer import ranking
+
+    out, st = study
+    b = Browser(width=1280, height=800)
+    try:
+        b.open(out / "report.html")
+        _wait(b, "document.body.dataset.figures === 'drawn'")
+        height = b.evaluate("window.innerHeight")
+        assert height == 800 and b.evaluate("window.scrollY") == 0
+        picks = b.evaluate("""Array.from(document.querySelectorAll('h2')[0].parentElement.querySelectorAll('li'))
+            .filter(li => !li.closest('details')).map(li => ({text: li.textContent,
+            bottom: li.getBoundingClientRect().bottom}))""")
+        assert len(picks) == len(st["scenarios"]), picks
+        for (name, pick) in zip(st["scenarios"], picks):
+            best = ranking(st, name)[0][0]
+            assert pick["text"].startswith(f"{name}: use {best}"), (name, best, pick["text"])
+            assert pick["bottom"] <= height, f"{name}'s answer ends below the first screen: {pick}"
+        tops = b.evaluate("""(() => { const g = document.querySelector('.glance');
+            return [g.querySelector('pre'), g.querySelector('.figure')].map(e => e ? e.getBoundingClientRect().top : null);
+            })()""")
+        assert all(t is not None and t < height for t in tops), tops
+        sections = b.evaluate("""Array.from(document.querySelectorAll('h2')).map(h => ({text: h.textContent,
+            folded: !!h.closest('details'), open: !!h.closest('details[open]')}))""")
+        assert sections[0] == {"text": "The answer", "folded": False, "open": False}, sections
+        assert len(sections) >= 3 and all(s["folded"] and not s["open"] for s in sections[1:]), sections
+        assert b.evaluate("document.querySelectorAll('details div.figure[data-drawn]').length") == 0
+        assert b.console_errors() == []
+    finally:
+        b.close()
+
+
 def test_report_html_in_a_headless_browser(study: tuple[Path, dict[str, Any]]) -> None:
     """report.html offline in Chromium: it loads with no console error and fetches nothing but
-    itself; every figure is drawn (its screenshot is not blank: many colours, many non-white
-    pixels); its tables hold study.json's numbers as report.md writes them."""
+    itself; every folded section opened, every figure is drawn (its screenshot is not blank: many
+    colours, many non-white pixels); its tables hold study.json's numbers as report.md writes them."""
     from tools.study.report import METRIC_TEXT, _ci, _labels, in_degrees
 
     out, st = study
@@ -243,12 +289,10 @@ def test_report_html_in_a_headless_browser(study: tuple[Path, dict[str, Any]]) -
     b = Browser(width=1300, height=1500)
     try:
         b.open(page)
-        for _ in range(600):
-            if b.evaluate("document.body.dataset.figures") == "drawn":
-                break
-            b.call("Runtime.evaluate", {"expression": "new Promise(r => setTimeout(r, 100))", "awaitPromise": True},
-                   session=True)
-        assert b.evaluate("document.body.dataset.figures") == "drawn"
+        _wait(b, "document.body.dataset.figures === 'drawn'")
+        b.evaluate("document.querySelectorAll('details').forEach(d => { d.open = true; })")
+        _wait(b, "document.querySelectorAll('div.figure[data-figure]').length === "
+                 "document.querySelectorAll('div.figure[data-drawn=\"yes\"]').length")
         assert b.console_errors() == []
         urls = b.requested_urls()
         assert urls and all(u.startswith(("file:", "data:")) for u in urls), urls

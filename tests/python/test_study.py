@@ -691,6 +691,26 @@ def test_the_report_shows_a_run_that_failed_and_never_crashes_on_it(tmp_path: Pa
     assert all(len(study["scenarios"][s]["stats"]["pm"]["linf"]["per_joint"]) == n for s in study["scenarios"])
 
 
+def test_the_report_gives_the_studys_own_loop_rate(tmp_path: Path) -> None:
+    """A study run at 500 Hz (an arm whose design is discretised for it) says 0.5 kHz in its report,
+    not the registry's default 1 kHz."""
+    from tools.study.report import write_report
+    from tools.study import scenario_result
+
+    n, methods = 6, ["pd"]
+    ok = {"result": "ok", "verdict_reasons": [], "tracking_max_abs_rad": [0.01] * n, "tracking_rms_rad": [0.005] * n,
+          "estimation_error_rms": [0.1] * n, "torque_power_w": 3.0}
+    definition = {"name": "s", "description": "", "uncertainty": {}, "drives": {}, "bus_timing": False}
+    study = {"description": "t", "config": "c", "seeds": [1], "duration_s": 1.0, "hold_s": 0.5, "methods": methods,
+             "tuning_procedure": "-", "notes": [], "rate_hz": 500.0,
+             "arm": {"name": "slow", "n_joints": n, "joint_names": [f"j{i}" for i in range(n)], "model": "m",
+                     "model_hash": "0", "is_default": False, "buses": []},
+             "scenarios": {"s": scenario_result(definition, {}, {"pd": [ok]}, methods, n)}}
+    write_report(tmp_path, study, figures=False)
+    report = (tmp_path / "report.md").read_text()
+    assert " at 0.5 kHz." in report and " at 1 kHz." not in report, report[:800]
+
+
 def test_a_study_on_a_seven_joint_arm_runs_every_scenario(tmp_path: Path) -> None:
     """The README's `study --arm tests/arms/panda.toml`, short: every scenario (friction values
     from the torque limits), one seed, two methods; every run measured, a report naming every

@@ -110,6 +110,19 @@ def test_verify_restamps_a_pair_that_reproduces_and_names_one_that_moved(tmp_pat
     assert "tools/armctl tune --retune ideal/pd" in r.stdout
     assert json.loads(kept.read_text())["scenarios"]["ideal"]["pd"]["code"] == "fedcba9876543210"
 
+    # --accept-moved keeps the pick that still ranks ahead: its runs become this code's, stamped
+    r = subprocess.run([*base, "--accept-moved", "--out", str(tmp_path / "v3")], cwd=REPO, capture_output=True,
+                       text=True, timeout=600)
+    assert r.returncode == 0, r.stdout + r.stderr[-2000:]
+    assert "their picks kept, their runs recorded anew on this code and stamped: ideal/pd" in r.stdout, r.stdout
+    arec = json.loads(kept.read_text())["scenarios"]["ideal"]["pd"]
+    assert arec["code"] == code_identity() and arec["knobs"] == mrec["knobs"]
+    assert arec["verified"]["accepted_move"]["largest_change"] > 0.009
+    arun0 = next(t for t in arec["validation"]["tried"] if t["rank"] == arec["validation"]["picked_rank"])["runs"][0]
+    assert arun0["tracking_max_abs_deg"][2] == run0["tracking_max_abs_deg"][2] / 1.01, "this code's number"
+    r = subprocess.run([*base, "--out", str(tmp_path / "v4")], cwd=REPO, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0 and "ideal/pd: 2 runs, every number as recorded" in r.stdout, r.stdout
+
 
 
 def test_a_drives_rated_torque_moves_the_pairs_it_reaches(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

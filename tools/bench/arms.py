@@ -44,6 +44,14 @@ MAX_HEAD_JOINTS = 2  # what else may branch there: a head's pan and tilt (legs, 
 DURATION_S = 3.0
 NO_JOINTS = "fewer than 3 hinges in the file itself (objects, grippers, scenes that include an arm's file)"
 RUN_TIMEOUT_S = 600
+# What a refusal says is wrong with the file (the importer's words: gen/arm), for the page's groups.
+# A refusal of none of these kinds names the importer's own limit, not the file's: a bug to fix.
+FILE_DEFECTS = (
+    ("moves but has no mass and inertia", "a link without mass and inertia"),
+    ("not positive definite", "an inertia no body has (not positive definite)"),
+    ("leaves it no room to move", "a range too narrow to move in (degrees read as radians?)"),
+    ("sits inside the arm", "a hinge inside the arm that nothing drives"),
+)
 
 
 class ArmsError(RuntimeError):
@@ -75,6 +83,21 @@ class Candidate:
     joints: list[str]
     locked: dict[str, float] = field(default_factory=dict)
     arm_file: bool = False     # run through an arm file naming `joints` (one arm of two)
+
+
+def folder_set(folder: Path) -> ModelSet:
+    """A folder of model files (a clone of a model collection) as a set of its own: every MJCF and
+    URDF under it (armctl arms --path)."""
+    folder = folder.resolve()
+    if not folder.is_dir():
+        raise ArmsError(f"--path {folder}: not a folder")
+    name = re.sub(r"[^A-Za-z0-9_.-]+", "-", folder.name).strip("-") or "models"
+    return ModelSet(name=name, licence="the folder's own (see its files)", search=["."], path=folder)
+
+
+def file_defect(reason: str) -> str | None:
+    """The kind of defect of the file a refusal names (FILE_DEFECTS), None for any other refusal."""
+    return next((kind for words, kind in FILE_DEFECTS if words in reason), None)
 
 
 def load_sets(path: Path = SETS_FILE) -> tuple[list[ModelSet], list[dict[str, str]]]:
@@ -357,7 +380,9 @@ def run_one(c: Candidate, model: Path, out: Path, bound_deg: float) -> dict[str,
         lines = [ln for ln in r.stderr.splitlines() if ln.startswith("armctl hil: ") and "warning" not in ln]
         row.update(result="refused", reason=(lines[-1] if lines else r.stderr.strip()[-300:]).removeprefix(
             "armctl hil: ").replace(str(model), "MODEL"))
+        row["defect"] = file_defect(row["reason"])
         return row
+    row["limitations"] = _limitations(arm_build_dir("release", ref))
     try:
         res = json.loads(run_json.read_text())["results"]
     except (OSError, ValueError, KeyError):
@@ -370,6 +395,15 @@ def run_one(c: Candidate, model: Path, out: Path, bound_deg: float) -> dict[str,
                design=res["arm"].get("design", {}).get("config") if isinstance(res["arm"].get("design"), dict)
                else None, warnings=len(res["arm"].get("warnings", [])))
     return row
+
+
+def _limitations(bdir: Path) -> list[str]:
+    """What the importer found the arm's physics leaves the controller no way to do (arm.json's
+    limitations: a joint whose drive's torque step is too coarse for its link)."""
+    try:
+        return [x["text"] for x in json.loads((bdir / "generated" / "arm" / "arm.json").read_text())["limitations"]]
+    except (OSError, ValueError, KeyError, TypeError):
+        return []
 
 
 def machine() -> dict[str, Any]:

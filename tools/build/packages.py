@@ -26,6 +26,7 @@ NEEDS = {
     "timing": "armctl timing (cyclictest)",
     "bench": "armctl bench step (valgrind's callgrind)",
     "fuzz": "armctl fuzz (clang and libFuzzer)",
+    "docs": "the user guide's build (mkdocs build, mkdocs serve: its diagrams, Graphviz's dot)",
     "test": "armctl test",
 }
 _LOCK = threading.Lock()

@@ -4,7 +4,10 @@ its default design, into runs/bench/arms.json, rendered into docs/arm-compatibil
 
 A benchmark, not a test: it installs each set on first use (its model files only, into
 build/model-sets/) and takes about half a minute an arm. --sets runs some sets again and keeps the
-other sets' rows; --list only shows what it would run."""
+other sets' rows; --list only shows what it would run. --path DIR runs the same matrix over every
+MJCF and URDF under a folder (a clone of a model collection: mujoco_menagerie, robot_descriptions'
+repositories), into runs/arms-NAME/ (arms.json and its page, arm-compatibility.md) unless --out and
+--page say where."""
 
 from __future__ import annotations
 
@@ -24,6 +27,9 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--sets-file", type=Path, default=None, metavar="FILE",
                    help="the list of model sets [tools/bench/model_sets.toml]")
     p.add_argument("--sets", default=None, metavar="A,B", help="only these sets (tools/bench/model_sets.toml) [all]")
+    p.add_argument("--path", type=Path, default=None, metavar="DIR",
+                   help="every MJCF and URDF under this folder instead of the model sets [runs/arms-NAME/ for "
+                        "the results and the page]")
     p.add_argument("--match", default=None, metavar="TEXT", help="only the arms whose id contains TEXT")
     p.add_argument("--list", action="store_true", help="list the arms found, run nothing")
     p.add_argument("--missing", action="store_true",
@@ -38,8 +44,10 @@ def run(ns: argparse.Namespace) -> int:
 
     from tools.bench import arms, arms_page
 
+    if ns.path is not None and (ns.sets_file or ns.sets):
+        raise UsageError("--path and --sets-file/--sets: give one (a folder, or model sets)")
     try:
-        sets, left_out = arms.load_sets(ns.sets_file or arms.SETS_FILE)
+        sets, left_out = ([arms.folder_set(ns.path)], []) if ns.path else arms.load_sets(ns.sets_file or arms.SETS_FILE)
     except arms.ArmsError as exc:
         raise UsageError(str(exc)) from exc
     if ns.sets:
@@ -49,7 +57,8 @@ def run(ns: argparse.Namespace) -> int:
             raise UsageError(f"--sets: no set {', '.join(unknown)} in {arms.SETS_FILE} "
                              f"(there: {', '.join(s.name for s in sets)})")
         sets = [s for s in sets if s.name in want]
-    out = ns.out or arms.RESULTS
+    own = arms.REPO / "runs" / f"arms-{sets[0].name}" if ns.path else None  # a folder's matrix: its own files
+    out = ns.out or (own / "arms.json" if own else arms.RESULTS)
     try:
         old = json.loads(out.read_text())
     except (OSError, ValueError):
@@ -65,6 +74,8 @@ def run(ns: argparse.Namespace) -> int:
         cands, skipped, nfiles = arms.find_arms(ms, folder)
         set_rows[ms.name] = {"name": ms.name, "requirement": ms.requirement, "licence": ms.licence,
                              "files": nfiles, "arms": len(cands), "not_arms": skipped}
+        if ns.path:
+            set_rows[ms.name]["path"] = str(folder)
         found += [(ms, folder, c) for c in cands if ns.match is None or ns.match in c.id]
         for rid in [r for r, row in rows.items() if row["set"] == ms.name and ns.match is None and not ns.missing]:
             del rows[rid]  # the set is run again: an arm it no longer holds goes
@@ -89,8 +100,11 @@ def run(ns: argparse.Namespace) -> int:
                                                  is not None else "") + (f": {row['reason']}" if row.get("reason")
                                                                          else "") + f" ({row.get('first_result_s')} s)",
                    file=sys.stderr)
-    page = ns.page or arms_page.PAGE
+    page = ns.page or (own / "arm-compatibility.md" if own else arms_page.PAGE)
     if out.exists():
+        if not page.exists():
+            page.parent.mkdir(parents=True, exist_ok=True)
+            page.write_text(arms_page.blank_page(sets[0].name))
         arms_page.render_file(out, page)
         print(f"armctl arms: {out} -> {page}")
     return 0

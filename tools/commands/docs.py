@@ -186,6 +186,13 @@ def findings(record: dict[str, Any]) -> str:
     return "\n".join(out) + "\n" + _study_made_by(record)
 
 
+def answer(record: dict[str, Any]) -> str:
+    """The study's answer in plain words (the report's opening: tools/study/answer.py)."""
+    from tools.study.answer import answer as words
+
+    return "\n".join(words(record)) + "\n\n" + _study_made_by(record)
+
+
 def picks(record: dict[str, Any]) -> str:
     """What to pick for the bundled arm, per scenario, in words (the report's)."""
     from tools.study.report import recommendation
@@ -249,6 +256,57 @@ def tuning(record: dict[str, Any]) -> str:
             "*`tools/armctl tune` (`tools/studies/paper.tuning.json`).*")
 
 
+def _bus_facts() -> dict[str, Any]:
+    """What the bus-load figures are computed from: the bundled drive table's PDO transmission
+    types and the arm protocol's wiring (firmware/protocol/drives.toml, buses.toml), the budget and
+    the heartbeat period (the parameter registry)."""
+    from gen import drives as drives_mod
+    from gen.lib import busload
+    from gen.lib.params import constant
+
+    return {"every": drives_mod.load_transmission(drives_mod.DEFAULT_DRIVES), "budget": constant("bus-budget"),
+            "heartbeat_ms": constant("heartbeat-ms"), "topology": busload.load_topology(busload.DEFAULT_TOPOLOGY)}
+
+
+def bus_load(f: dict[str, Any]) -> str:
+    """The worst-case load of CiA 402 drives per bus (gen/lib/busload.py, as `armctl busload`
+    computes it), the wiring the bundled arm gets, and the arm protocol's load on its wiring."""
+    from gen.lib import busload as bl
+    from gen.lib.params import default
+
+    rate = default("controller", "rate")
+    fd = bl.Bus("can0", True, 1e6, 5e6, [])
+    every, hb, budget = f["every"], f["heartbeat_ms"], f["budget"]
+    tpdo2 = every.get("tpdo2", 1)
+    counts = (1, 2, 3, 6)
+    rows = ["| bus | TPDO2 | " + " / ".join(map(str, counts)) + f" drives at {rate:g} Hz | at {rate / 2:g} Hz | "
+            f"drives a bus carries within {budget:.0%} at {rate:g} / {rate / 2:g} Hz |", "|---|---|---|---|---|"]
+    for bus, what in ((bl.CLASSIC_1M, "classic 1 Mbit/s"), (fd, "CAN FD 1/5 Mbit/s")):
+        for ev, when in (({}, "every SYNC"), (every, f"every {tpdo2}nd SYNC (the bundled drive table's)")):
+            if ev is every and tpdo2 == 1:
+                continue
+            cells = [" / ".join(f"{100 * bl.canopen_load(bus, n, r, hb, ev):.1f}" for n in counts) + " %"
+                     for r in (rate, rate / 2)]
+            fit = " / ".join(str(bl.canopen_drives_per_bus(bus, r, budget, hb, ev)) for r in (rate, rate / 2))
+            rows.append(f"| {what} | {when} | {cells[0]} | {cells[1]} | {fit} |")
+    wiring = bl.canopen_wiring(6, rate, every, budget, hb)
+    six = ("six drives need more than the controller's "
+           f"{bl.MAX_BUSES} classic buses" if wiring is None else
+           f"{len(wiring)} classic 1 Mbit/s buses (" + ", ".join(
+               f"drives {bl.drives_arg(b)}: {100 * bl.canopen_load(b, len(b.drives), rate, hb, every):.1f} %"
+               for b in wiring) + ")")
+    arm = bl.compute(f["topology"], rate, hb, bl.default_protocol(), 6)
+    one_fd = bl.compute([bl.Bus("can0", True, 1e6, 5e6, list(range(1, 7)))], rate, hb, bl.default_protocol(), 6)[0]
+    return ("\n".join(rows) + f"\n\nThe bundled arm's six drives at {rate:g} Hz with its drive table: {six}. The arm "
+            f"protocol's frames on its wiring (`firmware/protocol/buses.toml`): "
+            + ", ".join(f"{x.bus.name} (drives {bl.drives_arg(x.bus)}) {100 * x.load:.1f} %, up to "
+                        f"{math.floor(x.max_rate_hz(budget))} Hz" for x in arm)
+            + f"; all six on one CAN FD 1/5 Mbit/s bus {100 * one_fd.load:.1f} %, up to "
+              f"{math.floor(one_fd.max_rate_hz(budget))} Hz.\n\n"
+            "*Computed by `gen/lib/busload.py`, as `tools/armctl busload` computes it, from "
+            "`firmware/protocol/drives.toml` and `firmware/protocol/buses.toml`.*")
+
+
 # NAME -> (the results file's loader, the renderer)
 RENDERERS: dict[str, tuple[Callable[[], dict[str, Any]], Callable[[dict[str, Any]], str]]] = {
     "bench-step": (lambda: _result("bench-step"), bench_step),
@@ -264,6 +322,8 @@ RENDERERS: dict[str, tuple[Callable[[], dict[str, Any]], Callable[[dict[str, Any
     "headline": (lambda: _load(STUDIES / "paper.headline.json", "tools/armctl study --record"), headline_table),
     "findings": (lambda: _load(STUDIES / "paper.headline.json", "tools/armctl study --record"), findings),
     "tuning": (lambda: _load(STUDIES / "paper.tuning.json", "tools/armctl tune"), tuning),
+    "bus-load": (_bus_facts, bus_load),
+    "answer": (lambda: _load(STUDIES / "paper.headline.json", "tools/armctl study --record"), answer),
     "picks": (lambda: _load(STUDIES / "paper.headline.json", "tools/armctl study --record"), picks),
     "resonances": (lambda: _load(STUDIES / "paper.headline.json", "tools/armctl study --record"), resonances),
     "protocols": (lambda: _load(STUDIES / "paper.headline.json", "tools/armctl study --record"), protocols),

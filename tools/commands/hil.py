@@ -177,7 +177,8 @@ def _study_run(ns: argparse.Namespace) -> int:
 def run(ns: argparse.Namespace) -> int:
     import sys
 
-    from tools.build.arm import arm_from_args, arm_info, build_arm, print_arm_warnings, reference_for
+    from tools.build.arm import (HIL_TARGETS, arm_from_args, arm_info, build_arm, print_arm_warnings, reference_for,
+                                 targets_for)
     from tools.run.hil import HilOptions, run_hil
     from tools.study.config import DRIVE_PRESETS
     from tools.run.verdict import Bounds
@@ -216,7 +217,8 @@ def run(ns: argparse.Namespace) -> int:
     if ns.target is not None and ns.bus != "auto":
         raise UsageError(f"--target {ns.target} --bus {ns.bus}: a processor-in-the-loop run's buses are SLCAN links "
                          "to the image's UARTs (give no --bus)")
-    bdir = build_arm("release", arm)
+    # what the run needs (a software-in-the-loop run: arm_sil alone), not the tests and benches
+    bdir = build_arm("release", arm, targets=targets_for(ns.bus) if ns.bus == "sil" else HIL_TARGETS)
     if ns.target is not None:
         build_arm(ns.target, arm)
     info = arm_info(bdir)

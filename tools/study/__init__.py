@@ -526,6 +526,10 @@ def add_tune_arguments(p: argparse.ArgumentParser) -> None:
                            "(exit 1; the pairs to tune again are named)")
     what.add_argument("--retune", nargs="+", metavar="SCENARIO/METHOD", default=None,
                       help="tune these pairs alone (e.g. realistic/pm ideal/gh2), keeping every other pair's record")
+    p.add_argument("--accept-moved", action="store_true",
+                   help="with --verify: a pair that moved but whose pick still ranks ahead of its runner-up and "
+                        "runs as recorded keeps its pick: its recorded runs become this code's, and it is "
+                        "stamped with this code, the record saying by how much it moved")
 
 
 def subset(text: str | None, allowed: list[str], what: str) -> list[str] | None:
@@ -684,6 +688,7 @@ def _cmd_verify(ns: argparse.Namespace, cfg: StudyConfig, arm: ArmRef, methods: 
         checks = verify.verify_pairs(setup, recs, ns.out / "verify", progress=lambda spec, run: bar.update(1))
         bar.close()
         stamped = verify.restamp(path, checks)
+        accepted = verify.accept_moved(path, checks, setup.cfg.tuning_seeds) if ns.accept_moved else []
     for c in checks:
         print(c.line())
     moved = [c for c in checks if not c.equal]
@@ -695,10 +700,14 @@ def _cmd_verify(ns: argparse.Namespace, cfg: StudyConfig, arm: ArmRef, methods: 
     if retune:
         print(f"armctl tune --verify: the pick no longer holds in {len(retune)} pair(s): "
               f"tools/armctl tune --retune {' '.join(retune)}")
-    elif moved:
+    if accepted:
+        print(f"armctl tune --verify: {len(accepted)} moved pair(s) still rank ahead of their runner-up: their "
+              f"picks kept, their runs recorded anew on this code and stamped: {', '.join(accepted)}")
+    elif moved and not retune:
         print("armctl tune --verify: every moved pick still ranks ahead of its runner-up; its record's numbers are "
-              f"another code's: tools/armctl tune --retune {' '.join(c.pair for c in moved)} records them anew")
-    return 1 if moved else 0
+              f"another code's: tools/armctl tune --retune {' '.join(c.pair for c in moved)} tunes them again, "
+              "or --verify --accept-moved keeps the picks and records this code's numbers")
+    return 1 if retune or (moved and not accepted) else 0
 
 
 # A method's own outcome, which the comparison reports: the run itself was complete.
@@ -728,6 +737,8 @@ def _pairs(text: list[str], cfg: StudyConfig) -> list[tuple[str, str]]:
 def cmd_tune(ns: argparse.Namespace) -> int:
     """armctl tune (its errors as the study's); --verify: the kept tuning checked on this code."""
     cfg, arm, methods, scenarios, cluster = _common(ns)
+    if getattr(ns, "accept_moved", False) and not getattr(ns, "verify", False):
+        raise StudyConfigError("--accept-moved: only with --verify (it keeps picks that verified as still ahead)")
     if getattr(ns, "verify", False):
         return _cmd_verify(ns, cfg, arm, methods, scenarios, cluster)
     pairs = _pairs(ns.retune, cfg) if getattr(ns, "retune", None) else None

@@ -14,7 +14,7 @@ import numpy as np
 
 from tools.run.telemetry_log import read_log, truth_rows
 from tools.study.config import METHODS
-from tools.study.report import ESTIMATING, in_degrees
+from tools.study.report import ESTIMATING, in_degrees, loop_rate_hz
 
 # matplotlib's tab10, the colours of every figure's methods in their order in the study's method
 # table (METHODS): the same colour for a method in every figure of every study, PNG or HTML
@@ -52,6 +52,23 @@ def metric_bars(study: dict[str, Any], scenario: str, metric: str) -> tuple[list
         hi = np.array([c["ci95"][1] if c.get("ci95") else np.nan for c in cells], float)
         out[m] = {"mean": mean, "below": mean - lo, "above": hi - mean,
                   "not_ok": sum(1 for r in sc["stats"][m]["results"] if r != "ok"), "runs": len(sc["stats"][m]["results"])}
+    return groups, out
+
+
+def answer_bars(study: dict[str, Any]) -> tuple[list[str], dict[str, dict[str, Any]]]:
+    """The study's answer as bars: per scenario (the groups) each method's L-infinity tracking error
+    summed over the joints (deg), the mean over the seeds, the 95 % interval's half-widths and how
+    many of its runs did not end ok: what the pick is picked by."""
+    groups = list(study["scenarios"])
+    out: dict[str, dict[str, Any]] = {}
+    for m in study["methods"]:
+        cells = [in_degrees(study["scenarios"][s]["stats"][m]["linf"]["total"], "linf") for s in groups]
+        mean = np.array([c["mean"] if c.get("mean") is not None else np.nan for c in cells], float)
+        lo = np.array([c["ci95"][0] if c.get("ci95") else np.nan for c in cells], float)
+        hi = np.array([c["ci95"][1] if c.get("ci95") else np.nan for c in cells], float)
+        not_ok = [sum(1 for r in study["scenarios"][s]["stats"][m]["results"] if r != "ok") for s in groups]
+        out[m] = {"mean": mean, "below": mean - lo, "above": hi - mean, "not_ok": not_ok,
+                  "runs": [len(study["scenarios"][s]["stats"][m]["results"]) for s in groups]}
     return groups, out
 
 
@@ -105,7 +122,7 @@ def envelopes(series: dict[str, dict[str, np.ndarray]], rate_hz: float) -> dict[
 
 def stopped_early(t: np.ndarray, study: dict[str, Any]) -> bool:
     """Whether a run's series ends before its trajectory did (the safety layer stopped it)."""
-    return float(t[-1]) < study["duration_s"] - 2.0 / study.get("rate_hz", 1000.0)
+    return float(t[-1]) < study["duration_s"] - 2.0 / loop_rate_hz(study)
 
 
 def decimate(t: np.ndarray, y: np.ndarray, points: int) -> tuple[np.ndarray, np.ndarray]:

@@ -19,11 +19,12 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from tools.study.figure_data import (BAR_METRICS, ENVELOPE_S, METRIC_UNITS, colour_of, envelopes,  # noqa: E402
+from tools.study.figure_data import (BAR_METRICS, ENVELOPE_S, METRIC_UNITS, answer_bars, colour_of, envelopes,  # noqa: E402
                                      metric_bars, scenario_series, stopped_early)
-from tools.study.html_figures import (distribution_figure, envelope_figure, metrics_figure,  # noqa: E402
+from tools.study.html_figures import (answer_figure, distribution_figure, envelope_figure, metrics_figure,  # noqa: E402
                                       tuning_figure)
-from tools.study.report import ESTIMATING, METRIC_TEXT, fig_name, worst_kept_run  # noqa: E402
+from tools.study.report import (ANSWER_FIGURE, ESTIMATING, METRIC_TEXT, fig_name, loop_rate_hz,  # noqa: E402
+                                worst_kept_run)
 from gen.lib.escape import matplotlib_text as mt  # noqa: E402
 from gen.lib.one_line import one_line  # noqa: E402
 
@@ -41,7 +42,7 @@ def _time_figures(out: Path, study: dict[str, Any], scenario: str) -> list[tuple
     made: list[tuple[str, str | None]] = []
     if not series:
         return made
-    env = envelopes(series, study.get("rate_hz", 1000.0))
+    env = envelopes(series, loop_rate_hz(study))
 
     def label(m: str) -> str:
         r = runs[m][0].get("result") if runs.get(m) else None
@@ -145,6 +146,44 @@ def _distribution_figure(out: Path, study: dict[str, Any], scenario: str) -> str
     return _save(fig, out / fig_name("distribution", scenario))
 
 
+def _grouped_bars(ax: Any, groups: list[str], bars: dict[str, dict[str, Any]], colour: dict[str, str]) -> None:
+    """One group of bars per entry of `groups`, a bar a method in its colour with its 95 % interval;
+    hatched where some of its runs did not end ok (`not_ok`: one count, or one per group; `labels`:
+    the legend's, one per group, None for none); a log scale where the means span more than 30x."""
+    width = 0.8 / max(len(bars), 1)
+    x0 = np.arange(len(groups))
+    for k, (m, b) in enumerate(bars.items()):
+        x = x0 + (k - (len(bars) - 1) / 2) * width
+        bad = np.broadcast_to(np.asarray(b["not_ok"]) > 0, x.shape)
+        for xi, mean, hatched, label in zip(x, b["mean"], bad, b["labels"]):
+            ax.bar(xi, mean, width, color=colour[m], edgecolor="k" if hatched else colour[m], lw=0.6,
+                   hatch="///" if hatched else None, alpha=0.9, label=label)
+        ax.errorbar(x, b["mean"], yerr=[b["below"], b["above"]], fmt="none", ecolor="k", lw=0.8, capsize=2)
+    vals = np.concatenate([b["mean"] for b in bars.values()]) if bars else np.array([])
+    vals = vals[np.isfinite(vals) & (vals > 0)]
+    if len(vals) and vals.max() / vals.min() > 30:
+        ax.set_yscale("log")
+    ax.set_xticks(x0, [mt(g) for g in groups], fontsize=8)
+
+
+def _answer_figure(out: Path, study: dict[str, Any]) -> str:
+    """The answer drawn (fig_answer_all.png): per scenario, each method's L-infinity tracking error
+    summed over the joints, mean and 95 % interval; hatched where some runs did not end ok."""
+    colour = colour_of(study)
+    groups, bars = answer_bars(study)
+    fig, ax = plt.subplots(figsize=(max(7.0, 2.2 * len(groups) + 2), 3.6))
+    _grouped_bars(ax, groups, {m: {**b, "labels": [None] * len(groups)} for m, b in bars.items()}, colour)
+    ax.set_ylabel("deg")
+    ax.grid(axis="y", lw=0.3, alpha=0.6)
+    from matplotlib.patches import Patch
+
+    ax.legend(handles=[Patch(color=colour[m], label=mt(m)) for m in bars], fontsize=7, ncol=min(len(bars), 7),
+              loc="lower left", bbox_to_anchor=(0.0, 1.0), frameon=False)
+    fig.suptitle(f"L-infinity tracking error summed over the joints: mean over {len(study['seeds'])} seed(s),\n"
+                 "95 % interval (hatched: some runs not ok)", fontsize=9)
+    return _save(fig, out / fig_name(ANSWER_FIGURE, "all"))
+
+
 def _metrics_figure(out: Path, study: dict[str, Any], scenario: str) -> str:
     """Each metric per joint as bars, the mean over the seeds with its 95 % interval (the paper's
     Tables 1-3 drawn): one bar a method in its colour, hatched where some of its runs did not end
@@ -155,20 +194,9 @@ def _metrics_figure(out: Path, study: dict[str, Any], scenario: str) -> str:
                              gridspec_kw={"height_ratios": [3, 3, 3, 2]})
     for ax, metric in zip(axes, BAR_METRICS):
         groups, bars = metric_bars(study, scenario, metric)
-        width = 0.8 / max(len(bars), 1)
-        x0 = np.arange(len(groups))
-        for k, (m, b) in enumerate(bars.items()):
-            x = x0 + (k - (len(bars) - 1) / 2) * width
-            bad = b["not_ok"] > 0
-            ax.bar(x, b["mean"], width, color=colour[m], edgecolor="k" if bad else colour[m], lw=0.6,
-                   hatch="///" if bad else None, alpha=0.9,
-                   label=mt(m + (f" ({b['not_ok']} of {b['runs']} runs not ok)" if bad else "")))
-            ax.errorbar(x, b["mean"], yerr=[b["below"], b["above"]], fmt="none", ecolor="k", lw=0.8, capsize=2)
-        vals = np.concatenate([b["mean"] for b in bars.values()]) if bars else np.array([])
-        vals = vals[np.isfinite(vals) & (vals > 0)]
-        if len(vals) and vals.max() / vals.min() > 30:
-            ax.set_yscale("log")
-        ax.set_xticks(x0, [mt(g) for g in groups], fontsize=8)
+        _grouped_bars(ax, groups, {m: {**b, "labels": [mt(m + (f" ({b['not_ok']} of {b['runs']} runs not ok)"
+                                                               if b["not_ok"] else ""))] + [None] * (len(groups) - 1)}
+                                   for m, b in bars.items()}, colour)
         ax.set_ylabel(METRIC_UNITS[metric])
         ax.set_title(f"{METRIC_TEXT[metric]}: mean over {len(study['seeds'])} seed(s), 95 % interval", fontsize=9)
         ax.grid(axis="y", lw=0.3, alpha=0.6)
@@ -257,13 +285,14 @@ def draw_figures(out: Path, study: dict[str, Any], jobs: int | None = None) -> d
 
     tasks = [(name, kind) for kind in FIGURE_KINDS for name in study["scenarios"]]
     jobs = min(len(tasks), jobs or len(os.sched_getaffinity(0)))
+    answer = {(ANSWER_FIGURE, ANSWER_FIGURE): [(_answer_figure(out, study), answer_figure(study))]}  # the whole study's, here
     if jobs <= 1:
-        return {(name, kind): _scenario_figures(out, study, name, kind) for name, kind in tasks}
+        return {**answer, **{(name, kind): _scenario_figures(out, study, name, kind) for name, kind in tasks}}
     # fork: the workers have matplotlib imported already, and need no importable __main__ (a
     # forkserver or spawn would re-run the caller's script); the study's run threads have ended
     ctx = multiprocessing.get_context("fork")
     with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
         futs = {t: pool.submit(_scenario_figures, out, {**study, "scenarios": {t[0]: study["scenarios"][t[0]]}}, *t)
                 for t in tasks}
-        return {t: f.result() for t, f in futs.items()}
+        return {**answer, **{t: f.result() for t, f in futs.items()}}
 

@@ -2,7 +2,12 @@
 and tables are report.md's (python-markdown), so both always say the same; where report.md shows a
 figure the page shows its interactive version (plotly: zoom into a run, hover a value, a method
 toggled in the legend; tools/study/html_figures.py), or the PNG itself, inlined. plotly.js, the
-figures' data, the images and the style are all inside the page: no CDN, no file beside it."""
+figures' data, the images and the style are all inside the page: no CDN, no file beside it.
+
+It reads at a glance: the first screen is report.md's first section (the answer per scenario, the
+table of means, the answer drawn); every later section (how the study was run, each scenario's
+per-joint detail) is folded in a <details> the reader opens, and its figures are drawn when it is
+opened."""
 
 from __future__ import annotations
 
@@ -29,15 +34,35 @@ pre { background: #f6f6f6; padding: .8em; overflow-x: auto; font-size: .8em; }
 pre code { background: none; padding: 0; }
 .figure { width: 100%; margin: 1em 0; border: 1px solid #eee; }
 img.figure { height: auto; }
+.glance { display: flex; flex-wrap: wrap; gap: 1em; align-items: flex-start; }
+.glance > pre { flex: 0 1 auto; margin: 0; font-size: .72em; }
+.glance > .figure, .glance > p { flex: 1 1 420px; min-width: 380px; margin: 0; }
+details.section { margin-top: 1.2em; border-top: 1px solid #ddd; }
+details.section > summary { cursor: pointer; padding: .3em 0; }
+details.section > summary > h2 { display: inline; border: none; margin: 0; font-size: 1.3em; }
 """
+# Each figure is drawn once it can be seen: at load, those outside a folded section; the others
+# when their section is opened (plotly sizes a figure by its container, which a closed <details>
+# gives none). A drawn figure says so (data-drawn="yes"); the page, once the first screen's are.
 RENDER = """
-const drawing = [];
-for (const el of document.querySelectorAll("div.figure[data-figure]")) {
-  const fig = JSON.parse(document.getElementById(el.dataset.figure).textContent);
-  drawing.push(Plotly.newPlot(el, fig.data, fig.layout, {responsive: true, displaylogo: false}));
+function draw(root) {
+  const drawing = [];
+  for (const el of root.querySelectorAll("div.figure[data-figure]:not([data-drawn])")) {
+    if (el.closest("details:not([open])")) continue;
+    el.dataset.drawn = "pending";
+    const fig = JSON.parse(document.getElementById(el.dataset.figure).textContent);
+    drawing.push(Plotly.newPlot(el, fig.data, fig.layout, {responsive: true, displaylogo: false})
+      .then(() => { el.dataset.drawn = "yes"; }));
+  }
+  return Promise.all(drawing);
 }
-Promise.all(drawing).then(() => { document.body.dataset.figures = "drawn"; });
+for (const d of document.querySelectorAll("details.section")) {
+  d.addEventListener("toggle", () => { if (d.open) draw(d); });
+}
+draw(document).then(() => { document.body.dataset.figures = "drawn"; });
 """
+SECTION = re.compile(r"(?=<h2[ >])")
+HEADING = re.compile(r"^(<h2[^>]*>.*?</h2>)", re.S)
 IMAGE = re.compile(r'<p><img alt="([^"]*)" src="([^"]+\.png)" ?/?></p>')
 
 
@@ -49,6 +74,26 @@ def page(title: str, body: str, plotly: bool) -> str:
             f'<meta name="viewport" content="width=device-width, initial-scale=1">\n<title>{html_text(title)}</title>\n'
             f"<style>{STYLE}</style>\n{scripts}\n</head>\n<body>\n<main>\n{body}\n</main>\n"
             + (f"<script>{RENDER}</script>\n" if plotly else "") + "</body>\n</html>\n")
+
+
+def folded(body: str) -> str:
+    """The body with every h2 section after the first folded: <details> whose summary is its
+    heading. What comes before the first h2 (the title) and the first section stay open."""
+    head, *sections = SECTION.split(body)
+    if not sections:
+        return body
+    first = sections[0]
+    at = first.find("<pre>")
+    if at >= 0:  # the table of means and the figure after it side by side, where the page is wide enough
+        first = f'{first[:at]}<div class="glance">\n{first[at:]}</div>\n'
+    out = [head, first]
+    for sec in sections[1:]:
+        m = HEADING.match(sec)
+        if m is None:
+            out.append(sec)
+            continue
+        out.append(f'<details class="section">\n<summary>{m.group(1)}</summary>\n{sec[m.end():]}</details>\n')
+    return "".join(out)
 
 
 def write_html(out: Path, study: dict[str, Any], markdown_text: str, interactive: dict[str, str]) -> Path:
@@ -70,7 +115,7 @@ def write_html(out: Path, study: dict[str, Any], markdown_text: str, interactive
             return m.group(0)  # report.md names it and it is gone: the page says so as the Markdown does
         return f'<p><img class="figure" alt="{html_text(alt)}" src="data:image/png;base64,{data}"></p>'
 
-    body = IMAGE.sub(figure, body)
+    body = folded(IMAGE.sub(figure, body))
     path = out / HTML_FILE
     write_text_atomic(path, page(f"Study: {study['description']}", body, bool(used)))
     return path

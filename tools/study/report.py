@@ -341,6 +341,15 @@ def worst_kept_run(study: dict[str, Any], scenario: str) -> tuple[str, int, str]
     return m, seed, why
 
 
+ANSWER_FIGURE = "answer"  # tools/study/figures.py ANSWER: draw_figures' key of the study's one figure
+
+
+def loop_rate_hz(study: dict[str, Any]) -> float:
+    """The loop rate the study ran at (study.json's rate_hz, the arm's design's); a record made
+    before it was kept ran at the registry's default."""
+    return float(study.get("rate_hz") or default("controller", "rate"))
+
+
 def _remove_figures(out: Path, scenarios: list[str]) -> None:
     """A report without figures leaves none beside it of an earlier study of these scenarios in
     the same folder: every figure there is the report's."""
@@ -359,7 +368,7 @@ def write_report(out: Path, study: dict[str, Any], figures: bool = True) -> None
         drawn = draw_figures(out, study)
     else:
         drawn = {}
-        _remove_figures(out, list(study["scenarios"]))
+        _remove_figures(out, [*study["scenarios"], "all"])  # "all": the study's own figure (fig_answer_all)
 
     def images(name: str, kind: str) -> list[str]:  # a paragraph each (report.html puts a figure in its place)
         return [line for f, _ in drawn.get((name, kind), []) for line in ("", f"![{f}]({f})", "")]
@@ -369,10 +378,16 @@ def write_report(out: Path, study: dict[str, Any], figures: bool = True) -> None
     paper = arm["is_default"] and n == 6  # the paper's numbers are for its six-joint arm
     labels = _labels(study, paper)
     wiring = ", ".join(f"{md(b['name'])}: drives {','.join(map(str, b['drives']))}" for b in arm["buses"])
+    from tools.study.answer import answer
+
     text = [f"# Study: {md(study['description'])}", "",
+            "## The answer", "", *answer(study), "",
+            "Means over the seeds per scenario and method (the detail of each is in its scenario's section):", "",
+            markdown_fence(summary_table(study).splitlines()), "", *images(ANSWER_FIGURE, ANSWER_FIGURE),
+            "## How the study was run", "",
             f"Arm {code(arm['name'])} ({n} joints: {', '.join(map(code, arm['joint_names']))}; model "
             f"{code(arm['model'])}, hash {md(arm['model_hash'])}), its CAN buses {wiring}, {md(_how_run(study))} at "
-            f"{default('controller', 'rate') / 1000:g} kHz. Config {code(study['config'])}; "
+            f"{loop_rate_hz(study) / 1000:g} kHz. Config {code(study['config'])}; "
             f"seeds {study['seeds']}; trajectory {study['duration_s']:g} s after a {study['hold_s']:g} s hold on the "
             "start pose (metrics cover the trajectory only). Intervals are 95 % confidence intervals of the mean over "
             "the seeds (Student's t); PM against another method is paired on the same seeds: the ratio of the means, "
@@ -383,7 +398,7 @@ def write_report(out: Path, study: dict[str, Any], figures: bool = True) -> None
             *([] if figures else ["Figures: not drawn (`--no-figures`).", ""]),
             *(["Notes:", "", *[f"- {md(x)}" for x in study.get("notes", [])], ""] if study.get("notes") else []),
             *_drivetrain_lines(study),
-            "## What to pick", "",
+            "## What to pick, in detail", "",
             "Per scenario, the method with the lowest mean tracking error (the sum over joints of the L-infinity "
             "error, the tuning's objective) among those whose every run ended ok, against the next best and PM on the "
             "same seeds (paired t-test):", "",
@@ -444,7 +459,6 @@ def write_report(out: Path, study: dict[str, Any], figures: bool = True) -> None
                 text += [f"The arm in the worst run of {code(name)} whose telemetry is kept (seed {worst[1]}): "
                          f"{md(worst[0])}, {md(worst[2])}. Solid: the arm as simulated; translucent, beside it: the "
                          f"commanded reference ({code(render)} makes its video):", "", *images(name, "arm"), ""]
-    text += ["## Summary", "", markdown_fence(summary_table(study).splitlines()), ""]
     write_text_atomic(out / "report.md", "\n".join(text))
     write_text_atomic(out / "summary.txt", summary_table(study) + "\n")
     from tools.study.html_report import write_html

@@ -64,6 +64,8 @@ class PairCheck:
     results_changed: list[str] = field(default_factory=list)
     rank: str = ""                 # moved: the pick against its runner-up on this code
     retune: bool = False           # the pick no longer holds its place (or no longer runs ok)
+    now: list[dict[str, Any]] = field(default_factory=list)  # the recorded runs' results on this code
+    bandwidth_now: float | None = None
 
     @property
     def pair(self) -> str:
@@ -316,6 +318,7 @@ def verify_pairs(setup: TuneSetup, recs: dict[tuple[str, str], dict[str, Any]], 
             check.worst_rel = _rel(float(want), float(bw)) if bw is not None else math.inf
             check.moved.append(f"closed-loop bandwidth {want:.6g} -> {'none' if bw is None else f'{bw:.6g}'} Hz")
         compare(check, labels, recorded, runs[start:start + n])
+        check.now, check.bandwidth_now = [r.get("results") or {} for r in runs[start:start + n]], bw
     rank_checks(setup, [(check, rec) for check, rec, *_ in plan if not check.equal], out)
     return checks
 
@@ -401,6 +404,39 @@ def moved_note(checks: list[PairCheck], tuning_path: Path) -> str | None:
             + "; ".join(c.line() for c in moved)
             + (f"; `armctl tune --retune {' '.join(retune)}` tunes those again" if retune else
                "; every pick still ranks ahead of its runner-up (`armctl tune --verify` says so in full)"))
+
+
+def accept_moved(path: Path, checks: list[PairCheck], tuning_seeds: list[int]) -> list[str]:
+    """The pairs that moved but whose pick still ranks ahead of its runner-up on this code (and
+    still runs as recorded): their recorded runs and bandwidth replaced by this code's, stamped
+    with this code, the verification saying by how much they moved (`armctl tune --verify
+    --accept-moved`). The tuning's history (its trials) stays the tuning code's. Returns those pairs."""
+    from tools.study import _read_tuning
+
+    code = code_identity()
+    done = []
+    when = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    with flocked(path.with_name(f".{path.name}.lock")):
+        doc = _read_tuning(path)
+        for c in checks:
+            rec = (doc["scenarios"].get(c.scenario) or {}).get(c.method)
+            if c.equal or c.retune or not c.now or not isinstance(rec, dict):
+                continue
+            _, _, recorded = recorded_runs(rec, tuning_seeds)
+            if len(recorded) != len(c.now):
+                raise VerifyError(f"{c.pair}: {len(recorded)} recorded runs, {len(c.now)} verified")
+            for r, res in zip(recorded, c.now, strict=True):
+                r["result"], r["tracking_max_abs_deg"] = res.get("result"), res.get("tracking_max_abs_deg")
+            if rec.get("bandwidth_hz") is not None:
+                rec["bandwidth_hz"] = c.bandwidth_now
+            rec.setdefault("tuned_code", rec.get("code"))
+            rec["code"] = code
+            rec["verified"] = {"code": code, "runs": c.runs, "when": when,
+                               "accepted_move": {"largest_change": c.worst_rel, "rank": c.rank}}
+            done.append(c.pair)
+        if done:
+            write_json_atomic(path, doc)
+    return done
 
 
 def restamp(path: Path, checks: list[PairCheck]) -> list[str]:

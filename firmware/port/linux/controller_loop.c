@@ -45,16 +45,14 @@ typedef struct {
     uint32_t tpdo1_late, tpdo2_late;
     int draining; /* reading what came before this period's SYNC: every TPDO then is late */
     int64_t next_heartbeat_ns;
+    int64_t heartbeat_ns; /* the master's heartbeat period (--heartbeat-ms; 0: none) */
+    uint32_t master_id;   /* --master-id: its heartbeat's node id */
     /* TPDO2 every tpdo2_every-th SYNC (its transmission type); the joints whose TPDO2 has come */
     uint32_t tpdo2_every;
     uint32_t period;
     uint32_t tpdo2_seen;
 } link_t;
 
-#define CANOPEN_MASTER_ID 0x7Fu
-#ifndef CANOPEN_HEARTBEAT_MS /* the master's and the drives' heartbeat period (the MCU image's: its CMake) */
-#define CANOPEN_HEARTBEAT_MS 100u
-#endif
 
 /* Whether joint j's TPDO (of the kind `seen` records this period) is this period's answer. One read
  * before this period's SYNC is late: counted as such, not used. A second one this period is
@@ -354,10 +352,11 @@ static int boot_canopen_run(link_t *l, const options_t *opt, const arm_robot_mod
         arm_co_boot_config_t cfg;
         arm_co_boot_default_config(&cfg);
         cfg.cycle_us = (uint32_t)(1e6 / opt->rate_hz + 0.5);
-        cfg.heartbeat_ms = CANOPEN_HEARTBEAT_MS;
-        cfg.master_id = CANOPEN_MASTER_ID;
-#ifdef CANOPEN_CONSUMER_MS /* the drives' timeout for the master's heartbeat (the MCU image's: its CMake) */
-        cfg.consumer_ms = CANOPEN_CONSUMER_MS;
+        cfg.heartbeat_ms = (uint16_t)opt->co_heartbeat_ms;
+        cfg.master_id = (uint8_t)opt->co_master_id;
+        cfg.consumer_ms = (uint16_t)opt->co_consumer_ms;
+#ifdef CANOPEN_CONSUMER_MIN_MS /* the MCU image's floor (its CMake): its clock is QEMU's virtual time */
+        if (cfg.consumer_ms != 0u && cfg.consumer_ms < CANOPEN_CONSUMER_MIN_MS) cfg.consumer_ms = CANOPEN_CONSUMER_MIN_MS;
 #endif
         /* drives that come up after the controller (a slower process, a bus powered later) are
          * waited for, as the arm protocol waits for their heartbeats: for the first half of the
@@ -667,10 +666,10 @@ static void start_period(link_t *l, uint32_t k, int64_t now)
         l->tpdo2_late = tpdo2_was_due ? (ALL_JOINTS & ~l->tpdo2_mask) | l->tpdo2_late : 0u;
         l->tpdo1_mask = l->tpdo2_mask = 0u;
         l->period = k;
-        if (now >= l->next_heartbeat_ns) { /* the drives consume it (0x1016.1) */
-            const arm_can_frame_t hb = {.id = ARM_CO_COB_HEARTBEAT + CANOPEN_MASTER_ID, .len = 1u, .data = {0x05u}};
+        if (l->heartbeat_ns > 0 && now >= l->next_heartbeat_ns) { /* the drives consume it (0x1016.1) */
+            const arm_can_frame_t hb = {.id = ARM_CO_COB_HEARTBEAT + l->master_id, .len = 1u, .data = {0x05u}};
             send_all(l, &hb);
-            l->next_heartbeat_ns = now + (int64_t)CANOPEN_HEARTBEAT_MS * 1000000LL;
+            l->next_heartbeat_ns = now + l->heartbeat_ns;
         }
     }
     drain(l);
@@ -747,6 +746,8 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
     l.spin_ns = (int64_t)(opt->spin_us * 1e3);
     l.canopen = opt->protocol_canopen;
     l.tpdo2_every = opt->tpdo2_type != 0u ? opt->tpdo2_type : 1u;
+    l.heartbeat_ns = (int64_t)opt->co_heartbeat_ms * 1000000LL;
+    l.master_id = opt->co_master_id;
     p.opt = opt;
     p.telem = telem;
     p.report = report;

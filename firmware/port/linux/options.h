@@ -31,6 +31,11 @@ typedef struct {
     unsigned n_nodes;
     uint8_t rpdo_type;         /* --rpdo-type: RPDO1's transmission type [1] */
     uint8_t tpdo2_type;        /* --tpdo2-type: TPDO2's, every N-th SYNC [1] */
+    /* --heartbeat-ms, --consumer-ms, --master-id: the drive table's heartbeat_ms, consumer_ms and
+     * master_id (0x1017, 0x1016.1, the master's own heartbeat) */
+    uint32_t co_heartbeat_ms;
+    uint32_t co_consumer_ms;
+    uint32_t co_master_id;
     arm_co_node_config_t node[ARM_N_JOINTS];
     arm_ctl_config_t ctl;
     double position_margin_rad; /* --position-margin: ctl's q_min, q_max are the model's widened by it */
