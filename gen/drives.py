@@ -40,7 +40,10 @@ ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_DRIVES = ROOT / "firmware" / "protocol" / "drives.toml"
 TOP_FIELDS = {"eds", "heartbeat_ms", "consumer_ms", "master_id", "defaults", "joint", "pdo",
               drive_check.ACCEPT_NO_WATCHDOG}
-JOINT_FIELDS = {"node", "encoder_increments", "gear", "rated_torque_nm", "torque_unit", "gear_efficiency"}
+JOINT_FIELDS = {"node", "encoder_increments", "gear", "rated_torque_nm", "torque_unit", "gear_efficiency",
+                "brake_holding_nm", "brake_close_ms", "brake_release_ms", "quick_stop_deceleration"}
+BRAKE_FIELDS = ("brake_holding_nm", "brake_close_ms", "brake_release_ms")  # all or none
+BRAKE_JOINT_TORQUE_LIMIT = "joint_torque_limit"  # brake_holding_nm: the joint's torque limit (arm.json)
 # 0x6076's unit, per N m: CiA 402 says mN m; maxon's EPOS4 gives µN m (its firmware specification)
 TORQUE_UNITS = {"mNm": 1000, "uNm": 1000000}
 # rated_torque_nm: the motor that gives the joint's torque limit (arm.json) through the gear
@@ -73,6 +76,17 @@ class Drive:
     joint_torque_limit_nm: float = 0.0  # arm.json's: the drive must give it at the joint
     max_torque_permille: int = drive_check.MAX_PERMILLE  # 0x6072 as the file says (the boot reads the drive's)
     accept_no_master_watchdog: bool = False  # the table accepts a drive without a settable 0x1016.1
+    # The drive's holding brake (its own settings, no CiA 402 object): holding torque at the joint,
+    # closing and release delays; None: no brake. And 0x6085 in the drive's own unit (None: its own).
+    brake: tuple[float, float, float] | None = None
+    quick_stop_deceleration: int | None = None
+
+    def brake_spec(self) -> str | None:
+        """arm_sim's --brake value for this drive's joint, or None."""
+        if self.brake is None:
+            return None
+        hold, close, release = self.brake
+        return f"{self.drive}:{hold:g}:{close:g}:{release:g}"
 
     @property
     def joint_rated_torque_nm(self) -> float:
@@ -97,6 +111,8 @@ class Drive:
             spec.append(f"efficiency={self.gear_efficiency:g}")
         if self.accept_no_master_watchdog:
             spec.append(f"{drive_check.ACCEPT_NO_WATCHDOG}=true")
+        if self.quick_stop_deceleration is not None:
+            spec.append(f"quick_stop={self.quick_stop_deceleration}")
         if limit and self.joint_torque_limit_nm > 0:
             spec.append(f"limit={self.joint_torque_limit_nm:g}")
         return ",".join(spec)
@@ -215,6 +231,37 @@ def _units(get: Callable[[str], tuple[Any, str]], torque_limit: float | None,
         raise DrivesError(f"{w}: expected the motor's rated torque in N m, {1 / TORQUE_UNITS[unit]:g}..{top:g} (or "
                           f"\"{JOINT_TORQUE_LIMIT}\"), got {rated_v!r}")
     return TableUnits(float(rated_v), enc, gear, unit, float(efficiency))
+
+
+def _stopping(get: Callable[[str], tuple[Any, str]], torque_limit: float | None) -> tuple[
+        tuple[float, float, float] | None, int | None]:
+    """The brake a table gives (holding torque in N m at the joint, or "joint_torque_limit"; closing
+    and release delays in ms: all three or none) and 0x6085 in the drive's own unit."""
+    given = {k: get(k) for k in BRAKE_FIELDS}
+    have = [k for k in BRAKE_FIELDS if given[k][0] is not None]
+    brake = None
+    if have:
+        missing = [k for k in BRAKE_FIELDS if given[k][0] is None]
+        if missing:
+            raise DrivesError(f"{given[missing[0]][1]}: missing: a brake needs {', '.join(BRAKE_FIELDS)} "
+                              f"(given: {', '.join(have)})")
+        hold, w = given["brake_holding_nm"]
+        if hold == BRAKE_JOINT_TORQUE_LIMIT:
+            hold = torque_limit
+        if isinstance(hold, bool) or not isinstance(hold, (int, float)) or not math.isfinite(hold) \
+                or not 0 < hold <= 1e6:
+            raise DrivesError(f"{w}: expected a holding torque in N m at the joint, (0, 1e6] (or "
+                              f"\"{BRAKE_JOINT_TORQUE_LIMIT}\"), got {hold!r}")
+        delays = []
+        for k in ("brake_close_ms", "brake_release_ms"):
+            v, w = given[k]
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not 0 <= v <= 10000:
+                raise DrivesError(f"{w}: expected a delay in ms, 0..10000, got {v!r}")
+            delays.append(float(v))
+        brake = (float(hold), delays[0], delays[1])
+    qs_v, w = get("quick_stop_deceleration")
+    qs = None if qs_v is None else _uint(qs_v, w)
+    return brake, qs
 
 
 def _in_unit(rated_nm: float | None, unit: str) -> int | None:
@@ -372,11 +419,12 @@ def load(arm: dict[str, Any], path: Path | None = None) -> DriveConfig:
         if num not in bus_of:
             raise DrivesError(f"arm.json: drive {num} (joint {name}) is on no bus")
         rated_mnm = u.rated_nm * 1000 if u.rated_nm is not None else units["rated"] * 1000 / TORQUE_UNITS[u.unit]
+        brake, quick_stop = _stopping(get, j["torque_limit"])
         d = Drive(name, num, bus_of[num], node, rated_mnm, u.encoder if u.encoder is not None else units["encoder"],
                   u.gear if u.gear is not None else units["gear"], given,
                   [f"warning: {x}" for x in report.warnings] + report.notes,
                   1 if u.encoder is not None else units["encoder_revs"], u.unit, u.efficiency, float(j["torque_limit"]),
-                  report.max_permille, accept)
+                  report.max_permille, accept, brake, quick_stop)
         _check_torque_limit(path, d)
         out.append(d)
     for b in {d.bus for d in out}:

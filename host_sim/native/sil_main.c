@@ -121,7 +121,7 @@ int main(int argc, char **argv)
     mju_user_warning = on_mujoco_warning;
     static sim_arm_t arm;
     if (sim_arm_open(&arm, so.model, so.plant, so.keyframe, so.substeps, &so.unc, err, sizeof(err)) != 0 ||
-        sim_options_finish(&so, arm.n, err, sizeof(err)) != 0) {
+        sim_options_finish(&so, &arm, err, sizeof(err)) != 0) {
         fprintf(stderr, "arm_sil: simulator: %s\n", err);
         return 2;
     }
@@ -191,8 +191,9 @@ int main(int argc, char **argv)
     }
     sim_arm_close(&arm);
     if (report.result != RUN_OK) {
-        fprintf(stderr, "arm_sil: controller: %s; state %s, zero torque commanded\n", report.reason,
-                arm_state_str(report.final_state));
+        fprintf(stderr, "arm_sil: controller: %s; state %s; safe stop: %s\n", report.reason,
+                arm_state_str(report.final_state),
+                report.stop.cause != RUN_STOP_NONE ? report.stop.safe_state : "none (never enabled)");
     }
     if (sim_rc != 0) {
         fprintf(stderr, "arm_sil: simulator: %s\n", srep.reason);

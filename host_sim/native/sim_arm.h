@@ -75,6 +75,14 @@ typedef struct {
     double mass[SIM_MAX_JOINTS * SIM_MAX_JOINTS]; /* the links' mass matrix (the plant's link block) */
     double mass_full[4 * SIM_MAX_JOINTS * SIM_MAX_JOINTS]; /* scratch: the plant's whole one */
     double torque_limit[SIM_MAX_JOINTS];
+    /* The holding brakes (sim_arm_set_brake): each motor dof's own dry friction and its constraint's
+     * softness, restored when its brake opens; the joint's inertia a drive's velocity loop is tuned
+     * for (its motor dof and, on a flexible joint, the link behind it, at the start pose). */
+    double own_frictionloss[SIM_MAX_JOINTS];
+    double own_solref[SIM_MAX_JOINTS][mjNREF];
+    double own_solimp[SIM_MAX_JOINTS][mjNIMP];
+    double brake_nm[SIM_MAX_JOINTS];
+    double drive_inertia[SIM_MAX_JOINTS];
     int substeps;             /* MuJoCo steps per period (the model's timestep x substeps = period) */
     unsigned long long model_hash; /* FNV-1a 64 of the model file: announced at boot (SIM_IDENTITY) */
 } sim_arm_t;
@@ -85,14 +93,18 @@ void sim_uncertainty_default(sim_uncertainty_t *u);
  * Returns 0, or -1 with a message naming the file, option or element in err. */
 int sim_arm_open(sim_arm_t *a, const char *path, const char *plant, const char *keyframe, int substeps,
                  const sim_uncertainty_t *u, char *err, size_t errcap);
-/* Puts the arm at rest at joint angles q (rad), each rotor of a flexible joint wound up against
- * gravity, as sim_arm_open does at the keyframe (the plant's --start-pose). */
-void sim_arm_set_pose(sim_arm_t *a, const double *q);
 /* Joint j's motor angle and speed, in joint units: its rotor's, or the link's on a rigid joint. */
 double sim_arm_motor_q(const sim_arm_t *a, int j);
 double sim_arm_motor_qd(const sim_arm_t *a, int j);
 /* FNV-1a 64 of a file's bytes (gen/arm.py's fnv1a64), or 0 if it cannot be read. */
 unsigned long long sim_file_hash(const char *path);
+/* Start at pose q (rad per joint, inside each joint's range) at rest instead of the keyframe: -1 with
+ * the joint and value named in err otherwise. */
+int sim_arm_set_pose(sim_arm_t *a, const double *q, char *err, size_t errcap);
+/* Joint j's holding brake: holding_nm (N m at the joint; 0: open) of dry friction on its motor dof,
+ * on top of the joint's own, as a stiff constraint: it holds a load below it (creep under 0.01 deg
+ * in 2 s at the bundled arm's most loaded pose) and slips above it. */
+void sim_arm_set_brake(sim_arm_t *a, int j, double holding_nm);
 /* One period under tau (the time average the joints feel); tau_commanded (may be NULL: tau) is
  * what the controller commanded, when the bus delays a new command into the period. w: n values.
  * Returns 0, or the 1-based DOF whose acceleration MuJoCo found NaN, infinite or huge: the

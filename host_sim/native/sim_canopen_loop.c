@@ -1,6 +1,8 @@
 #define _GNU_SOURCE
 #include "sim_canopen_loop.h"
 
+#include "sim_after_stop.h"
+
 #include <errno.h>
 #include <math.h>
 #include <stdio.h>
@@ -45,6 +47,15 @@ struct co_sim {
     int holding_answers; /* TEST HOOK (cfg->late_answer_period): what the nodes queue stays queued */
     sim_plant_t *plant;  /* the truth the drives sense and act through, the brakes, the sessions (NULL: none) */
     const char *sessions_path;
+    int serving;         /* --serve: each session's after-stop is the plant's own (sim_plant.h), not post_stop's */
+    double frame_sent_s; /* the frame being handled: when the master sent it (-1: the bus does not say) */
+    double sync_sent_s;  /* this period's lead SYNC: when it was sent, when it was read (-1: unknown) */
+    double sync_read_s;
+    double answered_s;   /* when the period's answers last went out */
+    int prestepped;      /* the period since the last SYNC is simulated already (maybe_prestep) */
+    int lost;            /* the master fell silent */
+    int power_lost;      /* stopped by a signal: the drives lose their supply */
+    int after_stop;      /* the master is gone: the arm runs on (post_stop), nothing is counted */
 };
 
 static int64_t mono_ns(void)
@@ -80,33 +91,40 @@ static void captured(const co_sim_t *s, unsigned bus, const arm_can_frame_t *f)
     }
 }
 
-/* Every frame the nodes queued goes out on their bus; EMCYs are also telemetry events. */
+/* Every frame the nodes queued goes out on their bus, each bus's in one batch (one syscall on UDP:
+ * the drives' answers leave together, as fast as the bus takes them); EMCYs are also telemetry events. */
 static void flush(co_sim_t *s)
 {
     if (s->holding_answers) return;
+    static arm_can_frame_t batch[ARM_CAN_BUS_SET_MAX][SIM_MAX_JOINTS * SIM_CO_OUT_MAX];
+    unsigned count[ARM_CAN_BUS_SET_MAX] = {0};
     for (int j = 0; j < s->n; ++j) {
         sim_co_node_t *nd = &s->node[j];
         const unsigned bus = (unsigned)s->bus_of[j];
         for (unsigned k = 0; k < nd->n_out; ++k) {
             const arm_can_frame_t *f = &nd->out[k];
-            if (arm_can_bus_set_send(&s->set, bus, f) == 0) {
-                s->rep->frames_tx++;
-                captured(s, bus, f);
-            } else {
-                s->rep->tx_dropped++;
-            }
+            batch[bus][count[bus]++] = *f;
             if (f->id == 0x080u + nd->id) {
-                char src[24], text[96];
+                char src[24], text[112];
                 const unsigned code = (unsigned)(f->data[0] | (f->data[1] << 8));
                 snprintf(src, sizeof(src), "drive%d", j + 1);
                 snprintf(text, sizeof(text), "EMCY 0x%04x from node %u%s", code, nd->id,
-                         code != 0u ? ": fault, torque off" : ": error reset");
+                         code != 0u ? ": fault (its fault reaction, then its brake)" : ": error reset");
                 sim_telemetry_event(s->tel, s->arm->step_count, src, code != 0u ? "fault" : "info", text);
             }
         }
         s->rep->tx_dropped += nd->out_dropped;
         nd->out_dropped = 0u;
         nd->n_out = 0u;
+    }
+    for (unsigned b = 0; b < s->set.n; ++b) {
+        for (unsigned at = 0; at < count[b]; at += ARM_CAN_UDP_TX_BATCH) {
+            const unsigned chunk = count[b] - at < ARM_CAN_UDP_TX_BATCH ? count[b] - at : ARM_CAN_UDP_TX_BATCH;
+            const unsigned sent = arm_can_bus_set_send_many(&s->set, b, &batch[b][at], chunk);
+            for (unsigned i = 0; i < sent; ++i) captured(s, b, &batch[b][at + i]);
+            s->rep->frames_tx += sent;
+            s->rep->tx_dropped += chunk - sent;
+        }
     }
 }
 
@@ -119,33 +137,44 @@ static int32_t fault_bits(const co_sim_t *s)
     return m;
 }
 
-/* One period of the arm under the torques the drives apply now. 0, or -1 when it diverged. */
-static int step_once(co_sim_t *s)
+/* ARM_SIM's flags: the brakes that hold, and whether the master is gone. */
+static int32_t truth_flags(const co_sim_t *s)
+{
+    int32_t m = s->after_stop ? SIM_FLAG_AFTER_STOP : 0;
+    for (int j = 0; j < s->n; ++j) {
+        if (sim_power_stage_brake_nm(&s->node[j].ps) > 0.0) m |= (int32_t)(1u << j);
+    }
+    return m;
+}
+
+/* One period of the arm under the torques the drives' power stages apply. Nonzero: diverged. */
+static int step_arm(co_sim_t *s)
 {
     const int ideal = sim_servo_is_ideal(&s->cfg->servo);
     double cmd[SIM_MAX_JOINTS];
-    uint32_t applying = 0u; /* bit j: joint j's drive applies its torque (its brake is open) */
     for (int j = 0; j < s->n; ++j) {
-        cmd[j] = sim_co_node_torque(&s->node[j]);
+        /* the drive's own velocity loop (a quick stop, its fault reaction) sees the joint as its encoder
+         * does, and its torque reaches the joint as its motor turns (the plant's truth) */
+        double qm = sim_arm_motor_q(s->arm, j), qdm = sim_arm_motor_qd(s->arm, j);
+        if (s->plant != NULL) sim_plant_sense(s->plant, j, &qm, &qdm);
+        cmd[j] = sim_co_node_period(&s->node[j], qdm, s->arm->period);
+        sim_arm_set_brake(s->arm, j, sim_power_stage_brake_nm(&s->node[j].ps));
         s->tau[j] = ideal ? cmd[j]
                           : sim_servo_period_torque(&s->cfg->servo, &s->servo[j], cmd[j], 0.0, s->arm->period,
                                                     s->arm->data->qpos[j]);
         if (s->plant != NULL) s->tau[j] = sim_plant_actuate(s->plant, j, s->tau[j]);
-        if (s->node[j].power == SIM_PS_OPERATION_ENABLED && s->node[j].nmt == SIM_NMT_STATE_OPERATIONAL) {
-            applying |= 1u << j;
-        }
     }
-    if (s->plant != NULL) sim_plant_brakes(s->plant, applying);
     const int bad = sim_arm_step(s->arm, s->tau, cmd, s->w);
-    s->rep->periods++;
+    if (!s->after_stop) s->rep->periods++;
     sim_telemetry_truth(s->tel, s->arm->step_count - 1, s->arm->period, s->n, s->arm->data->qpos,
-                        s->arm->data->qvel, s->tau, s->w, fault_bits(s));
-    if (bad == 0) return 0;
-    char why[300];
-    sim_arm_diverged_text(s->arm, bad, (unsigned long long)s->rep->periods, why, sizeof(why));
-    set_result(s->rep, "diverged", why);
-    for (int j = 0; j < s->n; ++j) sim_co_node_fault(&s->node[j], 0xFF00u, 0x80u);
-    return -1;
+                        s->arm->data->qvel, s->tau, s->w, fault_bits(s), truth_flags(s));
+    if (bad != 0) {
+        char why[300];
+        sim_arm_diverged_text(s->arm, bad, (unsigned long long)s->rep->periods, why, sizeof(why));
+        set_result(s->rep, "diverged", why);
+        for (int j = 0; j < s->n; ++j) sim_co_node_fault(&s->node[j], 0xFF00u, 0x80u);
+    }
+    return bad;
 }
 
 /* The arm advances by the first joint's communication cycle (0x1006), in whole periods. */
@@ -154,8 +183,7 @@ static void advance(co_sim_t *s)
     const double cycle_s = (double)sim_co_od_get(&s->node[0].od, 0x1006u, 0u) * 1e-6;
     unsigned steps = (unsigned)nearbyint(cycle_s / s->arm->period);
     steps = steps < 1u ? 1u : steps > STEPS_PER_SYNC_MAX ? STEPS_PER_SYNC_MAX : steps;
-    for (unsigned k = 0; k < steps; ++k) {
-        if (step_once(s) != 0) break;
+    for (unsigned k = 0; k < steps && step_arm(s) == 0; ++k) {
     }
 }
 
@@ -172,6 +200,50 @@ static void release_answers(co_sim_t *s)
     flush(s);
 }
 
+static uint64_t bin_of(double us)
+{
+    return us < 0.0 ? 0u : us >= (double)SIM_COST_BINS ? SIM_COST_BINS : (uint64_t)us;
+}
+
+/* The period that just ended: how long after the master sent its SYNC the drives read it and their
+ * answers went out (where the bus says when it was sent). */
+static void record_answer(co_sim_t *s)
+{
+    sim_report_t *r = s->rep;
+    if (s->sync_sent_s < 0.0 || s->answered_s < 0.0 || s->after_stop) return;
+    const double read_us = (s->sync_read_s - s->sync_sent_s) * 1e6, answer_us = (s->answered_s - s->sync_sent_s) * 1e6;
+    r->read_hist[bin_of(read_us)]++;
+    r->answer_hist[bin_of(answer_us)]++;
+    r->answer_n++;
+    if (read_us > r->read_max_us) r->read_max_us = read_us;
+    if (answer_us > r->answer_max_us) r->answer_max_us = answer_us;
+    int64_t *row = r->answer_last[r->answer_last_n++ % SIM_ANSWER_LAST];
+    row[0] = (int64_t)s->syncs[s->bus_of[0]] - 2; /* the bus period of the SYNC before this one */
+    row[1] = (int64_t)read_us;
+    row[2] = (int64_t)answer_us;
+    s->answered_s = -1.0;
+}
+
+/* Once every bus's drives have answered this period's SYNC, the arm is stepped through the period
+ * at once, under the torques in effect from this SYNC on (each drive's synchronous RPDOs took effect
+ * at it), instead of when the next SYNC comes: the next period's answers then go out the moment its
+ * SYNC is read, the physics off their path. Not where a drive's RPDO is event-driven (its torque
+ * changes when the frame comes, inside the period). */
+static void maybe_prestep(co_sim_t *s)
+{
+    if (!s->synced || s->prestepped) return;
+    const unsigned lead = (unsigned)s->bus_of[0];
+    for (unsigned b = 0; b < s->set.n; ++b) {
+        if (s->syncs[b] != s->syncs[lead]) return;
+    }
+    for (int j = 0; j < s->n; ++j) {
+        const sim_co_pdo_t *r = &s->node[j].rpdo[0];
+        if (r->valid && r->trans >= 254u) return;
+    }
+    advance(s);
+    s->prestepped = 1;
+}
+
 static void on_sync(co_sim_t *s, unsigned bus)
 {
     /* Every bus's SYNC of a period follows the first joint's bus's, which moves the arm. Sockets
@@ -184,12 +256,19 @@ static void on_sync(co_sim_t *s, unsigned bus)
         }
         s->syncs[bus]++;
         sync_nodes(s, bus);
+        maybe_prestep(s);
         return;
     }
     s->syncs[bus]++;
+    record_answer(s);
+    s->sync_read_s = arm_can_bus_clock_s();
+    /* the master's time, where it is one (a python-can master may leave its timestamps at 0) */
+    const double age = s->sync_read_s - s->frame_sent_s;
+    s->sync_sent_s = s->frame_sent_s >= 0.0 && age >= -0.001 && age <= 0.5 ? s->frame_sent_s : -1.0;
     release_answers(s);
     s->holding_answers = sim_answers_late(s->cfg, s->syncs[bus] - 1u);
-    if (s->synced) advance(s);
+    if (s->synced && !s->prestepped) advance(s);
+    s->prestepped = 0;
     s->synced = 1;
     s->states_end = 0.0;
     sync_nodes(s, bus);
@@ -200,6 +279,7 @@ static void on_sync(co_sim_t *s, unsigned bus)
             sync_nodes(s, b);
         }
     }
+    maybe_prestep(s);
 }
 
 /* Bus timing: this bus's SYNC at the period's start, then the TPDOs the nodes just queued, in id
@@ -257,6 +337,7 @@ static void sync_nodes(co_sim_t *s, unsigned bus)
         s->n_late[bus] = 0u;
     }
     flush(s);
+    if (!s->holding_answers) s->answered_s = arm_can_bus_clock_s();
 }
 
 /* Bus timing: an RPDO of a node on this bus, from the master, goes on the bus once every TPDO of
@@ -322,8 +403,9 @@ static int on_frame(co_sim_t *s, const arm_can_frame_t *f, unsigned bus, int64_t
         if (f->id == COB_NMT && f->len == 2u && f->data[0] == 0x02u && f->data[1] == 0u && s->synced) {
             /* NMT stop to all (on whichever bus it is read first) ends the last period, as the next SYNC
              * would have, before any drive stops applying its torque */
-            advance(s);
+            if (!s->prestepped) advance(s);
             s->synced = 0;
+            s->prestepped = 0;
         }
         /* An RPDO on a bus whose SYNC of this period came: the master's command for this period. */
         if (s->cfg->late_answer_release == SIM_LATE_AT_COMMAND && is_rpdo(s, f, bus) &&
@@ -367,6 +449,7 @@ static int receive(co_sim_t *s, int64_t wait, int *master)
     arm_can_frame_t f;
     unsigned bus = 0;
     const int rc = arm_can_bus_set_recv(&s->set, &f, &bus, (int)(wait / 1000));
+    const double f_sent_s = rc == 1 ? arm_can_bus_set_sent_s(&s->set, bus) : -1.0;
     if (rc < 0) {
         char text[200];
         snprintf(text, sizeof(text), "receiving on bus %u failed: %s", bus, strerror(errno));
@@ -380,19 +463,31 @@ static int receive(co_sim_t *s, int64_t wait, int *master)
      * queued on the others up to their own SYNC (this period's RPDOs) was sent first; their
      * SYNC and what follows it come after this frame. */
     static arm_can_frame_t later[ARM_CAN_BUS_SET_MAX][64];
+    static double later_sent_s[ARM_CAN_BUS_SET_MAX][64];
     unsigned n_later[ARM_CAN_BUS_SET_MAX] = {0};
     if (rc == 1 && (f.id == COB_SYNC || f.id == COB_NMT) && s->set.n > 1u) {
         for (unsigned i = 0; i < s->set.n && !stopped; ++i) {
             arm_can_frame_t g;
             while (i != bus && n_later[i] < 64u && !stopped && arm_can_bus_recv(&s->set.bus[i], &g, 0) == 1) {
-                if (n_later[i] > 0u || g.id == COB_SYNC || g.id == COB_NMT) later[i][n_later[i]++] = g;
-                else stopped = on_frame(s, &g, i, now);
+                if (n_later[i] > 0u || g.id == COB_SYNC || g.id == COB_NMT) {
+                    later_sent_s[i][n_later[i]] = s->set.bus[i].rx_sent_s;
+                    later[i][n_later[i]++] = g;
+                } else {
+                    s->frame_sent_s = s->set.bus[i].rx_sent_s;
+                    stopped = on_frame(s, &g, i, now);
+                }
             }
         }
     }
-    if (rc == 1 && !stopped) stopped = on_frame(s, &f, bus, now);
+    if (rc == 1 && !stopped) {
+        s->frame_sent_s = f_sent_s;
+        stopped = on_frame(s, &f, bus, now);
+    }
     for (unsigned i = 0; i < s->set.n; ++i) {
-        for (unsigned k = 0; k < n_later[i] && !stopped; ++k) stopped = on_frame(s, &later[i][k], i, now);
+        for (unsigned k = 0; k < n_later[i] && !stopped; ++k) {
+            s->frame_sent_s = later_sent_s[i][k];
+            stopped = on_frame(s, &later[i][k], i, now);
+        }
     }
     *master = rep->frames_rx != before;
     tick_all(s, bus_now(s)); /* the frames may have ended a period */
@@ -408,6 +503,7 @@ static void run(co_sim_t *s)
     for (;;) {
         if (sim_stop_requested) {
             set_result(rep, "interrupted", "stopped by a signal");
+            s->power_lost = 1;
             return;
         }
         int master = 0;
@@ -417,15 +513,15 @@ static void run(co_sim_t *s)
             last_rx = wall;
             booted = 1;
         }
-        if (rc != 0) return; /* a bus error, or the master stopped every drive */
+        if (rc > 0) s->ended = 1; /* the master stopped every drive */
+        if (rc != 0) return;      /* that, or a bus error */
         const double timeout = booted ? cfg->idle_timeout_s : cfg->boot_timeout_s;
         if ((double)(wall - last_rx) * 1e-9 > timeout) {
             char why[160];
             snprintf(why, sizeof(why), "%s for %g s: drives faulted, torque off",
                      booted ? "master silent" : "no master on the bus", timeout);
             set_result(rep, "controller-lost", why);
-            for (int j = 0; j < s->n; ++j) sim_co_node_fault(&s->node[j], SIM_CO_EMCY_HEARTBEAT, 0x10u);
-            flush(s);
+            s->lost = 1; /* the drives fault once the arm has run on after the stop (post_stop) */
             return;
         }
     }
@@ -507,7 +603,7 @@ static void serve(co_sim_t *s)
                 idle_done = due - IDLE_CATCH_UP_MAX;
             }
             for (; idle_done < due; ++idle_done) {
-                if (step_once(s) != 0) {
+                if (step_arm(s) != 0) {
                     sessions_changed(s, s->rep->reason);
                     return;
                 }
@@ -544,7 +640,9 @@ co_sim_t *sim_co_begin(const sim_config_t *cfg, const sim_co_config_t *co, sim_a
         snprintf(err, errcap, "--serve: the plant is missing");
         return NULL;
     }
+    sp->serving = co->serve;
     if (co->serve) sp->t_first_sync = sp->t0; /* the drives' clock is the plant's from the start (bus_now) */
+    sp->frame_sent_s = sp->sync_sent_s = sp->answered_s = -1.0;
     memcpy(sp->timing, cfg->timelines, sizeof(sp->timing));
     for (int j = sp->n; j < SIM_MAX_JOINTS; ++j) {
         const sim_co_preset_t *own = &co->node_preset[j];
@@ -566,6 +664,7 @@ co_sim_t *sim_co_begin(const sim_config_t *cfg, const sim_co_config_t *co, sim_a
         if (own->torque_units_per_nm) pre.torque_units_per_nm = own->torque_units_per_nm;
         if (own->gear_efficiency > 0.0) pre.gear_efficiency = own->gear_efficiency;
         if (own->encoder_increments) pre.encoder_increments = own->encoder_increments;
+        if (own->quick_stop_decel) pre.quick_stop_decel = own->quick_stop_decel;
         if (own->gear_motor) {
             pre.gear_motor = own->gear_motor;
             pre.gear_shaft = own->gear_shaft;
@@ -581,6 +680,9 @@ co_sim_t *sim_co_begin(const sim_config_t *cfg, const sim_co_config_t *co, sim_a
             snprintf(err, errcap, "--protocol canopen: %s", why);
             return NULL;
         }
+        sim_co_node_set_stopping(&sp->node[j], &cfg->brake[j], arm->drive_inertia[j], cfg->quick_stop_decel);
+        if (cfg->brakes_released_at_start) sim_power_stage_release_brake(&sp->node[j].ps);
+        sim_arm_set_brake(arm, j, sim_power_stage_brake_nm(&sp->node[j].ps));
         sim_servo_init(&sp->servo[j]);
         sim_rng_seed(&sp->noise[j], arm->unc.seed ^ (0x9E3779B97F4A7C15ull * ((uint64_t)j + 1u)));
     }
@@ -598,17 +700,56 @@ int sim_co_service(co_sim_t *s)
     arm_can_frame_t f;
     unsigned bus = 0;
     while (!s->ended && arm_can_bus_set_recv(&s->set, &f, &bus, 0) == 1) {
+        s->frame_sent_s = arm_can_bus_set_sent_s(&s->set, bus);
         s->ended = on_frame(s, &f, bus, bus_now(s));
     }
     if (!s->ended) tick_all(s, bus_now(s));
     return !s->ended;
 }
 
+/* After the master stopped the drives, fell silent or the simulator was stopped: the arm runs on
+ * for --post-stop s of simulated time, as fast as it computes, each drive on its own clock (its
+ * heartbeat consumer, its fault reaction, its brake; the supply cut when the simulator was stopped
+ * by a signal). Its truth goes on in ARM_SIM (SIM_FLAG_AFTER_STOP); the run's own counts stop. */
+static void post_stop(co_sim_t *s, const char *why)
+{
+    double q0[SIM_MAX_JOINTS];
+    const uint64_t periods = sim_after_stop_begin(s->rep, s->cfg, s->arm, s->tel, why, q0);
+    s->after_stop = 1;
+    s->holding_answers = 0;
+    if (s->power_lost) {
+        for (int j = 0; j < s->n; ++j) sim_co_node_power_lost(&s->node[j]);
+    }
+    for (uint64_t k = 0; k < periods; ++k) {
+        tick_all(s, bus_now(s)); /* the drives' own timers: the master's heartbeat they watch */
+        const int bad = step_arm(s);
+        sim_after_stop_period(s->rep, s->arm, q0);
+        if (bad != 0) break;
+    }
+    tick_all(s, bus_now(s));
+    for (int j = 0; j < s->n; ++j) {
+        sim_after_stop_drive(s->rep, j, (uint16_t)s->node[j].power, sim_power_stage_brake_nm(&s->node[j].ps) > 0.0);
+    }
+}
+
 void sim_co_end(co_sim_t *s)
 {
     sim_report_t *rep = s->rep;
+    /* the run's drive faults: those of the stop; a drive that faults after it (its heartbeat
+     * consumer, once the master stopped heartbeating) is post_stop's to say */
     for (int j = 0; j < s->n; ++j) {
-        if (s->node[j].power == SIM_PS_FAULT) rep->drive_fault_mask |= 1u << j;
+        if (s->node[j].power == SIM_PS_FAULT || s->node[j].power == SIM_PS_FAULT_REACTION) rep->drive_fault_mask |= 1u << j;
+    }
+    if (!s->serving && s->cfg->post_stop_s > 0.0 && s->t_first_sync != 0 && strcmp(rep->result, "diverged") != 0) {
+        post_stop(s, s->power_lost ? "the simulator was stopped: the drives lost their supply"
+                     : s->lost     ? "the master fell silent"
+                     : s->ended    ? "the master stopped the drives (NMT stop)"
+                                   : "the bus failed");
+    }
+    if (s->lost) { /* the master was lost: every drive faulted, on its own or now */
+        for (int j = 0; j < s->n; ++j) sim_co_node_fault(&s->node[j], SIM_CO_EMCY_HEARTBEAT, 0x10u);
+        flush(s);
+        for (int j = 0; j < s->n; ++j) rep->drive_fault_mask |= 1u << j;
     }
     for (unsigned b = 0; b < s->set.n; ++b) {
         rep->rx_undecodable += arm_can_bus_rx_undecodable(&s->set.bus[b]);

@@ -119,21 +119,45 @@ static void set_error(sim_co_node_t *n, uint16_t code, uint8_t reg)
     sim_co_od_set(&n->od, 0x1001u, 0u, reg);
 }
 
+/* An option code the drive reads (0x605A, 0x605E), or CiA 402's default where its file lacks it. */
+static int option_code(const sim_co_node_t *n, uint16_t index, int dflt)
+{
+    return sim_co_od_has(&n->od, index, 0u) ? (int)sim_co_od_get_signed(&n->od, index, 0u) : dflt;
+}
+
+/* A ramp's deceleration at the joint, rad/s^2: 0x6084 (slow down) or 0x6085 (quick stop), in
+ * position increments per s^2 (CiA 402's unit without a factor group), else the default. */
+static double deceleration(const sim_co_node_t *n, uint16_t index)
+{
+    if (!sim_co_od_has(&n->od, index, 0u) || sim_co_od_get(&n->od, index, 0u) == 0u) return n->default_decel;
+    sim_cia402_scale_t sc;
+    if (sim_cia402_scale(&n->od, &n->preset, &sc) != 0 || sc.inc_per_rad <= 0.0) return n->default_decel;
+    return (double)sim_co_od_get(&n->od, index, 0u) / sc.inc_per_rad;
+}
+
 void sim_co_node_fault(sim_co_node_t *n, uint16_t emcy_code, uint8_t error_register)
 {
-    if (n->power == SIM_PS_FAULT) return;
-    n->power = SIM_PS_FAULT;
+    if (n->power == SIM_PS_FAULT || n->power == SIM_PS_FAULT_REACTION) return;
+    /* a drive without 0x605E takes CiA 402's default, 2: the quick stop ramp */
+    sim_power_stage_fault(&n->ps, &n->power, option_code(n, 0x605Eu, SIM_FR_QUICK), deceleration(n, 0x6084u),
+                          deceleration(n, 0x6085u));
     set_error(n, emcy_code, (uint8_t)(error_register | ERR_REG_GENERIC));
     refresh(n);
     emcy(n, emcy_code);
+}
+
+/* The state machine's next state, through the power stage. */
+static void move_to(sim_co_node_t *n, sim_power_t next, int qs)
+{
+    sim_power_stage_transition(&n->ps, &n->power, next, qs, deceleration(n, 0x6084u), deceleration(n, 0x6085u));
 }
 
 static void controlword(sim_co_node_t *n, uint16_t cw)
 {
     const sim_power_t before = n->power;
     /* a drive without 0x605A takes CiA 402's default, 2: quick stop, then switch on disabled */
-    const int16_t qs = sim_co_od_has(&n->od, 0x605Au, 0u) ? (int16_t)sim_co_od_get_signed(&n->od, 0x605Au, 0u) : 2;
-    n->power = sim_cia402_next(n->power, cw, n->prev_cw, qs);
+    const int qs = option_code(n, 0x605Au, SIM_QS_QUICK);
+    move_to(n, sim_cia402_next(n->power, cw, n->prev_cw, qs), qs);
     n->prev_cw = cw;
     if (before == SIM_PS_FAULT && n->power != SIM_PS_FAULT) { /* fault reset */
         set_error(n, 0u, 0u);
@@ -230,7 +254,7 @@ uint32_t sim_co_node_write(void *node, uint16_t index, uint8_t sub, const uint8_
     if (ab == 0u && scaling && sub <= 2u && v == 0u && (index == 0x6076u || sub >= 1u)) {
         ab = SIM_CO_ABORT_RANGE; /* a unit of 0 would divide by it */
     }
-    if (ab == 0u && (scaling || index == 0x6060u) && n->power == SIM_PS_OPERATION_ENABLED) {
+    if (ab == 0u && (scaling || index == 0x6060u) && sim_power_stage_energised(&n->ps)) {
         ab = SIM_CO_ABORT_STATE; /* no new scaling or mode while torque flows */
     }
     if (ab != 0u) return ab;
@@ -247,6 +271,7 @@ static void apply_presets(sim_co_node_t *n)
     if (p->encoder_increments) sim_co_od_set(&n->od, 0x608Fu, 1u, p->encoder_increments);
     if (p->gear_motor) sim_co_od_set(&n->od, 0x6091u, 1u, p->gear_motor);
     if (p->gear_shaft) sim_co_od_set(&n->od, 0x6091u, 2u, p->gear_shaft);
+    if (p->quick_stop_decel) sim_co_od_set(&n->od, 0x6085u, 0u, p->quick_stop_decel);
 }
 
 static void boot(sim_co_node_t *n, int64_t now_ns, int comm_only)
@@ -257,6 +282,9 @@ static void boot(sim_co_node_t *n, int64_t now_ns, int comm_only)
     sim_co_od_set(&n->od, 0x1018u, 4u, n->id);
     if (!comm_only) {
         apply_presets(n);
+        if (sim_power_stage_energised(&n->ps)) { /* a reset of a running drive: the power stage off, the brake closing */
+            sim_power_stage_power_lost(&n->ps, &n->power);
+        }
         n->power = SIM_PS_SWITCH_ON_DISABLED; /* not ready to switch on passes at once: no self-test */
         n->prev_cw = 0u;
     }
@@ -271,10 +299,22 @@ static void boot(sim_co_node_t *n, int64_t now_ns, int comm_only)
     memset(n->tpdo_syncs, 0, sizeof(n->tpdo_syncs));
 }
 
+void sim_co_node_set_stopping(sim_co_node_t *n, const sim_brake_config_t *brake, double joint_inertia,
+                              double default_decel)
+{
+    n->brake = *brake;
+    n->joint_inertia = joint_inertia;
+    n->default_decel = default_decel;
+    sim_power_stage_init(&n->ps, brake, n->limit_nm, joint_inertia);
+}
+
 int sim_co_node_init(sim_co_node_t *n, const sim_co_table_t *table, uint8_t id, const sim_co_preset_t *preset,
                      double limit_nm, double overcurrent_at_s, char *err, unsigned long errcap)
 {
     memset(n, 0, sizeof(*n));
+    const sim_brake_config_t none = {0.0, 0.0, 0.0};
+    n->limit_nm = limit_nm;
+    sim_co_node_set_stopping(n, &none, 0.0, 0.0);
     n->table = table;
     n->id = id;
     n->preset = *preset;
@@ -307,6 +347,11 @@ void sim_co_node_boot(sim_co_node_t *n, int64_t now_ns)
 
 static void on_nmt(sim_co_node_t *n, uint8_t cmd, int64_t now_ns)
 {
+    /* leaving operational while energised: CiA 402's abort connection, here a quick stop */
+    if ((cmd == SIM_NMT_STOP || cmd == NMT_PRE_OPERATIONAL) && n->power == SIM_PS_OPERATION_ENABLED) {
+        move_to(n, SIM_PS_QUICK_STOP_ACTIVE, SIM_QS_QUICK);
+        refresh(n);
+    }
     switch (cmd) {
     case SIM_NMT_START: /* a TPDO of type n goes at every n-th SYNC counted from here (a restarted master's too) */
         if (n->nmt != SIM_NMT_STATE_OPERATIONAL) memset(n->tpdo_syncs, 0, sizeof(n->tpdo_syncs));
@@ -388,7 +433,9 @@ void sim_co_node_on_sync(sim_co_node_t *n, double q, double qd, double tau_measu
     }
     sim_cia402_scale_t sc;
     (void)sim_cia402_scale(&n->od, &n->preset, &sc);
-    const double tau = isnan(tau_measured) ? sim_co_node_torque(n) : tau_measured;
+    /* torque actual: the target it follows, its own ramp's, or none */
+    const double own = n->ps.mode == SIM_STAGE_FOLLOW ? sim_co_node_torque(n) : n->ps.mode == SIM_STAGE_RAMP ? n->ps.last_nm : 0.0;
+    const double tau = isnan(tau_measured) ? own : tau_measured;
     sim_co_od_set(&n->od, 0x6064u, 0u, (uint32_t)sim_cia402_increments(&sc, q));
     sim_co_od_set(&n->od, 0x606Cu, 0u, (uint32_t)sim_cia402_increments(&sc, qd));
     sim_co_od_set(&n->od, 0x6077u, 0u, (uint32_t)(uint16_t)sim_cia402_permille(&sc, tau));
@@ -446,15 +493,32 @@ int64_t sim_co_node_wait_ns(const sim_co_node_t *n, int64_t now_ns)
     return w < 0 ? 0 : w;
 }
 
-double sim_co_node_torque(const sim_co_node_t *n)
+/* The target torque the master sends (CST, NMT operational), whatever the power state. */
+static double target_nm(const sim_co_node_t *n)
 {
-    if (n->power != SIM_PS_OPERATION_ENABLED || n->nmt != SIM_NMT_STATE_OPERATIONAL ||
-        mode_of(n) != SIM_CIA402_MODE_CST) {
-        return 0.0; /* another mode the drive offers: taken, but this emulation moves only in CST */
-    }
+    if (n->nmt != SIM_NMT_STATE_OPERATIONAL || mode_of(n) != SIM_CIA402_MODE_CST) return 0.0;
     sim_cia402_scale_t sc;
     (void)sim_cia402_scale(&n->od, &n->preset, &sc);
     /* without 0x6072 (max torque) the drive limits nothing but the joint's own torque */
     const uint32_t max = sim_co_od_has(&n->od, 0x6072u, 0u) ? (uint32_t)sim_co_od_get(&n->od, 0x6072u, 0u) : 32767u;
     return sim_cia402_target_nm(&sc, (int32_t)sim_co_od_get_signed(&n->od, 0x6071u, 0u), max, n->limit_nm);
+}
+
+double sim_co_node_period(sim_co_node_t *n, double qd, double dt)
+{
+    const sim_power_t before = n->power;
+    const double tau = sim_power_stage_period(&n->ps, &n->power, target_nm(n), qd, dt);
+    if (n->power != before) refresh(n); /* the brake closed: the state held back is reported */
+    return tau;
+}
+
+void sim_co_node_power_lost(sim_co_node_t *n)
+{
+    sim_power_stage_power_lost(&n->ps, &n->power);
+}
+
+double sim_co_node_torque(const sim_co_node_t *n)
+{
+    /* another mode the drive offers is taken, but this emulation moves only in CST */
+    return n->power == SIM_PS_OPERATION_ENABLED ? target_nm(n) : 0.0;
 }

@@ -43,6 +43,10 @@ typedef struct {
     sim_co_preset_t preset;
     double limit_nm;            /* the joint's torque limit: the drive gives no more */
     sim_power_t power;
+    sim_power_stage_t ps;       /* brake, quick stop (0x605A, 0x6084, 0x6085), fault reaction (0x605E) */
+    sim_brake_config_t brake;   /* the drive table's (arm_sim --brake) */
+    double joint_inertia;       /* what its velocity loop is tuned for */
+    double default_decel;       /* rad/s^2: a ramp's deceleration when the drive lacks 0x6084/0x6085 */
     uint16_t prev_cw;
     sim_co_pdo_t rpdo[SIM_CO_N_PDO], tpdo[SIM_CO_N_PDO];
     uint8_t rpdo_data[SIM_CO_N_PDO][8];
@@ -76,8 +80,17 @@ void sim_co_node_on_sync(sim_co_node_t *n, double q, double qd, double tau_measu
 void sim_co_node_tick(sim_co_node_t *n, int64_t now_ns, double sim_s);
 /* Longest the loop may wait before calling tick again (ns from now_ns). */
 int64_t sim_co_node_wait_ns(const sim_co_node_t *n, int64_t now_ns);
-/* The torque the drive applies: the target torque in operation enabled, CST, NMT operational. */
+/* Its stopping (sim_power_stage.h): its brake, the joint's inertia, and the deceleration of a ramp
+ * when its file has no 0x6084/0x6085 (rad/s^2 at the joint). Before sim_co_node_boot. */
+void sim_co_node_set_stopping(sim_co_node_t *n, const sim_brake_config_t *brake, double joint_inertia,
+                              double default_decel);
+/* The torque the drive is told to apply: the target torque in CST, NMT operational (what operation
+ * enabled applies). */
 double sim_co_node_torque(const sim_co_node_t *n);
+/* One period of dt s of its power stage at joint velocity qd: the torque it applies. */
+double sim_co_node_period(sim_co_node_t *n, double qd, double dt);
+/* Power lost (the simulator stopped by a signal): no torque, its brake closes on its own. */
+void sim_co_node_power_lost(sim_co_node_t *n);
 void sim_co_node_fault(sim_co_node_t *n, uint16_t emcy_code, uint8_t error_register);
 /* SDO access as the server uses it (exposed for the C tests). */
 uint32_t sim_co_node_read(void *node, uint16_t index, uint8_t sub, uint8_t *buf, unsigned cap, unsigned *len);

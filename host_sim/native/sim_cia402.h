@@ -22,6 +22,7 @@ typedef struct {
     uint32_t gear_motor, gear_shaft; /* 0x6091.1, .2 */
     uint32_t torque_units_per_nm;    /* 0x6076's unit: 1000 mN m (CiA 402's; 0 means it), 1000000 µN m */
     double gear_efficiency;          /* the gear's, (0, 1]; 0 means 1 (no object holds it) */
+    uint32_t quick_stop_decel;       /* 0x6085 */
 } sim_co_preset_t;
 
 typedef struct {

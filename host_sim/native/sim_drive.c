@@ -10,10 +10,28 @@ void sim_drive_init(sim_drive_t *d, uint8_t node_id, double torque_limit, uint32
     d->command_timeout_periods = command_timeout_periods;
     d->nmt_state = SIM_NMT_STATE_PRE_OPERATIONAL;
     d->power = SIM_PS_SWITCH_ON_DISABLED;
+    const sim_brake_config_t none = {0.0, 0.0, 0.0};
+    sim_power_stage_init(&d->ps, &none, torque_limit, 0.0);
+}
+
+void sim_drive_set_stopping(sim_drive_t *d, const sim_brake_config_t *brake, double joint_inertia,
+                            double quick_stop_decel)
+{
+    sim_power_stage_init(&d->ps, brake, d->torque_limit, joint_inertia);
+    d->quick_stop_decel = quick_stop_decel;
+}
+
+/* The state machine's next state, through the power stage (quick stop option 2). */
+static void move_to(sim_drive_t *d, sim_power_t next)
+{
+    sim_power_stage_transition(&d->ps, &d->power, next, SIM_QS_QUICK, d->quick_stop_decel, d->quick_stop_decel);
 }
 
 sim_power_t sim_cia402_next(sim_power_t state, uint16_t cw, uint16_t prev_cw, int32_t quick_stop_option)
 {
+    if (state == SIM_PS_FAULT_REACTION) {
+        return state; /* the drive finishes its reaction first */
+    }
     if (state == SIM_PS_FAULT) {
         const int rising_reset = (cw & CW_FAULT_RESET) != 0u && (prev_cw & CW_FAULT_RESET) == 0u;
         return rising_reset ? SIM_PS_SWITCH_ON_DISABLED : state;
@@ -21,12 +39,13 @@ sim_power_t sim_cia402_next(sim_power_t state, uint16_t cw, uint16_t prev_cw, in
     if ((cw & 0x0082u) == 0x0000u) { /* disable voltage (transitions 7, 9, 10, 12) */
         return SIM_PS_SWITCH_ON_DISABLED;
     }
-    if (state == SIM_PS_QUICK_STOP_ACTIVE) { /* left by disable voltage, above, or enable operation (16) */
-        return (cw & 0x008Fu) == 0x000Fu ? SIM_PS_OPERATION_ENABLED : state;
+    if (state == SIM_PS_QUICK_STOP_ACTIVE) { /* left by disable voltage, above, or, with 0x605A 5-8, enable operation (16) */
+        const int back = (cw & 0x008Fu) == 0x000Fu && quick_stop_option >= 5 && quick_stop_option <= 8;
+        return back ? SIM_PS_OPERATION_ENABLED : state;
     }
-    if ((cw & 0x0086u) == 0x0002u) { /* quick stop: this drive stops at once, torque off (7, 10, 11) */
-        const int stays = state == SIM_PS_OPERATION_ENABLED && quick_stop_option >= 5 && quick_stop_option <= 8;
-        return stays ? SIM_PS_QUICK_STOP_ACTIVE : SIM_PS_SWITCH_ON_DISABLED;
+    if ((cw & 0x0086u) == 0x0002u) { /* quick stop (7, 10, 11): from operation enabled a ramp, unless option 0 */
+        const int ramps = state == SIM_PS_OPERATION_ENABLED && quick_stop_option >= 1 && quick_stop_option <= 8;
+        return ramps ? SIM_PS_QUICK_STOP_ACTIVE : SIM_PS_SWITCH_ON_DISABLED;
     }
     if ((cw & 0x0087u) == 0x0006u) { /* shutdown */
         return SIM_PS_READY_TO_SWITCH_ON;
@@ -55,6 +74,7 @@ int sim_drive_on_nmt(sim_drive_t *d, uint8_t command)
     } else if (command == SIM_NMT_STOP) {
         d->nmt_state = SIM_NMT_STATE_STOPPED;
         d->target_torque = 0.0;
+        if (d->power == SIM_PS_OPERATION_ENABLED) move_to(d, SIM_PS_QUICK_STOP_ACTIVE);
     }
     return d->nmt_state != before;
 }
@@ -64,7 +84,7 @@ void sim_drive_on_command(sim_drive_t *d, uint16_t controlword, double torque)
     if (d->nmt_state != SIM_NMT_STATE_OPERATIONAL) {
         return; /* PDOs are only processed in NMT operational */
     }
-    d->power = sim_cia402_next(d->power, controlword, d->controlword, SIM_QUICK_STOP_DISABLE);
+    move_to(d, sim_cia402_next(d->power, controlword, d->controlword, SIM_QS_QUICK));
     d->controlword = controlword;
     d->periods_without_command = 0u;
     d->commands_received++;
@@ -94,8 +114,8 @@ void sim_drive_on_period_end(sim_drive_t *d, int got_command)
 
 void sim_drive_fault(sim_drive_t *d, uint8_t error_code, uint16_t emcy_code)
 {
-    if (d->power != SIM_PS_FAULT) {
-        d->power = SIM_PS_FAULT;
+    if (d->power != SIM_PS_FAULT && d->power != SIM_PS_FAULT_REACTION) {
+        sim_power_stage_fault(&d->ps, &d->power, SIM_FR_QUICK, d->quick_stop_decel, d->quick_stop_decel);
         d->error_code = error_code;
         if (d->n_emcy_pending < SIM_EMCY_QUEUE) {
             d->emcy_pending[d->n_emcy_pending++] = emcy_code;
@@ -103,8 +123,12 @@ void sim_drive_fault(sim_drive_t *d, uint8_t error_code, uint16_t emcy_code)
     }
 }
 
+double sim_drive_period(sim_drive_t *d, double qd, double dt)
+{
+    return sim_power_stage_period(&d->ps, &d->power, d->target_torque, qd, dt);
+}
+
 double sim_drive_applied_torque(const sim_drive_t *d)
 {
-    const int enabled = d->power == SIM_PS_OPERATION_ENABLED && d->nmt_state == SIM_NMT_STATE_OPERATIONAL;
-    return enabled ? d->target_torque : 0.0;
+    return d->ps.last_nm;
 }

@@ -7,6 +7,7 @@
 #include <time.h>
 
 #include "arm_drives.h"
+#include "sim_after_stop.h"
 #include "sim_drive.h"
 #include "sim_frames.h"
 
@@ -61,6 +62,10 @@ struct sim {
     int64_t cpu_mark_ns; /* thread CPU time at the end of the previous period */
     int truth_pending;   /* the last period's ARM_SIM message is still to be published */
     int32_t truth_faults;
+    int32_t truth_flags;
+    int lost;            /* the controller fell silent */
+    int after_stop;      /* the controller is gone: the arm runs on (post_stop), nothing is counted */
+    int power_lost;      /* stopped by a signal: the drives lose their supply */
     int64_t t0_ns;       /* when the drives booted */
     int booted;          /* the controller has spoken (NMT or SYNC) */
     int ended;           /* the controller stopped every drive */
@@ -106,6 +111,16 @@ static void event(sim_t *s, const char *source, const char *level, const char *t
     const int64_t c0 = prof_mark(s);
     sim_telemetry_event(s->tel, s->arm->step_count, source, level, text);
     prof_add(s, &s->rep->prof_telemetry_ns, c0);
+}
+
+/* ARM_SIM's flags: the brakes that hold, and whether the controller is gone. */
+static int32_t truth_flags(const sim_t *s)
+{
+    int32_t m = s->after_stop ? SIM_FLAG_AFTER_STOP : 0;
+    for (int j = 0; j < s->n; ++j) {
+        if (sim_power_stage_brake_nm(&s->drives[j].ps) > 0.0) m |= (int32_t)(1u << j);
+    }
+    return m;
 }
 
 static int32_t fault_bits(const sim_t *s)
@@ -380,12 +395,14 @@ static void diverged(sim_t *s, int dof)
     }
 }
 
+static void publish_truth(sim_t *s);
+
 /* Apply the period's commands and advance the arm by one step. */
 static void finish_period(sim_t *s)
 {
     const int n = s->n;
     double effect[SIM_MAX_JOINTS];
-    const int timed = s->cfg->timing != SIM_TIMING_OFF;
+    const int timed = s->cfg->timing != SIM_TIMING_OFF && !s->after_stop;
     if (timed) emulate_commands(s, effect);
     double tau[SIM_MAX_JOINTS], tau_cmd[SIM_MAX_JOINTS];
     const int ideal = sim_servo_is_ideal(&s->cfg->servo);
@@ -406,10 +423,11 @@ static void finish_period(sim_t *s)
         const uint8_t was_fault = d->error_code;
         sim_drive_on_period_end(d, got);
         if (d->n_emcy_pending > 0u) send_emcys(s, j);
-        if (!got && was_fault == 0u) s->rep->commands_missed++;
+        if (!got && was_fault == 0u && !s->after_stop) s->rep->commands_missed++;
         /* One physics step per period: a torque that changes inside it acts as its time average
          * (through the drive's latency and current loop when they are emulated). */
-        tau_cmd[j] = sim_drive_applied_torque(d);
+        tau_cmd[j] = sim_drive_period(d, sim_arm_motor_qd(s->arm, j), s->arm->period);
+        sim_arm_set_brake(s->arm, j, sim_power_stage_brake_nm(&d->ps));
         if (ideal) {
             tau[j] = held_for * before + (1.0 - held_for) * tau_cmd[j];
         } else {
@@ -424,13 +442,18 @@ static void finish_period(sim_t *s)
     if (bad_dof != 0) {
         diverged(s, bad_dof);
     }
-    s->rep->periods++;
     s->truth_pending = 1; /* published once the next period's states are out (publish_truth) */
     s->truth_faults = fault_bits(s);
+    s->truth_flags = truth_flags(s);
     if (s->arm->step_count % HEARTBEAT_PERIODS == 0) {
         for (int j = 0; j < n; ++j) send_heartbeat(s, j, -1);
     }
     s->counter = -1;
+    if (s->after_stop) {
+        publish_truth(s);
+        return;
+    }
+    s->rep->periods++;
     s->last_period_ns = mono_ns();
     record_cost(s);
 }
@@ -444,7 +467,7 @@ static void publish_truth(sim_t *s)
     s->truth_pending = 0;
     const int64_t t1 = prof_mark(s);
     sim_telemetry_truth(s->tel, s->arm->step_count - 1, s->arm->period, s->n, s->arm->data->qpos,
-                        s->arm->data->qvel, s->last_tau, s->last_w, s->truth_faults);
+                        s->arm->data->qvel, s->last_tau, s->last_w, s->truth_faults, s->truth_flags);
     prof_add(s, &s->rep->prof_telemetry_ns, t1);
 }
 
@@ -639,9 +662,42 @@ static void controller_lost(sim_t *s, int booted, double timeout)
     snprintf(why, sizeof(why), "%s for %g s: drives faulted, torque off",
              booted ? "controller silent" : "no controller on the bus", timeout);
     set_result(s, "controller-lost", why);
+    s->lost = 1; /* the drives fault once the arm has run on after the stop (post_stop) */
+}
+
+/* The drives that have not faulted on their own by now: faulted (the controller was lost). */
+static void fault_lost_drives(sim_t *s)
+{
     for (int j = 0; j < s->n; ++j) {
         sim_drive_fault(&s->drives[j], SIM_ERR_CONTROLLER_LOST, SIM_EMCY_HEARTBEAT);
         send_emcys(s, j);
+    }
+}
+
+/* After the controller stopped the drives, fell silent or the simulator was stopped: the arm runs
+ * on for --post-stop s of simulated time, as fast as it computes, each drive on its own (its
+ * command timeout, its fault reaction, its brake; the supply cut when the simulator was stopped
+ * by a signal). Its truth goes on in ARM_SIM (SIM_FLAG_AFTER_STOP); the run's own counts stop. */
+static void post_stop(sim_t *s, const char *why)
+{
+    if (s->counter >= 0) finish_period(s); /* the period under way: its missing commands count */
+    publish_truth(s);
+    double q0[SIM_MAX_JOINTS];
+    const uint64_t periods = sim_after_stop_begin(s->rep, s->cfg, s->arm, s->tel, why, q0);
+    s->after_stop = 1;
+    if (s->power_lost) {
+        for (int j = 0; j < s->n; ++j) sim_power_stage_power_lost(&s->drives[j].ps, &s->drives[j].power);
+    }
+    uint64_t missed[SIM_MAX_JOINTS]; /* the run's count: what the drives miss after it is not the controller's */
+    for (int j = 0; j < s->n; ++j) missed[j] = s->drives[j].commands_missed;
+    for (uint64_t k = 0; k < periods && strcmp(s->rep->result, "diverged") != 0; ++k) {
+        s->got_cmd = 0u;
+        finish_period(s);
+        sim_after_stop_period(s->rep, s->arm, q0);
+    }
+    for (int j = 0; j < s->n; ++j) {
+        s->drives[j].commands_missed = missed[j];
+        sim_after_stop_drive(s->rep, j, (uint16_t)s->drives[j].power, sim_power_stage_brake_nm(&s->drives[j].ps) > 0.0);
     }
 }
 
@@ -716,6 +772,7 @@ static void run_loop(sim_t *s)
             if (sim_stop_requested) {
                 snprintf(text, sizeof(text), "stopped by a signal after %llu periods", (unsigned long long)s->rep->periods);
                 set_result(s, "interrupted", text);
+                s->power_lost = 1;
                 break;
             }
             if (rc == 0 && s->n_deferred > 0u) { /* the missing commands never came */
@@ -763,6 +820,19 @@ static void run_loop(sim_t *s)
 static void wrap_up(sim_t *s)
 {
     sim_report_t *rep = s->rep;
+    for (int k = 0; k < s->n; ++k) { /* the run's drive faults: those of the stop (post_stop's are its own) */
+        if (s->drives[k].error_code != 0u) rep->drive_fault_mask |= 1u << k;
+    }
+    if (s->cfg->post_stop_s > 0.0 && s->booted && strcmp(rep->result, "diverged") != 0) {
+        post_stop(s, s->power_lost ? "the simulator was stopped: the drives lost their supply"
+                     : s->lost     ? "the controller fell silent"
+                     : s->ended    ? "the controller stopped the drives (NMT stop)"
+                                   : "the bus failed");
+    }
+    if (s->lost) { /* the controller was lost: every drive faulted, on its own or now */
+        fault_lost_drives(s);
+        for (int k = 0; k < s->n; ++k) rep->drive_fault_mask |= 1u << k;
+    }
     publish_truth(s);
     const int64_t t_end = mono_ns();
     rep->wall_s = (double)(t_end - s->t0_ns) * 1e-9;
@@ -770,10 +840,7 @@ static void wrap_up(sim_t *s)
         rep->boot_s = (double)(s->first_sync_ns - s->t0_ns) * 1e-9;
         rep->run_wall_s = (double)(s->last_period_ns - s->first_sync_ns) * 1e-9;
     }
-    for (int k = 0; k < s->n; ++k) {
-        rep->commands_missed_per_drive[k] = s->drives[k].commands_missed;
-        if (s->drives[k].error_code != 0u) rep->drive_fault_mask |= 1u << k;
-    }
+    for (int k = 0; k < s->n; ++k) rep->commands_missed_per_drive[k] = s->drives[k].commands_missed;
     for (unsigned b = 0; b < s->set.n; ++b) {
         rep->rx_undecodable += arm_can_bus_rx_undecodable(&s->set.bus[b]);
         rep->rx_kernel_drops += arm_can_bus_rx_kernel_drops(&s->set.bus[b]);
@@ -811,6 +878,9 @@ sim_t *sim_begin(const sim_config_t *cfg, sim_arm_t *arm, sim_telemetry_t *tel, 
             return NULL;
         }
         sim_drive_init(&s.drives[j], (uint8_t)(j + 1), arm->torque_limit[j], cfg->command_timeout_periods);
+        sim_drive_set_stopping(&s.drives[j], &cfg->brake[j], arm->drive_inertia[j], cfg->quick_stop_decel);
+        if (cfg->brakes_released_at_start) sim_power_stage_release_brake(&s.drives[j].ps);
+        sim_arm_set_brake(arm, j, sim_power_stage_brake_nm(&s.drives[j].ps));
         sim_servo_init(&s.servo[j]);
         /* not the uncertainty's stream, and one per drive */
         sim_rng_seed(&s.noise[j], arm->unc.seed ^ (0x9E3779B97F4A7C15ull * ((uint64_t)j + 1u)));

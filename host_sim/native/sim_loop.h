@@ -12,6 +12,7 @@
 #include "sim_arm.h"
 #include "sim_bus_timing.h"
 #include "sim_capture.h"
+#include "sim_power_stage.h"
 #include "sim_servo.h"
 #include "sim_telemetry.h"
 
@@ -46,6 +47,13 @@ typedef struct {
     int64_t late_answer_period;  /* TEST HOOK: the drives answer the SYNCs of these periods late; -1: off */
     int64_t late_answer_last;
     sim_late_release_t late_answer_release;
+    /* The drives' stopping (sim_power_stage.h): each joint's brake (--brake), the deceleration of
+     * a drive's ramp where it has no 0x6084/0x6085 (the arm protocol's drives always), and how long
+     * the arm is simulated on after the controller stopped the drives or fell silent (--post-stop). */
+    sim_brake_config_t brake[SIM_MAX_JOINTS];
+    int brakes_released_at_start; /* --brakes-at-start released */
+    double quick_stop_decel;
+    double post_stop_s;
 } sim_config_t;
 
 /* TEST HOOK: whether the drives answer bus period `period`'s SYNC late (sim_late_release_t). */
@@ -55,7 +63,11 @@ static inline int sim_answers_late(const sim_config_t *cfg, uint64_t period)
            period <= (uint64_t)cfg->late_answer_last;
 }
 
+/* ARM_SIM's flags: bit j, joint j's brake holds; this bit, the period is after the stop. */
+#define SIM_FLAG_AFTER_STOP (1 << 16)
+
 #define SIM_COST_BINS 5000u /* per-period CPU cost histogram, 1 us bins */
+#define SIM_ANSWER_LAST 1536u /* the last periods whose answer times the summary keeps: a stop's and those before it */
 
 typedef struct {
     char result[32]; /* "ok", "controller-lost", "bus-error", "interrupted" */
@@ -88,6 +100,23 @@ typedef struct {
     uint64_t cost_n;
     /* --profile: thread CPU time per activity, summed over the periods measured */
     uint64_t prof_physics_ns, prof_bus_tx_ns, prof_bus_rx_ns, prof_telemetry_ns;
+    /* After the stop (--post-stop): why it began, its first step, the periods simulated, each
+     * joint's largest motion in them, and what the drives ended in (their state, their brake). */
+    char post_stop_why[160];
+    int64_t post_stop_from_step;
+    double post_stop_mujoco_s;      /* MuJoCo's clock when it began */
+    uint64_t post_stop_periods;
+    double post_stop_moved_rad[SIM_MAX_JOINTS];
+    uint16_t post_stop_statusword[SIM_MAX_JOINTS];
+    uint32_t post_stop_braked_mask; /* bit j: joint j's brake engaged at the end */
+    /* How fast the drives answered each SYNC (where the bus says when the master sent it: UDP): the
+     * simulator's reading of the SYNC and its answers' leaving, after the SYNC was sent, us
+     * (histograms of 1 us bins, the last bin: more), and the last periods' of them. */
+    uint64_t read_hist[SIM_COST_BINS + 1u], answer_hist[SIM_COST_BINS + 1u];
+    uint64_t answer_n;
+    double read_max_us, answer_max_us;
+    int64_t answer_last[SIM_ANSWER_LAST][3]; /* bus period, read us, answered us */
+    unsigned answer_last_n;
 } sim_report_t;
 
 /* Set from a signal handler: the loop stops at its next frame or within 100 ms. */

@@ -77,7 +77,7 @@ int main(int argc, char **argv)
         sim_arm_close(&arm);
         return rc;
     }
-    if (sim_options_finish(&o, arm.n, err, sizeof(err)) != 0) {
+    if (sim_options_finish(&o, &arm, err, sizeof(err)) != 0) {
         fprintf(stderr, "arm_sim: %s\n", err);
         sim_arm_close(&arm);
         return 2;

@@ -231,6 +231,33 @@ static int sim_inject_overcurrent(void *t, void *c, const argv_opt_t *opt, const
     return 0;
 }
 
+/* --brake JOINT:HOLD:CLOSE:RELEASE: joint JOINT's holding brake (N m at the joint, ms, ms). */
+static int sim_brake(void *t, void *c, const argv_opt_t *opt, const char *v, char *err, unsigned long errcap)
+{
+    sim_options_t *o = t;
+    unsigned joint = 0;
+    double hold = 0.0, close_ms = 0.0, release_ms = 0.0;
+    char tail = 0;
+    (void)c;
+    if (sscanf(v, "%u:%lf:%lf:%lf%c", &joint, &hold, &close_ms, &release_ms, &tail) != 4 || joint < 1u ||
+        joint > SIM_MAX_JOINTS || !isfinite(hold) || hold <= 0.0 || hold > 1e6 || !isfinite(close_ms) ||
+        close_ms < 0.0 || close_ms > 1e4 || !isfinite(release_ms) || release_ms < 0.0 || release_ms > 1e4) {
+        snprintf(err, errcap, "%s: '%s' is not JOINT:HOLD:CLOSE:RELEASE (joint 1..%d, holding torque in (0, 1e6] N m, "
+                 "delays 0..10000 ms)", opt->name, v, SIM_MAX_JOINTS);
+        return -1;
+    }
+    o->cfg.brake[joint - 1u] = (sim_brake_config_t){hold, close_ms * 1e-3, release_ms * 1e-3};
+    o->brake_given |= 1u << (joint - 1u);
+    return 0;
+}
+
+static int sim_start_pose(void *t, void *c, const argv_opt_t *opt, const char *v, char *err, unsigned long errcap)
+{
+    sim_options_t *o = t;
+    (void)c;
+    return parse_list(opt->name, v, -1e3, 1e3, o->start_pose, &o->n_start_pose, err, errcap);
+}
+
 static int node_u32(const char *s, uint32_t *out)
 {
     char *end = NULL;
@@ -256,9 +283,9 @@ static int sim_od(void *t, void *c, const argv_opt_t *opt, const char *v, char *
     return 0;
 }
 
-/* --node ID[,rated=N][,encoder=INC][,gear=M/S][,torque_unit=U][,efficiency=E]: node ID's dictionary preset
- * and its gear's efficiency (arm_controller's --node syntax: the arm's drive table, python -m gen.drives;
- * its limit= and accept_no_master_watchdog= are the master's, and taken without effect here). */
+/* --node ID[,rated=N][,encoder=INC][,gear=M/S][,torque_unit=U][,efficiency=E][,quick_stop=N]: node ID's dictionary
+ * preset (0x6085 too) and its gear's efficiency (arm_controller's --node syntax: the arm's drive table, python -m
+ * gen.drives; its limit= and accept_no_master_watchdog= are the master's, and taken without effect here). */
 static int sim_node(void *t, void *c, const argv_opt_t *opt, const char *v, char *err, unsigned long errcap)
 {
     sim_options_t *o = t;
@@ -290,6 +317,8 @@ static int sim_node(void *t, void *c, const argv_opt_t *opt, const char *v, char
         } else if (strcmp(tok, "torque_unit") == 0) {
             bad = strcmp(eq + 1, "mNm") != 0 && strcmp(eq + 1, "uNm") != 0;
             p->torque_units_per_nm = strcmp(eq + 1, "uNm") == 0 ? 1000000u : 1000u;
+        } else if (strcmp(tok, "quick_stop") == 0) {
+            bad = node_u32(eq + 1, &p->quick_stop_decel);
         } else if (strcmp(tok, "gear") == 0 && slash != NULL) {
             *slash = '\0';
             bad = node_u32(eq + 1, &p->gear_motor) || node_u32(slash + 1, &p->gear_shaft);
@@ -305,8 +334,8 @@ static int sim_node(void *t, void *c, const argv_opt_t *opt, const char *v, char
         }
         if (bad) {
             snprintf(err, errcap, "%s '%s': expected ID[,rated=N][,encoder=INC][,gear=M/S][,torque_unit=mNm|uNm]"
-                     "[,efficiency=E][,limit=NM][,accept_no_master_watchdog=true], whole numbers >= 1, 0 < E <= 1",
-                     opt->name, v);
+                     "[,efficiency=E][,limit=NM][,accept_no_master_watchdog=true][,quick_stop=N], whole numbers >= 1, "
+                     "0 < E <= 1", opt->name, v);
             return -1;
         }
     }
@@ -323,8 +352,6 @@ static int sim_truth_list(void *t, void *c, const argv_opt_t *opt, const char *v
         double lo, hi;
         size_t values, count;
     } k[] = {
-        {"--start-pose", ARM_P_SIMULATOR_START_POSE_MIN, ARM_P_SIMULATOR_START_POSE_MAX,
-         offsetof(sim_plant_truth_t, start_pose), offsetof(sim_plant_truth_t, n_start_pose)},
         {"--rotor-inertia", ARM_P_SIMULATOR_ROTOR_INERTIA_MIN, ARM_P_SIMULATOR_ROTOR_INERTIA_MAX,
          offsetof(sim_plant_truth_t, rotor_inertia), offsetof(sim_plant_truth_t, n_rotor_inertia)},
         {"--joint-stiffness-scale", ARM_P_SIMULATOR_JOINT_STIFFNESS_SCALE_MIN, ARM_P_SIMULATOR_JOINT_STIFFNESS_SCALE_MAX,
@@ -333,8 +360,6 @@ static int sim_truth_list(void *t, void *c, const argv_opt_t *opt, const char *v
          offsetof(sim_plant_truth_t, encoder_offset), offsetof(sim_plant_truth_t, n_encoder_offset)},
         {"--gear-factor", ARM_P_SIMULATOR_GEAR_FACTOR_MIN, ARM_P_SIMULATOR_GEAR_FACTOR_MAX,
          offsetof(sim_plant_truth_t, gear_factor), offsetof(sim_plant_truth_t, n_gear_factor)},
-        {"--plant-brake-nm", ARM_P_SIMULATOR_PLANT_BRAKE_NM_MIN, ARM_P_SIMULATOR_PLANT_BRAKE_NM_MAX,
-         offsetof(sim_plant_truth_t, brake_nm), offsetof(sim_plant_truth_t, n_brake)},
     };
     for (size_t i = 0; i < sizeof(k) / sizeof(k[0]); ++i) {
         if (strcmp(opt->name, k[i].name) != 0) continue;
@@ -415,7 +440,7 @@ int sim_options_parse(int argc, char **argv, sim_options_t *o, char *err, unsign
     const sim_plant_truth_t *tr = &o->truth;
     /* what the drives sense and act through (sim_canopen_loop.c): a start pose is any run's */
     const int drive_truth = tr->n_rotor_inertia || tr->n_stiffness_scale || tr->n_encoder_offset || tr->n_gear_factor ||
-                            tr->n_brake || tr->reversed_motor || tr->reversed_encoder;
+                            tr->reversed_motor || tr->reversed_encoder;
     if ((o->co.serve || o->sessions[0] != '\0' || drive_truth) &&
         o->protocol != SIM_PROTOCOL_CANOPEN) {
         snprintf(err, errcap, "--serve/--sessions and the plant's truth (--rotor-inertia, --encoder-offset, ...): "
@@ -462,8 +487,21 @@ int sim_options_parse(int argc, char **argv, sim_options_t *o, char *err, unsign
     return 0;
 }
 
-int sim_options_finish(sim_options_t *o, int n_joints, char *err, unsigned long errcap)
+int sim_options_finish(sim_options_t *o, sim_arm_t *arm, char *err, unsigned long errcap)
 {
+    const int n_joints = arm->n;
+    if ((o->brake_given >> n_joints) != 0u) {
+        snprintf(err, errcap, "--brake: joint %d: the arm has %d joints", 32 - __builtin_clz(o->brake_given), n_joints);
+        return -1;
+    }
+    if (o->n_start_pose != 0) {
+        if (o->n_start_pose != n_joints) {
+            snprintf(err, errcap, "--start-pose: need %d values (one per joint of the model), got %d", n_joints,
+                     o->n_start_pose);
+            return -1;
+        }
+        if (sim_arm_set_pose(arm, o->start_pose, err, errcap) != 0) return -1;
+    }
     arm_can_bus_set_config_init(&o->cfg.buses);
     for (unsigned b = 0; b < o->n_bus_args; ++b) {
         if (arm_can_bus_set_add(&o->cfg.buses, o->bus_args[b], (unsigned)n_joints, "--bus", err, errcap) != 0) {

@@ -27,11 +27,15 @@ typedef struct {
     int co_given;            /* a canopen-only option was given */
     sim_plant_truth_t truth; /* --serve and the plant's truth (sim_plant.h) */
     char sessions[1024];     /* --sessions */
+    double start_pose[SIM_MAX_JOINTS]; /* --start-pose: rad per joint */
+    int n_start_pose;        /* values given (0: the keyframe; else the arm's joint count) */
+    uint32_t brake_given;    /* bit j: --brake gave joint j + 1's */
 } sim_options_t;
 
 /* 0: run; 1: --help printed; -1: bad argument, message (naming the option) in err. */
 int sim_options_parse(int argc, char **argv, sim_options_t *o, char *err, unsigned long errcap);
-/* What depends on the model (joint count): the bus assignment, the friction lists. */
-int sim_options_finish(sim_options_t *o, int n_joints, char *err, unsigned long errcap);
+/* What depends on the model (joint count): the bus assignment, the friction lists, the brakes, the
+ * start pose (set on the arm here: inside its joints' ranges). */
+int sim_options_finish(sim_options_t *o, sim_arm_t *arm, char *err, unsigned long errcap);
 
 #endif

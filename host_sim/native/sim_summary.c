@@ -19,6 +19,18 @@ static double cost_percentile(const sim_report_t *r, double p)
     return (double)r->cost_max_ns * 1e-3;
 }
 
+/* The p-th percentile of a 1-us histogram of n values (the last bin: max). */
+static double hist_percentile(const uint64_t *hist, uint64_t n, double p, double max)
+{
+    const double want = p / 100.0 * (double)n;
+    uint64_t seen = 0;
+    for (unsigned b = 0; b <= SIM_COST_BINS; ++b) {
+        seen += hist[b];
+        if ((double)seen >= want) return b < SIM_COST_BINS ? (double)(b + 1u) : max;
+    }
+    return max;
+}
+
 int sim_write_summary(const char *path, const sim_options_t *o, const sim_arm_t *arm, const sim_report_t *r,
                          const sim_telemetry_t *tel, int locked, char *err, unsigned long errcap)
 {
@@ -36,8 +48,9 @@ int sim_write_summary(const char *path, const sim_options_t *o, const sim_arm_t 
     json_string(f, o->model);
     fprintf(f, ",\n  \"model_hash\": \"%016llx\",\n  \"substeps\": %d", arm->model_hash, arm->substeps);
     fprintf(f, ",\n  \"protocol\": \"%s\"", o->protocol == SIM_PROTOCOL_CANOPEN ? "canopen" : "arm");
-    /* MuJoCo's own clock: substeps x timestep per period, checked against the periods run */
-    fprintf(f, ",\n  \"mujoco_time_s\": %.6f", arm->data->time);
+    /* MuJoCo's own clock: substeps x timestep per period, checked against the periods run (up to the
+     * stop: the periods after it are post_stop's) */
+    fprintf(f, ",\n  \"mujoco_time_s\": %.6f", r->post_stop_periods > 0u ? r->post_stop_mujoco_s : arm->data->time);
     fprintf(f, ",\n  \"n_drives\": %d,\n  \"periods\": %llu,\n  \"simulated_s\": %.6f,\n", arm->n,
             (unsigned long long)r->periods, simulated);
     fprintf(f, "  \"frames_tx\": %llu,\n  \"frames_rx\": %llu,\n  \"tx_dropped\": %llu,\n",
@@ -109,6 +122,32 @@ int sim_write_summary(const char *path, const sim_options_t *o, const sim_arm_t 
                 (double)r->prof_physics_ns * per, (double)r->prof_bus_tx_ns * per, (double)r->prof_bus_rx_ns * per,
                 (double)r->prof_telemetry_ns * per, r->cost_n ? (double)r->cost_sum_ns * 1e-3 / (double)r->cost_n : 0.0);
     }
+    if (r->answer_n > 0u) {
+        fprintf(f, "  \"answer_timing\": {\"n\": %llu, \"read_p99_us\": %.0f, \"read_max_us\": %.0f, "
+                   "\"answer_p50_us\": %.0f, \"answer_p99_us\": %.0f, \"answer_max_us\": %.0f, \"last\": [",
+                (unsigned long long)r->answer_n, hist_percentile(r->read_hist, r->answer_n, 99.0, r->read_max_us),
+                r->read_max_us, hist_percentile(r->answer_hist, r->answer_n, 50.0, r->answer_max_us),
+                hist_percentile(r->answer_hist, r->answer_n, 99.0, r->answer_max_us), r->answer_max_us);
+        const unsigned kept = r->answer_last_n < SIM_ANSWER_LAST ? r->answer_last_n : SIM_ANSWER_LAST;
+        for (unsigned i = 0; i < kept; ++i) {
+            const int64_t *row = r->answer_last[(r->answer_last_n - kept + i) % SIM_ANSWER_LAST];
+            fprintf(f, "%s[%lld, %lld, %lld]", i ? ", " : "", (long long)row[0], (long long)row[1], (long long)row[2]);
+        }
+        fprintf(f, "]},\n");
+    } else {
+        fprintf(f, "  \"answer_timing\": null,\n");
+    }
+    fprintf(f, "  \"post_stop\": {\"configured_s\": %.6g, \"why\": ", o->cfg.post_stop_s);
+    json_string(f, r->post_stop_why);
+    fprintf(f, ", \"from_step\": %lld, \"periods\": %llu, \"simulated_s\": %.6f, \"moved_deg\": [",
+            (long long)r->post_stop_from_step, (unsigned long long)r->post_stop_periods,
+            (double)r->post_stop_periods * arm->period);
+    for (int j = 0; j < arm->n; ++j) fprintf(f, "%s%.6g", j ? ", " : "", r->post_stop_moved_rad[j] * 57.29577951308232);
+    fprintf(f, "], \"statuswords\": [");
+    for (int j = 0; j < arm->n; ++j) fprintf(f, "%s%u", j ? ", " : "", (unsigned)r->post_stop_statusword[j]);
+    fprintf(f, "], \"braked\": [");
+    for (int j = 0; j < arm->n; ++j) fprintf(f, "%s%s", j ? ", " : "", (r->post_stop_braked_mask >> j) & 1u ? "true" : "false");
+    fprintf(f, "]},\n");
     fprintf(f, "  \"memory_locked\": %s,\n  \"timestep_s\": %.9g\n}\n", locked ? "true" : "false", arm->period);
     return json_file_commit(&jf, "--summary", err, errcap);
 }

@@ -55,7 +55,7 @@ static void publish(sim_telemetry_t *t, const char *channel, int len)
 }
 
 void sim_telemetry_truth(sim_telemetry_t *t, int64_t step, double period_s, int n, const double *q,
-                         const double *qd, const double *tau, const double *w, int32_t drive_faults)
+                         const double *qd, const double *tau, const double *w, int32_t drive_faults, int32_t flags)
 {
     if (t->sink == NULL) {
         return;
@@ -67,7 +67,7 @@ void sim_telemetry_truth(sim_telemetry_t *t, int64_t step, double period_s, int 
     memcpy(cw, w, (size_t)n * sizeof(double));
     armlcm_sim_truth_t m = {
         .seq = (int64_t)t->sent_truth++, .step = step, .t = (double)step * period_s, .n = (int16_t)n,
-        .q = cq, .qd = cqd, .tau_applied = ctau, .w_true = cw, .drive_faults = drive_faults, .flags = 0,
+        .q = cq, .qd = cqd, .tau_applied = ctau, .w_true = cw, .drive_faults = drive_faults, .flags = flags,
     };
     publish(t, "ARM_SIM", armlcm_sim_truth_t_encode(t->buf, 0, (int)sizeof(t->buf), &m));
 }

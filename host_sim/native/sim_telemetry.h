@@ -15,7 +15,7 @@ sim_telemetry_t *sim_telemetry_open(const char *url, char *err, unsigned long er
 /* Software in the loop: into sink (shared with the controller, not closed here). */
 sim_telemetry_t *sim_telemetry_open_sink(lcm_sink_t *sink, char *err, unsigned long errcap);
 void sim_telemetry_truth(sim_telemetry_t *t, int64_t step, double period_s, int n, const double *q,
-                         const double *qd, const double *tau, const double *w, int32_t drive_faults);
+                         const double *qd, const double *tau, const double *w, int32_t drive_faults, int32_t flags);
 void sim_telemetry_event(sim_telemetry_t *t, int64_t step, const char *source, const char *level,
                          const char *text);
 uint64_t sim_telemetry_sent_truth(const sim_telemetry_t *t);

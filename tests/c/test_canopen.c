@@ -191,6 +191,10 @@ static void test_a_late_answer_does_not_fail_the_next_transfer(void)
 #define LACKS_608F 0x020u
 #define LACKS_6091 0x040u
 #define LACKS_6072 0x080u
+#define LACKS_605A 0x100u
+#define LACKS_605E 0x200u
+#define LACKS_6085 0x400u
+#define READ_ONLY_605E 0x800u /* a drive whose fault reaction is fixed (abort 0x06010002 on a write) */
 
 typedef struct {
     uint16_t sw;
@@ -230,6 +234,9 @@ static unsigned lacks_bit(uint16_t index)
     case 0x608Fu: return LACKS_608F;
     case 0x6091u: return LACKS_6091;
     case 0x6072u: return LACKS_6072;
+    case 0x605Au: return LACKS_605A;
+    case 0x605Eu: return LACKS_605E;
+    case 0x6085u: return LACKS_6085;
     default: return 0u;
     }
 }
@@ -268,6 +275,8 @@ static int serve(server_t *s, const arm_can_frame_t *req, arm_can_frame_t *resp)
     uint8_t d[8] = {0, req->data[1], req->data[2], req->data[3], 0, 0, 0, 0};
     if ((dr->lacks & lacks_bit(index)) != 0u) {
         put_abort(d, 0x06020000u); /* no such object */
+    } else if ((req->data[0] >> 5) == 1u && index == 0x605Eu && (dr->lacks & READ_ONLY_605E) != 0u) {
+        put_abort(d, 0x06010002u); /* read only */
     } else if ((req->data[0] >> 5) == 1u) {
         dr->writes++;
         d[0] = 0x60u;
@@ -341,8 +350,8 @@ static void test_boot_sequence(void)
     CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
     CHECK(run_boot(&b, &s, 1000u) == 0);
     CHECK(b.node[0].state == ARM_CO_NODE_ENABLED && b.node[1].state == ARM_CO_NODE_ENABLED);
-    /* per node: 3 PDOs x (5 + 2 entries) + 1006, 1017, 1016 + 6060 + three controlwords = 28 */
-    CHECK_MSG(b.n_log == 28u + 29u, "%u writes", b.n_log); /* node 2: + the 0x00 */
+    /* per node: 3 PDOs x (5 + 2 entries) + 1006, 1017, 1016 + 605A, 605E + 6060 + three controlwords = 30 */
+    CHECK_MSG(b.n_log == 30u + 31u, "%u writes", b.n_log); /* node 2: + the 0x00 */
     CHECK(s.d[1].writes + s.d[2].writes == b.n_log);
     /* the units are read, never written: not even those the drive table gives */
     CHECK(writes_of(&b, 2u, 0x6076u) == 0u && writes_of(&b, 2u, 0x6091u) == 0u && writes_of(&b, 1u, 0x608Fu) == 0u);
@@ -403,6 +412,39 @@ static void test_boot_sequence(void)
     CHECK(arm_co_boot_init(&b, &cfg, 0u) == -1 && b.fault.code == ARM_CO_FAULT_BAD_CONFIG && b.fault.node == 1u);
 }
 
+/* How the drives stop: quick stop option 2 and fault reaction 2 written where the drive has them
+ * writable (a read-only or missing one leaves the drive's own, and says so), the quick stop
+ * deceleration where the table gives one and the drive has it. */
+static unsigned value_of(const arm_co_boot_t *b, uint8_t node, uint16_t index)
+{
+    for (unsigned i = 0; i < b->n_log; ++i) {
+        if (b->log[i].node == node && b->log[i].index == index) return b->log[i].value;
+    }
+    return 0xFFFFFFFFu;
+}
+
+static void test_stopping_objects(void)
+{
+    static arm_co_boot_config_t cfg;
+    static arm_co_boot_t b;
+    static server_t s;
+    arm_co_boot_default_config(&cfg);
+    cfg.n_nodes = 3u;
+    cfg.node[0] = (arm_co_node_config_t){.node_id = 1u, .quick_stop_decel = 84277457u};
+    cfg.node[1] = (arm_co_node_config_t){.node_id = 2u};
+    cfg.node[2] = (arm_co_node_config_t){.node_id = 3u, .quick_stop_decel = 1000u};
+    server_init(&s);
+    s.d[2].lacks = READ_ONLY_605E;
+    s.d[3].lacks = LACKS_605A | LACKS_605E | LACKS_6085;
+    CHECK(arm_co_boot_init(&b, &cfg, 0u) == 0);
+    CHECK(run_boot(&b, &s, 1000u) == 0);
+    CHECK(value_of(&b, 1u, 0x605Au) == 2u && value_of(&b, 1u, 0x605Eu) == 2u && value_of(&b, 1u, 0x6085u) == 84277457u);
+    CHECK(value_of(&b, 2u, 0x605Au) == 2u && writes_of(&b, 2u, 0x605Eu) == 0u && writes_of(&b, 2u, 0x6085u) == 0u);
+    CHECK(b.node[1].absent == ARM_CO_ABSENT_605E);
+    CHECK(writes_of(&b, 3u, 0x605Au) == 0u && writes_of(&b, 3u, 0x605Eu) == 0u && writes_of(&b, 3u, 0x6085u) == 0u);
+    CHECK(b.node[2].absent == (ARM_CO_ABSENT_605A | ARM_CO_ABSENT_605E | ARM_CO_ABSENT_6085));
+}
+
 /* CiA 301's optional objects are written only where the drive has them; CiA 402's optional unit
  * objects are read where it has them, the drive table standing in where it has not. */
 static void test_optional_objects(void)
@@ -427,7 +469,7 @@ static void test_optional_objects(void)
     CHECK(n->absent == (ARM_CO_ABSENT_1006 | ARM_CO_ABSENT_1016 | ARM_CO_ABSENT_608F | ARM_CO_ABSENT_6091 |
                         ARM_CO_ABSENT_6072 | ARM_CO_ABSENT_6502));
     CHECK(writes_of(&b, 4u, 0x1006u) == 0u && writes_of(&b, 4u, 0x1016u) == 0u && writes_of(&b, 4u, 0x1017u) == 1u);
-    CHECK_MSG(b.n_log == 26u, "%u writes", b.n_log);
+    CHECK_MSG(b.n_log == 28u, "%u writes", b.n_log);
     CHECK(n->units.from_table == (ARM_CO_EXPECT_ENCODER | ARM_CO_EXPECT_GEAR) && n->units.rated_torque == 512871u);
     CHECK(n->units.max_torque_permille == 32767u);
     arm_co_units_t u;
@@ -639,6 +681,7 @@ int main(void)
     test_abort_expedited_and_retries();
     test_a_late_answer_does_not_fail_the_next_transfer();
     test_boot_sequence();
+    test_stopping_objects();
     test_optional_objects();
     test_units_and_modes_refused();
     test_torque_limit_checked();

@@ -108,6 +108,7 @@ static void test_controller_defaults_are_the_registrys(void)
     CHECK(opt.ref_hold_s == ARM_P_CONTROLLER_REF_HOLD_DEFAULT);
     CHECK(opt.boot_timeout_s == ARM_P_CONTROLLER_BOOT_TIMEOUT_DEFAULT);
     CHECK(opt.ctl.kp == (float)ARM_P_CONTROLLER_KP_DEFAULT && opt.ctl.watchdog_periods == 3u);
+    CHECK(opt.stop_timeout_s == ARM_P_CONTROLLER_STOP_TIMEOUT_DEFAULT && opt.ctl.safe_stop_rate == (float)ARM_P_SAFE_STOP_HOLD_RATE);
     CHECK(opt.ctl.following_error_limit[ARM_N_JOINTS - 1] == (float)ARM_P_CONTROLLER_MAX_FOLLOWING_ERROR_DEFAULT);
     CHECK(strcmp(opt.lcm_url, ARM_P_CONTROLLER_LCM_URL_DEFAULT) == 0 && strcmp(opt.bus, ARM_P_CONTROLLER_BUS_DEFAULT) == 0);
     CHECK(opt.steps == (uint32_t)((ARM_P_CONTROLLER_DURATION_DEFAULT + ARM_P_CONTROLLER_REF_HOLD_DEFAULT) *
@@ -132,6 +133,16 @@ static void test_controller_options(void)
     char *margin[] = {"arm_controller", "--position-margin", "11"};
     CHECK(options_parse(3, margin, &ARM_ROBOT_MODEL, &opt, err, sizeof(err)) == -1);
     CHECK_MSG(strcmp(err, "--position-margin: '11' is not a number in [0, 10]") == 0, "%s", err);
+    /* the safe stop holds the arm: a rate of its own, or the registry's; zero torque alone is refused */
+    char *hold[] = {"arm_controller", "--safe-stop", "hold:35", "--stop-timeout", "0.5"};
+    CHECK(options_parse(5, hold, &ARM_ROBOT_MODEL, &opt, err, sizeof(err)) == 0);
+    CHECK(opt.ctl.safe_stop_rate == 35.0f && opt.stop_timeout_s == 0.5);
+    char *plain[] = {"arm_controller", "--safe-stop", "hold"};
+    CHECK(options_parse(3, plain, &ARM_ROBOT_MODEL, &opt, err, sizeof(err)) == 0);
+    CHECK(opt.ctl.safe_stop_rate == (float)ARM_P_SAFE_STOP_HOLD_RATE);
+    char *zero[] = {"arm_controller", "--safe-stop", "zero"};
+    CHECK(options_parse(3, zero, &ARM_ROBOT_MODEL, &opt, err, sizeof(err)) == -1);
+    CHECK_MSG(strstr(err, "--safe-stop: 'zero' is not hold or hold:RATE") == err, "%s", err);
 }
 
 int main(void)

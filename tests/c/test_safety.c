@@ -3,6 +3,7 @@
 #include <string.h>
 
 #include "arm/controller.h"
+#include "arm/rnea.h"
 #include "arm_robot_model_data.h"
 #include "check.h"
 
@@ -53,6 +54,27 @@ static void check_zero_torque(const rig_t *r)
     for (int j = 0; j < ARM_N_JOINTS; ++j) CHECK(r->out.tau[j] == 0.0f);
 }
 
+/* The safe stop's hold at pose q: the model's torque for the deceleration -rate * qd (qd NULL: at
+ * rest, gravity alone). Never zero torque alone: the shoulder's share of it is the arm's weight. */
+static void check_hold(const rig_t *r, const float *q, const float *qd)
+{
+    float rest[ARM_N_JOINTS] = {0}, acc[ARM_N_JOINTS] = {0}, want[ARM_N_JOINTS];
+    for (int j = 0; j < ARM_N_JOINTS && qd != NULL; ++j) acc[j] = -r->cfg.safe_stop_rate * qd[j];
+    arm_rnea(&ARM_ROBOT_MODEL, q, rest, acc, want);
+    for (int j = 0; j < ARM_N_JOINTS; ++j) {
+        CHECK_MSG(fabsf(r->out.tau[j] - want[j]) <= 1e-3f + 1e-5f * fabsf(want[j]), "joint %d: %g, the hold is %g", j,
+                  (double)r->out.tau[j], (double)want[j]);
+    }
+    CHECK(fabsf(r->out.tau[1]) > 1.0f);
+}
+
+static void check_gravity_hold_at_home(const rig_t *r)
+{
+    float home[ARM_N_JOINTS];
+    for (int j = 0; j < ARM_N_JOINTS; ++j) home[j] = ARM_HOME_Q[j];
+    check_hold(r, home, NULL);
+}
+
 static void test_starts_in_init_with_zero_torque(void)
 {
     rig_t r;
@@ -66,7 +88,7 @@ static void test_starts_in_init_with_zero_torque(void)
     CHECK(r.out.state == ARM_STATE_RUNNING);
 }
 
-static void test_nan_input_gives_safe_stop_and_zero_torque(void)
+static void test_nan_input_gives_safe_stop_and_the_hold(void)
 {
     rig_t r;
     run_default_from_home(&r, 50);
@@ -76,13 +98,39 @@ static void test_nan_input_gives_safe_stop_and_zero_torque(void)
     step(&r);
     CHECK(r.out.state == ARM_STATE_FAULT);
     CHECK(r.out.fault == ARM_FAULT_NONFINITE_INPUT);
-    check_zero_torque(&r);
-    /* Latched: good input afterwards does not restart the arm. */
+    check_gravity_hold_at_home(&r); /* the NaN state is not used: gravity at the last good pose */
+    /* Latched: good input afterwards does not restart the arm; it holds it. */
     r.in.qd[2] = 0.0f;
     step(&r);
     CHECK(r.out.state == ARM_STATE_SAFE_STOP);
     CHECK(r.out.fault == ARM_FAULT_NONFINITE_INPUT);
-    check_zero_torque(&r);
+    check_gravity_hold_at_home(&r);
+}
+
+/* A stop without a fault holds the arm as a fault does; the hold damps a moving joint through the
+ * model (the deceleration -rate * qd), and a state that fails the plausibility checks is not used. */
+static void test_stop_holds_and_damps_and_ignores_implausible_states(void)
+{
+    rig_t r;
+    run_default_from_home(&r, 20);
+    arm_ctl_stop(&r.ctl);
+    float q[ARM_N_JOINTS], qd[ARM_N_JOINTS] = {0};
+    for (int j = 0; j < ARM_N_JOINTS; ++j) q[j] = r.in.q[j];
+    qd[1] = 0.2f;
+    qd[3] = -0.3f;
+    for (int k = 0; k < 30; ++k) { /* constant velocities, their steps consistent; the rate limit lets it settle */
+        for (int j = 0; j < ARM_N_JOINTS; ++j) {
+            r.in.qd[j] = qd[j];
+            q[j] += qd[j] * r.cfg.period_s;
+            r.in.q[j] = q[j];
+        }
+        step(&r);
+        CHECK(r.out.state == ARM_STATE_SAFE_STOP && r.out.fault == ARM_FAULT_NONE);
+    }
+    check_hold(&r, q, qd);
+    r.in.q[2] = 2147.0f; /* a spoofed position: the hold stays at the last good pose, at rest */
+    for (int k = 0; k < 30; ++k) step(&r);
+    check_hold(&r, q, NULL);
 }
 
 static void test_torque_and_rate_limits(void)
@@ -111,8 +159,6 @@ static void test_watchdog_trips_after_configured_stale_periods(void)
     rig_t r;
     arm_ctl_default_config(&ARM_ROBOT_MODEL, &r.cfg);
     r.cfg.watchdog_periods = 4u;
-    r.cfg.safe_stop_mode = ARM_SAFE_STOP_DAMPING;
-    r.cfg.safe_stop_damping = 2.0f;
     run_from_home(&r, 0);
     r.in.qd[0] = 0.5f;
     step(&r);
@@ -124,7 +170,8 @@ static void test_watchdog_trips_after_configured_stale_periods(void)
     step(&r);
     CHECK(r.out.state == ARM_STATE_FAULT);
     CHECK(r.out.fault == ARM_FAULT_STALE_INPUT);
-    CHECK(fabsf(r.out.tau[0] - (-2.0f * 0.5f)) < 1e-6f); /* damping safe stop uses the last qd */
+    for (int k = 0; k < 20; ++k) step(&r); /* within the rate limit, to the hold */
+    check_gravity_hold_at_home(&r); /* stale: gravity at the last pose, no damping on an old velocity */
 }
 
 static void test_bad_config_refused(void)
@@ -147,15 +194,15 @@ static void test_bad_config_refused(void)
 static void test_external_fault_latches(void)
 {
     rig_t r;
-    run_default_from_home(&r, 1);
+    run_default_from_home(&r, 20); /* the torque has risen to the arm's weight (its rate limit) */
     arm_ctl_external_fault(&r.ctl);
     step(&r);
     CHECK(r.out.state == ARM_STATE_FAULT && r.out.fault == ARM_FAULT_EXTERNAL);
-    check_zero_torque(&r);
+    check_gravity_hold_at_home(&r);
 }
 
 /* Runs the arm at its home pose for a while, then applies `spoil` to one period's input: the
- * next output must be that fault, on that joint, with zero torque. */
+ * next output must be that fault, on that joint, with the hold at the last good pose. */
 static void expect_fault(void (*spoil)(arm_ctl_input_t *), arm_fault_t fault, int joint, uint32_t periods)
 {
     rig_t r;
@@ -168,7 +215,7 @@ static void expect_fault(void (*spoil)(arm_ctl_input_t *), arm_fault_t fault, in
     }
     CHECK_MSG(r.out.state == ARM_STATE_FAULT && r.out.fault == fault && r.out.fault_joint == joint,
               "state %d fault %s joint %d", (int)r.out.state, arm_fault_str(r.out.fault), r.out.fault_joint);
-    check_zero_torque(&r);
+    check_gravity_hold_at_home(&r);
 }
 
 static void spoof_position(arm_ctl_input_t *in) { in->q[2] = 2147.0f; }               /* INT32_MAX urad */
@@ -251,7 +298,8 @@ static void test_each_bad_limit_is_named(void)
 int main(void)
 {
     test_starts_in_init_with_zero_torque();
-    test_nan_input_gives_safe_stop_and_zero_torque();
+    test_nan_input_gives_safe_stop_and_the_hold();
+    test_stop_holds_and_damps_and_ignores_implausible_states();
     test_torque_and_rate_limits();
     test_watchdog_trips_after_configured_stale_periods();
     test_bad_config_refused();

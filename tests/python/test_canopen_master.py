@@ -79,8 +79,9 @@ def test_boot_brings_every_node_to_operation_enabled(boot_bin: Path, udp_port: i
     cfg = gen_drives.load(_arm())
     args = cfg.boot_args("can0")
     # the bundled table: the motor that gives the joint's torque limit through the 101:1 gear (28 N m:
-    # 278 mN m, rounded up), checked against the drive's own; the limit for the boot to check
-    assert "3,rated=278,encoder=524288,gear=101/1,limit=28" in args
+    # 278 mN m, rounded up), checked against the drive's own; its quick stop deceleration; the limit
+    # for the boot to check
+    assert "3,rated=278,encoder=524288,gear=101/1,quick_stop=337109828,limit=28" in args
     drives = [Cia402Drive(1), Cia402Drive(2), Cia402Drive(3, commissioned={(0x6076, 0): 278})]
     out = tmp_path / "boot.json"
     p, _ = _run(boot_bin, udp_port, [*args, "--json", str(out)], drives, monkeypatch)
@@ -224,9 +225,9 @@ def test_gen_drives_boot_args_on_the_command_line(tmp_path: Path) -> None:
     p = subprocess.run([*run, "--boot-args", "can0"], capture_output=True, text=True, cwd=REPO)
     assert p.returncode == 0, p.stderr
     assert p.stdout.split() == ["--cycle-us", "1000", "--heartbeat-ms", "100", "--consumer-ms", "300", "--master-id",
-                                "127", "--node", "1,rated=1486,encoder=524288,gear=101/1,limit=150",
-                                "--node", "2,rated=1486,encoder=524288,gear=101/1,limit=150",
-                                "--node", "3,rated=278,encoder=524288,gear=101/1,limit=28"]
+                                "127", "--node", "1,rated=1486,encoder=524288,gear=101/1,quick_stop=337109828,limit=150",
+                                "--node", "2,rated=1486,encoder=524288,gear=101/1,quick_stop=337109828,limit=150",
+                                "--node", "3,rated=278,encoder=524288,gear=101/1,quick_stop=337109828,limit=28"]
     p = subprocess.run([*run, "--boot-args", "can7"], capture_output=True, text=True, cwd=REPO)
     assert p.returncode == 2 and "no drive is on bus 'can7'" in p.stderr
     table = json.loads(subprocess.run(run, capture_output=True, text=True, cwd=REPO).stdout)
@@ -374,7 +375,7 @@ def test_controller_runs_on_localnode_drives(build_dir: Path, udp_port: int, tmp
     drives = {i: Cia402Drive(i) for i in range(1, 7)}
     pending = {i: 0 for i in drives}   # the latest RPDO1 torque, applied at the next SYNC
     applied = {i: 0 for i in drives}
-    rpdo_cw: set[int] = set()
+    rpdo_cw: list[int] = []  # each change of an RPDO1's controlword
     sync_lengths: set[int] = set()
     net = loopback_network(monkeypatch, GROUP, udp_port)
     summary = tmp_path / "controller.json"
@@ -384,7 +385,8 @@ def test_controller_runs_on_localnode_drives(build_dir: Path, udp_port: int, tmp
 
             def on_rpdo(can_id: int, data: bytes, ts: float, i: int = i) -> None:
                 cw, tq = struct.unpack("<Hh", data)
-                rpdo_cw.add(cw)
+                if not rpdo_cw or rpdo_cw[-1] != cw:
+                    rpdo_cw.append(cw)
                 pending[i] = tq
 
             net.subscribe(0x200 + i, on_rpdo)
@@ -413,7 +415,9 @@ def test_controller_runs_on_localnode_drives(build_dir: Path, udp_port: int, tmp
     assert all(drives[i].stored(0x6076) == 1486 and (0x6076, 0) not in {(x, s) for x, s, _ in drives[i].writes}
                for i in drives)
     assert all(drives[i].sw & 0x6F == 0x27 and drives[i].stored(0x6060) == 10 for i in drives)
-    assert rpdo_cw == {0x000F}  # enable operation all along (the NMT stop ends the run)
+    # enable operation all along, then the end of the run's controlled stop: quick stop (these drives
+    # never leave operation enabled, so until --stop-timeout), disable voltage, then the NMT stop
+    assert rpdo_cw == [0x000F, 0x0002, 0x0000]
     assert sync_lengths == {0}  # CiA 301 SYNC without a counter
 
 
@@ -497,6 +501,23 @@ def test_drive_config_rule_and_what_the_table_gives(tmp_path: Path) -> None:
     assert cfg.boot_args("can0")[-4:] == ["--node", "7,rated=1500,encoder=4096,gear=160/1,limit=150",
                                           "--node", "3,rated=219,gear=160/1,efficiency=0.8,limit=28"]
     assert d3.node_spec() == "3,rated=219,gear=160/1,efficiency=0.8"  # arm_controller's: its limit is the arm's
+    assert all(d.brake is None and d.brake_spec() is None for d in cfg.drives)  # no brake fields: no brake
+
+
+def test_drive_config_brakes_and_quick_stop(tmp_path: Path) -> None:
+    """The stopping fields: a brake (holding torque at the joint, or the joint's torque limit; its
+    delays) to the simulator's --brake, 0x6085 to both programs' --node."""
+    f = tmp_path / "drives.toml"
+    f.write_text(f'eds = "{EDS}"\n[defaults]\nbrake_holding_nm = "joint_torque_limit"\nbrake_close_ms = 50\n'
+                 'brake_release_ms = 80\nquick_stop_deceleration = 84277457\n[joint.j2]\nbrake_holding_nm = 300\n')
+    d1, d2, d3 = gen_drives.load(_arm(), f).drives
+    assert d1.brake == (150.0, 50.0, 80.0) and d2.brake == (300.0, 50.0, 80.0) and d3.brake == (28.0, 50.0, 80.0)
+    assert d1.brake_spec() == "1:150:50:80" and d3.brake_spec() == "3:28:50:80"
+    assert d2.node_spec().endswith(",quick_stop=84277457")
+    # the bundled table's: a brake on every joint, the deceleration of 40 rad/s^2 at the joint
+    bundled = gen_drives.load(_arm())
+    assert all(d.brake is not None and d.brake[1:] == (50.0, 80.0) for d in bundled.drives)
+    assert all(d.quick_stop_deceleration == 337109828 for d in bundled.drives)
 
 
 @pytest.mark.parametrize("body, message", [
@@ -522,6 +543,13 @@ def test_drive_config_rule_and_what_the_table_gives(tmp_path: Path) -> None:
     ('[pdo]\ntransmission = { tpdo2 = 254 }\n', "pdo.transmission.tpdo2: expected 1..240 (every n-th SYNC)"),
     ('[pdo]\ntransmission = { rpdo1 = 250 }\n', "pdo.transmission.rpdo1: expected 1..240, 254 or 255"),
     ('[pdo]\ntransmission = { tpdo3 = 1 }\n', "pdo.transmission: expected a table of rpdo1, tpdo1, tpdo2"),
+    ('[defaults]\nbrake_holding_nm = 100\nbrake_close_ms = 50\n',
+     "defaults.brake_release_ms: missing: a brake needs brake_holding_nm, brake_close_ms, brake_release_ms"),
+    ('[joint.j1]\nbrake_holding_nm = 0\nbrake_close_ms = 50\nbrake_release_ms = 80\n',
+     "joint.j1.brake_holding_nm: expected a holding torque in N m at the joint"),
+    ('[defaults]\nbrake_holding_nm = 100\nbrake_close_ms = -5\nbrake_release_ms = 80\n',
+     "defaults.brake_close_ms: expected a delay in ms, 0..10000, got -5"),
+    ('[defaults]\nquick_stop_deceleration = 0\n', "defaults.quick_stop_deceleration: expected an integer 1..4294967295"),
 ])
 def test_drive_config_bad_input_is_one_line(tmp_path: Path, body: str, message: str) -> None:
     f = tmp_path / "drives.toml"

@@ -33,6 +33,33 @@ def test_every_fault_has_its_row(matrix: dict[str, dict]) -> None:
     assert list(matrix) == [f.name for f in FAULTS]
 
 
+@pytest.mark.parametrize("name", [f.name for f in FAULTS])
+def test_no_joint_moves_more_than_the_bound_after_the_stop(matrix: dict[str, dict], name: str) -> None:
+    """At the arm's most gravity-loaded pose, whatever stopped it (the controller's safe stop, the drives'
+    own reaction to a dead controller, a lost supply): the simulator's truth of the window after the stop;
+    a row where there is none says why, in words."""
+    from tools.bench.faults import MOVED_BOUND_DEG, UNMEASURED
+
+    row = matrix[name]
+    if name in UNMEASURED:
+        assert row["moved_after_stop_deg"] is None and row["moved_unmeasured"] == UNMEASURED[name], row
+        return
+    assert row["moved_unmeasured"] is None, row
+    assert 0.0 <= row["moved_after_stop_deg"] <= MOVED_BOUND_DEG, row
+    assert len(row["moved_after_stop_per_joint_deg"]) == 6 and row["stop"]["from_bus_period"] is not None
+
+
+def test_the_rows_run_at_the_most_gravity_loaded_pose(faults_out: Path) -> None:
+    doc = json.loads((faults_out / "faults.json").read_text())
+    from tools.bench.loaded_pose import most_loaded_pose
+
+    pose = most_loaded_pose(REPO / "build" / "release" / "generated" / "arm" / "arm.xml")
+    assert doc["pose"]["q_rad"] == pose.q and max(doc["pose"]["load"]) > 0.3  # the shoulder carries the arm
+    for row in doc["rows"]:
+        sim = json.loads((faults_out / row["fault"] / "run.json").read_text())["results"]
+        assert sim["controller_args"][sim["controller_args"].index("--ref-amp") + 1] == "0,0,0,0,0,0"
+
+
 @pytest.mark.parametrize("name", [f.name for f in FAULTS if f.expect_stop])
 def test_faults_that_must_stop_the_arm_stop_it_and_are_never_ok(matrix: dict[str, dict], name: str) -> None:
     row = matrix[name]

@@ -94,7 +94,11 @@ def test_telemetry_log_is_complete_and_recomputes_the_table(short_run: tuple[Pat
     q_err = np.array([np.subtract(m.q_d, m.q) for m in ctl])
     assert np.allclose(e, q_err, atol=1e-6)  # e is q_d - q, as published
     assert np.allclose(np.degrees(np.abs(e).max(axis=0)), run["results"]["tracking_max_abs_deg"])
-    assert len(log["ARM_SIM"].messages) == run["results"]["simulated_periods"]
+    # one truth per simulated period, then the arm simulated on after the stop (flagged so)
+    after = (np.asarray(log["ARM_SIM"].messages.flags) & (1 << 16)) != 0
+    assert int((~after).sum()) == run["results"]["simulated_periods"]
+    assert int(after.sum()) == round(run["results"]["stop"]["window_s"] * run["results"]["rate_hz"])
+    assert not after[:int((~after).sum())].any()  # the run's own periods first
 
 
 def _kill_one_side(controller_bin: Path, bus_spec: str, kill: str, *sim_args: str,

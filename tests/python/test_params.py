@@ -165,7 +165,7 @@ def test_a_number_a_help_text_quotes_is_the_constants(tmp_path: Path) -> None:
     for program in PROGRAMS:
         for p in params(program).values():
             assert "{const:" not in p.help and "{const:" not in str(p.default), (program, p.name)
-    assert f"GAIN {constant('safe-stop-damping-gain'):g} N m s/rad" in param("controller", "safe-stop").help
+    assert f"RATE {constant('safe-stop-hold-rate'):g} 1/s" in param("controller", "safe-stop").help
     assert param("controller", "rt-priority").default.startswith(f"realtime: {constant('rt-priority')} ")
     bad = tmp_path / "params.toml"
     bad.write_text('[controller.x]\ntype = "float"\ndefault = 1.0\nhelp = "at most {const:nowhere}"\n')

@@ -48,14 +48,27 @@ def test_a_signal_to_armctl_stops_the_run_safely_and_leaves_nothing(tmp_path: Pa
     run = json.loads((out / "run.json").read_text())
     assert run["results"]["result"] == "interrupted", run["results"]["verdict_reasons"]
     assert not _children_of(out)
-    # each drive's last command (RPDO1, COB-ID 0x200 + node, as the arm protocol's 0x200 + drive):
-    # shutdown (controlword 0x06) with zero torque, then NMT stop on the bus
-    last = {f.arbitration_id: f for f in frames if f.arbitration_id in CMD_IDS}
-    assert len(last) >= 2 and all(int.from_bytes(f.data[0:2], "little") == 0x06 and not any(f.data[2:6])
-                                  for f in last.values()), [bytes(f.data).hex() for f in last.values()]
+    # the controlled stop on the bus (RPDO1, COB-ID 0x200 + node, as the arm protocol's 0x200 + drive):
+    # quick stop (controlword 0x0002) under the hold, the shoulder's (drive 2) torque its weight, never
+    # zero torque alone; then disable voltage (0x0000) once the drives braked, then NMT stop
+    cmds = [f for f in frames if f.arbitration_id in CMD_IDS]
+    cw = [int.from_bytes(f.data[0:2], "little") for f in cmds]
+    assert 0x02 in cw, cw[-20:]
+    first_stop = cw.index(0x02)
+    assert all(c in (0x02, 0x00) for c in cw[first_stop:]), cw[first_stop:]
+    shoulder = [f for f in cmds[first_stop:] if f.arbitration_id == 0x202 and f.data[0] == 0x02]
+    assert shoulder and all(any(f.data[2:4]) for f in shoulder), [bytes(f.data).hex() for f in shoulder[:3]]
+    last = {f.arbitration_id: f for f in cmds}
+    assert len(last) >= 2 and all(int.from_bytes(f.data[0:2], "little") == 0x00 for f in last.values()), \
+        [bytes(f.data).hex() for f in last.values()]
     assert any(f.arbitration_id == 0x000 and f.data[0] == 0x02 for f in frames)
     assert "interrupted" in run["results"]["verdict_reasons"][0]
-    # the shutdown commands came in a period of their own: the drives took them, none saw a second
+    # the arm braked and stayed where it was (canopen: the table's brakes; the arm protocol's drives have none)
+    stop = run["results"]["stop"]
+    assert stop["cause"] == "stop signal" and stop["braked"] is True, stop
+    if protocol == "canopen":
+        assert stop["moved_after_stop_max_deg"] <= 1.0, stop
+    # the stop's commands came in periods of their own: the drives took them, none saw a second
     # master (the arm protocol's drives fault on a second command for one SYNC: a race between two buses
     # once made them, in the VM)
     sim = json.loads((out / "sim_summary.json").read_text())

@@ -1,16 +1,21 @@
 """`armctl faults`: every fault against a short lockstep run (realtime where the fault is about
 the wall clock: a second master between the controller's periods), as a table.
 
-For each fault a HIL run starts (pm, the default arm, its own run slot); once the controller is
-tracking, the fault is injected from outside: a signal to a process, frames on a bus (garbage,
-spoofed joint states or torque commands, a flood), a drive reporting a fault, a lost bus (the
-simulator's --debug-lose-bus test hook), a stalled logger. The table says, from the bus and the
-run's own records: after how many periods the arm was stopped (the first zero-torque shutdown
-command or NMT stop, or the drives faulting), whether a safe state was reached, the run's
-verdict, and whether the telemetry is complete. One row's fault is in the input itself
-(hostile-names: the arm's model names its joints with C, a script and a shell command, as a
-downloaded file may): its arm is built and run like any other, its names are data (gen/lib/escape.py),
-and the row fails if anything of the file ran. tests/python/test_faults.py holds every row.
+For each fault a HIL run starts (pm, the default arm, its own run slot) with the arm held at its
+most gravity-loaded pose (tools/bench/loaded_pose.py) and the drives' brakes of the arm's drive
+table; once the controller is tracking, the fault is injected from outside: a signal to a process,
+frames on a bus (garbage, spoofed joint states or torque commands, a flood), a drive reporting a
+fault, a lost bus (the simulator's --debug-lose-bus test hook), a stalled logger. The table says,
+from the bus and the run's own records: after how many periods the arm was stopped (the first
+quick stop, disable or shutdown command or NMT stop, or the drives faulting), whether a safe state
+was reached and which, how far each joint moved in the window after the stop (run.json's
+results.stop, from the simulator's truth: the simulator runs the arm on after the controller stopped
+or died), the run's verdict, and whether the telemetry is complete. A row whose arm moved more than
+the bound after its stop fails the command; a row where it cannot be measured says why. One row's
+fault is in the input itself (hostile-names: the arm's model names its joints with C, a script and
+a shell command, as a downloaded file may): its arm is built and run like any other, its names are
+data (gen/lib/escape.py), and the row fails if anything of the file ran. tests/python/test_faults.py
+holds every row.
 """
 
 from __future__ import annotations
@@ -36,9 +41,21 @@ from host_sim.canbus import open_bus
 from tools.run.hil import HilOptions, run_hil
 from gen.lib.paths import REPO
 from tools.run.slots import acquire_slot
+from gen.lib.params import constant, default as param_default
 
 SYNC, NMT = 0x080, 0x000
 LOST_BUS_PERIOD = 1500
+# what a stop sends each drive first (CiA 402 controlwords, little-endian): quick stop, disable
+# voltage, shutdown
+STOP_CONTROLWORDS = (b"\x02\x00", b"\x00\x00", b"\x06\x00")
+MOVED_BOUND_DEG = constant("max-moved-after-stop-deg")
+# Where the arm's motion after a stop cannot be measured, and why (no truth after it).
+UNMEASURED = {
+    "kill-simulator": "the simulator is the arm: killed (SIGKILL), it simulates nothing after (a real arm's drives lose "
+                      "their supply there, and their spring-applied brakes close: term-simulator runs that path)",
+    "kill-logger": "the logger is the record: killed, the log holds no simulator truth of the stop (the simulator's "
+                   "own account of the window after the controller fell silent is the row's stop.simulator.moved_deg)",
+}
 GROUP = "239.74.163.2"
 
 
@@ -236,7 +253,7 @@ def _garbage(i: Injector) -> None:
     s.close()
 
 
-def run_fault(f: Fault, out: Path) -> dict[str, Any]:
+def run_fault(f: Fault, out: Path, pose: list[float]) -> dict[str, Any]:
     from tools.build.arm import DEFAULT_ARM, HIL_TARGETS, build_arm
 
     arm = f.arm() if f.arm is not None else DEFAULT_ARM
@@ -261,7 +278,7 @@ def run_fault(f: Fault, out: Path) -> dict[str, Any]:
                     inj.counter = m.data[0]
                 elif inj.injected_at is not None and inj.stopped_at is None and (
                         (m.arbitration_id == NMT and m.data[:1] == b"\x02") or
-                        (0x201 <= m.arbitration_id <= 0x210 and m.data[:2] == b"\x06\x00")):
+                        (0x201 <= m.arbitration_id <= 0x210 and bytes(m.data[:2]) in STOP_CONTROLWORDS)):
                     inj.stopped_at = inj.syncs
                 elif inj.tracking_syncs is None and 0x201 <= m.arbitration_id <= 0x210 and m.data[:2] == b"\x0f\x00":
                     inj.tracking_syncs = inj.syncs
@@ -285,8 +302,12 @@ def run_fault(f: Fault, out: Path) -> dict[str, Any]:
         try:
             # the arm protocol's frames are what the injectors forge (its DBC); the CiA 402 drives'
             # faults are tests/python/test_canopen_hil.py's and test_canopen_master.py's
+            # held at the most loaded pose the whole run: a zero reference (the default frequencies)
+            zeros = ",".join("0" for _ in pose)
             run = run_hil(HilOptions(out=out, duration_s=8.0, method="pm", can_port=slot.can_port, protocol="arm",
-                                     lcm_port=slot.lcm_port, sim_args=f.sim_args, mode=f.mode, arm=arm))
+                                     lcm_port=slot.lcm_port, mode=f.mode, arm=arm,
+                                     sim_args=("--start-pose", ",".join(f"{x:.9g}" for x in pose), *f.sim_args),
+                                     controller_args=("--ref-amp", zeros, "--ref-freq", ",".join("0.2" for _ in pose))))
         finally:
             inj.stop_event.set()
             for t in threads:
@@ -306,7 +327,25 @@ def run_fault(f: Fault, out: Path) -> dict[str, Any]:
     lost = run.get("transport", {}).get("telemetry_lost_total")
     # messages that cannot come from the run's own senders (tools/run/run_analysis.py), summed over channels
     foreign = sum(a.get("foreign", 0) for a in (run.get("transport", {}).get("telemetry") or {}).values())
+    stop = r.get("stop") or {}
+    moved = stop.get("moved_after_stop_deg")
+    window = float(stop.get("window_s") or param_default("simulator", "post-stop"))
+    covered = float(stop.get("after_stop_covered_s") or 0.0)
+    if f.name in UNMEASURED:
+        unmeasured = UNMEASURED[f.name]
+    elif moved is None:
+        unmeasured = stop.get("after_stop_problem") or "no stop was found (neither the controller nor the simulator " \
+                                                       "recorded one)"
+    elif covered + 1e-9 < window:
+        unmeasured = f"the simulator's truth covers {covered:.3f} s of the {window:g} s after the stop"
+    else:
+        unmeasured = None
     return {"fault": f.name, "what": f.what, "detected_after_periods": detected, "safe_state": safe,
+            "stop": {k: stop.get(k) for k in ("cause", "from_bus_period", "found_by", "safe_state", "braked",
+                                              "simulator")},
+            "moved_after_stop_deg": None if unmeasured else max(moved),
+            "moved_after_stop_per_joint_deg": moved if not unmeasured else None,
+            "moved_unmeasured": unmeasured,
             "final_state": r.get("final_state"), "drives_faulted": faulted, "verdict": r.get("result"),
             "reasons": r.get("verdict_reasons", []), "telemetry_lost": lost, "telemetry_foreign": foreign, "expect_stop": f.expect_stop,
             "injected": inj.acted, "harness_problem": inj.problem or (None if inj.acted else
@@ -324,18 +363,35 @@ def _load(path: Path) -> dict[str, Any]:
         return {}
 
 
+def _safe_state(x: dict[str, Any]) -> str:
+    """Where the arm ended: braked by the controller's stop, braked by the drives' own reaction (the
+    controller gone), or neither."""
+    stop = x.get("stop") or {}
+    sim = stop.get("simulator") or {}
+    braked = bool(sim.get("braked")) and all(sim["braked"])
+    if not x["safe_state"]:
+        how = "no stop needed"
+    elif stop.get("braked"):
+        how = "braked (quick stop)"
+    elif braked:
+        how = "braked (drives' reaction)"
+    else:
+        how = "drives faulted, torque off" if x["drives_faulted"] else "stopped, brakes unconfirmed"
+    return f"{how}, {x['final_state']}" if not x["safe_state"] else how
+
+
 def table(rows: list[dict[str, Any]]) -> str:
-    lines = [f"{'fault':<18}{'detected in':>12}  {'safe state':<28}{'verdict':<26}{'telemetry':<12}",
-             f"{'':<18}{'(periods)':>12}"]
+    lines = [f"{'fault':<18}{'detected in':>12}  {'safe state':<28}{'moved after':>12}  {'verdict':<26}{'telemetry':<12}",
+             f"{'':<18}{'(periods)':>12}  {'':<28}{'stop (deg)':>12}"]
     for x in rows:
         det = "-" if x["detected_after_periods"] is None else str(x["detected_after_periods"])
-        safe = ("drives faulted, torque off" if x["drives_faulted"] else f"yes ({x['final_state']})") \
-            if x["safe_state"] else f"no stop needed ({x['final_state']})"
         tel = f"{x['telemetry_foreign']} foreign" if x.get("telemetry_foreign") else \
             "complete" if x["telemetry_lost"] == 0 else f"{x['telemetry_lost']} lost" \
             if x["telemetry_lost"] is not None else "unknown"
+        moved = x.get("moved_after_stop_deg")
+        mv = "n/a" if moved is None else f"{moved:.3f}"
         verdict = "the input ran code" if x.get("input_ran_code") else str(x["verdict"])
-        lines.append(f"{x['fault']:<18}{det:>12}  {safe:<28}{verdict:<26}{tel:<12}")
+        lines.append(f"{x['fault']:<18}{det:>12}  {_safe_state(x):<28}{mv:>12}  {verdict:<26}{tel:<12}")
     return "\n".join(lines)
 
 
@@ -366,18 +422,25 @@ def run(ns: argparse.Namespace) -> int:
 
         raise RecordError("--record with --only: the docs show the whole matrix")
     check_out_dir(ns.out)
-    build_arm("release")
+    bdir = build_arm("release")
+    from tools.bench.loaded_pose import most_loaded_pose
+
+    pose = most_loaded_pose(bdir / "generated" / "arm" / "arm.xml")
+    print(f"armctl faults: the arm held at its most gravity-loaded pose, q = "
+          f"[{', '.join(f'{x:.3f}' for x in pose.q)}] rad ({max(pose.load):.0%} of a joint's torque limit against "
+          "gravity)")
     rows = []
     for f in [f for f in FAULTS if f.name in names]:
-        row = run_fault(f, ns.out / f.name)
+        row = run_fault(f, ns.out / f.name, pose.q)
         if not row["injected"]:  # the harness missed its moment (not the arm's doing): once more, said so
             print(f"armctl faults: {f.name}: not injected ({row['harness_problem']}); running it again",
                   file=sys.stderr)
             first = row["harness_problem"]
-            row = run_fault(f, ns.out / f.name)
+            row = run_fault(f, ns.out / f.name, pose.q)
             row["retried_after"] = first
         rows.append(row)
-    doc = {"rows": rows}
+    doc = {"pose": {"q_rad": pose.q, "gravity_nm": pose.gravity_nm, "load": pose.load},
+           "moved_after_stop_bound_deg": MOVED_BOUND_DEG, "rows": rows}
     write_json_atomic(ns.out / "faults.json", doc)
     print(table(rows))
     print(f"results: {ns.out / 'faults.json'}")
@@ -390,7 +453,16 @@ def run(ns: argparse.Namespace) -> int:
     broken += [f"{x['fault']} (the input ran code)" for x in rows if x.get("input_ran_code")]
     broken += [f"{x['fault']} (never injected: {x['harness_problem']})" for x in rows
                if not x["injected"] and x["fault"] not in broken]
+    # And the stop's: no joint moved more than the bound after it, where that can be measured.
+    moved = [f"{x['fault']} ({x['moved_after_stop_deg']:.3f} deg > {MOVED_BOUND_DEG:g})" for x in rows
+             if x["moved_after_stop_deg"] is not None and x["moved_after_stop_deg"] > MOVED_BOUND_DEG]
+    for x in rows:
+        if x["moved_unmeasured"]:
+            print(f"armctl faults: {x['fault']}: motion after the stop not measured: {x['moved_unmeasured']}",
+                  file=sys.stderr)
     if broken:
         print(f"armctl faults: not stopped safely: {', '.join(broken)}", file=sys.stderr)
-    return 1 if broken else 0
+    if moved:
+        print(f"armctl faults: the arm moved after the stop: {', '.join(moved)}", file=sys.stderr)
+    return 1 if broken or moved else 0
 

@@ -10,7 +10,9 @@ at the same interval and SCHED_FIFO priority. Written to DIR:
   round trip SYNC -> joint states -> commands, including the compute time and the simulator's
   response time), overruns; cyclictest's wake-up latency from its histogram; the controller's
   figures relative to cyclictest's; what the bus lost (late or missing joint states, commands the
-  simulator missed). Percentiles p50, p99, p99.9, max.
+  simulator missed); which side was late where states missed the wait (run.json's
+  environment.lateness: the controller's account by side, a stop's, and the simulator's answer
+  times). Percentiles p50, p99, p99.9, max.
 - timing.png: histograms and time series.
 - hil/: the HIL run itself (run.json, telemetry.lcmlog, logs).
 
@@ -278,6 +280,12 @@ def measure(out: Path, duration_s: float, rate_hz: float, rt_priority: int, cpu:
         "cyclictest": {k: v for k, v in cyc.items() if k != "histogram_us"} |
                       {"histogram_us": {str(k): v for k, v in sorted(cyc.get("histogram_us", {}).items())}},
         "relative_to_cyclictest": relative,
+        # which side was late, wherever states missed the wait: the controller's account and the
+        # simulator's own times, beside cyclictest's figures of the same window (docs/runs.md,
+        # Which side was late)
+        "lateness": run.get("environment", {}).get("lateness") or {
+            "late_periods": (summary.get("lateness") or {}).get("late_periods"),
+            "stop": (summary.get("lateness") or {}).get("stop") or None},
         "bus": {
             "joint_states_in_time": frames.get("rx_state"),
             "joint_states_late": frames.get("rx_wrong_counter"),
@@ -333,6 +341,13 @@ def table(d: dict[str, Any]) -> str:
     b = d["bus"]
     rows.append(f"joint states in time {b['joint_states_in_time']}, late {b['joint_states_late']}; "
                 f"commands the simulator missed {b['commands_missed_by_simulator']}")
+    late = d.get("lateness") or {}
+    if late.get("late_periods"):
+        lp = late["late_periods"]
+        rows.append(f"periods whose states missed the wait: {lp.get('plant', 0)} the plant's answer, "
+                    f"{lp.get('controller', 0)} the controller's wake-up, {lp.get('bus', 0)} the bus")
+    if late.get("stop"):
+        rows.append(f"the stop: {late['stop']}")
     rows.append(f"controller rt set-up: {d['controller_rt_setup'] or '?'}")
     if "error" in d["cyclictest"]:
         rows.append(f"cyclictest: {d['cyclictest']['error']}")

@@ -37,6 +37,7 @@ CONTROLLER_DEFAULT_HOLD_S: float = param_default("controller", "ref-hold")
 # within tens of microseconds, sooner than a sleeping process is woken on a VM: measured on this
 # 2-core machine, 10-11x real time without, 11-14x with (host_sim/README.md).
 LOCKSTEP_SPIN_US = 50
+BRAKES = ("engaged", "released", "none")  # HilOptions.brakes
 
 
 # What the drives speak (docs/drives.md): this project's frames, or CANopen CiA 402. The one
@@ -77,6 +78,10 @@ class HilOptions:
     # Emulate each bus's bit timing in the simulator (host_sim/bus_timing.py) with the topology's
     # physical layers: virtual in lockstep, wallclock in realtime.
     bus_timing: bool = False
+    # The drives' holding brakes, from the arm's drive table (gen/drives.py): "engaged" at power-on
+    # as on the arm, "released" (the arm starts held by its drives: the study's runs, recorded so; a
+    # brake that held the arm through its release delay would make other runs), or "none".
+    brakes: str = "engaged"
     # What the run must meet to be "ok" (tools/run/verdict.py).
     bounds: Bounds = field(default_factory=Bounds)
     # The emulated drives' sensing and torque path (host_sim/drive_model.py; default: ideal).
@@ -577,6 +582,14 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
         raise HilError("--drive-config: a CiA 402 drive configuration, for --protocol canopen")
     node_args, sim_node_args, drive_table, dbc, od_table = (canopen_of(info, opt.drive_config) if canopen
                                                             else ([], [], None, "", ""))
+    if opt.brakes not in BRAKES:
+        raise HilError(f"brakes: {opt.brakes!r}: expected one of {', '.join(BRAKES)}")
+    brakes = opt.brakes != "none"
+    brake_table = drive_table if drive_table is not None or not brakes else canopen_args(info, opt.drive_config)[2]
+    brake_args = [a for d in brake_table.drives if d.brake_spec() for a in ("--brake", d.brake_spec())] \
+        if brakes and brake_table is not None else []
+    if brake_args and opt.brakes == "released":
+        brake_args += ["--brakes-at-start", "released"]
     transmission = drive_table.transmission if drive_table is not None else None
     rate_hz = _arg_value(opt.controller_args, "--rate", info["loop_rate_hz"])
     if canopen:
@@ -625,7 +638,7 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
                         uncertainty=opt.uncertainty, timing=bus_timing_mode(opt.mode) if opt.bus_timing else "off",
                         phys=topology, model=prepared_model(bdir), drives=opt.drives, canopen=canopen,
                         extra=["--substeps", str(substeps), *([] if sil else sim_mode_args(opt.mode, opt.spin_us)),
-                               *capture_args(opt), "--protocol", opt.protocol, *sim_node_args,
+                               *capture_args(opt), "--protocol", opt.protocol, *sim_node_args, *brake_args,
                                *opt.sim_args])
     ctl_args = [*opt.controller_cmd_prefix, str(binary), *bus_argv, "--lcm-url", url,
                 "--duration", f"{opt.duration_s:g}", "--method", opt.method, "--mode", opt.mode,

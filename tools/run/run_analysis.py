@@ -191,11 +191,49 @@ class _Sequences:
                 "logged_beyond_sent": max(0, self.logged - sent), "foreign": foreign}
 
 
+class _AfterStop:
+    """The arm's true motion after the stop (ARM_SIM): each joint's largest |q - q0| over the
+    `periods` simulated periods from bus period `from_period` on, q0 its position as that period
+    began (the truth of the period before it). Rows outside the window are not kept."""
+
+    def __init__(self, from_period: int | None, periods: int) -> None:
+        self.first = None if from_period is None else from_period - 1  # the truth the stop starts from
+        self.last = None if from_period is None else from_period - 1 + periods
+        self.steps: list[np.ndarray] = []
+        self.q: list[np.ndarray] = []
+
+    def feed(self, sim: np.ndarray) -> None:
+        if self.first is None or len(sim) == 0:
+            return
+        keep = (sim["step"] >= self.first) & (sim["step"] <= self.last)
+        if keep.any():
+            self.steps.append(sim["step"][keep])
+            self.q.append(sim["q"][keep].astype(np.float64))
+
+    def result(self, period_s: float) -> dict[str, Any]:
+        if self.first is None:
+            return {}
+        steps = np.concatenate(self.steps) if self.steps else np.empty(0, np.int64)
+        at_start = np.nonzero(steps == self.first)[0]
+        if len(at_start) == 0:
+            return {"moved_after_stop_deg": None, "after_stop_covered_s": 0.0,
+                    "after_stop_problem": f"no simulator truth for bus period {self.first} (the stop's start)"}
+        q = np.concatenate(self.q)
+        q0 = q[at_start[-1]]
+        after = steps > self.first
+        moved = np.degrees(np.abs(q[after] - q0).max(axis=0)) if after.any() else np.zeros(len(q0))
+        covered = len(np.unique(steps[after])) * period_s
+        return {"moved_after_stop_deg": moved.tolist(), "moved_after_stop_max_deg": float(moved.max()),
+                "after_stop_covered_s": covered}
+
+
 class LogScan:
     """One streaming pass over a run's log: the metrics of control_metrics, the telemetry
     accounting and the last controller state, in memory that does not grow with the run."""
 
-    def __init__(self, hold_s: float, rate_hz: float, sent: dict[str, int], expected_periods: int) -> None:
+    def __init__(self, hold_s: float, rate_hz: float, sent: dict[str, int], expected_periods: int,
+                 stop_from: int | None = None, after_stop_periods: int = 0) -> None:
+        self.after_stop = _AfterStop(stop_from, after_stop_periods)
         self.t_min = hold_s - 0.5 / rate_hz
         self.seqs = {ch: _Sequences(sent.get(ch), ch in ONE_PER_PERIOD) for ch in set(sent) | set(FIXED_CHANNELS)
                      | set(EVENT_CHANNELS)}
@@ -224,6 +262,7 @@ class LogScan:
         for ch, evs in chunk.events.items():
             self.seqs[ch].feed(np.array([m.seq for m in evs], dtype=np.int64), None)
         ctl, sim = chunk.arrays["ARM_CTL"], chunk.arrays["ARM_SIM"]
+        self.after_stop.feed(sim)
         if len(ctl):
             self.last_state = int(ctl["state"][-1])
         run = ctl[(ctl["state"] == STATE_RUNNING) & (ctl["t"] >= self.t_min)]
@@ -266,10 +305,10 @@ def _power_sums(chunks: Iterable[Chunk], t_min: float, n: int) -> tuple[np.float
 
 
 def scan_log(path: Path, hold_s: float, rate_hz: float, sent: dict[str, int], expected_periods: int,
-             chunk_bytes: int = CHUNK_BYTES) -> LogScan:
+             chunk_bytes: int = CHUNK_BYTES, stop_from: int | None = None, after_stop_periods: int = 0) -> LogScan:
     """Stream the log once (twice when the running periods are not the expected count: the two
     pairwise-summed means need the count before they start)."""
-    scan = LogScan(hold_s, rate_hz, sent, max(int(expected_periods), 0))
+    scan = LogScan(hold_s, rate_hz, sent, max(int(expected_periods), 0), stop_from, after_stop_periods)
     if path.exists():
         for chunk in iter_chunks(path, chunk_bytes, scan.damage):
             scan.feed(chunk)
@@ -339,6 +378,53 @@ def foreign_telemetry(tele: dict[str, Any]) -> list[str]:
     return out
 
 
+def stop_period(controller: dict[str, Any], sim: dict[str, Any]) -> tuple[int | None, str]:
+    """The bus period the stop began: the controller's own record of it, or the period after the
+    last one the simulator ran for the controller, whichever came first (a controller that died
+    says nothing; a simulator stopped by a signal cut the drives' supply before the controller
+    noticed)."""
+    stop = controller.get("stop") or {}
+    post = sim.get("post_stop") or {}
+    found = []
+    if stop.get("cause") not in (None, "none"):
+        found.append((int(stop["from_bus_period"]), "controller"))
+    if post.get("periods"):
+        found.append((int(post["from_step"]), "simulator"))
+    return min(found) if found else (None, "none")
+
+
+def stop_record(controller: dict[str, Any], sim: dict[str, Any], stop_from: int | None, source: str,
+                window_s: float, motion: dict[str, Any]) -> dict[str, Any]:
+    """How the run's stop went: what began it and when, the safe state the controller reached (its
+    ARM_EVENT and summary), what the drives ended in after the simulator ran the arm on, and each
+    joint's true motion in the window after the stop (ARM_SIM)."""
+    stop = controller.get("stop") or {}
+    post = sim.get("post_stop") or {}
+    return {"cause": stop.get("cause") if source == "controller" else post.get("why") if source == "simulator" else None,
+            "from_bus_period": stop_from, "found_by": source, "safe_state": stop.get("safe_state"),
+            "braked": stop.get("braked"), "window_s": window_s,
+            "simulator": {"why": post.get("why"), "braked": post.get("braked"),
+                          "statuswords": post.get("statuswords"), "from_step": post.get("from_step"),
+                          "moved_deg": post.get("moved_deg")} if post else None,
+            **motion}
+
+
+def lateness_record(controller: dict[str, Any], sim: dict[str, Any], stop_from: int | None) -> dict[str, Any]:
+    """Which side was late, from both ends (wall-clock facts: environment, not results): the
+    controller's count of the periods that missed their states by side and its account of a stop for
+    lateness (firmware/port/linux/lateness.c), and the simulator's own times for each SYNC it
+    answered, those of the periods before the stop beside them."""
+    late = controller.get("lateness") or {}
+    answers = sim.get("answer_timing") or {}
+    near = [{"period": p, "read_us": r, "answered_us": a} for p, r, a in answers.get("last", [])
+            if stop_from is not None and stop_from - 8 <= p < stop_from]
+    return {"late_periods": late.get("late_periods"), "worst_us": late.get("worst_us"),
+            "stop_side": late.get("stop_side"), "stop": late.get("stop") or None,
+            "simulator": {k: answers.get(k) for k in ("n", "read_p99_us", "read_max_us", "answer_p50_us",
+                                                      "answer_p99_us", "answer_max_us")} if answers else None,
+            "simulator_before_stop": near}
+
+
 def final_state(scan: LogScan, controller: dict[str, Any]) -> str:
     if controller.get("final_state"):
         return str(controller["final_state"])
@@ -356,7 +442,10 @@ def analyse(out_dir: Path, controller: dict[str, Any], sim: dict[str, Any], conf
     hold = float(controller.get("ref_hold_s", config.get("ref_hold_s", 0.0)))
     rate = float(controller.get("rate_hz", config.get("rate_hz", param_default("controller", "rate"))))
     requested = controller.get("steps_requested", round((config["duration_s"] + hold) * rate))
-    scan = scan_log(out_dir / "telemetry.lcmlog", hold, rate, sent, requested - round(hold * rate))
+    stop_from, stop_source = stop_period(controller, sim)
+    window_s = float((sim.get("post_stop") or {}).get("configured_s") or param_default("simulator", "post-stop"))
+    scan = scan_log(out_dir / "telemetry.lcmlog", hold, rate, sent, requested - round(hold * rate),
+                    stop_from=stop_from, after_stop_periods=round(window_s * rate))
     tele = telemetry_accounting(scan, sent) if sent else {}
     results = {
         **config,
@@ -375,6 +464,7 @@ def analyse(out_dir: Path, controller: dict[str, Any], sim: dict[str, Any], conf
         "ref_hold_s": hold,
         "design_hash": controller.get("design_hash", ""),
         **control_metrics(scan),
+        "stop": stop_record(controller, sim, stop_from, stop_source, window_s, scan.after_stop.result(1.0 / rate)),
     }
     transport = {
         "controller_frames": controller.get("frames", {}),
@@ -391,6 +481,7 @@ def analyse(out_dir: Path, controller: dict[str, Any], sim: dict[str, Any], conf
         # where the log breaks and what was left unread (a damaged log: the run is incomplete, never ok)
         "telemetry_log": scan.damage.as_dict(),
     }
+    environment = {**environment, "lateness": lateness_record(controller, sim, stop_from)}
     verdict, reasons = judge(results, transport, controller, sim, environment.get("exit_codes", {}), bounds)
     results["result"] = verdict
     results["verdict_reasons"] = reasons
@@ -411,6 +502,13 @@ def table(run: dict[str, Any]) -> str:
                  f"after {r.get('steps', '?')} of {r.get('steps_requested', '?')} periods")
     for why in r.get("verdict_reasons", []):
         lines.append(f"  {one_line(why)}")
+    stop = r.get("stop") or {}
+    if stop.get("from_bus_period") is not None:
+        moved = stop.get("moved_after_stop_deg")
+        how = (f"at most {max(moved):.3f} deg of motion in the {stop.get('after_stop_covered_s', 0):.1f} s after it "
+               f"(joint {1 + moved.index(max(moved))})" if moved else stop.get("after_stop_problem", "motion unknown"))
+        lines.append(f"stop ({stop.get('cause')}, bus period {stop['from_bus_period']}): "
+                     f"{stop.get('safe_state') or 'no safe state reported'}; {how}")
     cf, sf = t["controller_frames"], t["simulator_frames"]
     lines.append(f"frames: controller sent {cf.get('tx', '?')} / received {cf.get('rx', '?')}, "
                  f"simulator sent {sf['frames_tx']} / received {sf['frames_rx']}")

@@ -350,7 +350,9 @@ def _run(spec: RunSpec, arm: ArmRef, slot: Slot, out: Path, spin_us: float,
                               bus_timing=spec.bus_timing, can_port=slot.can_port, lcm_port=slot.lcm_port,
                               labels=dict(spec.labels), bus=spec.bus, protocol=spec.protocol,
                               # the runs that keep their telemetry keep their bus too (gzip: 0.6 MB a 10 s run)
-                              capture=spec.keep_log, compress_capture=True, spin_us=spin_us, **loaded))
+                              capture=spec.keep_log, compress_capture=True, spin_us=spin_us,
+                              # the study's runs start with the arm held by its drives, as recorded
+                              brakes="released", **loaded))
 
 
 def spec_digest(spec: RunSpec) -> str:

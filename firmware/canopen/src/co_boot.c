@@ -111,6 +111,13 @@ static void build(arm_co_node_t *n, const arm_co_boot_config_t *cfg, const arm_c
     add_full(n, ARM_CO_ACT_WRITE, 0x1017u, 0u, 2u, cfg->heartbeat_ms, 0u, ARM_CO_ACT_OPTIONAL, ARM_CO_SLOT_NONE);
     add_full(n, ARM_CO_ACT_WRITE, 0x1016u, 1u, 4u, ((uint32_t)cfg->master_id << 16) | cfg->consumer_ms, 0u,
              ARM_CO_ACT_OPTIONAL, ARM_CO_SLOT_NONE);
+    /* how the drive stops: the quick stop ramp, then switch on disabled (its brake closed); a fault:
+     * the quick stop ramp (CiA 402 option codes 2); the ramp's deceleration where the table gives it */
+    add_full(n, ARM_CO_ACT_WRITE, 0x605Au, 0u, 2u, 2u, 0u, ARM_CO_ACT_OPTIONAL | ARM_CO_ACT_IF_WRITABLE, ARM_CO_SLOT_NONE);
+    add_full(n, ARM_CO_ACT_WRITE, 0x605Eu, 0u, 2u, 2u, 0u, ARM_CO_ACT_OPTIONAL | ARM_CO_ACT_IF_WRITABLE, ARM_CO_SLOT_NONE);
+    if (nc->quick_stop_decel != 0u) {
+        add_full(n, ARM_CO_ACT_WRITE, 0x6085u, 0u, 4u, nc->quick_stop_decel, 0u, ARM_CO_ACT_OPTIONAL, ARM_CO_SLOT_NONE);
+    }
     add(n, ARM_CO_ACT_WRITE, 0x6060u, 0u, 1u, (uint32_t)ARM_CO_MODE_CST, 0u);
     add(n, ARM_CO_ACT_READ, 0x6061u, 0u, 1u, (uint32_t)ARM_CO_MODE_CST, 0xFFu);
     add(n, ARM_CO_ACT_NMT, 0u, 0u, 0u, ARM_CO_NMT_START, 0u);
@@ -120,10 +127,10 @@ static void build(arm_co_node_t *n, const arm_co_boot_config_t *cfg, const arm_c
 }
 
 /* NMT, 0x1000, 0x1018.1-4, 7 unit reads and their check, the quiesce, 3 PDOs x 5 + their entries,
- * 0x1006, 0x1017, 0x1016, 0x6060, 0x6061, NMT start, 3 controlwords. */
+ * 0x1006, 0x1017, 0x1016, 0x605A, 0x605E, 0x6085, 0x6060, 0x6061, NMT start, 3 controlwords. */
 static unsigned sequence_length(const arm_co_boot_config_t *cfg)
 {
-    return 6u + 8u + 1u + 3u * 5u + cfg->rpdo1.n + cfg->tpdo1.n + cfg->tpdo2.n + 3u + 2u + 1u + 3u;
+    return 6u + 8u + 1u + 3u * 5u + cfg->rpdo1.n + cfg->tpdo1.n + cfg->tpdo2.n + 3u + 3u + 2u + 1u + 3u;
 }
 
 static int bad_config(arm_co_boot_t *b, uint8_t node, uint32_t value)
@@ -247,11 +254,14 @@ static int said_absent(const arm_co_node_t *n)
            (n->sdo.abort_code == ARM_CO_ABORT_NO_SUB || n->sdo.abort_code == ARM_CO_ABORT_NO_OBJECT);
 }
 
-/* An optional object the drive lacks (a recorded identity entry, an optional read or write). */
+/* An optional object the drive lacks (a recorded identity entry, an optional read or write), or
+ * keeps read-only where it may. */
 static int optional_absent(const arm_co_node_t *n, const arm_co_action_t *a)
 {
     const int identity = a->kind == ARM_CO_ACT_READ && a->mask == 0u && a->index == 0x1018u && a->sub >= 2u;
-    return (identity || (a->flags & ARM_CO_ACT_OPTIONAL) != 0u) && said_absent(n);
+    const int read_only = (a->flags & ARM_CO_ACT_IF_WRITABLE) != 0u && n->sdo.status == ARM_CO_SDO_ABORTED &&
+                          n->sdo.abort_by_server && n->sdo.abort_code == ARM_CO_ABORT_READ_ONLY;
+    return ((identity || (a->flags & ARM_CO_ACT_OPTIONAL) != 0u) && said_absent(n)) || read_only;
 }
 
 static uint16_t absent_bit(uint16_t index)
@@ -265,6 +275,9 @@ static uint16_t absent_bit(uint16_t index)
     case 0x608Fu: return ARM_CO_ABSENT_608F;
     case 0x6091u: return ARM_CO_ABSENT_6091;
     case 0x6072u: return ARM_CO_ABSENT_6072;
+    case 0x605Au: return ARM_CO_ABSENT_605A;
+    case 0x605Eu: return ARM_CO_ABSENT_605E;
+    case 0x6085u: return ARM_CO_ABSENT_6085;
     default: return 0u;
     }
 }

@@ -47,8 +47,7 @@ void arm_ctl_default_config(const arm_robot_model_t *model, arm_ctl_config_t *cf
         cfg->torque_rate_limit[i] = model->link[i].torque_limit * (cfg->period_s / 0.010f);
     }
     cfg->watchdog_periods = ARM_P_CONTROLLER_WATCHDOG_PERIODS_DEFAULT;
-    cfg->safe_stop_mode = ARM_SAFE_STOP_ZERO_TORQUE;
-    cfg->safe_stop_damping = 0.0f;
+    cfg->safe_stop_rate = (float)ARM_P_SAFE_STOP_HOLD_RATE;
     cfg->checks = ARM_CHECK_ALL;
     /* A noisy encoder, a filtered velocity and a lagging current loop stay far inside these; a
      * corrupted or spoofed state, a runaway joint or a drive that does not do as told do not. */
@@ -75,7 +74,7 @@ arm_ctl_init_result_t arm_ctl_init(arm_ctl_t *ctl, const arm_robot_model_t *mode
         return ARM_CTL_BAD_PERIOD;
     }
     if (!(isfinite(cfg->kp) && isfinite(cfg->kd) && cfg->kp >= 0.0f && cfg->kd >= 0.0f &&
-          isfinite(cfg->safe_stop_damping) && cfg->safe_stop_damping >= 0.0f)) {
+          isfinite(cfg->safe_stop_rate) && cfg->safe_stop_rate >= 0.0f)) {
         return ARM_CTL_BAD_GAIN;
     }
     if ((unsigned)cfg->numeric > (unsigned)ARM_NUMERIC_FIXED) {
@@ -152,6 +151,11 @@ static void latch_fault(arm_ctl_t *ctl, arm_fault_t fault)
 void arm_ctl_external_fault(arm_ctl_t *ctl)
 {
     latch_fault(ctl, ARM_FAULT_EXTERNAL);
+}
+
+void arm_ctl_stop(arm_ctl_t *ctl)
+{
+    if (ctl->state != ARM_STATE_FAULT) ctl->state = ARM_STATE_SAFE_STOP;
 }
 
 static void latch_joint_fault(arm_ctl_t *ctl, arm_fault_t fault, int joint, float value)
@@ -250,15 +254,38 @@ static float clampf(float x, float lo, float hi)
     return x < lo ? lo : (x > hi ? hi : x);
 }
 
-static void safe_stop_output(const arm_ctl_t *ctl, arm_ctl_output_t *out)
+/* The safe stop's hold: the model's torque at the arm's pose for a deceleration of the rate times
+ * each joint's velocity (gravity compensation plus damping), through the torque and rate limits.
+ * The pose and velocity are this period's if they pass the plausibility checks, else the last
+ * good pose at rest (gravity alone): a spoofed or stale state never drives the hold. Never zero
+ * torque alone: a loaded arm stays where it is while the drives quick-stop and brake. */
+static void safe_stop_output(arm_ctl_t *ctl, const arm_ctl_input_t *in, arm_ctl_output_t *out)
 {
+    const int fresh = (in->fresh_mask & ARM_ALL_JOINTS_MASK) == ARM_ALL_JOINTS_MASK && input_finite(in) &&
+                      all_plausible(ctl, in, 0);
+    if (fresh) {
+        memcpy(ctl->last_q, in->q, sizeof(ctl->last_q));
+        memcpy(ctl->last_qd, in->qd, sizeof(ctl->last_qd));
+        ctl->have_last = 1;
+    } else {
+        ctl->have_last = 0;
+    }
+    float rest[ARM_N_JOINTS], acc[ARM_N_JOINTS];
     for (int i = 0; i < ARM_N_JOINTS; ++i) {
-        float tau = 0.0f;
-        if (ctl->cfg.safe_stop_mode == ARM_SAFE_STOP_DAMPING && isfinite(ctl->last_qd[i])) {
-            const float lim = ctl->cfg.torque_limit[i];
-            tau = clampf(-ctl->cfg.safe_stop_damping * ctl->last_qd[i], -lim, lim);
-        }
-        out->tau[i] = tau;
+        rest[i] = 0.0f;
+        acc[i] = fresh ? -ctl->cfg.safe_stop_rate * ctl->last_qd[i] : 0.0f;
+    }
+    float hold[ARM_N_JOINTS];
+    if (ctl->rnea_kernel) {
+        arm_rnea_kernel(ctl->last_q, rest, acc, hold);
+    } else {
+        arm_rnea(ctl->model, ctl->last_q, rest, acc, hold);
+    }
+    for (int i = 0; i < ARM_N_JOINTS; ++i) {
+        const float lim = ctl->cfg.torque_limit[i];
+        const float rate = ctl->cfg.torque_rate_limit[i];
+        const float want = isfinite(hold[i]) ? hold[i] : ctl->tau_prev[i];
+        out->tau[i] = clampf(clampf(want, ctl->tau_prev[i] - rate, ctl->tau_prev[i] + rate), -lim, lim);
     }
 }
 
@@ -346,7 +373,7 @@ void arm_ctl_step(arm_ctl_t *ctl, const arm_ctl_input_t *in, arm_ctl_output_t *o
     }
 
     if (ctl->state == ARM_STATE_FAULT || ctl->state == ARM_STATE_SAFE_STOP) {
-        safe_stop_output(ctl, out);
+        safe_stop_output(ctl, in, out);
     }
     /* INIT commands zero torque: out->tau is already zero. */
 

@@ -188,3 +188,15 @@ void arm_can_bus_set_close(arm_can_bus_set_t *set)
     for (unsigned i = 0; i < set->n; ++i) arm_can_bus_close(&set->bus[i]);
     set->n = 0u;
 }
+
+double arm_can_bus_set_sent_s(const arm_can_bus_set_t *set, unsigned index)
+{
+    (void)set;
+    (void)index;
+    return -1.0; /* SLCAN lines carry no sender's time */
+}
+
+double arm_can_bus_clock_s(void)
+{
+    return -1.0;
+}

@@ -212,6 +212,21 @@ size_t pil_encode_report(const run_report_t *rep, unsigned max_writes, const pil
         u8(&w, x->len);
         u32(&w, x->value);
     }
+    const run_stop_t *st = &rep->stop; /* how the arm was stopped, and which side was late */
+    u32(&w, (uint32_t)st->cause);
+    u32(&w, st->from_bus_period);
+    u32(&w, st->periods);
+    u32(&w, st->quick_stop_periods);
+    u32(&w, st->stopped_mask);
+    u32(&w, (uint32_t)st->braked);
+    text(&w, st->safe_state, sizeof(st->safe_state));
+    for (unsigned j = 0; j < ARM_N_JOINTS; ++j) u16(&w, st->statusword[j]);
+    for (unsigned k = 0; k < 4u; ++k) {
+        u32(&w, rep->late_count[k]);
+        u32(&w, (uint32_t)rep->late_worst_us[k]);
+    }
+    u32(&w, (uint32_t)rep->late_side);
+    text(&w, rep->late_text, sizeof(rep->late_text));
     put(&w, c, sizeof(*c)); /* all uint32_t: the same layout on both sides */
     return finish(&w);
 }
@@ -265,6 +280,21 @@ static int decode_report(rd_t *r, run_report_t *rep, pil_counts_t *c)
         w->len = (uint8_t)g8(r);
         w->value = g32(r);
     }
+    run_stop_t *st = &x.stop;
+    st->cause = (run_stop_cause_t)g32(r);
+    st->from_bus_period = g32(r);
+    st->periods = g32(r);
+    st->quick_stop_periods = g32(r);
+    st->stopped_mask = g32(r);
+    st->braked = (int)g32(r);
+    gtext(r, st->safe_state, sizeof(st->safe_state));
+    for (unsigned j = 0; j < ARM_N_JOINTS; ++j) st->statusword[j] = (uint16_t)g16(r);
+    for (unsigned k = 0; k < 4u; ++k) {
+        x.late_count[k] = g32(r);
+        x.late_worst_us[k] = (int32_t)g32(r);
+    }
+    x.late_side = (int)g32(r);
+    gtext(r, x.late_text, sizeof(x.late_text));
     pil_counts_t cc;
     get(r, &cc, sizeof(cc));
     if (r->bad || r->at != r->len) return -1;

@@ -251,13 +251,14 @@ static const char *node_state_name(arm_co_node_state_t s)
     return s == ARM_CO_NODE_ENABLED ? "operation_enabled" : s == ARM_CO_NODE_FAILED ? "failed" : "unfinished";
 }
 
-/* The optional objects a node lacked, "0x1006 0x1016" ("" for none). */
+/* The optional objects a node lacked (or kept read-only, 0x605A and 0x605E), "0x1006 0x1016" ("" for none). */
 static void absent_text(uint16_t absent, char *out, size_t cap)
 {
     static const struct { uint16_t bit, index; } k_objects[] = {
         {ARM_CO_ABSENT_1006, 0x1006u}, {ARM_CO_ABSENT_1017, 0x1017u}, {ARM_CO_ABSENT_1016, 0x1016u},
         {ARM_CO_ABSENT_6502, 0x6502u}, {ARM_CO_ABSENT_6076, 0x6076u}, {ARM_CO_ABSENT_608F, 0x608Fu},
-        {ARM_CO_ABSENT_6091, 0x6091u}, {ARM_CO_ABSENT_6072, 0x6072u}};
+        {ARM_CO_ABSENT_6091, 0x6091u}, {ARM_CO_ABSENT_6072, 0x6072u}, {ARM_CO_ABSENT_605A, 0x605Au},
+        {ARM_CO_ABSENT_605E, 0x605Eu}, {ARM_CO_ABSENT_6085, 0x6085u}};
     size_t used = 0u;
     out[0] = '\0';
     for (unsigned k = 0; k < sizeof(k_objects) / sizeof(k_objects[0]) && used + 8u < cap; ++k) {
@@ -290,7 +291,7 @@ static int write_json(const char *path, const arm_co_boot_t *b, const hold_state
         fprintf(f, "%s\n    {\"node\": %u, \"state\": \"%s\", \"statusword\": %u, \"identity\": [%u, %u, %u, %u]",
                 i ? "," : "", b->cfg.node[i].node_id, node_state_name(n->state), n->statusword, n->identity[0],
                 n->identity[1], n->identity[2], n->identity[3]);
-        char absent[80];
+        char absent[96];
         absent_text(n->absent, absent, sizeof(absent));
         fprintf(f, ", \"absent\": \"%s\"", absent);
         if (n->state == ARM_CO_NODE_ENABLED) {
@@ -440,7 +441,7 @@ int main(int argc, char **argv)
                (u->from_table & ARM_CO_EXPECT_ENCODER) ? " (drive table)" : "", u->gear_motor_revs, u->gear_shaft_revs,
                (u->from_table & ARM_CO_EXPECT_GEAR) ? " (drive table)" : "", (double)u->gear_efficiency,
                u->max_torque_permille, joint_rated);
-        char absent[80];
+        char absent[96];
         absent_text(n->absent, absent, sizeof(absent));
         if (absent[0] != '\0') {
             printf("node %u: optional objects it lacks (not written, or taken from the drive table): %s\n",

@@ -232,9 +232,11 @@ int canopen_parse_node(const char *arg, arm_co_node_config_t *nc, char *err, siz
             bad = canopen_parse_u32(val, 0u, UINT32_MAX, &nc->vendor_id);
         } else if (strcmp(tok, "product") == 0) {
             bad = canopen_parse_u32(val, 0u, UINT32_MAX, &nc->product_code);
+        } else if (strcmp(tok, "quick_stop") == 0) {
+            bad = canopen_parse_u32(val, 1u, UINT32_MAX, &nc->quick_stop_decel);
         } else {
             snprintf(err, cap, "--node '%s': unknown field '%s' (rated, encoder, gear, torque_unit, efficiency, limit, "
-                     "accept_no_master_watchdog, vendor, product)", arg, tok);
+                     "accept_no_master_watchdog, vendor, product, quick_stop)", arg, tok);
             return -1;
         }
         if (bad) {

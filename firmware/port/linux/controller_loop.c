@@ -13,6 +13,7 @@
 #include "arm_drives.h"
 #include "arm/reference.h"
 #include "canopen_text.h"
+#include "lateness.h"
 #include "loop_port.h"
 #include "task.h"
 
@@ -44,7 +45,11 @@ typedef struct {
      * extra TPDO then clears it, and is taken for a second node one period later. */
     uint32_t tpdo1_late, tpdo2_late;
     int draining; /* reading what came before this period's SYNC: every TPDO then is late */
+    double rx_sent_s; /* the frame being handled: when its sender sent it (-1: the transport does not say) */
+    double sync_clock_s; /* the transport's clock as this period's SYNC went out (-1: it has none) */
     int64_t next_heartbeat_ns;
+    lateness_t late;  /* each period's timing: which side was late when states missed the wait */
+    int late_on;      /* tracking or stopping: the periods the lateness counts */
     /* TPDO2 every tpdo2_every-th SYNC (its transmission type); the joints whose TPDO2 has come */
     uint32_t tpdo2_every;
     uint32_t period;
@@ -56,6 +61,24 @@ typedef struct {
 #define CANOPEN_HEARTBEAT_MS 100u
 #endif
 
+/* When the sender of the frame just read from `bus` sent it, if the transport says so and the time
+ * is the sender's clock at all: a python-can node that leaves its messages' timestamps at 0, or keeps
+ * one Message to send again, says nothing of it (-1). */
+static double sender_time(const arm_can_bus_set_t *buses, unsigned bus)
+{
+    const double sent = arm_can_bus_set_sent_s(buses, bus);
+    if (sent < 0.0) return -1.0;
+    const double age = arm_can_bus_clock_s() - sent;
+    return age >= -0.001 && age <= 0.5 ? sent : -1.0;
+}
+
+/* A frame its sender sent before this period's SYNC went out (the transport says when: UDP) cannot
+ * answer it, however long it took to arrive: a late answer, whatever came before it. */
+static int sent_before_sync(const link_t *l)
+{
+    return l->rx_sent_s >= 0.0 && l->sync_clock_s >= 0.0 && l->rx_sent_s < l->sync_clock_s;
+}
+
 /* Whether joint j's TPDO (of the kind `seen` records this period) is this period's answer. One read
  * before this period's SYNC is late: counted as such, not used. A second one this period is
  * either the real answer after a late one (the joint's last answer was missing: the late one is
@@ -64,7 +87,7 @@ static int tpdo_is_this_periods(link_t *l, uint32_t *seen, uint32_t *may_be_late
 {
     arm_drive_bus_t *d = &l->drives;
     const uint32_t bit = 1u << j;
-    if (l->draining) {
+    if (l->draining || sent_before_sync(l)) {
         d->rx.wrong_counter++;
         return 0;
     }
@@ -94,6 +117,7 @@ static int canopen_rx(link_t *l, const arm_can_frame_t *f)
     int16_t tq;
     uint16_t sw;
     if (arm_co_unpack_tpdo1((uint8_t)node, f, &pos, &vel) == 0) {
+        if (l->late_on) lateness_state(&l->late, now_ns(), l->rx_sent_s, l->draining ? 1u : sent_before_sync(l) ? 2u : 0u);
         if (!tpdo_is_this_periods(l, &l->tpdo1_mask, &l->tpdo1_late, j)) return 1;
         d->q[j] = arm_co_increments_to_rad(&l->units[j], pos);
         d->qd[j] = arm_co_increments_to_rad(&l->units[j], vel);
@@ -161,8 +185,14 @@ static void dispatch(link_t *l, const arm_can_frame_t *f, unsigned bus)
         l->report->rx_wrong_bus++; /* drive j is not on this bus: not its frame */
         return;
     }
+    l->rx_sent_s = sender_time(&l->buses, bus);
     if (!l->canopen || !canopen_rx(l, f)) {
-        (void)arm_bus_handle_rx(&l->drives, f); /* heartbeats and EMCY: the same in both */
+        const arm_rx_kind_t kind = arm_bus_handle_rx(&l->drives, f); /* heartbeats and EMCY: the same in both */
+        if (l->late_on && (kind == ARM_RX_STATE || kind == ARM_RX_WRONG_COUNTER)) {
+            /* a state of another period: before this period's SYNC, the last period's answer; after it, the one before */
+            const unsigned back = kind == ARM_RX_STATE ? 0u : l->draining ? 1u : 2u;
+            lateness_state(&l->late, now_ns(), l->rx_sent_s, back);
+        }
     }
 }
 
@@ -439,15 +469,13 @@ static int boot_canopen_run(link_t *l, const options_t *opt, const arm_robot_mod
 }
 
 /* Each bus's commands in one batch (one syscall on the UDP transport): the period's critical
- * path in lockstep is mostly syscalls. */
-static void send_commands(link_t *l, const arm_ctl_output_t *out)
+ * path in lockstep is mostly syscalls. Every drive gets controlword cw. */
+static void send_commands(link_t *l, const arm_ctl_output_t *out, uint16_t cw)
 {
-    const int enabled = out->state == ARM_STATE_RUNNING || out->state == ARM_STATE_INIT;
     arm_can_frame_t batch[ARM_CAN_BUS_SET_MAX][ARM_N_JOINTS];
     unsigned count[ARM_CAN_BUS_SET_MAX] = {0};
     for (int j = 0; j < ARM_N_JOINTS; ++j) {
         const unsigned b = (unsigned)l->bus_of[j];
-        const uint16_t cw = enabled ? ARM_CW_ENABLE_OPERATION : ARM_CW_SHUTDOWN;
         if (l->canopen) {
             arm_co_pack_rpdo1((uint8_t)(j + 1), cw, arm_co_torque_to_permille(&l->units[j], out->tau[j]),
                               &batch[b][count[b]++]);
@@ -477,6 +505,8 @@ typedef struct {
     int64_t next_deadline; /* realtime: the next period's start */
     int64_t period_ns;
     uint32_t k_run;        /* tracking periods done */
+    uint32_t k_published;  /* periods in telemetry: the tracking ones, then the stop's */
+    int states_missing;    /* lockstep: a period's states did not come within the wait (supervise) */
 } loop_t;
 
 /* Periods on the clock: realtime, and lockstep too where the port paces it (the MCU's SysTick-driven
@@ -554,6 +584,7 @@ static void supervise(link_t *l, loop_t *p)
     switch (f.condition) {
     case ARM_BUS_WELL: return;
     case ARM_BUS_STATES_MISSING:
+        p->states_missing = 1;
         list_joints(ALL_JOINTS & ~fresh, missing, sizeof(missing));
         snprintf(reason, cap, "period %u: no joint state from drive(s) %s within %.3f s (simulator stopped?)",
                  p->k_run, missing, p->opt->lockstep_timeout_s);
@@ -602,16 +633,21 @@ static int64_t control(link_t *l, loop_t *p)
     }
     const int64_t compute = now_ns() - c0;
     if (p->out.state == ARM_STATE_RUNNING && p->task_over == 0) task_track(&p->task, p->out.e);
-    send_commands(l, &p->out);
+    /* a stop begins in the very period of its fault: the drives quick-stop under the hold */
+    const int stopping = p->out.state == ARM_STATE_FAULT || p->out.state == ARM_STATE_SAFE_STOP;
+    send_commands(l, &p->out, stopping ? ARM_CW_QUICK_STOP : ARM_CW_ENABLE_OPERATION);
     return compute;
 }
 
 /* Publish: the period's telemetry, its timing, state changes and a fault's reason. 0 to go on, -1
  * when the controller stopped the arm. */
-static int publish(loop_t *p, uint32_t k, int64_t wake_latency, int64_t compute, int64_t cycle)
+/* The period's ARM_CTL and ARM_TIMING (one each per period, numbered on: the tracking periods,
+ * then a stop's), and the next deadline. */
+static void publish_period(loop_t *p, uint32_t k, int64_t wake_latency, int64_t compute, int64_t cycle)
 {
     run_report_t *report = p->report;
-    telem_controller_t snap = {.step = p->k_run, .bus_period = k, .t = (double)p->k_run * p->opt->ctl.period_s,
+    const uint32_t step = p->k_published++;
+    telem_controller_t snap = {.step = step, .bus_period = k, .t = (double)step * p->opt->ctl.period_s,
                                .method = (int8_t)p->opt->ctl.method, .out = p->out};
     memcpy(snap.q, p->in.q, sizeof(snap.q));
     memcpy(snap.qd, p->in.qd, sizeof(snap.qd));
@@ -625,10 +661,16 @@ static int publish(loop_t *p, uint32_t k, int64_t wake_latency, int64_t compute,
             while (p->next_deadline < now_ns()) p->next_deadline += p->period_ns;
         }
     }
-    const telem_timing_t tm = {.step = p->k_run, .period_ns = (int32_t)p->period_ns,
+    const telem_timing_t tm = {.step = step, .period_ns = (int32_t)p->period_ns,
                                .wake_latency_ns = (int32_t)wake_latency, .compute_ns = (int32_t)compute,
                                .cycle_ns = (int32_t)cycle, .overruns = (int64_t)report->overruns};
     telemetry_timing(p->telem, &tm);
+}
+
+static int publish(loop_t *p, uint32_t k, int64_t wake_latency, int64_t compute, int64_t cycle)
+{
+    run_report_t *report = p->report;
+    publish_period(p, k, wake_latency, compute, cycle);
     report->steps_done = ++p->k_run;
     const arm_ctl_output_t *out = &p->out;
     if (out->state != p->last_state) {
@@ -664,7 +706,8 @@ static void start_period(link_t *l, uint32_t k, int64_t now)
         sync.len = 0u; /* CiA 301 SYNC without a counter (0x1019 = 0) */
         const int tpdo2_was_due = k > 0u && k % l->tpdo2_every == 0u;
         l->tpdo1_late = k > 0u ? (ALL_JOINTS & ~l->tpdo1_mask) | l->tpdo1_late : 0u;
-        l->tpdo2_late = tpdo2_was_due ? (ALL_JOINTS & ~l->tpdo2_mask) | l->tpdo2_late : 0u;
+        /* a TPDO2 late for its period may come a period after that one too (a non-due one between) */
+        l->tpdo2_late = tpdo2_was_due ? (ALL_JOINTS & ~l->tpdo2_mask) | l->tpdo2_late : k > 0u ? l->tpdo2_late : 0u;
         l->tpdo1_mask = l->tpdo2_mask = 0u;
         l->period = k;
         if (now >= l->next_heartbeat_ns) { /* the drives consume it (0x1016.1) */
@@ -674,8 +717,26 @@ static void start_period(link_t *l, uint32_t k, int64_t now)
         }
     }
     drain(l);
+    l->sync_clock_s = arm_can_bus_clock_s();
     send_all(l, &sync);
     l->report->bus_periods = k + 1u;
+}
+
+/* The frames the kernel dropped on a full receive queue, on every bus so far. */
+static uint64_t rx_dropped(const link_t *l)
+{
+    uint64_t n = 0u;
+    for (unsigned b = 0; b < l->buses.n; ++b) n += arm_can_bus_rx_kernel_drops(&l->buses.bus[b]);
+    return n;
+}
+
+/* The period's SYNC is out (start_period): its timing begins, waiting for the states until wait_until. */
+static void begin_timing(link_t *l, uint32_t k, int64_t wake_latency, int64_t wait_until)
+{
+    const int64_t t = now_ns();
+    l->late_on = 1;
+    lateness_begin(&l->late, k, wake_latency, t, l->sync_clock_s, wait_until - t, l->report->tx_would_block,
+                   rx_dropped(l));
 }
 
 /* The bus's time at the start of period k (start_period). */
@@ -684,55 +745,130 @@ static int64_t period_time(const loop_t *p, uint32_t k, int64_t wall)
     return p->opt->mode == MODE_REALTIME ? wall : (int64_t)k * p->period_ns;
 }
 
-/* A stop signal at a period boundary: zero torque with controlword shutdown, before the NMT stop.
- * The commands go in a period of their own (k, not yet begun): the
- * last period's commands are out already, and a second command for one SYNC is a second master
- * to the drives (EMCY 0x8200). */
-static void stop_arm(link_t *l, loop_t *p, uint32_t k)
-{
-    p->out.state = ARM_STATE_SAFE_STOP;
-    memset(p->out.tau, 0, sizeof(p->out.tau));
-    start_period(l, k, period_time(p, k, now_ns()));
-    send_commands(l, &p->out);
-    if (l->canopen && p->opt->rpdo_type <= 240u) {
-        /* a synchronous RPDO acts at the next SYNC: without it the drives would never take the
-         * shutdown, and would stay enabled under the NMT stop (then fault when the master's
-         * heartbeat ends). Their answers to it say they have taken it, on every bus, before the
-         * NMT stop goes out (buses keep no order between them). */
-        start_period(l, k + 1u, period_time(p, k + 1u, now_ns()));
-        const int64_t wait = p->opt->mode == MODE_REALTIME ? p->period_ns
-                                                           : (int64_t)(p->opt->lockstep_timeout_s * 1e9);
-        pump(l, now_ns() + wait, states_done);
-    }
-}
-
-static void stop_on_signal(link_t *l, loop_t *p, uint32_t k)
-{
-    snprintf(p->report->reason, sizeof(p->report->reason),
-             "stopped by signal %d after %u periods: zero torque, drives shut down and stopped",
-             (int)controller_stop_signal, p->k_run);
-    p->report->result = RUN_INTERRUPTED;
-    telemetry_event(p->telem, p->k_run, "fault", p->report->reason);
-    stop_arm(l, p, k);
-}
-
-/* The task is over (it ended, or stopped the arm itself): the same controlled stop as a signal's. */
-static void stop_at_task_end(link_t *l, loop_t *p, uint32_t k)
-{
-    if (p->task_over > 0) {
-        snprintf(p->report->reason, sizeof(p->report->reason), "%s done after %u periods: the arm stopped",
-                 task_name(p->opt->task), p->k_run);
-        telemetry_event(p->telem, p->k_run, "info", p->report->reason);
-    }
-    stop_arm(l, p, k);
-}
-
 /* Sleep to the period's absolute deadline (paced); the wake-up's lateness. */
 static int64_t wait_for_period(loop_t *p)
 {
     if (!paced(p)) return 0;
     port_clock_sleep_until(p->next_deadline);
     return now_ns() - p->next_deadline;
+}
+
+/* ---- the controlled stop ------------------------------------------------------------------- */
+#define DISABLE_PERIODS_MAX 200u /* after the quick stop: disable voltage until the drives show it */
+
+/* A drive whose quick stop is done: switch on disabled (its brake closed, its power stage off), or
+ * in fault (its own fault reaction done). */
+static int drive_stopped(uint16_t sw)
+{
+    return (sw & 0x004Fu) == 0x0040u || (sw & 0x004Fu) == 0x0008u;
+}
+
+static uint32_t stopped_drives(const link_t *l)
+{
+    uint32_t m = 0u;
+    for (int j = 0; j < ARM_N_JOINTS; ++j) {
+        if (drive_stopped(l->drives.statusword[j])) m |= 1u << j;
+    }
+    return m;
+}
+
+/* One period of a stop: SYNC, the drives' states (not waited for once the plant fell silent in
+ * lockstep, where a wait costs the lockstep timeout), the core's hold, the commands with controlword
+ * cw, the period's telemetry. The states that came. */
+static uint32_t stop_period(link_t *l, loop_t *p, uint32_t k, uint16_t cw, int wait)
+{
+    const options_t *opt = p->opt;
+    const int64_t wake_latency = wait_for_period(p);
+    const int64_t cycle_start = now_ns();
+    start_period(l, k, period_time(p, k, cycle_start));
+    const int64_t wait_until = !wait ? cycle_start
+                               : opt->mode == MODE_REALTIME ? p->next_deadline + p->period_ns * 8 / 10
+                                                            : cycle_start + (int64_t)(opt->lockstep_timeout_s * 1e9);
+    begin_timing(l, k, wake_latency, wait_until);
+    pump(l, wait_until, states_done);
+    const uint32_t fresh = l->drives.fresh_mask & ALL_JOINTS;
+    lateness_missing(&l->late, ALL_JOINTS & ~fresh);
+    memcpy(p->in.q, l->drives.q, sizeof(p->in.q));
+    memcpy(p->in.qd, l->drives.qd, sizeof(p->in.qd));
+    p->in.fresh_mask = fresh;
+    memcpy(p->in.tau_measured, l->drives.tau_measured, sizeof(p->in.tau_measured));
+    const int64_t c0 = now_ns();
+    port_control_step(&p->ctl, &p->in, &p->out);
+    const int64_t compute = now_ns() - c0;
+    send_commands(l, &p->out, cw);
+    publish_period(p, k, wake_latency, compute, now_ns() - cycle_start);
+    return fresh;
+}
+
+/* A stop for lateness (the watchdog, a lockstep wait that ran out) says which side was late and by
+ * how much, from the periods that led to it: in its reason, in ARM_EVENT and in the summary. */
+static void explain_late_stop(link_t *l, loop_t *p)
+{
+    run_report_t *r = p->report;
+    const int watchdog = p->out.fault == ARM_FAULT_STALE_INPUT || r->final_fault == ARM_FAULT_STALE_INPUT;
+    if (!watchdog && !p->states_missing) return;
+    const uint32_t periods = p->states_missing ? 1u : p->ctl.cfg.watchdog_periods + 1u;
+    char text[300];
+    r->late_side = lateness_explain(&l->late, 1u, periods, r->tx_would_block, rx_dropped(l), text, sizeof(text));
+    snprintf(r->late_text, sizeof(r->late_text), "%s", text);
+    const size_t len = strlen(r->reason);
+    snprintf(r->reason + len, sizeof(r->reason) - len, "; %s", text);
+    telemetry_event(p->telem, p->k_published, "fault", text);
+}
+
+/* The one way this controller stops the arm, whatever asked (a fault, a stop signal, the end of the
+ * run): from period k on, every drive is told to quick-stop (controlword 0x0002: its 0x605A ramp to
+ * standstill, then its brake closes with the power stage on, then switch on disabled) while the
+ * core holds the arm (gravity compensation and damping, --safe-stop) as the drives' target torque;
+ * once every drive reports switch on disabled or fault (or after --stop-timeout, or once the plant
+ * has been silent for the watchdog's periods) every drive is disabled (0x0000), then stopped (NMT).
+ * Telemetry (ARM_EVENT) says which safe state the arm reached; the report keeps it. Returns the
+ * next bus period. */
+static uint32_t controlled_stop(link_t *l, loop_t *p, uint32_t k, run_stop_cause_t cause)
+{
+    const options_t *opt = p->opt;
+    run_stop_t *st = &p->report->stop;
+    st->cause = cause;
+    st->from_bus_period = k;
+    arm_ctl_stop(&p->ctl);
+    telemetry_event(p->telem, p->k_published, "info",
+                    "safe stop: drives quick-stopping (controlword 0x0002) under the hold (gravity compensation and "
+                    "damping); their brakes close once they stand still");
+    const uint32_t limit = (uint32_t)(opt->stop_timeout_s * opt->rate_hz + 0.5);
+    uint32_t silent = 0u, periods = 0u;
+    int wait = 1;
+    while (periods < limit && stopped_drives(l) != ALL_JOINTS && silent <= p->ctl.cfg.watchdog_periods) {
+        const uint32_t fresh = stop_period(l, p, k++, ARM_CW_QUICK_STOP, wait);
+        periods++;
+        silent = fresh == 0u ? silent + 1u : 0u;
+        if (fresh != ALL_JOINTS && opt->mode == MODE_LOCKSTEP) wait = 0; /* the plant fell silent: no more waits */
+        if (periods == 1u) explain_late_stop(l, p); /* what came late for the stop's periods has been read */
+    }
+    st->quick_stop_periods = periods;
+    st->stopped_mask = stopped_drives(l);
+    char missing[64], text[300];
+    list_joints(ALL_JOINTS & ~st->stopped_mask, missing, sizeof(missing));
+    if (st->stopped_mask == ALL_JOINTS) {
+        st->braked = 1;
+        snprintf(text, sizeof(text), "safe stop: arm braked: every drive reports switch on disabled or fault (its ramp "
+                 "done, its brake closed, its power stage off) after %u periods", periods);
+    } else if (silent > p->ctl.cfg.watchdog_periods) {
+        snprintf(text, sizeof(text), "safe stop: brakes not confirmed: no joint state for %u periods (drive(s) %s not "
+                 "seen switch on disabled); the drives' own reaction to a lost master stops them", silent, missing);
+    } else {
+        snprintf(text, sizeof(text), "safe stop: brakes not confirmed: drive(s) %s not switch on disabled after %u "
+                 "periods (--stop-timeout %g s); disabling them", missing, periods, opt->stop_timeout_s);
+    }
+    snprintf(st->safe_state, sizeof(st->safe_state), "%.230s", text + strlen("safe stop: "));
+    telemetry_event(p->telem, p->k_published, st->braked ? "info" : "fault", text);
+    /* disable voltage: a drive still in quick stop active (0x605A 5-8) closes its brake now */
+    for (uint32_t i = 0; i < DISABLE_PERIODS_MAX; ++i) {
+        stop_period(l, p, k++, ARM_CW_DISABLE_VOLTAGE, wait && silent == 0u);
+        if (stopped_drives(l) == ALL_JOINTS || silent > 0u || opt->mode == MODE_LOCKSTEP) break;
+    }
+    for (int j = 0; j < ARM_N_JOINTS; ++j) st->statusword[j] = l->drives.statusword[j];
+    st->periods = k - st->from_bus_period;
+    return k;
 }
 
 void controller_run(const options_t *opt, const arm_robot_model_t *model, telemetry_t *telem,
@@ -803,13 +939,25 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
 
     /* k counts bus periods (SYNCs); the first few bring the drives to operation enabled. Each
      * period: SYNC out, the drives' states in, then enable, or supervise, control and publish. */
-    for (uint32_t k = 0; p.k_run < opt->steps; ++k) {
-        if (controller_stop_signal != 0) {
-            stop_on_signal(&l, &p, k);
+    uint32_t k = 0;
+    run_stop_cause_t cause = RUN_STOP_END;
+    for (; p.k_run < opt->steps; ++k) {
+        if (controller_stop_signal != 0) { /* at a period boundary: the stop begins with period k */
+            snprintf(p.report->reason, sizeof(p.report->reason),
+                     "stopped by signal %d after %u periods: drives quick-stopped under the hold, braked, disabled "
+                     "and stopped", (int)controller_stop_signal, p.k_run);
+            p.report->result = RUN_INTERRUPTED;
+            telemetry_event(p.telem, p.k_run, "fault", p.report->reason);
+            cause = RUN_STOP_SIGNAL;
             break;
         }
-        if (p.task_over != 0) {
-            stop_at_task_end(&l, &p, k);
+        if (p.task_over != 0) { /* the task ended, or stopped the arm itself (a fault): the controlled stop */
+            if (p.task_over > 0) {
+                snprintf(p.report->reason, sizeof(p.report->reason), "%s done after %u periods: the arm stopped",
+                         task_name(opt->task), p.k_run);
+                telemetry_event(p.telem, p.k_run, "info", p.report->reason);
+            }
+            cause = p.task_over > 0 ? RUN_STOP_END : RUN_STOP_FAULT;
             break;
         }
         const int64_t wake_latency = wait_for_period(&p);
@@ -818,7 +966,9 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
         const int64_t wait_until = opt->mode == MODE_REALTIME
                                        ? p.next_deadline + p.period_ns * 8 / 10
                                        : cycle_start + (int64_t)(opt->lockstep_timeout_s * 1e9);
+        if (!enabling) begin_timing(&l, k, wake_latency, wait_until);
         pump(&l, wait_until, states_done);
+        if (l.late_on) lateness_missing(&l.late, ALL_JOINTS & ~l.drives.fresh_mask);
         if (enabling) {
             const int e = enable(&l, &p, k, l.drives.fresh_mask & ALL_JOINTS);
             if (e < 0) break;
@@ -830,16 +980,32 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
         }
         supervise(&l, &p);
         const int64_t compute = control(&l, &p);
-        if (publish(&p, k, wake_latency, compute, now_ns() - cycle_start) != 0) break;
+        if (publish(&p, k, wake_latency, compute, now_ns() - cycle_start) != 0) {
+            cause = RUN_STOP_FAULT; /* this period's commands are out: the stop goes on with the next */
+            ++k;
+            break;
+        }
+    }
+    const arm_state_t tracked = p.out.state;
+    const arm_fault_t fault = p.out.fault;
+    report->final_fault = fault;
+    if (!enabling) {
+        k = controlled_stop(&l, &p, k, cause);
+    }
+    for (unsigned s = 0; s < LATE_SIDES; ++s) {
+        report->late_count[s] = l.late.count[s];
+        report->late_worst_us[s] = l.late.worst_us[s];
     }
 
-    /* Stop the drives: they go to a stopped NMT state and stop applying torque. */
+    /* Stop the drives (NMT): they are braked and disabled by now, or their own reaction takes over. */
     arm_can_frame_t stop;
     arm_bus_make_nmt(ARM_NMT_STOP, 0u, &stop);
     send_all(&l, &stop);
     if (p.task.opt != NULL) task_end(&p.task);
-    report->final_state = p.out.state;
-    report->final_fault = p.out.fault;
+    /* a task that ended, as a stop signal, leaves the arm held by the stop (its tracking state otherwise) */
+    report->final_state = cause == RUN_STOP_SIGNAL || (cause == RUN_STOP_END && p.task_over > 0) ? ARM_STATE_SAFE_STOP
+                                                                                                : tracked;
+    report->final_fault = fault;
     report->rx = l.drives.rx;
     for (unsigned b = 0; b < l.buses.n; ++b) {
         report->rx_undecodable += arm_can_bus_rx_undecodable(&l.buses.bus[b]);

@@ -33,6 +33,21 @@ extern volatile sig_atomic_t controller_stop_signal;
 #define ARM_REPORT_CO_WRITES_MAX (ARM_CAN_BUS_SET_MAX * ARM_CO_BOOT_LOG_MAX)
 #endif
 
+/* What began a stop (controller_loop.c controlled_stop: the one path every stop takes). */
+typedef enum { RUN_STOP_NONE = 0, RUN_STOP_END, RUN_STOP_FAULT, RUN_STOP_SIGNAL } run_stop_cause_t;
+
+/* How the arm was stopped: the safe state it reached (summary.json "stop", ARM_EVENT). */
+typedef struct {
+    run_stop_cause_t cause;            /* NONE: never enabled, nothing to stop */
+    uint32_t from_bus_period;          /* the stop's first period */
+    uint32_t periods;                  /* its periods, up to the NMT stop */
+    uint32_t quick_stop_periods;       /* of them, the drives' quick stop */
+    uint32_t stopped_mask;             /* drives that reported switch on disabled or fault */
+    int braked;                        /* every drive did: braked and disabled */
+    char safe_state[240];
+    uint16_t statusword[ARM_N_JOINTS]; /* each drive's last */
+} run_stop_t;
+
 typedef struct {
     run_result_t result;
     char reason[512];
@@ -60,6 +75,13 @@ typedef struct {
     float co_q_first[ARM_N_JOINTS];              /* each joint's first position decoded with them, rad */
     unsigned co_q_seen;                          /* bit j: joint j's first position came */
     task_report_t task;                          /* what the task did (task.h) */
+    run_stop_t stop;
+    /* Periods whose states missed the wait, by the side that was late (lateness.h: none, the plant,
+     * the controller, the bus), the worst of each (us); a stop for lateness: its side and why. */
+    uint32_t late_count[4];
+    int32_t late_worst_us[4];
+    int late_side;
+    char late_text[300];
 } run_report_t;
 
 void controller_run(const options_t *opt, const arm_robot_model_t *model, telemetry_t *telem,

@@ -60,8 +60,8 @@ int main(int argc, char **argv)
     }
     free(telem);
     if (report.result != RUN_OK) {
-        fprintf(stderr, "arm_controller: %s; state %s, zero torque commanded\n", report.reason,
-                arm_state_str(report.final_state));
+        fprintf(stderr, "arm_controller: %s; state %s; safe stop: %s\n", report.reason,
+                arm_state_str(report.final_state), report.stop.cause != RUN_STOP_NONE ? report.stop.safe_state : "none (never enabled)");
         return (int)report.result;
     }
     printf("arm_controller: %u periods, %llu frames sent, %llu received, final state %s\n",

@@ -179,20 +179,16 @@ static int opt_safe_stop(void *t, void *c, const argv_opt_t *o, const char *v, c
     options_t *opt = t;
     (void)c;
     double d = 0.0;
-    if (strcmp(v, "zero") == 0) {
-        opt->ctl.safe_stop_mode = ARM_SAFE_STOP_ZERO_TORQUE;
-        return 0;
-    }
-    if (strncmp(v, "damping", 7) == 0 && (v[7] == ':' || v[7] == '\0')) {
-        opt->ctl.safe_stop_mode = ARM_SAFE_STOP_DAMPING;
-        opt->ctl.safe_stop_damping = (float)ARM_P_SAFE_STOP_DAMPING_GAIN;
-        if (v[7] == ':') {
-            if (argv_double("--safe-stop damping gain", v + 8, 0.0, ARM_P_SAFE_STOP_DAMPING_GAIN_MAX, 0, &d, err, errcap) != 0) return -1;
-            opt->ctl.safe_stop_damping = (float)d;
+    if (strncmp(v, "hold", 4) == 0 && (v[4] == ':' || v[4] == '\0')) {
+        opt->ctl.safe_stop_rate = (float)ARM_P_SAFE_STOP_HOLD_RATE;
+        if (v[4] == ':') {
+            if (argv_double("--safe-stop hold rate", v + 5, 0.0, ARM_P_SAFE_STOP_HOLD_RATE_MAX, 0, &d, err, errcap) != 0) return -1;
+            opt->ctl.safe_stop_rate = (float)d;
         }
         return 0;
     }
-    snprintf(err, errcap, "%s: '%s' is not zero, damping or damping:GAIN", o->name, v);
+    snprintf(err, errcap, "%s: '%s' is not hold or hold:RATE (a stop holds a loaded arm: zero torque alone would drop it)",
+             o->name, v);
     return -1;
 }
 

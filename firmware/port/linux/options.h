@@ -24,6 +24,7 @@ typedef struct {
     double rate_hz;
     double boot_timeout_s;
     double lockstep_timeout_s; /* lockstep: wall time to wait for a period's states */
+    double stop_timeout_s;     /* --stop-timeout: how long a stop waits for the drives' quick stop */
     double spin_us;            /* poll this long for a frame before sleeping in ppoll */
     int protocol_canopen;      /* --protocol canopen: CiA 301/402 drives (docs/drives.md) */
     /* --node, one per joint in joint order (gen/drives.py's table of the arm); n_nodes 0: the
@@ -49,6 +50,7 @@ typedef struct {
     float jog_rad;
     double jog_speed;
     double end_hold_s;
+    double brake_release_s;          /* the drives' brakes open this long after enable: a task waits */
     char trajectory_path[512];       /* --trajectory (loaded at parse time: traj_file.h) */
     arm_traj_t trajectory;
     char stream_url[256];

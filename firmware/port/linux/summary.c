@@ -42,6 +42,23 @@ int summary_write(const char *path, const options_t *opt, const run_report_t *r,
             r->rx.foreign_master, r->rx.unknown_id, r->rx.bad_length, r->rx.wrong_counter,
             r->rx.bad_format, (unsigned long long)r->rx_wrong_bus, (unsigned long long)r->rx_undecodable,
             (unsigned long long)r->rx_kernel_drops, r->rx.sim_identity, r->rx.duplicate_state);
+    static const char *const causes[] = {"none", "end of the run", "fault", "stop signal"};
+    const run_stop_t *st = &r->stop;
+    fprintf(f, "  \"stop\": {\"cause\": \"%s\", \"from_bus_period\": %u, \"periods\": %u, "
+               "\"quick_stop_periods\": %u, \"braked\": %s, \"safe_state\": ",
+            causes[(unsigned)st->cause < 4u ? st->cause : 0], st->from_bus_period, st->periods, st->quick_stop_periods,
+            st->braked ? "true" : "false");
+    json_string(f, st->safe_state);
+    fprintf(f, ", \"statuswords\": [");
+    for (unsigned j = 0; j < ARM_N_JOINTS; ++j) fprintf(f, "%s%u", j ? ", " : "", (unsigned)st->statusword[j]);
+    fprintf(f, "]},\n");
+    static const char *const sides[] = {"none", "plant", "controller", "bus"};
+    fprintf(f, "  \"lateness\": {\"late_periods\": {\"plant\": %u, \"controller\": %u, \"bus\": %u}, "
+               "\"worst_us\": {\"plant\": %d, \"controller\": %d, \"bus\": %d}, \"stop_side\": \"%s\", \"stop\": ",
+            r->late_count[1], r->late_count[2], r->late_count[3], r->late_worst_us[1], r->late_worst_us[2],
+            r->late_worst_us[3], sides[(unsigned)r->late_side < 4u ? r->late_side : 0]);
+    json_string(f, r->late_text);
+    fprintf(f, "},\n");
     fprintf(f, "  \"protocol\": \"%s\",\n", opt->protocol_canopen ? "canopen" : "arm");
     if (r->canopen) { /* the CANopen boot (arm_canopen_boot --json's sdo_writes and fault) */
         const arm_co_fault_t *cf = &r->co_fault;

@@ -79,6 +79,7 @@ unsigned arm_can_bus_send_many(arm_can_bus_t *bus, const arm_can_frame_t *frames
 
 int arm_can_bus_recv(arm_can_bus_t *bus, arm_can_frame_t *f, int timeout_us)
 {
+    bus->rx_sent_s = -1.0;
     if (bus->kind == ARM_BUS_MEM) {
         if (timeout_us != 0 && arm_can_mem_head(&bus->mem) == ARM_CAN_MEM_EMPTY) {
             arm_can_mem_idle(&bus->mem);
@@ -91,8 +92,21 @@ int arm_can_bus_recv(arm_can_bus_t *bus, arm_can_frame_t *f, int timeout_us)
     if (bus->kind == ARM_BUS_SLCAN) {
         return arm_can_slcan_recv(&bus->slcan, f, timeout_us);
     }
-    double ts = 0.0;
-    return arm_can_udp_recv(&bus->udp, f, &ts, timeout_us);
+    double ts = -1.0;
+    const int rc = arm_can_udp_recv(&bus->udp, f, &ts, timeout_us);
+    if (rc == 1) bus->rx_sent_s = ts;
+    return rc;
+}
+
+double arm_can_bus_set_sent_s(const arm_can_bus_set_t *set, unsigned index)
+{
+    /* only UDP frames carry it (the in-process bus's set reads past arm_can_bus_recv) */
+    return index < set->n && set->bus[index].kind == ARM_BUS_UDP ? set->bus[index].rx_sent_s : -1.0;
+}
+
+double arm_can_bus_clock_s(void)
+{
+    return arm_can_udp_now();
 }
 
 void arm_can_bus_close(arm_can_bus_t *bus)

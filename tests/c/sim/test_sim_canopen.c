@@ -76,7 +76,7 @@ static void boot_up_and_defaults(void)
     CHECK(sim_co_od_get(&n.od, 0x1401u, 1u) == 0x80000303u);         /* RPDO2 invalid */
     CHECK(sim_co_od_get(&n.od, 0x6076u, 0u) == 1486u); /* the motor's, mN m */
     CHECK(sim_co_od_get(&n.od, 0x608Fu, 1u) == 524288u && sim_co_od_get(&n.od, 0x6091u, 1u) == 101u);
-    const sim_co_preset_t p = {560u, 4096u, 50u, 1u, 0u, 0.0};
+    const sim_co_preset_t p = {560u, 4096u, 50u, 1u, 0u, 0.0, 0u};
     CHECK(init(&n, 3, &p, 28.0) == 0);
     sim_co_node_boot(&n, 0);
     CHECK(sim_co_od_get(&n.od, 0x6076u, 0u) == 560u && sim_co_od_get(&n.od, 0x608Fu, 1u) == 4096u);
@@ -88,14 +88,14 @@ static void boot_up_and_defaults(void)
 static void torque_through_the_gear(void)
 {
     sim_co_node_t n;
-    const sim_co_preset_t p = {0u, 0u, 0u, 0u, 0u, 0.8};
+    const sim_co_preset_t p = {0u, 0u, 0u, 0u, 0u, 0.8, 0u};
     CHECK(init(&n, 3, &p, 150.0) == 0);
     sim_cia402_scale_t sc;
     CHECK(sim_cia402_scale(&n.od, &n.preset, &sc) == 0);
     CHECK(fabs(sc.joint_rated_nm - 1.486 * 101.0 * 0.8) < 1e-12);
     CHECK(fabs(sim_cia402_target_nm(&sc, 100, 1000u, 150.0) - 0.1 * 1.486 * 101.0 * 0.8) < 1e-12);
     CHECK(sim_cia402_permille(&sc, 0.1 * 1.486 * 101.0 * 0.8) == 100);
-    const sim_co_preset_t bad = {0u, 0u, 0u, 0u, 0u, 1.5}; /* an efficiency above 1: no units */
+    const sim_co_preset_t bad = {0u, 0u, 0u, 0u, 0u, 1.5, 0u}; /* an efficiency above 1: no units */
     CHECK(sim_cia402_scale(&n.od, &bad, &sc) == -1);
 }
 
@@ -234,16 +234,21 @@ static void sync_pdos_and_cst(void)
     sim_co_node_on_sync(&n, 0.0, 0.0, NAN);
     CHECK(fabs(sim_co_node_torque(&n) - 150.0) < 1e-12);
     CHECK(write(&n, 0x6076, 0, 1000u, 4u) == 0x08000022u); /* no new scaling while enabled */
-    rpdo(&n, 0x02, 200); /* quick stop: 0x605A's default (6) stays in quick stop active, torque off */
+    rpdo(&n, 0x02, 200); /* quick stop: 0x605A's default (6) stays in quick stop active, its target no longer applied */
     sim_co_node_on_sync(&n, 0.0, 0.0, NAN);
     CHECK(n.power == SIM_PS_QUICK_STOP_ACTIVE && sim_co_node_torque(&n) == 0.0);
+    for (int k = 0; k < 50; ++k) sim_co_node_period(&n, 0.0, 0.001);
+    CHECK(n.power == SIM_PS_QUICK_STOP_ACTIVE); /* holding at standstill until told */
     rpdo(&n, 0x0F, 200); /* enable operation: back (transition 16) */
     sim_co_node_on_sync(&n, 0.0, 0.0, NAN);
     CHECK(n.power == SIM_PS_OPERATION_ENABLED);
-    CHECK(write(&n, 0x605A, 0, 2u, 2u) == 0u); /* 0-4: a quick stop ends in switch on disabled */
+    CHECK(write(&n, 0x605A, 0, 2u, 2u) == 0u); /* 1-4: a quick stop ends in switch on disabled, after its ramp */
     rpdo(&n, 0x02, 200);
     sim_co_node_on_sync(&n, 0.0, 0.0, NAN);
+    CHECK(n.power == SIM_PS_QUICK_STOP_ACTIVE);
+    for (int k = 0; k < 50; ++k) sim_co_node_period(&n, 0.0, 0.001);
     CHECK(n.power == SIM_PS_SWITCH_ON_DISABLED && sim_co_node_torque(&n) == 0.0);
+    CHECK(sim_co_od_get(&n.od, 0x6041u, 0u) == SIM_PS_SWITCH_ON_DISABLED); /* reported once reached */
     CHECK(write(&n, 0x605A, 0, 9u, 2u) == 0x06090030u); /* beyond the EDS's range */
 }
 

@@ -18,7 +18,10 @@
  * written only if the drive has it (CiA 301 makes them optional: an abort 0x06020000 or 0x06090011
  * skips it); 0x1016.1 consumer heartbeat of the master, the drive's watchdog on the master: a drive
  * that has none or refuses it is refused (ARM_CO_FAULT_NO_WATCHDOG: a dead master would leave it
- * applying its last torque), unless the configuration accepts that; 0x6060 = 10 (a refusal is
+ * applying its last torque), unless the configuration accepts that; how the drive stops (CiA 402:
+ * quick stop option 0x605A = 2, the quick stop ramp then switch on disabled, and fault reaction
+ * 0x605E = 2, the quick stop ramp, where the drive has them writable; 0x6085 quick stop
+ * deceleration where the configuration gives it); 0x6060 = 10 (a refusal is
  * ARM_CO_FAULT_NO_CST), upload 0x6061 must be 10; NMT start; controlword 0x06, 0x07, 0x0F, each
  * confirmed by statusword & 0x6F (0x21, 0x23, 0x27) read back over SDO (a drive in fault: one fault
  * reset if the configuration allows). Every download is logged (arm_co_boot_t.log). */
@@ -32,7 +35,7 @@
 #include "arm/co_sdo.h"
 
 #define ARM_CO_BOOT_MAX_NODES 8u    /* nodes of one bus */
-#define ARM_CO_BOOT_MAX_ACTIONS 56u /* steps of one node's sequence (the default uses 46) */
+#define ARM_CO_BOOT_MAX_ACTIONS 56u /* steps of one node's sequence (the default uses 48) */
 #define ARM_CO_BOOT_LOG_MAX (ARM_CO_BOOT_MAX_NODES * ARM_CO_BOOT_MAX_ACTIONS)
 #define ARM_CO_PDO_MAX_ENTRIES 4u   /* mapping entries per PDO the configurator writes */
 
@@ -64,6 +67,9 @@
 #define ARM_CO_ABSENT_608F 0x0020u
 #define ARM_CO_ABSENT_6091 0x0040u
 #define ARM_CO_ABSENT_6072 0x0080u
+#define ARM_CO_ABSENT_605A 0x0100u /* absent or read-only: the drive's own quick stop option stands */
+#define ARM_CO_ABSENT_605E 0x0200u /* the same for its fault reaction */
+#define ARM_CO_ABSENT_6085 0x0400u
 
 typedef struct {
     uint8_t n;                                  /* entries */
@@ -85,6 +91,7 @@ typedef struct {
     uint32_t gear_shaft_revs;    /* 0x6091.2 */
     uint32_t vendor_id;          /* 0x1018.1 expected; 0: any */
     uint32_t product_code;       /* 0x1018.2 expected; 0: any */
+    uint32_t quick_stop_decel;   /* 0x6085 in the drive's own unit, written where it has it; 0: its own */
     /* the gear's efficiency, (0, 1]: the joint gets 0x6076 x gear x it (the drive table's; no object
      * holds it); 0 means 1, a lossless gear */
     float gear_efficiency;
@@ -194,6 +201,7 @@ typedef enum {
 } arm_co_slot_t;
 
 #define ARM_CO_ACT_OPTIONAL 0x01u /* the drive may lack the object (CiA 301/402): an abort saying so skips it */
+#define ARM_CO_ACT_IF_WRITABLE 0x02u /* ... or keep it read-only: its own value then stands */
 
 typedef struct {
     uint8_t kind;        /* arm_co_action_kind_t */

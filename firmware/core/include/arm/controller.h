@@ -26,7 +26,7 @@ typedef enum {
     ARM_STATE_INIT = ARM_P_CONTROLLER_STATES_INIT,           /* configured, no valid input yet */
     ARM_STATE_RUNNING = ARM_P_CONTROLLER_STATES_RUNNING,     /* method output reaches the drives */
     ARM_STATE_FAULT = ARM_P_CONTROLLER_STATES_FAULT,         /* a fault was detected this period; the safe-stop output is commanded */
-    ARM_STATE_SAFE_STOP = ARM_P_CONTROLLER_STATES_SAFE_STOP, /* latched after a fault: safe-stop output until re-initialised */
+    ARM_STATE_SAFE_STOP = ARM_P_CONTROLLER_STATES_SAFE_STOP, /* latched after a fault or a stop: the arm held (gravity + damping) until re-initialised */
 } arm_state_t;
 
 typedef enum {
@@ -53,10 +53,6 @@ typedef enum {
 
 #define ARM_TORQUE_REPORT_LAG_MAX 4u /* the commands kept for the torque check (torque_report_lag_max); a power of two */
 
-typedef enum {
-    ARM_SAFE_STOP_ZERO_TORQUE = 0,
-    ARM_SAFE_STOP_DAMPING, /* tau = -damping * qd, clamped */
-} arm_safe_stop_mode_t;
 
 typedef struct {
     arm_method_t method;
@@ -86,8 +82,9 @@ typedef struct {
      * later, a TPDO2 of every n-th SYNC reports up to n - 1 periods late). */
     uint32_t torque_report_lag_min;
     uint32_t torque_report_lag_max;         /* at most ARM_TORQUE_REPORT_LAG_MAX */
-    arm_safe_stop_mode_t safe_stop_mode;
-    float safe_stop_damping; /* Nm s/rad */
+    /* The safe stop's hold: gravity compensation plus damping, the model's torque at the joints'
+     * positions for the deceleration -safe_stop_rate * qd (1/s), within the torque and rate limits. */
+    float safe_stop_rate;
 } arm_ctl_config_t;
 
 typedef struct {
@@ -163,7 +160,8 @@ typedef enum {
 
 /* Fills cfg with the defaults for the model (the numbers are the registry's,
  * firmware/params/params.toml): PD at 20 rad/s, critically damped; the model's
- * torque limits; a rate limit of full scale per 10 ms; zero-torque safe stop after 3 stale periods;
+ * torque limits; a rate limit of full scale per 10 ms; a safe stop that holds the arm (gravity
+ * compensation, damping at 20 1/s) after 3 stale periods;
  * every plausibility check: the model's joint ranges + 0.1 rad, 2 pi rad/s, steps within 0.01 rad
  * of what the velocities explain, 0.5 rad of following error, and the reported torque within 10 %
  * of the torque limit of the commanded one for no more than 3 periods in a row. */
@@ -179,6 +177,9 @@ void arm_ctl_step(arm_ctl_t *ctl, const arm_ctl_input_t *in, arm_ctl_output_t *o
 
 /* The port detected a fault the core cannot see (lost peer, drive fault): latch safe stop. */
 void arm_ctl_external_fault(arm_ctl_t *ctl);
+/* A stop without a fault (a stop signal, the end of a run): safe stop from the next step on, the
+ * arm held as after a fault. */
+void arm_ctl_stop(arm_ctl_t *ctl);
 
 const char *arm_state_str(arm_state_t s);
 const char *arm_fault_str(arm_fault_t f);

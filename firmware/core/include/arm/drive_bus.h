@@ -13,6 +13,8 @@
 #define ARM_NMT_STATE_OPERATIONAL 0x05u
 
 /* CiA 402 controlwords the controller uses. */
+#define ARM_CW_DISABLE_VOLTAGE 0x0000u
+#define ARM_CW_QUICK_STOP 0x0002u
 #define ARM_CW_SHUTDOWN 0x0006u
 #define ARM_CW_SWITCH_ON 0x0007u
 #define ARM_CW_ENABLE_OPERATION 0x000Fu

@@ -26,6 +26,7 @@ typedef struct {
     arm_can_socketcan_t socketcan; /* kind == ARM_BUS_SOCKETCAN */
     arm_can_mem_t mem;             /* kind == ARM_BUS_MEM */
     arm_can_slcan_t slcan;         /* kind == ARM_BUS_SLCAN */
+    double rx_sent_s;              /* the last frame received: when its sender sent it (arm_can_bus_sent_s) */
 } arm_can_bus_t;
 
 typedef struct {
@@ -61,5 +62,13 @@ unsigned arm_can_bus_set_send_many(arm_can_bus_set_t *set, unsigned index, const
  * 0 after the idle hook had its turn (arm/can_mem.h). */
 int arm_can_bus_set_recv(arm_can_bus_set_t *set, arm_can_frame_t *f, unsigned *index, int timeout_us);
 void arm_can_bus_set_close(arm_can_bus_set_t *set);
+
+/* When the sender of the last frame received on bus `index` sent it, on arm_can_bus_clock_s()'s
+ * clock (s), or -1 where the transport does not say (SocketCAN, SLCAN, the in-process bus): the UDP
+ * transport's frames carry their sender's time (python-can's wire format). A receiver on the same
+ * host tells from it a sender that was late from its own late reading. */
+double arm_can_bus_set_sent_s(const arm_can_bus_set_t *set, unsigned index);
+/* The clock of those times, now (s); -1 where there is none. */
+double arm_can_bus_clock_s(void);
 
 #endif
