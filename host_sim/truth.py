@@ -1,6 +1,7 @@
 """The plant's truth file (armctl plant --truth FILE): the arm as it really is, where the model the
 controller was built from is silent or wrong. The controller never reads it: it meets the arm only
-through the bus, as it would a real one; `armctl commission` has to find what the file hides.
+through the bus, as it would a real one; `armctl commission` has to find what the file hides. The
+drives' holding brakes are the drive table's (brake_holding_nm, gen/drives.py), as on a real arm.
 
     flexible = true          # the arm with flexible joints (the build's plant.xml) [false]
     payload_kg = 1.5         # at the flange, unmodelled [0]
@@ -13,7 +14,6 @@ through the bus, as it would a real one; `armctl commission` has to find what th
     encoder_offset_deg = 10  # its encoder zeroed this far off [0]
     reversed = "motor"       # its motor (or "encoder") turns the other way
     gear = [101, 1]          # the real gear, when the drive's 0x6091 (the drive table's) is not it
-    brake_nm = 150           # its holding brake, closed while the drive is disabled [its torque limit; 0: none]
     start_deg = 30           # its angle when the plant starts [the arm's home]
 
 Bad input is one line naming the file and the field (TruthError)."""
@@ -33,7 +33,7 @@ from host_sim.uncertainty import UncertaintyConfig
 
 TOP_FIELDS = {"flexible", "payload_kg", "joint"}
 JOINT_FIELDS = {"viscous", "coulomb", "rotor_inertia", "stiffness_scale", "encoder_offset_deg", "reversed", "gear",
-                "brake_nm", "start_deg"}
+                "start_deg"}
 REVERSED = ("motor", "encoder")
 
 
@@ -61,7 +61,7 @@ def _csv(vals: list[float]) -> str:
 
 def load(path: Path | None, info: dict[str, Any], table: Any) -> Truth:
     """The truth for the arm (arm.json as a dict) and its drive table (gen/drives.py DriveConfig):
-    None is the arm as modelled (brakes on every joint, at its torque limit)."""
+    None is the arm as modelled."""
     doc: dict[str, Any] = {}
     where = str(path) if path is not None else "truth"
     if path is not None:
@@ -101,9 +101,6 @@ def load(path: Path | None, info: dict[str, Any], table: Any) -> Truth:
     stiff = per_joint("stiffness_scale", 1.0, param("simulator", "joint-stiffness-scale").min,
                       param("simulator", "joint-stiffness-scale").max)
     offset = per_joint("encoder_offset_deg", 0.0, -360.0, 360.0)
-    limits = [j["torque_limit"] for j in info["joints"]]
-    brake = [_number(tab.get(j, {}).get("brake_nm", lim), f"{where}: joint.{j}.brake_nm", 0.0,
-                     param("simulator", "plant-brake-nm").max) for j, lim in zip(joints, limits)]
     start = []
     for j, spec in zip(joints, info["joints"]):
         lo, hi = spec["range"]
@@ -134,7 +131,7 @@ def load(path: Path | None, info: dict[str, Any], table: Any) -> Truth:
         raise TruthError(f"{where}: stiffness_scale: scales the gears of a flexible arm (flexible = true)")
     unc = UncertaintyConfig(viscous=viscous if any(viscous) else [], coulomb=coulomb if any(coulomb) else [],
                             flexible=flexible, payload_kg=[payload] if payload > 0 else [])
-    args = ["--start-pose", _csv(start), "--plant-brake-nm", _csv(brake)]
+    args = ["--start-pose", _csv(start)]
     if any(rotor):
         args += ["--rotor-inertia", _csv(rotor)]
     if any(s != 1.0 for s in stiff):
@@ -149,7 +146,7 @@ def load(path: Path | None, info: dict[str, Any], table: Any) -> Truth:
     notes = []
     for i, j in enumerate(joints):
         t = tab.get(j, {})
-        bits = [f"{k} = {one_line(repr(t[k]))}" for k in sorted(t) if k not in ("start_deg", "brake_nm")]
+        bits = [f"{k} = {one_line(repr(t[k]))}" for k in sorted(t) if k != "start_deg"]
         if bits:
             notes.append(f"{j}: {', '.join(bits)}")
     if payload:

@@ -93,9 +93,6 @@ void sim_uncertainty_default(sim_uncertainty_t *u);
  * Returns 0, or -1 with a message naming the file, option or element in err. */
 int sim_arm_open(sim_arm_t *a, const char *path, const char *plant, const char *keyframe, int substeps,
                  const sim_uncertainty_t *u, char *err, size_t errcap);
-/* Puts the arm at rest at joint angles q (rad), each rotor of a flexible joint wound up against
- * gravity, as sim_arm_open does at the keyframe (the plant's --start-pose). */
-void sim_arm_set_pose(sim_arm_t *a, const double *q);
 /* Joint j's motor angle and speed, in joint units: its rotor's, or the link's on a rigid joint. */
 double sim_arm_motor_q(const sim_arm_t *a, int j);
 double sim_arm_motor_qd(const sim_arm_t *a, int j);

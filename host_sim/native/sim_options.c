@@ -352,8 +352,6 @@ static int sim_truth_list(void *t, void *c, const argv_opt_t *opt, const char *v
         double lo, hi;
         size_t values, count;
     } k[] = {
-        {"--start-pose", ARM_P_SIMULATOR_START_POSE_MIN, ARM_P_SIMULATOR_START_POSE_MAX,
-         offsetof(sim_plant_truth_t, start_pose), offsetof(sim_plant_truth_t, n_start_pose)},
         {"--rotor-inertia", ARM_P_SIMULATOR_ROTOR_INERTIA_MIN, ARM_P_SIMULATOR_ROTOR_INERTIA_MAX,
          offsetof(sim_plant_truth_t, rotor_inertia), offsetof(sim_plant_truth_t, n_rotor_inertia)},
         {"--joint-stiffness-scale", ARM_P_SIMULATOR_JOINT_STIFFNESS_SCALE_MIN, ARM_P_SIMULATOR_JOINT_STIFFNESS_SCALE_MAX,
@@ -362,8 +360,6 @@ static int sim_truth_list(void *t, void *c, const argv_opt_t *opt, const char *v
          offsetof(sim_plant_truth_t, encoder_offset), offsetof(sim_plant_truth_t, n_encoder_offset)},
         {"--gear-factor", ARM_P_SIMULATOR_GEAR_FACTOR_MIN, ARM_P_SIMULATOR_GEAR_FACTOR_MAX,
          offsetof(sim_plant_truth_t, gear_factor), offsetof(sim_plant_truth_t, n_gear_factor)},
-        {"--plant-brake-nm", ARM_P_SIMULATOR_PLANT_BRAKE_NM_MIN, ARM_P_SIMULATOR_PLANT_BRAKE_NM_MAX,
-         offsetof(sim_plant_truth_t, brake_nm), offsetof(sim_plant_truth_t, n_brake)},
     };
     for (size_t i = 0; i < sizeof(k) / sizeof(k[0]); ++i) {
         if (strcmp(opt->name, k[i].name) != 0) continue;
@@ -444,7 +440,7 @@ int sim_options_parse(int argc, char **argv, sim_options_t *o, char *err, unsign
     const sim_plant_truth_t *tr = &o->truth;
     /* what the drives sense and act through (sim_canopen_loop.c): a start pose is any run's */
     const int drive_truth = tr->n_rotor_inertia || tr->n_stiffness_scale || tr->n_encoder_offset || tr->n_gear_factor ||
-                            tr->n_brake || tr->reversed_motor || tr->reversed_encoder;
+                            tr->reversed_motor || tr->reversed_encoder;
     if ((o->co.serve || o->sessions[0] != '\0' || drive_truth) &&
         o->protocol != SIM_PROTOCOL_CANOPEN) {
         snprintf(err, errcap, "--serve/--sessions and the plant's truth (--rotor-inertia, --encoder-offset, ...): "

@@ -6,11 +6,6 @@
 
 #include "json_file.h"
 
-/* A closed brake: MuJoCo's friction loss at the brake's holding torque, made stiff (its default
- * soft constraint lets a loaded joint creep about a degree in 2 s; these, 0.03 deg). */
-static const double BRAKE_SOLREF[2] = {0.005, 1.0};
-static const double BRAKE_SOLIMP[5] = {0.99, 0.999, 0.001, 0.5, 2.0};
-
 void sim_plant_truth_default(sim_plant_truth_t *t)
 {
     memset(t, 0, sizeof(*t));
@@ -26,9 +21,8 @@ int sim_plant_apply(sim_plant_t *p, const sim_plant_truth_t *truth, sim_arm_t *a
     const struct {
         const char *name;
         int count;
-    } lists[] = {{"--start-pose", truth->n_start_pose}, {"--rotor-inertia", truth->n_rotor_inertia},
-                 {"--joint-stiffness-scale", truth->n_stiffness_scale}, {"--encoder-offset", truth->n_encoder_offset},
-                 {"--gear-factor", truth->n_gear_factor}, {"--plant-brake-nm", truth->n_brake}};
+    } lists[] = {{"--rotor-inertia", truth->n_rotor_inertia}, {"--joint-stiffness-scale", truth->n_stiffness_scale},
+                 {"--encoder-offset", truth->n_encoder_offset}, {"--gear-factor", truth->n_gear_factor}};
     for (size_t i = 0; i < sizeof(lists) / sizeof(lists[0]); ++i) {
         if (lists[i].count != 0 && lists[i].count != n) {
             snprintf(err, errcap, "%s: %d values for the arm's %d joints", lists[i].name, lists[i].count, n);
@@ -39,10 +33,6 @@ int sim_plant_apply(sim_plant_t *p, const sim_plant_truth_t *truth, sim_arm_t *a
         snprintf(err, errcap, "--reversed-motor/--reversed-encoder: a joint beyond the arm's %d", n);
         return -1;
     }
-    if (truth->n_brake != 0 && !truth->serve) {
-        snprintf(err, errcap, "--plant-brake-nm: with --serve (the brakes close between sessions)");
-        return -1;
-    }
     int changed = 0;
     for (int j = 0; j < n; ++j) {
         const int dof = arm->motor_dof[j];
@@ -50,9 +40,6 @@ int sim_plant_apply(sim_plant_t *p, const sim_plant_truth_t *truth, sim_arm_t *a
             m->dof_armature[dof] += truth->rotor_inertia[j];
             changed = 1;
         }
-        p->base_frictionloss[j] = m->dof_frictionloss[dof];
-        memcpy(p->base_solref[j], m->dof_solref + 2 * dof, sizeof(p->base_solref[j]));
-        memcpy(p->base_solimp[j], m->dof_solimp + 5 * dof, sizeof(p->base_solimp[j]));
     }
     if (truth->n_stiffness_scale != 0) {
         if (!arm->flexible) {
@@ -77,19 +64,6 @@ int sim_plant_apply(sim_plant_t *p, const sim_plant_truth_t *truth, sim_arm_t *a
         arm->w_from_plant = 0;
         mj_setConst(m, arm->data);
     }
-    if (truth->n_start_pose != 0) {
-        for (int j = 0; j < n; ++j) {
-            const int jnt = m->dof_jntid[j];
-            if (m->jnt_limited[jnt] && (truth->start_pose[j] < m->jnt_range[2 * jnt] ||
-                                        truth->start_pose[j] > m->jnt_range[2 * jnt + 1])) {
-                snprintf(err, errcap, "--start-pose: joint %d at %g rad is outside its range [%g, %g]", j + 1,
-                         truth->start_pose[j], m->jnt_range[2 * jnt], m->jnt_range[2 * jnt + 1]);
-                return -1;
-            }
-        }
-        sim_arm_set_pose(arm, truth->start_pose);
-    }
-    if (truth->serve) sim_plant_brakes(p, 0u); /* powered up with the drives disabled: braked */
     return 0;
 }
 
@@ -107,22 +81,6 @@ double sim_plant_actuate(const sim_plant_t *p, int j, double tau)
     const sim_plant_truth_t *t = p->truth;
     const double s = t->n_gear_factor != 0 ? t->gear_factor[j] : 1.0;
     return ((t->reversed_motor >> j) & 1u) ? -s * tau : s * tau;
-}
-
-void sim_plant_brakes(sim_plant_t *p, uint32_t enabled_mask)
-{
-    const sim_plant_truth_t *t = p->truth;
-    if (t->n_brake == 0) return;
-    mjModel *m = p->arm->model;
-    for (int j = 0; j < p->arm->n; ++j) {
-        const int closed = ((enabled_mask >> j) & 1u) == 0u && t->brake_nm[j] > 0.0;
-        if (closed == (int)((p->braked >> j) & 1u)) continue;
-        const int dof = p->arm->motor_dof[j];
-        m->dof_frictionloss[dof] = p->base_frictionloss[j] + (closed ? t->brake_nm[j] : 0.0);
-        memcpy(m->dof_solref + 2 * dof, closed ? BRAKE_SOLREF : p->base_solref[j], sizeof(BRAKE_SOLREF));
-        memcpy(m->dof_solimp + 5 * dof, closed ? BRAKE_SOLIMP : p->base_solimp[j], sizeof(BRAKE_SOLIMP));
-        p->braked ^= 1u << j;
-    }
 }
 
 static sim_plant_session_t *current(sim_plant_t *p)
@@ -177,6 +135,16 @@ const sim_plant_session_t *sim_plant_last(const sim_plant_t *p)
     return p->n_sessions > 0 ? &p->sessions[(p->n_sessions - 1) % SIM_PLANT_SESSIONS_MAX] : NULL;
 }
 
+/* Bit j: joint j's holding brake holds (its drive's, sim_power_stage.h). */
+static unsigned braked(const sim_plant_t *p)
+{
+    unsigned m = 0u;
+    for (int j = 0; j < p->arm->n; ++j) {
+        if (p->arm->brake_nm[j] > 0.0) m |= 1u << j;
+    }
+    return m;
+}
+
 int sim_plant_write(const sim_plant_t *p, const char *path, char *err, unsigned long errcap)
 {
     json_file_t jf;
@@ -186,7 +154,7 @@ int sim_plant_write(const sim_plant_t *p, const char *path, char *err, unsigned 
     fprintf(f, "{\n  \"settle_s\": %g,\n  \"in_session\": %s,\n  \"simulated_s\": %.6f,\n  \"idle_steps\": %llu,\n"
                "  \"idle_slips\": %llu,\n  \"brakes_closed\": %u,\n  \"q\": [",
             SIM_PLANT_SETTLE_S, p->in_session ? "true" : "false", (double)p->arm->step_count * p->arm->period,
-            (unsigned long long)p->idle_steps, (unsigned long long)p->idle_slips, (unsigned)p->braked);
+            (unsigned long long)p->idle_steps, (unsigned long long)p->idle_slips, braked(p));
     for (int j = 0; j < n; ++j) fprintf(f, "%s%.9g", j ? ", " : "", p->arm->data->qpos[j]);
     fprintf(f, "],\n  \"sessions\": [");
     const int first = p->n_sessions > SIM_PLANT_SESSIONS_MAX ? p->n_sessions - SIM_PLANT_SESSIONS_MAX : 0;

@@ -3,13 +3,13 @@
  *
  * Sessions: a master boots the drives, runs its SYNCs and stops them (NMT stop) or falls silent;
  * the plant then keeps the arm's physics going on the wall clock, its drives disabled and their
- * holding brakes closed, until the next master speaks, and says how far each joint moved in the
+ * holding brakes (the drive table's: sim_power_stage.h) closed, until the next master speaks, and says how far each joint moved in the
  * SETTLE_S after each stop. Inside a session the arm moves on the master's SYNC only, as in every
  * HIL run: a rehearsal is the same whatever the machine's latency.
  *
- * The truth (--start-pose, --rotor-inertia, --joint-stiffness-scale, --encoder-offset,
- * --gear-factor, --reversed-motor, --reversed-encoder, --plant-brake-nm; friction and payload are
- * the uncertainty's --viscous, --coulomb, --payload-kg): what the model the controller was built
+ * The truth (--rotor-inertia, --joint-stiffness-scale, --encoder-offset, --gear-factor,
+ * --reversed-motor, --reversed-encoder; the start pose is --start-pose, friction and payload the
+ * uncertainty's --viscous, --coulomb, --payload-kg): what the model the controller was built
  * from does not say, or says wrong, and a commissioning must find. */
 #ifndef ARM_SIM_PLANT_H
 #define ARM_SIM_PLANT_H
@@ -23,8 +23,6 @@
 
 typedef struct {
     int serve;                              /* --serve */
-    double start_pose[SIM_MAX_JOINTS];      /* rad; n_start_pose 0: the keyframe */
-    int n_start_pose;
     double rotor_inertia[SIM_MAX_JOINTS];   /* kg m^2 added to each joint's armature */
     int n_rotor_inertia;
     double stiffness_scale[SIM_MAX_JOINTS]; /* each joint's gear stiffness times this (flexible plant) */
@@ -35,8 +33,6 @@ typedef struct {
     int n_gear_factor;
     uint32_t reversed_motor;                /* bit j: joint j's motor turns the other way */
     uint32_t reversed_encoder;              /* bit j: joint j's encoder counts the other way */
-    double brake_nm[SIM_MAX_JOINTS];        /* holding brake per joint (--serve); n_brake 0: none */
-    int n_brake;
 } sim_plant_truth_t;
 
 typedef struct {
@@ -51,9 +47,6 @@ typedef struct {
 typedef struct {
     const sim_plant_truth_t *truth;
     sim_arm_t *arm;
-    double base_frictionloss[SIM_MAX_JOINTS];
-    double base_solref[SIM_MAX_JOINTS][2], base_solimp[SIM_MAX_JOINTS][5];
-    uint32_t braked;        /* bit j: joint j's brake is closed */
     int in_session;
     uint64_t session_start_period;
     double stop_q[SIM_MAX_JOINTS];
@@ -66,14 +59,12 @@ typedef struct {
 } sim_plant_t;
 
 void sim_plant_truth_default(sim_plant_truth_t *t);
-/* The truth into the arm (rotor inertia, stiffness, start pose): 0, or -1 with the option named in err. */
+/* The truth into the arm (rotor inertia, stiffness): 0, or -1 with the option named in err. */
 int sim_plant_apply(sim_plant_t *p, const sim_plant_truth_t *truth, sim_arm_t *arm, char *err, unsigned long errcap);
 /* What joint j's drive reads (its encoder): the true q, qd as the truth turns them. */
 void sim_plant_sense(const sim_plant_t *p, int j, double *q, double *qd);
 /* The torque joint j gets when its drive applies tau. */
 double sim_plant_actuate(const sim_plant_t *p, int j, double tau);
-/* The brakes before a step: joint j's closes when enabled_mask's bit j is 0 (its drive's power stage is off). */
-void sim_plant_brakes(sim_plant_t *p, uint32_t enabled_mask);
 /* A master's SYNC began a session. */
 void sim_plant_session_begin(sim_plant_t *p, uint64_t period);
 /* Its end ("stopped", "master silent"): the window after the stop begins. */

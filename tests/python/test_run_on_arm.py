@@ -128,6 +128,7 @@ class Rehearsal:
     runs: dict[str, subprocess.CompletedProcess[str]]
     sessions: dict[str, dict]      # each run's session.json
     plant: list[dict]              # the plant's sessions, settled
+    plant_state: dict              # the plant's record then (its brakes, its pose)
     record: Path
     out: Path
 
@@ -160,11 +161,12 @@ def rehearsal(ports: int, tmp_path_factory: pytest.TempPathFactory) -> Iterator[
         o, e = communicate_or_kill(p, 120)
         runs["ctrl-c"] = subprocess.CompletedProcess(p.args, p.returncode, o, e)
         settled = plant.settled(1 + len(runs))
+        state = plant.sessions()
     finally:
         plant.stop()
     sessions = {k: json.loads((out / ("stop" if k == "ctrl-c" else k) / "session.json").read_text())
                 for k, r in runs.items() if (out / ("stop" if k == "ctrl-c" else k) / "session.json").exists()}
-    yield Rehearsal(cm, runs, sessions, settled, record, out)
+    yield Rehearsal(cm, runs, sessions, settled, state, record, out)
 
 
 def test_commission_passes_on_the_arm_the_model_describes(rehearsal: Rehearsal) -> None:
@@ -197,8 +199,15 @@ def test_ctrl_c_is_a_controlled_stop_and_no_joint_moves_after_it(rehearsal: Rehe
     r = rehearsal.runs["ctrl-c"]
     assert r.returncode == 0 and "stopped by you" in r.stdout, r.stdout + r.stderr
     assert rehearsal.sessions["ctrl-c"]["stopped_by_user"]
+    # every session's stop (each task's end, then Ctrl-C) is the controlled stop: the drives quick-stopped
+    # under the hold, each confirmed switch on disabled with its brake closed
+    for name, s in rehearsal.sessions.items():
+        stop = s["stop"]
+        assert stop["cause"] == ("stop signal" if name == "ctrl-c" else "end of the run") and stop["braked"], (name, stop)
     last = rehearsal.plant[-1]
     assert last["ended"] == "stopped" and last["complete"] and last["window_s"] >= 2.0 - 1e-3, last
+    held = rehearsal.plant_state
+    assert held["brakes_closed"] == (1 << len(NAMES)) - 1 and not held["in_session"], held  # held and braked
     for s in rehearsal.plant:
         if s["window_s"] >= 2.0 - 1e-3:  # the sessions whose whole 2 s after the stop were watched
             assert max(s["moved_after_stop_deg"]) <= MOVED_AFTER_STOP_DEG, s

@@ -123,8 +123,12 @@ def test_the_rehearsal_on_vcan_ends_as_asked(vm: Path) -> None:
 
 def test_ctrl_c_on_vcan_stops_the_arm_and_it_stays(vm: Path) -> None:
     assert _rc(vm, "stop") == 0 and "stopped by you" in _text(vm, "stop"), _text(vm, "stop")
-    sessions = json.loads((vm / "plant" / "sessions.json").read_text())["sessions"]
+    plant = json.loads((vm / "plant" / "sessions.json").read_text())
+    sessions = plant["sessions"]
     assert len(sessions) == 6 and all(s["ended"] == "stopped" for s in sessions), sessions
+    stop = json.loads((vm / "stop" / "session.json").read_text())["stop"]
+    assert stop["cause"] == "stop signal" and stop["braked"], stop  # the controlled stop, every brake closed
+    assert plant["brakes_closed"] == (1 << len(NAMES)) - 1, plant  # the arm left held by its brakes
     last = sessions[-1]
     assert last["complete"] and last["window_s"] >= 2.0 - 1e-3 and max(last["moved_after_stop_deg"]) <= \
         MOVED_AFTER_STOP_DEG, last

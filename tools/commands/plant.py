@@ -67,12 +67,14 @@ def run(ns: argparse.Namespace) -> int:
     except OutputError as exc:
         raise CommandError(str(exc)) from None
     substeps = info["substeps"]
+    # the drives' holding brakes, from the drive table (engaged at power-on, as a real arm's)
+    brakes = [a for d in setup.table.drives if d.brake_spec() for a in ("--brake", d.brake_spec())]
     exe = setup.bdir / "host_sim" / "native" / "arm_sim"
     argv = sim_argv(exe, setup.buses, lcm_url="", summary=out / "plant_summary.json",
                     uncertainty=truth.uncertainty.to_dict(), model=prepared_model(setup.bdir),
                     extra=["--substeps", str(substeps), "--protocol", "canopen", *setup.sim_node_args,
                            "--od", str(out / "canopen_od.txt"), "--serve", "--sessions", str(out / "sessions.json"),
-                           *truth.args])
+                           *truth.args, *brakes])
     print(f"armctl plant: the arm {info['name']} on the bus, for controllers one after another; Ctrl-C ends it")
     for line in setup.describe_buses():
         print(f"  bus {line}")

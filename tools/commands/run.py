@@ -172,15 +172,19 @@ def finish(res: object, setup: object, task: str, prog: str) -> int:
     follow = tracking(summary, setup.joint_names)  # type: ignore[attr-defined]
     write_json_atomic(out / "session.json", {
         "task": task, "controller_exit": code, "stopped_by_user": user_stop, "reason": reason,
-        "final_state": summary.get("final_state"), "task_report": summary.get("task"),
+        "final_state": summary.get("final_state"), "stop": summary.get("stop"), "task_report": summary.get("task"),
         "buses": setup.buses, "tracking": follow})  # type: ignore[attr-defined]
     if follow.get("periods"):
         worst = max(follow["max_abs_deg"].items(), key=lambda kv: kv[1])
         print(f"{prog}: followed within {worst[1]:.3g} deg ({worst[0]}) over {follow['periods']} periods "
               f"(each joint: {out / 'session.json'})")
+    stop = summary.get("stop") or {}
+    if (code == 0 or user_stop) and stop.get("cause", "none") != "none" and not stop.get("braked"):
+        raise CommandError(f"{reason}; the stop did not end braked: {stop.get('safe_state', '?')} (log "
+                           f"{out / 'controller.log'})", 1)
     if code == 0 or user_stop:
         print(f"{prog}: {'stopped by you' if user_stop else 'done'}: {reason}; final state "
-              f"{summary.get('final_state', '?')}")
+              f"{summary.get('final_state', '?')}; {stop.get('safe_state', 'nothing to stop')}")
         return 0
     raise CommandError(f"{reason} (controller exit {code}; log {out / 'controller.log'})", 1)
 

@@ -202,6 +202,12 @@ def _echo(stream: Any, log: TextIO, prefix: str) -> None:
         sys.stderr.flush()
 
 
+def brake_release_s(setup: ArmOnBus) -> float:
+    """The drive table's longest brake release delay (s): a task holds the pose that long after the
+    drives are enabled, so that nothing moves against a brake still closed."""
+    return max((d.brake[2] / 1000 for d in setup.table.drives if d.brake is not None), default=0.0)
+
+
 def run_controller(setup: ArmOnBus, ctl_args: list[str], out: Path, mode: str) -> SessionResult:
     """arm_controller alone on the arm's buses (and the telemetry logger), until it ends: the task
     ends, the arm faults, or a signal to armctl (Ctrl-C) makes it stop the arm. Its output is shown
@@ -221,7 +227,8 @@ def run_controller(setup: ArmOnBus, ctl_args: list[str], out: Path, mode: str) -
         cpu = (os.cpu_count() or 1) - 1  # the loop's CPU, as a HIL run's (tools/run/hil.py realtime_cpu)
         ctl = [str(controller_binary(setup.bdir)), *setup.bus_args(), "--lcm-url", url, "--protocol", "canopen",
                *setup.node_args, "--mode", mode, "--summary", str(out / "controller_summary.json"),
-               *(["--cpu", str(cpu)] if realtime else spin_args(mode)), *ctl_args]
+               *(["--cpu", str(cpu)] if realtime else spin_args(mode)), "--brake-release", f"{brake_release_s(setup):g}",
+               *ctl_args]
         (out / "controller.argv").write_text(json.dumps(ctl) + "\n")
         print(f"  telemetry: {url} (ARM_CTL: q, q_d, tau; ARM_EVENT), logged to {out / 'telemetry.lcmlog'}")
         sys.stdout.flush()

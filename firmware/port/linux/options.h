@@ -55,6 +55,7 @@ typedef struct {
     float jog_rad;
     double jog_speed;
     double end_hold_s;
+    double brake_release_s;          /* the drives' brakes open this long after enable: a task waits */
     char trajectory_path[512];       /* --trajectory (loaded at parse time: traj_file.h) */
     arm_traj_t trajectory;
     char stream_url[256];

@@ -79,7 +79,9 @@ int task_begin(task_t *t, const options_t *opt, const float q[ARM_N_JOINTS], tel
     memcpy(report->start_pose, q, sizeof(report->start_pose));
     memcpy(t->hold, q, sizeof(t->hold));
     memcpy(t->last_q_d, q, sizeof(t->last_q_d));
-    const float now = (float)k_run * opt->ctl.period_s;
+    /* nothing moves before the drives' brakes are open (their release delay): the pose held until then */
+    const float now = (float)k_run * opt->ctl.period_s + (float)opt->brake_release_s;
+    t->t_released = now;
     const float duration = (float)opt->duration_s;
     float first[ARM_N_JOINTS];
     memcpy(first, q, sizeof(first));
@@ -326,6 +328,12 @@ int task_step(task_t *t, float time_s, uint32_t k_run, const float q[ARM_N_JOINT
     int over = 0;
     if (kind == TASK_REFERENCE && !opt->reference_home) {
         arm_reference_eval(&t->ref, time_s, in->q_d, in->qd_d, in->qdd_d); /* a HIL run's, unchanged */
+        return 0;
+    }
+    if (time_s < t->t_released) {
+        set_pose(in, t->report->start_pose);
+        memcpy(t->last_q_d, in->q_d, sizeof(t->last_q_d));
+        memcpy(t->last_qd_d, in->qd_d, sizeof(t->last_qd_d));
         return 0;
     }
     if (t->moving && time_s >= t->t_move_end) {

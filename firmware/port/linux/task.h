@@ -73,6 +73,7 @@ typedef struct {
     arm_commission_t cm;
     float hold[ARM_N_JOINTS]; /* the pose held (the end of a move, a stopped stream, the start) */
     float t_end;         /* s: the task is over after this (run time); < 0: open-ended */
+    float t_released;    /* s: the drives' brakes are open (run time): the start pose held until then */
     float last_q_d[ARM_N_JOINTS], last_qd_d[ARM_N_JOINTS];
 #if !ARM_PORT_MCU
     plan_stream_t stream;
