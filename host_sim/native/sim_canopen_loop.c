@@ -45,6 +45,9 @@ struct co_sim {
     arm_can_frame_t late[ARM_CAN_BUS_SET_MAX][SIM_MAX_JOINTS];
     unsigned n_late[ARM_CAN_BUS_SET_MAX];
     int holding_answers; /* TEST HOOK (cfg->late_answer_period): what the nodes queue stays queued */
+    sim_plant_t *plant;  /* the truth the drives sense and act through, the brakes, the sessions (NULL: none) */
+    const char *sessions_path;
+    int serving;         /* --serve: each session's after-stop is the plant's own (sim_plant.h), not post_stop's */
     double frame_sent_s; /* the frame being handled: when the master sent it (-1: the bus does not say) */
     double sync_sent_s;  /* this period's lead SYNC: when it was sent, when it was read (-1: unknown) */
     double sync_read_s;
@@ -150,11 +153,16 @@ static int step_arm(co_sim_t *s)
     const int ideal = sim_servo_is_ideal(&s->cfg->servo);
     double cmd[SIM_MAX_JOINTS];
     for (int j = 0; j < s->n; ++j) {
-        cmd[j] = sim_co_node_period(&s->node[j], sim_arm_motor_qd(s->arm, j), s->arm->period);
+        /* the drive's own velocity loop (a quick stop, its fault reaction) sees the joint as its encoder
+         * does, and its torque reaches the joint as its motor turns (the plant's truth) */
+        double qm = sim_arm_motor_q(s->arm, j), qdm = sim_arm_motor_qd(s->arm, j);
+        if (s->plant != NULL) sim_plant_sense(s->plant, j, &qm, &qdm);
+        cmd[j] = sim_co_node_period(&s->node[j], qdm, s->arm->period);
         sim_arm_set_brake(s->arm, j, sim_power_stage_brake_nm(&s->node[j].ps));
         s->tau[j] = ideal ? cmd[j]
                           : sim_servo_period_torque(&s->cfg->servo, &s->servo[j], cmd[j], 0.0, s->arm->period,
                                                     s->arm->data->qpos[j]);
+        if (s->plant != NULL) s->tau[j] = sim_plant_actuate(s->plant, j, s->tau[j]);
     }
     const int bad = sim_arm_step(s->arm, s->tau, cmd, s->w);
     if (!s->after_stop) s->rep->periods++;
@@ -316,6 +324,7 @@ static void sync_nodes(co_sim_t *s, unsigned bus)
             sim_servo_measure(&s->cfg->servo, &s->servo[j], &s->noise[j], q[j], qd[j], sim_arm_motor_q(s->arm, j),
                               sim_arm_motor_qd(s->arm, j), s->arm->period, &qm, &qdm, &taum);
         }
+        if (s->plant != NULL) sim_plant_sense(s->plant, j, &qm, &qdm);
         sim_co_node_on_sync(&s->node[j], qm, qdm, taum);
     }
     if (s->timed) {
@@ -418,6 +427,73 @@ static void tick_all(co_sim_t *s, int64_t now)
     flush(s);
 }
 
+/* The longest the loop may sleep: a stop request is noticed within 100 ms, the nodes' timers kept. */
+static int64_t wait_ns(co_sim_t *s)
+{
+    const int64_t now = bus_now(s);
+    int64_t wait = 100000000;
+    for (int j = 0; j < s->n; ++j) {
+        const int64_t w = sim_co_node_wait_ns(&s->node[j], now);
+        if (w < wait) wait = w;
+    }
+    return wait;
+}
+
+/* Waits up to wait_ns for a frame and hands what came to the nodes, in the order it was sent (see
+ * below), then their timers. -1 on a bus error (the result set); 1 when the master stopped every
+ * drive; else 0. *master: a frame of the master's came. */
+static int receive(co_sim_t *s, int64_t wait, int *master)
+{
+    sim_report_t *rep = s->rep;
+    *master = 0;
+    arm_can_frame_t f;
+    unsigned bus = 0;
+    const int rc = arm_can_bus_set_recv(&s->set, &f, &bus, (int)(wait / 1000));
+    const double f_sent_s = rc == 1 ? arm_can_bus_set_sent_s(&s->set, bus) : -1.0;
+    if (rc < 0) {
+        char text[200];
+        snprintf(text, sizeof(text), "receiving on bus %u failed: %s", bus, strerror(errno));
+        set_result(rep, "bus-error", text);
+        return -1;
+    }
+    const int64_t now = bus_now(s);
+    const uint64_t before = rep->frames_rx;
+    int stopped = 0;
+    /* SYNC and NMT go on every bus, and sockets keep no order between buses: what is already
+     * queued on the others up to their own SYNC (this period's RPDOs) was sent first; their
+     * SYNC and what follows it come after this frame. */
+    static arm_can_frame_t later[ARM_CAN_BUS_SET_MAX][64];
+    static double later_sent_s[ARM_CAN_BUS_SET_MAX][64];
+    unsigned n_later[ARM_CAN_BUS_SET_MAX] = {0};
+    if (rc == 1 && (f.id == COB_SYNC || f.id == COB_NMT) && s->set.n > 1u) {
+        for (unsigned i = 0; i < s->set.n && !stopped; ++i) {
+            arm_can_frame_t g;
+            while (i != bus && n_later[i] < 64u && !stopped && arm_can_bus_recv(&s->set.bus[i], &g, 0) == 1) {
+                if (n_later[i] > 0u || g.id == COB_SYNC || g.id == COB_NMT) {
+                    later_sent_s[i][n_later[i]] = s->set.bus[i].rx_sent_s;
+                    later[i][n_later[i]++] = g;
+                } else {
+                    s->frame_sent_s = s->set.bus[i].rx_sent_s;
+                    stopped = on_frame(s, &g, i, now);
+                }
+            }
+        }
+    }
+    if (rc == 1 && !stopped) {
+        s->frame_sent_s = f_sent_s;
+        stopped = on_frame(s, &f, bus, now);
+    }
+    for (unsigned i = 0; i < s->set.n; ++i) {
+        for (unsigned k = 0; k < n_later[i] && !stopped; ++k) {
+            s->frame_sent_s = later_sent_s[i][k];
+            stopped = on_frame(s, &later[i][k], i, now);
+        }
+    }
+    *master = rep->frames_rx != before;
+    tick_all(s, bus_now(s)); /* the frames may have ended a period */
+    return stopped;
+}
+
 static void run(co_sim_t *s)
 {
     const sim_config_t *cfg = s->cfg;
@@ -430,65 +506,15 @@ static void run(co_sim_t *s)
             s->power_lost = 1;
             return;
         }
-        int64_t now = bus_now(s);
-        int64_t wait = 100000000; /* a stop request is noticed within 100 ms */
-        for (int j = 0; j < s->n; ++j) {
-            const int64_t w = sim_co_node_wait_ns(&s->node[j], now);
-            if (w < wait) wait = w;
-        }
-        arm_can_frame_t f;
-        unsigned bus = 0;
-        const int rc = arm_can_bus_set_recv(&s->set, &f, &bus, (int)(wait / 1000));
-        const double f_sent_s = rc == 1 ? arm_can_bus_set_sent_s(&s->set, bus) : -1.0;
-        if (rc < 0) {
-            char text[200];
-            snprintf(text, sizeof(text), "receiving on bus %u failed: %s", bus, strerror(errno));
-            set_result(rep, "bus-error", text);
-            return;
-        }
-        now = bus_now(s);
+        int master = 0;
+        const int rc = receive(s, wait_ns(s), &master);
         const int64_t wall = mono_ns();
-        int stopped = 0;
-        /* SYNC and NMT go on every bus, and sockets keep no order between buses: what is already
-         * queued on the others up to their own SYNC (this period's RPDOs) was sent first; their
-         * SYNC and what follows it come after this frame. */
-        static arm_can_frame_t later[ARM_CAN_BUS_SET_MAX][64];
-        static double later_sent_s[ARM_CAN_BUS_SET_MAX][64];
-        unsigned n_later[ARM_CAN_BUS_SET_MAX] = {0};
-        if (rc == 1 && (f.id == COB_SYNC || f.id == COB_NMT) && s->set.n > 1u) {
-            for (unsigned i = 0; i < s->set.n && !stopped; ++i) {
-                arm_can_frame_t g;
-                while (i != bus && n_later[i] < 64u && !stopped && arm_can_bus_recv(&s->set.bus[i], &g, 0) == 1) {
-                    if (n_later[i] > 0u || g.id == COB_SYNC || g.id == COB_NMT) {
-                        later_sent_s[i][n_later[i]] = s->set.bus[i].rx_sent_s;
-                        later[i][n_later[i]++] = g;
-                    } else {
-                        s->frame_sent_s = s->set.bus[i].rx_sent_s;
-                        stopped = on_frame(s, &g, i, now);
-                    }
-                }
-            }
+        if (master) {
+            last_rx = wall;
+            booted = 1;
         }
-        if (rc == 1 && !stopped) {
-            const uint64_t before = rep->frames_rx;
-            s->frame_sent_s = f_sent_s;
-            stopped = on_frame(s, &f, bus, now);
-            if (rep->frames_rx != before) {
-                last_rx = wall;
-                booted = 1;
-            }
-        }
-        for (unsigned i = 0; i < s->set.n; ++i) {
-            for (unsigned k = 0; k < n_later[i] && !stopped; ++k) {
-                s->frame_sent_s = later_sent_s[i][k];
-                stopped = on_frame(s, &later[i][k], i, now);
-            }
-        }
-        tick_all(s, bus_now(s)); /* the frames may have ended a period */
-        if (stopped) { /* the master stopped every drive */
-            s->ended = 1;
-            return;
-        }
+        if (rc > 0) s->ended = 1; /* the master stopped every drive */
+        if (rc != 0) return;      /* that, or a bus error */
         const double timeout = booted ? cfg->idle_timeout_s : cfg->boot_timeout_s;
         if ((double)(wall - last_rx) * 1e-9 > timeout) {
             char why[160];
@@ -497,6 +523,97 @@ static void run(co_sim_t *s)
             set_result(rep, "controller-lost", why);
             s->lost = 1; /* the drives fault once the arm has run on after the stop (post_stop) */
             return;
+        }
+    }
+}
+
+/* --serve: the sessions' record, and the plant's line about a finished one (on stdout: armctl plant shows it). */
+static void sessions_changed(co_sim_t *s, const char *event)
+{
+    char err[300];
+    if (event != NULL) {
+        printf("arm_sim: %s\n", event);
+        fflush(stdout);
+        sim_telemetry_event(s->tel, s->arm->step_count, "plant", "info", event);
+    }
+    if (s->sessions_path != NULL && s->sessions_path[0] != '\0' &&
+        sim_plant_write(s->plant, s->sessions_path, err, sizeof(err)) != 0) {
+        fprintf(stderr, "arm_sim: %s\n", err);
+    }
+}
+
+/* At most this many periods are simulated at once between sessions: a machine that could not keep
+ * up for longer drops the rest (counted: idle_slips) rather than run the physics in a burst. */
+#define IDLE_CATCH_UP_MAX 200u
+
+/* --serve: masters come and go (sim_plant.h). While one runs its SYNCs the arm moves on them, as
+ * in run(); between masters, on the wall clock, with the drives' brakes; while a master boots (it
+ * speaks, no SYNC yet) the arm waits for its first SYNC. Ends on a signal. */
+static void serve(co_sim_t *s)
+{
+    const sim_config_t *cfg = s->cfg;
+    sim_plant_t *p = s->plant;
+    const int64_t period_ns = (int64_t)(s->arm->period * 1e9 + 0.5);
+    int64_t last_rx = mono_ns();
+    int master = 0; /* a master has spoken since the last session ended */
+    int64_t idle_anchor = mono_ns();
+    uint64_t idle_done = 0u;
+    int64_t prev_wall = mono_ns();
+    char text[400];
+    sessions_changed(s, "the arm is on the bus: waiting for a master");
+    for (;;) {
+        if (sim_stop_requested) {
+            set_result(s->rep, "interrupted", "stopped by a signal");
+            return;
+        }
+        const int idle = !p->in_session && !master;
+        int64_t wait = wait_ns(s);
+        if (idle && wait > period_ns) wait = period_ns;
+        int spoke = 0;
+        const int rc = receive(s, wait, &spoke);
+        if (rc < 0) return;
+        const int64_t wall = mono_ns();
+        if (master && !p->in_session) s->t_first_sync += wall - prev_wall; /* a master boots: the drives' clock runs on */
+        prev_wall = wall;
+        if (spoke) {
+            last_rx = wall;
+            master = 1;
+        }
+        if (!p->in_session && s->synced) {
+            sim_plant_session_begin(p, (uint64_t)s->arm->step_count);
+            snprintf(text, sizeof(text), "session %d: a master runs its SYNC", p->n_sessions);
+            sessions_changed(s, text);
+        }
+        const int silent = master && (double)(wall - last_rx) * 1e-9 > cfg->idle_timeout_s;
+        if (rc == 1 || silent) { /* the master stopped every drive, or fell silent: the arm is on its own */
+            const int ran = p->in_session;
+            if (ran) sim_plant_session_end(p, (uint64_t)s->arm->step_count, rc == 1 ? "stopped" : "master silent");
+            s->synced = 0; /* the next master's first SYNC begins a period, ends none */
+            master = 0;
+            idle_anchor = wall;
+            idle_done = 0u;
+            snprintf(text, sizeof(text), "%s%s: the drives are disabled, the brakes hold the arm",
+                     rc == 1 ? "the master stopped the drives" : "the master fell silent", ran ? "" : " before its first SYNC");
+            sessions_changed(s, text);
+        }
+        if (!p->in_session && !master) { /* between masters: the wall clock moves the arm */
+            uint64_t due = (uint64_t)((wall - idle_anchor) / period_ns);
+            if (due > idle_done + IDLE_CATCH_UP_MAX) {
+                p->idle_slips++;
+                idle_done = due - IDLE_CATCH_UP_MAX;
+            }
+            for (; idle_done < due; ++idle_done) {
+                if (step_arm(s) != 0) {
+                    sessions_changed(s, s->rep->reason);
+                    return;
+                }
+                p->idle_steps++;
+                if (sim_plant_after_step(p)) {
+                    sim_plant_describe(p, sim_plant_last(p), text, sizeof(text));
+                    sessions_changed(s, text);
+                }
+            }
+            tick_all(s, bus_now(s));
         }
     }
 }
@@ -517,6 +634,14 @@ co_sim_t *sim_co_begin(const sim_config_t *cfg, const sim_co_config_t *co, sim_a
     sp->n = arm->n;
     sp->t0 = mono_ns();
     sp->timed = cfg->timing != SIM_TIMING_OFF;
+    sp->plant = co->plant;
+    sp->sessions_path = co->sessions_path;
+    if (co->serve && co->plant == NULL) {
+        snprintf(err, errcap, "--serve: the plant is missing");
+        return NULL;
+    }
+    sp->serving = co->serve;
+    if (co->serve) sp->t_first_sync = sp->t0; /* the drives' clock is the plant's from the start (bus_now) */
     sp->frame_sent_s = sp->sync_sent_s = sp->answered_s = -1.0;
     memcpy(sp->timing, cfg->timelines, sizeof(sp->timing));
     for (int j = sp->n; j < SIM_MAX_JOINTS; ++j) {
@@ -615,7 +740,7 @@ void sim_co_end(co_sim_t *s)
     for (int j = 0; j < s->n; ++j) {
         if (s->node[j].power == SIM_PS_FAULT || s->node[j].power == SIM_PS_FAULT_REACTION) rep->drive_fault_mask |= 1u << j;
     }
-    if (s->cfg->post_stop_s > 0.0 && s->t_first_sync != 0 && strcmp(rep->result, "diverged") != 0) {
+    if (!s->serving && s->cfg->post_stop_s > 0.0 && s->t_first_sync != 0 && strcmp(rep->result, "diverged") != 0) {
         post_stop(s, s->power_lost ? "the simulator was stopped: the drives lost their supply"
                      : s->lost     ? "the master fell silent"
                      : s->ended    ? "the master stopped the drives (NMT stop)"
@@ -646,7 +771,11 @@ int sim_canopen_run(const sim_config_t *cfg, const sim_co_config_t *co, sim_arm_
 {
     co_sim_t *s = sim_co_begin(cfg, co, arm, tel, rep, err, errcap);
     if (s == NULL) return -1;
-    run(s);
+    if (co->serve) {
+        serve(s);
+    } else {
+        run(s);
+    }
     sim_co_end(s);
     return 0;
 }

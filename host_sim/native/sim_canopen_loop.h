@@ -7,6 +7,7 @@
 
 #include "sim_canopen_node.h"
 #include "sim_loop.h"
+#include "sim_plant.h"
 
 typedef enum { SIM_PROTOCOL_ARM = 0, SIM_PROTOCOL_CANOPEN } sim_protocol_t;
 
@@ -17,6 +18,9 @@ typedef struct {
     sim_co_preset_t node_preset[SIM_MAX_JOINTS];
     int overcurrent_node;    /* TEST HOOK: this node trips 0x2310 (0: none) */
     double overcurrent_at_s; /* at this simulated time, once operation is enabled */
+    sim_plant_t *plant;      /* the truth, brakes and sessions (sim_plant.h; NULL: none) */
+    int serve;               /* --serve: masters come and go; the run ends on a signal (sim_plant.h) */
+    const char *sessions_path; /* --serve: each session's record, rewritten as it changes ("": none) */
 } sim_co_config_t;
 
 typedef struct co_sim co_sim_t;

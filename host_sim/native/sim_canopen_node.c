@@ -353,7 +353,10 @@ static void on_nmt(sim_co_node_t *n, uint8_t cmd, int64_t now_ns)
         refresh(n);
     }
     switch (cmd) {
-    case SIM_NMT_START: n->nmt = SIM_NMT_STATE_OPERATIONAL; break;
+    case SIM_NMT_START: /* a TPDO of type n goes at every n-th SYNC counted from here (a restarted master's too) */
+        if (n->nmt != SIM_NMT_STATE_OPERATIONAL) memset(n->tpdo_syncs, 0, sizeof(n->tpdo_syncs));
+        n->nmt = SIM_NMT_STATE_OPERATIONAL;
+        break;
     case SIM_NMT_STOP: n->nmt = SIM_NMT_STATE_STOPPED; break;
     case NMT_PRE_OPERATIONAL: n->nmt = SIM_NMT_STATE_PRE_OPERATIONAL; break;
     case NMT_RESET_NODE: boot(n, now_ns, 0); break;
@@ -464,7 +467,12 @@ void sim_co_node_tick(sim_co_node_t *n, int64_t now_ns, double sim_s)
     const uint32_t hbc_ms = (uint32_t)sim_co_od_get(&n->od, 0x1016u, 1u) & 0xFFFFu;
     if (n->hbc_armed && hbc_ms != 0u && now_ns - n->hbc_last_ns > (int64_t)hbc_ms * 1000000) {
         n->hbc_armed = 0; /* monitoring resumes with the producer's next heartbeat */
-        sim_co_node_fault(n, SIM_CO_EMCY_HEARTBEAT, ERR_REG_COMMUNICATION);
+        /* CiA 402's reaction to a lost master (0x6007) is for a drive that applies torque: one the
+         * master stopped and disabled before it left has nothing to stop, and is not faulted (the
+         * next master boots it as it is) */
+        if (n->power == SIM_PS_OPERATION_ENABLED || n->power == SIM_PS_QUICK_STOP_ACTIVE) {
+            sim_co_node_fault(n, SIM_CO_EMCY_HEARTBEAT, ERR_REG_COMMUNICATION);
+        }
     }
     if (n->overcurrent_at_s >= 0.0 && !n->overcurrent_done && sim_s >= n->overcurrent_at_s &&
         n->power == SIM_PS_OPERATION_ENABLED) { /* a current flows only when enabled */

@@ -82,6 +82,13 @@ int main(int argc, char **argv)
         sim_arm_close(&arm);
         return 2;
     }
+    static sim_plant_t plant;
+    if (sim_plant_apply(&plant, &o.truth, &arm, err, sizeof(err)) != 0) {
+        fprintf(stderr, "arm_sim: %s\n", err);
+        sim_arm_close(&arm);
+        return 2;
+    }
+    o.co.plant = &plant;
     sim_telemetry_t *tel = sim_telemetry_open(o.lcm_url, err, sizeof(err));
     if (tel == NULL) {
         fprintf(stderr, "arm_sim: %s\n", err);

@@ -5,6 +5,7 @@
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <stddef.h>
 #include <string.h>
 
 #include "arm/lcm_url.h"
@@ -341,6 +342,58 @@ static int sim_node(void *t, void *c, const argv_opt_t *opt, const char *v, char
     return 0;
 }
 
+/* The plant's per-joint lists (sim_plant.h): each into its own field of the truth. */
+static int sim_truth_list(void *t, void *c, const argv_opt_t *opt, const char *v, char *err, unsigned long errcap)
+{
+    sim_plant_truth_t *tr = &((sim_options_t *)t)->truth;
+    (void)c;
+    static const struct {
+        const char *name;
+        double lo, hi;
+        size_t values, count;
+    } k[] = {
+        {"--rotor-inertia", ARM_P_SIMULATOR_ROTOR_INERTIA_MIN, ARM_P_SIMULATOR_ROTOR_INERTIA_MAX,
+         offsetof(sim_plant_truth_t, rotor_inertia), offsetof(sim_plant_truth_t, n_rotor_inertia)},
+        {"--joint-stiffness-scale", ARM_P_SIMULATOR_JOINT_STIFFNESS_SCALE_MIN, ARM_P_SIMULATOR_JOINT_STIFFNESS_SCALE_MAX,
+         offsetof(sim_plant_truth_t, stiffness_scale), offsetof(sim_plant_truth_t, n_stiffness_scale)},
+        {"--encoder-offset", ARM_P_SIMULATOR_ENCODER_OFFSET_MIN, ARM_P_SIMULATOR_ENCODER_OFFSET_MAX,
+         offsetof(sim_plant_truth_t, encoder_offset), offsetof(sim_plant_truth_t, n_encoder_offset)},
+        {"--gear-factor", ARM_P_SIMULATOR_GEAR_FACTOR_MIN, ARM_P_SIMULATOR_GEAR_FACTOR_MAX,
+         offsetof(sim_plant_truth_t, gear_factor), offsetof(sim_plant_truth_t, n_gear_factor)},
+    };
+    for (size_t i = 0; i < sizeof(k) / sizeof(k[0]); ++i) {
+        if (strcmp(opt->name, k[i].name) != 0) continue;
+        return parse_list(opt->name, v, k[i].lo, k[i].hi, (double *)((char *)tr + k[i].values),
+                          (int *)((char *)tr + k[i].count), err, errcap);
+    }
+    snprintf(err, errcap, "%s: not a plant option", opt->name);
+    return -1;
+}
+
+/* --reversed-motor / --reversed-encoder J,..: joints 1..SIM_MAX_JOINTS as a mask. */
+static int sim_truth_joints(void *t, void *c, const argv_opt_t *opt, const char *v, char *err, unsigned long errcap)
+{
+    sim_plant_truth_t *tr = &((sim_options_t *)t)->truth;
+    double js[SIM_MAX_JOINTS];
+    int n = 0;
+    (void)c;
+    if (parse_list(opt->name, v, 1.0, (double)SIM_MAX_JOINTS, js, &n, err, errcap) != 0) return -1;
+    uint32_t mask = 0u;
+    for (int i = 0; i < n; ++i) {
+        if (js[i] != floor(js[i])) {
+            snprintf(err, errcap, "%s: '%s' is not a list of joint numbers 1..%d", opt->name, v, SIM_MAX_JOINTS);
+            return -1;
+        }
+        mask |= 1u << ((unsigned)js[i] - 1u);
+    }
+    if (strcmp(opt->name, "--reversed-motor") == 0) {
+        tr->reversed_motor = mask;
+    } else {
+        tr->reversed_encoder = mask;
+    }
+    return 0;
+}
+
 #define ROW(...) ARGV_ROW(sim_options_t, __VA_ARGS__)
 static const argv_opt_t k_options[] = {ARM_SIMULATOR_OPTIONS(ROW, ARGV_SPECIAL_ROW)};
 enum { ARM_SIMULATOR_OPTIONS(ARGV_ID, ARGV_ID) ARGV_COUNT };
@@ -380,6 +433,22 @@ int sim_options_parse(int argc, char **argv, sim_options_t *o, char *err, unsign
     }
     if (c->servo.position_noise_counts > 0.0 && c->servo.encoder_bits == 0) {
         snprintf(err, errcap, "--position-noise-counts: counts of what? give --encoder-bits too");
+        return -1;
+    }
+    o->truth.serve = o->co.serve;
+    o->co.sessions_path = o->sessions;
+    const sim_plant_truth_t *tr = &o->truth;
+    /* what the drives sense and act through (sim_canopen_loop.c): a start pose is any run's */
+    const int drive_truth = tr->n_rotor_inertia || tr->n_stiffness_scale || tr->n_encoder_offset || tr->n_gear_factor ||
+                            tr->reversed_motor || tr->reversed_encoder;
+    if ((o->co.serve || o->sessions[0] != '\0' || drive_truth) &&
+        o->protocol != SIM_PROTOCOL_CANOPEN) {
+        snprintf(err, errcap, "--serve/--sessions and the plant's truth (--rotor-inertia, --encoder-offset, ...): "
+                 "only with --protocol canopen");
+        return -1;
+    }
+    if (o->sessions[0] != '\0' && !o->co.serve) {
+        snprintf(err, errcap, "--sessions: with --serve");
         return -1;
     }
     if (o->co_given && o->protocol != SIM_PROTOCOL_CANOPEN) {

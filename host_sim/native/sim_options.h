@@ -5,6 +5,7 @@
 #include "sim_arm.h"
 #include "sim_canopen_loop.h"
 #include "sim_loop.h"
+#include "sim_plant.h"
 
 typedef struct {
     char model[1024];
@@ -24,6 +25,8 @@ typedef struct {
     sim_protocol_t protocol; /* what the drives speak on the bus */
     sim_co_config_t co;      /* --protocol canopen: the drives' configuration */
     int co_given;            /* a canopen-only option was given */
+    sim_plant_truth_t truth; /* --serve and the plant's truth (sim_plant.h) */
+    char sessions[1024];     /* --sessions */
     double start_pose[SIM_MAX_JOINTS]; /* --start-pose: rad per joint */
     int n_start_pose;        /* values given (0: the keyframe; else the arm's joint count) */
     uint32_t brake_given;    /* bit j: --brake gave joint j + 1's */

@@ -43,6 +43,9 @@ EXERCISED: dict[str, str] = {
     "bench pil": "test_pil.py::test_bench_pil_runs_in_its_short_form",
     "hil --target": "test_pil.py::test_documented_command_ends_ok",
     "drive check": "test_canopen_vendor.py::test_drive_check_says_whether_this_controller_can_run_it",
+    "plant": "test_run_on_arm.py::rehearsal",  # and every other test there: its arm is the plant
+    "commission": "test_run_on_arm.py::rehearsal",
+    "run": "test_run_on_arm.py::rehearsal",
     "arms": "test_arm_matrix.py::test_armctl_arms_runs_a_set_end_to_end",
     "timing": "test_timing.py::timing_run",
     "busload": "test_documented_commands.py::test_busload",

@@ -107,34 +107,14 @@ static void log_datagram(logger_t *lg, const uint8_t *buf, size_t n, int64_t uti
 
 static int open_socket(const arm_lcm_url_t *u, const char *url, int rcvbuf)
 {
-    const int fd = socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+    char err[300];
+    const int fd = arm_lcm_url_open_rx(u, "--lcm-url", url, rcvbuf, 0, err, sizeof err);
     if (fd < 0) {
-        perror("arm_lcm_logger: socket");
+        fprintf(stderr, "arm_lcm_logger: %s\n", err);
         return -1;
     }
     const int one = 1;
-    (void)setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
-    (void)setsockopt(fd, SOL_SOCKET, SO_REUSEPORT, &one, sizeof one);
     (void)setsockopt(fd, SOL_SOCKET, SO_TIMESTAMP, &one, sizeof one);
-    if (rcvbuf > 0) {
-        (void)setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &rcvbuf, sizeof rcvbuf);
-    }
-#ifdef IP_MULTICAST_ALL
-    const int zero = 0;
-    (void)setsockopt(fd, IPPROTO_IP, IP_MULTICAST_ALL, &zero, sizeof zero);
-#endif
-    /* The group, not INADDR_ANY: datagrams unicast to this port from elsewhere never arrive. */
-    struct sockaddr_in addr = {.sin_family = AF_INET, .sin_port = htons(u->port)};
-    addr.sin_addr.s_addr = u->group_be;
-    struct ip_mreq mreq;
-    mreq.imr_multiaddr.s_addr = u->group_be;
-    mreq.imr_interface.s_addr = htonl(INADDR_LOOPBACK); /* the membership (and IGMP) stays on lo */
-    if (bind(fd, (const struct sockaddr *)&addr, sizeof addr) != 0 ||
-        setsockopt(fd, IPPROTO_IP, IP_ADD_MEMBERSHIP, &mreq, sizeof mreq) != 0) {
-        fprintf(stderr, "arm_lcm_logger: --lcm-url '%s': cannot join the group on lo: %s\n", url, strerror(errno));
-        close(fd);
-        return -1;
-    }
     return fd;
 }
 

@@ -27,7 +27,6 @@ from gen.lib.paths import REPO, controller_binary, logger_binary
 from tools.run import procs as procs_mod
 from tools.run.processes import (LOGGER_READY_S, USAGE_ERROR, HilError, ProcessPlan, last_line, plan_json,
                                  run_processes)
-from tools.run.run_analysis import analyse
 from tools.run.slots import CAN_GROUP, LCM_GROUP, acquire_slot
 from tools.run.verdict import Bounds
 
@@ -686,6 +685,8 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
               "bus_timing": bus_timing_mode(opt.mode) if opt.bus_timing else "off", "protocol": opt.protocol,
               **({"target": opt.target, "numeric": "fixed" if pil_numeric(opt) else "float"} if opt.target else {}),
               **opt.labels}
+    from tools.run.run_analysis import analyse  # numpy: here, not for every importer of this module
+
     run = analyse(opt.out, controller, simulator, config, {
         "protocol": opt.protocol, "canopen": canopen_record(controller),
         # what the drive table fills for its drive's file, and what the boot skips (gen/drive_check.py)

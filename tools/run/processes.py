@@ -12,7 +12,6 @@ from __future__ import annotations
 import json
 import os
 import select
-import signal
 import subprocess
 import sys
 import time
@@ -175,14 +174,7 @@ def run_processes(plan: ProcessPlan) -> tuple[dict[str, int | None], float, str]
         raise HilError(str(exc)) from None
     finally:
         for p in reversed(procs):
-            if p.poll() is None:
-                p.send_signal(signal.SIGINT)
-                try:
-                    p.wait(timeout=5)
-                except subprocess.TimeoutExpired:
-                    p.kill()
-                    p.wait()
-            procs_mod.forget(p)
+            procs_mod.interrupt_and_reap(p, 5)
         for f in logs.values():
             f.close()
         if logger.stdout is not None:

@@ -158,6 +158,19 @@ def forget(p: Any) -> None:
         _live[:] = [(r, q) for r, q in _live if q is not p]
 
 
+def interrupt_and_reap(p: subprocess.Popen[Any], timeout: float) -> None:
+    """SIGINT to p if it still runs (a logger writes what it has queued, a simulator its summary),
+    a SIGKILL if it has not ended within timeout; then forgotten."""
+    if p.poll() is None:
+        p.send_signal(signal.SIGINT)
+        try:
+            p.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+    forget(p)
+
+
 def _stop(sig: int) -> None:
     with _lock:
         alive = [(r, p) for r, p in _live if p.poll() is None]

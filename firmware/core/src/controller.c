@@ -306,6 +306,9 @@ static void run_method(arm_ctl_t *ctl, const arm_ctl_input_t *in, arm_ctl_output
     } else {
         arm_rnea(ctl->model, ctl->last_q, ctl->last_qd, acc, out->tau_method);
     }
+    for (int i = 0; i < ARM_N_JOINTS && in->torque_override_mask != 0u; ++i) {
+        if ((in->torque_override_mask & (1u << i)) != 0u) out->tau_method[i] = in->tau_override[i];
+    }
 }
 
 static void apply_limits(arm_ctl_t *ctl, arm_ctl_output_t *out)

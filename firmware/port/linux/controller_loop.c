@@ -15,6 +15,7 @@
 #include "canopen_text.h"
 #include "lateness.h"
 #include "loop_port.h"
+#include "task.h"
 
 #define ALL_JOINTS ((uint32_t)((1ull << ARM_N_JOINTS) - 1u))
 
@@ -495,7 +496,8 @@ typedef struct {
     telemetry_t *telem;
     run_report_t *report;
     arm_ctl_t ctl;
-    arm_reference_t ref;
+    task_t task; /* what the arm does: the reference source (task.h) */
+    int task_over; /* 1: the task ended (the arm is stopped next period); -1: it stopped the arm (a fault) */
     arm_ctl_input_t in;
     arm_ctl_output_t out;
     arm_state_t last_state;
@@ -510,7 +512,8 @@ typedef struct {
  * SYNC: its states are still waited for, but the next SYNC goes no sooner than its time). */
 static int paced(const loop_t *p)
 {
-    return p->opt->mode == MODE_REALTIME || port_paces_lockstep;
+    /* a planner's stream comes on the wall clock: a lockstep rehearsal of it keeps that time too */
+    return p->opt->mode == MODE_REALTIME || port_paces_lockstep || p->opt->task == TASK_STREAM;
 }
 
 /* Enable: the CiA 402 sequence with zero torque, one step a period. 1 when every drive is
@@ -536,12 +539,13 @@ static int enable(link_t *l, loop_t *p, uint32_t k, uint32_t fresh)
         enabled = fresh & l->tpdo2_seen;
     }
     if (enabled == ALL_JOINTS) {
-        if (p->opt->ref_given) {
-            arm_reference_set(&p->ref, l->drives.q, p->opt->ref_amp, p->opt->ref_freq_hz);
-        } else {
-            arm_reference_default(&p->ref, l->drives.q);
+        char err[200];
+        if (task_begin(&p->task, p->opt, l->drives.q, p->telem, &p->report->task, p->k_run, err, sizeof(err)) != 0) {
+            snprintf(p->report->reason, sizeof(p->report->reason), "%s", err);
+            p->report->result = RUN_FAULT;
+            telemetry_event(p->telem, 0, "fault", p->report->reason);
+            return -1;
         }
-        arm_reference_set_hold(&p->ref, (float)p->opt->ref_hold_s);
         telemetry_event(p->telem, 0, "info", "all drives operation enabled; tracking starts");
         return 1;
     }
@@ -612,13 +616,22 @@ static int64_t control(link_t *l, loop_t *p)
     memcpy(p->in.qd, l->drives.qd, sizeof(p->in.qd));
     p->in.fresh_mask = l->drives.fresh_mask & ALL_JOINTS;
     memcpy(p->in.tau_measured, l->drives.tau_measured, sizeof(p->in.tau_measured));
-    arm_reference_eval(&p->ref, (float)p->k_run * p->opt->ctl.period_s, p->in.q_d, p->in.qd_d, p->in.qdd_d);
+    char err[240];
+    const int over = task_step(&p->task, (float)p->k_run * p->opt->ctl.period_s, p->k_run, p->in.q, p->out.tau, &p->in,
+                               err, sizeof(err));
+    if (over < 0 && p->task_over == 0) { /* the task stopped the arm (commissioning's bound): a fault */
+        snprintf(p->report->reason, sizeof(p->report->reason), "period %u: %s", p->k_run, err);
+        telemetry_event(p->telem, p->k_run, "fault", p->report->reason);
+        p->report->result = RUN_FAULT;
+    }
+    if (over != 0 && p->task_over == 0) p->task_over = over;
     const int64_t c0 = now_ns();
     port_control_step(&p->ctl, &p->in, &p->out);
     if (p->opt->rt.debug_slow_step_us > 0u) {
         rt_debug_busy_wait_us(p->opt->rt.debug_slow_step_us); /* TEST HOOK: forces overruns */
     }
     const int64_t compute = now_ns() - c0;
+    if (p->out.state == ARM_STATE_RUNNING && p->task_over == 0) task_track(&p->task, p->out.e);
     /* a stop begins in the very period of its fault: the drives quick-stop under the hold */
     const int stopping = p->out.state == ARM_STATE_FAULT || p->out.state == ARM_STATE_SAFE_STOP;
     send_commands(l, &p->out, stopping ? ARM_CW_QUICK_STOP : ARM_CW_ENABLE_OPERATION);
@@ -939,6 +952,15 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
             cause = RUN_STOP_SIGNAL;
             break;
         }
+        if (p.task_over != 0) { /* the task ended, or stopped the arm itself (a fault): the controlled stop */
+            if (p.task_over > 0) {
+                snprintf(p.report->reason, sizeof(p.report->reason), "%s done after %u periods: the arm stopped",
+                         task_name(opt->task), p.k_run);
+                telemetry_event(p.telem, p.k_run, "info", p.report->reason);
+            }
+            cause = p.task_over > 0 ? RUN_STOP_END : RUN_STOP_FAULT;
+            break;
+        }
         const int64_t wake_latency = wait_for_period(&p);
         const int64_t cycle_start = now_ns();
         start_period(&l, k, period_time(&p, k, cycle_start));
@@ -980,7 +1002,10 @@ void controller_run(const options_t *opt, const arm_robot_model_t *model, teleme
     arm_can_frame_t stop;
     arm_bus_make_nmt(ARM_NMT_STOP, 0u, &stop);
     send_all(&l, &stop);
-    report->final_state = cause == RUN_STOP_SIGNAL ? ARM_STATE_SAFE_STOP : tracked;
+    if (p.task.opt != NULL) task_end(&p.task);
+    /* a task that ended, as a stop signal, leaves the arm held by the stop (its tracking state otherwise) */
+    report->final_state = cause == RUN_STOP_SIGNAL || (cause == RUN_STOP_END && p.task_over > 0) ? ARM_STATE_SAFE_STOP
+                                                                                                : tracked;
     report->final_fault = fault;
     report->rx = l.drives.rx;
     for (unsigned b = 0; b < l.buses.n; ++b) {

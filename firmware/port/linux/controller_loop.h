@@ -7,6 +7,7 @@
 #include "arm/drive_bus.h"
 #include "arm_params.h"
 #include "options.h"
+#include "task.h"
 #include "telemetry.h"
 
 /* arm_controller's exit codes: the registry's (controller-exit, firmware/params/params.toml), which
@@ -73,6 +74,7 @@ typedef struct {
     arm_co_drive_units_t co_units[ARM_N_JOINTS]; /* each joint's drive's units, as the boot settled them */
     float co_q_first[ARM_N_JOINTS];              /* each joint's first position decoded with them, rad */
     unsigned co_q_seen;                          /* bit j: joint j's first position came */
+    task_report_t task;                          /* what the task did (task.h) */
     run_stop_t stop;
     /* Periods whose states missed the wait, by the side that was late (lateness.h: none, the plant,
      * the controller, the bus), the worst of each (us); a stop for lateness: its side and why. */

@@ -14,6 +14,10 @@
 #include "arm/methods.h"
 #include "argv_table.h"
 #include "canopen_text.h"
+#include "task.h"
+#if !ARM_PORT_MCU
+#include "traj_file.h"
+#endif
 
 /* "pd | pm | ..." from the method table (arm/methods.h): the one list of methods. */
 static const char *method_list(const char *sep)
@@ -259,6 +263,56 @@ static int opt_tpdo2_type(void *t, void *c, const argv_opt_t *o, const char *v, 
     return 0;
 }
 
+/* --jog J:RAD: joint J (1-based) by RAD. */
+static int opt_jog(void *t, void *c, const argv_opt_t *o, const char *v, char *err, unsigned long errcap)
+{
+    options_t *opt = t;
+    (void)c;
+    char *end = NULL;
+    errno = 0;
+    const long j = strtol(v, &end, 10);
+    double rad = 0.0;
+    if (errno != 0 || end == v || *end != ':' || j < 1 || j > ARM_N_JOINTS) {
+        snprintf(err, errcap, "%s: '%s' is not J:RAD with J a joint 1..%d", o->name, v, ARM_N_JOINTS);
+        return -1;
+    }
+    if (argv_double(o->name, end + 1, ARM_P_CONTROLLER_JOG_MIN, ARM_P_CONTROLLER_JOG_MAX, 0, &rad, err, errcap) != 0) {
+        return -1;
+    }
+    opt->jog_joint = (int)j - 1;
+    opt->jog_rad = (float)rad;
+    return 0;
+}
+
+static int opt_trajectory(void *t, void *c, const argv_opt_t *o, const char *v, char *err, unsigned long errcap)
+{
+    options_t *opt = t;
+    (void)c;
+#if ARM_PORT_MCU
+    (void)opt;
+    snprintf(err, errcap, "%s %s: the MCU image has no file to read", o->name, v);
+    return -1;
+#else
+    if (argv_copy(o->name, v, opt->trajectory_path, sizeof(opt->trajectory_path), err, errcap) != 0) return -1;
+    return traj_file_load(v, &opt->trajectory, err, errcap);
+#endif
+}
+
+static int opt_stream_url(void *t, void *c, const argv_opt_t *o, const char *v, char *err, unsigned long errcap)
+{
+    options_t *opt = t;
+    (void)c;
+    if (argv_copy(o->name, v, opt->stream_url, sizeof(opt->stream_url), err, errcap) != 0) return -1;
+    return check_lcm_url(v, err, errcap);
+}
+
+static int opt_commission_pulse(void *t, void *c, const argv_opt_t *o, const char *v, char *err, unsigned long errcap)
+{
+    (void)c;
+    return parse_list(o->name, v, ARM_P_CONTROLLER_COMMISSION_PULSE_MIN, ARM_P_CONTROLLER_COMMISSION_PULSE_MAX,
+                      ((options_t *)t)->commission_pulse, err, errcap);
+}
+
 #define ROW(...) ARGV_ROW(options_t, __VA_ARGS__)
 static const argv_opt_t k_options[] = {ARM_CONTROLLER_OPTIONS(ROW, ARGV_SPECIAL_ROW)};
 enum { ARM_CONTROLLER_OPTIONS(ARGV_ID, ARGV_ID) ARGV_COUNT };
@@ -276,6 +330,8 @@ int options_parse(int argc, char **argv, const arm_robot_model_t *model, options
         return -1;
     }
     strcpy(opt->lcm_url, ARM_P_CONTROLLER_LCM_URL_DEFAULT);
+    strcpy(opt->stream_url, ARM_P_CONTROLLER_STREAM_URL_DEFAULT);
+    opt->jog_joint = -1;
     parse_ctx_t ctx = {0};
     unsigned char given[ARGV_COUNT];
     const int rc = argv_parse(argc, argv, k_options, ARGV_COUNT, opt, &ctx, given, err, errcap);
@@ -323,5 +379,5 @@ int options_parse(int argc, char **argv, const arm_robot_model_t *model, options
         return -1;
     }
     opt->steps = (uint32_t)steps;
-    return 0;
+    return task_check_options(opt, given[ARGV_OPT_JOG], given[ARGV_OPT_TRAJECTORY], err, errcap);
 }

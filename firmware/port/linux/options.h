@@ -7,6 +7,7 @@
 #include "arm/can_bus_config.h"
 #include "arm/co_boot.h"
 #include "arm/controller.h"
+#include "arm/reference.h"
 #include "design_file.h"
 #include "rt.h"
 
@@ -46,6 +47,20 @@ typedef struct {
     int ref_given;                   /* 1: --ref-amp/--ref-freq replace the default reference */
     float ref_amp[ARM_N_JOINTS];     /* rad */
     float ref_freq_hz[ARM_N_JOINTS]; /* Hz */
+    /* the task (task.h): what the arm does once the drives are enabled */
+    int task;                        /* --task: task_kind_t */
+    int reference_home;              /* --reference-origin home: the reference around home, after a move there */
+    double move_speed, move_accel;   /* the bounded move to a task's first point, rad/s and rad/s^2 */
+    int jog_joint;                   /* --jog J:RAD: 0-based joint (-1: none given) */
+    float jog_rad;
+    double jog_speed;
+    double end_hold_s;
+    double brake_release_s;          /* the drives' brakes open this long after enable: a task waits */
+    char trajectory_path[512];       /* --trajectory (loaded at parse time: traj_file.h) */
+    arm_traj_t trajectory;
+    char stream_url[256];
+    double stream_timeout_s;
+    float commission_pulse[ARM_N_JOINTS]; /* N m; 0: 5 % of the joint's torque limit */
 } options_t;
 
 /* Parses argv into opt (starting from the defaults). On a bad argument writes a message naming

@@ -2,6 +2,7 @@
 #include "summary.h"
 
 #include "json_file.h"
+#include "task_summary.h"
 
 #include "arm/pm.h"
 
@@ -96,6 +97,9 @@ int summary_write(const char *path, const options_t *opt, const run_report_t *r,
             }
         }
         fprintf(f, "]},\n");
+    }
+    if (r->task.begun) {
+        task_summary_write(f, opt, &r->task);
     }
     static const char *const names[TELEM_KIND_COUNT] = {"ARM_CTL", "ARM_TIMING", "ARM_EVENT"};
     fprintf(f, "  \"telemetry\": {\"dropped\": %llu, \"sent\": {",

@@ -7,6 +7,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
 static int fail(char *err, size_t errcap, const char *option, const char *url, const char *why)
 {
@@ -142,4 +144,36 @@ int arm_lcm_url_check_route(const arm_lcm_url_t *u, const char *option, char *er
         return -1;
     }
     return 0;
+}
+
+int arm_lcm_url_open_rx(const arm_lcm_url_t *u, const char *option, const char *url, int rcvbuf, int nonblock,
+                        char *err, size_t errcap)
+{
+    const int fd = socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC | (nonblock ? SOCK_NONBLOCK : 0), 0);
+    if (fd < 0) {
+        snprintf(err, errcap, "%s: '%s': socket: %s", option, url, strerror(errno));
+        return -1;
+    }
+    const int one = 1;
+    (void)setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
+    (void)setsockopt(fd, SOL_SOCKET, SO_REUSEPORT, &one, sizeof one);
+    if (rcvbuf > 0) {
+        (void)setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &rcvbuf, sizeof rcvbuf);
+    }
+#ifdef IP_MULTICAST_ALL
+    const int zero = 0;
+    (void)setsockopt(fd, IPPROTO_IP, IP_MULTICAST_ALL, &zero, sizeof zero);
+#endif
+    struct sockaddr_in addr = {.sin_family = AF_INET, .sin_port = htons(u->port)};
+    addr.sin_addr.s_addr = u->group_be;
+    struct ip_mreq mreq;
+    mreq.imr_multiaddr.s_addr = u->group_be;
+    mreq.imr_interface.s_addr = htonl(INADDR_LOOPBACK); /* the membership (and IGMP) stays on lo */
+    if (bind(fd, (const struct sockaddr *)&addr, sizeof addr) != 0 ||
+        setsockopt(fd, IPPROTO_IP, IP_ADD_MEMBERSHIP, &mreq, sizeof mreq) != 0) {
+        snprintf(err, errcap, "%s: '%s': cannot join the group on lo: %s", option, url, strerror(errno));
+        close(fd);
+        return -1;
+    }
+    return fd;
 }

@@ -261,13 +261,29 @@ static void heartbeat_consumer_faults(void)
     const uint8_t op = 0x05;
     frame(&n, 0x77Fu, &op, 1u, 0);
     n.n_out = 0u;
-    sim_co_node_tick(&n, 90 * MS, 0.0);
-    CHECK(n.power != SIM_PS_FAULT);
+    /* a drive the master disabled before it left has nothing to stop: not faulted */
     sim_co_node_tick(&n, 101 * MS, 0.0);
+    CHECK(n.power == SIM_PS_SWITCH_ON_DISABLED && n.n_out == 0u);
+    /* one that applies torque is (CiA 402's reaction to a lost master) */
+    CHECK(write(&n, 0x6060, 0, 10u, 1u) == 0u);
+    const uint16_t steps[3] = {0x06, 0x07, 0x0F};
+    for (int i = 0; i < 3; ++i) {
+        rpdo(&n, steps[i], 0);
+        sim_co_node_on_sync(&n, 0.0, 0.0, NAN);
+    }
+    CHECK(n.power == SIM_PS_OPERATION_ENABLED);
+    frame(&n, 0x77Fu, &op, 1u, 200 * MS);
+    n.n_out = 0u;
+    sim_co_node_tick(&n, 290 * MS, 0.0);
+    CHECK(n.power != SIM_PS_FAULT);
+    sim_co_node_tick(&n, 301 * MS, 0.0);
     const arm_can_frame_t *f = NULL;
-    CHECK(n.power == SIM_PS_FAULT && sent(&n, 0x083u, &f) == 1u);
+    /* an enabled drive: its fault reaction (the ramp to standstill, the brake) before it reports fault */
+    CHECK((n.power == SIM_PS_FAULT_REACTION || n.power == SIM_PS_FAULT) && sent(&n, 0x083u, &f) == 1u);
     CHECK(f != NULL && f->data[0] == 0x30u && f->data[1] == 0x81u && (f->data[2] & 0x11u) == 0x11u);
     CHECK(sim_co_od_get(&n.od, 0x603Fu, 0u) == 0x8130u);
+    for (int k = 0; k < 5000 && n.power != SIM_PS_FAULT; ++k) (void)sim_co_node_period(&n, 0.0, 0.001);
+    CHECK(n.power == SIM_PS_FAULT);
     rpdo(&n, 0x80, 0); /* fault reset */
     n.n_out = 0u;
     sim_co_node_on_sync(&n, 0.0, 0.0, NAN);

@@ -95,6 +95,10 @@ typedef struct {
     float qdd_d[ARM_N_JOINTS];
     uint32_t fresh_mask; /* bit i: joint i's state arrived this period */
     float tau_measured[ARM_N_JOINTS]; /* the torque each drive reports it applies (end of last period) */
+    /* bit i: joint i's torque is tau_override[i], open loop, instead of the method's (still through
+     * the torque and rate limits); commissioning's pulses (arm/commission.h). 0: none */
+    uint32_t torque_override_mask;
+    float tau_override[ARM_N_JOINTS];
 } arm_ctl_input_t;
 
 typedef struct {

@@ -24,4 +24,11 @@ int arm_lcm_url_parse(const char *url, const char *option, arm_lcm_url_t *out, c
  * /proc/net/route is on lo), else -1 with the command that fixes it in err. */
 int arm_lcm_url_check_route(const arm_lcm_url_t *u, const char *option, char *err, size_t errcap);
 
+/* A UDP socket that receives the group's datagrams on this host alone: bound to the group (never
+ * INADDR_ANY: datagrams unicast to the port from elsewhere do not arrive), its membership on lo,
+ * shared with other listeners (SO_REUSEADDR/SO_REUSEPORT); rcvbuf > 0 sizes its queue; nonblock: reads
+ * never wait. The descriptor, or -1 with a message naming `option` and the URL in err. */
+int arm_lcm_url_open_rx(const arm_lcm_url_t *u, const char *option, const char *url, int rcvbuf, int nonblock,
+                        char *err, size_t errcap);
+
 #endif
