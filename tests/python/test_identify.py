@@ -8,7 +8,7 @@ arm's rated 5 kg at the flange.
   10 %, the payload's mass within 10 % (or 0.1 kg); each 95 % interval contains the truth;
 - the arm file written is one the product takes: it prepares (gen.arm) into the identified values;
 - bad input: an excitation the limits cannot hold is one line naming the joint, exit 2, before a
-  controller starts; nothing written.
+  controller starts; a plant whose joint does not move is one line naming it, exit 1; nothing written.
 
 Fast, no plant (unmarked, at the end): the excitation's limit checks, the fit on synthetic torques,
 and a poor fit named.
@@ -20,18 +20,15 @@ from __future__ import annotations
 import json
 import math
 import random
-import signal
-import subprocess
-import threading
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from hil_procs import armctl
+from test_run_on_arm import Plant  # `armctl plant` in the background, ended by Ctrl-C
 from gen.lib.paths import REPO
 
-ARMCTL = str(REPO / "tools" / "armctl")
 SEEDS = (11, 12, 13)
 RATED_PAYLOAD_KG = 5.0
 NOMINAL = {  # the bundled arm's model (host_sim/models/ur5e_arm.xml): armature, damping, frictionloss
@@ -63,36 +60,6 @@ def truth_toml(t: dict) -> str:
         lines.append(f"[joint.{name}]")
         lines += [f"{k} = {x!r}" for k, x in v.items()]
     return "\n".join(lines) + "\n"
-
-
-class Plant:
-    """`armctl plant` in the background until stop() (Ctrl-C, as a user ends it)."""
-
-    def __init__(self, port: int, out: Path, truth: Path) -> None:
-        self.p = subprocess.Popen([ARMCTL, "plant", "--bus", f"udp:{port}", "--out", str(out), "--truth", str(truth)],
-                                  cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        self.lines: list[str] = []
-        self.ready = threading.Event()
-        threading.Thread(target=self._read, daemon=True).start()
-        if not self.ready.wait(180):
-            self.stop()
-            raise AssertionError("the plant did not come up:\n" + "".join(self.lines))
-
-    def _read(self) -> None:
-        assert self.p.stdout is not None
-        for line in self.p.stdout:
-            self.lines.append(line)
-            if "waiting for a master" in line:
-                self.ready.set()
-
-    def stop(self) -> None:
-        if self.p.poll() is None:
-            self.p.send_signal(signal.SIGINT)
-        try:
-            self.p.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            self.p.kill()
-            self.p.wait()
 
 
 @pytest.fixture(scope="module")
@@ -194,6 +161,23 @@ def test_an_excitation_the_limits_cannot_hold_is_refused_before_anything_starts(
     last = r.stderr.strip().splitlines()[-1]
     assert last.startswith("armctl identify: the excitation: joint ") and "--amplitude" in last, last
     assert not (tmp_path / "arm.toml").exists() and not (tmp_path / "run" / "controller.log").exists()
+
+
+@pytest.mark.long
+def test_a_plant_that_does_not_move_is_named_and_nothing_written(identified: dict, port: int, tmp_path: Path) -> None:
+    """A joint held by friction beyond its motor (wrist_3: 100 N m of Coulomb friction, its limit 28),
+    identified with the record of a plant that passed (the same model and drive table)."""
+    record = identified[SEEDS[0]]["dir"] / "record.json"
+    (tmp_path / "truth.toml").write_text("[joint.wrist_3]\ncoulomb = 100.0\n")
+    plant = Plant(port, tmp_path / "plant", tmp_path / "truth.toml")
+    try:
+        r = armctl("identify", "--bus", f"udp:{port}", "--record", str(record), "--run-dir", str(tmp_path / "run"),
+                   "--out", str(tmp_path / "arm.toml"))
+    finally:
+        plant.stop()
+    last = r.stderr.strip().splitlines()[-1]
+    assert r.returncode == 1 and last.startswith("armctl identify: ") and "wrist_3" in last, r.stdout + r.stderr
+    assert not (tmp_path / "arm.toml").exists() and not (tmp_path / "arm.xml").exists()
 
 
 # ----------------------------------------------------------------------------- fast: no plant
