@@ -87,6 +87,11 @@ def identified(port: int, tmp_path_factory: pytest.TempPathFactory) -> dict:
             plant.stop()
         res = json.loads((d / "run" / "identification.json").read_text()) if (d / "run" / "identification.json").exists() else None
         out[seed] = {"truth": truth, "commission": cm, "identify": r, "result": res, "dir": d}
+    keep = REPO / "runs" / "test_identify"  # the figures, for the record (pytest's folders go)
+    keep.mkdir(parents=True, exist_ok=True)
+    (keep / "figures.json").write_text(json.dumps(
+        {seed: {"truth": e["truth"], "identify_exit": e["identify"].returncode,
+                "figures": figures(e) if e["result"] else None} for seed, e in out.items()}, indent=1))
     return out
 
 

@@ -8,9 +8,14 @@ arm.xml). Unknown, and linear in the joint torques:
   flange), as the 10 dynamic parameters of a point mass at the flange plus dc, to first order in dc.
 Y is Pinocchio's joint torque regressor (computeJointTorqueRegressor), pi_links the model's links'
 dynamic parameters (Inertia.toDynamicParameters). The solve is scipy's linear least squares
-(scipy.linalg.lstsq), weighted per joint by its residual's spread (two passes); the covariance is
-the Newey-West sandwich over the time samples (the residuals of filtered signals are correlated in
-time), and each interval is CONFIDENCE (two-sided, normal).
+(scipy.linalg.lstsq), weighted per joint by its residual's spread (two passes). Each value's
+interval (CONFIDENCE, two-sided) is the widest of: the Newey-West sandwich over the time samples
+(the residuals of filtered signals are correlated in time); a delete-a-block jackknife over BLOCKS
+stretches of the run (model error that changes along it); how far the analysis's own choices move
+the value (VARIANTS: the low-pass and the slowest rows kept); and MODEL_FLOOR of the value
+(PAYLOAD_FLOOR_KG for the payload), for what rigid links with Coulomb and viscous friction cannot
+describe of a drive. The first two are statistics; the last two are the model's own error, which
+no residual shows.
 
 Rows where a joint moves slower than MIN_SPEED are left out of that joint's equations: its Coulomb
 friction's sign is undefined at rest (stiction, not this model).
@@ -35,6 +40,7 @@ POOR_RESIDUAL = 0.10   # of a joint's torque RMS: a residual above it is a poor 
 CONFIDENCE = 0.95
 MODEL_FLOOR = 0.02      # of each value: the model's own error, a floor on its interval
 PAYLOAD_FLOOR_KG = 0.02  # the same for the payload's mass, which may be 0
+VARIANTS = [(f, v) for f in (5.0, 10.0, 20.0) for v in (0.05, 0.1, 0.2)]  # (low-pass Hz, slowest rad/s)
 BLOCKS = 10            # contiguous stretches of the run for the jackknife
 HAC_LAG_S = 0.5        # the Newey-West window: the residuals' correlation time (filtered, model error)
 
@@ -151,17 +157,17 @@ def prepare(t: np.ndarray, q: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, 
     return t, qf, qd, qdd, tau
 
 
-def _parallel_filter(t: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
-    """The same zero-phase low-pass at FILTER_HZ on each array (along time), then every FIT_HZ-th
+def _parallel_filter(t: np.ndarray, filter_hz: float, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The same zero-phase low-pass at filter_hz on each array (along time), then every FIT_HZ-th
     sample without the filter's ends: the equations are linear in the unknowns, so filtering the
     torques and every column alike keeps them exact (a Coulomb term's step included)."""
     from scipy.signal import butter, sosfiltfilt
 
     dt = float(np.median(np.diff(t)))
     fs = 1.0 / dt
-    sos = butter(4, FILTER_HZ / (fs / 2), output="sos")
+    sos = butter(4, filter_hz / (fs / 2), output="sos")
     step = max(1, int(round(fs / FIT_HZ)))
-    edge = int(round(fs / FILTER_HZ)) * 2
+    edge = int(round(fs / min(FILTER_HZ, filter_hz))) * 2  # the same rows whatever the variant
     sl = slice(edge, len(t) - edge, step)
     return (t[sl], *[sosfiltfilt(sos, a, axis=0)[sl] for a in arrays])
 
@@ -173,30 +179,39 @@ def _solve(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     return x
 
 
-def fit(reg: ArmRegressor, t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, tau: np.ndarray,
-        names: list[str]) -> Fit:
-    from scipy.stats import norm
-    from scipy.stats import t as student_t
-
-    n, P = reg.n, reg.n_params
-    known, cols = reg.rows(q, qd, qdd)
-    t, y, cols, qd, tau = _parallel_filter(t, tau - known, cols, qd, tau)
-    use = np.abs(qd) >= MIN_SPEED                      # (T, n)
-    counts = use.sum(axis=0)
-    for j, c in enumerate(counts):
-        if c < 10 * 3:
-            raise FitError(f"joint {j + 1} ({names[j]}) moved faster than {MIN_SPEED:g} rad/s in {int(c)} samples: "
-                           "the arm did not follow the excitation (did it move? is a brake closed?)")
+def _weighted(y: np.ndarray, cols: np.ndarray, use: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The least-squares solution weighted by 1 / each joint's residual spread (two passes): the
+    unknowns, the residuals, each joint's residual spread and its weight."""
+    n, P = cols.shape[1], cols.shape[2]
     w = np.ones(n)
-    for _ in range(2):                                 # weights: 1 / each joint's residual spread
+    for _ in range(2):
         A = (cols * (w[None, :, None] * use[:, :, None])).reshape(-1, P)
         b = (y * w[None, :] * use).reshape(-1)
         norms = np.linalg.norm(A, axis=0)
         norms = np.where(norms > 0, norms, 1.0)
         x = _solve(A / norms, b) / norms
         r = y - np.einsum("tjp,p->tj", cols, x)
-        sd = np.array([np.sqrt(np.mean(r[use[:, j], j] ** 2)) for j in range(n)])
+        sd = np.array([np.sqrt(np.mean(r[use[:, j], j] ** 2)) if use[:, j].any() else 0.0 for j in range(n)])
         w = 1.0 / np.maximum(sd, 1e-9)
+    return x, r, sd, w
+
+
+def fit(reg: ArmRegressor, t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, tau: np.ndarray,
+        names: list[str]) -> Fit:
+    from scipy.stats import norm
+    from scipy.stats import t as student_t
+
+    n, P = reg.n, reg.n_params
+    known, cols_all = reg.rows(q, qd, qdd)
+    y_all, t_all, qd_all = tau - known, t, qd
+    t, y, cols, qd, tau = _parallel_filter(t_all, FILTER_HZ, y_all, cols_all, qd_all, tau)
+    use = np.abs(qd) >= MIN_SPEED                      # (T, n)
+    counts = use.sum(axis=0)
+    for j, c in enumerate(counts):
+        if c < 10 * 3:
+            raise FitError(f"joint {j + 1} ({names[j]}) moved faster than {MIN_SPEED:g} rad/s in {int(c)} samples: "
+                           "the arm did not follow the excitation (did it move? is a brake closed?)")
+    x, r, sd, w = _weighted(y, cols, use)
     # the Newey-West sandwich over time samples: g_k = sum_j a_kj r_kj (weighted rows of sample k)
     Aw = cols * (w[None, :, None] * use[:, :, None])   # (T, n, P)
     rw = r * w[None, :] * use
@@ -233,7 +248,12 @@ def fit(reg: ArmRegressor, t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np
     # capture of a drive (its torque path, friction's shape at low speed), as a floor on each interval
     floor = MODEL_FLOOR * np.abs(x)
     floor[3 * n] = max(floor[3 * n], PAYLOAD_FLOOR_KG)
-    half = np.maximum(half, floor)
+    # and how far the analysis's own choices move each value: the low-pass and the slowest rows kept
+    moved = np.zeros(P)
+    for filter_hz, min_speed in VARIANTS:
+        _, yv, cv, qdv = _parallel_filter(t_all, filter_hz, y_all, cols_all, qd_all)
+        moved = np.maximum(moved, np.abs(_weighted(yv, cv, np.abs(qdv) >= min_speed)[0] - x))
+    half = np.maximum.reduce([half, floor, moved])
 
     def est(i: int) -> Estimate:
         return Estimate(float(x[i]), float(x[i] - half[i]), float(x[i] + half[i]))
