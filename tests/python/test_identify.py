@@ -170,10 +170,10 @@ def test_an_excitation_the_limits_cannot_hold_is_refused_before_anything_starts(
 
 @pytest.mark.long
 def test_a_plant_that_does_not_move_is_named_and_nothing_written(identified: dict, port: int, tmp_path: Path) -> None:
-    """A joint held by friction beyond its motor (wrist_3: 100 N m of Coulomb friction, its limit 28),
+    """A joint held by friction far beyond its motor (wrist_3: 10 kN m of Coulomb friction, its limit 28),
     identified with the record of a plant that passed (the same model and drive table)."""
     record = identified[SEEDS[0]]["dir"] / "record.json"
-    (tmp_path / "truth.toml").write_text("[joint.wrist_3]\ncoulomb = 100.0\n")
+    (tmp_path / "truth.toml").write_text("[joint.wrist_3]\ncoulomb = 10000.0\n")
     plant = Plant(port, tmp_path / "plant", tmp_path / "truth.toml")
     try:
         r = armctl("identify", "--bus", f"udp:{port}", "--record", str(record), "--run-dir", str(tmp_path / "run"),

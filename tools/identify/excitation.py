@@ -88,13 +88,13 @@ def check(ex: Excitation, joints: list[dict[str, Any]], max_speed: float, max_ac
         lo, hi = lo + MARGIN_RAD, hi - MARGIN_RAD
         if not lo <= ex.q0[i] <= hi:
             raise ExcitationError(f"joint {i + 1} ({j['name']}): the centre {ex.q0[i]:.4g} rad is not {MARGIN_RAD:g} rad "
-                                  f"inside its range [{j['range'][0]:g}, {j['range'][1]:g}]: give another --centre")
+                                  f"inside its range [{j['range'][0]:g}, {j['range'][1]:g}]: the arm's home must be")
         qmin, qmax = float(q[:, i].min()), float(q[:, i].max())
         if qmin < lo or qmax > hi:
             room = min(ex.q0[i] - lo, hi - ex.q0[i])
             raise ExcitationError(f"joint {i + 1} ({j['name']}): the excitation spans [{qmin:.4g}, {qmax:.4g}] rad, "
                                   f"beyond its range [{j['range'][0]:g}, {j['range'][1]:g}] less {MARGIN_RAD:g} rad: "
-                                  f"an amplitude of at most {room:.3g} rad there, or another --centre")
+                                  f"an --amplitude of at most {room:.3g} rad for it")
         v = float(np.abs(qd[:, i]).max())
         if v > max_speed:
             raise ExcitationError(f"joint {i + 1} ({j['name']}): the excitation's speed reaches {v:.4g} rad/s, above the "
