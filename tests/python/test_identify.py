@@ -8,10 +8,13 @@ arm's rated 5 kg at the flange.
   10 %, the payload's mass within 10 % (or 0.1 kg); each 95 % interval contains the truth;
 - the arm file written is one the product takes: it prepares (gen.arm) into the identified values;
 - bad input: an excitation the limits cannot hold is one line naming the joint, exit 2, before a
-  controller starts; a plant whose joint does not move is one line naming it, exit 1; nothing written.
+  controller starts; nothing written. (A joint that did not move is named by check_moved, tested
+  below on telemetry made up for it: the plant cannot hold an enabled joint still, its friction is
+  MuJoCo's soft frictionloss, which a 10 kN m value turns into a damper the joint still moves
+  against.)
 
 Fast, no plant (unmarked, at the end): the excitation's limit checks, the fit on synthetic torques,
-and a poor fit named.
+a poor fit named, a joint that did not move named.
 Cost on the 2-core machine: about 2 minutes of wall time (three plants, each commissioned and
 identified in about 30 s of lockstep)."""
 
@@ -168,24 +171,6 @@ def test_an_excitation_the_limits_cannot_hold_is_refused_before_anything_starts(
     assert not (tmp_path / "arm.toml").exists() and not (tmp_path / "run" / "controller.log").exists()
 
 
-@pytest.mark.long
-def test_a_plant_that_does_not_move_is_named_and_nothing_written(identified: dict, port: int, tmp_path: Path) -> None:
-    """A joint held by friction far beyond its motor (wrist_3: 10 kN m of Coulomb friction, its limit 28),
-    identified with the record of a plant that passed (the same model and drive table)."""
-    record = identified[SEEDS[0]]["dir"] / "record.json"
-    (tmp_path / "truth.toml").write_text("[joint.wrist_3]\ncoulomb = 10000.0\n")
-    plant = Plant(port, tmp_path / "plant", tmp_path / "truth.toml")
-    try:
-        r = armctl("identify", "--bus", f"udp:{port}", "--record", str(record), "--run-dir", str(tmp_path / "run"),
-                   "--out", str(tmp_path / "arm.toml"))
-    finally:
-        plant.stop()
-    last = r.stderr.strip().splitlines()[-1]
-    assert r.returncode == 1 and last.startswith("armctl identify: "), r.stdout + r.stderr
-    assert "wrist_3" in last or "joint 6" in last, last  # by name (identify) or number (the controller)
-    assert not (tmp_path / "arm.toml").exists() and not (tmp_path / "arm.xml").exists()
-
-
 # ----------------------------------------------------------------------------- fast: no plant
 
 def _prepared_xml() -> Path:
@@ -251,3 +236,15 @@ def test_a_torque_the_model_cannot_explain_is_a_poor_fit() -> None:
     reg, t, q, tau = _synthetic(THETA, extra=1.0)
     f = fit(reg, *prepare(t, q, tau), NAMES)
     assert f.poor and "unexplained" in f.poor[0], f.poor
+
+
+def test_a_joint_that_did_not_move_is_named() -> None:
+    from tools.commands import CommandError
+    from tools.commands.identify import check_moved
+
+    peaks = {"q_min": [-0.5, -0.4], "q_max": [0.5, 0.4]}
+    t = np.linspace(0, 10, 1000)
+    moving = 0.5 * np.sin(t)
+    check_moved(np.c_[moving, 0.8 * moving], peaks, ["a", "b"])
+    with pytest.raises(CommandError, match=r"^joint 2 \(b\) moved 0.0\d* rad of the excitation's 0.8 rad"):
+        check_moved(np.c_[moving, 0.01 * moving], peaks, ["a", "b"])

@@ -47,6 +47,21 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=run)
 
 
+def check_moved(q: object, peaks: dict, names: list[str]) -> None:
+    """CommandError naming the first joint that covered less than MOVED_FRACTION of the excitation's
+    span: the arm did not follow it, and there is nothing to identify from."""
+    import numpy as np
+
+    qa = np.asarray(q)
+    span = qa.max(axis=0) - qa.min(axis=0)
+    want = np.array(peaks["q_max"]) - np.array(peaks["q_min"])
+    for j, name in enumerate(names):
+        if span[j] < MOVED_FRACTION * want[j]:
+            raise CommandError(f"joint {j + 1} ({name}) moved {span[j]:.3g} rad of the excitation's {want[j]:.3g} "
+                               "rad: the arm did not follow it (a brake, a drive not enabled, a gear or unit wrong): "
+                               "check it with tools/armctl commission; nothing written", 1)
+
+
 def _check_options(ns: argparse.Namespace) -> None:
     for name in ("period", "periods", "harmonics", "amplitude", "seed"):
         try:
@@ -157,13 +172,7 @@ def run(ns: argparse.Namespace) -> int:
     res = run_controller(setup, ["--method", "pm", *ctl], run_dir, mode)
     finish(res, setup, task, "armctl identify")
     t, q, tau = samples(run_dir / "telemetry.lcmlog", n)
-    span = q.max(axis=0) - q.min(axis=0)
-    want = np.array(peaks["q_max"]) - np.array(peaks["q_min"])
-    for j in range(n):
-        if span[j] < MOVED_FRACTION * want[j]:
-            raise CommandError(f"joint {j + 1} ({names[j]}) moved {span[j]:.3g} rad of the excitation's {want[j]:.3g} "
-                               "rad: the arm did not follow it (a brake, a drive not enabled, a gear or unit wrong): "
-                               "check it with tools/armctl commission; nothing written", 1)
+    check_moved(q, peaks, names)
     print(f"armctl identify: fitting {len(t)} periods of telemetry (Pinocchio's regressor, least squares)")
     sys.stdout.flush()
     try:
