@@ -53,7 +53,9 @@ def draw(seed: int) -> dict:
         joints[name] = {"viscous": round(rng.uniform(0.1, 0.6) * NOMINAL["damping"][j], 4),
                         "coulomb": round(rng.uniform(0.1, 0.4) * NOMINAL["frictionloss"][j], 4),
                         "rotor_inertia": round(rng.uniform(0.1, 0.4) * NOMINAL["armature"][j], 4)}
-    payload = 0.0 if seed == SEEDS[0] else round(rng.uniform(0.5, RATED_PAYLOAD_KG), 3)
+    # the draws span 0 to the rated payload: none, a third to two thirds of it, two thirds to all of it
+    k = SEEDS.index(seed)
+    payload = 0.0 if k == 0 else round(rng.uniform(k / 3, (k + 1) / 3) * RATED_PAYLOAD_KG, 3)
     return {"payload_kg": payload, "joint": joints}
 
 
