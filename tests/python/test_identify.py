@@ -1,6 +1,7 @@
 """armctl identify against hidden plants (docs/identify.md): `armctl plant --truth FILE` (a process of
 its own; the truth file the controller and identify never read), `armctl commission`, then `armctl
-identify`, over UDP in lockstep, for three plants drawn per seed: each joint's viscous and Coulomb
+identify` (commissioned bare, then with the payload mounted), over UDP in lockstep, for three plants
+drawn per seed: each joint's viscous and Coulomb
 friction above the model's, its rotor inertia above the model's armature, and a payload of 0 to the
 arm's rated 5 kg at the flange.
 
@@ -83,10 +84,17 @@ def identified(port: int, tmp_path_factory: pytest.TempPathFactory) -> dict:
         d = tmp_path_factory.mktemp(f"seed{seed}")
         truth = draw(seed)
         (d / "truth.toml").write_text(truth_toml(truth))
+        (d / "bare.toml").write_text(truth_toml({**truth, "payload_kg": 0.0}))
         common = ["--bus", f"udp:{port}", "--record", str(d / "record.json")]
-        plant = Plant(port, d / "plant", d / "truth.toml")
+        # commissioned bare, as docs/identify.md says (a heavy payload the model lacks stops it), then
+        # the payload mounted: the plant again, with it
+        plant = Plant(port, d / "bare", d / "bare.toml")
         try:
             cm = armctl("commission", *common, "--out", str(d / "commission"))
+        finally:
+            plant.stop()
+        plant = Plant(port, d / "plant", d / "truth.toml")
+        try:
             r = armctl("identify", *common, "--run-dir", str(d / "run"), "--out", str(d / "identified.toml"))
         finally:
             plant.stop()
