@@ -67,7 +67,7 @@ def test_the_checker_sees_lazy_and_relative_imports(tmp_path: Path) -> None:
 
 # tools/ by job, lowest first: a package imports only those below it (and gen, host_sim); the CLI
 # (tools/cli.py, tools/commands/) sits above them all.
-TOOL_LAYERS = ("build", "run", "study", "bench")
+TOOL_LAYERS = ("build", "run", "identify", "study", "bench")
 
 
 @pytest.mark.parametrize("level", range(len(TOOL_LAYERS)))
