@@ -147,12 +147,12 @@ def test_identify_finds_the_hidden_plant(seed: int, identified: dict) -> None:
 @pytest.mark.long
 def test_the_identified_arm_file_prepares_into_what_was_measured(identified: dict) -> None:
     """The arm file written for the plant with the heaviest payload goes through the product's own
-    importer (gen/arm/prepare.py: what armctl build, tune, study and run do with --arm first): its
+    importer (gen/arm/preparation.py: what armctl build, tune, study and run do with --arm first): its
     joints carry the identified values and its last link the payload."""
     import mujoco
 
     from gen.arm.arm_file import load_arm_file
-    from gen.arm.prepare import prepare
+    from gen.arm.preparation import prepare
 
     seed = max(SEEDS, key=lambda s: identified[s]["truth"]["payload_kg"])
     e = identified[seed]
