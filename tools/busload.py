@@ -69,7 +69,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def add_subparser(sub: argparse._SubParsersAction) -> None:
-    bl = sub.add_parser("busload", help="worst-case CAN bus load per control period from the DBC; refuses > budget")
+    formulas = (lib.__doc__ or "").split("\n\n", 1)[1]  # the library's: what is counted, and how
+    bl = sub.add_parser("busload", help="worst-case CAN bus load per control period from the DBC; refuses > budget",
+                        description=__doc__ + "\n\n" + formulas, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_arguments(bl)
     bl.set_defaults(run=run)
 
@@ -178,13 +180,3 @@ def _classic_rates(n_drives: int, every: dict[str, int], budget: float, heartbea
         parts.append(f"{k} bus{'es' if k > 1 else ''} up to {rate} Hz")
     return "classic 1 Mbit/s: " + ", ".join(parts)
 
-
-def main(argv: list[str] | None = None) -> int:
-    formulas = (lib.__doc__ or "").split("\n\n", 1)[1]  # the library's: what is counted, and how
-    from tools.cli import run_alone
-
-    return run_alone("busload", __doc__ + "\n\n" + formulas, add_arguments, run, argv)
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -108,17 +108,6 @@ def run_command(ns: argparse.Namespace) -> int:
         return code
 
 
-def run_alone(command: str, description: str | None, add_arguments: Callable[[argparse.ArgumentParser], None],
-              run: Callable[[argparse.Namespace], int], argv: list[str] | None) -> int:
-    """A command's module run as a script (`python -m tools.<command>`): its own parser, then the
-    same exit-code map as under armctl."""
-    p = argparse.ArgumentParser(prog=f"armctl {command}", description=description,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
-    add_arguments(p)
-    p.set_defaults(command=command, run=run)
-    return run_command(p.parse_args(argv))
-
-
 def parser(command: str | None = None) -> argparse.ArgumentParser:
     """armctl's parser: every command's, or only `command`'s when it names one (its module alone is
     imported; a module that registers more than one command, registers them all)."""

@@ -62,7 +62,7 @@ def _run(cmd: list[str]) -> tuple[int, str]:
 
 
 def cmd_up(ns: argparse.Namespace) -> int:
-    from tools.commands import CommandError
+    from tools.errors import CommandError
 
     iface = ns.iface
     mtu = "16" if ns.classic else "72"
@@ -133,7 +133,7 @@ def cmd_setup(ns: argparse.Namespace) -> int:
 
 
 def cmd_run(ns: argparse.Namespace) -> int:
-    from tools.commands import UsageError
+    from tools.errors import UsageError
     from tools.vm.run import run_in_vm
 
     argv = list(ns.argv)
@@ -184,12 +184,3 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
 def run(ns: argparse.Namespace) -> int:
     return int(ns.vcan_fn(ns))
 
-
-def main(argv: list[str] | None = None) -> int:
-    from tools.cli import run_alone
-
-    return run_alone("vcan", __doc__, add_arguments, run, argv)
-
-
-if __name__ == "__main__":
-    sys.exit(main())

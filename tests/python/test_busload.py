@@ -12,7 +12,7 @@ from pathlib import Path
 
 from gen.lib import busload
 from gen.lib.paths import REPO
-from tools.busload import main as busload_main
+from tools.cli import main as armctl
 from gen.lib.busload import Bus, Protocol, classic_frame_bits, compute, fd_frame_bits
 
 # ---- classic CAN --------------------------------------------------------------------------------
@@ -142,7 +142,7 @@ def test_fd_bus_without_data_rate(proto: Protocol) -> None:
 
 def _run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
     """armctl busload, of the arm protocol's DBC frames unless argv names a protocol."""
-    rc = busload_main(list(argv) if "--protocol" in argv else ["--protocol", "arm", *argv])
+    rc = armctl(["busload", *(argv if "--protocol" in argv else ("--protocol", "arm", *argv))])
     out, err = capsys.readouterr()
     return rc, out, err
 

@@ -123,7 +123,7 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
 
 def run(ns: argparse.Namespace) -> int:
     """armctl fuzz (a FuzzError exits 1: tools/cli.py)."""
-    from tools.commands import UsageError
+    from tools.errors import UsageError
 
     names = list(HARNESSES) if ns.only is None else ns.only.split(",")
     bad = [n for n in names if n not in HARNESSES]

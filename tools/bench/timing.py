@@ -349,7 +349,7 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
 
 def run(ns: argparse.Namespace) -> int:
     from tools.build import build
-    from tools.commands import UsageError
+    from tools.errors import UsageError
 
     if not ns.duration > 0:
         raise UsageError(f"--duration: must be > 0, got {ns.duration}")

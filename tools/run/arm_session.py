@@ -26,7 +26,7 @@ from gen.lib import busload
 from gen.lib.params import param
 from gen.lib.paths import REPO, controller_binary, logger_binary
 from tools.build.arm import ArmRef, arm_from_args, arm_info, build_arm, print_arm_warnings
-from tools.commands import CommandError, UsageError
+from tools.errors import CommandError, UsageError
 from tools.run import procs as procs_mod
 from tools.run.processes import _logger_priority, _wait_for_logger
 

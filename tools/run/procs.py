@@ -16,17 +16,14 @@ the last process of the run on it has ended, never while one still uses its port
 
 from __future__ import annotations
 
-import ctypes
 import os
 import signal
 import subprocess
 import threading
 import time
-from collections.abc import Callable
 from typing import Any
 
-PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
-_libc = ctypes.CDLL(None, use_errno=True)
+from gen.lib.parent_death import dies_with_parent
 
 _live: list[tuple[str, subprocess.Popen[Any]]] = []
 # Re-entrant: the signal handlers below take it in the thread they interrupt, which may hold it
@@ -67,18 +64,6 @@ def hold_for_children(fd: int) -> None:
 
 def release_for_children(fd: int) -> None:
     _held.fds = tuple(x for x in getattr(_held, "fds", ()) if x != fd)
-
-
-def dies_with_parent(parent: int, then: Callable[[], None] | None = None) -> Callable[[], None]:
-    """A preexec_fn: SIGTERM to the child when armctl dies. The kernel sends it when the thread
-    that forked the child ends, which is the thread that waits for it here (run_hil), so it comes
-    no earlier than armctl's own end of the run. A parent already gone before the prctl: exit."""
-    def setup() -> None:
-        if _libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0) != 0 or os.getppid() != parent:
-            os._exit(1)
-        if then is not None:
-            then()
-    return setup
 
 
 class _Process:

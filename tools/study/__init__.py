@@ -36,7 +36,8 @@ from tools.run.slots import default_jobs
 from tools.study.stats import paired, summary
 from tools.study.config import METHODS, PROTOCOLS, StudyConfig, StudyConfigError, Trajectory, for_arm, load
 from tools.study.pairs import pair_workers, tune_pairs
-from tools.study.tuning import REFUSED_SCORE, TuneSetup, batch_size, method_bandwidth, storage_url, trial_spec
+from tools.study.tuning import (REFUSED_SCORE, TuneSetup, _read_tuning, batch_size, method_bandwidth, storage_url,
+                                trial_spec)
 
 DEFAULT_CONFIG = REPO / "tools" / "studies" / "paper.toml"
 BASELINES = ("tde", "usde-smc", "pd", "pm-paper-weights", "pm-paper", "gh2")
@@ -165,17 +166,6 @@ def tuning_key(cfg: StudyConfig, info: dict[str, Any], setup: TuneSetup, scenari
            "scenario": setup.cfg.scenarios[scenario].as_dict(), "space": setup.cfg.spaces[method].as_dict(), "tuning": t,
            "trajectory": setup.trajectory_args, "hold_s": cfg.hold_s}
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:16]
-
-
-def _read_tuning(path: Path) -> dict[str, Any]:
-    """The kept tuning file; an absent or unreadable one is empty (everything is tuned again)."""
-    try:
-        doc = json.loads(path.read_text())
-    except (OSError, ValueError):
-        doc = {}
-    if not isinstance(doc, dict) or not isinstance(doc.get("scenarios"), dict):
-        doc = {**(doc if isinstance(doc, dict) else {}), "scenarios": {}}
-    return doc
 
 
 def keep_tuning(path: Path, scenario: str, method: str, rec: dict[str, Any], common: dict[str, Any]) -> None:

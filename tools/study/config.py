@@ -34,6 +34,8 @@ METHODS: dict[str, tuple[str, str | None]] = {
     "usde-smc": ("usde-smc", "gains"),
 }
 TUNED = tuple(m for m, (_, how) in METHODS.items() if how is not None)
+# The methods that estimate the disturbance: the ones with an estimation error to compare.
+ESTIMATING = ("pm", "pm-paper-weights", "pm-paper", "tde", "usde-smc")
 # The synthesis knobs: the estimator's weight F(s) = f_bw / (s + f_bw) and H, the controller's
 # z_o = E1 e + E2 e_dot + D12 u_o ("single") or [E1 e + E2 e_dot; D12 u_o] ("split", which keeps
 # the generalized-H2 problem non-degenerate). gh2 has no estimator: only the controller's.

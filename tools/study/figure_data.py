@@ -13,8 +13,9 @@ from typing import Any
 import numpy as np
 
 from tools.run.telemetry_log import read_log, truth_rows
-from tools.study.config import METHODS
-from tools.study.report import ESTIMATING, in_degrees, loop_rate_hz
+from gen.lib.escape import file_stem
+from gen.lib.params import default
+from tools.study.config import ESTIMATING, METHODS
 
 # matplotlib's tab10, the colours of every figure's methods in their order in the study's method
 # table (METHODS): the same colour for a method in every figure of every study, PNG or HTML
@@ -24,6 +25,55 @@ METRIC_UNITS = {"linf": "deg", "rms": "deg", "est": "rad/s^2", "power": "W"}
 BAR_METRICS = ("linf", "rms", "est", "power")
 
 ENVELOPE_S = 0.1  # the tracking and estimation figures draw each method's max |x| over this trailing window
+
+METRIC_TEXT = {"linf": "L-infinity tracking error (deg)", "rms": "RMS tracking error (deg)",
+               "est": "RMS estimation error w - w_hat (rad/s^2)", "power": "torque power (W)"}
+# What a person reads is in degrees; study.json keeps the runs' radians.
+IN_DEGREES = ("linf", "rms")
+
+
+def in_degrees(s: dict[str, Any], metric: str) -> dict[str, Any]:
+    """A statistic of radians, in degrees when the metric is an angle (IN_DEGREES)."""
+    if metric not in IN_DEGREES or s.get("mean") is None:
+        return s
+    return {**s, "mean": float(np.degrees(s["mean"])),
+            "ci95": [float(np.degrees(v)) for v in s["ci95"]] if s.get("ci95") else s.get("ci95")}
+
+
+def fig_name(kind: str, scenario: str) -> str:
+    """fig_KIND_SCENARIO.png, the scenario's name made a file name."""
+    return f"fig_{kind}_{file_stem(scenario)}.png"
+
+
+def worst_kept_run(study: dict[str, Any], scenario: str) -> tuple[str, int, str] | None:
+    """The scenario's worst run among those whose telemetry the study keeps (every method's first
+    seed): one the safety layer stopped before its trajectory ended, else the largest sum over the
+    joints of the L-infinity tracking error (the tuning's objective). (method, seed, why), or None."""
+    seed = study["seeds"][0]
+    ranked = []
+    for m, runs in study["scenarios"][scenario]["runs"].items():
+        if not runs:
+            continue
+        r = runs[0]
+        linf = r.get("tracking_max_abs_deg")
+        if linf:
+            ranked.append((0, float(sum(linf)), m, f"the largest L-infinity tracking error summed over the joints, "
+                                                   f"{sum(linf):.3g} deg; {r.get('result')}"))
+        elif r.get("result") != "ok":
+            ranked.append((1, 0.0, m, f"{r.get('result')} before its trajectory ended"))
+    if not ranked:
+        return None
+    _, _, m, why = max(ranked)
+    return m, seed, why
+
+
+ANSWER_FIGURE = "answer"  # tools/study/figures.py ANSWER: draw_figures' key of the study's one figure
+
+
+def loop_rate_hz(study: dict[str, Any]) -> float:
+    """The loop rate the study ran at (study.json's rate_hz, the arm's design's); a record made
+    before it was kept ran at the registry's default."""
+    return float(study.get("rate_hz") or default("controller", "rate"))
 
 
 def colour_of(study: dict[str, Any]) -> dict[str, str]:

@@ -19,12 +19,12 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from tools.study.figure_data import (BAR_METRICS, ENVELOPE_S, METRIC_UNITS, answer_bars, colour_of, envelopes,  # noqa: E402
-                                     metric_bars, scenario_series, stopped_early)
+from tools.study.figure_data import (ANSWER_FIGURE, BAR_METRICS, ENVELOPE_S, METRIC_TEXT, METRIC_UNITS,  # noqa: E402
+                                     answer_bars, colour_of, envelopes, fig_name, loop_rate_hz, metric_bars,
+                                     scenario_series, stopped_early, worst_kept_run)
 from tools.study.html_figures import (answer_figure, distribution_figure, envelope_figure, metrics_figure,  # noqa: E402
                                       tuning_figure)
-from tools.study.report import (ANSWER_FIGURE, ESTIMATING, METRIC_TEXT, fig_name, loop_rate_hz,  # noqa: E402
-                                worst_kept_run)
+from tools.study.config import ESTIMATING  # noqa: E402
 from gen.lib.escape import matplotlib_text as mt  # noqa: E402
 from gen.lib.one_line import one_line  # noqa: E402
 
@@ -240,7 +240,7 @@ def convergence_figure(out: Path, scenario: str, recs: dict[str, dict[str, Any]]
 
 
 def _arm_strip(out: Path, study: dict[str, Any], scenario: str) -> list[tuple[str, str | None]]:
-    """The frame strip of the scenario's worst kept run (tools/study/report.py worst_kept_run)."""
+    """The frame strip of the scenario's worst kept run (tools/study/figure_data.py worst_kept_run)."""
     from tools.run.render import RenderError, write_strip_apart
 
     worst = worst_kept_run(study, scenario)

@@ -9,10 +9,9 @@ from typing import Any
 
 import numpy as np
 
-from tools.study.figure_data import (BAR_METRICS, ENVELOPE_S, METRIC_UNITS, answer_bars, colour_of, decimate,
-                                     metric_bars,
-                                     stopped_early)
-from tools.study.report import ESTIMATING, METRIC_TEXT
+from tools.study.figure_data import (BAR_METRICS, ENVELOPE_S, METRIC_TEXT, METRIC_UNITS, answer_bars, colour_of,
+                                     decimate, metric_bars, stopped_early)
+from tools.study.config import ESTIMATING
 from gen.lib.escape import plotly_text as pt
 
 POINTS = 600  # samples per envelope trace: each the max over its block, so no peak is lost

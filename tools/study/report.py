@@ -11,11 +11,11 @@ from typing import Any
 import numpy as np
 
 from gen.lib.atomic_output import write_text_atomic
-from gen.lib.escape import file_stem, markdown_code as code, markdown_fence, markdown_text as md, shell_command
+from gen.lib.escape import markdown_code as code, markdown_fence, markdown_text as md, shell_command
 from gen.lib.one_line import one_line
 from tools.run.verdict import FOLLOWING_ERROR_STOP_DEG, left_tracking_bound, stopped_by_following_error
-from gen.lib.params import default
-from tools.study.config import STUDY_PROTOCOL
+from tools.study.config import ESTIMATING, STUDY_PROTOCOL
+from tools.study.figure_data import ANSWER_FIGURE, METRIC_TEXT, fig_name, in_degrees, loop_rate_hz, worst_kept_run
 
 PROTOCOL_TEXT = {"canopen": "CiA 402 (per-mille torque of the rated torque, positions in encoder increments)",
                  "arm": "the arm protocol (torques in micro-newton-metres, CAN FD state frames)"}
@@ -28,11 +28,6 @@ PAPER_TABLE2 = {"usde-smc": [0.5956, 0.2118, 1.2881, 0.6978, 4.7868, 3.6274],
                 "tde": [0.6201, 0.4429, 0.7234, 1.5404, 3.8190, 4.6619],
                 "pm": [0.2163, 0.0883, 0.3618, 0.2889, 2.7415, 2.1596]}
 PAPER_TABLE3 = {"usde-smc": 14.9473, "tde": 15.6809, "pm": 14.4772}
-ESTIMATING = ("pm", "pm-paper-weights", "pm-paper", "tde", "usde-smc")
-METRIC_TEXT = {"linf": "L-infinity tracking error (deg)", "rms": "RMS tracking error (deg)",
-               "est": "RMS estimation error w - w_hat (rad/s^2)", "power": "torque power (W)"}
-# What a person reads is in degrees; study.json keeps the runs' radians.
-IN_DEGREES = ("linf", "rms")
 ALPHA = 0.05  # a paired difference counts as significant below this p (the paired t-test's: _p)
 
 
@@ -74,14 +69,6 @@ def _tuning_status(r: dict[str, Any]) -> str:
 def _labels(study: dict[str, Any], paper: bool) -> list[str]:
     names = study["arm"]["joint_names"]
     return [f"joint {j + 1}" if paper else f"{j + 1} {md(names[j])}" for j in range(len(names))]
-
-
-def in_degrees(s: dict[str, Any], metric: str) -> dict[str, Any]:
-    """A statistic of radians, in degrees when the metric is an angle (IN_DEGREES)."""
-    if metric not in IN_DEGREES or s.get("mean") is None:
-        return s
-    return {**s, "mean": float(np.degrees(s["mean"])),
-            "ci95": [float(np.degrees(v)) for v in s["ci95"]] if s.get("ci95") else s.get("ci95")}
 
 
 def _stats_table(study: dict[str, Any], sc: dict[str, Any], metric: str, labels: list[str]) -> str:
@@ -306,48 +293,12 @@ def _bandwidth_cell(sc: dict[str, Any], m: str, resonance: float | None) -> str:
     return f"{bw:.3g} Hz ({bw / resonance:.2f}x the first resonance)"
 
 
-def fig_name(kind: str, scenario: str) -> str:
-    """fig_KIND_SCENARIO.png, the scenario's name made a file name."""
-    return f"fig_{kind}_{file_stem(scenario)}.png"
-
-
 def _shown(path: Path) -> str:
     """A path as a command in the report names it: from the repository's root when inside it."""
     from gen.lib.paths import REPO
 
     p = path.resolve()
     return str(p.relative_to(REPO)) if p.is_relative_to(REPO) else str(p)
-
-
-def worst_kept_run(study: dict[str, Any], scenario: str) -> tuple[str, int, str] | None:
-    """The scenario's worst run among those whose telemetry the study keeps (every method's first
-    seed): one the safety layer stopped before its trajectory ended, else the largest sum over the
-    joints of the L-infinity tracking error (the tuning's objective). (method, seed, why), or None."""
-    seed = study["seeds"][0]
-    ranked = []
-    for m, runs in study["scenarios"][scenario]["runs"].items():
-        if not runs:
-            continue
-        r = runs[0]
-        linf = r.get("tracking_max_abs_deg")
-        if linf:
-            ranked.append((0, float(sum(linf)), m, f"the largest L-infinity tracking error summed over the joints, "
-                                                   f"{sum(linf):.3g} deg; {r.get('result')}"))
-        elif r.get("result") != "ok":
-            ranked.append((1, 0.0, m, f"{r.get('result')} before its trajectory ended"))
-    if not ranked:
-        return None
-    _, _, m, why = max(ranked)
-    return m, seed, why
-
-
-ANSWER_FIGURE = "answer"  # tools/study/figures.py ANSWER: draw_figures' key of the study's one figure
-
-
-def loop_rate_hz(study: dict[str, Any]) -> float:
-    """The loop rate the study ran at (study.json's rate_hz, the arm's design's); a record made
-    before it was kept ran at the registry's default."""
-    return float(study.get("rate_hz") or default("controller", "rate"))
 
 
 def _remove_figures(out: Path, scenarios: list[str]) -> None:
@@ -487,6 +438,5 @@ def summary_table(study: dict[str, Any]) -> str:
             ends = ", ".join(f"{res.count(r)} {r}" for r in sorted(set(res), key=str))
             lines.append(f"  {one_line(m):<17}{linf:<{width}}{est_s:>12}{pw_s:>9}  {one_line(ends)}")
     return "\n".join(lines)
-
 
 

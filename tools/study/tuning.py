@@ -34,7 +34,7 @@ from tools.run.cluster import Cluster
 from tools.build.code_identity import code_identity
 from tools.study.design_knobs import design_text
 from tools.run.runner import SYNTH_LOCK, RunSpec, run_all, synthesize_cached
-from tools.study import bandwidth
+from tools.study.bandwidth import bandwidth_hz, method_loop
 from tools.study.config import KNOB_FLOOR, METHODS, Scenario, Space, StudyConfig, gain_args
 
 FAILED_SCORE = 1e3  # rad: what a trial with a run that failed, diverged or hit its torque limit scores at least
@@ -42,6 +42,17 @@ ACHIEVED_CAP = 30.0   # rad: one joint's error in a failed run counts at most th
 REFUSED_SCORE = 4 * FAILED_SCORE  # a design the synthesis refused: nothing ran
 EDGE = 0.02         # a best value this close to a range's end (fraction of its log width) is at the edge
 SCORED = ("ok", "tracking-bound-exceeded")  # a run that ended well scores its tracking error
+
+
+def _read_tuning(path: Path) -> dict[str, Any]:
+    """The kept tuning file; an absent or unreadable one is empty (everything is tuned again)."""
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, ValueError):
+        doc = {}
+    if not isinstance(doc, dict) or not isinstance(doc.get("scenarios"), dict):
+        doc = {**(doc if isinstance(doc, dict) else {}), "scenarios": {}}
+    return doc
 
 
 @dataclass
@@ -138,8 +149,8 @@ def method_bandwidth(setup: TuneSetup, method: str, knobs: dict[str, Any]) -> fl
     weights (the arm's design config); None when the synthesis refuses the design."""
     if METHODS[method][1] is None:
         design, _ = synthesized(setup.base_design)
-        return None if design is None else bandwidth.bandwidth_hz(
-            bandwidth.method_loop(METHODS[method][0], {}, design, setup.period_s), setup.period_s)
+        return None if design is None else bandwidth_hz(
+            method_loop(METHODS[method][0], {}, design, setup.period_s), setup.period_s)
     return candidate_check(setup, method, knobs)[1]
 
 
@@ -152,7 +163,7 @@ def candidate_check(setup: TuneSetup, method: str, knobs: dict[str, Any]) -> tup
         design, why = synthesized(design_text(setup.base_design, knobs, with_estimator=method != "gh2"))
         if design is None:
             return why, None
-    bw = bandwidth.bandwidth_hz(bandwidth.method_loop(
+    bw = bandwidth_hz(method_loop(
         METHODS[method][0], controller_values(method, knobs) if design is None else {}, design, setup.period_s),
         setup.period_s)
     if not bw < setup.resonance_hz:

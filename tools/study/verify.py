@@ -43,8 +43,8 @@ from tools.build.arm import arm_info
 from tools.run.runner import RunSpec, execute, prepare_build, run_all, sil_design
 from tools.run.workers import ForkedWorkers
 from tools.study.config import StudyConfigError
-from tools.study.tuning import (FAILED_SCORE, TuneSetup, _variant_text, candidate_check, objective, robust_variants,
-                                trial_spec)
+from tools.study.tuning import (FAILED_SCORE, TuneSetup, _read_tuning, _variant_text, candidate_check, objective,
+                                robust_variants, trial_spec)
 
 VERDICTS = "tuning-verified"  # build/release/VERDICTS/<code identity>.json: what this code found
 
@@ -411,8 +411,6 @@ def accept_moved(path: Path, checks: list[PairCheck], tuning_seeds: list[int]) -
     still runs as recorded): their recorded runs and bandwidth replaced by this code's, stamped
     with this code, the verification saying by how much they moved (`armctl tune --verify
     --accept-moved`). The tuning's history (its trials) stays the tuning code's. Returns those pairs."""
-    from tools.study import _read_tuning
-
     code = code_identity()
     done = []
     when = datetime.now(timezone.utc).isoformat(timespec="seconds")
@@ -442,8 +440,6 @@ def accept_moved(path: Path, checks: list[PairCheck], tuning_seeds: list[int]) -
 def restamp(path: Path, checks: list[PairCheck]) -> list[str]:
     """The pairs that verified equal, stamped with this code's identity in the kept tuning file
     (under its lock, merged with what other commands kept meanwhile). Returns those pairs."""
-    from tools.study import _read_tuning
-
     code = code_identity()
     done = []
     when = datetime.now(timezone.utc).isoformat(timespec="seconds")

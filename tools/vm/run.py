@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import BinaryIO, TextIO
 
 from gen.lib.escape import shell_word
-from tools.run import procs
+from gen.lib.parent_death import dies_with_parent
 from tools.vm.image import CACHE, QEMU, Image, VmError, ensure_image
 
 MEMORY = "2G"
@@ -174,7 +174,7 @@ def run_in_vm(argv: Sequence[str], cwd: Path | str | None = None, env: Mapping[s
             with open(qemu_log, "wb") as qlog:  # the qemu dies with armctl, even a SIGKILLed one
                 proc = subprocess.Popen(qemu_command(img, run_dir, console), stdin=subprocess.DEVNULL,
                                         stdout=qlog, stderr=subprocess.STDOUT,
-                                        preexec_fn=procs.dies_with_parent(os.getpid()))
+                                        preexec_fn=dies_with_parent(os.getpid()))
             try:
                 while proc.poll() is None:
                     if started is None and (run_dir / "started").exists():
