@@ -18,7 +18,7 @@ from gen.lib.paths import REPO
 COMMAND_MODULES = {
     "setup": "tools.commands.setup", "build": "tools.commands.build", "cluster-certs": "tools.run.cluster",
     "timing": "tools.bench.timing", "hil": "tools.commands.hil", "plant": "tools.commands.plant",
-    "commission": "tools.commands.commission", "run": "tools.commands.run", "demo": "tools.commands.demo",
+    "commission": "tools.commands.commission", "run": "tools.commands.run", "identify": "tools.commands.identify", "demo": "tools.commands.demo",
     "test": "tools.commands.test", "synth": "tools.commands.synth", "vcan": "tools.vcan",
     "busload": "tools.busload", "drive": "tools.commands.drive", "study": "tools.study", "tune": "tools.study",
     "faults": "tools.bench.faults", "fuzz": "tools.bench.fuzz", "bench": "tools.bench", "docs": "tools.commands.docs",

@@ -16,7 +16,7 @@ from gen.lib.paths import REPO
 from gen.lib.toml_input import loads as toml_loads
 
 REGISTRY = REPO / "firmware" / "params" / "params.toml"
-PROGRAMS = ("controller", "simulator", "hil")
+PROGRAMS = ("controller", "simulator", "hil", "identify")
 TYPES = ("float", "int", "text", "flag", "choice", "special")
 C_TYPES = ("double", "float", "floats", "uint32", "int", "long")
 _FIELDS = {"type", "c", "field", "default", "min", "max", "min_open", "scale", "unit", "arg", "help", "group", "hidden",

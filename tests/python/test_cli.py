@@ -22,7 +22,7 @@ def _no_signal_handlers(monkeypatch: pytest.MonkeyPatch) -> None:
 def test_every_command_is_a_module_with_add_subparser_and_run() -> None:
     p = cli.parser()
     sub = next(a for a in p._actions if isinstance(a, argparse._SubParsersAction))  # noqa: SLF001
-    assert list(sub.choices) == ["setup", "build", "cluster-certs", "timing", "hil", "plant", "commission", "run",
+    assert list(sub.choices) == ["setup", "build", "cluster-certs", "timing", "hil", "plant", "commission", "run", "identify",
                                  "demo", "test", "synth", "vcan",
                                  "busload", "drive", "study", "tune", "faults", "fuzz", "bench", "docs", "arms", "render",
                                  "export", "lock"]

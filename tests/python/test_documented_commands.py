@@ -46,6 +46,7 @@ EXERCISED: dict[str, str] = {
     "plant": "test_run_on_arm.py::rehearsal",  # and every other test there: its arm is the plant
     "commission": "test_run_on_arm.py::rehearsal",
     "run": "test_run_on_arm.py::rehearsal",
+    "identify": "test_identify.py::identified",  # and the bad-input test there
     "arms": "test_arm_matrix.py::test_armctl_arms_runs_a_set_end_to_end",
     "timing": "test_timing.py::timing_run",
     "busload": "test_documented_commands.py::test_busload",

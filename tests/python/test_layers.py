@@ -152,7 +152,7 @@ def test_the_circle_finder_names_each_circle() -> None:
 # tools/ by job, lowest first: a module imports only modules of its own level or below (and gen,
 # host_sim). The loose helpers sit lowest; tools/vcan.py (which runs the VM, for tools/run/hil.py)
 # between vm and run; the CLI (tools/cli.py, tools/commands/) above them all.
-TOOL_LAYERS = (("errors", "methods", "busload"), ("build",), ("vm",), ("vcan",), ("run",), ("study",), ("bench",),
+TOOL_LAYERS = (("errors", "methods", "busload"), ("build",), ("vm",), ("vcan",), ("run",), ("identify",), ("study",), ("bench",),
                ("cli", "commands"))
 
 

@@ -1,0 +1,1 @@
+"""armctl identify: the excitation, the fit and the identified arm file."""
