@@ -406,53 +406,48 @@ def moved_note(checks: list[PairCheck], tuning_path: Path) -> str | None:
                "; every pick still ranks ahead of its runner-up (`armctl tune --verify` says so in full)"))
 
 
+def _stamp_pairs(path: Path, checks: list[PairCheck], update: Any) -> list[str]:
+    """Each pair for which `update(check, record, stamp)` returns True, stamped with this code's
+    identity in the kept tuning file (under its lock, merged with what other commands kept
+    meanwhile; `stamp` is the `verified` entry to extend). Returns those pairs."""
+    code = code_identity()
+    done = []
+    when = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    with flocked(path.with_name(f".{path.name}.lock")):
+        doc = _read_tuning(path)
+        for c in checks:
+            rec = (doc["scenarios"].get(c.scenario) or {}).get(c.method)
+            stamp = {"code": code, "runs": c.runs, "when": when}
+            if not isinstance(rec, dict) or not update(c, rec, stamp):
+                continue
+            rec.setdefault("tuned_code", rec.get("code"))
+            rec["code"], rec["verified"] = code, stamp
+            done.append(c.pair)
+        if done:
+            write_json_atomic(path, doc)
+    return done
+
+
 def accept_moved(path: Path, checks: list[PairCheck], tuning_seeds: list[int]) -> list[str]:
     """The pairs that moved but whose pick still ranks ahead of its runner-up on this code (and
     still runs as recorded): their recorded runs and bandwidth replaced by this code's, stamped
     with this code, the verification saying by how much they moved (`armctl tune --verify
     --accept-moved`). The tuning's history (its trials) stays the tuning code's. Returns those pairs."""
-    code = code_identity()
-    done = []
-    when = datetime.now(timezone.utc).isoformat(timespec="seconds")
-    with flocked(path.with_name(f".{path.name}.lock")):
-        doc = _read_tuning(path)
-        for c in checks:
-            rec = (doc["scenarios"].get(c.scenario) or {}).get(c.method)
-            if c.equal or c.retune or not c.now or not isinstance(rec, dict):
-                continue
-            _, _, recorded = recorded_runs(rec, tuning_seeds)
-            if len(recorded) != len(c.now):
-                raise VerifyError(f"{c.pair}: {len(recorded)} recorded runs, {len(c.now)} verified")
-            for r, res in zip(recorded, c.now, strict=True):
-                r["result"], r["tracking_max_abs_deg"] = res.get("result"), res.get("tracking_max_abs_deg")
-            if rec.get("bandwidth_hz") is not None:
-                rec["bandwidth_hz"] = c.bandwidth_now
-            rec.setdefault("tuned_code", rec.get("code"))
-            rec["code"] = code
-            rec["verified"] = {"code": code, "runs": c.runs, "when": when,
-                               "accepted_move": {"largest_change": c.worst_rel, "rank": c.rank}}
-            done.append(c.pair)
-        if done:
-            write_json_atomic(path, doc)
-    return done
+    def update(c: PairCheck, rec: dict[str, Any], stamp: dict[str, Any]) -> bool:
+        if c.equal or c.retune or not c.now:
+            return False
+        _, _, recorded = recorded_runs(rec, tuning_seeds)
+        if len(recorded) != len(c.now):
+            raise VerifyError(f"{c.pair}: {len(recorded)} recorded runs, {len(c.now)} verified")
+        for r, res in zip(recorded, c.now, strict=True):
+            r["result"], r["tracking_max_abs_deg"] = res.get("result"), res.get("tracking_max_abs_deg")
+        if rec.get("bandwidth_hz") is not None:
+            rec["bandwidth_hz"] = c.bandwidth_now
+        stamp["accepted_move"] = {"largest_change": c.worst_rel, "rank": c.rank}
+        return True
+    return _stamp_pairs(path, checks, update)
 
 
 def restamp(path: Path, checks: list[PairCheck]) -> list[str]:
-    """The pairs that verified equal, stamped with this code's identity in the kept tuning file
-    (under its lock, merged with what other commands kept meanwhile). Returns those pairs."""
-    code = code_identity()
-    done = []
-    when = datetime.now(timezone.utc).isoformat(timespec="seconds")
-    with flocked(path.with_name(f".{path.name}.lock")):
-        doc = _read_tuning(path)
-        for c in checks:
-            rec = (doc["scenarios"].get(c.scenario) or {}).get(c.method)
-            if not c.equal or not isinstance(rec, dict) or rec.get("code") == code:
-                continue
-            rec.setdefault("tuned_code", rec.get("code"))
-            rec["code"] = code
-            rec["verified"] = {"code": code, "runs": c.runs, "when": when}
-            done.append(c.pair)
-        if done:
-            write_json_atomic(path, doc)
-    return done
+    """The pairs that verified equal and are stamped with other code, stamped with this code."""
+    return _stamp_pairs(path, checks, lambda c, rec, stamp: c.equal and rec.get("code") != stamp["code"])
