@@ -57,6 +57,10 @@ NEEDS = [
     Need("0x1017", OPTIONAL, "producer heartbeat, ms"),
     Need("0x1016.1", WATCHDOG, "consumer heartbeat: the drive faults if the master's heartbeat stops; without it a "
          "dead master leaves the drive applying its last torque"),
+    Need("0x605A", "written 2 where present and writable",
+         "quick stop option: the quick stop ramp, then switch on disabled (the brake closed)"),
+    Need("0x605E", "written 2 where present and writable", "fault reaction option: the quick stop ramp"),
+    Need("0x6085", "written where present, if the drive table gives it", "quick stop deceleration, in the drive's own unit"),
     Need("0x6060, 0x6061", REQUIRED, "mode of operation 10 (CST) written, then read back"),
 ]
 

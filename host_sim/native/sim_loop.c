@@ -814,7 +814,10 @@ static void run_loop(sim_t *s)
             controller_lost(s, s->booted, timeout);
             break;
         }
-        if (!on_frame(s, &f, bus)) break;
+        if (!on_frame(s, &f, bus)) {
+            s->ended = 1; /* the controller stopped every drive, as sim_service records it */
+            break;
+        }
     }
 }
 

@@ -84,7 +84,7 @@ def test_the_runner_s_sil_path_matches_the_slot_build(tmp_path: Path) -> None:
         build_arm("release", arm, targets=["arm_sil"])
         built = run_hil(HilOptions(out=tmp_path / "slot", duration_s=DURATION, method="pm", arm=arm, bus="sil",
                                    controller_args=HOLD, uncertainty={**sc.uncertainty, "seed": 3},
-                                   drives=sc.drives, bus_timing=sc.bus_timing))
+                                   drives=sc.drives, bus_timing=sc.bus_timing, brakes="released"))  # as the runner's
     a, b = runtime["results"], built["results"]
     assert a["design_hash"] and a["design_hash"] == b["design_hash"]
     own = json.loads((bdir / "generated" / "design" / "manifest.json").read_text())["content_hash"][:16]

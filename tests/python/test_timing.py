@@ -74,7 +74,8 @@ def test_overruns_are_counted_when_every_step_is_forced_slow(tmp_path: Path, con
                                               "--debug-slow-step-us", "6000")))
     summary = json.loads((tmp_path / "controller_summary.json").read_text())
     assert summary["steps_done"] > 0, run["results"]["problems"]
-    assert summary["overruns"] == summary["steps_done"]
+    # every step overran, and so may the controlled stop's periods after them
+    assert summary["steps_done"] <= summary["overruns"] <= summary["steps_done"] + summary["stop"]["periods"], summary
     assert run["transport"]["overruns"] == summary["overruns"]
     # the simulator is the other half of a realtime loop: real-time priority when permitted, on
     # the loop's CPU (the last one by default)

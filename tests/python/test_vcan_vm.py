@@ -279,9 +279,10 @@ def test_every_captured_frame_decodes_with_the_dbc(vm_run: dict) -> None:
         # one per SYNC: the safe stop's zero torque and shutdown come in a period of their own
         assert counts[f"DRIVE_{i}_CMD"] == n_sync
         assert counts[f"DRIVE_{i}_HEARTBEAT"] >= 3  # boot-up, operational, stopped
-    for i in range(1, 7):  # SIGTERM's safe stop: each drive's last command is zero torque with shutdown
-        last = db.decode_message(0x200 + i, [f for f in frames if f.can_id == 0x200 + i][-1].data)
-        assert last["controlword"] == 0x0006 and last["target_torque"] == 0, (i, last)
+    for i in range(1, 7):  # SIGTERM's controlled stop: quick stop under the hold, then each drive disabled
+        cmds = [db.decode_message(0x200 + i, f.data) for f in frames if f.can_id == 0x200 + i]
+        assert any(c["controlword"] == 0x0002 for c in cmds), (i, cmds[-3:])  # the quick stop
+        assert cmds[-1]["controlword"] == 0x0000, (i, cmds[-1])  # disable voltage: the power stage off
     assert counts.get("NMT", 0) >= 4  # start ... stop, on both buses
     assert not any(name.endswith("_EMCY") for name in counts), counts
     assert len(frames) + len(injected) > 13 * PERIODS
