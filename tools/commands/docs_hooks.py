@@ -19,10 +19,12 @@ import sys
 from pathlib import Path
 from typing import Any
 
-# mkdocs loads this file by its path, from a console script whose sys.path lacks the repository
+# mkdocs loads this file by its path, from a console script whose sys.path lacks the repository, and
+# gives the hook no sys.path of its own when it runs: what it needs of ours is imported here, at load
 _REPO = str(Path(__file__).resolve().parents[2])
 if _REPO not in sys.path:
     sys.path.append(_REPO)
+from tools.build import packages  # noqa: E402
 
 DIAGRAMS = "diagrams"
 GLOSSARY = "glossary.md"
@@ -48,11 +50,9 @@ def glossary_terms(text: str) -> dict[str, str]:
 
 def render_diagram(source: Path) -> str:
     """The SVG Graphviz's dot draws from `source`; DiagramError naming the file when it cannot."""
-    from tools.build.packages import PackagesMissing, ensure
-
     try:
-        ensure("docs")
-    except PackagesMissing as e:
+        packages.ensure("docs")
+    except packages.PackagesMissing as e:
         raise DiagramError(f"{source.name}: Graphviz's dot is missing: {e}") from None
     dot = shutil.which("dot")
     if dot is None:
