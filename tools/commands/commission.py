@@ -15,7 +15,7 @@ from pathlib import Path
 from gen.lib.paths import REPO
 from tools.build.arm import add_arm_arguments
 from tools.commands import CommandError
-from tools.run.arm_session import add_bus_arguments
+from tools.run.arm_session import add_bus_arguments, add_mode_argument
 
 END_HOLD_S = 0.5
 
@@ -27,8 +27,7 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
     add_bus_arguments(p, None, "; the arm's interfaces [socketcan:can0,can1,...]")
     p.add_argument("--record", type=Path, default=None, metavar="FILE",
                    help="where the commissioning record goes [runs/commission/ARM-HASH.json, where armctl run looks]")
-    p.add_argument("--mode", choices=("realtime", "lockstep"), default=None,
-                   help="realtime on real interfaces; lockstep against armctl plant [by the bus]")
+    add_mode_argument(p)
     p.add_argument("--out", type=Path, default=REPO / "runs" / "commission", metavar="DIR",
                    help="the controller's log, summary and telemetry [runs/commission]")
     add_arm_arguments(p)

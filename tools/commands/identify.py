@@ -20,7 +20,7 @@ from gen.lib.params import param
 from gen.lib.paths import REPO
 from tools.build.arm import add_arm_arguments
 from tools.commands import CommandError, UsageError
-from tools.run.arm_session import add_bus_arguments
+from tools.run.arm_session import add_bus_arguments, add_mode_argument
 
 MOVED_FRACTION = 0.5  # of the excitation's span: a joint that moved less did not follow it
 
@@ -39,8 +39,7 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--record", type=Path, default=None, metavar="FILE",
                    help="the arm's commissioning record [runs/commission/ARM-HASH.json, where armctl commission "
                         "keeps it]")
-    p.add_argument("--mode", choices=("realtime", "lockstep"), default=None,
-                   help="realtime on real interfaces; lockstep against armctl plant [by the bus]")
+    add_mode_argument(p)
     p.add_argument("--run-dir", type=Path, default=REPO / "runs" / "identify", metavar="DIR",
                    help="the excitation, the controller's log and telemetry, identification.json [runs/identify]")
     add_arm_arguments(p)

@@ -22,7 +22,7 @@ from gen.lib.params import constant, param
 from gen.lib.paths import REPO
 from tools.build.arm import add_arm_arguments
 from tools.commands import CommandError, UsageError
-from tools.run.arm_session import add_bus_arguments
+from tools.run.arm_session import add_bus_arguments, add_mode_argument
 
 OPEN_ENDED_S = param("controller", "duration").max  # hold and stream: until Ctrl-C
 REFERENCE_S = 10.0  # the built-in reference's length unless --duration says otherwise
@@ -51,9 +51,7 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--record", type=Path, default=None, metavar="FILE",
                    help="the arm's commissioning record [runs/commission/ARM-HASH.json, where armctl commission "
                         "keeps it]")
-    p.add_argument("--mode", choices=("realtime", "lockstep"), default=None,
-                   help="realtime on real interfaces; lockstep against armctl plant (udp, vcan), whose arm steps on "
-                        "the controller's SYNC [by the bus]")
+    add_mode_argument(p)
     p.add_argument("--out", type=Path, default=REPO / "runs" / "run", metavar="DIR",
                    help="the controller's log, summary and telemetry [runs/run]")
     add_arm_arguments(p)

@@ -82,6 +82,13 @@ def add_bus_arguments(p: Any, default: str | None, prog_note: str) -> None:
                         "that carry the drives at the loop rate, in drive order]")
 
 
+def add_mode_argument(p: Any) -> None:
+    """--mode of a command that runs the controller on the arm's buses (run, commission, identify)."""
+    p.add_argument("--mode", choices=("realtime", "lockstep"), default=None,
+                   help="realtime on real interfaces; lockstep against armctl plant (udp, vcan), whose arm steps on "
+                        "the controller's SYNC [by the bus]")
+
+
 def parse_bus(text: str, n_buses: int) -> tuple[str, list[str]]:
     """(kind, one interface or UDP spec per bus) from --bus; UsageError naming the value."""
     if text == "vcan":
