@@ -265,7 +265,7 @@ static void on_sync(co_sim_t *s, unsigned bus)
     /* the master's time, where it is one (a python-can master may leave its timestamps at 0) */
     const double age = s->sync_read_s - s->frame_sent_s;
     s->sync_sent_s = s->frame_sent_s >= 0.0 && age >= -0.001 && age <= 0.5 ? s->frame_sent_s : -1.0;
-    release_answers(s);
+    if (!sim_keeps_holding(s->cfg, s->syncs[bus] - 1u)) release_answers(s);
     s->holding_answers = sim_answers_late(s->cfg, s->syncs[bus] - 1u);
     if (s->synced && !s->prestepped) advance(s);
     s->prestepped = 0;

@@ -27,7 +27,7 @@ typedef struct {
     int flag; /* 0 fresh, 1 other buses already drained for it, 2 that and never held back again */
 } queued_t;
 
-#define HELD_MAX (2u * SIM_MAX_JOINTS) /* a period's answers, and an EMCY or heartbeat beside them */
+#define HELD_MAX (2u * SIM_LATE_BURST_MAX * SIM_MAX_JOINTS) /* a burst's answers, and an EMCY or heartbeat beside each */
 
 /* The whole working set: static, sized at compile time, nothing allocated per period. */
 struct sim {
@@ -519,7 +519,7 @@ static void on_sync(sim_t *s, int counter, unsigned bus)
         finish_period(s); /* commands missing: the drives count it, the arm still moves */
     }
     if (s->counter < 0) {
-        release_answers(s);
+        if (!sim_keeps_holding(s->cfg, s->rep->periods)) release_answers(s);
         s->holding_answers = sim_answers_late(s->cfg, s->rep->periods);
         s->counter = counter;
         s->got_cmd = 0u;

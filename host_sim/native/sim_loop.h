@@ -22,7 +22,11 @@ typedef enum { SIM_TIMING_OFF = 0, SIM_TIMING_VIRTUAL, SIM_TIMING_WALLCLOCK } si
  * are held back until the controller has stopped waiting for them, told by what it sends next
  * rather than by a time, which a loaded machine would blur: its first command of the period (it has
  * taken the period as stale, and the next SYNC has not gone out yet) or its next SYNC. */
-typedef enum { SIM_LATE_AT_COMMAND = 0, SIM_LATE_AT_NEXT_SYNC } sim_late_release_t;
+/* TEST HOOK: when answers held back go out: at the controller's command of their period, at the
+ * next SYNC, or all of them together at the SYNC after the last late period (a plant that stalled
+ * for several periods, then caught up). */
+typedef enum { SIM_LATE_AT_COMMAND = 0, SIM_LATE_AT_NEXT_SYNC, SIM_LATE_IN_ONE_BURST } sim_late_release_t;
+#define SIM_LATE_BURST_MAX 3u /* periods one burst holds (the drives' queues hold that many answers) */
 
 typedef struct {
     arm_can_bus_set_config_t buses;
@@ -61,6 +65,12 @@ static inline int sim_answers_late(const sim_config_t *cfg, uint64_t period)
 {
     return cfg->late_answer_period >= 0 && period >= (uint64_t)cfg->late_answer_period &&
            period <= (uint64_t)cfg->late_answer_last;
+}
+
+/* TEST HOOK: whether what is held stays held at the SYNC of `period` (a burst still gathering). */
+static inline int sim_keeps_holding(const sim_config_t *cfg, uint64_t period)
+{
+    return cfg->late_answer_release == SIM_LATE_IN_ONE_BURST && sim_answers_late(cfg, period);
 }
 
 /* ARM_SIM's flags: bit j, joint j's brake holds; this bit, the period is after the stop. */

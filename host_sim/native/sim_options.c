@@ -187,9 +187,11 @@ static int sim_late_answer(void *t, void *c, const argv_opt_t *opt, const char *
         cfg->late_answer_release = SIM_LATE_AT_COMMAND;
     } else if (parsed && strcmp(when, "next-sync") == 0) {
         cfg->late_answer_release = SIM_LATE_AT_NEXT_SYNC;
+    } else if (parsed && strcmp(when, "burst") == 0 && last - first < SIM_LATE_BURST_MAX) {
+        cfg->late_answer_release = SIM_LATE_IN_ONE_BURST;
     } else {
-        snprintf(err, errcap, "%s: '%s' is not PERIOD[-LAST]:command or PERIOD[-LAST]:next-sync (0 <= PERIOD <= LAST)",
-                 opt->name, v);
+        snprintf(err, errcap, "%s: '%s' is not PERIOD[-LAST]:command, PERIOD[-LAST]:next-sync or PERIOD[-LAST]:burst "
+                 "(0 <= PERIOD <= LAST; a burst at most %u periods)", opt->name, v, SIM_LATE_BURST_MAX);
         return -1;
     }
     cfg->late_answer_period = (int64_t)first;

@@ -81,6 +81,7 @@ def test_bad_drive_fields_are_one_line_errors(tmp_path: Path, drives: str, named
      "--velocity-source motor: give --velocity-filter-hz"),
     (["--debug-late-answer", "60:4500"], "--debug-late-answer: '60:4500' is not PERIOD[-LAST]:command"),
     (["--debug-late-answer", "62-60:command"], "--debug-late-answer: '62-60:command' is not PERIOD[-LAST]:command"),
+    (["--debug-late-answer", "60-63:burst"], "--debug-late-answer: '60-63:burst' is not PERIOD[-LAST]:command"),
 ])
 def test_bad_arm_sim_drive_options_are_one_line_errors(args: list[str], named: str) -> None:
     arm_sim = REPO / "build" / "release" / "host_sim" / "native" / "arm_sim"

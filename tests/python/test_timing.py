@@ -89,15 +89,17 @@ WIDE_WATCHDOG_PERIODS = 20  # 0.1 s at 200 Hz: a stall beside the late answer do
 
 
 @pytest.mark.parametrize("protocol", ["canopen", "arm"])
-@pytest.mark.parametrize(("release", "late_periods"), [("command", 1), ("next-sync", 1), ("next-sync", 3)])
+@pytest.mark.parametrize(("release", "late_periods"), [("command", 1), ("next-sync", 1), ("next-sync", 3),
+                                                    ("burst", 3)])
 def test_a_late_answer_is_counted_late_not_taken_for_another_node(tmp_path: Path, controller_bin: Path, protocol: str,
                                                                   release: str, late_periods: int) -> None:
     """A stalled simulator (a descheduled vCPU did it in CI) answers after the controller stopped
     waiting: before its next SYNC or after it, and for one period or several in a row. A CANopen TPDO
     carries no SYNC counter; the late one once passed for the next period's state, and that period's
     own then for a second node on the drive's id, which stopped the run (after late periods in a row,
-    even once the first was told apart). Late answers are counted late and the run goes on (the arm
-    protocol tells them by their counter).
+    even once the first was told apart), or when a plant that stalled for several periods sent them
+    all in one burst (the third of a burst once did). Late answers are counted late and the run goes
+    on (the arm protocol tells them by their counter).
     The simulator holds the answers back until the controller's first command of the period (it has
     stopped waiting) or its next SYNC: a delay in time would not do, since a stall of the controller
     on a loaded machine can outlast it, and an answer read before the controller stops waiting is

@@ -21,6 +21,7 @@
 
 volatile sig_atomic_t controller_stop_signal = 0;
 #define ENABLE_TIMEOUT_PERIODS 100u /* CiA 402 enable sequence: 3 periods when all is well */
+#define OWED_MAX 8u /* late answers a joint may owe before a second TPDO in a period is another node's */
 
 static int64_t now_ns(void)
 {
@@ -37,13 +38,14 @@ typedef struct {
     int canopen;
     arm_co_units_t units[ARM_N_JOINTS];
     uint32_t tpdo1_mask, tpdo2_mask;
-    /* The joints that may be one answer behind: their TPDO1 (TPDO2) of the last period did not
-     * come, or the one that came may itself have been late (this mask had the joint, and no second
-     * TPDO came to tell). Their answer to an earlier SYNC may still arrive after this one's SYNC (a
-     * CANopen TPDO carries no SYNC counter), so one second TPDO this period is that late answer,
-     * not another node on their id. A drive that stays behind keeps its bit; another node's
-     * extra TPDO then clears it, and is taken for a second node one period later. */
-    uint32_t tpdo1_late, tpdo2_late;
+    /* The answers each joint still owes (its TPDO1, its TPDO2): one more for every period its
+     * answer did not come in, one fewer for every late answer read. Their answers to earlier SYNCs
+     * may still arrive after this one's SYNC (a CANopen TPDO carries no SYNC counter), so a second
+     * TPDO in a period is one of those late answers while the joint owes any (a plant that stalled
+     * for several periods sends them in one burst), and another node on its id only once it owes
+     * none. A foreign node's extra TPDOs first pay off what a lagging drive owes, so it is named at
+     * most OWED_MAX periods later. */
+    uint8_t tpdo1_owed[ARM_N_JOINTS], tpdo2_owed[ARM_N_JOINTS];
     int draining; /* reading what came before this period's SYNC: every TPDO then is late */
     double rx_sent_s; /* the frame being handled: when its sender sent it (-1: the transport does not say) */
     double sync_clock_s; /* the transport's clock as this period's SYNC went out (-1: it has none) */
@@ -79,19 +81,20 @@ static int sent_before_sync(const link_t *l)
 
 /* Whether joint j's TPDO (of the kind `seen` records this period) is this period's answer. One read
  * before this period's SYNC is late: counted as such, not used. A second one this period is
- * either the real answer after a late one (the joint's last answer was missing: the late one is
- * counted, this one stands) or another node on the bus using j's id (the port stops the arm). */
-static int tpdo_is_this_periods(link_t *l, uint32_t *seen, uint32_t *may_be_late, unsigned j)
+ * either the real answer after a late one (the joint owes answers: the late one is counted, this
+ * one stands) or another node on the bus using j's id (the port stops the arm). */
+static int tpdo_is_this_periods(link_t *l, uint32_t *seen, uint8_t owed[ARM_N_JOINTS], unsigned j)
 {
     arm_drive_bus_t *d = &l->drives;
     const uint32_t bit = 1u << j;
     if (l->draining || sent_before_sync(l)) {
+        if (owed[j] > 0u) owed[j]--;
         d->rx.wrong_counter++;
         return 0;
     }
     if ((*seen & bit) != 0u) {
-        if ((*may_be_late & bit) != 0u) {
-            *may_be_late &= ~bit;
+        if (owed[j] > 0u) {
+            owed[j]--;
             d->rx.wrong_counter++;
         } else {
             d->duplicate_mask |= bit;
@@ -99,6 +102,15 @@ static int tpdo_is_this_periods(link_t *l, uint32_t *seen, uint32_t *may_be_late
     }
     *seen |= bit;
     return 1;
+}
+
+/* A new period: each joint whose answer did not come in the last one owes one more (at most
+ * OWED_MAX: a drive that far behind is stale long before, and the watchdog stops the arm). */
+static void count_owed(uint8_t owed[ARM_N_JOINTS], uint32_t answered)
+{
+    for (unsigned j = 0; j < ARM_N_JOINTS; ++j) {
+        if ((answered & (1u << j)) == 0u && owed[j] < OWED_MAX) owed[j]++;
+    }
 }
 
 /* A CANopen drive's TPDO1 or TPDO2: its joint's state in SI units (arm/co_pdo.h); 1 if it was one.
@@ -116,7 +128,7 @@ static int canopen_rx(link_t *l, const arm_can_frame_t *f)
     uint16_t sw;
     if (arm_co_unpack_tpdo1((uint8_t)node, f, &pos, &vel) == 0) {
         if (l->late_on) lateness_state(&l->late, now_ns(), l->rx_sent_s, l->draining ? 1u : sent_before_sync(l) ? 2u : 0u);
-        if (!tpdo_is_this_periods(l, &l->tpdo1_mask, &l->tpdo1_late, j)) return 1;
+        if (!tpdo_is_this_periods(l, &l->tpdo1_mask, l->tpdo1_owed, j)) return 1;
         d->q[j] = arm_co_increments_to_rad(&l->units[j], pos);
         d->qd[j] = arm_co_increments_to_rad(&l->units[j], vel);
         if ((l->report->co_q_seen & (1u << j)) == 0u) { /* the units' first use, for the summary */
@@ -124,7 +136,7 @@ static int canopen_rx(link_t *l, const arm_can_frame_t *f)
             l->report->co_q_first[j] = d->q[j];
         }
     } else if (arm_co_unpack_tpdo2((uint8_t)node, f, &tq, &sw) == 0) {
-        if (!tpdo_is_this_periods(l, &l->tpdo2_mask, &l->tpdo2_late, j)) return 1;
+        if (!tpdo_is_this_periods(l, &l->tpdo2_mask, l->tpdo2_owed, j)) return 1;
         l->tpdo2_seen |= 1u << j;
         d->tau_measured[j] = arm_co_permille_to_torque(&l->units[j], tq);
         d->statusword[j] = sw;
@@ -704,9 +716,14 @@ static void start_period(link_t *l, uint32_t k, int64_t now)
     if (l->canopen) {
         sync.len = 0u; /* CiA 301 SYNC without a counter (0x1019 = 0) */
         const int tpdo2_was_due = k > 0u && k % l->tpdo2_every == 0u;
-        l->tpdo1_late = k > 0u ? (ALL_JOINTS & ~l->tpdo1_mask) | l->tpdo1_late : 0u;
-        /* a TPDO2 late for its period may come a period after that one too (a non-due one between) */
-        l->tpdo2_late = tpdo2_was_due ? (ALL_JOINTS & ~l->tpdo2_mask) | l->tpdo2_late : k > 0u ? l->tpdo2_late : 0u;
+        if (k == 0u) {
+            memset(l->tpdo1_owed, 0, sizeof(l->tpdo1_owed));
+            memset(l->tpdo2_owed, 0, sizeof(l->tpdo2_owed));
+        } else {
+            count_owed(l->tpdo1_owed, l->tpdo1_mask);
+            /* a TPDO2 late for its period may come a period after that one too (a non-due one between) */
+            if (tpdo2_was_due) count_owed(l->tpdo2_owed, l->tpdo2_mask);
+        }
         l->tpdo1_mask = l->tpdo2_mask = 0u;
         l->period = k;
         if (l->heartbeat_ns > 0 && now >= l->next_heartbeat_ns) { /* the drives consume it (0x1016.1) */
