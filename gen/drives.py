@@ -35,6 +35,7 @@ from gen import eds as eds_mod
 from gen.lib.cia402 import CODEC_MAPPING
 from gen.lib import toml_input
 from gen.lib.escape import shell_command
+from gen.lib.params import param
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_DRIVES = ROOT / "firmware" / "protocol" / "drives.toml"
@@ -284,9 +285,8 @@ def table_plan(path: Path) -> tuple[drive_check.Plan, Path]:
     node = _uint(defaults.get("node", 1), f"{path}: defaults.node", 1, 127)
     eds_rel = doc.get("eds")
     eds = Path(str(eds_rel)) if eds_rel and Path(str(eds_rel)).is_absolute() else path.parent / str(eds_rel or "")
-    plan = drive_check.Plan(node=node, heartbeat_ms=_uint(doc.get("heartbeat_ms", 100), f"{path}: heartbeat_ms", 0, 65535),
-                            consumer_ms=_uint(doc.get("consumer_ms", 300), f"{path}: consumer_ms", 0, 65535),
-                            master_id=_uint(doc.get("master_id", 127), f"{path}: master_id", 1, 127),
+    heartbeat, consumer, master = _heartbeats(doc, path)
+    plan = drive_check.Plan(node=node, heartbeat_ms=heartbeat, consumer_ms=consumer, master_id=master,
                             transmission=_pdo(doc, path), rated=_in_unit(u.rated_nm, u.unit), encoder=u.encoder,
                             gear=u.gear, units_per_nm=TORQUE_UNITS[u.unit], gear_efficiency=u.efficiency,
                             accept_no_master_watchdog=_accept_no_watchdog(doc, path))
@@ -354,6 +354,21 @@ def load_transmission(path: Path | None = None) -> dict[str, int]:
     return _pdo(_read(path), path)
 
 
+# A drive table's fields that arm_controller takes as options of the same meaning: the option's
+# default and range (firmware/params/params.toml [controller.*]) are the field's.
+HEARTBEAT_FIELDS = {"heartbeat_ms": "heartbeat-ms", "consumer_ms": "consumer-ms", "master_id": "master-id"}
+
+
+def _heartbeats(doc: dict[str, Any], path: Path) -> tuple[int, int, int]:
+    """The table's heartbeat_ms, consumer_ms and master_id (each arm_controller's default if absent)."""
+    values = []
+    for key, option in HEARTBEAT_FIELDS.items():
+        p = param("controller", option)
+        values.append(_uint(doc.get(key, p.default), f"{path}: {key}", int(p.min), int(p.max)))
+    heartbeat, consumer, master = values
+    return heartbeat, consumer, master
+
+
 @dataclass
 class _Table:
     """What a drive table says for every joint: read once, before its joints are resolved."""
@@ -410,9 +425,7 @@ def _read_table(arm: dict[str, Any], path: Path) -> _Table:
         raise DrivesError(f"{path}: unknown field(s) {', '.join(sorted(unknown))} (known: {', '.join(sorted(TOP_FIELDS))})")
     eds, dictionary = _eds_of(doc, path)
     units = file_units(dictionary)
-    heartbeat = _uint(doc.get("heartbeat_ms", 100), f"{path}: heartbeat_ms", 0, 65535)
-    consumer = _uint(doc.get("consumer_ms", 300), f"{path}: consumer_ms", 0, 65535)
-    master = _uint(doc.get("master_id", 127), f"{path}: master_id", 1, 127)
+    heartbeat, consumer, master = _heartbeats(doc, path)
     accept = _accept_no_watchdog(doc, path)
     transmission = _pdo(doc, path)
     cycle_us = round(1e6 / float(arm.get("loop_rate_hz", 1000.0)))

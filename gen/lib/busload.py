@@ -49,6 +49,11 @@ from gen.lib.cia402 import CODEC_MAPPING, pdo_bytes
 from gen.lib.params import constant, default
 from gen.lib.paths import REPO
 
+# The drives' heartbeat period the load counts: the one arm_controller writes to each drive by
+# default (firmware/params/params.toml [controller.heartbeat-ms]); the busiest bus's load a design may take.
+HEARTBEAT_MS: float = float(default("controller", "heartbeat-ms"))
+BUS_BUDGET: float = constant("bus-budget")
+
 DEFAULT_DBC = REPO / "firmware" / "protocol" / "arm_drives.dbc"
 DEFAULT_TOPOLOGY = REPO / "firmware" / "protocol" / "buses.toml"
 MAX_BUSES = 4  # the controller's bus limit: ARM_CAN_BUS_SET_MAX (firmware/transport/include/arm/can_bus.h)
@@ -272,7 +277,7 @@ def topology_drives(path: Path) -> int:
 
 
 def default_wiring(n_drives: int, rate_hz: float = default("controller", "rate"),
-                   budget: float = constant("bus-budget"),
+                   budget: float = BUS_BUDGET,
                    template: Bus | None = None) -> list[Bus]:
     """The fewest buses of the template's kind (CAN FD 1/5 Mbit/s) that carry drives 1..n within
     the budget at the loop rate, drives split evenly in order; at most 4 buses (the controller's
@@ -428,7 +433,7 @@ def _check_drives(buses: list[Bus], n: int, slots: int, what: str) -> None:
         raise ConfigError(f"drives {', '.join(map(str, missing))} are on no bus")
 
 
-def canopen_compute(buses: list[Bus], rate_hz: float, heartbeat_ms: float = 100.0,
+def canopen_compute(buses: list[Bus], rate_hz: float, heartbeat_ms: float = HEARTBEAT_MS,
                     every: dict[str, int] | None = None, n_drives: int | None = None) -> list[BusLoad]:
     """The load of each bus of CiA 402 drives: per period one SYNC, and per drive RPDO1, TPDO1 and
     TPDO2, each once every `every[pdo]` SYNCs (their CiA 301 transmission types; absent: 1); a
@@ -456,7 +461,7 @@ def _canopen_frame(name: str, n_bytes: int, per_period: float, bus: Bus) -> Fram
     return FrameLoad(name, 1, per_period, nom, dat, canopen_frame_s(n_bytes, bus))
 
 
-def canopen_load(bus: Bus, n_drives: int, rate_hz: float, heartbeat_ms: float = 100.0,
+def canopen_load(bus: Bus, n_drives: int, rate_hz: float, heartbeat_ms: float = HEARTBEAT_MS,
                  every: dict[str, int] | None = None) -> float:
     """Worst-case load (fraction of bus time) of n_drives CiA 402 drives on one bus at rate_hz;
     every: the PDOs' transmission types (gen/drives.py [pdo] transmission; absent: 1, every SYNC)."""
@@ -464,7 +469,7 @@ def canopen_load(bus: Bus, n_drives: int, rate_hz: float, heartbeat_ms: float = 
     return canopen_compute([one], rate_hz, heartbeat_ms, every, n_drives)[0].load
 
 
-def canopen_drives_per_bus(bus: Bus, rate_hz: float, budget: float = 0.70, heartbeat_ms: float = 100.0,
+def canopen_drives_per_bus(bus: Bus, rate_hz: float, budget: float = BUS_BUDGET, heartbeat_ms: float = HEARTBEAT_MS,
                            every: dict[str, int] | None = None) -> int:
     """The most drives one bus carries within the budget (0: not even one)."""
     n = 0
@@ -477,7 +482,7 @@ CLASSIC_1M = Bus("can0", False, 1e6, None, [])  # the CiA 402 drives' default wi
 
 
 def canopen_wiring(n_drives: int, rate_hz: float, every: dict[str, int] | None = None,
-                   budget: float = constant("bus-budget"), heartbeat_ms: float = constant("heartbeat-ms"),
+                   budget: float = BUS_BUDGET, heartbeat_ms: float = HEARTBEAT_MS,
                    template: Bus = CLASSIC_1M, max_buses: int = MAX_BUSES) -> list[Bus] | None:
     """The fewest buses of the template's kind (classic 1 Mbit/s) that carry drives 1..n within
     the budget at rate_hz, drives split evenly in order; None if even max_buses do not."""
@@ -486,12 +491,3 @@ def canopen_wiring(n_drives: int, rate_hz: float, every: dict[str, int] | None =
         if all(canopen_load(b, len(b.drives), rate_hz, heartbeat_ms, every) <= budget for b in split):
             return split
     return None
-
-
-def canopen_drives_per_bus(bus: Bus, rate_hz: float, budget: float = 0.70, heartbeat_ms: float = 100.0,
-                           every: dict[str, int] | None = None) -> int:
-    """The most drives one bus carries within the budget (0: not even one)."""
-    n = 0
-    while n < 127 and canopen_load(bus, n + 1, rate_hz, heartbeat_ms, every) <= budget:
-        n += 1
-    return n

@@ -193,7 +193,7 @@ def canopen_topology(path: Path | None, info: dict[str, Any], rate_hz: float,
     timing (timed: what an overload does is then emulated); else classic CAN, the field's wire:
     the fewest 1 Mbit/s buses that carry the arm's drives (busload.canopen_wiring); else, when
     even the controller's limit of buses does not, the arm's CAN FD wiring (arm.json)."""
-    budget, hb = constant("bus-budget"), constant("heartbeat-ms")
+    budget, hb = constant("bus-budget"), busload.HEARTBEAT_MS
     n = info["n_joints"]
     if path is not None:
         topology = load_topology(path, info)
@@ -293,9 +293,9 @@ def topology_load_pct(topology: list[busload.Bus], rate_hz: float = param_defaul
 def _load_pct(topology: list[busload.Bus], rate_hz: float, protocol: str,
               every: dict[str, int] | None) -> dict[str, float]:
     if protocol == "canopen":
-        return {b.name: round(busload.canopen_load(b, len(b.drives), rate_hz, constant("heartbeat-ms"), every) * 100.0,
+        return {b.name: round(busload.canopen_load(b, len(b.drives), rate_hz, busload.HEARTBEAT_MS, every) * 100.0,
                               2) for b in topology}
-    loads = busload.compute(topology, rate_hz, constant("heartbeat-ms"), busload.default_protocol(),
+    loads = busload.compute(topology, rate_hz, busload.HEARTBEAT_MS, busload.default_protocol(),
                             max(d for b in topology for d in b.drives))
     return {bl.bus.name: round(bl.load * 100.0, 2) for bl in loads}
 
