@@ -15,7 +15,7 @@ from pathlib import Path
 from gen.lib.paths import REPO
 from tools.build.arm import add_arm_arguments
 from tools.commands import CommandError
-from tools.run.arm_session import add_bus_arguments, add_mode_argument
+from tools.run.arm_session import add_bus_arguments, add_mode_argument, add_record_argument
 
 END_HOLD_S = 0.5
 
@@ -25,8 +25,7 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
                                           "(docs/run-on-your-arm.md)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_bus_arguments(p, None, "; the arm's interfaces [socketcan:can0,can1,...]")
-    p.add_argument("--record", type=Path, default=None, metavar="FILE",
-                   help="where the commissioning record goes [runs/commission/ARM-HASH.json, where armctl run looks]")
+    add_record_argument(p, "where the commissioning record goes [runs/commission/ARM-HASH.json, where armctl run looks]")
     add_mode_argument(p)
     p.add_argument("--out", type=Path, default=REPO / "runs" / "commission", metavar="DIR",
                    help="the controller's log, summary and telemetry [runs/commission]")

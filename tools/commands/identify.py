@@ -21,7 +21,7 @@ from gen.lib.params import param
 from gen.lib.paths import REPO
 from tools.build.arm import add_arm_arguments
 from tools.commands import CommandError, UsageError
-from tools.run.arm_session import add_bus_arguments, add_mode_argument
+from tools.run.arm_session import add_bus_arguments, add_mode_argument, add_record_argument
 
 MOVED_FRACTION = 0.5  # of the excitation's span: a joint that moved less did not follow it
 
@@ -37,9 +37,7 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
         p.add_argument(f"--{name}", type=int if q.type == "int" else float, default=q.default, metavar=q.arg,
                        help=f"{q.help} [{q.default}]")
     add_bus_arguments(p, None, "; the arm's interfaces [socketcan:can0,can1,...]")
-    p.add_argument("--record", type=Path, default=None, metavar="FILE",
-                   help="the arm's commissioning record [runs/commission/ARM-HASH.json, where armctl commission "
-                        "keeps it]")
+    add_record_argument(p)
     add_mode_argument(p)
     p.add_argument("--run-dir", type=Path, default=REPO / "runs" / "identify", metavar="DIR",
                    help="the excitation, the controller's log and telemetry, identification.json [runs/identify]")

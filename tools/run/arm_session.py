@@ -82,6 +82,12 @@ def add_bus_arguments(p: Any, default: str | None, prog_note: str) -> None:
                         "that carry the drives at the loop rate, in drive order]")
 
 
+def add_record_argument(p: Any, help_text: str = "the arm's commissioning record [runs/commission/ARM-HASH.json, "
+                                                   "where armctl commission keeps it]") -> None:
+    """--record: the arm's commissioning record (armctl commission writes it; run and identify read it)."""
+    p.add_argument("--record", type=Path, default=None, metavar="FILE", help=help_text)
+
+
 def add_mode_argument(p: Any) -> None:
     """--mode of a command that runs the controller on the arm's buses (run, commission, identify)."""
     p.add_argument("--mode", choices=("realtime", "lockstep"), default=None,
