@@ -59,13 +59,15 @@ def _csv(vals: list[float]) -> str:
     return ",".join(repr(float(x)) for x in vals)
 
 
+def _parse(path: Path) -> dict[str, Any]:
+    try:
+        return toml_input.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise TruthError(f"{path}: {one_line(str(exc))}") from None
+
+
 def _read(path: Path | None, where: str) -> dict[str, Any]:
-    doc: dict[str, Any] = {}
-    if path is not None:
-        try:
-            doc = toml_input.loads(path.read_text())
-        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-            raise TruthError(f"{path}: {one_line(str(exc))}") from None
+    doc = _parse(path) if path is not None else {}
     unknown = set(doc) - TOP_FIELDS
     if unknown:
         raise TruthError(f"{where}: unknown field(s) {one_line(', '.join(sorted(unknown)))} (known: "

@@ -15,7 +15,7 @@ from pathlib import Path
 from gen.lib.paths import REPO
 from tools.build.arm import add_arm_arguments
 from tools.commands import CommandError
-from tools.run.arm_session import add_bus_arguments, add_mode_argument, add_record_argument
+from tools.run.arm_session import add_session_arguments
 
 END_HOLD_S = 0.5
 
@@ -24,9 +24,7 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("commission", help="check each joint of your arm before it moves: direction, scale, gravity "
                                           "(docs/run-on-your-arm.md)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    add_bus_arguments(p, None, "; the arm's interfaces [socketcan:can0,can1,...]")
-    add_record_argument(p, "where the commissioning record goes [runs/commission/ARM-HASH.json, where armctl run looks]")
-    add_mode_argument(p)
+    add_session_arguments(p, "where the commissioning record goes [runs/commission/ARM-HASH.json, where armctl run looks]")
     p.add_argument("--out", type=Path, default=REPO / "runs" / "commission", metavar="DIR",
                    help="the controller's log, summary and telemetry [runs/commission]")
     add_arm_arguments(p)

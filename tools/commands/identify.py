@@ -21,7 +21,7 @@ from gen.lib.params import param
 from gen.lib.paths import REPO
 from tools.build.arm import add_arm_arguments
 from tools.commands import CommandError, UsageError
-from tools.run.arm_session import add_bus_arguments, add_mode_argument, add_record_argument
+from tools.run.arm_session import add_session_arguments
 
 MOVED_FRACTION = 0.5  # of the excitation's span: a joint that moved less did not follow it
 
@@ -36,9 +36,7 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
         q = param("identify", name)
         p.add_argument(f"--{name}", type=int if q.type == "int" else float, default=q.default, metavar=q.arg,
                        help=f"{q.help} [{q.default}]")
-    add_bus_arguments(p, None, "; the arm's interfaces [socketcan:can0,can1,...]")
-    add_record_argument(p)
-    add_mode_argument(p)
+    add_session_arguments(p)
     p.add_argument("--run-dir", type=Path, default=REPO / "runs" / "identify", metavar="DIR",
                    help="the excitation, the controller's log and telemetry, identification.json [runs/identify]")
     add_arm_arguments(p)

@@ -22,7 +22,7 @@ from gen.lib.params import constant, param
 from gen.lib.paths import REPO
 from tools.build.arm import add_arm_arguments
 from tools.commands import CommandError, UsageError
-from tools.run.arm_session import add_bus_arguments, add_mode_argument, add_record_argument
+from tools.run.arm_session import add_session_arguments
 
 OPEN_ENDED_S = param("controller", "duration").max  # hold and stream: until Ctrl-C
 REFERENCE_S = 10.0  # the built-in reference's length unless --duration says otherwise
@@ -47,9 +47,7 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--duration", type=float, default=None, metavar="S",
                    help=f"the built-in reference's length [{REFERENCE_S:g}]; --hold and --stream: until Ctrl-C "
                         "unless given")
-    add_bus_arguments(p, None, "; the arm's interfaces [socketcan:can0,can1,...]")
-    add_record_argument(p)
-    add_mode_argument(p)
+    add_session_arguments(p)
     p.add_argument("--out", type=Path, default=REPO / "runs" / "run", metavar="DIR",
                    help="the controller's log, summary and telemetry [runs/run]")
     add_arm_arguments(p)

@@ -82,10 +82,14 @@ def add_bus_arguments(p: Any, default: str | None, prog_note: str) -> None:
                         "that carry the drives at the loop rate, in drive order]")
 
 
-def add_record_argument(p: Any, help_text: str = "the arm's commissioning record [runs/commission/ARM-HASH.json, "
-                                                   "where armctl commission keeps it]") -> None:
-    """--record: the arm's commissioning record (armctl commission writes it; run and identify read it)."""
-    p.add_argument("--record", type=Path, default=None, metavar="FILE", help=help_text)
+def add_session_arguments(p: Any, record_help: str = "the arm's commissioning record [runs/commission/ARM-HASH.json, "
+                                                     "where armctl commission keeps it]") -> None:
+    """The arguments of a command that runs the controller on the arm's buses (run, commission,
+    identify): the buses, the commissioning record (armctl commission writes it; run and identify
+    read it) and the mode."""
+    add_bus_arguments(p, None, "; the arm's interfaces [socketcan:can0,can1,...]")
+    p.add_argument("--record", type=Path, default=None, metavar="FILE", help=record_help)
+    add_mode_argument(p)
 
 
 def add_mode_argument(p: Any) -> None:
