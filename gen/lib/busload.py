@@ -41,6 +41,7 @@ from __future__ import annotations
 import functools
 import math
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -247,12 +248,10 @@ def topology_from_doc(doc: dict[str, Any], path: str, n_drives: int = 6) -> list
                 or not all(isinstance(d, int) and not isinstance(d, bool) for d in drives)):
             raise ConfigError(f"{where}.drives: expected a non-empty list of drive numbers, got {drives!r}")
         buses.append(Bus(name, kind == "fd", rates["nominal"], rates["data"], list(drives)))
-    problem = _misplaced_drive(buses, n_drives)
-    if problem is not None:
-        kind, bus, d, other = problem
-        raise ConfigError(f"{path}: bus {bus}.drives: drive {d} does not exist (drives 1..{n_drives})" if kind == "none"
-                          else f"{path}: bus {bus}.drives: drive {d} is on two buses ({other} and {bus})" if kind == "two"
-                          else f"{path}: drives: drive(s) {other} are on no bus")
+    _check_placement(buses, n_drives, {
+        "none": lambda bus, d, _: f"{path}: bus {bus}.drives: drive {d} does not exist (drives 1..{n_drives})",
+        "two": lambda bus, d, other: f"{path}: bus {bus}.drives: drive {d} is on two buses ({other} and {bus})",
+        "missing": lambda _, __, other: f"{path}: drives: drive(s) {other} are on no bus"})
     return buses
 
 
@@ -415,28 +414,27 @@ def _check_drives(buses: list[Bus], n: int, slots: int, what: str) -> None:
     """Drives 1..n each on exactly one bus, within `slots` (the DBC's, or CANopen's node ids)."""
     if not 1 <= n <= slots:
         raise ConfigError(f"{n} drives: {what} 1..{slots}")
-    problem = _misplaced_drive(buses, n)
-    if problem is not None:
-        kind, bus, d, other = problem
-        raise ConfigError(f"bus {bus}: drive {d} does not exist (drives 1..{n}; {what} 1..{slots})" if kind == "none"
-                          else f"drive {d} is on two buses ({other} and {bus})" if kind == "two"
-                          else f"drives {other} are on no bus")
+    _check_placement(buses, n, {
+        "none": lambda bus, d, _: f"bus {bus}: drive {d} does not exist (drives 1..{n}; {what} 1..{slots})",
+        "two": lambda bus, d, other: f"drive {d} is on two buses ({other} and {bus})",
+        "missing": lambda _, __, other: f"drives {other} are on no bus"})
 
 
-def _misplaced_drive(buses: list[Bus], n: int) -> tuple[str, str, int, str] | None:
-    """The first break of "drives 1..n each on exactly one bus": (kind, bus, drive, other), kind
-    "none" (no such drive), "two" (other: the bus it is on already) or "missing" (other: every
-    drive on no bus, comma-separated); None if there is none."""
+def _check_placement(buses: list[Bus], n: int, messages: dict[str, Callable[[str, int, str], str]]) -> None:
+    """Drives 1..n each on exactly one bus; else ConfigError with the caller's message for the first
+    break: "none" (no such drive), "two" (other: the bus it is on already) or "missing" (other:
+    every drive on no bus, comma-separated), each message made of (bus, drive, other)."""
     seen: dict[int, str] = {}
     for b in buses:
         for d in b.drives:
             if not 1 <= d <= n:
-                return "none", b.name, d, ""
+                raise ConfigError(messages["none"](b.name, d, ""))
             if d in seen:
-                return "two", b.name, d, seen[d]
+                raise ConfigError(messages["two"](b.name, d, seen[d]))
             seen[d] = b.name
     missing = [d for d in range(1, n + 1) if d not in seen]
-    return ("missing", "", 0, ", ".join(map(str, missing))) if missing else None
+    if missing:
+        raise ConfigError(messages["missing"]("", 0, ", ".join(map(str, missing))))
 
 
 def canopen_compute(buses: list[Bus], rate_hz: float, heartbeat_ms: float = HEARTBEAT_MS,
