@@ -37,6 +37,7 @@ from typing import Any
 import can
 
 from gen.lib.atomic_output import write_json_atomic
+from gen.lib.multicast import CAN_GROUP, lcm_url
 from host_sim.canbus import open_bus
 from tools.run.hil import HilOptions, run_hil
 from gen.lib.paths import REPO
@@ -56,7 +57,7 @@ UNMEASURED = {
     "kill-logger": "the logger is the record: killed, the log holds no simulator truth of the stop (the simulator's "
                    "own account of the window after the controller fell silent is the row's stop.simulator.moved_deg)",
 }
-GROUP = "239.74.163.2"
+GROUP = CAN_GROUP
 
 
 @dataclass
@@ -92,7 +93,7 @@ class Injector:
         """The processes of this run (their command line names its bus port)."""
         r = subprocess.run(["pgrep", "-f", f"{exe} .*{GROUP}:{self.port}@"], capture_output=True, text=True)
         if exe == "arm_lcm_logger":
-            r = subprocess.run(["pgrep", "-f", f"arm_lcm_logger --lcm-url udpm://239.255.76.67:{self.lcm_port}"],
+            r = subprocess.run(["pgrep", "-f", f"arm_lcm_logger --lcm-url {lcm_url(self.lcm_port)}"],
                                capture_output=True, text=True)
         return [int(x) for x in r.stdout.split()]
 
@@ -204,7 +205,7 @@ def _forge_truth(i: Injector) -> None:
 
     from gen import lcmtypes
 
-    lc = lcm.LCM(f"udpm://239.255.76.67:{i.lcm_port}?ttl=0")
+    lc = lcm.LCM(lcm_url(i.lcm_port))
     m = lcmtypes.load().sim_truth_t()
     m.n = 6
     m.q = m.qd = m.tau_applied = m.w_true = [0.0] * 6

@@ -24,6 +24,7 @@ from typing import Any, TextIO
 
 from gen.lib import busload
 from gen.lib.params import param
+from gen.lib.multicast import CAN_GROUP, LCM_GROUP, lcm_url
 from gen.lib.paths import REPO, controller_binary, logger_binary
 from tools.build.arm import ArmRef, arm_from_args, arm_info, build_arm, print_arm_warnings
 from tools.errors import CommandError, UsageError
@@ -32,9 +33,7 @@ from tools.run.processes import _logger_priority, _wait_for_logger
 
 ARPHRD_CAN = 280
 IFF_UP = 0x1
-CAN_GROUP = "239.74.163.2"
 DEFAULT_UDP_PORT = int(param("controller", "bus").default.rsplit(":", 1)[1])  # arm_controller's own default
-LCM_GROUP = "239.255.76.67"
 LOGGER_READY_S = 120.0  # generous: in the qemu VM a program takes seconds to start (tools/vm/README.md)
 
 
@@ -239,7 +238,7 @@ def run_controller(setup: ArmOnBus, ctl_args: list[str], out: Path, mode: str) -
     if setup.kind == "udp":
         check_loopback_route(CAN_GROUP)
     with acquire_slot(quiet_ports=True) as slot:
-        url = f"udpm://{LCM_GROUP}:{slot.lcm_port}?ttl=0&recv_buf_size=8388608"
+        url = lcm_url(slot.lcm_port, recv_buf=True)
         realtime = mode == "realtime"
         cpu = (os.cpu_count() or 1) - 1  # the loop's CPU, as a HIL run's (tools/run/hil.py realtime_cpu)
         ctl = [str(controller_binary(setup.bdir)), *setup.bus_args(), "--lcm-url", url, "--protocol", "canopen",

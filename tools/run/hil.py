@@ -27,7 +27,8 @@ from gen.lib.paths import REPO, controller_binary, logger_binary
 from tools.run import procs as procs_mod
 from tools.run.processes import (LOGGER_READY_S, USAGE_ERROR, HilError, ProcessPlan, last_line, plan_json,
                                  run_processes)
-from tools.run.slots import CAN_GROUP, LCM_GROUP, acquire_slot
+from gen.lib.multicast import CAN_GROUP, CAN_ROUTE, LCM_GROUP, LCM_ROUTE, lcm_url
+from tools.run.slots import acquire_slot
 from tools.run.verdict import Bounds
 
 CONTROLLER_DEFAULT_HOLD_S: float = param_default("controller", "ref-hold")
@@ -170,7 +171,7 @@ def check_loopback_route(group: str) -> None:
     """Refuse to run unless the group is routed to lo: every membership then stays on lo."""
     r = subprocess.run(["ip", "route", "get", group], capture_output=True, text=True)
     if r.returncode != 0 or " dev lo " not in f" {r.stdout} ":
-        net = "239.255.76.67/32" if group.startswith("239.255.") else "239.74.163.0/24"
+        net = LCM_ROUTE if group == LCM_GROUP else CAN_ROUTE
         raise HilError(f"multicast group {group} is not routed to lo (route: {r.stdout.strip() or r.stderr.strip()}); "
                        f"run as root: ip route replace {net} dev lo (tools/armctl does this when run as root)")
 
@@ -271,7 +272,7 @@ def bus_args(kind: str, can_port: int, topology: list[busload.Bus], side: str = 
     out = []
     for i, b in enumerate(topology):
         pil = f"uart:{i}" if side == "controller" else f"slcan:127.0.0.1:{can_port + i}"
-        spec = {"udp": f"udp:239.74.163.2:{can_port + i}", SIL: f"mem:{i}", PIL: pil}.get(kind, f"socketcan:vcan{i}")
+        spec = {"udp": f"udp:{CAN_GROUP}:{can_port + i}", SIL: f"mem:{i}", PIL: pil}.get(kind, f"socketcan:vcan{i}")
         out.append(f"{spec}@{','.join(map(str, b.drives))}")
     return out
 
@@ -693,7 +694,7 @@ def _command_lines(opt: HilOptions, info: dict[str, Any], bdir: Path, w: _Wiring
     buses = bus_args(w.bus_kind, can_port, w.topology)
     bus_argv = [a for spec in buses for a in ("--bus", spec)]
     sim_buses = bus_args(w.bus_kind, can_port, w.topology, "simulator") if w.bus_kind == PIL else buses
-    url = "" if sil else f"udpm://{LCM_GROUP}:{lcm_port}?ttl=0&recv_buf_size=8388608"
+    url = "" if sil else lcm_url(lcm_port, recv_buf=True)
     sim_args = sim_argv(programs.sim, sim_buses, lcm_url=url, summary=opt.out / "sim_summary.json",
                         uncertainty=opt.uncertainty, timing=bus_timing_mode(opt.mode) if opt.bus_timing else "off",
                         phys=w.topology, model=prepared_model(bdir), drives=opt.drives, canopen=w.canopen,
@@ -724,7 +725,7 @@ def _execute(opt: HilOptions, programs: _Programs, lines: _CommandLines,
                        logger=[str(programs.logger), "--lcm-url", lines.url, str(lines.log_path)],
                        simulator=lines.sim_args, controller=lines.ctl_args, cwd=str(REPO),
                        logger_ready_s=VM_LOGGER_READY_S if in_vm else LOGGER_READY_S,
-                       multicast_routes=(f"{LCM_GROUP}/32",) if in_vm else ())
+                       multicast_routes=(LCM_ROUTE,) if in_vm else ())
     return _run_processes_in_vm(opt, plan) if in_vm else run_processes(plan)
 
 
