@@ -34,7 +34,8 @@ METHODS: dict[str, tuple[str, str | None]] = {
     "usde-smc": ("usde-smc", "gains"),
 }
 TUNED = tuple(m for m, (_, how) in METHODS.items() if how is not None)
-# The methods that estimate the disturbance: the ones with an estimation error to compare.
+# The methods that estimate the disturbance: the ones with an estimation error to compare, and the
+# synthesised ones whose design has an estimator (gh2's has none).
 ESTIMATING = ("pm", "pm-paper-weights", "pm-paper", "tde", "usde-smc")
 # The synthesis knobs: the estimator's weight F(s) = f_bw / (s + f_bw) and H, the controller's
 # z_o = E1 e + E2 e_dot + D12 u_o ("single") or [E1 e + E2 e_dot; D12 u_o] ("split", which keeps
@@ -343,7 +344,7 @@ def _space(method: str, d: Any) -> Space:
     knobs = set(GAIN_KNOBS[method]) if how == "gains" else {*DESIGN_KNOBS}
     if how == "design" and {"E1", "E2", "D12"} & set(d):
         knobs = {*LEGACY_DESIGN_KNOBS}
-    if method == "gh2":
+    if how == "design" and method not in ESTIMATING:  # no estimator: no estimator weights
         knobs -= {"H", "f_bw"}
     known = knobs | ({"form"} if how == "design" else set())
     unknown = set(d) - known

@@ -35,7 +35,7 @@ from tools.build.code_identity import code_identity
 from tools.study.design_knobs import design_text
 from tools.run.runner import SYNTH_LOCK, RunSpec, run_all, synthesize_cached
 from tools.study.bandwidth import bandwidth_hz, method_loop
-from tools.study.config import KNOB_FLOOR, METHODS, Scenario, Space, StudyConfig, gain_args
+from tools.study.config import ESTIMATING, KNOB_FLOOR, METHODS, Scenario, Space, StudyConfig, gain_args
 
 FAILED_SCORE = 1e3  # rad: what a trial with a run that failed, diverged or hit its torque limit scores at least
 ACHIEVED_CAP = 30.0   # rad: one joint's error in a failed run counts at most this much (so a failed trial < 3000)
@@ -160,7 +160,7 @@ def candidate_check(setup: TuneSetup, method: str, knobs: dict[str, Any]) -> tup
     the arm's first resonance."""
     design = None
     if METHODS[method][1] == "design":
-        design, why = synthesized(design_text(setup.base_design, knobs, with_estimator=method != "gh2"))
+        design, why = synthesized(design_text(setup.base_design, knobs, with_estimator=method in ESTIMATING))
         if design is None:
             return why, None
     bw = bandwidth_hz(method_loop(
@@ -203,7 +203,7 @@ def trial_spec(setup: TuneSetup, method: str, scenario: Scenario, knobs: dict[st
     if how == "gains":
         args = [*gain_args(method, knobs), *args]
     elif how == "design":
-        text = design_text(setup.base_design, knobs, with_estimator=method != "gh2")
+        text = design_text(setup.base_design, knobs, with_estimator=method in ESTIMATING)
     return RunSpec(out=str(out), method=firmware, duration_s=duration_s, controller_args=tuple(args),
                    uncertainty={**scenario.uncertainty, **(overrides or {}), "seed": seed},
                    drives=scenario.drives.to_dict(),
@@ -437,7 +437,7 @@ def tune_method(setup: TuneSetup, scenario: Scenario, method: str, trials: int |
             "failed": pick["failed"], "edge_note": _edge_note(rounds, len(scores) >= cap), "validation": validation,
             "bandwidth_hz": pick.get("bandwidth_hz"), "resonance_hz": setup.resonance_hz,
             "storage": storage_url(setup.out),
-            "design_text": design_text(setup.base_design, pick["knobs"], with_estimator=method != "gh2")
+            "design_text": design_text(setup.base_design, pick["knobs"], with_estimator=method in ESTIMATING)
             if METHODS[method][1] == "design" else None}
 
 
