@@ -433,8 +433,27 @@ def run(ns: argparse.Namespace) -> int:
     return 0 if d["verdict"] == "ok" else 1
 
 
+def repeat(out: Path, runs: int, duration_s: float, rate_hz: float, rt_priority: int, cpu: int | None,
+           method: str) -> dict[str, Any]:
+    """`runs` measurements in a row, each to out/RUN/; repeat.json's data (also written;
+    tools/bench/timing_repeat.py)."""
+    from gen.lib.atomic_output import write_json_atomic
+    from tools.bench.timing_repeat import run_row, summarise
+
+    rows = []
+    for i in range(1, runs + 1):
+        d = measure(out / str(i), duration_s, rate_hz, rt_priority, cpu, method)
+        rows.append(run_row(i, d))
+        print(table(d))
+        print(f"armctl timing: run {i} of {runs}: {d['verdict']}"
+              + (f": {d['verdict_reason']}" if d["verdict_reason"] else ""), flush=True)
+    data = summarise(rows, duration_s, rate_hz)
+    write_json_atomic(out / "repeat.json", data)
+    return data
+
+
 def _run_repeated(ns: argparse.Namespace) -> int:
-    from tools.bench.timing_repeat import repeat, table as repeat_table
+    from tools.bench.timing_repeat import table as repeat_table
 
     d = repeat(ns.out, ns.repeat, ns.duration, ns.rate, ns.rt_priority, ns.cpu, ns.method)
     print(repeat_table(d))
