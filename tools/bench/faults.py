@@ -41,6 +41,7 @@ from gen.lib.multicast import CAN_GROUP, lcm_url
 from host_sim.canbus import open_bus
 from tools.run.hil import HilOptions, run_hil
 from gen.lib.paths import REPO
+from tools.run.run_files import SIM_SUMMARY
 from tools.run.slots import acquire_slot
 from gen.lib.params import constant, default as param_default
 
@@ -340,7 +341,7 @@ def run_fault(f: Fault, out: Path, pose: list[float]) -> dict[str, Any]:
         build_arm("release", arm, targets=HIL_TARGETS)
     run, inj = _run_with_injector(f, out, pose, arm)
     r = run["results"]
-    sim = _load(out / "sim_summary.json")
+    sim = _load(out / SIM_SUMMARY)
     faulted = bool(sim.get("drive_fault_mask")) or bool(r.get("drive_faults"))
     if f.name == "lost-bus":
         inj.injected_at = LOST_BUS_PERIOD  # the simulator's period, counted like the SYNCs seen

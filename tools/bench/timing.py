@@ -42,6 +42,7 @@ from pathlib import Path
 from typing import Any
 
 from tools.run import procs
+from tools.run.run_files import CONTROLLER_SUMMARY, SIM_SUMMARY, TELEMETRY_LOG
 
 HISTMAX_US = 20000  # cyclictest histogram range (1 us buckets); beyond it: overflows
 
@@ -201,7 +202,7 @@ def _cyclictest_beside(out: Path, hil_dir: Path, t: threading.Thread, result: di
                        cyc_cmd: list[str]) -> dict[str, Any]:
     """cyclictest, measuring while the control loop runs: from the loop's first period until the
     controller has finished (SIGINT: it prints its histogram). Its figures, or why there are none."""
-    log = hil_dir / "telemetry.lcmlog"
+    log = hil_dir / TELEMETRY_LOG
     while t.is_alive() and not _first_timing_message(log):
         time.sleep(0.05)
     cyc: dict[str, Any] = {"command": cyc_cmd}
@@ -211,7 +212,7 @@ def _cyclictest_beside(out: Path, hil_dir: Path, t: threading.Thread, result: di
         cyc["error"] = "not run: the HIL run failed before its loop started"
     else:
         proc = subprocess.Popen(cyc_cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        done = hil_dir / "controller_summary.json"
+        done = hil_dir / CONTROLLER_SUMMARY
         while t.is_alive() and not done.exists() and proc.poll() is None:
             time.sleep(0.02)
         if proc.poll() is None:
@@ -231,7 +232,7 @@ def _controller_samples(hil_dir: Path) -> tuple[Any, list[float], list[float], l
 
     from tools.run.telemetry_log import read_log
 
-    log = hil_dir / "telemetry.lcmlog"
+    log = hil_dir / TELEMETRY_LOG
     timing: Any = []
     if log.exists():
         timing = read_log(log, channels=("ARM_TIMING",))["ARM_TIMING"].messages
@@ -317,7 +318,7 @@ def measure(out: Path, duration_s: float, rate_hz: float, rt_priority: int, cpu:
         (out / stale).unlink(missing_ok=True)
     period_us = 1e6 / rate_hz
     hil_dir = out / "hil"
-    (hil_dir / "telemetry.lcmlog").unlink(missing_ok=True)  # a previous run's log must not start cyclictest
+    (hil_dir / TELEMETRY_LOG).unlink(missing_ok=True)  # a previous run's log must not start cyclictest
     ctl_args = ["--rate", f"{rate_hz:g}", "--rt-priority", str(rt_priority)]
     opts = HilOptions(out=hil_dir, duration_s=duration_s, method=method, mode="realtime", preset=preset,
                       controller_args=tuple(ctl_args), cpu=cpu)
@@ -330,7 +331,7 @@ def measure(out: Path, duration_s: float, rate_hz: float, rt_priority: int, cpu:
 
     run = result.get("run", {})
     timing, wake, compute, cycle = _controller_samples(hil_dir)
-    summary = _load_json(hil_dir / "controller_summary.json")
+    summary = _load_json(hil_dir / CONTROLLER_SUMMARY)
     ctl_log = hil_dir / "controller.log"
     rt_line = next((ln.split("rt: ", 1)[1] for ln in ctl_log.read_text().splitlines() if " rt: " in ln), "") \
         if ctl_log.exists() else ""
@@ -353,7 +354,7 @@ def measure(out: Path, duration_s: float, rate_hz: float, rt_priority: int, cpu:
         "lateness": run.get("environment", {}).get("lateness") or {
             "late_periods": (summary.get("lateness") or {}).get("late_periods"),
             "stop": (summary.get("lateness") or {}).get("stop") or None},
-        "bus": _bus_part(summary, _load_json(hil_dir / "sim_summary.json")),
+        "bus": _bus_part(summary, _load_json(hil_dir / SIM_SUMMARY)),
         "definitions": TIMING_DEFINITIONS,
     }
     data["verdict"], data["verdict_reason"] = _verdict(summary, cyc, run_part)

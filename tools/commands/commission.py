@@ -16,6 +16,7 @@ from gen.lib.paths import REPO
 from tools.build.arm import add_arm_arguments
 from tools.commands import CommandError
 from tools.run.arm_session import add_session_arguments
+from tools.run.run_files import CONTROLLER_SUMMARY
 
 END_HOLD_S = 0.5
 
@@ -67,7 +68,7 @@ def run(ns: argparse.Namespace) -> int:
               f"{num(v.friction_nm):>10}{num(v.inertia):>10}{num(v.inertia_model):>10}")
     write_record(record, passed=passed, info=info, table=setup.table, digest=table_digest(setup.table),
                  verdicts=verdicts, findings=findings, bus=" ".join(setup.buses),
-                 summary_path=ns.out / "controller_summary.json")
+                 summary_path=ns.out / CONTROLLER_SUMMARY)
     if passed:
         print(f"armctl commission: passed: every joint turns its way, at the model's scale, under the model's "
               f"gravity; record {record}")

@@ -22,6 +22,7 @@ from gen.lib.paths import REPO
 from tools.build.arm import add_arm_arguments
 from tools.commands import CommandError, UsageError
 from tools.run.arm_session import add_session_arguments
+from tools.run.run_files import TELEMETRY_LOG
 
 MOVED_FRACTION = 0.5  # of the excitation's span: a joint that moved less did not follow it
 
@@ -214,7 +215,7 @@ def run(ns: argparse.Namespace) -> int:
     if note:
         print(f"armctl identify: {note}")
     run_dir = _run_excitation(ns, setup, ex, cond)
-    t, q, tau = samples(run_dir / "telemetry.lcmlog", len(names))
+    t, q, tau = samples(run_dir / TELEMETRY_LOG, len(names))
     check_moved(q, peaks, names)
     print(f"armctl identify: fitting {len(t)} periods of telemetry (Pinocchio's regressor, least squares)")
     sys.stdout.flush()

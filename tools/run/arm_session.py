@@ -30,6 +30,7 @@ from tools.build.arm import ArmRef, arm_from_args, arm_info, build_arm, print_ar
 from tools.errors import CommandError, UsageError
 from tools.run import procs as procs_mod
 from tools.run.processes import _logger_priority, _wait_for_logger
+from tools.run.run_files import CONTROLLER_SUMMARY, TELEMETRY_LOG
 
 ARPHRD_CAN = 280
 IFF_UP = 0x1
@@ -232,7 +233,7 @@ def run_controller(setup: ArmOnBus, ctl_args: list[str], out: Path, mode: str) -
     from tools.run.slots import acquire_slot
 
     out.mkdir(parents=True, exist_ok=True)
-    for stale in ("controller_summary.json", "telemetry.lcmlog", "controller.log", "logger.log"):
+    for stale in (CONTROLLER_SUMMARY, TELEMETRY_LOG, "controller.log", "logger.log"):
         (out / stale).unlink(missing_ok=True)
     check_loopback_route(LCM_GROUP)
     if setup.kind == "udp":
@@ -242,7 +243,7 @@ def run_controller(setup: ArmOnBus, ctl_args: list[str], out: Path, mode: str) -
         realtime = mode == "realtime"
         cpu = (os.cpu_count() or 1) - 1  # the loop's CPU, as a HIL run's (tools/run/hil.py realtime_cpu)
         ctl = [str(controller_binary(setup.bdir)), *setup.bus_args(), "--lcm-url", url, "--protocol", "canopen",
-               *setup.node_args, "--mode", mode, "--summary", str(out / "controller_summary.json"),
+               *setup.node_args, "--mode", mode, "--summary", str(out / CONTROLLER_SUMMARY),
                *(["--cpu", str(cpu)] if realtime else spin_args(mode)), "--brake-release", f"{brake_release_s(setup):g}",
                *ctl_args]
         (out / "controller.argv").write_text(json.dumps(ctl) + "\n")
@@ -251,7 +252,7 @@ def run_controller(setup: ArmOnBus, ctl_args: list[str], out: Path, mode: str) -
         with open(out / "logger.log", "w") as llog, open(out / "controller.log", "w") as clog:
             try:
                 logger = procs_mod.spawn("logger", [str(logger_binary(setup.bdir)), "--lcm-url", url,
-                                                    str(out / "telemetry.lcmlog")], stdout=subprocess.PIPE,
+                                                    str(out / TELEMETRY_LOG)], stdout=subprocess.PIPE,
                                          stderr=llog, preexec_fn=_logger_priority if realtime else None)
             except InterruptedError as exc:
                 raise CommandError(str(exc)) from None
@@ -277,7 +278,7 @@ def run_controller(setup: ArmOnBus, ctl_args: list[str], out: Path, mode: str) -
                 if logger.stdout is not None:
                     logger.stdout.close()
     try:
-        summary = json.loads((out / "controller_summary.json").read_text())
+        summary = json.loads((out / CONTROLLER_SUMMARY).read_text())
     except (OSError, ValueError):
         summary = {}
     return SessionResult(p.returncode, summary, out, procs_mod.interrupted)

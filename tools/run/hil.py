@@ -28,6 +28,7 @@ from tools.run import procs as procs_mod
 from tools.run.processes import (LOGGER_READY_S, USAGE_ERROR, HilError, ProcessPlan, last_line, plan_json,
                                  run_processes)
 from gen.lib.multicast import CAN_GROUP, CAN_ROUTE, LCM_GROUP, LCM_ROUTE, lcm_url
+from tools.run.run_files import CONTROLLER_SUMMARY, RUN_RECORD, SIM_SUMMARY, TELEMETRY_LOG, UNCERTAINTY_FILE
 from tools.run.slots import acquire_slot
 from tools.run.verdict import Bounds
 
@@ -666,7 +667,7 @@ def _locate_programs(opt: HilOptions, bdir: Path, sil: bool) -> _Programs:
 
 # What a run writes into its folder: removed before it starts, so nothing of an earlier run is
 # taken for this one's.
-RUN_FILES = ("telemetry.lcmlog", "controller_summary.json", "sim_summary.json", "run.json", "uncertainty.json",
+RUN_FILES = (TELEMETRY_LOG, CONTROLLER_SUMMARY, SIM_SUMMARY, RUN_RECORD, UNCERTAINTY_FILE,
              PIL_FILE, CAPTURE_FILE, CAPTURE_FILE + ".gz", CANOPEN_DBC_FILE, CANOPEN_OD_FILE, *VM_FILES)
 
 
@@ -683,7 +684,7 @@ def _prepare_out(opt: HilOptions, w: _Wiring) -> None:
             write_text_atomic(opt.out / CANOPEN_OD_FILE, w.od_table)
             w.sim_node_args = [*w.sim_node_args, "--od", str(opt.out / CANOPEN_OD_FILE)]
         if opt.uncertainty is not None:
-            write_json_atomic(opt.out / "uncertainty.json", opt.uncertainty)
+            write_json_atomic(opt.out / UNCERTAINTY_FILE, opt.uncertainty)
     except OutputError as exc:
         raise HilError(str(exc)) from None
 
@@ -695,7 +696,7 @@ def _command_lines(opt: HilOptions, info: dict[str, Any], bdir: Path, w: _Wiring
     bus_argv = [a for spec in buses for a in ("--bus", spec)]
     sim_buses = bus_args(w.bus_kind, can_port, w.topology, "simulator") if w.bus_kind == PIL else buses
     url = "" if sil else lcm_url(lcm_port, recv_buf=True)
-    sim_args = sim_argv(programs.sim, sim_buses, lcm_url=url, summary=opt.out / "sim_summary.json",
+    sim_args = sim_argv(programs.sim, sim_buses, lcm_url=url, summary=opt.out / SIM_SUMMARY,
                         uncertainty=opt.uncertainty, timing=bus_timing_mode(opt.mode) if opt.bus_timing else "off",
                         phys=w.topology, model=prepared_model(bdir), drives=opt.drives, canopen=w.canopen,
                         extra=["--substeps", str(w.substeps), *([] if sil else sim_mode_args(opt.mode, opt.spin_us)),
@@ -703,14 +704,14 @@ def _command_lines(opt: HilOptions, info: dict[str, Any], bdir: Path, w: _Wiring
                                *opt.sim_args])
     ctl_args = [*opt.controller_cmd_prefix, str(programs.binary), *bus_argv, "--lcm-url", url,
                 "--duration", f"{opt.duration_s:g}", "--method", opt.method, "--mode", opt.mode,
-                "--summary", str(opt.out / "controller_summary.json"), *([] if sil or opt.target else spin_args(opt.mode, opt.spin_us)),
+                "--summary", str(opt.out / CONTROLLER_SUMMARY), *([] if sil or opt.target else spin_args(opt.mode, opt.spin_us)),
                 *(["--cpu", str(realtime_cpu(opt))] if opt.mode == "realtime" else []),
                 "--protocol", opt.protocol, *w.node_args,
                 *reference_args(info, opt.controller_args),
                 *(["--design-file", str(opt.design_file)] if opt.design_file is not None else []), *opt.controller_args]
     if w.bus_kind == PIL:  # the bridge stands for the controller: it runs the image and relays it
         ctl_args = [*pil_bridge_argv(opt, bdir, can_port), "--", *ctl_args[1:], *pil_numeric(opt)]
-    return _CommandLines(buses, url, opt.out / "telemetry.lcmlog", sim_args, ctl_args)
+    return _CommandLines(buses, url, opt.out / TELEMETRY_LOG, sim_args, ctl_args)
 
 
 def _execute(opt: HilOptions, programs: _Programs, lines: _CommandLines,
@@ -734,9 +735,9 @@ def _summaries(opt: HilOptions, exit_codes: dict[str, int | None], sil: bool) ->
     ends in a defined, named state and the partial log is analysed."""
     ctl_code = exit_codes.get("controller", exit_codes.get("sil"))
     sim_code = exit_codes.get("simulator", exit_codes.get("sil"))
-    controller = _load_json(opt.out / "controller_summary.json") or {
+    controller = _load_json(opt.out / CONTROLLER_SUMMARY) or {
         "result": ctl_code, "reason": f"controller died (exit code {ctl_code}); see {'sil' if sil else 'controller'}.log"}
-    simulator = _load_json(opt.out / "sim_summary.json") or {
+    simulator = _load_json(opt.out / SIM_SUMMARY) or {
         "result": "died", "reason": f"simulator died (exit code {sim_code}); see {'sil' if sil else 'simulator'}.log"}
     return controller, simulator
 
@@ -805,7 +806,7 @@ def _collect(opt: HilOptions, info: dict[str, Any], bdir: Path, w: _Wiring, line
 def _write_record(opt: HilOptions, run: dict[str, Any], started: datetime) -> None:
     try:
         run["provenance"] = provenance(started)
-        write_json_atomic(opt.out / "run.json", run)
+        write_json_atomic(opt.out / RUN_RECORD, run)
     except OutputError as exc:
         raise HilError(str(exc)) from None
 

@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from gen import lcmtypes
+from tools.run.run_files import RUN_RECORD, TELEMETRY_LOG
 from tools.run.telemetry_log import LogDamage, log_damage
 
 MCAP_FILE = "telemetry.mcap"
@@ -282,7 +283,7 @@ RAW_SCHEMA = {"type": "object", "title": "CAN frame", "properties": {
 def _read_run(run_dir: Path) -> tuple[dict[str, Any], dict[str, Any], str, float]:
     """run.json's results and environment, the run's mode and loop rate."""
     try:
-        run = json.loads((run_dir / "run.json").read_text())
+        run = json.loads((run_dir / RUN_RECORD).read_text())
         res, env = run["results"], run["environment"]
         return res, env, str(res["mode"]), float(res["rate_hz"])
     except FileNotFoundError:
@@ -348,7 +349,7 @@ def export_mcap(run_dir: Path, out: Path | None = None,
 
     say = progress or (lambda _: None)
     res, env, mode, rate = _read_run(run_dir)
-    log_path = run_dir / "telemetry.lcmlog"
+    log_path = run_dir / TELEMETRY_LOG
     if not log_path.exists():
         raise ExportError(f"{log_path}: no such file: the run kept no telemetry")
     out = out or run_dir / MCAP_FILE
