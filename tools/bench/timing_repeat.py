@@ -11,7 +11,6 @@ drive's id, with nothing injected, is the controller's misreading: it is counted
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
 ANOTHER_NODE = "another node uses its id"  # the controller's reason for a second TPDO in one period
