@@ -33,7 +33,7 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(ns: argparse.Namespace) -> int:
-    from tools.commands.run import describe
+    from tools.run.arm_task import describe
     from tools.run.arm_session import arm_on_bus, run_controller, table_digest
     from tools.run.commissioning import default_record, judge, pulses, write_record
 

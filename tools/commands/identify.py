@@ -144,7 +144,7 @@ def _excitation(ns: argparse.Namespace, info: dict[str, Any], reg: Any) -> tuple
 
 def _run_excitation(ns: argparse.Namespace, setup: Any, ex: Any, cond: float) -> Path:
     """The excitation run on the arm (armctl run's own checks and session): the run folder."""
-    from tools.commands.run import describe, finish, task_args
+    from tools.run.arm_task import describe, finish, task_args
     from tools.identify import excitation as exc_mod
     from tools.run.arm_session import run_controller
 
