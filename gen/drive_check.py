@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 from gen.eds import Dictionary, Entry
 from gen.lib.cia402 import CODEC_MAPPING, PDO_COB
+from gen.lib.params import default
 
 PROFILE = 0x0192              # CiA 402, the low word of 0x1000
 CST_MODE = 10                 # cyclic synchronous torque, the mode this controller commands torque in
@@ -70,9 +71,9 @@ class Plan:
     """What the boot writes to one drive (gen/drives.py DriveConfig's values)."""
     node: int = 1
     cycle_us: int = 1000
-    heartbeat_ms: int = 100
-    consumer_ms: int = 300
-    master_id: int = 127
+    heartbeat_ms: int = default("controller", "heartbeat-ms")  # arm_controller's defaults
+    consumer_ms: int = default("controller", "consumer-ms")
+    master_id: int = default("controller", "master-id")
     transmission: dict[str, int] = field(default_factory=lambda: {"rpdo1": 1, "tpdo1": 1, "tpdo2": 1})
     # the drive table's units (None: not given): the boot compares the drive's objects with them
     rated: int | None = None  # 0x6076, the motor's, in the drive's torque unit (mN m unless the table names another)

@@ -35,6 +35,7 @@ from gen import eds as eds_mod
 from gen.lib.cia402 import CODEC_MAPPING
 from gen.lib import toml_input
 from gen.lib.escape import shell_command
+from gen.lib.params import param
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_DRIVES = ROOT / "firmware" / "protocol" / "drives.toml"
@@ -297,9 +298,8 @@ def table_plan(path: Path) -> tuple[drive_check.Plan, Path]:
     node = _uint(defaults.get("node", 1), f"{path}: defaults.node", 1, 127)
     eds_rel = doc.get("eds")
     eds = Path(str(eds_rel)) if eds_rel and Path(str(eds_rel)).is_absolute() else path.parent / str(eds_rel or "")
-    plan = drive_check.Plan(node=node, heartbeat_ms=_uint(doc.get("heartbeat_ms", 100), f"{path}: heartbeat_ms", 0, 65535),
-                            consumer_ms=_uint(doc.get("consumer_ms", 300), f"{path}: consumer_ms", 0, 65535),
-                            master_id=_uint(doc.get("master_id", 127), f"{path}: master_id", 1, 127),
+    heartbeat, consumer, master = _heartbeats(doc, path)
+    plan = drive_check.Plan(node=node, heartbeat_ms=heartbeat, consumer_ms=consumer, master_id=master,
                             transmission=_pdo(doc, path), rated=_in_unit(u.rated_nm, u.unit), encoder=u.encoder,
                             gear=u.gear, units_per_nm=TORQUE_UNITS[u.unit], gear_efficiency=u.efficiency,
                             accept_no_master_watchdog=_accept_no_watchdog(doc, path))
@@ -367,28 +367,52 @@ def load_transmission(path: Path | None = None) -> dict[str, int]:
     return _pdo(_read(path), path)
 
 
-def load(arm: dict[str, Any], path: Path | None = None) -> DriveConfig:
-    """The drive configuration of the arm (arm.json as a dict), resolved and validated."""
-    path = path or drives_file_of(arm)
-    doc = _read(path)
-    unknown = set(doc) - TOP_FIELDS
-    if unknown:
-        raise DrivesError(f"{path}: unknown field(s) {', '.join(sorted(unknown))} (known: {', '.join(sorted(TOP_FIELDS))})")
+# A drive table's fields that arm_controller takes as options of the same meaning: the option's
+# default and range (firmware/params/params.toml [controller.*]) are the field's.
+HEARTBEAT_FIELDS = {"heartbeat_ms": "heartbeat-ms", "consumer_ms": "consumer-ms", "master_id": "master-id"}
+
+
+def _heartbeats(doc: dict[str, Any], path: Path) -> tuple[int, int, int]:
+    """The table's heartbeat_ms, consumer_ms and master_id (each arm_controller's default if absent)."""
+    values = []
+    for key, option in HEARTBEAT_FIELDS.items():
+        p = param("controller", option)
+        values.append(_uint(doc.get(key, p.default), f"{path}: {key}", int(p.min), int(p.max)))
+    heartbeat, consumer, master = values
+    return heartbeat, consumer, master
+
+
+@dataclass
+class _Table:
+    """What a drive table says for every joint: read once, before its joints are resolved."""
+    path: Path
+    eds: Path
+    dictionary: Any
+    units: dict[str, Any]
+    heartbeat: int
+    consumer: int
+    master: int
+    accept: bool
+    transmission: dict[str, int]
+    cycle_us: int
+    defaults: dict[str, Any]
+    joints: dict[str, Any]
+
+
+def _eds_of(doc: dict[str, Any], path: Path) -> tuple[Path, Any]:
+    """The drives' EDS (or DCF) the table names, and its dictionary."""
     eds_rel = doc.get("eds")
     if not isinstance(eds_rel, str) or not eds_rel:
         raise DrivesError(f"{path}: eds: expected the drives' EDS file, got {eds_rel!r}")
     eds = Path(eds_rel) if Path(eds_rel).is_absolute() else (path.parent / eds_rel).resolve()
     try:
-        dictionary = eds_mod.load(eds)
+        return eds, eds_mod.load(eds)
     except eds_mod.EdsError as exc:
         raise DrivesError(f"{path}: eds: {exc}") from None
-    units = file_units(dictionary)
-    heartbeat = _uint(doc.get("heartbeat_ms", 100), f"{path}: heartbeat_ms", 0, 65535)
-    consumer = _uint(doc.get("consumer_ms", 300), f"{path}: consumer_ms", 0, 65535)
-    master = _uint(doc.get("master_id", 127), f"{path}: master_id", 1, 127)
-    accept = _accept_no_watchdog(doc, path)
-    transmission = _pdo(doc, path)
-    cycle_us = round(1e6 / float(arm.get("loop_rate_hz", 1000.0)))
+
+
+def _joint_tables(doc: dict[str, Any], path: Path, arm: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """[defaults] and the [joint.NAME] tables, each naming a joint of the arm and known fields only."""
     defaults = doc.get("defaults", {})
     joints_tab = doc.get("joint", {})
     if not isinstance(defaults, dict) or not isinstance(joints_tab, dict):
@@ -404,43 +428,67 @@ def load(arm: dict[str, Any], path: Path | None = None) -> DriveConfig:
         if extra:
             raise DrivesError(f"{path}: {where}: unknown field(s) {', '.join(sorted(extra))} "
                               f"(known: {', '.join(sorted(JOINT_FIELDS))})")
-    bus_of = {d: b["name"] for b in arm.get("buses", []) for d in b["drives"]}
-    out: list[Drive] = []
-    for i, j in enumerate(arm["joints"]):
-        name, num = j["name"], i + 1
-        t = joints_tab.get(name, {})
-        src = f"joint.{name}" if name in joints_tab else "defaults"
+    return defaults, joints_tab
 
-        def get(key: str) -> tuple[Any, str]:
-            if key in t:
-                return t[key], f"{path}: joint.{name}.{key}"
-            if key in defaults:
-                return defaults[key], f"{path}: defaults.{key}"
-            return None, f"{path}: {src}.{key}"
 
-        node_v, w = get("node")
-        node = _uint(num if node_v is None else node_v, w, 1, 127)
-        u = _units(get, j["torque_limit"], units["gear"], j.get("motor_rated_torque_at_joint_nm"))
-        given = [o for o, v in (("0x6076", u.rated_nm), ("0x608F", u.encoder), ("0x6091", u.gear),
-                                ("0x6072", u.max_permille)) if v is not None]
-        plan = drive_check.Plan(node=node, cycle_us=cycle_us, heartbeat_ms=heartbeat, consumer_ms=consumer,
-                                master_id=master, transmission=transmission, rated=_in_unit(u.rated_nm, u.unit),
-                                encoder=u.encoder, gear=u.gear, units_per_nm=TORQUE_UNITS[u.unit],
-                                gear_efficiency=u.efficiency, accept_no_master_watchdog=accept)
-        report = drive_check.check(dictionary, plan)
-        if not report.ok:
-            raise DrivesError(f"{path}: joint {name} (node {node}): {eds.name}: {report.problems[0]}")
-        if num not in bus_of:
-            raise DrivesError(f"arm.json: drive {num} (joint {name}) is on no bus")
-        rated_mnm = u.rated_nm * 1000 if u.rated_nm is not None else units["rated"] * 1000 / TORQUE_UNITS[u.unit]
-        brake, quick_stop = _stopping(get, j["torque_limit"])
-        d = Drive(name, num, bus_of[num], node, rated_mnm, u.encoder if u.encoder is not None else units["encoder"],
-                  u.gear if u.gear is not None else units["gear"], given,
-                  [f"warning: {x}" for x in report.warnings] + report.notes,
-                  1 if u.encoder is not None else units["encoder_revs"], u.unit, u.efficiency, float(j["torque_limit"]),
-                  u.max_permille or report.max_permille, accept, brake, quick_stop)
-        _check_torque_limit(path, d)
-        out.append(d)
+def _read_table(arm: dict[str, Any], path: Path) -> _Table:
+    doc = _read(path)
+    unknown = set(doc) - TOP_FIELDS
+    if unknown:
+        raise DrivesError(f"{path}: unknown field(s) {', '.join(sorted(unknown))} (known: {', '.join(sorted(TOP_FIELDS))})")
+    eds, dictionary = _eds_of(doc, path)
+    units = file_units(dictionary)
+    heartbeat, consumer, master = _heartbeats(doc, path)
+    accept = _accept_no_watchdog(doc, path)
+    transmission = _pdo(doc, path)
+    cycle_us = round(1e6 / float(arm.get("loop_rate_hz", 1000.0)))
+    defaults, joints_tab = _joint_tables(doc, path, arm)
+    return _Table(path, eds, dictionary, units, heartbeat, consumer, master, accept, transmission, cycle_us,
+                  defaults, joints_tab)
+
+
+def _drive(tab: _Table, j: dict[str, Any], num: int, bus_of: dict[int, str]) -> Drive:
+    """Joint `num`'s drive: its table's values over the defaults over the EDS's, checked against
+    the EDS by the boot's own checks (gen/drive_check.py)."""
+    path, name = tab.path, j["name"]
+    t = tab.joints.get(name, {})
+    src = f"joint.{name}" if name in tab.joints else "defaults"
+
+    def get(key: str) -> tuple[Any, str]:
+        if key in t:
+            return t[key], f"{path}: joint.{name}.{key}"
+        if key in tab.defaults:
+            return tab.defaults[key], f"{path}: defaults.{key}"
+        return None, f"{path}: {src}.{key}"
+
+    node_v, w = get("node")
+    node = _uint(num if node_v is None else node_v, w, 1, 127)
+    units = tab.units
+    u = _units(get, j["torque_limit"], units["gear"], j.get("motor_rated_torque_at_joint_nm"))
+    given = [o for o, v in (("0x6076", u.rated_nm), ("0x608F", u.encoder), ("0x6091", u.gear),
+                            ("0x6072", u.max_permille)) if v is not None]
+    plan = drive_check.Plan(node=node, cycle_us=tab.cycle_us, heartbeat_ms=tab.heartbeat, consumer_ms=tab.consumer,
+                            master_id=tab.master, transmission=tab.transmission, rated=_in_unit(u.rated_nm, u.unit),
+                            encoder=u.encoder, gear=u.gear, units_per_nm=TORQUE_UNITS[u.unit],
+                            gear_efficiency=u.efficiency, accept_no_master_watchdog=tab.accept)
+    report = drive_check.check(tab.dictionary, plan)
+    if not report.ok:
+        raise DrivesError(f"{path}: joint {name} (node {node}): {tab.eds.name}: {report.problems[0]}")
+    if num not in bus_of:
+        raise DrivesError(f"arm.json: drive {num} (joint {name}) is on no bus")
+    rated_mnm = u.rated_nm * 1000 if u.rated_nm is not None else units["rated"] * 1000 / TORQUE_UNITS[u.unit]
+    brake, quick_stop = _stopping(get, j["torque_limit"])
+    d = Drive(name, num, bus_of[num], node, rated_mnm, u.encoder if u.encoder is not None else units["encoder"],
+              u.gear if u.gear is not None else units["gear"], given,
+              [f"warning: {x}" for x in report.warnings] + report.notes,
+              1 if u.encoder is not None else units["encoder_revs"], u.unit, u.efficiency, float(j["torque_limit"]),
+              u.max_permille or report.max_permille, tab.accept, brake, quick_stop)
+    _check_torque_limit(path, d)
+    return d
+
+
+def _check_node_ids(path: Path, out: list[Drive], master: int) -> None:
+    """No node id twice on a bus, and none the master's."""
     for b in {d.bus for d in out}:
         nodes = [d.node for d in out if d.bus == b]
         dup = sorted({n for n in nodes if nodes.count(n) > 1})
@@ -448,7 +496,17 @@ def load(arm: dict[str, Any], path: Path | None = None) -> DriveConfig:
             raise DrivesError(f"{path}: node: node id {dup[0]} is used twice on bus {b}")
         if master in nodes:
             raise DrivesError(f"{path}: master_id: {master} is a drive's node id on bus {b}")
-    return DriveConfig(str(path), str(eds), heartbeat, consumer, master, cycle_us, out, transmission)
+
+
+def load(arm: dict[str, Any], path: Path | None = None) -> DriveConfig:
+    """The drive configuration of the arm (arm.json as a dict), resolved and validated."""
+    path = path or drives_file_of(arm)
+    tab = _read_table(arm, path)
+    bus_of = {d: b["name"] for b in arm.get("buses", []) for d in b["drives"]}
+    out = [_drive(tab, j, i + 1, bus_of) for i, j in enumerate(arm["joints"])]
+    _check_node_ids(path, out, tab.master)
+    return DriveConfig(str(path), str(tab.eds), tab.heartbeat, tab.consumer, tab.master, tab.cycle_us, out,
+                       tab.transmission)
 
 
 def _check_torque_limit(path: Path, d: Drive) -> None:

@@ -21,6 +21,7 @@ import re
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -186,38 +187,51 @@ def _live(lines: list[str]) -> list[str]:
         lines = keep
 
 
-def kernel_source(model: RobotModel, model_hash: int) -> tuple[str, str]:
-    n = len(model.links)
-    e = Emitter()
+@dataclass
+class _Frames:
+    """Each link's constants in its own frame: joint origin, joint axis, centre of mass."""
+    pos: list[list[X]]
+    axis: list[list[X]]
+    com: list[list[X]]
+
+
+def _forward(e: Emitter, model: RobotModel, fr: _Frames) -> tuple[list[Any], list[list[X]], list[list[X]]]:
+    """The forward pass, base to tip: each link's rotation, net force and net moment."""
     w = [ZERO, ZERO, ZERO]
     dw = [ZERO, ZERO, ZERO]
     acc = [_c(-g) for g in model.gravity]
-    rots, force, moment = [], [], []
-    pos = [_offset(ln.pos) for ln in model.links]
-    axis = [_unit(ln.axis) for ln in model.links]
-    com = [_offset(ln.com) for ln in model.links]
+    rots: list[Any] = []
+    force: list[list[X]] = []
+    moment: list[list[X]] = []
     for i, ln in enumerate(model.links):
         e.comment(f"link {i + 1} ({ln.name}): forward")
         rot = _rotation(e, i, ln.rot, ln.axis)
         rots.append(rot)
-        t1 = _cross(e, f"dwp{i}", dw, pos[i])
-        t2 = _cross(e, f"wwp{i}", w, _cross(e, f"wp{i}", w, pos[i]))
+        t1 = _cross(e, f"dwp{i}", dw, fr.pos[i])
+        t2 = _cross(e, f"wwp{i}", w, _cross(e, f"wp{i}", w, fr.pos[i]))
         a_parent = _add(e, f"ap{i}", acc, t1, t2)
         acc = _matvec(e, f"a{i}", rot, a_parent, transpose=True)
         w_in = _matvec(e, f"wi{i}", rot, w, transpose=True)
         dw_in = _matvec(e, f"dwi{i}", rot, dw, transpose=True)
         qd, qdd = X(name=f"qd[{i}]"), X(name=f"qdd[{i}]")
-        wq = [e.sop(f"wq{i}_{AX[k]}", [(1.0, axis[i][k], qd)]) for k in range(3)]
+        wq = [e.sop(f"wq{i}_{AX[k]}", [(1.0, fr.axis[i][k], qd)]) for k in range(3)]
         cross_wq = _cross(e, f"wxq{i}", w_in, wq)
         w = _add(e, f"w{i}", w_in, wq)
-        dw = [e.sop(f"dw{i}_{AX[k]}", [(1.0, dw_in[k], X(const=1.0)), (1.0, axis[i][k], qdd), (1.0, cross_wq[k], X(const=1.0))])
+        dw = [e.sop(f"dw{i}_{AX[k]}", [(1.0, dw_in[k], X(const=1.0)), (1.0, fr.axis[i][k], qdd), (1.0, cross_wq[k], X(const=1.0))])
               for k in range(3)]
-        ac = _add(e, f"ac{i}", acc, _cross(e, f"dwc{i}", dw, com[i]),
-                  _cross(e, f"wwc{i}", w, _cross(e, f"wc{i}", w, com[i])))
+        ac = _add(e, f"ac{i}", acc, _cross(e, f"dwc{i}", dw, fr.com[i]),
+                  _cross(e, f"wwc{i}", w, _cross(e, f"wc{i}", w, fr.com[i])))
         force.append([e.sop(f"F{i}_{AX[k]}", [(1.0, _c(ln.mass), ac[k])]) for k in range(3)])
         inertia = [[_c(ln.inertia[a][b]) for b in range(3)] for a in range(3)]
         iw = _matvec(e, f"Iw{i}", inertia, w)
         moment.append(_add(e, f"N{i}", _matvec(e, f"Idw{i}", inertia, dw), _cross(e, f"wIw{i}", w, iw)))
+    return rots, force, moment
+
+
+def _backward(e: Emitter, model: RobotModel, fr: _Frames, rots: list[Any], force: list[list[X]],
+              moment: list[list[X]]) -> None:
+    """The backward pass, tip to base: each joint's torque into tau[i]."""
+    n = len(model.links)
     f = [ZERO, ZERO, ZERO]
     nm = [ZERO, ZERO, ZERO]
     for i in reversed(range(n)):
@@ -227,28 +241,34 @@ def kernel_source(model: RobotModel, model_hash: int) -> tuple[str, str]:
             rc = rots[i + 1]
             f_child = _matvec(e, f"fc{i}", rc, f)
             n_rot = _matvec(e, f"nr{i}", rc, nm)
-            n_child = _add(e, f"nc{i}", n_rot, _cross(e, f"pxf{i}", pos[i + 1], f_child))
+            n_child = _add(e, f"nc{i}", n_rot, _cross(e, f"pxf{i}", fr.pos[i + 1], f_child))
         else:
             f_child, n_child = [ZERO] * 3, [ZERO] * 3
-        cxf = _cross(e, f"cxf{i}", com[i], force[i])
+        cxf = _cross(e, f"cxf{i}", fr.com[i], force[i])
         f = _add(e, f"f{i}", force[i], f_child)
         nm = _add(e, f"n{i}", moment[i], cxf, n_child)
-        tau = e.sop(f"tau{i}", [(1.0, axis[i][k], nm[k]) for k in range(3)]
+        tau = e.sop(f"tau{i}", [(1.0, fr.axis[i][k], nm[k]) for k in range(3)]
                     + [(1.0, _c(ln.armature), X(name=f"qdd[{i}]")), (1.0, _c(ln.damping), X(name=f"qd[{i}]"))])
         e.lines.append(f"    tau[{i}] = {tau.name if tau.name else _lit(tau.const or 0.0)};")
-    # one sine and cosine per joint, only those used (the base at rest needs neither for the
-    # first joint's velocity terms): the compiler makes a pair one sincosf where the C library
-    # has it (glibc, newlib); C11 itself has no sincos
-    e.lines = _live(e.lines)
-    body = "\n".join(ln for ln in e.lines if not COMMENT.match(ln))
+
+
+def _with_trig(lines: list[str], n: int) -> list[str]:
+    """The live lines, after one sine and cosine per joint, only those used (the base at rest needs
+    neither for the first joint's velocity terms): the compiler makes a pair one sincosf where the
+    C library has it (glibc, newlib); C11 itself has no sincos."""
+    lines = _live(lines)
+    body = "\n".join(ln for ln in lines if not COMMENT.match(ln))
     trig = []
     for i in range(n):
         used = [f"{f} = {fn}(q[{i}])" for f, fn in ((f"s{i}", "sinf"), (f"c{i}", "cosf"))
                 if re.search(rf"\b{f}\b", body)]
         if used:
             trig.append(f"    const float {', '.join(used)};")
-    e.lines[:0] = trig
-    header = (
+    return trig + lines
+
+
+def _kernel_header(model_hash: int) -> str:
+    return (
         "/* Generated by gen/rnea_kernel.py. Do not edit. The arm's RNEA with its constants folded\n"
         " * (gen/rnea_kernel.py says how); arm/rnea.h's arm_rnea for any other model. */\n"
         "#ifndef ARM_RNEA_KERNEL_H\n#define ARM_RNEA_KERNEL_H\n\n"
@@ -262,7 +282,10 @@ def kernel_source(model: RobotModel, model_hash: int) -> tuple[str, str]:
         "void arm_rnea_kernel(const float q[ARM_N_JOINTS], const float qd[ARM_N_JOINTS],\n"
         "                     const float qdd[ARM_N_JOINTS], float tau[ARM_N_JOINTS]);\n\n#endif\n"
     )
-    source = (
+
+
+def _kernel_c(lines: list[str]) -> str:
+    return (
         "/* Generated by gen/rnea_kernel.py from the arm's prepared model. Do not edit.\n"
         " * Names: R<i>: link i's rotation; w, dw: angular velocity and acceleration; a: linear\n"
         " * acceleration of the link origin; ac: of its centre of mass; F, N: net force and moment;\n"
@@ -275,9 +298,17 @@ def kernel_source(model: RobotModel, model_hash: int) -> tuple[str, str]:
         "           memcmp(model->gravity, ARM_ROBOT_MODEL.gravity, sizeof(model->gravity)) == 0;\n}\n\n"
         "void arm_rnea_kernel(const float q[ARM_N_JOINTS], const float qd[ARM_N_JOINTS],\n"
         "                     const float qdd[ARM_N_JOINTS], float tau[ARM_N_JOINTS])\n{\n"
-        + "\n".join(e.lines) + "\n}\n"
+        + "\n".join(lines) + "\n}\n"
     )
-    return header, source
+
+
+def kernel_source(model: RobotModel, model_hash: int) -> tuple[str, str]:
+    e = Emitter()
+    fr = _Frames(pos=[_offset(ln.pos) for ln in model.links], axis=[_unit(ln.axis) for ln in model.links],
+                 com=[_offset(ln.com) for ln in model.links])
+    rots, force, moment = _forward(e, model, fr)
+    _backward(e, model, fr, rots, force, moment)
+    return _kernel_header(model_hash), _kernel_c(_with_trig(e.lines, len(model.links)))
 
 
 @exit_on_output_error("gen.rnea_kernel")

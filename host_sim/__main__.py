@@ -15,6 +15,7 @@ from pathlib import Path
 from host_sim.launch import TIMING_MODES, parse_phy, sim_argv, sim_binary
 from host_sim.uncertainty import UncertaintyConfig
 from gen.lib import busload
+from gen.lib.multicast import LCM_PORT, lcm_url
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -23,7 +24,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="udp | udp:GROUP:PORT | socketcan:IFACE, optionally @DRIVES (e.g. @1-3, @4,5,6); "
                         "repeatable (up to 4 buses), every drive on exactly one bus [udp, all drives]")
     p.add_argument("--model", "--mjcf", dest="model", type=Path, default=None, help="the arm [the bundled UR5e]")
-    p.add_argument("--lcm-url", default="udpm://239.255.76.67:7667?ttl=0")
+    p.add_argument("--lcm-url", default=lcm_url(LCM_PORT))
     p.add_argument("--boot-timeout", default="60", help="s to wait for the controller")
     p.add_argument("--idle-timeout", default="5", help="s of silence that faults the drives")
     p.add_argument("--command-timeout-periods", default="3")

@@ -10,8 +10,9 @@ from contextlib import contextmanager
 
 import can
 
-DEFAULT_UDP_GROUP = "239.74.163.2"
-DEFAULT_UDP_PORT = 43113
+from gen.lib.multicast import CAN_GROUP, CAN_PORT
+
+DEFAULT_UDP_GROUP, DEFAULT_UDP_PORT = CAN_GROUP, CAN_PORT
 
 
 class BusSpecError(ValueError):
@@ -95,7 +96,7 @@ def parse_udp_spec(spec: str) -> tuple[str, int]:
         port_n = int(port)
         socket.inet_aton(group)
     except (ValueError, OSError) as exc:
-        raise BusSpecError(f"bus '{spec}': expected udp:GROUP:PORT, e.g. udp:239.74.163.2:43113") from exc
+        raise BusSpecError(f"bus '{spec}': expected udp:GROUP:PORT, e.g. udp:{CAN_GROUP}:{CAN_PORT}") from exc
     if not (1 <= port_n <= 65535) or not 224 <= int(group.split(".")[0]) <= 239:
         raise BusSpecError(f"bus '{spec}': group must be IPv4 multicast and port 1..65535")
     return group, port_n

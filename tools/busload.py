@@ -58,7 +58,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--drive-config", type=Path, default=None, metavar="FILE",
                    help="canopen: the drive table whose PDO transmission types count "
                         "[firmware/protocol/drives.toml]")
-    rate, budget, heartbeat = default("controller", "rate"), 100 * constant("bus-budget"), constant("heartbeat-ms")
+    rate, budget, heartbeat = default("controller", "rate"), 100 * constant("bus-budget"), lib.HEARTBEAT_MS
     p.add_argument("--rate", type=float, default=rate, help=f"control loop rate, Hz [{rate:g}]")
     p.add_argument("--budget", type=float, default=budget, help=f"highest acceptable bus load, %% [{budget:g}]")
     p.add_argument("--heartbeat-ms", type=float, default=heartbeat, help=f"drive heartbeat period [{heartbeat:g}]")

@@ -58,17 +58,19 @@ def _table_of_numbers(v: Any, where: str) -> dict[str, float]:
     return {k: number(x, f"{where}.{k}") for k, x in v.items()}
 
 
-def load_arm_file(path: Path | None, model: Path | None = None) -> ArmFile:  # noqa: C901 - one check a field
-    """The arm file (TOML) validated field by field, or the defaults for a bare model."""
+def _bare_model(model: Path | None) -> ArmFile:
+    """The defaults for a model given without an arm file."""
     # gen.drivetrain (MuJoCo) only where it is needed: `python -m gen.arm` finds a prepared folder without it
-    if path is None:
-        if (model or DEFAULT_MODEL).resolve() == DEFAULT_MODEL.resolve():
-            from gen import drivetrain
+    if (model or DEFAULT_MODEL).resolve() == DEFAULT_MODEL.resolve():
+        from gen import drivetrain
 
-            # the bundled arm: its drive train and rated payload are cited in a file of their own
-            table, payload = drivetrain.load_bundled()
-            return ArmFile(None, None, DEFAULT_MODEL, drivetrain=table, rated_payload_kg=payload)
-        return ArmFile(None, None, model)
+        # the bundled arm: its drive train and rated payload are cited in a file of their own
+        table, payload = drivetrain.load_bundled()
+        return ArmFile(None, None, DEFAULT_MODEL, drivetrain=table, rated_payload_kg=payload)
+    return ArmFile(None, None, model)
+
+
+def _read_arm_toml(path: Path) -> dict[str, Any]:
     try:
         doc = toml_input.loads(path.read_text())
     except (OSError, UnicodeDecodeError) as exc:
@@ -79,20 +81,19 @@ def load_arm_file(path: Path | None, model: Path | None = None) -> ArmFile:  # n
     if unknown:
         raise ArmError(f"arm file {path}: unknown field(s) {', '.join(sorted(unknown))} "
                        f"(known: {', '.join(sorted(ARM_FILE_FIELDS))})")
-    base = path.parent
+    return doc
 
-    def rel(v: Any, where: str) -> Path:
-        if not isinstance(v, str) or not v:
-            raise ArmError(f"arm file {path}: {where}: expected a file path, got {v!r}")
-        p = Path(v)
-        return p if p.is_absolute() else (base / p).resolve()
 
-    if "model" not in doc and model is None:
-        raise ArmError(f"arm file {path}: model: missing (the MJCF or URDF file of the arm)")
-    m = model or rel(doc["model"], "model")
-    af = ArmFile(path, slug(doc["name"]) if isinstance(doc.get("name"), str) else None, m)
-    if "name" in doc and not isinstance(doc["name"], str):
-        raise ArmError(f"arm file {path}: name: expected a string")
+def _file_path(path: Path, v: Any, where: str) -> Path:
+    """A file the arm file names, relative to the arm file's folder."""
+    if not isinstance(v, str) or not v:
+        raise ArmError(f"arm file {path}: {where}: expected a file path, got {v!r}")
+    p = Path(v)
+    return p if p.is_absolute() else (path.parent / p).resolve()
+
+
+def _joint_fields(af: ArmFile, doc: dict[str, Any], path: Path) -> None:
+    """joints, locked, home, keyframe and torque_limits."""
     if "joints" in doc:
         af.joints = _names(doc["joints"], f"arm file {path}: joints")
     if "locked" in doc:
@@ -112,6 +113,10 @@ def load_arm_file(path: Path | None, model: Path | None = None) -> ArmFile:  # n
         bad = {k: v for k, v in af.torque_limits.items() if not v > 0}
         if bad:
             raise ArmError(f"arm file {path}: torque_limits: must be > 0 N m, got {bad}")
+
+
+def _wiring_fields(af: ArmFile, doc: dict[str, Any], path: Path) -> None:
+    """buses or topology, design and drives."""
     if "buses" in doc and "topology" in doc:
         raise ArmError(f"arm file {path}: give buses or topology, not both")
     if "buses" in doc:
@@ -119,14 +124,18 @@ def load_arm_file(path: Path | None, model: Path | None = None) -> ArmFile:  # n
             raise ArmError(f"arm file {path}: buses: expected [[buses]] tables (name, kind, nominal, data, drives)")
         af.buses = doc["buses"]
     if "topology" in doc:
-        af.topology = rel(doc["topology"], "topology")
+        af.topology = _file_path(path, doc["topology"], "topology")
     if "design" in doc:
-        af.design = rel(doc["design"], "design")
+        af.design = _file_path(path, doc["design"], "design")
     if "drives" in doc:  # the CiA 402 drive configuration: read by gen/drives.py, checked here early
-        drives = rel(doc["drives"], "drives")
+        drives = _file_path(path, doc["drives"], "drives")
         if not drives.is_file():
             raise ArmError(f"arm file {path}: drives: {drives} is not a file (the drive configuration, "
                            "like firmware/protocol/drives.toml)")
+
+
+def _simulation_fields(af: ArmFile, doc: dict[str, Any], path: Path) -> None:
+    """contacts, timestep, drivetrain, rated_payload_kg and flange."""
     if "contacts" in doc:
         if not isinstance(doc["contacts"], bool):
             raise ArmError(f"arm file {path}: contacts: expected true or false")
@@ -151,6 +160,22 @@ def load_arm_file(path: Path | None, model: Path | None = None) -> ArmFile:  # n
         if not isinstance(doc["flange"], str) or not doc["flange"]:
             raise ArmError(f"arm file {path}: flange: expected the name of a site on the last link")
         af.flange = doc["flange"]
+
+
+def load_arm_file(path: Path | None, model: Path | None = None) -> ArmFile:
+    """The arm file (TOML) validated field by field, or the defaults for a bare model."""
+    if path is None:
+        return _bare_model(model)
+    doc = _read_arm_toml(path)
+    if "model" not in doc and model is None:
+        raise ArmError(f"arm file {path}: model: missing (the MJCF or URDF file of the arm)")
+    m = model or _file_path(path, doc["model"], "model")
+    af = ArmFile(path, slug(doc["name"]) if isinstance(doc.get("name"), str) else None, m)
+    if "name" in doc and not isinstance(doc["name"], str):
+        raise ArmError(f"arm file {path}: name: expected a string")
+    _joint_fields(af, doc, path)
+    _wiring_fields(af, doc, path)
+    _simulation_fields(af, doc, path)
     return af
 
 

@@ -25,7 +25,7 @@ def wiring(af: ArmFile, n: int, rate: float) -> list[dict[str, Any]]:
             buses = busload.load_topology(DEFAULT_TOPOLOGY, n)
         else:
             buses = busload.default_wiring(n, rate)
-        loads = busload.compute(buses, rate, constant("heartbeat-ms"), busload.default_protocol(), n)
+        loads = busload.compute(buses, rate, busload.HEARTBEAT_MS, busload.default_protocol(), n)
         over = [bl for bl in loads if bl.load > BUS_BUDGET]
         if over:
             raise busload.ConfigError(

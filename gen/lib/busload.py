@@ -41,6 +41,7 @@ from __future__ import annotations
 import functools
 import math
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -48,6 +49,11 @@ from typing import Any
 from gen.lib.cia402 import CODEC_MAPPING, pdo_bytes
 from gen.lib.params import constant, default
 from gen.lib.paths import REPO
+
+# The drives' heartbeat period the load counts: the one arm_controller writes to each drive by
+# default (firmware/params/params.toml [controller.heartbeat-ms]); the busiest bus's load a design may take.
+HEARTBEAT_MS: float = float(default("controller", "heartbeat-ms"))
+BUS_BUDGET: float = constant("bus-budget")
 
 DEFAULT_DBC = REPO / "firmware" / "protocol" / "arm_drives.dbc"
 DEFAULT_TOPOLOGY = REPO / "firmware" / "protocol" / "buses.toml"
@@ -242,17 +248,10 @@ def topology_from_doc(doc: dict[str, Any], path: str, n_drives: int = 6) -> list
                 or not all(isinstance(d, int) and not isinstance(d, bool) for d in drives)):
             raise ConfigError(f"{where}.drives: expected a non-empty list of drive numbers, got {drives!r}")
         buses.append(Bus(name, kind == "fd", rates["nominal"], rates["data"], list(drives)))
-    seen: dict[int, str] = {}
-    for b in buses:
-        for d in b.drives:
-            if not 1 <= d <= n_drives:
-                raise ConfigError(f"{path}: bus {b.name}.drives: drive {d} does not exist (drives 1..{n_drives})")
-            if d in seen:
-                raise ConfigError(f"{path}: bus {b.name}.drives: drive {d} is on two buses ({seen[d]} and {b.name})")
-            seen[d] = b.name
-    missing = [d for d in range(1, n_drives + 1) if d not in seen]
-    if missing:
-        raise ConfigError(f"{path}: drives: drive(s) {', '.join(map(str, missing))} are on no bus")
+    _check_placement(buses, n_drives, {
+        "none": lambda bus, d, _: f"{path}: bus {bus}.drives: drive {d} does not exist (drives 1..{n_drives})",
+        "two": lambda bus, d, other: f"{path}: bus {bus}.drives: drive {d} is on two buses ({other} and {bus})",
+        "missing": lambda _, __, other: f"{path}: drives: drive(s) {other} are on no bus"})
     return buses
 
 
@@ -272,7 +271,7 @@ def topology_drives(path: Path) -> int:
 
 
 def default_wiring(n_drives: int, rate_hz: float = default("controller", "rate"),
-                   budget: float = constant("bus-budget"),
+                   budget: float = BUS_BUDGET,
                    template: Bus | None = None) -> list[Bus]:
     """The fewest buses of the template's kind (CAN FD 1/5 Mbit/s) that carry drives 1..n within
     the budget at the loop rate, drives split evenly in order; at most 4 buses (the controller's
@@ -415,20 +414,30 @@ def _check_drives(buses: list[Bus], n: int, slots: int, what: str) -> None:
     """Drives 1..n each on exactly one bus, within `slots` (the DBC's, or CANopen's node ids)."""
     if not 1 <= n <= slots:
         raise ConfigError(f"{n} drives: {what} 1..{slots}")
+    _check_placement(buses, n, {
+        "none": lambda bus, d, _: f"bus {bus}: drive {d} does not exist (drives 1..{n}; {what} 1..{slots})",
+        "two": lambda bus, d, other: f"drive {d} is on two buses ({other} and {bus})",
+        "missing": lambda _, __, other: f"drives {other} are on no bus"})
+
+
+def _check_placement(buses: list[Bus], n: int, messages: dict[str, Callable[[str, int, str], str]]) -> None:
+    """Drives 1..n each on exactly one bus; else ConfigError with the caller's message for the first
+    break: "none" (no such drive), "two" (other: the bus it is on already) or "missing" (other:
+    every drive on no bus, comma-separated), each message made of (bus, drive, other)."""
     seen: dict[int, str] = {}
     for b in buses:
         for d in b.drives:
             if not 1 <= d <= n:
-                raise ConfigError(f"bus {b.name}: drive {d} does not exist (drives 1..{n}; {what} 1..{slots})")
+                raise ConfigError(messages["none"](b.name, d, ""))
             if d in seen:
-                raise ConfigError(f"drive {d} is on two buses ({seen[d]} and {b.name})")
+                raise ConfigError(messages["two"](b.name, d, seen[d]))
             seen[d] = b.name
     missing = [d for d in range(1, n + 1) if d not in seen]
     if missing:
-        raise ConfigError(f"drives {', '.join(map(str, missing))} are on no bus")
+        raise ConfigError(messages["missing"]("", 0, ", ".join(map(str, missing))))
 
 
-def canopen_compute(buses: list[Bus], rate_hz: float, heartbeat_ms: float = 100.0,
+def canopen_compute(buses: list[Bus], rate_hz: float, heartbeat_ms: float = HEARTBEAT_MS,
                     every: dict[str, int] | None = None, n_drives: int | None = None) -> list[BusLoad]:
     """The load of each bus of CiA 402 drives: per period one SYNC, and per drive RPDO1, TPDO1 and
     TPDO2, each once every `every[pdo]` SYNCs (their CiA 301 transmission types; absent: 1); a
@@ -456,7 +465,7 @@ def _canopen_frame(name: str, n_bytes: int, per_period: float, bus: Bus) -> Fram
     return FrameLoad(name, 1, per_period, nom, dat, canopen_frame_s(n_bytes, bus))
 
 
-def canopen_load(bus: Bus, n_drives: int, rate_hz: float, heartbeat_ms: float = 100.0,
+def canopen_load(bus: Bus, n_drives: int, rate_hz: float, heartbeat_ms: float = HEARTBEAT_MS,
                  every: dict[str, int] | None = None) -> float:
     """Worst-case load (fraction of bus time) of n_drives CiA 402 drives on one bus at rate_hz;
     every: the PDOs' transmission types (gen/drives.py [pdo] transmission; absent: 1, every SYNC)."""
@@ -464,7 +473,7 @@ def canopen_load(bus: Bus, n_drives: int, rate_hz: float, heartbeat_ms: float = 
     return canopen_compute([one], rate_hz, heartbeat_ms, every, n_drives)[0].load
 
 
-def canopen_drives_per_bus(bus: Bus, rate_hz: float, budget: float = 0.70, heartbeat_ms: float = 100.0,
+def canopen_drives_per_bus(bus: Bus, rate_hz: float, budget: float = BUS_BUDGET, heartbeat_ms: float = HEARTBEAT_MS,
                            every: dict[str, int] | None = None) -> int:
     """The most drives one bus carries within the budget (0: not even one)."""
     n = 0
@@ -477,7 +486,7 @@ CLASSIC_1M = Bus("can0", False, 1e6, None, [])  # the CiA 402 drives' default wi
 
 
 def canopen_wiring(n_drives: int, rate_hz: float, every: dict[str, int] | None = None,
-                   budget: float = constant("bus-budget"), heartbeat_ms: float = constant("heartbeat-ms"),
+                   budget: float = BUS_BUDGET, heartbeat_ms: float = HEARTBEAT_MS,
                    template: Bus = CLASSIC_1M, max_buses: int = MAX_BUSES) -> list[Bus] | None:
     """The fewest buses of the template's kind (classic 1 Mbit/s) that carry drives 1..n within
     the budget at rate_hz, drives split evenly in order; None if even max_buses do not."""
@@ -486,12 +495,3 @@ def canopen_wiring(n_drives: int, rate_hz: float, every: dict[str, int] | None =
         if all(canopen_load(b, len(b.drives), rate_hz, heartbeat_ms, every) <= budget for b in split):
             return split
     return None
-
-
-def canopen_drives_per_bus(bus: Bus, rate_hz: float, budget: float = 0.70, heartbeat_ms: float = 100.0,
-                           every: dict[str, int] | None = None) -> int:
-    """The most drives one bus carries within the budget (0: not even one)."""
-    n = 0
-    while n < 127 and canopen_load(bus, n + 1, rate_hz, heartbeat_ms, every) <= budget:
-        n += 1
-    return n

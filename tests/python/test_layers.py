@@ -182,3 +182,42 @@ def test_tools_is_split_by_job() -> None:
     """No module of a job's package lies loose in tools/ (only the CLI and a few shared helpers do)."""
     loose = sorted(p.name for p in (REPO / "tools").glob("*.py"))
     assert loose == ["__init__.py", "busload.py", "cli.py", "errors.py", "methods.py", "vcan.py"], loose
+
+
+# A function longer than this is split into named steps that each do one job.
+LONGEST_FUNCTION = 80
+# The only longer ones, each with its reason.
+LONG_FUNCTION_EXEMPT = {
+    # a C header as one f-string template: its lines are the header's, not steps
+    "gen/synth/emit.py:fixed_header",
+}
+
+
+def long_functions(path: Path) -> list[tuple[str, int]]:
+    """Every function (or method) of `path` longer than LONGEST_FUNCTION lines, with its length."""
+    return [(node.name, node.end_lineno - node.lineno + 1)
+            for node in ast.walk(ast.parse(path.read_text(), str(path)))
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and node.end_lineno is not None
+            and node.end_lineno - node.lineno + 1 > LONGEST_FUNCTION]
+
+
+def test_no_function_in_gen_host_sim_or_tools_is_longer_than_80_lines() -> None:
+    long = [f"{path.relative_to(REPO)}:{name} ({n} lines)" for folder in ("gen", "host_sim", "tools")
+            for path in _modules(folder) for name, n in long_functions(path)
+            if f"{path.relative_to(REPO)}:{name}" not in LONG_FUNCTION_EXEMPT]
+    assert long == []
+
+
+def test_the_length_check_sees_a_long_function(tmp_path: Path) -> None:
+    """The test above would pass on a checker that measures nothing: an 81-line function is found,
+    an 80-line one is not."""
+    body = "    x = 0\n" * (LONGEST_FUNCTION - 2)
+    probe = tmp_path / "probe.py"
+    probe.write_text(f"def short():\n{body}    return x\n\ndef long():\n{body}    x += 1\n    return x\n")
+    assert long_functions(probe) == [("long", LONGEST_FUNCTION + 1)]
+
+
+def test_each_exempt_long_function_exists_and_is_long() -> None:
+    for entry in sorted(LONG_FUNCTION_EXEMPT):
+        path, name = entry.split(":")
+        assert name in dict(long_functions(REPO / path)), f"{entry} is no longer long: drop its exemption"

@@ -28,6 +28,7 @@ from gen.lib.atomic_output import write_json_atomic
 from tools.build import build
 from gen.lib.paths import REPO, build_dir
 from tools.methods import firmware_methods, method_names
+from tools.run.run_files import SIM_SUMMARY
 
 METHODS = method_names()
 STEPS = 2000
@@ -215,7 +216,7 @@ def _sim_runs(bus: str, repeats: int, duration: float, tmp: Path, flexible: bool
                                  sim_args=("--profile",) if profile else ()))
         if run["results"]["result"] != "ok":
             raise RuntimeError(f"bench run {i} ({bus}) failed: {run['results']['problems']}")
-        sim = json.loads((d / "sim_summary.json").read_text())
+        sim = json.loads((d / SIM_SUMMARY).read_text())
         entry = {"realtime_factor": sim["realtime_factor"], "wall_s": run["environment"]["wall_s"],
                  "boot_s": sim["boot_s"], "period_cost_us": sim["period_cost_us"]}
         if profile:

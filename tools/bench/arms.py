@@ -32,6 +32,7 @@ from typing import Any
 from gen.lib.atomic_output import write_json_atomic
 from gen.lib.bounds import DEFAULT_MAX_ERROR_DEG
 from gen.lib.paths import BUILD, REPO
+from tools.run.run_files import RUN_RECORD
 
 SETS_FILE = REPO / "tools" / "bench" / "model_sets.toml"
 CACHE = BUILD / "model-sets"
@@ -375,7 +376,7 @@ def run_one(c: Candidate, model: Path, out: Path, bound_deg: float) -> dict[str,
         return {"result": "failed", "reason": f"no result within {RUN_TIMEOUT_S} s"}
     elapsed = time.monotonic() - t0
     row: dict[str, Any] = {"first_result_s": round(elapsed, 1), "exit": r.returncode}
-    run_json = out / "run" / "run.json"
+    run_json = out / "run" / RUN_RECORD
     if r.returncode == 2 and not run_json.exists():
         lines = [ln for ln in r.stderr.splitlines() if ln.startswith("armctl hil: ") and "warning" not in ln]
         row.update(result="refused", reason=(lines[-1] if lines else r.stderr.strip()[-300:]).removeprefix(

@@ -37,9 +37,11 @@ from typing import Any
 import can
 
 from gen.lib.atomic_output import write_json_atomic
+from gen.lib.multicast import CAN_GROUP, lcm_url
 from host_sim.canbus import open_bus
 from tools.run.hil import HilOptions, run_hil
 from gen.lib.paths import REPO
+from tools.run.run_files import SIM_SUMMARY
 from tools.run.slots import acquire_slot
 from gen.lib.params import constant, default as param_default
 
@@ -56,7 +58,7 @@ UNMEASURED = {
     "kill-logger": "the logger is the record: killed, the log holds no simulator truth of the stop (the simulator's "
                    "own account of the window after the controller fell silent is the row's stop.simulator.moved_deg)",
 }
-GROUP = "239.74.163.2"
+GROUP = CAN_GROUP
 
 
 @dataclass
@@ -92,7 +94,7 @@ class Injector:
         """The processes of this run (their command line names its bus port)."""
         r = subprocess.run(["pgrep", "-f", f"{exe} .*{GROUP}:{self.port}@"], capture_output=True, text=True)
         if exe == "arm_lcm_logger":
-            r = subprocess.run(["pgrep", "-f", f"arm_lcm_logger --lcm-url udpm://239.255.76.67:{self.lcm_port}"],
+            r = subprocess.run(["pgrep", "-f", f"arm_lcm_logger --lcm-url {lcm_url(self.lcm_port)}"],
                                capture_output=True, text=True)
         return [int(x) for x in r.stdout.split()]
 
@@ -204,7 +206,7 @@ def _forge_truth(i: Injector) -> None:
 
     from gen import lcmtypes
 
-    lc = lcm.LCM(f"udpm://239.255.76.67:{i.lcm_port}?ttl=0")
+    lc = lcm.LCM(lcm_url(i.lcm_port))
     m = lcmtypes.load().sim_truth_t()
     m.n = 6
     m.q = m.qd = m.tau_applied = m.w_true = [0.0] * 6
@@ -253,50 +255,49 @@ def _garbage(i: Injector) -> None:
     s.close()
 
 
-def run_fault(f: Fault, out: Path, pose: list[float]) -> dict[str, Any]:
-    from tools.build.arm import DEFAULT_ARM, HIL_TARGETS, build_arm
+def _watch(inj: Injector) -> None:
+    """Counts the SYNCs on bus 0 and notes when tracking began and when the controller stopped the drives."""
+    while not inj.stop_event.is_set():
+        try:
+            m = inj.bus0.recv(0.05)
+        except Exception as exc:  # noqa: BLE001 - python-can's decoder raises many kinds on odd datagrams
+            inj.problem = inj.problem or f"watcher: {type(exc).__name__}: {exc}"
+            continue
+        if m is None:
+            continue
+        if m.arbitration_id == SYNC and m.dlc >= 1:
+            inj.syncs += 1
+            inj.counter = m.data[0]
+        elif inj.injected_at is not None and inj.stopped_at is None and (
+                (m.arbitration_id == NMT and m.data[:1] == b"\x02") or
+                (0x201 <= m.arbitration_id <= 0x210 and bytes(m.data[:2]) in STOP_CONTROLWORDS)):
+            inj.stopped_at = inj.syncs
+        elif inj.tracking_syncs is None and 0x201 <= m.arbitration_id <= 0x210 and m.data[:2] == b"\x0f\x00":
+            inj.tracking_syncs = inj.syncs
 
-    arm = f.arm() if f.arm is not None else DEFAULT_ARM
-    if f.arm is not None:
-        HOSTILE_MARKER.unlink(missing_ok=True)
-        build_arm("release", arm, targets=HIL_TARGETS)
+
+def _inject_after_tracking(f: Fault, inj: Injector) -> None:
+    """The fault, injected after 0.3 s of tracking."""
+    deadline = time.monotonic() + 60
+    while (inj.tracking_syncs is None or inj.syncs < inj.tracking_syncs + 300) and time.monotonic() < deadline:
+        if inj.stop_event.is_set():
+            inj.problem = inj.problem or f"the run ended before tracking was seen ({inj.syncs} SYNCs seen)"
+            return
+        time.sleep(0.005)
+    inj.injected_at = inj.syncs
+    try:
+        f.inject(inj)
+    except (OSError, can.CanError) as exc:
+        inj.problem = inj.problem or f"injection: {type(exc).__name__}: {exc}"
+
+
+def _run_with_injector(f: Fault, out: Path, pose: list[float], arm: Any) -> tuple[dict[str, Any], Injector]:
+    """One HIL run with the watcher and the injector beside it on the run slot's buses."""
     with acquire_slot() as slot:
         inj = Injector(slot.can_port)
         inj.lcm_port = slot.lcm_port
-
-        def watch() -> None:
-            while not inj.stop_event.is_set():
-                try:
-                    m = inj.bus0.recv(0.05)
-                except Exception as exc:  # noqa: BLE001 - python-can's decoder raises many kinds on odd datagrams
-                    inj.problem = inj.problem or f"watcher: {type(exc).__name__}: {exc}"
-                    continue
-                if m is None:
-                    continue
-                if m.arbitration_id == SYNC and m.dlc >= 1:
-                    inj.syncs += 1
-                    inj.counter = m.data[0]
-                elif inj.injected_at is not None and inj.stopped_at is None and (
-                        (m.arbitration_id == NMT and m.data[:1] == b"\x02") or
-                        (0x201 <= m.arbitration_id <= 0x210 and bytes(m.data[:2]) in STOP_CONTROLWORDS)):
-                    inj.stopped_at = inj.syncs
-                elif inj.tracking_syncs is None and 0x201 <= m.arbitration_id <= 0x210 and m.data[:2] == b"\x0f\x00":
-                    inj.tracking_syncs = inj.syncs
-
-        def injector() -> None:
-            deadline = time.monotonic() + 60
-            while (inj.tracking_syncs is None or inj.syncs < inj.tracking_syncs + 300) and time.monotonic() < deadline:
-                if inj.stop_event.is_set():
-                    inj.problem = inj.problem or f"the run ended before tracking was seen ({inj.syncs} SYNCs seen)"
-                    return
-                time.sleep(0.005)  # 0.3 s of tracking first
-            inj.injected_at = inj.syncs
-            try:
-                f.inject(inj)
-            except (OSError, can.CanError) as exc:
-                inj.problem = inj.problem or f"injection: {type(exc).__name__}: {exc}"
-
-        threads = [threading.Thread(target=watch, daemon=True), threading.Thread(target=injector, daemon=True)]
+        threads = [threading.Thread(target=_watch, args=(inj,), daemon=True),
+                   threading.Thread(target=_inject_after_tracking, args=(f, inj), daemon=True)]
         for t in threads:
             t.start()
         try:
@@ -314,8 +315,33 @@ def run_fault(f: Fault, out: Path, pose: list[float]) -> dict[str, Any]:
                 t.join(5)
             inj.bus0.shutdown()
             inj.bus1.shutdown()
+    return run, inj
+
+
+def _unmeasured(f: Fault, stop: dict[str, Any]) -> str | None:
+    """Why the arm's motion after the stop is not measured (None: it is)."""
+    window = float(stop.get("window_s") or param_default("simulator", "post-stop"))
+    covered = float(stop.get("after_stop_covered_s") or 0.0)
+    if f.name in UNMEASURED:
+        return UNMEASURED[f.name]
+    if stop.get("moved_after_stop_deg") is None:
+        return stop.get("after_stop_problem") or "no stop was found (neither the controller nor the simulator " \
+                                                 "recorded one)"
+    if covered + 1e-9 < window:
+        return f"the simulator's truth covers {covered:.3f} s of the {window:g} s after the stop"
+    return None
+
+
+def run_fault(f: Fault, out: Path, pose: list[float]) -> dict[str, Any]:
+    from tools.build.arm import DEFAULT_ARM, HIL_TARGETS, build_arm
+
+    arm = f.arm() if f.arm is not None else DEFAULT_ARM
+    if f.arm is not None:
+        HOSTILE_MARKER.unlink(missing_ok=True)
+        build_arm("release", arm, targets=HIL_TARGETS)
+    run, inj = _run_with_injector(f, out, pose, arm)
     r = run["results"]
-    sim = _load(out / "sim_summary.json")
+    sim = _load(out / SIM_SUMMARY)
     faulted = bool(sim.get("drive_fault_mask")) or bool(r.get("drive_faults"))
     if f.name == "lost-bus":
         inj.injected_at = LOST_BUS_PERIOD  # the simulator's period, counted like the SYNCs seen
@@ -323,37 +349,27 @@ def run_fault(f: Fault, out: Path, pose: list[float]) -> dict[str, Any]:
     stopped = r.get("final_state") in ("fault", "safe-stop") or faulted  # not the run's normal end
     detected = (inj.stopped_at - inj.injected_at) if stopped and inj.stopped_at is not None \
         and inj.injected_at is not None else None
-    safe = stopped
-    lost = run.get("transport", {}).get("telemetry_lost_total")
+    transport = run.get("transport", {})
     # messages that cannot come from the run's own senders (tools/run/run_analysis.py), summed over channels
-    foreign = sum(a.get("foreign", 0) for a in (run.get("transport", {}).get("telemetry") or {}).values())
+    foreign = sum(a.get("foreign", 0) for a in (transport.get("telemetry") or {}).values())
     stop = r.get("stop") or {}
     moved = stop.get("moved_after_stop_deg")
-    window = float(stop.get("window_s") or param_default("simulator", "post-stop"))
-    covered = float(stop.get("after_stop_covered_s") or 0.0)
-    if f.name in UNMEASURED:
-        unmeasured = UNMEASURED[f.name]
-    elif moved is None:
-        unmeasured = stop.get("after_stop_problem") or "no stop was found (neither the controller nor the simulator " \
-                                                       "recorded one)"
-    elif covered + 1e-9 < window:
-        unmeasured = f"the simulator's truth covers {covered:.3f} s of the {window:g} s after the stop"
-    else:
-        unmeasured = None
-    return {"fault": f.name, "what": f.what, "detected_after_periods": detected, "safe_state": safe,
+    unmeasured = _unmeasured(f, stop)
+    return {"fault": f.name, "what": f.what, "detected_after_periods": detected, "safe_state": stopped,
             "stop": {k: stop.get(k) for k in ("cause", "from_bus_period", "found_by", "safe_state", "braked",
                                               "simulator")},
             "moved_after_stop_deg": None if unmeasured else max(moved),
             "moved_after_stop_per_joint_deg": moved if not unmeasured else None,
             "moved_unmeasured": unmeasured,
             "final_state": r.get("final_state"), "drives_faulted": faulted, "verdict": r.get("result"),
-            "reasons": r.get("verdict_reasons", []), "telemetry_lost": lost, "telemetry_foreign": foreign, "expect_stop": f.expect_stop,
+            "reasons": r.get("verdict_reasons", []), "telemetry_lost": transport.get("telemetry_lost_total"),
+            "telemetry_foreign": foreign, "expect_stop": f.expect_stop,
             "injected": inj.acted, "harness_problem": inj.problem or (None if inj.acted else
                                                                      "nothing sent while the arm ran"),
             # a file of the input's ran code on this machine (hostile-names: its constructor touched the marker)
             "input_ran_code": f.arm is not None and HOSTILE_MARKER.exists(),
-            "counters": {"controller": run.get("transport", {}).get("controller_frames", {}),
-                         "simulator": run.get("transport", {}).get("simulator_frames", {})}}
+            "counters": {"controller": transport.get("controller_frames", {}),
+                         "simulator": transport.get("simulator_frames", {})}}
 
 
 def _load(path: Path) -> dict[str, Any]:

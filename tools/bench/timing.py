@@ -42,6 +42,7 @@ from pathlib import Path
 from typing import Any
 
 from tools.run import procs
+from tools.run.run_files import CONTROLLER_SUMMARY, SIM_SUMMARY, TELEMETRY_LOG
 
 HISTMAX_US = 20000  # cyclictest histogram range (1 us buckets); beyond it: overflows
 
@@ -178,25 +179,10 @@ def _plot(path: Path, ctl_wake: list[float], cyc_hist: dict[int, int], compute: 
     plt.close(fig)
 
 
-def measure(out: Path, duration_s: float, rate_hz: float, rt_priority: int, cpu: int | None,
-            method: str = "pd", preset: str = "release") -> dict[str, Any]:
-    """The measurement itself (the command and the tests call this). Returns timing.json's data."""
-    from gen.lib.atomic_output import write_json_atomic
-    import numpy as np
+def _start_run(opts: Any) -> tuple[threading.Thread, dict[str, Any]]:
+    """The HIL run on a thread of its own; its record (or its error) lands in the returned dict."""
+    from tools.run.hil import HilError, run_hil
 
-    from tools.run.hil import HilError, HilOptions, realtime_cpu, run_hil
-    from tools.run.telemetry_log import read_log
-
-    out.mkdir(parents=True, exist_ok=True)
-    for stale in ("timing.json", "timing.png", "cyclictest.txt"):
-        (out / stale).unlink(missing_ok=True)
-    period_us = 1e6 / rate_hz
-    hil_dir = out / "hil"
-    (hil_dir / "telemetry.lcmlog").unlink(missing_ok=True)  # a previous run's log must not start cyclictest
-    ctl_args = ["--rate", f"{rate_hz:g}", "--rt-priority", str(rt_priority)]
-    opts = HilOptions(out=hil_dir, duration_s=duration_s, method=method, mode="realtime", preset=preset,
-                      controller_args=tuple(ctl_args), cpu=cpu)
-    cpu = realtime_cpu(opts)  # the loop, the simulator and cyclictest: one CPU, the same conditions
     result: dict[str, Any] = {}
 
     def hil() -> None:
@@ -209,14 +195,16 @@ def measure(out: Path, duration_s: float, rate_hz: float, rt_priority: int, cpu:
 
     t = threading.Thread(target=hil, daemon=True)
     t.start()
-    # cyclictest measures while the control loop runs: it starts at the loop's first period.
-    log = hil_dir / "telemetry.lcmlog"
+    return t, result
+
+
+def _cyclictest_beside(out: Path, hil_dir: Path, t: threading.Thread, result: dict[str, Any],
+                       cyc_cmd: list[str]) -> dict[str, Any]:
+    """cyclictest, measuring while the control loop runs: from the loop's first period until the
+    controller has finished (SIGINT: it prints its histogram). Its figures, or why there are none."""
+    log = hil_dir / TELEMETRY_LOG
     while t.is_alive() and not _first_timing_message(log):
         time.sleep(0.05)
-    # No loop count: it runs exactly while the loop does and is stopped (SIGINT: it prints its
-    # histogram) when the controller has finished (its summary is written).
-    cyc_cmd = ["cyclictest", "-m", "-q", "-t", "1", "--policy=fifo", "-p", str(rt_priority),
-               "-i", str(int(round(period_us))), "-h", str(HISTMAX_US), "-a", str(cpu)]
     cyc: dict[str, Any] = {"command": cyc_cmd}
     if shutil.which("cyclictest") is None:
         cyc["error"] = "cyclictest not found: apt-get install rt-tests (tools/armctl does as root)"
@@ -224,7 +212,7 @@ def measure(out: Path, duration_s: float, rate_hz: float, rt_priority: int, cpu:
         cyc["error"] = "not run: the HIL run failed before its loop started"
     else:
         proc = subprocess.Popen(cyc_cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        done = hil_dir / "controller_summary.json"
+        done = hil_dir / CONTROLLER_SUMMARY
         while t.is_alive() and not done.exists() and proc.poll() is None:
             time.sleep(0.02)
         if proc.poll() is None:
@@ -235,98 +223,151 @@ def measure(out: Path, duration_s: float, rate_hz: float, rt_priority: int, cpu:
         if proc.returncode not in (0, -signal.SIGINT) or not parsed["histogram_us"]:
             cyc["error"] = f"cyclictest exited {proc.returncode}: {(stderr or stdout).strip()[-300:]}"
         cyc.update(parsed)
-    t.join()
+    return cyc
 
-    run = result.get("run", {})
+
+def _controller_samples(hil_dir: Path) -> tuple[Any, list[float], list[float], list[float]]:
+    """The loop's ARM_TIMING messages and, from them, its wake latency, compute and cycle in us."""
+    import numpy as np
+
+    from tools.run.telemetry_log import read_log
+
+    log = hil_dir / TELEMETRY_LOG
     timing: Any = []
     if log.exists():
         timing = read_log(log, channels=("ARM_TIMING",))["ARM_TIMING"].messages
     wake = (np.asarray(timing.wake_latency_ns) / 1e3).tolist() if len(timing) else []
     compute = (np.asarray(timing.compute_ns) / 1e3).tolist() if len(timing) else []
     cycle = (np.asarray(timing.cycle_ns) / 1e3).tolist() if len(timing) else []
-    summary = json.loads((hil_dir / "controller_summary.json").read_text()) \
-        if (hil_dir / "controller_summary.json").exists() else {}
-    sim = json.loads((hil_dir / "sim_summary.json").read_text()) if (hil_dir / "sim_summary.json").exists() else {}
-    frames = summary.get("frames", {})
-    rt_line = ""
-    ctl_log = hil_dir / "controller.log"
-    if ctl_log.exists():
-        rt_line = next((ln.split("rt: ", 1)[1] for ln in ctl_log.read_text().splitlines() if " rt: " in ln), "")
-    periods = len(timing)
-    overruns = int(timing[-1].overruns) if len(timing) else int(summary.get("overruns", 0))
-    ctl_stats = _stats(wake)
-    cyc_stats = cyc.get("stats", {})
+    return timing, wake, compute, cycle
+
+
+def _relative_to_cyclictest(ctl_stats: dict[str, Any], cyc_stats: dict[str, Any]) -> dict[str, Any]:
     relative = {}
     for k in ("p50", "p99", "p99.9", "max"):
         a, b = ctl_stats.get(k), cyc_stats.get(k)
         if isinstance(a, float) and isinstance(b, (int, float)) and b:
             relative[k] = {"controller_us": a, "cyclictest_us": float(b), "ratio": a / float(b),
                            "difference_us": a - float(b)}
+    return relative
+
+
+TIMING_DEFINITIONS = {
+    "wake_latency": "actual wake-up minus the absolute deadline (clock_nanosleep TIMER_ABSTIME, "
+                    "CLOCK_MONOTONIC); cyclictest measures the same quantity",
+    "compute": "arm_ctl_step alone (inverse dynamics + method + safety layer)",
+    "cycle": "SYNC sent -> six commands sent: CAN round trip to the drives (simulator) + compute",
+    "overrun": "a period whose deadline passed before its cycle finished (missed deadlines "
+               "are skipped, the schedule never drifts)",
+}
+
+
+def _run_part(run: dict[str, Any], result: dict[str, Any]) -> dict[str, Any]:
+    """timing.json's `run`: the HIL run's verdict, problems and how far it got."""
+    results = run.get("results", {})
+    return {"ok": bool(run) and run["results"]["result"] == "ok",
+            "result": results.get("result", "failed"),
+            "problems": results.get("problems", []) + ([result["error"]] if "error" in result else []),
+            "final_state": results.get("final_state"),
+            "steps": results.get("steps", 0)}
+
+
+def _controller_part(timing: Any, summary: dict[str, Any], ctl_stats: dict[str, Any], compute: list[float],
+                     cycle: list[float]) -> dict[str, Any]:
+    periods = len(timing)
+    overruns = int(timing[-1].overruns) if len(timing) else int(summary.get("overruns", 0))
+    return {"periods_measured": periods, "wake_latency_us": ctl_stats, "compute_us": _stats(compute),
+            "cycle_us": _stats(cycle), "overruns": overruns,
+            "overrun_fraction": overruns / periods if periods else None}
+
+
+def _bus_part(summary: dict[str, Any], sim: dict[str, Any]) -> dict[str, Any]:
+    frames = summary.get("frames", {})
+    return {"joint_states_in_time": frames.get("rx_state"),
+            "joint_states_late": frames.get("rx_wrong_counter"),
+            "simulator_periods": sim.get("periods"),
+            "commands_missed_by_simulator": sim.get("commands_missed"),
+            "note": "late = a state for an earlier SYNC, arriving after that period's wait (0.8 period) "
+                    "and discarded; more than --watchdog-periods (3) in a row safe-stop the loop"}
+
+
+def _verdict(summary: dict[str, Any], cyc: dict[str, Any], run_part: dict[str, Any]) -> tuple[str, str]:
+    """Every period the controller was asked for ran, and cyclictest ran beside it."""
+    requested, done = summary.get("steps_requested"), summary.get("steps_done")
+    if not summary:
+        return "failed", "the controller wrote no summary: " + "; ".join(run_part["problems"])
+    if done != requested:
+        return "incomplete", (f"the loop ran {done} of {requested} periods: "
+                              + ("; ".join(run_part["problems"]) or summary.get("reason", "")))
+    if "error" in cyc:
+        return "incomplete", f"cyclictest did not measure beside the loop: {cyc['error']}"
+    if not run_part["ok"]:
+        return "failed", "; ".join(run_part["problems"]) or "the HIL run failed"
+    return "ok", ""
+
+
+def measure(out: Path, duration_s: float, rate_hz: float, rt_priority: int, cpu: int | None,
+            method: str = "pd", preset: str = "release") -> dict[str, Any]:
+    """The measurement itself (the command and the tests call this). Returns timing.json's data."""
+    from gen.lib.atomic_output import write_json_atomic
+
+    from tools.run.hil import HilOptions, realtime_cpu
+
+    out.mkdir(parents=True, exist_ok=True)
+    for stale in ("timing.json", "timing.png", "cyclictest.txt"):
+        (out / stale).unlink(missing_ok=True)
+    period_us = 1e6 / rate_hz
+    hil_dir = out / "hil"
+    (hil_dir / TELEMETRY_LOG).unlink(missing_ok=True)  # a previous run's log must not start cyclictest
+    ctl_args = ["--rate", f"{rate_hz:g}", "--rt-priority", str(rt_priority)]
+    opts = HilOptions(out=hil_dir, duration_s=duration_s, method=method, mode="realtime", preset=preset,
+                      controller_args=tuple(ctl_args), cpu=cpu)
+    cpu = realtime_cpu(opts)  # the loop, the simulator and cyclictest: one CPU, the same conditions
+    cyc_cmd = ["cyclictest", "-m", "-q", "-t", "1", "--policy=fifo", "-p", str(rt_priority),
+               "-i", str(int(round(period_us))), "-h", str(HISTMAX_US), "-a", str(cpu)]
+    t, result = _start_run(opts)
+    cyc = _cyclictest_beside(out, hil_dir, t, result, cyc_cmd)
+    t.join()
+
+    run = result.get("run", {})
+    timing, wake, compute, cycle = _controller_samples(hil_dir)
+    summary = _load_json(hil_dir / CONTROLLER_SUMMARY)
+    ctl_log = hil_dir / "controller.log"
+    rt_line = next((ln.split("rt: ", 1)[1] for ln in ctl_log.read_text().splitlines() if " rt: " in ln), "") \
+        if ctl_log.exists() else ""
+    ctl_stats = _stats(wake)
+    run_part = _run_part(run, result)
     data: dict[str, Any] = {
         "config": {"duration_s": duration_s, "rate_hz": rate_hz, "period_us": period_us,
                    "rt_priority": rt_priority, "cpu": cpu, "method": method, "mode": "realtime",
                    "controller_args": ctl_args, "cyclictest": cyc_cmd},
         "controller_rt_setup": rt_line,
         "simulator_scheduling": run.get("environment", {}).get("simulator_scheduling", "unknown"),
-        "run": {"ok": bool(run) and run["results"]["result"] == "ok",
-                "result": run.get("results", {}).get("result", "failed"),
-                "problems": run.get("results", {}).get("problems", []) + ([result["error"]] if "error" in result else []),
-                "final_state": run.get("results", {}).get("final_state"),
-                "steps": run.get("results", {}).get("steps", 0)},
-        "controller": {
-            "periods_measured": periods,
-            "wake_latency_us": ctl_stats,
-            "compute_us": _stats(compute),
-            "cycle_us": _stats(cycle),
-            "overruns": overruns,
-            "overrun_fraction": overruns / periods if periods else None,
-        },
+        "run": run_part,
+        "controller": _controller_part(timing, summary, ctl_stats, compute, cycle),
         "cyclictest": {k: v for k, v in cyc.items() if k != "histogram_us"} |
                       {"histogram_us": {str(k): v for k, v in sorted(cyc.get("histogram_us", {}).items())}},
-        "relative_to_cyclictest": relative,
+        "relative_to_cyclictest": _relative_to_cyclictest(ctl_stats, cyc.get("stats", {})),
         # which side was late, wherever states missed the wait: the controller's account and the
         # simulator's own times, beside cyclictest's figures of the same window (docs/runs.md,
         # Which side was late)
         "lateness": run.get("environment", {}).get("lateness") or {
             "late_periods": (summary.get("lateness") or {}).get("late_periods"),
             "stop": (summary.get("lateness") or {}).get("stop") or None},
-        "bus": {
-            "joint_states_in_time": frames.get("rx_state"),
-            "joint_states_late": frames.get("rx_wrong_counter"),
-            "simulator_periods": sim.get("periods"),
-            "commands_missed_by_simulator": sim.get("commands_missed"),
-            "note": "late = a state for an earlier SYNC, arriving after that period's wait (0.8 period) "
-                    "and discarded; more than --watchdog-periods (3) in a row safe-stop the loop",
-        },
-        "definitions": {
-            "wake_latency": "actual wake-up minus the absolute deadline (clock_nanosleep TIMER_ABSTIME, "
-                            "CLOCK_MONOTONIC); cyclictest measures the same quantity",
-            "compute": "arm_ctl_step alone (inverse dynamics + method + safety layer)",
-            "cycle": "SYNC sent -> six commands sent: CAN round trip to the drives (simulator) + compute",
-            "overrun": "a period whose deadline passed before its cycle finished (missed deadlines "
-                       "are skipped, the schedule never drifts)",
-        },
+        "bus": _bus_part(summary, _load_json(hil_dir / SIM_SUMMARY)),
+        "definitions": TIMING_DEFINITIONS,
     }
-    # The verdict: every period the controller was asked for ran, and cyclictest ran beside it.
-    requested, done = summary.get("steps_requested"), summary.get("steps_done")
-    if not summary:
-        verdict, why = "failed", "the controller wrote no summary: " + "; ".join(data["run"]["problems"])
-    elif done != requested:
-        verdict, why = "incomplete", (f"the loop ran {done} of {requested} periods: "
-                                      + ("; ".join(data["run"]["problems"]) or summary.get("reason", "")))
-    elif "error" in cyc:
-        verdict, why = "incomplete", f"cyclictest did not measure beside the loop: {cyc['error']}"
-    elif not data["run"]["ok"]:
-        verdict, why = "failed", "; ".join(data["run"]["problems"]) or "the HIL run failed"
-    else:
-        verdict, why = "ok", ""
-    data["verdict"], data["verdict_reason"] = verdict, why
-    data["controller"]["periods_requested"] = requested
-    if periods or cyc.get("histogram_us"):
+    data["verdict"], data["verdict_reason"] = _verdict(summary, cyc, run_part)
+    data["controller"]["periods_requested"] = summary.get("steps_requested")
+    if len(timing) or cyc.get("histogram_us"):
         _plot(out / "timing.png", wake, cyc.get("histogram_us", {}), compute, cycle, period_us,
               f"controller vs cyclictest, {rate_hz:g} Hz, SCHED_FIFO {rt_priority}, {duration_s:g} s")
     write_json_atomic(out / "timing.json", data)
     return data
+
+
+def _load_json(path: Path) -> dict[str, Any]:
+    return json.loads(path.read_text()) if path.exists() else {}
 
 
 def _fmt(v: Any) -> str:
@@ -393,8 +434,27 @@ def run(ns: argparse.Namespace) -> int:
     return 0 if d["verdict"] == "ok" else 1
 
 
+def repeat(out: Path, runs: int, duration_s: float, rate_hz: float, rt_priority: int, cpu: int | None,
+           method: str) -> dict[str, Any]:
+    """`runs` measurements in a row, each to out/RUN/; repeat.json's data (also written;
+    tools/bench/timing_repeat.py)."""
+    from gen.lib.atomic_output import write_json_atomic
+    from tools.bench.timing_repeat import run_row, summarise
+
+    rows = []
+    for i in range(1, runs + 1):
+        d = measure(out / str(i), duration_s, rate_hz, rt_priority, cpu, method)
+        rows.append(run_row(i, d))
+        print(table(d))
+        print(f"armctl timing: run {i} of {runs}: {d['verdict']}"
+              + (f": {d['verdict_reason']}" if d["verdict_reason"] else ""), flush=True)
+    data = summarise(rows, duration_s, rate_hz)
+    write_json_atomic(out / "repeat.json", data)
+    return data
+
+
 def _run_repeated(ns: argparse.Namespace) -> int:
-    from tools.bench.timing_repeat import repeat, table as repeat_table
+    from tools.bench.timing_repeat import table as repeat_table
 
     d = repeat(ns.out, ns.repeat, ns.duration, ns.rate, ns.rt_priority, ns.cpu, ns.method)
     print(repeat_table(d))

@@ -11,7 +11,6 @@ drive's id, with nothing injected, is the controller's misreading: it is counted
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
 ANOTHER_NODE = "another node uses its id"  # the controller's reason for a second TPDO in one period
@@ -44,24 +43,6 @@ def summarise(rows: list[dict[str, Any]], duration_s: float, rate_hz: float) -> 
             "another_node": sum(r["another_node"] for r in rows), "runs": rows,
             "verdict": "ok" if ok == len(rows) else "stopped",
             "verdict_reason": "" if ok == len(rows) else f"{len(rows) - ok} of {len(rows)} runs stopped before their end"}
-
-
-def repeat(out: Path, runs: int, duration_s: float, rate_hz: float, rt_priority: int, cpu: int | None,
-           method: str) -> dict[str, Any]:
-    """`runs` measurements in a row, each to out/RUN/; repeat.json's data (also written)."""
-    from gen.lib.atomic_output import write_json_atomic
-    from tools.bench.timing import measure, table as run_table
-
-    rows = []
-    for i in range(1, runs + 1):
-        d = measure(out / str(i), duration_s, rate_hz, rt_priority, cpu, method)
-        rows.append(run_row(i, d))
-        print(run_table(d))
-        print(f"armctl timing: run {i} of {runs}: {d['verdict']}"
-              + (f": {d['verdict_reason']}" if d["verdict_reason"] else ""), flush=True)
-    data = summarise(rows, duration_s, rate_hz)
-    write_json_atomic(out / "repeat.json", data)
-    return data
 
 
 def _us(v: Any) -> str:

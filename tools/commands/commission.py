@@ -15,7 +15,8 @@ from pathlib import Path
 from gen.lib.paths import REPO
 from tools.build.arm import add_arm_arguments
 from tools.commands import CommandError
-from tools.run.arm_session import add_bus_arguments, add_mode_argument
+from tools.run.arm_session import add_session_arguments
+from tools.run.run_files import CONTROLLER_SUMMARY
 
 END_HOLD_S = 0.5
 
@@ -24,10 +25,7 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("commission", help="check each joint of your arm before it moves: direction, scale, gravity "
                                           "(docs/run-on-your-arm.md)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    add_bus_arguments(p, None, "; the arm's interfaces [socketcan:can0,can1,...]")
-    p.add_argument("--record", type=Path, default=None, metavar="FILE",
-                   help="where the commissioning record goes [runs/commission/ARM-HASH.json, where armctl run looks]")
-    add_mode_argument(p)
+    add_session_arguments(p, "where the commissioning record goes [runs/commission/ARM-HASH.json, where armctl run looks]")
     p.add_argument("--out", type=Path, default=REPO / "runs" / "commission", metavar="DIR",
                    help="the controller's log, summary and telemetry [runs/commission]")
     add_arm_arguments(p)
@@ -35,7 +33,7 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(ns: argparse.Namespace) -> int:
-    from tools.commands.run import describe
+    from tools.run.arm_task import describe
     from tools.run.arm_session import arm_on_bus, run_controller, table_digest
     from tools.run.commissioning import default_record, judge, pulses, write_record
 
@@ -70,7 +68,7 @@ def run(ns: argparse.Namespace) -> int:
               f"{num(v.friction_nm):>10}{num(v.inertia):>10}{num(v.inertia_model):>10}")
     write_record(record, passed=passed, info=info, table=setup.table, digest=table_digest(setup.table),
                  verdicts=verdicts, findings=findings, bus=" ".join(setup.buses),
-                 summary_path=ns.out / "controller_summary.json")
+                 summary_path=ns.out / CONTROLLER_SUMMARY)
     if passed:
         print(f"armctl commission: passed: every joint turns its way, at the model's scale, under the model's "
               f"gravity; record {record}")

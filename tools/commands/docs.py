@@ -272,7 +272,7 @@ def _bus_facts() -> dict[str, Any]:
     from gen.lib.params import constant
 
     return {"every": drives_mod.load_transmission(drives_mod.DEFAULT_DRIVES), "budget": constant("bus-budget"),
-            "heartbeat_ms": constant("heartbeat-ms"), "topology": busload.load_topology(busload.DEFAULT_TOPOLOGY)}
+            "heartbeat_ms": busload.HEARTBEAT_MS, "topology": busload.load_topology(busload.DEFAULT_TOPOLOGY)}
 
 
 def bus_load(f: dict[str, Any]) -> str:

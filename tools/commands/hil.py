@@ -163,11 +163,12 @@ def _study_run(ns: argparse.Namespace) -> int:
         raise StudyConfigError(f"--scenario: --bus {ns.bus}: a study's run runs on {', '.join(study.BUSES)}")
     print_arm_warnings(arm_info(build_arm("release", arm)), "armctl hil")
     seed = cfg.seed if ns.seed is None else ns.seed
-    spec, traj, notes = study.study_run_spec(cfg, arm, ns.scenario, ns.method or "pm", seed, ns.duration, knobs,
+    method = ns.method or param("hil", "method").default
+    spec, traj, notes = study.study_run_spec(cfg, arm, ns.scenario, method, seed, ns.duration, knobs,
                                              ns.tuned is not None, ns.out.resolve(), ns.bus)
     for n in notes:
         print(f"armctl hil: {one_line(n)}", file=sys.stderr)
-    print(f"armctl hil: {ns.method or 'pm'} in scenario {ns.scenario} of {cfg.path}, seed {seed}, "
+    print(f"armctl hil: {method} in scenario {ns.scenario} of {cfg.path}, seed {seed}, "
           f"{spec.duration_s:g} s, knobs {json.dumps(spec.labels['knobs'])}; trajectory ({traj['from']}) amplitudes "
           f"{traj['amp']} rad, frequencies {traj['freq_hz']} Hz")
     (ns.out / DONE).unlink(missing_ok=True)  # run it, never take a kept one

@@ -15,12 +15,14 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import Any
 
 from gen.lib.params import param
 from gen.lib.paths import REPO
 from tools.build.arm import add_arm_arguments
 from tools.commands import CommandError, UsageError
-from tools.run.arm_session import add_bus_arguments, add_mode_argument
+from tools.run.arm_session import add_session_arguments
+from tools.run.run_files import TELEMETRY_LOG
 
 MOVED_FRACTION = 0.5  # of the excitation's span: a joint that moved less did not follow it
 
@@ -35,11 +37,7 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
         q = param("identify", name)
         p.add_argument(f"--{name}", type=int if q.type == "int" else float, default=q.default, metavar=q.arg,
                        help=f"{q.help} [{q.default}]")
-    add_bus_arguments(p, None, "; the arm's interfaces [socketcan:can0,can1,...]")
-    p.add_argument("--record", type=Path, default=None, metavar="FILE",
-                   help="the arm's commissioning record [runs/commission/ARM-HASH.json, where armctl commission "
-                        "keeps it]")
-    add_mode_argument(p)
+    add_session_arguments(p)
     p.add_argument("--run-dir", type=Path, default=REPO / "runs" / "identify", metavar="DIR",
                    help="the excitation, the controller's log and telemetry, identification.json [runs/identify]")
     add_arm_arguments(p)
@@ -124,44 +122,37 @@ def record_allows(path: Path, setup: object) -> str:
                 f"{findings[0]}")
 
 
-def run(ns: argparse.Namespace) -> int:
+IDENTIFICATION_FILE = "identification.json"
+
+
+def _excitation(ns: argparse.Namespace, info: dict[str, Any], reg: Any) -> tuple[Any, float, dict[str, Any]]:
+    """The excitation about home (its condition of the regressor), checked against the reference's limits."""
     import numpy as np
 
     from gen.arm.reference import REF_MAX_ACCELERATION, REF_MAX_VELOCITY
-    from tools.build.arm import prepared_model
-    from tools.commands.run import describe, finish, task_args
     from tools.identify import excitation as exc_mod
-    from tools.identify.arm_out import write as write_arm
-    from tools.identify.fit import CONFIDENCE, ArmRegressor, FitError, fit, prepare
-    from tools.run.arm_session import arm_on_bus, run_controller
-    from tools.run.commissioning import default_record
 
-    _check_options(ns)
-    setup = arm_on_bus(ns, "armctl identify")
-    info = setup.info
-    names = setup.joint_names
-    n = len(names)
-    model_xml = prepared_model(setup.bdir)
-    site = "payload"
-    try:
-        reg = ArmRegressor(model_xml, site)
-    except FitError as exc:
-        raise UsageError(str(exc)) from None
     q0 = np.array([j["home"] for j in info["joints"]], float)
-    amplitude = np.full(n, ns.amplitude)
+    amplitude = np.full(len(info["joints"]), ns.amplitude)
     try:
         ex, cond = exc_mod.design(q0, amplitude, ns.period, ns.periods, ns.harmonics, ns.seed, reg.condition)
         peaks = exc_mod.check(ex, info["joints"], REF_MAX_VELOCITY, REF_MAX_ACCELERATION)
     except exc_mod.ExcitationError as exc:
         raise UsageError(f"the excitation: {exc}") from None
-    note = record_allows(ns.record or default_record(info), setup)
-    if note:
-        print(f"armctl identify: {note}")
+    return ex, cond, peaks
+
+
+def _run_excitation(ns: argparse.Namespace, setup: Any, ex: Any, cond: float) -> Path:
+    """The excitation run on the arm (armctl run's own checks and session): the run folder."""
+    from tools.run.arm_task import describe, finish, task_args
+    from tools.identify import excitation as exc_mod
+    from tools.run.arm_session import run_controller
+
     run_dir = ns.run_dir
     run_dir.mkdir(parents=True, exist_ok=True)
-    (run_dir / "identification.json").unlink(missing_ok=True)
+    (run_dir / IDENTIFICATION_FILE).unlink(missing_ok=True)
     csv = run_dir / "excitation.csv"
-    exc_mod.write_csv(ex, names, csv)
+    exc_mod.write_csv(ex, setup.joint_names, csv)
     ns.trajectory, ns.hold, ns.jog, ns.stream, ns.duration = csv, False, None, None, None
     ctl, task = task_args(ns, setup, run_dir)  # armctl run's own check (range, speed, acceleration, torque)
     mode = ns.mode or ("lockstep" if setup.rehearsal else "realtime")
@@ -170,21 +161,12 @@ def run(ns: argparse.Namespace) -> int:
              "armctl identify")
     res = run_controller(setup, ["--method", "pm", *ctl], run_dir, mode)
     finish(res, setup, task, "armctl identify")
-    t, q, tau = samples(run_dir / "telemetry.lcmlog", n)
-    check_moved(q, peaks, names)
-    print(f"armctl identify: fitting {len(t)} periods of telemetry (Pinocchio's regressor, least squares)")
-    sys.stdout.flush()
-    try:
-        f = fit(reg, *prepare(t, q, tau), names)
-    except FitError as exc:
-        raise CommandError(f"{exc}; nothing written", 1) from None
-    result = {"arm": info["name"], "model_hash": info["model_hash"], "fit": f.as_dict(),
-              "model": {"armature": [j.get("armature", 0.0) for j in info["joints"]],
-                        "damping": [j.get("damping", 0.0) for j in info["joints"]],
-                        "frictionloss": [j.get("frictionloss", 0.0) for j in info["joints"]]},
-              "excitation": {"period_s": ns.period, "periods": ns.periods, "harmonics": ns.harmonics,
-                             "amplitude_rad": ns.amplitude, "seed": ns.seed, "condition": cond, **peaks},
-              "written": None}
+    return run_dir
+
+
+def _print_fit(f: Any, names: list[str]) -> None:
+    from tools.identify.fit import CONFIDENCE
+
     pct = int(round(100 * CONFIDENCE))
     print(f"{'joint':<16}{'rotor inertia kg m^2':>26}{'viscous N m s/rad':>24}{'Coulomb N m':>22}{'residual':>10}")
     for j, name in enumerate(names):
@@ -196,17 +178,62 @@ def run(ns: argparse.Namespace) -> int:
     print(f"payload: {m.value:.3g} kg [{m.lo:.3g}, {m.hi:.3g}]" + (
         ", centre of mass off the flange " + ", ".join(f"{1000 * e.value:.0f} mm" for e in f.payload_com)
         if m.lo > 0 else " (none found: its interval reaches 0)") + f"; intervals {pct} %")
-    from gen.lib.atomic_output import write_json_atomic
 
+
+def _identification(ns: argparse.Namespace, info: dict[str, Any], f: Any, cond: float,
+                    peaks: dict[str, Any]) -> dict[str, Any]:
+    """identification.json: the fit beside the model's values, and the excitation that measured it."""
+    return {"arm": info["name"], "model_hash": info["model_hash"], "fit": f.as_dict(),
+            "model": {"armature": [j.get("armature", 0.0) for j in info["joints"]],
+                      "damping": [j.get("damping", 0.0) for j in info["joints"]],
+                      "frictionloss": [j.get("frictionloss", 0.0) for j in info["joints"]]},
+            "excitation": {"period_s": ns.period, "periods": ns.periods, "harmonics": ns.harmonics,
+                           "amplitude_rad": ns.amplitude, "seed": ns.seed, "condition": cond, **peaks},
+            "written": None}
+
+
+def run(ns: argparse.Namespace) -> int:
+    from gen.lib.atomic_output import write_json_atomic
+    from tools.build.arm import prepared_model
+    from tools.identify.arm_out import write as write_arm
+    from tools.identify.fit import ArmRegressor, FitError, fit, prepare
+    from tools.run.arm_session import arm_on_bus
+    from tools.run.commissioning import default_record
+
+    _check_options(ns)
+    setup = arm_on_bus(ns, "armctl identify")
+    info = setup.info
+    names = setup.joint_names
+    model_xml = prepared_model(setup.bdir)
+    site = "payload"
+    try:
+        reg = ArmRegressor(model_xml, site)
+    except FitError as exc:
+        raise UsageError(str(exc)) from None
+    ex, cond, peaks = _excitation(ns, info, reg)
+    note = record_allows(ns.record or default_record(info), setup)
+    if note:
+        print(f"armctl identify: {note}")
+    run_dir = _run_excitation(ns, setup, ex, cond)
+    t, q, tau = samples(run_dir / TELEMETRY_LOG, len(names))
+    check_moved(q, peaks, names)
+    print(f"armctl identify: fitting {len(t)} periods of telemetry (Pinocchio's regressor, least squares)")
+    sys.stdout.flush()
+    try:
+        f = fit(reg, *prepare(t, q, tau), names)
+    except FitError as exc:
+        raise CommandError(f"{exc}; nothing written", 1) from None
+    result = _identification(ns, info, f, cond, peaks)
+    _print_fit(f, names)
     if f.poor:
-        write_json_atomic(run_dir / "identification.json", result)
+        write_json_atomic(run_dir / IDENTIFICATION_FILE, result)
         raise CommandError(f"a poor fit, not written: {f.poor[0]}: run it again with a larger --amplitude or more "
-                           f"--periods, or check that joint's drive (details {run_dir / 'identification.json'})", 1)
+                           f"--periods, or check that joint's drive (details {run_dir / IDENTIFICATION_FILE})", 1)
     header = [f"armctl identify: {info['name']} as measured through its drives ({ns.periods} x {ns.period:g} s of "
-              f"excitation, seed {ns.seed}); {run_dir / 'identification.json'} has each value's interval",
+              f"excitation, seed {ns.seed}); {run_dir / IDENTIFICATION_FILE} has each value's interval",
               "the links are the model's; each joint's armature, damping and frictionloss, and the payload, identified"]
     model_out = write_arm(ns.out, model_xml, info, setup.table.path, f, header, site)
     result["written"] = {"arm_file": str(ns.out), "model": str(model_out)}
-    write_json_atomic(run_dir / "identification.json", result)
-    print(f"armctl identify: wrote {ns.out} (model {model_out}); results {run_dir / 'identification.json'}")
+    write_json_atomic(run_dir / IDENTIFICATION_FILE, result)
+    print(f"armctl identify: wrote {ns.out} (model {model_out}); results {run_dir / IDENTIFICATION_FILE}")
     return 0

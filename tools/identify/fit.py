@@ -196,6 +196,65 @@ def _weighted(y: np.ndarray, cols: np.ndarray, use: np.ndarray) -> tuple[np.ndar
     return x, r, sd, w
 
 
+def _sandwich_variance(t: np.ndarray, Aw: np.ndarray, rw: np.ndarray) -> np.ndarray:
+    """Each parameter's variance by the Newey-West sandwich over time samples: g_k = sum_j a_kj r_kj
+    (the weighted rows of sample k)."""
+    g = np.einsum("tjp,tj->tp", Aw, rw)                # (T, P)
+    H = np.einsum("tjp,tjq->pq", Aw, Aw)
+    lag = max(1, int(round(HAC_LAG_S / float(np.median(np.diff(t))))))
+    S = g.T @ g
+    for l in range(1, lag + 1):
+        G = g[l:].T @ g[:-l]
+        S += (1 - l / (lag + 1)) * (G + G.T)
+    Hi = np.linalg.pinv(H)
+    return np.maximum(np.diag(Hi @ S @ Hi), 0.0)
+
+
+def _jackknife_variance(t: np.ndarray, Aw: np.ndarray, yw: np.ndarray, P: int) -> np.ndarray:
+    """The delete-a-block jackknife over BLOCKS contiguous stretches: model error that changes along
+    the trajectory (the drives' torque path, the friction's shape) shows as spread between them."""
+    K = BLOCKS
+    edges = np.linspace(0, len(t), K + 1).astype(int)
+    thetas = []
+    for k in range(K):
+        keep = np.ones(len(t), bool)
+        keep[edges[k]:edges[k + 1]] = False
+        A_k = Aw[keep].reshape(-1, P)
+        b_k = yw[keep].reshape(-1)
+        nk = np.linalg.norm(A_k, axis=0)
+        nk = np.where(nk > 0, nk, 1.0)
+        thetas.append(_solve(A_k / nk, b_k) / nk)
+    th = np.asarray(thetas)
+    return (K - 1) / K * np.sum((th - th.mean(axis=0)) ** 2, axis=0)
+
+
+def _analysis_spread(x: np.ndarray, n: int, t_all: np.ndarray, y_all: np.ndarray, cols_all: np.ndarray,
+                     qd_all: np.ndarray) -> list[np.ndarray]:
+    """Floors on each half-interval: the model's own error (Type B: what rigid links with Coulomb and
+    viscous friction cannot capture of a drive), and how far the analysis's own choices (the
+    low-pass, the slowest rows kept) move each value."""
+    floor = MODEL_FLOOR * np.abs(x)
+    floor[3 * n] = max(floor[3 * n], PAYLOAD_FLOOR_KG)
+    moved = np.zeros(len(x))
+    for filter_hz, min_speed in VARIANTS:
+        _, yv, cv, qdv = _parallel_filter(t_all, filter_hz, y_all, cols_all, qd_all)
+        moved = np.maximum(moved, np.abs(_weighted(yv, cv, np.abs(qdv) >= min_speed)[0] - x))
+    return [floor, moved]
+
+
+def _poor(f: Fit, names: list[str]) -> None:
+    """What makes a fit too poor to write: a joint's torque the model leaves unexplained, or a value
+    that is not positive."""
+    for j, name in enumerate(names):
+        if f.residual_fraction[j] > POOR_RESIDUAL:
+            f.poor.append(f"joint {j + 1} ({name}): the model leaves {100 * f.residual_fraction[j]:.0f} % of its "
+                          f"torque unexplained (at most {100 * POOR_RESIDUAL:.0f} %)")
+        for what, e in (("rotor inertia", f.rotor_inertia[j]), ("viscous friction", f.viscous[j]),
+                        ("Coulomb friction", f.coulomb[j])):
+            if not e.hi > 0 or not math.isfinite(e.value):
+                f.poor.append(f"joint {j + 1} ({name}): its {what} comes out {e.value:.3g}, not positive")
+
+
 def fit(reg: ArmRegressor, t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, tau: np.ndarray,
         names: list[str]) -> Fit:
     from scipy.stats import norm
@@ -212,48 +271,13 @@ def fit(reg: ArmRegressor, t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np
             raise FitError(f"joint {j + 1} ({names[j]}) moved faster than {MIN_SPEED:g} rad/s in {int(c)} samples: "
                            "the arm did not follow the excitation (did it move? is a brake closed?)")
     x, r, sd, w = _weighted(y, cols, use)
-    # the Newey-West sandwich over time samples: g_k = sum_j a_kj r_kj (weighted rows of sample k)
     Aw = cols * (w[None, :, None] * use[:, :, None])   # (T, n, P)
-    rw = r * w[None, :] * use
-    g = np.einsum("tjp,tj->tp", Aw, rw)                # (T, P)
-    H = np.einsum("tjp,tjq->pq", Aw, Aw)
-    lag = max(1, int(round(HAC_LAG_S / float(np.median(np.diff(t))))))
-    S = g.T @ g
-    for l in range(1, lag + 1):
-        G = g[l:].T @ g[:-l]
-        S += (1 - l / (lag + 1)) * (G + G.T)
-    Hi = np.linalg.pinv(H)
-    cov = Hi @ S @ Hi
+    var = _sandwich_variance(t, Aw, r * w[None, :] * use)
+    jack = _jackknife_variance(t, Aw, y * w[None, :] * use, P)
     z = float(norm.ppf(0.5 + CONFIDENCE / 2))
-    var = np.maximum(np.diag(cov), 0.0)
-    # the delete-a-block jackknife over BLOCKS contiguous stretches: model error that changes along
-    # the trajectory (the drives' torque path, the friction's shape) shows as spread between them
-    K = BLOCKS
-    edges = np.linspace(0, len(t), K + 1).astype(int)
-    thetas = []
-    for k in range(K):
-        keep = np.ones(len(t), bool)
-        keep[edges[k]:edges[k + 1]] = False
-        A_k = Aw[keep].reshape(-1, P)
-        b_k = (y * w[None, :] * use)[keep].reshape(-1)
-        nk = np.linalg.norm(A_k, axis=0)
-        nk = np.where(nk > 0, nk, 1.0)
-        thetas.append(_solve(A_k / nk, b_k) / nk)
-    th = np.asarray(thetas)
-    jack = (K - 1) / K * np.sum((th - th.mean(axis=0)) ** 2, axis=0)
-    tq = float(student_t.ppf(0.5 + CONFIDENCE / 2, K - 1))
-    half = np.maximum(z * np.sqrt(var), tq * np.sqrt(jack))
-
-    # the model's own error (Type B): what rigid links with Coulomb and viscous friction cannot
-    # capture of a drive (its torque path, friction's shape at low speed), as a floor on each interval
-    floor = MODEL_FLOOR * np.abs(x)
-    floor[3 * n] = max(floor[3 * n], PAYLOAD_FLOOR_KG)
-    # and how far the analysis's own choices move each value: the low-pass and the slowest rows kept
-    moved = np.zeros(P)
-    for filter_hz, min_speed in VARIANTS:
-        _, yv, cv, qdv = _parallel_filter(t_all, filter_hz, y_all, cols_all, qd_all)
-        moved = np.maximum(moved, np.abs(_weighted(yv, cv, np.abs(qdv) >= min_speed)[0] - x))
-    half = np.maximum.reduce([half, floor, moved])
+    tq = float(student_t.ppf(0.5 + CONFIDENCE / 2, BLOCKS - 1))
+    half = np.maximum.reduce([np.maximum(z * np.sqrt(var), tq * np.sqrt(jack)),
+                              *_analysis_spread(x, n, t_all, y_all, cols_all, qd_all)])
 
     def est(i: int) -> Estimate:
         return Estimate(float(x[i]), float(x[i] - half[i]), float(x[i] + half[i]))
@@ -271,12 +295,5 @@ def fit(reg: ArmRegressor, t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np
     cond = float(np.linalg.cond(An / np.where(norms > 0, norms, 1.0)))
     f = Fit(names, [est(j) for j in range(n)], [est(n + j) for j in range(n)], [est(2 * n + j) for j in range(n)],
             m, com, resid, [int(c) for c in counts], cond)
-    for j, name in enumerate(names):
-        if resid[j] > POOR_RESIDUAL:
-            f.poor.append(f"joint {j + 1} ({name}): the model leaves {100 * resid[j]:.0f} % of its torque unexplained "
-                          f"(at most {100 * POOR_RESIDUAL:.0f} %)")
-        for what, e in (("rotor inertia", f.rotor_inertia[j]), ("viscous friction", f.viscous[j]),
-                        ("Coulomb friction", f.coulomb[j])):
-            if not e.hi > 0 or not math.isfinite(e.value):
-                f.poor.append(f"joint {j + 1} ({name}): its {what} comes out {e.value:.3g}, not positive")
+    _poor(f, names)
     return f

@@ -24,17 +24,17 @@ from typing import Any, TextIO
 
 from gen.lib import busload
 from gen.lib.params import param
+from gen.lib.multicast import CAN_GROUP, LCM_GROUP, lcm_url
 from gen.lib.paths import REPO, controller_binary, logger_binary
 from tools.build.arm import ArmRef, arm_from_args, arm_info, build_arm, print_arm_warnings
 from tools.errors import CommandError, UsageError
 from tools.run import procs as procs_mod
 from tools.run.processes import _logger_priority, _wait_for_logger
+from tools.run.run_files import CONTROLLER_SUMMARY, TELEMETRY_LOG
 
 ARPHRD_CAN = 280
 IFF_UP = 0x1
-CAN_GROUP = "239.74.163.2"
 DEFAULT_UDP_PORT = int(param("controller", "bus").default.rsplit(":", 1)[1])  # arm_controller's own default
-LCM_GROUP = "239.255.76.67"
 LOGGER_READY_S = 120.0  # generous: in the qemu VM a program takes seconds to start (tools/vm/README.md)
 
 
@@ -80,6 +80,16 @@ def add_bus_arguments(p: Any, default: str | None, prog_note: str) -> None:
     p.add_argument("--topology", type=Path, default=None, metavar="FILE",
                    help="which drive is on which bus and each bus's bit rate [the fewest classic 1 Mbit/s buses "
                         "that carry the drives at the loop rate, in drive order]")
+
+
+def add_session_arguments(p: Any, record_help: str = "the arm's commissioning record [runs/commission/ARM-HASH.json, "
+                                                     "where armctl commission keeps it]") -> None:
+    """The arguments of a command that runs the controller on the arm's buses (run, commission,
+    identify): the buses, the commissioning record (armctl commission writes it; run and identify
+    read it) and the mode."""
+    add_bus_arguments(p, None, "; the arm's interfaces [socketcan:can0,can1,...]")
+    p.add_argument("--record", type=Path, default=None, metavar="FILE", help=record_help)
+    add_mode_argument(p)
 
 
 def add_mode_argument(p: Any) -> None:
@@ -223,17 +233,17 @@ def run_controller(setup: ArmOnBus, ctl_args: list[str], out: Path, mode: str) -
     from tools.run.slots import acquire_slot
 
     out.mkdir(parents=True, exist_ok=True)
-    for stale in ("controller_summary.json", "telemetry.lcmlog", "controller.log", "logger.log"):
+    for stale in (CONTROLLER_SUMMARY, TELEMETRY_LOG, "controller.log", "logger.log"):
         (out / stale).unlink(missing_ok=True)
     check_loopback_route(LCM_GROUP)
     if setup.kind == "udp":
         check_loopback_route(CAN_GROUP)
     with acquire_slot(quiet_ports=True) as slot:
-        url = f"udpm://{LCM_GROUP}:{slot.lcm_port}?ttl=0&recv_buf_size=8388608"
+        url = lcm_url(slot.lcm_port, recv_buf=True)
         realtime = mode == "realtime"
         cpu = (os.cpu_count() or 1) - 1  # the loop's CPU, as a HIL run's (tools/run/hil.py realtime_cpu)
         ctl = [str(controller_binary(setup.bdir)), *setup.bus_args(), "--lcm-url", url, "--protocol", "canopen",
-               *setup.node_args, "--mode", mode, "--summary", str(out / "controller_summary.json"),
+               *setup.node_args, "--mode", mode, "--summary", str(out / CONTROLLER_SUMMARY),
                *(["--cpu", str(cpu)] if realtime else spin_args(mode)), "--brake-release", f"{brake_release_s(setup):g}",
                *ctl_args]
         (out / "controller.argv").write_text(json.dumps(ctl) + "\n")
@@ -242,7 +252,7 @@ def run_controller(setup: ArmOnBus, ctl_args: list[str], out: Path, mode: str) -
         with open(out / "logger.log", "w") as llog, open(out / "controller.log", "w") as clog:
             try:
                 logger = procs_mod.spawn("logger", [str(logger_binary(setup.bdir)), "--lcm-url", url,
-                                                    str(out / "telemetry.lcmlog")], stdout=subprocess.PIPE,
+                                                    str(out / TELEMETRY_LOG)], stdout=subprocess.PIPE,
                                          stderr=llog, preexec_fn=_logger_priority if realtime else None)
             except InterruptedError as exc:
                 raise CommandError(str(exc)) from None
@@ -268,7 +278,7 @@ def run_controller(setup: ArmOnBus, ctl_args: list[str], out: Path, mode: str) -
                 if logger.stdout is not None:
                     logger.stdout.close()
     try:
-        summary = json.loads((out / "controller_summary.json").read_text())
+        summary = json.loads((out / CONTROLLER_SUMMARY).read_text())
     except (OSError, ValueError):
         summary = {}
     return SessionResult(p.returncode, summary, out, procs_mod.interrupted)

@@ -27,7 +27,9 @@ from gen.lib.paths import REPO, controller_binary, logger_binary
 from tools.run import procs as procs_mod
 from tools.run.processes import (LOGGER_READY_S, USAGE_ERROR, HilError, ProcessPlan, last_line, plan_json,
                                  run_processes)
-from tools.run.slots import CAN_GROUP, LCM_GROUP, acquire_slot
+from gen.lib.multicast import CAN_GROUP, CAN_ROUTE, LCM_GROUP, LCM_ROUTE, lcm_url
+from tools.run.run_files import CONTROLLER_SUMMARY, RUN_RECORD, SIM_SUMMARY, TELEMETRY_LOG, UNCERTAINTY_FILE
+from tools.run.slots import acquire_slot
 from tools.run.verdict import Bounds
 
 CONTROLLER_DEFAULT_HOLD_S: float = param_default("controller", "ref-hold")
@@ -170,7 +172,7 @@ def check_loopback_route(group: str) -> None:
     """Refuse to run unless the group is routed to lo: every membership then stays on lo."""
     r = subprocess.run(["ip", "route", "get", group], capture_output=True, text=True)
     if r.returncode != 0 or " dev lo " not in f" {r.stdout} ":
-        net = "239.255.76.67/32" if group.startswith("239.255.") else "239.74.163.0/24"
+        net = LCM_ROUTE if group == LCM_GROUP else CAN_ROUTE
         raise HilError(f"multicast group {group} is not routed to lo (route: {r.stdout.strip() or r.stderr.strip()}); "
                        f"run as root: ip route replace {net} dev lo (tools/armctl does this when run as root)")
 
@@ -193,7 +195,7 @@ def canopen_topology(path: Path | None, info: dict[str, Any], rate_hz: float,
     timing (timed: what an overload does is then emulated); else classic CAN, the field's wire:
     the fewest 1 Mbit/s buses that carry the arm's drives (busload.canopen_wiring); else, when
     even the controller's limit of buses does not, the arm's CAN FD wiring (arm.json)."""
-    budget, hb = constant("bus-budget"), constant("heartbeat-ms")
+    budget, hb = constant("bus-budget"), busload.HEARTBEAT_MS
     n = info["n_joints"]
     if path is not None:
         topology = load_topology(path, info)
@@ -271,7 +273,7 @@ def bus_args(kind: str, can_port: int, topology: list[busload.Bus], side: str = 
     out = []
     for i, b in enumerate(topology):
         pil = f"uart:{i}" if side == "controller" else f"slcan:127.0.0.1:{can_port + i}"
-        spec = {"udp": f"udp:239.74.163.2:{can_port + i}", SIL: f"mem:{i}", PIL: pil}.get(kind, f"socketcan:vcan{i}")
+        spec = {"udp": f"udp:{CAN_GROUP}:{can_port + i}", SIL: f"mem:{i}", PIL: pil}.get(kind, f"socketcan:vcan{i}")
         out.append(f"{spec}@{','.join(map(str, b.drives))}")
     return out
 
@@ -293,9 +295,9 @@ def topology_load_pct(topology: list[busload.Bus], rate_hz: float = param_defaul
 def _load_pct(topology: list[busload.Bus], rate_hz: float, protocol: str,
               every: dict[str, int] | None) -> dict[str, float]:
     if protocol == "canopen":
-        return {b.name: round(busload.canopen_load(b, len(b.drives), rate_hz, constant("heartbeat-ms"), every) * 100.0,
+        return {b.name: round(busload.canopen_load(b, len(b.drives), rate_hz, busload.HEARTBEAT_MS, every) * 100.0,
                               2) for b in topology}
-    loads = busload.compute(topology, rate_hz, constant("heartbeat-ms"), busload.default_protocol(),
+    loads = busload.compute(topology, rate_hz, busload.HEARTBEAT_MS, busload.default_protocol(),
                             max(d for b in topology for d in b.drives))
     return {bl.bus.name: round(bl.load * 100.0, 2) for bl in loads}
 
@@ -564,18 +566,67 @@ def pil_record(opt: HilOptions, rate_hz: float) -> dict[str, Any]:
             "link_frames_refused": measured.get("link_frames_refused")}
 
 
-def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
-    started = datetime.now(timezone.utc)
+@dataclass
+class _Wiring:
+    """What a run's options and arm resolve to before anything is written or started: the drive
+    table (CiA 402), each program's node and brake arguments, the buses and the loop rate."""
+    canopen: bool
+    node_args: list[str]
+    sim_node_args: list[str]
+    drive_table: Any
+    dbc: str
+    od_table: str
+    brake_args: list[str]
+    transmission: dict[str, int] | None
+    rate_hz: float
+    topology: list[busload.Bus]
+    wiring: str
+    substeps: int
+    bus_kind: str
+    bus_why: str
+
+
+@dataclass
+class _Programs:
+    binary: Path
+    logger: Path
+    sim: Path
+    sil: Path
+
+
+@dataclass
+class _CommandLines:
+    buses: list[str]
+    url: str
+    log_path: Path
+    sim_args: list[str]
+    ctl_args: list[str]
+
+
+def _validate(opt: HilOptions) -> bool:
+    """The option checks that need no build; True for software in the loop."""
     sil = opt.bus == SIL
     if sil and (opt.mode != "lockstep" or opt.controller_cmd_prefix or opt.controller is not None):
         raise HilError("--bus sil: software in the loop runs the arm's own controller build, in lockstep only")
     for group in () if sil or opt.bus == VM else (LCM_GROUP, CAN_GROUP):  # the VM routes its own (processes.py)
         check_loopback_route(group)
-    bdir = arm_build_dir(opt.preset, opt.arm)
-    try:
-        info = arm_info(bdir)
-    except ArmChoiceError as exc:
-        raise HilError(str(exc)) from exc
+    return sil
+
+
+def _brake_args(opt: HilOptions, info: dict[str, Any], drive_table: Any) -> list[str]:
+    if opt.brakes not in BRAKES:
+        raise HilError(f"brakes: {opt.brakes!r}: expected one of {', '.join(BRAKES)}")
+    brakes = opt.brakes != "none"
+    brake_table = drive_table if drive_table is not None or not brakes else canopen_args(info, opt.drive_config)[2]
+    brake_args = [a for d in brake_table.drives if d.brake_spec() for a in ("--brake", d.brake_spec())] \
+        if brakes and brake_table is not None else []
+    if brake_args and opt.brakes == "released":
+        brake_args += ["--brakes-at-start", "released"]
+    return brake_args
+
+
+def _resolve_wiring(opt: HilOptions, info: dict[str, Any]) -> _Wiring:
+    """The protocol, drive table, brakes, loop rate, topology and bus kind of this run."""
     if opt.protocol not in PROTOCOLS:
         raise HilError(f"--protocol {opt.protocol}: expected one of {', '.join(PROTOCOLS)}")
     canopen = opt.protocol == "canopen"
@@ -586,14 +637,7 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
         raise HilError("--drive-config: a CiA 402 drive configuration, for --protocol canopen")
     node_args, sim_node_args, drive_table, dbc, od_table = (canopen_of(info, opt.drive_config) if canopen
                                                             else ([], [], None, "", ""))
-    if opt.brakes not in BRAKES:
-        raise HilError(f"brakes: {opt.brakes!r}: expected one of {', '.join(BRAKES)}")
-    brakes = opt.brakes != "none"
-    brake_table = drive_table if drive_table is not None or not brakes else canopen_args(info, opt.drive_config)[2]
-    brake_args = [a for d in brake_table.drives if d.brake_spec() for a in ("--brake", d.brake_spec())] \
-        if brakes and brake_table is not None else []
-    if brake_args and opt.brakes == "released":
-        brake_args += ["--brakes-at-start", "released"]
+    brake_args = _brake_args(opt, info, drive_table)
     transmission = drive_table.transmission if drive_table is not None else None
     rate_hz = _arg_value(opt.controller_args, "--rate", info["loop_rate_hz"])
     if canopen:
@@ -609,99 +653,130 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
         bus_kind, bus_why = _pil_bus(opt, len(topology))
     else:
         bus_kind, bus_why = resolve_bus(opt.bus, len(topology))
-    binary = opt.controller or controller_binary(bdir)
-    logger_exe = logger_binary(bdir)
-    sim_exe = bdir / "host_sim" / "native" / "arm_sim"
-    sil_exe = bdir / "host_sim" / "native" / "arm_sil"
-    for exe in (sil_exe,) if sil else (binary, logger_exe, sim_exe):
+    return _Wiring(canopen, list(node_args), list(sim_node_args), drive_table, dbc, od_table, brake_args,
+                   transmission, rate_hz, topology, wiring, substeps, bus_kind, bus_why)
+
+
+def _locate_programs(opt: HilOptions, bdir: Path, sil: bool) -> _Programs:
+    programs = _Programs(binary=opt.controller or controller_binary(bdir), logger=logger_binary(bdir),
+                         sim=bdir / "host_sim" / "native" / "arm_sim", sil=bdir / "host_sim" / "native" / "arm_sil")
+    for exe in (programs.sil,) if sil else (programs.binary, programs.logger, programs.sim):
         if not exe.exists():
             raise HilError(f"{exe} is missing: run tools/armctl build")
+    return programs
+
+
+# What a run writes into its folder: removed before it starts, so nothing of an earlier run is
+# taken for this one's.
+RUN_FILES = (TELEMETRY_LOG, CONTROLLER_SUMMARY, SIM_SUMMARY, RUN_RECORD, UNCERTAINTY_FILE,
+             PIL_FILE, CAPTURE_FILE, CAPTURE_FILE + ".gz", CANOPEN_DBC_FILE, CANOPEN_OD_FILE, *VM_FILES)
+
+
+def _prepare_out(opt: HilOptions, w: _Wiring) -> None:
+    """The run folder, emptied of an earlier run's files, with what decodes this run's capture,
+    the emulated drives' dictionary and the uncertainty the simulated arm has (the record of what ran)."""
     opt.out.mkdir(parents=True, exist_ok=True)
-    for stale in ("telemetry.lcmlog", "controller_summary.json", "sim_summary.json", "run.json", "uncertainty.json", PIL_FILE,
-                  CAPTURE_FILE, CAPTURE_FILE + ".gz", CANOPEN_DBC_FILE, CANOPEN_OD_FILE, *VM_FILES):
+    for stale in RUN_FILES:
         (opt.out / stale).unlink(missing_ok=True)
-    if drive_table is not None:  # what decodes a capture of this run, in SI units (gen/canopen_dbc.py)
-        try:
-            write_text_atomic(opt.out / CANOPEN_DBC_FILE, dbc)
+    try:
+        if w.drive_table is not None:  # what decodes a capture of this run, in SI units (gen/canopen_dbc.py)
+            write_text_atomic(opt.out / CANOPEN_DBC_FILE, w.dbc)
             # the emulated drives are the drive table's drives: their dictionary from its EDS or DCF
-            write_text_atomic(opt.out / CANOPEN_OD_FILE, od_table)
-        except OutputError as exc:
-            raise HilError(str(exc)) from None
-        sim_node_args = [*sim_node_args, "--od", str(opt.out / CANOPEN_OD_FILE)]
-    buses = bus_args(bus_kind, can_port, topology)
+            write_text_atomic(opt.out / CANOPEN_OD_FILE, w.od_table)
+            w.sim_node_args = [*w.sim_node_args, "--od", str(opt.out / CANOPEN_OD_FILE)]
+        if opt.uncertainty is not None:
+            write_json_atomic(opt.out / UNCERTAINTY_FILE, opt.uncertainty)
+    except OutputError as exc:
+        raise HilError(str(exc)) from None
+
+
+def _command_lines(opt: HilOptions, info: dict[str, Any], bdir: Path, w: _Wiring, programs: _Programs,
+                   can_port: int, lcm_port: int, sil: bool) -> _CommandLines:
+    """The simulator's and the controller's (or the PIL bridge's) argument lists."""
+    buses = bus_args(w.bus_kind, can_port, w.topology)
     bus_argv = [a for spec in buses for a in ("--bus", spec)]
-    sim_buses = bus_args(bus_kind, can_port, topology, "simulator") if bus_kind == PIL else buses
-    url = "" if sil else f"udpm://{LCM_GROUP}:{lcm_port}?ttl=0&recv_buf_size=8388608"
-    log_path = opt.out / "telemetry.lcmlog"
-    if opt.uncertainty is not None:
-        try:
-            write_json_atomic(opt.out / "uncertainty.json", opt.uncertainty)  # the record of what ran
-        except OutputError as exc:
-            raise HilError(str(exc)) from None
-    sim_args = sim_argv(sim_exe, sim_buses, lcm_url=url, summary=opt.out / "sim_summary.json",
+    sim_buses = bus_args(w.bus_kind, can_port, w.topology, "simulator") if w.bus_kind == PIL else buses
+    url = "" if sil else lcm_url(lcm_port, recv_buf=True)
+    sim_args = sim_argv(programs.sim, sim_buses, lcm_url=url, summary=opt.out / SIM_SUMMARY,
                         uncertainty=opt.uncertainty, timing=bus_timing_mode(opt.mode) if opt.bus_timing else "off",
-                        phys=topology, model=prepared_model(bdir), drives=opt.drives, canopen=canopen,
-                        extra=["--substeps", str(substeps), *([] if sil else sim_mode_args(opt.mode, opt.spin_us)),
-                               *capture_args(opt), "--protocol", opt.protocol, *sim_node_args, *brake_args,
+                        phys=w.topology, model=prepared_model(bdir), drives=opt.drives, canopen=w.canopen,
+                        extra=["--substeps", str(w.substeps), *([] if sil else sim_mode_args(opt.mode, opt.spin_us)),
+                               *capture_args(opt), "--protocol", opt.protocol, *w.sim_node_args, *w.brake_args,
                                *opt.sim_args])
-    ctl_args = [*opt.controller_cmd_prefix, str(binary), *bus_argv, "--lcm-url", url,
+    ctl_args = [*opt.controller_cmd_prefix, str(programs.binary), *bus_argv, "--lcm-url", url,
                 "--duration", f"{opt.duration_s:g}", "--method", opt.method, "--mode", opt.mode,
-                "--summary", str(opt.out / "controller_summary.json"), *([] if sil or opt.target else spin_args(opt.mode, opt.spin_us)),
+                "--summary", str(opt.out / CONTROLLER_SUMMARY), *([] if sil or opt.target else spin_args(opt.mode, opt.spin_us)),
                 *(["--cpu", str(realtime_cpu(opt))] if opt.mode == "realtime" else []),
-                "--protocol", opt.protocol, *node_args,
+                "--protocol", opt.protocol, *w.node_args,
                 *reference_args(info, opt.controller_args),
                 *(["--design-file", str(opt.design_file)] if opt.design_file is not None else []), *opt.controller_args]
-    if bus_kind == PIL:  # the bridge stands for the controller: it runs the image and relays it
+    if w.bus_kind == PIL:  # the bridge stands for the controller: it runs the image and relays it
         ctl_args = [*pil_bridge_argv(opt, bdir, can_port), "--", *ctl_args[1:], *pil_numeric(opt)]
-    if sil:
-        exit_codes, wall, sim_scheduling = _run_sil(opt, sil_exe, ctl_args[1:], sim_args[1:], log_path)
-    else:
-        in_vm = opt.bus == VM
-        base_s, per_s = VM_DEADLINE_S if in_vm else PIL_DEADLINE_S if opt.target else (120.0, 60.0)
-        plan = ProcessPlan(out=str(opt.out), mode=opt.mode, cpu=realtime_cpu(opt),
-                           deadline_s=base_s + per_s * opt.duration_s,
-                           logger=[str(logger_exe), "--lcm-url", url, str(log_path)], simulator=sim_args,
-                           controller=ctl_args, cwd=str(REPO),
-                           logger_ready_s=VM_LOGGER_READY_S if in_vm else LOGGER_READY_S,
-                           multicast_routes=(f"{LCM_GROUP}/32",) if in_vm else ())
-        exit_codes, wall, sim_scheduling = _run_processes_in_vm(opt, plan) if in_vm else run_processes(plan)
+    return _CommandLines(buses, url, opt.out / TELEMETRY_LOG, sim_args, ctl_args)
 
-    # A process that died wrote no summary: the run still ends in a defined, named state and
-    # the partial log is analysed.
+
+def _execute(opt: HilOptions, programs: _Programs, lines: _CommandLines,
+             sil: bool) -> tuple[dict[str, int | None], float, str]:
+    """Runs the processes (or arm_sil): their exit codes, the wall time and the simulator's scheduling."""
+    if sil:
+        return _run_sil(opt, programs.sil, lines.ctl_args[1:], lines.sim_args[1:], lines.log_path)
+    in_vm = opt.bus == VM
+    base_s, per_s = VM_DEADLINE_S if in_vm else PIL_DEADLINE_S if opt.target else (120.0, 60.0)
+    plan = ProcessPlan(out=str(opt.out), mode=opt.mode, cpu=realtime_cpu(opt),
+                       deadline_s=base_s + per_s * opt.duration_s,
+                       logger=[str(programs.logger), "--lcm-url", lines.url, str(lines.log_path)],
+                       simulator=lines.sim_args, controller=lines.ctl_args, cwd=str(REPO),
+                       logger_ready_s=VM_LOGGER_READY_S if in_vm else LOGGER_READY_S,
+                       multicast_routes=(LCM_ROUTE,) if in_vm else ())
+    return _run_processes_in_vm(opt, plan) if in_vm else run_processes(plan)
+
+
+def _summaries(opt: HilOptions, exit_codes: dict[str, int | None], sil: bool) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The controller's and simulator's summaries. A process that died wrote none: the run still
+    ends in a defined, named state and the partial log is analysed."""
     ctl_code = exit_codes.get("controller", exit_codes.get("sil"))
     sim_code = exit_codes.get("simulator", exit_codes.get("sil"))
-    controller = _load_json(opt.out / "controller_summary.json") or {
+    controller = _load_json(opt.out / CONTROLLER_SUMMARY) or {
         "result": ctl_code, "reason": f"controller died (exit code {ctl_code}); see {'sil' if sil else 'controller'}.log"}
-    simulator = _load_json(opt.out / "sim_summary.json") or {
+    simulator = _load_json(opt.out / SIM_SUMMARY) or {
         "result": "died", "reason": f"simulator died (exit code {sim_code}); see {'sil' if sil else 'simulator'}.log"}
-    config = {"method": opt.method, "mode": opt.mode, "duration_s": opt.duration_s,
-              "joint_names": [j["name"] for j in info["joints"]],
-              "arm": {"name": info["name"], "model": info["model"], "arm_file": info["arm_file"],
-                      "model_hash": info["model_hash"], "n_joints": info["n_joints"], "warnings": info["warnings"]},
-              "design": opt.design_record if opt.design_record is not None else info.get("design"),
-              "ref_hold_s": _arg_value(opt.controller_args, "--ref-hold", CONTROLLER_DEFAULT_HOLD_S),
-              "rate_hz": rate_hz,
-              "controller_args": list(opt.controller_args),
-              "uncertainty": opt.uncertainty, "drives": opt.drives.to_dict(),
-              "bus_timing": bus_timing_mode(opt.mode) if opt.bus_timing else "off", "protocol": opt.protocol,
-              **({"target": opt.target, "numeric": "fixed" if pil_numeric(opt) else "float"} if opt.target else {}),
-              **opt.labels}
-    from tools.run.run_analysis import analyse  # numpy: here, not for every importer of this module
+    return controller, simulator
 
-    run = analyse(opt.out, controller, simulator, config, {
-        "protocol": opt.protocol, "canopen": canopen_record(controller),
+
+def _run_config(opt: HilOptions, info: dict[str, Any], rate_hz: float) -> dict[str, Any]:
+    """run.json's `config`: what was asked of this run."""
+    return {"method": opt.method, "mode": opt.mode, "duration_s": opt.duration_s,
+            "joint_names": [j["name"] for j in info["joints"]],
+            "arm": {"name": info["name"], "model": info["model"], "arm_file": info["arm_file"],
+                    "model_hash": info["model_hash"], "n_joints": info["n_joints"], "warnings": info["warnings"]},
+            "design": opt.design_record if opt.design_record is not None else info.get("design"),
+            "ref_hold_s": _arg_value(opt.controller_args, "--ref-hold", CONTROLLER_DEFAULT_HOLD_S),
+            "rate_hz": rate_hz,
+            "controller_args": list(opt.controller_args),
+            "uncertainty": opt.uncertainty, "drives": opt.drives.to_dict(),
+            "bus_timing": bus_timing_mode(opt.mode) if opt.bus_timing else "off", "protocol": opt.protocol,
+            **({"target": opt.target, "numeric": "fixed" if pil_numeric(opt) else "float"} if opt.target else {}),
+            **opt.labels}
+
+
+def _run_results(opt: HilOptions, info: dict[str, Any], bdir: Path, w: _Wiring, lines: _CommandLines,
+                 simulator: dict[str, Any], executed: tuple[dict[str, int | None], float, str]) -> dict[str, Any]:
+    """run.json's `results` beside the analysis: how the run was wired and how its processes ran."""
+    exit_codes, wall, sim_scheduling = executed
+    capture = opt.out / CAPTURE_FILE
+    return {
+        "protocol": opt.protocol,
         # what the drive table fills for its drive's file, and what the boot skips (gen/drive_check.py)
-        "canopen_drive_notes": sorted({f"{Path(drive_table.eds).name}: {n}" for d in drive_table.drives
-                                       for n in d.notes}) if drive_table is not None else [],
-        "bus": " ".join(buses), "bus_choice": f"{opt.bus} -> {bus_kind} ({bus_why})",
-        "topology": {"source": wiring,
+        "canopen_drive_notes": sorted({f"{Path(w.drive_table.eds).name}: {n}" for d in w.drive_table.drives
+                                       for n in d.notes}) if w.drive_table is not None else [],
+        "bus": " ".join(lines.buses), "bus_choice": f"{opt.bus} -> {w.bus_kind} ({w.bus_why})",
+        "topology": {"source": w.wiring,
                      "buses": [{"name": b.name, "spec": spec.rpartition("@")[0], "kind": b.describe(),
-                                "drives": b.drives} for b, spec in zip(topology, buses)]},
-        "bus_load_pct": topology_load_pct(topology, rate_hz,
-                                          opt.protocol, transmission),
-        "canopen_transmission": transmission,
-        "dbc": str(opt.out / CANOPEN_DBC_FILE) if canopen else str(busload.DEFAULT_DBC),
-        "lcm_url": url, "wall_s": wall, "simulator_scheduling": sim_scheduling,
+                                "drives": b.drives} for b, spec in zip(w.topology, lines.buses)]},
+        "bus_load_pct": topology_load_pct(w.topology, w.rate_hz, opt.protocol, w.transmission),
+        "canopen_transmission": w.transmission,
+        "dbc": str(opt.out / CANOPEN_DBC_FILE) if w.canopen else str(busload.DEFAULT_DBC),
+        "lcm_url": lines.url, "wall_s": wall, "simulator_scheduling": sim_scheduling,
         # the simulator's speed: simulated seconds per wall second after boot, and its CPU time
         # per period (arm_sim measures both)
         "realtime_factor": simulator.get("realtime_factor"),
@@ -711,14 +786,45 @@ def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
         # to boot unless they agree (SIM_IDENTITY frame)
         "model_hash": {"firmware": info["model_hash"], "simulator": simulator.get("model_hash")},
         "exit_codes": exit_codes,
-        "capture": str(_compress(opt.out / CAPTURE_FILE) if opt.compress_capture else opt.out / CAPTURE_FILE)
-                   if opt.capture and (opt.out / CAPTURE_FILE).exists() else None},
-        opt.bounds)
+        "capture": str(_compress(capture) if opt.compress_capture else capture)
+                   if opt.capture and capture.exists() else None}
+
+
+def _collect(opt: HilOptions, info: dict[str, Any], bdir: Path, w: _Wiring, lines: _CommandLines,
+             executed: tuple[dict[str, int | None], float, str], sil: bool) -> dict[str, Any]:
+    """The run's record: its summaries analysed (tools/run/run_analysis.py) with how it was wired."""
+    from tools.run.run_analysis import analyse  # numpy: here, not for every importer of this module
+
+    controller, simulator = _summaries(opt, executed[0], sil)
+    results = _run_results(opt, info, bdir, w, lines, simulator, executed)
+    results = {"protocol": results.pop("protocol"), "canopen": canopen_record(controller), **results}
+    run = analyse(opt.out, controller, simulator, _run_config(opt, info, w.rate_hz), results, opt.bounds)
     if opt.target is not None:
-        run["target"] = pil_record(opt, rate_hz)
+        run["target"] = pil_record(opt, w.rate_hz)
+    return run
+
+
+def _write_record(opt: HilOptions, run: dict[str, Any], started: datetime) -> None:
     try:
         run["provenance"] = provenance(started)
-        write_json_atomic(opt.out / "run.json", run)
+        write_json_atomic(opt.out / RUN_RECORD, run)
     except OutputError as exc:
         raise HilError(str(exc)) from None
+
+
+def _run_hil(opt: HilOptions, can_port: int, lcm_port: int) -> dict[str, Any]:
+    started = datetime.now(timezone.utc)
+    sil = _validate(opt)
+    bdir = arm_build_dir(opt.preset, opt.arm)
+    try:
+        info = arm_info(bdir)
+    except ArmChoiceError as exc:
+        raise HilError(str(exc)) from exc
+    wiring = _resolve_wiring(opt, info)
+    programs = _locate_programs(opt, bdir, sil)
+    _prepare_out(opt, wiring)
+    lines = _command_lines(opt, info, bdir, wiring, programs, can_port, lcm_port, sil)
+    executed = _execute(opt, programs, lines, sil)
+    run = _collect(opt, info, bdir, wiring, lines, executed, sil)
+    _write_record(opt, run, started)
     return run

@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from gen import lcmtypes
+from tools.run.run_files import RUN_RECORD, TELEMETRY_LOG
 from tools.run.telemetry_log import LogDamage, log_damage
 
 MCAP_FILE = "telemetry.mcap"
@@ -279,21 +280,76 @@ RAW_SCHEMA = {"type": "object", "title": "CAN frame", "properties": {
     "frame": FRAME_SCHEMA, "error": {"type": "string", "description": "why its DBC message did not decode it"}}}
 
 
+def _read_run(run_dir: Path) -> tuple[dict[str, Any], dict[str, Any], str, float]:
+    """run.json's results and environment, the run's mode and loop rate."""
+    try:
+        run = json.loads((run_dir / RUN_RECORD).read_text())
+        res, env = run["results"], run["environment"]
+        return res, env, str(res["mode"]), float(res["rate_hz"])
+    except FileNotFoundError:
+        raise ExportError(f"{run_dir / 'run.json'}: no such file: not a run folder (armctl hil --out writes one)") from None
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ExportError(f"{run_dir / 'run.json'}: not a run's results ({type(exc).__name__}: {exc})") from None
+
+
+def _capture_and_dbc(run_dir: Path, env: dict[str, Any], result: Exported) -> tuple[Path | None, Path | None, Any]:
+    """The run's capture, the DBC that decodes it and that DBC loaded (all None: no capture kept)."""
+    capture = _run_file(run_dir, env.get("capture"))
+    if capture is None:
+        return None, None, None
+    dbc_path = _run_file(run_dir, env.get("dbc"))
+    if dbc_path is None:
+        raise ExportError(f"{run_dir / 'run.json'}: environment.dbc {env.get('dbc')!r}: no such file, and none "
+                          "beside run.json: the capture cannot be decoded")
+    import cantools
+
+    try:
+        db = cantools.database.load_file(str(dbc_path), strict=False)
+    except Exception as exc:  # noqa: BLE001 - cantools raises its own parse errors
+        raise ExportError(f"{dbc_path}: not a DBC cantools reads ({type(exc).__name__}: {exc})") from None
+    result.capture, result.dbc = capture, dbc_path
+    return capture, dbc_path, db
+
+
+def _lcm_channels(w: Any, classes: dict[str, Any]) -> dict[str, int]:
+    """Each LCM channel registered with its type's JSON schema: its MCAP channel id."""
+    channel_ids = {}
+    for ch, cls in classes.items():
+        sid = w.register_schema(name=f"armlcm.{cls.__name__}", encoding="jsonschema",
+                                data=json.dumps(_schema_of(cls, lcmtypes.load())).encode())
+        channel_ids[ch] = w.register_channel(topic=ch, message_encoding="json", schema_id=sid,
+                                             metadata={"source": "LCM", "lcm_type": cls.__name__})
+    return channel_ids
+
+
+def _write_merged(w: Any, msgs: list[Any], times_ns: list[int], channel_ids: dict[str, int],
+                  pending: Iterator[tuple[int, int, bytes]], result: Exported) -> None:
+    """The LCM messages and the capture's frames, in one order of time."""
+    order = sorted(range(len(msgs)), key=lambda i: times_ns[i])  # stable: log order within a time
+    nxt = next(pending, None)
+    for i in order:
+        while nxt is not None and nxt[0] < times_ns[i]:
+            w.add_message(nxt[1], log_time=nxt[0], data=nxt[2], publish_time=nxt[0])
+            nxt = next(pending, None)
+        ch, stamp, m = msgs[i]
+        w.add_message(channel_ids[ch], log_time=times_ns[i], publish_time=stamp * 1000,
+                      sequence=int(getattr(m, "seq", 0)) & 0xFFFFFFFF,
+                      data=json.dumps({k: _value(getattr(m, k)) for k in m.__slots__},
+                                      allow_nan=False).encode())
+        result.lcm[ch] = result.lcm.get(ch, 0) + 1
+    while nxt is not None:
+        w.add_message(nxt[1], log_time=nxt[0], data=nxt[2], publish_time=nxt[0])
+        nxt = next(pending, None)
+
+
 def export_mcap(run_dir: Path, out: Path | None = None,
                 progress: Callable[[str], None] | None = None) -> Exported:
     """RUN_DIR's telemetry and capture into one MCAP file (default RUN_DIR/telemetry.mcap)."""
     from mcap.writer import CompressionType, Writer
 
     say = progress or (lambda _: None)
-    try:
-        run = json.loads((run_dir / "run.json").read_text())
-        res, env = run["results"], run["environment"]
-        mode, rate = str(res["mode"]), float(res["rate_hz"])
-    except FileNotFoundError:
-        raise ExportError(f"{run_dir / 'run.json'}: no such file: not a run folder (armctl hil --out writes one)") from None
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise ExportError(f"{run_dir / 'run.json'}: not a run's results ({type(exc).__name__}: {exc})") from None
-    log_path = run_dir / "telemetry.lcmlog"
+    res, env, mode, rate = _read_run(run_dir)
+    log_path = run_dir / TELEMETRY_LOG
     if not log_path.exists():
         raise ExportError(f"{log_path}: no such file: the run kept no telemetry")
     out = out or run_dir / MCAP_FILE
@@ -307,21 +363,7 @@ def export_mcap(run_dir: Path, out: Path | None = None,
     msgs, result.undecodable, classes = _decode_lcm(log_path, damage)
     times_ns = ([stamp * 1000 for _, stamp, _ in msgs] if realtime else
                 [round(t * 1e9) for t in _lockstep_times(msgs, 1.0 / rate)])
-
-    capture = _run_file(run_dir, env.get("capture"))
-    dbc_path = _run_file(run_dir, env.get("dbc")) if capture else None
-    db = None
-    if capture is not None:
-        if dbc_path is None:
-            raise ExportError(f"{run_dir / 'run.json'}: environment.dbc {env.get('dbc')!r}: no such file, and none "
-                              "beside run.json: the capture cannot be decoded")
-        import cantools
-
-        try:
-            db = cantools.database.load_file(str(dbc_path), strict=False)
-        except Exception as exc:  # noqa: BLE001 - cantools raises its own parse errors
-            raise ExportError(f"{dbc_path}: not a DBC cantools reads ({type(exc).__name__}: {exc})") from None
-        result.capture, result.dbc = capture, dbc_path
+    capture, dbc_path, db = _capture_and_dbc(run_dir, env, result)
 
     tmp = out.with_name(f".{out.name}.tmp")
     try:
@@ -333,29 +375,10 @@ def export_mcap(run_dir: Path, out: Path | None = None,
                                    "arm": str(res.get("arm", {}).get("name")), "timeline": result.timeline,
                                    "joint_names": ",".join(res.get("joint_names") or []),
                                    "telemetry_log": damage.describe()})
-            channel_ids = {}
-            for ch, cls in classes.items():
-                sid = w.register_schema(name=f"armlcm.{cls.__name__}", encoding="jsonschema",
-                                        data=json.dumps(_schema_of(cls, lcmtypes.load())).encode())
-                channel_ids[ch] = w.register_channel(topic=ch, message_encoding="json", schema_id=sid,
-                                                     metadata={"source": "LCM", "lcm_type": cls.__name__})
-            order = sorted(range(len(msgs)), key=lambda i: times_ns[i])  # stable: log order within a time
+            channel_ids = _lcm_channels(w, classes)
             pending = _can_messages(capture, db, w, realtime, result) if capture is not None else iter(())
-            say(f"writing {out}" + (f" with {capture.name} decoded by {dbc_path.name}" if capture else ""))
-            nxt = next(pending, None)
-            for i in order:
-                while nxt is not None and nxt[0] < times_ns[i]:
-                    w.add_message(nxt[1], log_time=nxt[0], data=nxt[2], publish_time=nxt[0])
-                    nxt = next(pending, None)
-                ch, stamp, m = msgs[i]
-                w.add_message(channel_ids[ch], log_time=times_ns[i], publish_time=stamp * 1000,
-                              sequence=int(getattr(m, "seq", 0)) & 0xFFFFFFFF,
-                              data=json.dumps({k: _value(getattr(m, k)) for k in m.__slots__},
-                                              allow_nan=False).encode())
-                result.lcm[ch] = result.lcm.get(ch, 0) + 1
-            while nxt is not None:
-                w.add_message(nxt[1], log_time=nxt[0], data=nxt[2], publish_time=nxt[0])
-                nxt = next(pending, None)
+            say(f"writing {out}" + (f" with {capture.name} decoded by {dbc_path.name}" if capture and dbc_path else ""))
+            _write_merged(w, msgs, times_ns, channel_ids, pending, result)
             if capture is not None:
                 result.capture_damage = result.capture_damage_of.describe(capture, capture.stat().st_size)
                 if result.capture_damage:

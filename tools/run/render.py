@@ -25,6 +25,7 @@ import numpy as np
 from gen.lib.atomic_output import write_bytes_atomic, write_json_atomic
 from gen.lib.one_line import one_line
 from tools.build.arm import prepared_model
+from tools.run.run_files import RUN_RECORD, TELEMETRY_LOG
 from tools.run.telemetry_log import LogDamage, read_log, truth_rows
 
 STRIP_FILE = "arm-strip.png"
@@ -71,7 +72,7 @@ class Motion:
 
 def load_run(run_dir: Path) -> tuple[dict[str, Any], Path]:
     """run.json and the prepared model of the build it names (checked to be the model that ran)."""
-    path = run_dir / "run.json"
+    path = run_dir / RUN_RECORD
     try:
         run = json.loads(path.read_text())
         build = Path(run["environment"]["build"])
@@ -95,7 +96,7 @@ def load_run(run_dir: Path) -> tuple[dict[str, Any], Path]:
 
 def load_motion(run_dir: Path, run: dict[str, Any]) -> Motion:
     """The periods the controller ran (state running) with the simulator's q of each."""
-    log_path = run_dir / "telemetry.lcmlog"
+    log_path = run_dir / TELEMETRY_LOG
     if not log_path.exists():
         raise RenderError(f"{log_path}: no such file: the run kept no telemetry")
     damage = LogDamage()

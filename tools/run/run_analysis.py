@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from tools.run.run_files import TELEMETRY_LOG
 from tools.run.telemetry_log import CHUNK_BYTES, EVENT_CHANNELS, FIXED_CHANNELS, Chunk, LogDamage, iter_chunks
 from tools.run.verdict import Bounds, judge
 from gen.lib.one_line import one_line
@@ -444,7 +445,7 @@ def analyse(out_dir: Path, controller: dict[str, Any], sim: dict[str, Any], conf
     requested = controller.get("steps_requested", round((config["duration_s"] + hold) * rate))
     stop_from, stop_source = stop_period(controller, sim)
     window_s = float((sim.get("post_stop") or {}).get("configured_s") or param_default("simulator", "post-stop"))
-    scan = scan_log(out_dir / "telemetry.lcmlog", hold, rate, sent, requested - round(hold * rate),
+    scan = scan_log(out_dir / TELEMETRY_LOG, hold, rate, sent, requested - round(hold * rate),
                     stop_from=stop_from, after_stop_periods=round(window_s * rate))
     tele = telemetry_accounting(scan, sent) if sent else {}
     results = {

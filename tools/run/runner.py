@@ -41,6 +41,7 @@ from tools.run.cluster import Cluster
 from gen.lib.paths import BUILD
 from gen.lib.atomic_output import write_json_atomic, write_text_atomic
 from tools.run.hil import DEFAULT_PROTOCOL, LOCKSTEP_SPIN_US, SIL, HilError, HilOptions, lockstep_spin_us, provenance, run_hil
+from tools.run.run_files import RUN_RECORD, TELEMETRY_LOG
 from tools.run.slots import Slot, acquire_slot
 from tools.run.workers import ForkedWorkers
 
@@ -258,7 +259,7 @@ def kept_run(out: Path, spec: RunSpec) -> tuple[dict[str, Any] | None, str]:
         diff = sorted(k for k in set(want) | set(done["spec"]) if done["spec"].get(k) != want.get(k))
         return None, f"kept for another spec (differs in {', '.join(diff)})"
     try:
-        raw = (out / "run.json").read_bytes()
+        raw = (out / RUN_RECORD).read_bytes()
         res = json.loads(raw)["results"]
     except (OSError, ValueError, KeyError, TypeError) as exc:
         return None, f"run.json missing or unreadable ({exc})"
@@ -317,13 +318,13 @@ def execute(spec_d: dict[str, Any], spin_us: float = LOCKSTEP_SPIN_US) -> dict[s
                 prepare_build(arm)  # a no-op when built (a Dask worker on another machine may not be)
                 run = _run(spec, arm, slot, out, spin_us)
         except HilError as exc:
-            write_json_atomic(out / "run.json", {"results": {**_identity(spec), "bus_timing": "on" if spec.bus_timing
+            write_json_atomic(out / RUN_RECORD, {"results": {**_identity(spec), "bus_timing": "on" if spec.bus_timing
                                                              else "off", "result": "failed",
                                                              "verdict_reasons": [f"failed: {exc}"]},
                                                  "transport": {}, "environment": {}, "provenance": provenance()})
     if not spec.keep_log:
-        (out / "telemetry.lcmlog").unlink(missing_ok=True)
-    raw = (out / "run.json").read_bytes()
+        (out / TELEMETRY_LOG).unlink(missing_ok=True)
+    raw = (out / RUN_RECORD).read_bytes()
     if procs.interrupted is None:  # a run armctl stopped is not done: a resumed study runs it again
         write_json_atomic(out / DONE, {"spec": key, "run_json_sha256": hashlib.sha256(raw).hexdigest()})
     return json.loads(raw)  # what a resumed study reads back, exactly

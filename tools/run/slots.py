@@ -20,6 +20,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
+from gen.lib.multicast import CAN_GROUP, LCM_GROUP  # the groups a slot's ports are on
 from tools.run import procs
 
 MAX_SLOTS = 64
@@ -47,7 +48,6 @@ class Slot:
         return LCM_BASE + self.index
 
 
-CAN_GROUP, LCM_GROUP = "239.74.163.2", "239.255.76.67"
 LISTEN_S = 0.02  # a live lockstep run sends thousands of frames a second: 20 ms hears one
 
 

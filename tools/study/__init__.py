@@ -278,6 +278,51 @@ def procedure(cfg: StudyConfig, trials: int | None = None, jobs: int | None = No
             f"weights (each candidate synthesised: loaded at run time in SIL, built into the firmware over a CAN bus); pm-paper-weights is the paper's own weights, not tuned.")
 
 
+def _study_specs(cfg: StudyConfig, setup: Any, info: dict[str, Any], out: Path, scen_names: list[str],
+                 methods: list[str], seed_list: list[int], tuning: dict[str, Any], duration: float,
+                 traj_args: Any, protocol: str | None) -> tuple[list[RunSpec], list[tuple[str, str, int]]]:
+    """Every run of the study (scenario x method x seed) with its tuned knobs, and which it is."""
+    paper_text = None if Path(info["design_config"]).resolve() == DEFAULT_DESIGN.resolve() else DEFAULT_DESIGN.read_text()
+    specs: list[RunSpec] = []
+    where: list[tuple[str, str, int]] = []
+    for s in scen_names:
+        scen = cfg.scenarios[s] if protocol is None else replace(cfg.scenarios[s], protocol=protocol)
+        for m in methods:
+            knobs = tuning[s][m]["knobs"] if m in tuning[s] else {}
+            for i, seed in enumerate(seed_list):
+                spec = trial_spec(setup, m, scen, knobs, seed, out / s / m / f"seed-{seed}", duration, traj_args,
+                                  keep_log=i == 0)
+                if m == "pm-paper-weights" and paper_text is not None:
+                    spec = replace(spec, design_text=paper_text)
+                specs.append(spec)
+                where.append((s, m, seed))
+    return specs, where
+
+
+def _arm_record(info: dict[str, Any], arm: ArmRef) -> dict[str, Any]:
+    return {"name": info["name"], "model": info["model"], "arm_file": info["arm_file"],
+            "n_joints": info["n_joints"], "joint_names": [j["name"] for j in info["joints"]],
+            "model_hash": info["model_hash"], "is_default": arm.is_default, "buses": info["buses"],
+            "drivetrain": info["drivetrain"], "first_resonance_hz": info["first_resonance_hz"],
+            "payload": info["payload"]}
+
+
+def _per_scenario(cfg: StudyConfig, setup: Any, info: dict[str, Any], scen_names: list[str], methods: list[str],
+                  tuning: dict[str, Any], where: list[tuple[str, str, int]],
+                  runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """study.json's `scenarios`: each one's results per method, with each pick's closed-loop bandwidth."""
+    per: dict[str, dict[str, list[dict[str, Any]]]] = {s: {m: [] for m in methods} for s in scen_names}
+    for (s, m, _), run in zip(where, runs):
+        per[s][m].append({**run["results"], "transport_telemetry_lost": run.get("transport", {}).get("telemetry_lost_total")})
+    scenarios = {s: scenario_result({**cfg.scenarios[s].as_dict(), "per_joint_from": cfg.scenarios[s].per_joint},
+                                    tuning[s], per[s], methods, info["n_joints"])
+                 for s in scen_names}
+    for s in scen_names:  # each pick's closed-loop bandwidth, beside the arm's first resonance
+        scenarios[s]["bandwidth_hz"] = {
+            m: method_bandwidth(setup, m, tuning[s][m]["knobs"] if m in tuning[s] else {}) for m in methods}
+    return scenarios
+
+
 def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration_s: float | None = None,
               methods: list[str] | None = None, scenarios: list[str] | None = None, arm: ArmRef = DEFAULT_ARM,
               jobs: int = 1, cluster: Cluster | None = None, retune: bool = False,
@@ -298,20 +343,8 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
     notes += verified_notes(setup, tuning_file(cfg, arm), tuning, prefix)
     for n in notes:
         print(f"{prefix}: {one_line(n)}", file=sys.stderr)  # a file's names, to a terminal
-    paper_text = None if Path(info["design_config"]).resolve() == DEFAULT_DESIGN.resolve() else DEFAULT_DESIGN.read_text()
-    specs: list[RunSpec] = []
-    where: list[tuple[str, str, int]] = []
-    for s in scen_names:
-        scen = cfg.scenarios[s] if protocol is None else replace(cfg.scenarios[s], protocol=protocol)
-        for m in methods:
-            knobs = tuning[s][m]["knobs"] if m in tuning[s] else {}
-            for i, seed in enumerate(seed_list):
-                spec = trial_spec(setup, m, scen, knobs, seed, out / s / m / f"seed-{seed}", duration, traj_args,
-                                  keep_log=i == 0)
-                if m == "pm-paper-weights" and paper_text is not None:
-                    spec = replace(spec, design_text=paper_text)
-                specs.append(spec)
-                where.append((s, m, seed))
+    specs, where = _study_specs(cfg, setup, info, out, scen_names, methods, seed_list, tuning, duration, traj_args,
+                                protocol)
     bar = tqdm(total=len(specs), desc="study", unit="run")
     runs = run_all(specs, jobs, cluster, progress=lambda spec, run: bar.update(1), forked=True)
     bar.close()
@@ -324,17 +357,10 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
     commands = {s: {m: run_command(cfg, arm, s, m, "SEED", duration, tuning[s][m]["knobs"] if m in tuning[s] else None,
                                    bus, f"runs/hil/{s}-{m}-seed-SEED".replace("+", "-"))
                     for m in methods} for s in scen_names}
-    per: dict[str, dict[str, list[dict[str, Any]]]] = {s: {m: [] for m in methods} for s in scen_names}
-    for (s, m, _), run in zip(where, runs):
-        per[s][m].append({**run["results"], "transport_telemetry_lost": run.get("transport", {}).get("telemetry_lost_total")})
     study = {
         "config": str(cfg.path.relative_to(REPO) if cfg.path.is_relative_to(REPO) else cfg.path),
         "description": cfg.description,
-        "arm": {"name": info["name"], "model": info["model"], "arm_file": info["arm_file"],
-                "n_joints": info["n_joints"], "joint_names": [j["name"] for j in info["joints"]],
-                "model_hash": info["model_hash"], "is_default": arm.is_default, "buses": info["buses"],
-                "drivetrain": info["drivetrain"], "first_resonance_hz": info["first_resonance_hz"],
-                "payload": info["payload"]},
+        "arm": _arm_record(info, arm),
         "seeds": seed_list,
         "rate_hz": info["loop_rate_hz"],
         "duration_s": duration,
@@ -347,13 +373,8 @@ def run_study(cfg: StudyConfig, out: Path, *, seeds: int | None = None, duration
         "protocol": protocol,  # None: each scenario's own (its definition says which)
         "confirmation": confirmation,
         "commands": commands,
-        "scenarios": {s: scenario_result({**cfg.scenarios[s].as_dict(), "per_joint_from": cfg.scenarios[s].per_joint},
-                                         tuning[s], per[s], methods, info["n_joints"])
-                      for s in scen_names},
+        "scenarios": _per_scenario(cfg, setup, info, scen_names, methods, tuning, where, runs),
     }
-    for s in scen_names:  # each pick's closed-loop bandwidth, beside the arm's first resonance
-        study["scenarios"][s]["bandwidth_hz"] = {
-            m: method_bandwidth(setup, m, tuning[s][m]["knobs"] if m in tuning[s] else {}) for m in methods}
     write_json_atomic(out / "study.json", study)
     from tools.study.report import write_report
 

@@ -34,7 +34,8 @@ METHODS: dict[str, tuple[str, str | None]] = {
     "usde-smc": ("usde-smc", "gains"),
 }
 TUNED = tuple(m for m, (_, how) in METHODS.items() if how is not None)
-# The methods that estimate the disturbance: the ones with an estimation error to compare.
+# The methods that estimate the disturbance: the ones with an estimation error to compare, and the
+# synthesised ones whose design has an estimator (gh2's has none).
 ESTIMATING = ("pm", "pm-paper-weights", "pm-paper", "tde", "usde-smc")
 # The synthesis knobs: the estimator's weight F(s) = f_bw / (s + f_bw) and H, the controller's
 # z_o = E1 e + E2 e_dot + D12 u_o ("single") or [E1 e + E2 e_dot; D12 u_o] ("split", which keeps
@@ -343,7 +344,7 @@ def _space(method: str, d: Any) -> Space:
     knobs = set(GAIN_KNOBS[method]) if how == "gains" else {*DESIGN_KNOBS}
     if how == "design" and {"E1", "E2", "D12"} & set(d):
         knobs = {*LEGACY_DESIGN_KNOBS}
-    if method == "gh2":
+    if how == "design" and method not in ESTIMATING:  # no estimator: no estimator weights
         knobs -= {"H", "f_bw"}
     known = knobs | ({"form"} if how == "design" else set())
     unknown = set(d) - known
@@ -385,21 +386,29 @@ def _names(items: list, where: str) -> None:
         raise StudyConfigError(f"{where}: expected names (strings), got {odd[0]!r}")
 
 
-def load(path: Path) -> StudyConfig:
-    try:
-        data = toml_input.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise StudyConfigError(f"{path}: {exc}") from exc
-    known = {"description", "duration_s", "hold_s", "seed", "seeds", "methods", "scenarios", "trajectory", "study_tuning_cap",
-             "scenario", "tuning"}
-    unknown = set(data) - known
+STUDY_FIELDS = {"description", "duration_s", "hold_s", "seed", "seeds", "methods", "scenarios", "trajectory",
+                "study_tuning_cap", "scenario", "tuning"}
+TUNING_FIELDS = {"seeds", "duration_s", "amp", "freq_hz", "arm", "objective", "cap", "plateau", "tolerance", "batch",
+                 "widen", "startup", "validation_seeds", "validation_tries", "robust_stiffness", "file", "space"}
+
+
+def _known_fields(table: dict[str, Any], known: set[str], where: str) -> None:
+    unknown = set(table) - known
     if unknown:
-        raise StudyConfigError(f"study: unknown field(s) {sorted(unknown)} (known: {', '.join(sorted(known))})")
+        raise StudyConfigError(f"{where}: unknown field(s) {sorted(unknown)} (known: {', '.join(sorted(known))})")
+
+
+def _methods(data: dict[str, Any]) -> list[str]:
     methods = _get(data, "methods", "study", list)
     _names(methods, "study.methods")
     bad = [m for m in methods if m not in METHODS]
     if bad or not methods or len(set(methods)) != len(methods):
         raise StudyConfigError(f"study.methods: unknown or repeated {bad or methods} (known: {', '.join(METHODS)})")
+    return methods
+
+
+def _chosen_scenarios(data: dict[str, Any]) -> dict[str, Scenario]:
+    """The scenarios the study runs ([study] scenarios, default all), in its order."""
     tables = _get(data, "scenario", "study", dict)
     scenarios = {name: _scenario(name, d) for name, d in tables.items()}
     stems: dict[str, str] = {}
@@ -413,33 +422,58 @@ def load(path: Path) -> StudyConfig:
     missing = [s for s in chosen if s not in scenarios]
     if missing or not chosen:
         raise StudyConfigError(f"study.scenarios: {missing or 'none'} not defined (defined: {', '.join(scenarios)})")
-    tuning = _get(data, "tuning", "study", dict)
-    t_known = {"seeds", "duration_s", "amp", "freq_hz", "arm", "objective", "cap", "plateau", "tolerance", "batch",
-               "widen", "startup", "validation_seeds", "validation_tries", "robust_stiffness", "file", "space"}
-    t_unknown = set(tuning) - t_known
-    if t_unknown:
-        raise StudyConfigError(f"tuning: unknown field(s) {sorted(t_unknown)} (known: {', '.join(sorted(t_known))})")
-    tseeds = _get(tuning, "seeds", "tuning", list)
-    if not tseeds or not all(isinstance(s, int) and not isinstance(s, bool) and 0 <= s < 2**63 for s in tseeds):
-        raise StudyConfigError(f"tuning.seeds: a list of whole numbers >= 0, got {tseeds!r}")
+    return {k: scenarios[k] for k in chosen}
+
+
+def _seed_list(table: dict[str, Any], key: str, where: str, default: Any = ..., empty_ok: bool = True) -> list[int]:
+    seeds = _get(table, key, where, list, default)
+    if not (seeds or empty_ok) or not all(isinstance(s, int) and not isinstance(s, bool) and 0 <= s < 2**63 for s in seeds):
+        raise StudyConfigError(f"{where}.{key}: a list of whole numbers >= 0, got {seeds!r}")
+    return seeds
+
+
+def _seeds(data: dict[str, Any], tuning: dict[str, Any]) -> tuple[list[int], int, int, list[int]]:
+    """The tuning seeds, the study's first seed and count, and the validation seeds: none shared."""
+    tseeds = _seed_list(tuning, "seeds", "tuning", empty_ok=False)
     seed = _whole(data, "seed", "study", 0, 2**62)
     seeds = _whole(data, "seeds", "study", 1, 1000, 1)
     if set(tseeds) & set(range(seed, seed + seeds)):
         raise StudyConfigError(f"tuning.seeds {tseeds}: must differ from the study's seeds ({seed}..{seed + seeds - 1})")
-    vseeds = _get(tuning, "validation_seeds", "tuning", list, [])
-    if not all(isinstance(s, int) and not isinstance(s, bool) and 0 <= s < 2**63 for s in vseeds):
-        raise StudyConfigError(f"tuning.validation_seeds: a list of whole numbers >= 0, got {vseeds!r}")
+    vseeds = _seed_list(tuning, "validation_seeds", "tuning", [])
     if set(vseeds) & (set(tseeds) | set(range(seed, seed + seeds))):
         raise StudyConfigError(f"tuning.validation_seeds {vseeds}: held out: must differ from the tuning seeds "
                                f"{tseeds} and the study's ({seed}..{seed + seeds - 1})")
-    spaces_t = _get(tuning, "space", "tuning", dict)
-    spaces = {m: _space(m, d) for m, d in spaces_t.items()}
+    return tseeds, seed, seeds, vseeds
+
+
+def _spaces(tuning: dict[str, Any], methods: list[str]) -> dict[str, Space]:
+    spaces = {m: _space(m, d) for m, d in _get(tuning, "space", "tuning", dict).items()}
     untuned = [m for m in methods if METHODS[m][1] is not None and m not in spaces]
     if untuned:
         raise StudyConfigError(f"tuning.space: no search space for {untuned}: every tuned method needs one")
+    return spaces
+
+
+def _tuning_file_name(tuning: dict[str, Any]) -> str:
     file_name = _get(tuning, "file", "tuning", str)
     if "/" in file_name or not file_name.endswith(".json"):
         raise StudyConfigError(f"tuning.file: a file name next to the config ending .json, got {file_name!r}")
+    return file_name
+
+
+def load(path: Path) -> StudyConfig:
+    try:
+        data = toml_input.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise StudyConfigError(f"{path}: {exc}") from exc
+    _known_fields(data, STUDY_FIELDS, "study")
+    methods = _methods(data)
+    scenarios = _chosen_scenarios(data)
+    tuning = _get(data, "tuning", "study", dict)
+    _known_fields(tuning, TUNING_FIELDS, "tuning")
+    tseeds, seed, seeds, vseeds = _seeds(data, tuning)
+    spaces = _spaces(tuning, methods)
+    file_name = _tuning_file_name(tuning)
     return StudyConfig(
         path=path,
         description=str(data.get("description", "")),
@@ -448,7 +482,7 @@ def load(path: Path) -> StudyConfig:
         seed=seed,
         seeds=seeds,
         methods=list(methods),
-        scenarios={k: scenarios[k] for k in chosen},
+        scenarios=scenarios,
         trajectory=_trajectory(_get(data, "trajectory", "study", dict), "trajectory"),
         tuning_seeds=list(tseeds),
         tuning_duration_s=_number(tuning, "duration_s", "tuning", 0.001, 3600),

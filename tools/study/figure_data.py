@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from tools.run.run_files import TELEMETRY_LOG
 from tools.run.telemetry_log import read_log, truth_rows
 from gen.lib.escape import file_stem
 from gen.lib.params import default
@@ -134,7 +135,7 @@ def envelope(x: np.ndarray, window: int) -> np.ndarray:
 def run_series(run_dir: Path, hold: float) -> dict[str, np.ndarray]:
     """One kept run's trajectory series: t after the hold (s), e (rad), w and w_hat (rad/s^2; w NaN
     where the simulator logged no message for the period)."""
-    log = read_log(run_dir / "telemetry.lcmlog", channels=("ARM_CTL", "ARM_SIM"))
+    log = read_log(run_dir / TELEMETRY_LOG, channels=("ARM_CTL", "ARM_SIM"))
     ctl, sim = log["ARM_CTL"].messages, log["ARM_SIM"].messages
     ctl = ctl[(ctl.state == 1) & (ctl.t >= hold - 1e-9)]
     w_hat = ctl.w_hat.astype(float)
@@ -153,7 +154,7 @@ def scenario_series(out: Path, study: dict[str, Any], scenario: str) -> tuple[di
     series, empty = {}, []
     for m in study["methods"]:
         d = out / scenario / m / f"seed-{seed}"
-        got = run_series(d, hold) if (d / "telemetry.lcmlog").exists() else None
+        got = run_series(d, hold) if (d / TELEMETRY_LOG).exists() else None
         if got is not None and len(got["t"]) >= 2:
             series[m] = got
         else:

@@ -6,7 +6,7 @@ person reads degrees: the tables give tracking errors in deg, study.json keeps t
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -310,28 +310,38 @@ def _remove_figures(out: Path, scenarios: list[str]) -> None:
             f.unlink()
 
 
-def write_report(out: Path, study: dict[str, Any], figures: bool = True) -> None:
-    """report.md, report.html (the same, one self-contained page, its figures interactive) and
-    summary.txt, and the figures unless `figures` is False (`--no-figures`)."""
-    if figures:
-        from tools.study.figures import draw_figures  # matplotlib: only when there are figures to draw
+Images = Callable[[str, str], list[str]]
 
-        drawn = draw_figures(out, study)
-    else:
-        drawn = {}
-        _remove_figures(out, [*study["scenarios"], "all"])  # "all": the study's own figure (fig_answer_all)
 
-    def images(name: str, kind: str) -> list[str]:  # a paragraph each (report.html puts a figure in its place)
-        return [line for f, _ in drawn.get((name, kind), []) for line in ("", f"![{f}]({f})", "")]
+def _paper_table(sc: dict[str, Any], labels: list[str], n: int, metric: str, ours: str,
+                 paper_table: dict[str, list[float]]) -> str:
+    """This scenario's per-joint means of `metric` for PM, TDE and USDE-SMC beside one of the paper's tables."""
+    methods = ("pm", "tde", "usde-smc")
+    return _md_table(["joint", *[f"{ours} {m}" for m in ("PM", "TDE", "USDE-SMC")],
+                      "paper PM", "paper TDE", "paper EUSDE-SMC"],
+                     [[labels[j], *[_fmt(sc["stats"][m][metric]["per_joint"][j]["mean"]) if m in sc["stats"] else "-"
+                                    for m in methods],
+                       *[_fmt(paper_table[m][j]) for m in methods]] for j in range(n)])
+
+
+def _beside_the_paper(sc: dict[str, Any], labels: list[str], n: int) -> list[str]:
+    return ["### Beside the paper's numbers", "",
+            "The paper's Table 1 is its simulation (its units and uncertainty), Tables 2-3 its hardware "
+            "experiment; ours are this scenario's means.", "",
+            _paper_table(sc, labels, n, "est", "est", PAPER_TABLE1), "",
+            _paper_table(sc, labels, n, "linf", "L-inf", PAPER_TABLE2), "",
+            f"Torque power, the paper: PM {PAPER_TABLE3['pm']} W, TDE {PAPER_TABLE3['tde']} W, EUSDE-SMC "
+            f"{PAPER_TABLE3['usde-smc']} W.", ""]
+
+
+def _report_head(study: dict[str, Any], figures: bool, images: Images) -> list[str]:
+    """The answer, how the study was run, and what to pick per scenario."""
+    from tools.study.answer import answer
 
     arm = study["arm"]
     n = arm["n_joints"]
-    paper = arm["is_default"] and n == 6  # the paper's numbers are for its six-joint arm
-    labels = _labels(study, paper)
     wiring = ", ".join(f"{md(b['name'])}: drives {','.join(map(str, b['drives']))}" for b in arm["buses"])
-    from tools.study.answer import answer
-
-    text = [f"# Study: {md(study['description'])}", "",
+    return [f"# Study: {md(study['description'])}", "",
             "## The answer", "", *answer(study), "",
             "Means over the seeds per scenario and method (the detail of each is in its scenario's section):", "",
             markdown_fence(summary_table(study).splitlines()), "", *images(ANSWER_FIGURE, ANSWER_FIGURE),
@@ -354,22 +364,28 @@ def write_report(out: Path, study: dict[str, Any], figures: bool = True) -> None
             "error, the tuning's objective) among those whose every run ended ok, against the next best and PM on the "
             "same seeds (paired t-test):", "",
             *[recommendation(study, name) for name in study["scenarios"]], ""]
-    for i, (name, sc) in enumerate(study["scenarios"].items()):
-        d = sc["definition"]
-        text += [f"## Scenario {code(name)}", "", md(d["description"]), "",
-                 f"Uncertainty {code(str(d['uncertainty']))}; drives {code(str(d['drives']))}, speaking "
-                 f"{PROTOCOL_TEXT[study.get('protocol') or d.get('protocol', STUDY_PROTOCOL)]}"
-                 + (" (every scenario's runs, with the picks tuned on its own protocol)" if study.get("protocol") else "")
-                 + f"; bus timing {'emulated' if d['bus_timing'] else 'not emulated'}.", "",
-                 *([f"Per-joint values on this arm from the config's {code(str(d['per_joint_from']))}.", ""]
-                   if d.get("per_joint_from") else []), "### Verdict", ""]
-        text += _verdict(study, sc, labels) + [""]
-        if study.get("commands", {}).get(name):
-            text += [f"One run again on its own (SEED: one of {study['seeds']}; the same run.json results):", "",
-                     markdown_fence(study["commands"][name].values(), "sh"), ""]
-        text += ["The paper's claims, with this scenario's evidence:", ""] + _claims(sc) + [""]
-        resonance = arm.get("first_resonance_hz")
-        text += ["### Tuning", "", _md_table(
+
+
+def _scenario_intro(study: dict[str, Any], name: str, sc: dict[str, Any], labels: list[str]) -> list[str]:
+    """A scenario's definition, its verdict, the command that runs one of its runs again, and the paper's claims."""
+    d = sc["definition"]
+    text = [f"## Scenario {code(name)}", "", md(d["description"]), "",
+            f"Uncertainty {code(str(d['uncertainty']))}; drives {code(str(d['drives']))}, speaking "
+            f"{PROTOCOL_TEXT[study.get('protocol') or d.get('protocol', STUDY_PROTOCOL)]}"
+            + (" (every scenario's runs, with the picks tuned on its own protocol)" if study.get("protocol") else "")
+            + f"; bus timing {'emulated' if d['bus_timing'] else 'not emulated'}.", "",
+            *([f"Per-joint values on this arm from the config's {code(str(d['per_joint_from']))}.", ""]
+              if d.get("per_joint_from") else []), "### Verdict", ""]
+    text += _verdict(study, sc, labels) + [""]
+    if study.get("commands", {}).get(name):
+        text += [f"One run again on its own (SEED: one of {study['seeds']}; the same run.json results):", "",
+                 markdown_fence(study["commands"][name].values(), "sh"), ""]
+    return text + ["The paper's claims, with this scenario's evidence:", ""] + _claims(sc) + [""]
+
+
+def _tuning_section(study: dict[str, Any], name: str, sc: dict[str, Any], images: Images) -> list[str]:
+    resonance = study["arm"].get("first_resonance_hz")
+    return ["### Tuning", "", _md_table(
               ["method", "knobs", "closed-loop bandwidth", "objective (worst seed's sum L-inf, rad)", "trials",
                "validation", "source", "note"],
               [[md(m), code(str({k: (round(v, 4) if isinstance(v, float) else v) for k, v in r['knobs'].items()})),
@@ -377,39 +393,60 @@ def write_report(out: Path, study: dict[str, Any], figures: bool = True) -> None
                 md(str((r.get("validation") or {}).get("note", "-"))), md(str(r.get("source", ""))),
                 md(str(r.get("edge_note") or (f"no trial ended well; the best: {r['failed']}" if r.get("failed") else "")))]
                for m, r in sc["tuning"].items()]), "",
-              "pm-paper-weights: the paper's own weights (gen/configs/paper.toml), not tuned; its closed-loop "
-              f"bandwidth: {_bandwidth_cell(sc, 'pm-paper-weights', resonance)}. Every trial is in "
-              "study.json; the Optuna studies in the tuning's SQLite storage (optuna-dashboard opens it).", "",
-              *images(name, "tuning"), ""]
-        for metric in ("linf", "rms", "est", "power"):
-            text += [f"### {METRIC_TEXT[metric]}", "", _stats_table(study, sc, metric, labels), "",
-                     f"PM against each method (ratio of means PM/other, seeds PM lower, p):", "",
-                     _paired_table(study, sc, metric, labels), ""]
-        text += [*images(name, "metrics"), ""]
+            "pm-paper-weights: the paper's own weights (gen/configs/paper.toml), not tuned; its closed-loop "
+            f"bandwidth: {_bandwidth_cell(sc, 'pm-paper-weights', resonance)}. Every trial is in "
+            "study.json; the Optuna studies in the tuning's SQLite storage (optuna-dashboard opens it).", "",
+            *images(name, "tuning"), ""]
+
+
+def _metric_sections(study: dict[str, Any], sc: dict[str, Any], labels: list[str]) -> list[str]:
+    text: list[str] = []
+    for metric in ("linf", "rms", "est", "power"):
+        text += [f"### {METRIC_TEXT[metric]}", "", _stats_table(study, sc, metric, labels), "",
+                 "PM against each method (ratio of means PM/other, seeds PM lower, p):", "",
+                 _paired_table(study, sc, metric, labels), ""]
+    return text
+
+
+def _scenario_figures(out: Path, study: dict[str, Any], name: str, drawn: dict[Any, Any], images: Images) -> list[str]:
+    """Its distribution and time series, and the arm in its worst run whose telemetry is kept."""
+    text = [*images(name, "distribution"), "", f"Time series, the first seed of {code(name)}:", "",
+            *images(name, "time"), ""]
+    worst = worst_kept_run(study, name)
+    if worst and drawn.get((name, "arm")):
+        render = shell_command(["tools/armctl", "render", _shown(out / name / worst[0] / f"seed-{worst[1]}")])
+        text += [f"The arm in the worst run of {code(name)} whose telemetry is kept (seed {worst[1]}): "
+                 f"{md(worst[0])}, {md(worst[2])}. Solid: the arm as simulated; translucent, beside it: the "
+                 f"commanded reference ({code(render)} makes its video):", "", *images(name, "arm"), ""]
+    return text
+
+
+def write_report(out: Path, study: dict[str, Any], figures: bool = True) -> None:
+    """report.md, report.html (the same, one self-contained page, its figures interactive) and
+    summary.txt, and the figures unless `figures` is False (`--no-figures`)."""
+    if figures:
+        from tools.study.figures import draw_figures  # matplotlib: only when there are figures to draw
+
+        drawn = draw_figures(out, study)
+    else:
+        drawn = {}
+        _remove_figures(out, [*study["scenarios"], "all"])  # "all": the study's own figure (fig_answer_all)
+
+    def images(name: str, kind: str) -> list[str]:  # a paragraph each (report.html puts a figure in its place)
+        return [line for f, _ in drawn.get((name, kind), []) for line in ("", f"![{f}]({f})", "")]
+
+    n = study["arm"]["n_joints"]
+    paper = study["arm"]["is_default"] and n == 6  # the paper's numbers are for its six-joint arm
+    labels = _labels(study, paper)
+    text = _report_head(study, figures, images)
+    for name, sc in study["scenarios"].items():
+        text += _scenario_intro(study, name, sc, labels)
+        text += _tuning_section(study, name, sc, images)
+        text += _metric_sections(study, sc, labels) + [*images(name, "metrics"), ""]
         if paper and name == next(iter(study["scenarios"])):
-            text += ["### Beside the paper's numbers", "",
-                     "The paper's Table 1 is its simulation (its units and uncertainty), Tables 2-3 its hardware "
-                     "experiment; ours are this scenario's means.", "",
-                     _md_table(["joint", "est PM", "est TDE", "est USDE-SMC", "paper PM", "paper TDE", "paper EUSDE-SMC"],
-                               [[labels[j], *[_fmt(sc["stats"][m]["est"]["per_joint"][j]["mean"]) if m in sc["stats"] else "-"
-                                              for m in ("pm", "tde", "usde-smc")],
-                                 *[_fmt(PAPER_TABLE1[m][j]) for m in ("pm", "tde", "usde-smc")]] for j in range(n)]), "",
-                     _md_table(["joint", "L-inf PM", "L-inf TDE", "L-inf USDE-SMC", "paper PM", "paper TDE",
-                                "paper EUSDE-SMC"],
-                               [[labels[j], *[_fmt(sc["stats"][m]["linf"]["per_joint"][j]["mean"]) if m in sc["stats"] else "-"
-                                              for m in ("pm", "tde", "usde-smc")],
-                                 *[_fmt(PAPER_TABLE2[m][j]) for m in ("pm", "tde", "usde-smc")]] for j in range(n)]), "",
-                     f"Torque power, the paper: PM {PAPER_TABLE3['pm']} W, TDE {PAPER_TABLE3['tde']} W, EUSDE-SMC "
-                     f"{PAPER_TABLE3['usde-smc']} W.", ""]
+            text += _beside_the_paper(sc, labels, n)
         if figures:
-            text += [*images(name, "distribution"), "", f"Time series, the first seed of {code(name)}:", "",
-                     *images(name, "time"), ""]
-            worst = worst_kept_run(study, name)
-            if worst and drawn.get((name, "arm")):
-                render = shell_command(["tools/armctl", "render", _shown(out / name / worst[0] / f"seed-{worst[1]}")])
-                text += [f"The arm in the worst run of {code(name)} whose telemetry is kept (seed {worst[1]}): "
-                         f"{md(worst[0])}, {md(worst[2])}. Solid: the arm as simulated; translucent, beside it: the "
-                         f"commanded reference ({code(render)} makes its video):", "", *images(name, "arm"), ""]
+            text += _scenario_figures(out, study, name, drawn, images)
     write_text_atomic(out / "report.md", "\n".join(text))
     write_text_atomic(out / "summary.txt", summary_table(study) + "\n")
     from tools.study.html_report import write_html

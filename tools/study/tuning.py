@@ -35,7 +35,7 @@ from tools.build.code_identity import code_identity
 from tools.study.design_knobs import design_text
 from tools.run.runner import SYNTH_LOCK, RunSpec, run_all, synthesize_cached
 from tools.study.bandwidth import bandwidth_hz, method_loop
-from tools.study.config import KNOB_FLOOR, METHODS, Scenario, Space, StudyConfig, gain_args
+from tools.study.config import ESTIMATING, KNOB_FLOOR, METHODS, Scenario, Space, StudyConfig, gain_args
 
 FAILED_SCORE = 1e3  # rad: what a trial with a run that failed, diverged or hit its torque limit scores at least
 ACHIEVED_CAP = 30.0   # rad: one joint's error in a failed run counts at most this much (so a failed trial < 3000)
@@ -160,7 +160,7 @@ def candidate_check(setup: TuneSetup, method: str, knobs: dict[str, Any]) -> tup
     the arm's first resonance."""
     design = None
     if METHODS[method][1] == "design":
-        design, why = synthesized(design_text(setup.base_design, knobs, with_estimator=method != "gh2"))
+        design, why = synthesized(design_text(setup.base_design, knobs, with_estimator=method in ESTIMATING))
         if design is None:
             return why, None
     bw = bandwidth_hz(method_loop(
@@ -203,7 +203,7 @@ def trial_spec(setup: TuneSetup, method: str, scenario: Scenario, knobs: dict[st
     if how == "gains":
         args = [*gain_args(method, knobs), *args]
     elif how == "design":
-        text = design_text(setup.base_design, knobs, with_estimator=method != "gh2")
+        text = design_text(setup.base_design, knobs, with_estimator=method in ESTIMATING)
     return RunSpec(out=str(out), method=firmware, duration_s=duration_s, controller_args=tuple(args),
                    uncertainty={**scenario.uncertainty, **(overrides or {}), "seed": seed},
                    drives=scenario.drives.to_dict(),
@@ -310,6 +310,81 @@ def _run_summary(seeds: list[int], runs: list[dict[str, Any]]) -> list[dict[str,
              "tracking_max_abs_deg": r["results"].get("tracking_max_abs_deg")} for s, r in zip(seeds, runs)]
 
 
+def _resumed_trials(study: Any, best: dict[str, Any] | None, scores: list[float]) -> list[dict[str, Any]]:
+    """What an earlier run of this round told (its scores appended to `scores`); a trial asked and
+    never told is failed, to be asked again. A new round's trial 0 is the previous round's best."""
+    import optuna
+
+    recorded: list[dict[str, Any]] = []
+    for t in study.get_trials(deepcopy=False):
+        rec = _record_of(t) if t.state == optuna.trial.TrialState.COMPLETE else None
+        if rec is not None:
+            recorded.append(rec)
+            scores.append(rec["objective"])
+        elif t.state == optuna.trial.TrialState.RUNNING:
+            study.tell(t.number, state=optuna.trial.TrialState.FAIL)
+    if not study.trials and best is not None:  # the previous round's best, inside the widened ranges
+        study.enqueue_trial(best["knobs"])
+    return recorded
+
+
+@dataclass
+class _Round:
+    """One round of a method's tuning: its number, its ranges, and where its Optuna study is kept."""
+    number: int
+    ranges: dict[str, tuple[float, float]]
+    name: str
+    cap: int
+    batch: int
+
+
+def _run_round(setup: TuneSetup, scenario: Scenario, method: str, rnd: _Round, study: Any,
+               recorded: list[dict[str, Any]], scores: list[float], progress: Any) -> bool:
+    """Asks and runs batches of trials until the best-so-far plateaus, the cap, or the best sits at an
+    edge (widen now, within the same cap). True when it converged."""
+    cfg, space = setup.cfg, setup.cfg.spaces[method]
+    since = len(scores) - len(recorded)
+    converged = plateaued(best_so_far(scores), since, cfg.plateau, cfg.tolerance)
+    while not converged and len(scores) < rnd.cap:
+        asked = [study.ask() for _ in range(min(rnd.batch, rnd.cap - len(scores)))]
+        knob_sets = [_suggest(t, rnd.ranges, space.choices) for t in asked]
+        names = [f"r{rnd.number}-t{len(recorded) + i:03d}" for i in range(len(asked))]
+        for t, knobs, (score, why, per_seed, bw) in zip(asked, knob_sets, _trial_runs(
+                setup, method, scenario, knob_sets, cfg.tuning_seeds, names)):
+            rec = {"trial": len(recorded), "round": rnd.number, "knobs": knobs, "objective": score,
+                   "failed": why or None, "bandwidth_hz": bw, "runs": _run_summary(cfg.tuning_seeds, per_seed)}
+            t.set_user_attr("record", json.dumps(rec))
+            study.tell(t, score)
+            recorded.append(rec)
+            scores.append(score)
+            if progress:
+                progress()
+        converged = plateaued(best_so_far(scores), since, cfg.plateau, cfg.tolerance)
+        if rnd.number < cfg.widen and len(recorded) >= cfg.plateau and _edges(method, recorded, rnd.ranges,
+                                                                              space.ceilings):
+            break
+    return converged
+
+
+def _widened(method: str, ranges: dict[str, tuple[float, float]], edges: dict[str, str]) -> None:
+    """Each range whose best sits at an edge, ten times wider on that side (not below its floor)."""
+    for k, side in edges.items():
+        lo, hi = ranges[k]
+        floor = KNOB_FLOOR.get((method, k))
+        ranges[k] = (max(lo / 10, floor or 0.0), hi) if side == "low" else (lo, hi * 10)
+
+
+def _edge_note(rounds: list[dict[str, Any]], capped: bool) -> str:
+    last = rounds[-1]
+    if last["at_edge"]:
+        return (f"the best value of {', '.join(last['at_edge'])} is still at the edge of its range after "
+                f"{len(rounds) - 1} widening(s)" + (" (the cap ended the tuning)" if capped else "")
+                + f": the optimum may lie beyond {last['ranges']}")
+    if len(rounds) > 1:
+        return "ranges widened: " + "; ".join(f"round {r['round']}: {r['at_edge']}" for r in rounds[:-1])
+    return ""
+
+
 def tune_method(setup: TuneSetup, scenario: Scenario, method: str, trials: int | None = None,
                 progress: Any = None, key: str = "") -> dict[str, Any]:
     """One method in one scenario, to convergence or the cap (`trials` overrides [tuning] cap);
@@ -330,77 +405,39 @@ def tune_method(setup: TuneSetup, scenario: Scenario, method: str, trials: int |
     scores: list[float] = []  # every trial of every round, in order: the best-so-far curve's source
     best: dict[str, Any] | None = None
     status = "capped"
-    for rnd in range(cfg.widen + 1):
+    for number in range(cfg.widen + 1):
         if len(scores) >= cap:
             break
-        since = len(scores)
-        sampler = optuna.samplers.TPESampler(seed=_sampler_seed(method, scenario.name, rnd),
+        rnd = _Round(number, ranges, f"{scenario.name}/{method}/{key or 'nokey'}/cap{cap}/b{batch}/r{number}", cap, batch)
+        sampler = optuna.samplers.TPESampler(seed=_sampler_seed(method, scenario.name, number),
                                              n_startup_trials=max(1, min(cfg.startup, cap // 2)))
-        name = f"{scenario.name}/{method}/{key or 'nokey'}/cap{cap}/b{batch}/r{rnd}"
-        study = optuna.create_study(direction="minimize", sampler=sampler, storage=storage, study_name=name,
+        study = optuna.create_study(direction="minimize", sampler=sampler, storage=storage, study_name=rnd.name,
                                     load_if_exists=True)
-        recorded: list[dict[str, Any]] = []
-        for t in study.get_trials(deepcopy=False):  # resumed: what an earlier run told
-            rec = _record_of(t) if t.state == optuna.trial.TrialState.COMPLETE else None
-            if rec is not None:
-                recorded.append(rec)
-                scores.append(rec["objective"])
-            elif t.state == optuna.trial.TrialState.RUNNING:
-                study.tell(t.number, state=optuna.trial.TrialState.FAIL)  # asked, never told: asked again
-        if not study.trials and best is not None:  # the previous round's best, inside the widened ranges, is trial 0
-            study.enqueue_trial(best["knobs"])
-        converged = plateaued(best_so_far(scores), since, cfg.plateau, cfg.tolerance)
-        while not converged and len(scores) < cap:
-            asked = [study.ask() for _ in range(min(batch, cap - len(scores)))]
-            knob_sets = [_suggest(t, ranges, space.choices) for t in asked]
-            names = [f"r{rnd}-t{len(recorded) + i:03d}" for i in range(len(asked))]
-            for t, knobs, (score, why, per_seed, bw) in zip(asked, knob_sets, _trial_runs(
-                    setup, method, scenario, knob_sets, cfg.tuning_seeds, names)):
-                rec = {"trial": len(recorded), "round": rnd, "knobs": knobs, "objective": score, "failed": why or None,
-                       "bandwidth_hz": bw, "runs": _run_summary(cfg.tuning_seeds, per_seed)}
-                t.set_user_attr("record", json.dumps(rec))
-                study.tell(t, score)
-                recorded.append(rec)
-                scores.append(score)
-                if progress:
-                    progress()
-            converged = plateaued(best_so_far(scores), since, cfg.plateau, cfg.tolerance)
-            if rnd < cfg.widen and len(recorded) >= cfg.plateau and _edges(method, recorded, ranges, space.ceilings):
-                break  # its best sits at an edge after `plateau` trials: widen now, within the same cap
+        recorded = _resumed_trials(study, best, scores)
+        converged = _run_round(setup, scenario, method, rnd, study, recorded, scores, progress)
         if not recorded:
             break
         top = min(recorded, key=lambda x: x["objective"])
         edges = _edges(method, recorded, ranges, space.ceilings)
-        rounds.append({"round": rnd, "ranges": {k: list(v) for k, v in ranges.items()}, "trials": recorded,
-                       "best": top, "at_edge": edges, "converged": converged, "storage_study": name})
+        rounds.append({"round": number, "ranges": {k: list(v) for k, v in ranges.items()}, "trials": recorded,
+                       "best": top, "at_edge": edges, "converged": converged, "storage_study": rnd.name})
         if best is None or top["objective"] <= best["objective"]:
             best = top
         status = "converged" if converged else "capped"
         if not edges or top["objective"] >= FAILED_SCORE:
             break
-        for k, side in edges.items():
-            lo, hi = ranges[k]
-            floor = KNOB_FLOOR.get((method, k))
-            ranges[k] = (max(lo / 10, floor or 0.0), hi) if side == "low" else (lo, hi * 10)
+        _widened(method, ranges, edges)
     assert best is not None
-    last = rounds[-1]
-    note = ""
-    if last["at_edge"]:
-        note = (f"the best value of {', '.join(last['at_edge'])} is still at the edge of its range after "
-                f"{len(rounds) - 1} widening(s)" + (" (the cap ended the tuning)" if len(scores) >= cap else "")
-                + f": the optimum may lie beyond {last['ranges']}")
-    elif len(rounds) > 1:
-        note = "ranges widened: " + "; ".join(f"round {r['round']}: {r['at_edge']}" for r in rounds[:-1])
     everything = [t for r in rounds for t in r["trials"]]
     pick, validation = validate(setup, scenario, method, everything, best)
     return {"method": method, "scenario": scenario.name, "space": space.as_dict(), "cap": cap,
             "plateau": cfg.plateau, "tolerance": cfg.tolerance, "batch": batch, "status": status,
             "trials_run": len(scores), "best_so_far": best_so_far(scores), "best_by_objective": best,
             "rounds": rounds, "knobs": pick["knobs"], "objective": pick["objective"],
-            "failed": pick["failed"], "edge_note": note, "validation": validation,
+            "failed": pick["failed"], "edge_note": _edge_note(rounds, len(scores) >= cap), "validation": validation,
             "bandwidth_hz": pick.get("bandwidth_hz"), "resonance_hz": setup.resonance_hz,
             "storage": storage_url(setup.out),
-            "design_text": design_text(setup.base_design, pick["knobs"], with_estimator=method != "gh2")
+            "design_text": design_text(setup.base_design, pick["knobs"], with_estimator=method in ESTIMATING)
             if METHODS[method][1] == "design" else None}
 
 

@@ -134,6 +134,90 @@ def qemu_command(img: Image, run_dir: Path, console: Path) -> list[str]:
     ]
 
 
+def _new_run_dir(argv: Sequence[str], cwd: Path, env: Mapping[str, str]) -> Path:
+    """A fresh folder under the cache for one command, with the script the VM runs (run.sh)."""
+    runs = CACHE / "runs"
+    runs.mkdir(parents=True, exist_ok=True)
+    run_dir = runs / f"{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}-{uuid.uuid4().hex[:6]}"
+    run_dir.mkdir()
+    (run_dir / "run.sh").write_text(_script(run_dir, argv, cwd, env))
+    return run_dir
+
+
+def _watch_boot(proc: subprocess.Popen[bytes], run_dir: Path, res: VmResult, t0: float, timeout: float,
+                started: float | None, log) -> tuple[bool, float | None]:  # noqa: ANN001
+    """Waits for one boot's qemu to end; kills it when the whole run is past `timeout` or the boot
+    hung (the command not started BOOT_WAIT_S after it, with boots left). (hung, when the command started)."""
+    t_boot = time.monotonic()
+    while proc.poll() is None:
+        if started is None and (run_dir / "started").exists():
+            started = time.monotonic()
+        if time.monotonic() - t0 > timeout:
+            res.timed_out = True
+            proc.kill()
+            break
+        if started is None and time.monotonic() - t_boot > BOOT_WAIT_S and res.boots < BOOT_ATTEMPTS:
+            proc.kill()
+            log(f"armctl vcan: the VM had not started the command {BOOT_WAIT_S:g} s after boot "
+                f"{res.boots} (a hung boot); booting it again")
+            return True, started
+        time.sleep(0.1)
+    return False, started
+
+
+def _boot(img: Image, run_dir: Path, res: VmResult, t0: float, timeout: float,
+          log) -> tuple[int | None, float | None]:  # noqa: ANN001
+    """Boots the VM until a boot does not hang (at most BOOT_ATTEMPTS); qemu's exit code and when
+    the command started (None: it never did)."""
+    started = None
+    hung = True
+    while hung:
+        res.boots += 1
+        with open(run_dir / "qemu.log", "wb") as qlog:  # the qemu dies with armctl, even a SIGKILLed one
+            proc = subprocess.Popen(qemu_command(img, run_dir, run_dir / "console.log"), stdin=subprocess.DEVNULL,
+                                    stdout=qlog, stderr=subprocess.STDOUT,
+                                    preexec_fn=dies_with_parent(os.getpid()))
+        try:
+            hung, started = _watch_boot(proc, run_dir, res, t0, timeout, started, log)
+            proc.wait()
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    return proc.returncode, started
+
+
+def _finish_result(res: VmResult, run_dir: Path, t0: float, started: float | None, qemu_code: int | None,
+                   timeout: float, log) -> VmResult:  # noqa: ANN001
+    """The command's exit code and times from the run folder (rc, started), or VmError if the VM
+    never reported one."""
+    t_end = time.monotonic()
+    res.total_s = round(t_end - t0, 2)
+    if started is None and (run_dir / "started").exists():
+        started = t_end
+    try:
+        res.console_tail = (run_dir / "console.log").read_text(errors="replace").splitlines()[-30:]
+        qemu_out = (run_dir / "qemu.log").read_text(errors="replace")
+    except OSError:
+        qemu_out = ""
+    rc_file = run_dir / "rc"
+    if res.timed_out:
+        res.returncode = EXIT_TIMEOUT
+        if started is not None:
+            res.boot_s = round(started - t0, 2)
+        log(f"armctl vcan: the VM did not finish within {timeout:g} s; killed it")
+        return res
+    if not rc_file.exists():
+        tail = "\n  ".join(res.console_tail + qemu_out.strip().splitlines()[-10:])
+        raise VmError(f"the VM never reported an exit code (qemu exit {qemu_code}); "
+                      f"console:\n  {tail}")
+    res.returncode = int(rc_file.read_text().strip() or EXIT_SETUP)
+    if started is not None:
+        res.boot_s = round(started - t0, 2)
+        res.command_s = round(rc_file.stat().st_mtime - (run_dir / "started").stat().st_mtime, 2)
+    return res
+
+
 def run_in_vm(argv: Sequence[str], cwd: Path | str | None = None, env: Mapping[str, str] | None = None,
               timeout: float = 600.0, stdout: TextIO | BinaryIO | None = None,
               stderr: TextIO | BinaryIO | None = None, keep: bool = False, log=None) -> VmResult:  # noqa: ANN001
@@ -150,80 +234,19 @@ def run_in_vm(argv: Sequence[str], cwd: Path | str | None = None, env: Mapping[s
 
     t_setup = time.monotonic()
     img = ensure_image(log=log)
-    setup_s = time.monotonic() - t_setup
-
-    runs = CACHE / "runs"
-    runs.mkdir(parents=True, exist_ok=True)
-    run_dir = runs / f"{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}-{uuid.uuid4().hex[:6]}"
-    run_dir.mkdir()
-    (run_dir / "run.sh").write_text(_script(run_dir, argv, cwd, env))
-    console = run_dir / "console.log"
+    res = VmResult(returncode=EXIT_SETUP, setup_s=round(time.monotonic() - t_setup, 2))
+    run_dir = _new_run_dir(argv, cwd, env)
     tails = [_Tail(run_dir / "stdout", stdout), _Tail(run_dir / "stderr", stderr)]
     for t in tails:
         t.start()
-    res = VmResult(returncode=EXIT_SETUP, setup_s=round(setup_s, 2))
     t0 = time.monotonic()
-    qemu_log = run_dir / "qemu.log"
-    started = None
     try:
-        hung = True
-        while hung:
-            res.boots += 1
-            hung = False
-            t_boot = time.monotonic()
-            with open(qemu_log, "wb") as qlog:  # the qemu dies with armctl, even a SIGKILLed one
-                proc = subprocess.Popen(qemu_command(img, run_dir, console), stdin=subprocess.DEVNULL,
-                                        stdout=qlog, stderr=subprocess.STDOUT,
-                                        preexec_fn=dies_with_parent(os.getpid()))
-            try:
-                while proc.poll() is None:
-                    if started is None and (run_dir / "started").exists():
-                        started = time.monotonic()
-                    if time.monotonic() - t0 > timeout:
-                        res.timed_out = True
-                        proc.kill()
-                        break
-                    if started is None and time.monotonic() - t_boot > BOOT_WAIT_S and res.boots < BOOT_ATTEMPTS:
-                        proc.kill()
-                        log(f"armctl vcan: the VM had not started the command {BOOT_WAIT_S:g} s after boot "
-                            f"{res.boots} (a hung boot); booting it again")
-                        hung = True
-                        break
-                    time.sleep(0.1)
-                proc.wait()
-            finally:
-                if proc.poll() is None:
-                    proc.kill()
-                    proc.wait()
-    finally:
-        for t in tails:
-            t.finish()
-    t_end = time.monotonic()
-    res.total_s = round(t_end - t0, 2)
-    if started is None and (run_dir / "started").exists():
-        started = t_end
-    try:
-        res.console_tail = console.read_text(errors="replace").splitlines()[-30:]
-        qemu_out = qemu_log.read_text(errors="replace")
-    except OSError:
-        qemu_out = ""
-    rc_file = run_dir / "rc"
-    try:
-        if res.timed_out:
-            res.returncode = EXIT_TIMEOUT
-            if started is not None:
-                res.boot_s = round(started - t0, 2)
-            log(f"armctl vcan: the VM did not finish within {timeout:g} s; killed it")
-            return res
-        if not rc_file.exists():
-            tail = "\n  ".join(res.console_tail + qemu_out.strip().splitlines()[-10:])
-            raise VmError(f"the VM never reported an exit code (qemu exit {proc.returncode}); "
-                          f"console:\n  {tail}")
-        res.returncode = int(rc_file.read_text().strip() or EXIT_SETUP)
-        if started is not None:
-            res.boot_s = round(started - t0, 2)
-            res.command_s = round(rc_file.stat().st_mtime - (run_dir / "started").stat().st_mtime, 2)
-        return res
+        try:
+            qemu_code, started = _boot(img, run_dir, res, t0, timeout, log)
+        finally:
+            for t in tails:
+                t.finish()
+        return _finish_result(res, run_dir, t0, started, qemu_code, timeout, log)
     finally:
         if not keep:
             shutil.rmtree(run_dir, ignore_errors=True)
