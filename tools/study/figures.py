@@ -8,6 +8,7 @@ each) nor matplotlib's import (0.4 s a process)."""
 
 from __future__ import annotations
 
+import gc
 import os
 import sys
 from pathlib import Path
@@ -291,8 +292,16 @@ def draw_figures(out: Path, study: dict[str, Any], jobs: int | None = None) -> d
     # fork: the workers have matplotlib imported already, and need no importable __main__ (a
     # forkserver or spawn would re-run the caller's script); the study's run threads have ended
     ctx = multiprocessing.get_context("fork")
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
-        futs = {t: pool.submit(_scenario_figures, out, {**study, "scenarios": {t[0]: study["scenarios"][t[0]]}}, *t)
-                for t in tasks}
-        return {**answer, **{t: f.result() for t, f in futs.items()}}
+    # the caller's heap (a whole study, the solver's imports) stays shared with the workers only while
+    # nothing writes to it: the collector in each worker would walk, and so copy, every object the
+    # parent had
+    gc.collect()
+    gc.freeze()
+    try:
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
+            futs = {t: pool.submit(_scenario_figures, out, {**study, "scenarios": {t[0]: study["scenarios"][t[0]]}},
+                                   *t) for t in tasks}
+            return {**answer, **{t: f.result() for t, f in futs.items()}}
+    finally:
+        gc.unfreeze()
 
