@@ -15,6 +15,15 @@ VM_SCRIPT below through `armctl vcan run`. One boot serves the tests that read i
    and drive 1's STATE on vcan1 (not drive 1's bus); 300 periods later SIGTERM stops the
    controller (a safe stop: zero torque, shutdown, NMT stop, then its summary).
 
+4. your arm's rehearsal on real SocketCAN (docs/run-on-your-arm.md), the part only a kernel with CAN
+   proves: `armctl plant --bus vcan` (the arm, a process of its own) and `armctl run --hold --bus
+   vcan` (the controller alone) on vcan0..vcan2, ended by Ctrl-C: the controlled stop leaves the arm
+   held and braked; then an interface that is down, refused in one line before anything starts.
+   The arm was commissioned over UDP on the host just before the boot: the record holds for the arm
+   and its drive table, not the bus, and commissioning itself (24 simulated seconds, four minutes
+   in the VM), the other tasks and the other stop are bus-independent, proven over UDP by
+   test_run_on_arm.py.
+
 On the host: both processes ended as they should; every captured frame is either one of the injected ones
 (each exactly once) or decodes with the DBC via cantools with the DBC's length and FD/BRS format;
 both sides counted each injected frame in the right counter and nothing else went wrong.
@@ -26,9 +35,11 @@ root to install them, no Debian kernel package reachable).
 from __future__ import annotations
 
 import json
+import math
 import re
 import subprocess
 import sys
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -38,13 +49,16 @@ import pytest
 from host_sim.protocol import DBC_PATH
 from gen.lib.paths import REPO, env_with_repo
 
-pytestmark = pytest.mark.long  # minutes: three runs of the qemu VM (five boots)
+pytestmark = pytest.mark.long  # minutes: three runs of the qemu VM (five boots), one of them the rehearsal
 
 # Not serial: the guest's runs are lockstep (no wall clock decides them) and qemu takes one core,
 # so these share the machine with one other test file; a boot that hangs is booted again.
 
 PERIODS = 300
-VM_TIMEOUT_S = 420.0  # generous: the whole module takes ~2-4 min on the 2-core CI machine
+VM_TIMEOUT_S = 420.0  # generous: one boot's HIL run, or `hil --bus vm`, takes ~1-2 min on the 2-core CI machine
+REHEARSAL_TIMEOUT_S = 600.0  # the rehearsal's part of vm_run's boot: three armctl start-ups (Python, MuJoCo) in the VM
+MOVED_AFTER_STOP_DEG = 1.0   # the most any joint may move in the 2 s the plant watches after the stop
+N_JOINTS = 6
 
 # (IFACE/cansend argument, where the controller counts it, where the simulator counts it). Frames
 # with a master's ids (SYNC, a command) are not here: only the master sends them, so the controller
@@ -70,6 +84,7 @@ def _frame_text(g: str) -> str:
 VM_SCRIPT = r"""#!/bin/sh
 # Runs inside the VM, chrooted into the host's filesystem (tests/python/test_vcan_vm.py).
 OUT=$1; CTL=$2; PY=$3; UNIT=$4; SELFTEST=$5; PERIODS=$6; GARBAGE=$7; CTL_EXTRA=$8; BUSES=$9; BUSLOG=${10}
+REHEARSAL=${11}; RECORD=${12}
 # can-utils' canplayer reads a run's capture (armctl hil --capture: candump's log format), each
 # bus's lines printed as they would be sent (it needs AF_CAN even for that: here it has it); into
 # the guest's tmpfs, then copied out: a 9p write a line took 5 s
@@ -115,6 +130,45 @@ wait $SIM; echo $? > "$OUT/sim.rc"
 kill $INJ 2>/dev/null; wait $INJ 2>/dev/null
 sleep 0.5; kill $CD; wait $CD 2>/dev/null
 cp "$CAP" "$OUT/candump.log"
+# the same boot: your arm's rehearsal on vcan (REHEARSAL_SCRIPT)
+bash "$REHEARSAL" "$OUT/rehearsal" "$RECORD"
+exit 0
+"""
+
+REHEARSAL_SCRIPT = r"""#!/bin/bash
+# Runs inside the VM after VM_SCRIPT's HIL run (tests/python/test_vcan_vm.py): the plant and the
+# controller through the documented commands on vcan0..vcan2, the arm commissioned over UDP before.
+OUT=$1; RECORD=$2
+A=tools/armctl
+mkdir -p "$OUT"
+ip route replace 239.255.76.67/32 dev lo   # the controller's telemetry stays on lo, as on the host
+ip route replace 239.74.163.0/24 dev lo
+wait_for() {  # wait_for FILE TEXT SECONDS: until FILE says TEXT, at most SECONDS (the wall clock's)
+    local t0=$SECONDS
+    until grep -q "$2" "$1" 2>/dev/null; do sleep 0.5; [ $((SECONDS - t0)) -ge "$3" ] && return 1; done
+    return 0
+}
+$A plant --bus vcan --out "$OUT/plant" > "$OUT/plant.out" 2>&1 &
+PLANT=$!
+wait_for "$OUT/plant.out" "waiting for a master" 300 || echo "no plant" > "$OUT/plant.failed"
+# a hold, ended by Ctrl-C once it holds
+$A run --hold --bus vcan --record "$RECORD" --out "$OUT/stop" > "$OUT/stop.out" 2>&1 &
+RUN=$!
+wait_for "$OUT/stop/controller.log" "hold: holding" 300
+sleep 2
+kill -INT $RUN   # Ctrl-C
+wait $RUN; echo $? > "$OUT/stop.rc"
+# the plant watches the arm for 2 s after the stop: until its record of the session is final
+settled() {
+    python3 -c "import json, sys; s = json.load(open('$OUT/plant/sessions.json'))['sessions']
+sys.exit(0 if len(s) >= 1 and s[-1]['complete'] else 1)" 2>/dev/null
+}
+t0=$SECONDS; until settled; do sleep 1; [ $((SECONDS - t0)) -ge 300 ] && break; done
+kill -INT $PLANT; wait $PLANT; echo $? > "$OUT/plant.rc"
+# a bus that is down
+ip link add dev vcan9 type vcan
+$A run --hold --bus socketcan:vcan0,vcan1,vcan9 --record "$RECORD" > "$OUT/down.out" 2>&1
+echo $? > "$OUT/down.rc"
 exit 0
 """
 
@@ -182,26 +236,51 @@ def vm_run(tmp_path_factory: pytest.TempPathFactory, build_dir: Path) -> dict:
     out = tmp_path_factory.mktemp("vcan_vm")
     script = out / "vm_script.sh"
     script.write_text(VM_SCRIPT)
+    (out / "rehearsal.sh").write_text(REHEARSAL_SCRIPT)
     # no start-pose hold where the controller has one: the VM is slow, the periods are precious
     helptext = subprocess.run([str(exes["ctl"]), "--help"], capture_output=True, text=True).stdout
     ctl_extra = "--ref-hold 0" if "--ref-hold" in helptext else ""
     from tools.run.hil import CAPTURE_FILE, HilOptions, run_hil
 
-    run_hil(HilOptions(out=out / "sil", duration_s=0.2, preset=build_dir.name, bus="sil", capture=True))
+    # the VM's inputs, made before it boots (a file the host writes during the run may look stale
+    # in it: 9p's cache): the record, meanwhile the capture canplayer replays
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        commissioned = pool.submit(_commission_on_udp, out / "udp")
+        run_hil(HilOptions(out=out / "sil", duration_s=0.2, preset=build_dir.name, bus="sil", capture=True))
+        record = commissioned.result()
     # through the CLI, as a user runs a command in the VM (docs/drives.md)
     res = subprocess.run(
-        [ARMCTL, "vcan", "run", "--verbose", "--timeout", f"{VM_TIMEOUT_S:g}", "--",
+        [ARMCTL, "vcan", "run", "--verbose", "--timeout", f"{VM_TIMEOUT_S + REHEARSAL_TIMEOUT_S:g}", "--",
          "sh", str(script), str(out), str(exes["ctl"]), sys.executable, str(exes["unit"]),
          str(exes["selftest"]), str(PERIODS), " ".join(g for g, _, _ in GARBAGE), ctl_extra, BUSES,
-         str(out / "sil" / CAPTURE_FILE)],
-        cwd=REPO, capture_output=True, text=True, timeout=VM_TIMEOUT_S + 60)
+         str(out / "sil" / CAPTURE_FILE), str(out / "rehearsal.sh"), str(record)],
+        cwd=REPO, capture_output=True, text=True, timeout=VM_TIMEOUT_S + REHEARSAL_TIMEOUT_S + 60)
     assert res.returncode == 0, f"armctl vcan run: exit {res.returncode}: {res.stdout[-3000:]}{res.stderr[-3000:]}"
 
     def read(name: str) -> str:
         p = out / name
         return p.read_text() if p.exists() else f"<{name} missing>"
 
-    return {"out": out, "read": read, "stdout": res.stdout, "stderr": res.stderr}
+    return {"out": out, "read": read, "stdout": res.stdout, "stderr": res.stderr, "record": record}
+
+
+def _commission_on_udp(out: Path) -> Path:
+    """The arm commissioned on the host (`armctl plant` and `armctl commission` over UDP): the
+    record `armctl run` asks for, on any bus."""
+    from hil_procs import armctl
+    from test_run_on_arm import Plant  # `armctl plant` in the background, ended by Ctrl-C
+    from tools.run.slots import acquire_slot
+
+    record = out / "record.json"
+    with acquire_slot(quiet_ports=True) as slot:
+        plant = Plant(slot.can_port, out / "plant")
+        try:
+            cm = armctl("commission", "--bus", f"udp:{slot.can_port}", "--record", str(record),
+                        "--out", str(out / "commission"))
+        finally:
+            plant.stop()
+    assert cm.returncode == 0 and "armctl commission: passed" in cm.stdout, cm.stdout + cm.stderr
+    return record
 
 
 def _rc(vm_run: dict, name: str) -> int:
@@ -371,3 +450,44 @@ def test_a_hung_boot_is_booted_again_and_the_vm_dies_with_the_armctl_that_booted
     while time.monotonic() < deadline and Path(f"/proc/{qemu[0]}").exists():
         time.sleep(0.2)
     assert not Path(f"/proc/{qemu[0]}").exists(), f"qemu {qemu[0]} outlived its armctl"
+
+
+def _rehearsal(vm_run: dict, name: str) -> str:
+    return vm_run["read"](f"rehearsal/{name}")
+
+
+def test_run_holds_your_arm_on_vcan_against_the_plant_a_process_of_its_own(vm_run: dict) -> None:
+    """`armctl plant --bus vcan` and `armctl run --hold --bus vcan`, two processes that meet only on
+    vcan0..vcan2 (real SocketCAN): the arm held within 1 deg while the task ran, and where it stood
+    when the hold began once it is over (the hold's 1 deg, the stop's 1 deg)."""
+    assert not (vm_run["out"] / "rehearsal" / "plant.failed").exists(), _rehearsal(vm_run, "plant.out")
+    assert _rc(vm_run, "rehearsal/stop") == 0, _rehearsal(vm_run, "stop.out")
+    s = json.loads(_rehearsal(vm_run, "stop/session.json"))
+    assert s["task"].startswith("hold the pose the arm is in"), s
+    assert [b.split("@")[0] for b in s["buses"]] == ["socketcan:vcan0", "socketcan:vcan1", "socketcan:vcan2"], s
+    assert s["tracking"]["periods"] > 0 and max(s["tracking"]["max_abs_deg"].values()) < 1.0, s["tracking"]
+    plant = json.loads(_rehearsal(vm_run, "plant/sessions.json"))
+    assert len(plant["sessions"]) == 1, plant  # the plant's arm, the one the controller held
+    off = [math.degrees(abs(a - b)) for a, b in zip(plant["q"], s["task_report"]["start_pose"])]
+    assert len(off) == N_JOINTS and max(off) < 1.0 + MOVED_AFTER_STOP_DEG, off
+
+
+def test_ctrl_c_on_vcan_stops_the_arm_and_it_stays(vm_run: dict) -> None:
+    stop_out = _rehearsal(vm_run, "stop.out")
+    assert _rc(vm_run, "rehearsal/stop") == 0 and "stopped by you" in stop_out, stop_out
+    session = json.loads(_rehearsal(vm_run, "stop/session.json"))
+    assert session["stopped_by_user"], session
+    stop = session["stop"]
+    assert stop["cause"] == "stop signal" and stop["braked"], stop  # the controlled stop, every brake closed
+    plant = json.loads(_rehearsal(vm_run, "plant/sessions.json"))
+    assert plant["brakes_closed"] == (1 << N_JOINTS) - 1 and not plant["in_session"], plant  # held by its brakes
+    last = plant["sessions"][-1]
+    assert last["ended"] == "stopped" and last["complete"] and last["window_s"] >= 2.0 - 1e-3, last
+    assert max(last["moved_after_stop_deg"]) <= MOVED_AFTER_STOP_DEG, last
+    assert _rc(vm_run, "rehearsal/plant") == 0, _rehearsal(vm_run, "plant.out")
+
+
+def test_a_down_interface_is_one_line(vm_run: dict) -> None:
+    down = _rehearsal(vm_run, "down.out").strip().splitlines()
+    assert _rc(vm_run, "rehearsal/down") == 2 and down[-1] == (
+        "armctl run: --bus socketcan:vcan9: the interface is down (as root: ip link set vcan9 up)"), down
