@@ -18,7 +18,7 @@ VM_SCRIPT below through `armctl vcan run`. One boot serves the tests that read i
 4. your arm's rehearsal on real SocketCAN (docs/run-on-your-arm.md), the part only a kernel with CAN
    proves: `armctl plant --bus vcan` (the arm, a process of its own) and `armctl run --hold --bus
    vcan` (the controller alone) on vcan0..vcan2, ended by Ctrl-C: the controlled stop leaves the arm
-   held and braked; then an interface that is down, refused in one line before anything starts.
+   held and braked; and an interface that is down, refused in one line before anything starts.
    The arm was commissioned over UDP on the host just before the boot: the record holds for the arm
    and its drive table, not the bus, and commissioning itself (24 simulated seconds, four minutes
    in the VM), the other tasks and the other stop are bus-independent, proven over UDP by
@@ -150,7 +150,12 @@ wait_for() {  # wait_for FILE TEXT SECONDS: until FILE says TEXT, at most SECOND
 }
 $A plant --bus vcan --out "$OUT/plant" > "$OUT/plant.out" 2>&1 &
 PLANT=$!
+# meanwhile, a bus that is down: refused before anything starts (the plant, on vcan0..vcan2, never sees it)
+ip link add dev vcan9 type vcan
+$A run --hold --bus socketcan:vcan0,vcan1,vcan9 --record "$RECORD" > "$OUT/down.out" 2>&1 &
+DOWN=$!
 wait_for "$OUT/plant.out" "waiting for a master" 300 || echo "no plant" > "$OUT/plant.failed"
+wait $DOWN; echo $? > "$OUT/down.rc"
 # a hold, ended by Ctrl-C once it holds
 $A run --hold --bus vcan --record "$RECORD" --out "$OUT/stop" > "$OUT/stop.out" 2>&1 &
 RUN=$!
@@ -165,10 +170,6 @@ sys.exit(0 if len(s) >= 1 and s[-1]['complete'] else 1)" 2>/dev/null
 }
 t0=$SECONDS; until settled; do sleep 1; [ $((SECONDS - t0)) -ge 300 ] && break; done
 kill -INT $PLANT; wait $PLANT; echo $? > "$OUT/plant.rc"
-# a bus that is down
-ip link add dev vcan9 type vcan
-$A run --hold --bus socketcan:vcan0,vcan1,vcan9 --record "$RECORD" > "$OUT/down.out" 2>&1
-echo $? > "$OUT/down.rc"
 exit 0
 """
 
