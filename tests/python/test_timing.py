@@ -36,11 +36,12 @@ def timing_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict, su
     if shutil.which("cyclictest") is None:
         pytest.skip("cyclictest not found: apt-get install rt-tests (tools/armctl does as root)")
     out = tmp_path_factory.mktemp("timing")
-    # 200 Hz: a rate the Python simulator sustains on a loaded 2-core machine; 2 s of loop.
-    r = subprocess.run([sys.executable, "-m", "tools.cli", "timing", "--duration", "2", "--rate", "200",
-                        "--out", str(out)], cwd=REPO, env=env_with_repo(), capture_output=True, text=True,
-                       timeout=600)
-    return out, json.loads((out / "timing.json").read_text()), r
+    # 200 Hz: a rate the Python simulator sustains on a loaded 2-core machine; two runs of 1 s of
+    # loop (--repeat: each run's files in OUT/RUN/, the runs together in OUT/repeat.json)
+    r = subprocess.run([sys.executable, "-m", "tools.cli", "timing", "--duration", "1", "--rate", "200",
+                        "--repeat", "2", "--out", str(out)], cwd=REPO, env=env_with_repo(), capture_output=True,
+                       text=True, timeout=600)
+    return out / "1", json.loads((out / "1" / "timing.json").read_text()), r
 
 
 def test_timing_command_writes_complete_well_formed_results(timing_run) -> None:
@@ -64,6 +65,37 @@ def test_timing_command_writes_complete_well_formed_results(timing_run) -> None:
     png = (out / "timing.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10000
     assert (out / "hil" / "run.json").exists() and (out / "hil" / "telemetry.lcmlog").exists()
+
+
+def test_repeated_runs_are_summarised_run_by_run(timing_run) -> None:
+    out, d, r = timing_run
+    rep = json.loads((out.parent / "repeat.json").read_text())
+    assert rep["config"] == {"runs": 2, "duration_s": 1.0, "rate_hz": 200.0}
+    assert [row["run"] for row in rep["runs"]] == [1, 2]
+    assert rep["runs"][0]["verdict"] == d["verdict"]  # the row is that run's own timing.json
+    assert rep["runs"][0]["controller_wake_us"]["max"] == d["controller"]["wake_latency_us"]["max"]
+    assert rep["runs_ok"] == sum(row["verdict"] == "ok" for row in rep["runs"]) == 2, rep
+    assert "run 2 of 2: ok" in r.stdout and (out.parent / "2" / "timing.json").is_file()
+
+
+def test_a_stop_naming_another_node_is_counted_apart() -> None:
+    """With nothing injected, a stop naming another node on a drive's id is the controller misreading
+    late answers: the summary counts it apart from the machine's lateness, and its verdict is not ok."""
+    from tools.bench.timing_repeat import ANOTHER_NODE, run_row, summarise
+
+    def run(verdict: str, reason: str, side: str) -> dict:
+        return {"verdict": verdict, "verdict_reason": reason, "lateness": {"stop_side": side},
+                "controller": {"wake_latency_us": {"p99.9": 40.0, "max": 900.0}},
+                "cyclictest": {"stats": {"p99.9": 50.0, "max": 1200.0}}}
+
+    rows = [run_row(1, run("ok", "", "none")),
+            run_row(2, run("incomplete", "period 9: stale joint state (watchdog); late: the plant's answer", "plant")),
+            run_row(3, run("incomplete", f"period 174: drive 1's state came twice for one SYNC: {ANOTHER_NODE}", "none"))]
+    s = summarise(rows, 10.0, 1000.0)
+    assert s["verdict"] == "stopped" and s["runs_ok"] == 1 and s["another_node"] == 1, s
+    assert s["stopped_by_side"] == {"plant": 1, "another node (misread)": 1}, s
+    assert rows[1]["cyclictest_wake_us"]["max"] == 1200.0
+    assert summarise(rows[:1], 10.0, 1000.0)["verdict"] == "ok"
 
 
 def test_overruns_are_counted_when_every_step_is_forced_slow(tmp_path: Path, controller_bin: Path) -> None:

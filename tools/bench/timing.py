@@ -54,8 +54,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--cpu", type=int, default=None,
                    help="the CPU of the controller's loop, the simulator and cyclictest [the last one]")
     p.add_argument("--method", default="pd")
+    p.add_argument("--repeat", type=int, default=1,
+                   help="runs of the same measurement, each to OUT/RUN/, and OUT/repeat.json: how many ran to their "
+                        "end and what stopped the others (tools/bench/timing_repeat.py) [1]")
     p.add_argument("--record", action="store_true",
-                   help="also keep timing.json for the docs (docs/results/timing.json), which tools/armctl docs renders")
+                   help="also keep timing.json (with --repeat, repeat.json) for the docs (docs/results/timing.json, "
+                        "timing-repeat.json), which tools/armctl docs renders")
 
 
 def _stats(values_us: list[float]) -> dict[str, float | int]:
@@ -372,8 +376,12 @@ def run(ns: argparse.Namespace) -> int:
         raise UsageError(f"--rate: must be in [10, 20000] Hz, got {ns.rate}")
     from tools.build.packages import ensure
 
+    if ns.repeat < 1:
+        raise UsageError(f"--repeat: must be 1 or more, got {ns.repeat}")
     ensure("timing")
     build("release")
+    if ns.repeat > 1:
+        return _run_repeated(ns)
     d = measure(ns.out, ns.duration, ns.rate, ns.rt_priority, ns.cpu, ns.method)
     print(table(d))
     print(f"verdict: {d['verdict']}" + (f": {d['verdict_reason']}" if d["verdict_reason"] else ""))
@@ -382,4 +390,19 @@ def run(ns: argparse.Namespace) -> int:
         from tools.bench.record import record
 
         record("timing", d, f"tools/armctl timing --duration {ns.duration:g} --rate {ns.rate:g} --record")
+    return 0 if d["verdict"] == "ok" else 1
+
+
+def _run_repeated(ns: argparse.Namespace) -> int:
+    from tools.bench.timing_repeat import repeat, table as repeat_table
+
+    d = repeat(ns.out, ns.repeat, ns.duration, ns.rate, ns.rt_priority, ns.cpu, ns.method)
+    print(repeat_table(d))
+    print(f"verdict: {d['verdict']}" + (f": {d['verdict_reason']}" if d["verdict_reason"] else ""))
+    print(f"results: {ns.out / 'repeat.json'}")
+    if ns.record:
+        from tools.bench.record import record
+
+        record("timing-repeat", d, f"tools/armctl timing --repeat {ns.repeat} --duration {ns.duration:g} "
+                                   f"--rate {ns.rate:g} --record")
     return 0 if d["verdict"] == "ok" else 1

@@ -47,6 +47,7 @@ def _load(path: Path, how: str) -> dict[str, Any]:
 RECORDED_BY = {"bench-step": "tools/armctl bench step --record", "bench-synth": "tools/armctl bench synth --record",
                "bench-sim": "tools/armctl bench sim --record", "bench-study": "tools/armctl bench study --record",
                "timing": "tools/armctl timing --record", "faults": "tools/armctl faults --record",
+               "timing-repeat": "tools/armctl timing --repeat 20 --record",
                "test": "tools/armctl test --record", "bench-pil": "tools/armctl bench pil --record"}
 
 
@@ -139,6 +140,12 @@ def timing(r: dict[str, Any]) -> str:
 
     verdict = r["verdict"] + (f": {r['verdict_reason']}" if r.get("verdict_reason") else "")
     return _block(table(r)) + f"\n\nVerdict: {code(verdict)}.\n\n" + _made_by(r)
+
+
+def timing_repeat(r: dict[str, Any]) -> str:
+    from tools.bench.timing_repeat import table
+
+    return _block(table(r)) + "\n\n" + _made_by(r)
 
 
 def faults(r: dict[str, Any]) -> str:
@@ -317,6 +324,7 @@ RENDERERS: dict[str, tuple[Callable[[], dict[str, Any]], Callable[[dict[str, Any
     "bench-study": (lambda: _result("bench-study"), bench_study),
     "pil": (lambda: _result("bench-pil"), pil),
     "timing": (lambda: _result("timing"), timing),
+    "timing-repeat": (lambda: _result("timing-repeat"), timing_repeat),
     "faults": (lambda: _result("faults"), faults),
     "test-time": (lambda: _result("test") if (DOCS_RESULTS / "test.json").is_file() else {}, test_time),
     "headline": (lambda: _load(STUDIES / "paper.headline.json", "tools/armctl study --record"), headline_table),
