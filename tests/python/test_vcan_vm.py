@@ -49,7 +49,7 @@ import pytest
 from host_sim.protocol import DBC_PATH
 from gen.lib.paths import REPO, env_with_repo
 
-pytestmark = pytest.mark.long  # minutes: three runs of the qemu VM (five boots), one of them the rehearsal
+pytestmark = pytest.mark.long  # minutes: three runs of the qemu VM (five boots); the first also runs your arm's rehearsal
 
 # Not serial: the guest's runs are lockstep (no wall clock decides them) and qemu takes one core,
 # so these share the machine with one other test file; a boot that hangs is booted again.
