@@ -136,8 +136,9 @@ class Rehearsal:
 
 @pytest.fixture(scope="module")
 def rehearsal(ports: int, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Rehearsal]:
-    """commission -> hold 1 s -> jog -> the built-in reference 1 s -> a 2 s trajectory file -> Ctrl-C (each
-    as long as its claim needs: a task that ends, followed within FOLLOW_DEG, stopped braked)."""
+    """commission -> hold 5 s -> jog -> the built-in reference 1 s -> a 2 s trajectory file -> Ctrl-C (the
+    hold as the rehearsal's spec says; the others as long as their claim needs: a task that ends,
+    followed within FOLLOW_DEG, stopped braked)."""
     out = tmp_path_factory.mktemp("rehearsal")
     record = out / "record.json"
     bus = ["--bus", f"udp:{ports}", "--record", str(record)]
@@ -145,7 +146,7 @@ def rehearsal(ports: int, tmp_path_factory: pytest.TempPathFactory) -> Iterator[
     plant = Plant(ports, out / "plant")
     try:
         cm = armctl("commission", *bus, "--out", str(out / "commission"))
-        runs = {"hold": armctl("run", "--hold", "--duration", "1", *bus, "--out", str(out / "hold")),
+        runs = {"hold": armctl("run", "--hold", "--duration", "5", *bus, "--out", str(out / "hold")),
                 "jog": armctl("run", "--jog", "elbow=5", *bus, "--out", str(out / "jog")),
                 "reference": armctl("run", "--duration", "1", *bus, "--out", str(out / "reference")),
                 "trajectory": armctl("run", str(traj), *bus, "--out", str(out / "trajectory"))}
@@ -190,6 +191,8 @@ def test_every_task_ends_as_asked_and_the_arm_follows(rehearsal: Rehearsal) -> N
         assert s["final_state"] == "safe-stop" and s["task_report"]["ended"], (name, s)
         worst = max(s["tracking"]["max_abs_deg"].values())
         assert worst < FOLLOW_DEG, (name, s["tracking"])
+    hold = rehearsal.sessions["hold"]["task_report"]
+    assert hold["name"] == "hold" and abs(hold["task_s"] - 5.0) < 1e-3, hold  # the must-hold's 5 s
     jog = rehearsal.sessions["jog"]["task_report"]
     moved = [b - a for a, b in zip(jog["start_pose"], jog["first_point"])]
     assert moved == pytest.approx([0, 0, math.radians(5), 0, 0, 0], abs=1e-6), jog
