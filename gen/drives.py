@@ -93,11 +93,13 @@ class Drive:
         """1000 per-mille at the joint: the motor's rated torque x gear x efficiency (CiA 402)."""
         return self.rated_torque_mnm / 1000 * self.gear[0] / self.gear[1] * self.gear_efficiency
 
-    def node_spec(self, limit: bool = False) -> str:
+    def node_spec(self, limit: bool = False, sim: bool = False) -> str:
         """The programs' --node value: ID, then what the table gives (arm_controller and
         arm_canopen_boot check the drive against it; arm_sim commissions its drive with it), the
-        gear's efficiency, whether a drive without a master watchdog is accepted, and (limit:
-        arm_canopen_boot's, which has no arm) the joint's torque limit the drive must give."""
+        gear's efficiency, whether a drive without a master watchdog is accepted, (limit:
+        arm_canopen_boot's, which has no arm) the joint's torque limit the drive must give, and (sim:
+        arm_sim's) the max torque 0x6072 of a motor sized below the limit, which the master reads
+        from the drive as it reads a real one's."""
         spec = [str(self.node)]
         if "0x6076" in self.given:  # in the drive's own unit
             spec.append(f"rated={round(self.rated_torque_mnm * TORQUE_UNITS[self.torque_unit] / 1000)}")
@@ -113,6 +115,8 @@ class Drive:
             spec.append(f"{drive_check.ACCEPT_NO_WATCHDOG}=true")
         if self.quick_stop_deceleration is not None:
             spec.append(f"quick_stop={self.quick_stop_deceleration}")
+        if sim and "0x6072" in self.given:
+            spec.append(f"max={self.max_torque_permille}")
         if limit and self.joint_torque_limit_nm > 0:
             spec.append(f"limit={self.joint_torque_limit_nm:g}")
         return ",".join(spec)
@@ -186,12 +190,16 @@ class TableUnits:
     gear: tuple[int, int] | None    # motor, shaft revolutions
     unit: str                       # 0x6076's unit (TORQUE_UNITS)
     efficiency: float               # the gear's: the joint gets 0x6076 x gear x it
+    max_permille: int | None = None  # 0x6072: a motor the importer sized below the joint's limit gives it so
 
 
 def _units(get: Callable[[str], tuple[Any, str]], torque_limit: float | None,
-           file_gear: tuple[int, int] | None) -> TableUnits:
+           file_gear: tuple[int, int] | None, sized_nm: float | None = None) -> TableUnits:
     """The units a table gives. get(key) -> (value or None, where it is); torque_limit: the joint's
-    (None: no arm); file_gear: the drive file's 0x6091 (for "joint_torque_limit / gear")."""
+    (None: no arm); file_gear: the drive file's 0x6091 (for "joint_torque_limit / gear"); sized_nm:
+    the motor's rated torque at the joint where the importer sized it below the limit (arm.json's
+    motor_rated_torque_at_joint_nm: a drive rated at the limit would step too coarsely for the link),
+    which "joint_torque_limit / gear" then takes, with the 0x6072 that gives the limit."""
     unit, w = get("torque_unit")
     if unit is None:
         unit = "mNm"
@@ -214,6 +222,7 @@ def _units(get: Callable[[str], tuple[Any, str]], torque_limit: float | None,
     if rated_v == "joint_torque_limit":  # the joint's torque as 0x6076: what CiA 402 does not define
         raise DrivesError(f"{w}: \"joint_torque_limit\": 0x6076 is the motor's rated torque (CiA 402), the joint "
                           f"gets it times the gear; \"{JOINT_TORQUE_LIMIT}\" is the motor that gives the joint's limit")
+    max_permille = None
     if rated_v == JOINT_TORQUE_LIMIT:
         through = gear or file_gear
         if torque_limit is None:
@@ -222,7 +231,11 @@ def _units(get: Callable[[str], tuple[Any, str]], torque_limit: float | None,
             raise DrivesError(f"{w}: \"{JOINT_TORQUE_LIMIT}\": neither the table nor the drive's file gives the gear")
         else:  # rounded up to the drive's unit: the drive gives at least the joint's limit at 1000 per-mille
             per_unit = TORQUE_UNITS[unit]
-            rated_v = math.ceil(round(torque_limit / (through[0] / through[1]) / efficiency * per_unit, 6)) / per_unit
+            at_joint = torque_limit if sized_nm is None else sized_nm
+            rated_v = math.ceil(round(at_joint / (through[0] / through[1]) / efficiency * per_unit, 6)) / per_unit
+            if sized_nm is not None:  # the least per-mille of that motor that gives the joint's limit
+                joint_rated = rated_v * through[0] / through[1] * efficiency
+                max_permille = min(math.ceil(round(torque_limit / joint_rated * 1000, 6)), drive_check.MAX_PERMILLE)
     if rated_v is None:
         return TableUnits(None, enc, gear, unit, float(efficiency))
     top = U32_MAX / TORQUE_UNITS[unit]
@@ -230,7 +243,7 @@ def _units(get: Callable[[str], tuple[Any, str]], torque_limit: float | None,
             or not 1 / TORQUE_UNITS[unit] <= rated_v <= top:
         raise DrivesError(f"{w}: expected the motor's rated torque in N m, {1 / TORQUE_UNITS[unit]:g}..{top:g} (or "
                           f"\"{JOINT_TORQUE_LIMIT}\"), got {rated_v!r}")
-    return TableUnits(float(rated_v), enc, gear, unit, float(efficiency))
+    return TableUnits(float(rated_v), enc, gear, unit, float(efficiency), max_permille)
 
 
 def _stopping(get: Callable[[str], tuple[Any, str]], torque_limit: float | None) -> tuple[
@@ -407,8 +420,9 @@ def load(arm: dict[str, Any], path: Path | None = None) -> DriveConfig:
 
         node_v, w = get("node")
         node = _uint(num if node_v is None else node_v, w, 1, 127)
-        u = _units(get, j["torque_limit"], units["gear"])
-        given = [o for o, v in (("0x6076", u.rated_nm), ("0x608F", u.encoder), ("0x6091", u.gear)) if v is not None]
+        u = _units(get, j["torque_limit"], units["gear"], j.get("motor_rated_torque_at_joint_nm"))
+        given = [o for o, v in (("0x6076", u.rated_nm), ("0x608F", u.encoder), ("0x6091", u.gear),
+                                ("0x6072", u.max_permille)) if v is not None]
         plan = drive_check.Plan(node=node, cycle_us=cycle_us, heartbeat_ms=heartbeat, consumer_ms=consumer,
                                 master_id=master, transmission=transmission, rated=_in_unit(u.rated_nm, u.unit),
                                 encoder=u.encoder, gear=u.gear, units_per_nm=TORQUE_UNITS[u.unit],
@@ -424,7 +438,7 @@ def load(arm: dict[str, Any], path: Path | None = None) -> DriveConfig:
                   u.gear if u.gear is not None else units["gear"], given,
                   [f"warning: {x}" for x in report.warnings] + report.notes,
                   1 if u.encoder is not None else units["encoder_revs"], u.unit, u.efficiency, float(j["torque_limit"]),
-                  report.max_permille, accept, brake, quick_stop)
+                  u.max_permille or report.max_permille, accept, brake, quick_stop)
         _check_torque_limit(path, d)
         out.append(d)
     for b in {d.bus for d in out}:

@@ -15,6 +15,7 @@ import numpy as np
 from gen.arm.arm_file import ArmFile
 from gen.arm.chain import Chain
 from gen.arm.errors import ArmError
+from gen.drive_check import MAX_PERMILLE
 from gen.arm.home import MID_RANGE, Pose
 from gen.arm.reference import (RANGE_MARGIN, REF_MAX_ACCELERATION, REF_TORQUE_FRACTION, default_reference,
                                reference_torque)
@@ -165,31 +166,60 @@ def _check_gravity_at_home(m1: mujoco.MjModel, chain: Chain, pose: Pose, limits:
                            "(arm file home)")
 
 
-# CiA 402 commands torque in steps of 1 per mille of the motor's rated torque (0x6071), which the
-# emulated drives give the joint's torque limit through the gear (firmware/protocol/drives.toml:
+# CiA 402 commands torque in steps of 1 per mille of the motor's rated torque (0x6071). The emulated
+# drives' motor gives the joint's torque limit at its rated torque (firmware/protocol/drives.toml:
 # "joint_torque_limit / gear"): a step of a thousandth of the limit at the joint. One step that
 # changes a joint's speed by more than MAX_STEP_SPEED within one loop period leaves the loop
-# nothing finer to hold it with: it cycles between steps, up to the safety layer's 2 pi rad/s
-# stop (SO-100's gripper in docs/arm-compatibility.md: 1.6 rad/s a step; SO-101's, 0.6, runs).
+# nothing finer to hold it with: it cycles between steps, up to the safety layer's 2 pi rad/s stop
+# (a light last link on a limit sized for a heavy one: SO-100's gripper, 1.6 rad/s a step; SO-101's,
+# 0.6, runs). There the importer sizes the motor as an integrator would: rated at the joint so that
+# a step changes the speed by SIZED_STEP_SPEED, and its max torque 0x6072 (per-mille of the rated,
+# up to an INTEGER16's 32767) gives the joint's limit; only a joint that even 32767 per-mille
+# cannot serve stays a limitation.
 TORQUE_STEP = 1e-3
 MAX_STEP_SPEED = 1.0  # rad/s
+SIZED_STEP_SPEED = 0.25  # rad/s: a quarter of MAX_STEP_SPEED, SO-101's gripper's half
 
 
-def coarse_torque_steps(names: list[str], limits: list[float], inertia_at_home: np.ndarray,
-                        period: float) -> list[dict[str, object]]:
-    """The joints whose drive, giving the joint's torque limit at its rated torque, changes the
-    joint's speed within one period by more than MAX_STEP_SPEED with one torque step (M_jj at
-    home): arm.json's limitations, each with what to change."""
+def _round_down(x: float) -> float:
+    """Down to two significant digits (a motor's rating as a catalogue gives it)."""
+    scale = 10.0 ** (math.floor(math.log10(x)) - 1)
+    return round(math.floor(x / scale + 1e-9) * scale, 12)
+
+
+def size_drives(names: list[str], limits: list[float], inertia_at_home: np.ndarray,
+                period: float) -> tuple[list[float | None], list[dict[str, object]], list[str]]:
+    """Per joint, the rated torque at the joint of a motor sized below the limit (None: the limit's
+    own motor, whose step is fine enough), where one torque step of a drive rated at the limit
+    changes the joint's speed within one period by more than MAX_STEP_SPEED (M_jj at home); the
+    joints no motor can serve (arm.json's limitations, each with what to change); and a warning
+    per sized joint."""
+    sized: list[float | None] = []
     out: list[dict[str, object]] = []
+    notes: list[str] = []
     for name, lim, mjj in zip(names, limits, inertia_at_home):
         step = TORQUE_STEP * lim
         speed = step / float(mjj) * period
-        if speed > MAX_STEP_SPEED:
-            out.append({"joint": name, "kind": "torque-step", "text": (
-                f"joint '{name}': one torque step of a drive whose rated torque gives its {lim:g} N m limit "
-                f"(CiA 402 commands 1 per mille of the rated torque: {step:.3g} N m at the joint) changes its "
-                f"speed by {speed:.2g} rad/s within a {period * 1e3:g} ms period (it moves {float(mjj):.2g} kg m^2 "
-                f"at home), more than {MAX_STEP_SPEED:g} rad/s: the loop has nothing finer to hold it with; give "
-                "it a drive with a finer step (the arm file's drives: a lower rated_torque_nm, or more gear) or "
-                "its drive's real torque limit (torque_limits)")})
-    return out
+        if speed <= MAX_STEP_SPEED:
+            sized.append(None)
+            continue
+        rated = _round_down(SIZED_STEP_SPEED * float(mjj) / period / TORQUE_STEP)
+        if lim / rated * 1000 <= MAX_PERMILLE:
+            sized.append(rated)
+            notes.append(f"joint '{name}': a motor rated at its {lim:g} N m limit is too coarse for the {float(mjj):.2g} "
+                         f"kg m^2 it moves (one CiA 402 step, 1 per mille of the rated torque, would change its speed "
+                         f"by {speed:.2g} rad/s within a {period * 1e3:g} ms period): its emulated drive's motor is "
+                         f"rated {rated:g} N m at the joint (a step of {rated * TORQUE_STEP:.3g} N m, "
+                         f"{SIZED_STEP_SPEED:g} rad/s), its max torque (0x6072) gives the limit; give the real "
+                         "drive's in an arm file (drives)")
+            continue
+        sized.append(None)
+        out.append({"joint": name, "kind": "torque-step", "text": (
+            f"joint '{name}': one torque step of a drive whose rated torque gives its {lim:g} N m limit "
+            f"(CiA 402 commands 1 per mille of the rated torque: {step:.3g} N m at the joint) changes its "
+            f"speed by {speed:.2g} rad/s within a {period * 1e3:g} ms period (it moves {float(mjj):.2g} kg m^2 "
+            f"at home), more than {MAX_STEP_SPEED:g} rad/s, and a motor fine enough would need more than "
+            f"{MAX_PERMILLE} per-mille (0x6072) for the limit: the loop has nothing finer to hold it with; give "
+            "it a drive with a finer step (the arm file's drives: a lower rated_torque_nm, or more gear) or "
+            "its drive's real torque limit (torque_limits)")})
+    return sized, out, notes

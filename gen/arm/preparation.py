@@ -13,7 +13,7 @@ from gen.arm.compile import compile_model
 from gen.arm.design import arm_design, design_config
 from gen.arm.drive_train import drive_train, payload_site, rotor_inertia
 from gen.arm.home import home_pose, lock_other_joints
-from gen.arm.limits import coarse_torque_steps, torque_limits
+from gen.arm.limits import size_drives, torque_limits
 from gen.arm.load import load
 from gen.arm.reference import arm_reference
 from gen.arm.wiring import wiring
@@ -53,8 +53,8 @@ def prepare(af: ArmFile, design: Path | None = None) -> Prepared:
     flange_from = payload_site(spec, dyn.model, chain, af)
     out = write(spec, dyn, chain, pose.home, limits, name, path, warnings)
     lims = [lim for lim, _ in limits]
-    limitations = coarse_torque_steps(chain.names, lims, out.inertia_at_home, 1.0 / cfg.rate)
-    warnings += [x["text"] for x in limitations]
+    sized, limitations, sized_notes = size_drives(chain.names, lims, out.inertia_at_home, 1.0 / cfg.rate)
+    warnings += sized_notes + [x["text"] for x in limitations]
     drive_info, plant = drive_train(af, out.model, out.xml, chain, pose.home, lims, dyn.timestep, flange_from)
     reference = arm_reference(out.model, pose.home, pose.ranges, lims, chain.names, warnings)
     design_info, design_text = arm_design(cfg, af, design, out.inertia_at_home, lims, chain.names)
@@ -64,7 +64,7 @@ def prepare(af: ArmFile, design: Path | None = None) -> Prepared:
         "arm_file": str(af.path) if af.path else None,
         "model_format": "urdf" if path.suffix.lower() == ".urdf" else "mjcf",
         "n_joints": chain.n,
-        "joints": info_joints(out.model, chain.names, limits, pose.ranges, pose.home),
+        "joints": info_joints(out.model, chain.names, limits, pose.ranges, pose.home, sized),
         "locked": locked,
         "home_from": pose.source,
         "loop_rate_hz": cfg.rate,

@@ -215,8 +215,12 @@ def inverse_dynamics_difference(a: mujoco.MjModel, b: mujoco.MjModel, samples: i
 
 
 def info_joints(m: mujoco.MjModel, names: list[str], limits: list[tuple[float, str]], ranges: list[Any],
-                home: list[float]) -> list[dict[str, Any]]:
-    """arm.json's joints: limits, ranges, home, and the armature, damping and friction the model gives."""
+                home: list[float], sized: list[float | None]) -> list[dict[str, Any]]:
+    """arm.json's joints: limits, ranges, home, the armature, damping and friction the model gives,
+    and where the importer sized a joint's motor below its limit (limits.size_drives), its rated
+    torque at the joint (gen/drives.py: "joint_torque_limit / gear" takes it)."""
     return [{"name": jname, "torque_limit": limits[i][0], "torque_limit_from": limits[i][1], "range": ranges[i],
              "home": home[i], "armature": float(m.dof_armature[i]), "damping": float(m.dof_damping[i]),
-             "frictionloss": float(m.dof_frictionloss[i])} for i, jname in enumerate(names)]
+             "frictionloss": float(m.dof_frictionloss[i]),
+             **({} if sized[i] is None else {"motor_rated_torque_at_joint_nm": sized[i]})}
+            for i, jname in enumerate(names)]

@@ -646,7 +646,8 @@ co_sim_t *sim_co_begin(const sim_config_t *cfg, const sim_co_config_t *co, sim_a
     memcpy(sp->timing, cfg->timelines, sizeof(sp->timing));
     for (int j = sp->n; j < SIM_MAX_JOINTS; ++j) {
         const sim_co_preset_t *own = &co->node_preset[j];
-        if (own->rated_torque_mnm || own->encoder_increments || own->gear_motor || own->gear_efficiency > 0.0) {
+        if (own->rated_torque_mnm || own->encoder_increments || own->gear_motor || own->gear_efficiency > 0.0 ||
+            own->max_torque_permille) {
             snprintf(err, errcap, "--node %d: the arm has %d drives", j + 1, sp->n);
             return NULL;
         }
@@ -665,6 +666,7 @@ co_sim_t *sim_co_begin(const sim_config_t *cfg, const sim_co_config_t *co, sim_a
         if (own->gear_efficiency > 0.0) pre.gear_efficiency = own->gear_efficiency;
         if (own->encoder_increments) pre.encoder_increments = own->encoder_increments;
         if (own->quick_stop_decel) pre.quick_stop_decel = own->quick_stop_decel;
+        if (own->max_torque_permille) pre.max_torque_permille = own->max_torque_permille;
         if (own->gear_motor) {
             pre.gear_motor = own->gear_motor;
             pre.gear_shaft = own->gear_shaft;

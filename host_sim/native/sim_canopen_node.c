@@ -272,6 +272,7 @@ static void apply_presets(sim_co_node_t *n)
     if (p->gear_motor) sim_co_od_set(&n->od, 0x6091u, 1u, p->gear_motor);
     if (p->gear_shaft) sim_co_od_set(&n->od, 0x6091u, 2u, p->gear_shaft);
     if (p->quick_stop_decel) sim_co_od_set(&n->od, 0x6085u, 0u, p->quick_stop_decel);
+    if (p->max_torque_permille) sim_co_od_set(&n->od, 0x6072u, 0u, p->max_torque_permille);
 }
 
 static void boot(sim_co_node_t *n, int64_t now_ns, int comm_only)

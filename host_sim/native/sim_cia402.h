@@ -23,6 +23,7 @@ typedef struct {
     uint32_t torque_units_per_nm;    /* 0x6076's unit: 1000 mN m (CiA 402's; 0 means it), 1000000 µN m */
     double gear_efficiency;          /* the gear's, (0, 1]; 0 means 1 (no object holds it) */
     uint32_t quick_stop_decel;       /* 0x6085 */
+    uint32_t max_torque_permille;    /* 0x6072: a motor sized below the joint's limit gives it above 1000 */
 } sim_co_preset_t;
 
 typedef struct {

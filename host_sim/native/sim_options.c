@@ -285,8 +285,8 @@ static int sim_od(void *t, void *c, const argv_opt_t *opt, const char *v, char *
     return 0;
 }
 
-/* --node ID[,rated=N][,encoder=INC][,gear=M/S][,torque_unit=U][,efficiency=E][,quick_stop=N]: node ID's dictionary
- * preset (0x6085 too) and its gear's efficiency (arm_controller's --node syntax: the arm's drive table, python -m
+/* --node ID[,rated=N][,encoder=INC][,gear=M/S][,torque_unit=U][,efficiency=E][,quick_stop=N][,max=N]: node ID's
+ * dictionary preset (0x6085 and 0x6072 too) and its gear's efficiency (arm_controller's --node syntax: the arm's drive table, python -m
  * gen.drives; its limit= and accept_no_master_watchdog= are the master's, and taken without effect here). */
 static int sim_node(void *t, void *c, const argv_opt_t *opt, const char *v, char *err, unsigned long errcap)
 {
@@ -321,6 +321,8 @@ static int sim_node(void *t, void *c, const argv_opt_t *opt, const char *v, char
             p->torque_units_per_nm = strcmp(eq + 1, "uNm") == 0 ? 1000000u : 1000u;
         } else if (strcmp(tok, "quick_stop") == 0) {
             bad = node_u32(eq + 1, &p->quick_stop_decel);
+        } else if (strcmp(tok, "max") == 0) { /* 0x6072 holds an INTEGER16's per-mille */
+            bad = node_u32(eq + 1, &p->max_torque_permille) || p->max_torque_permille > 32767u;
         } else if (strcmp(tok, "gear") == 0 && slash != NULL) {
             *slash = '\0';
             bad = node_u32(eq + 1, &p->gear_motor) || node_u32(slash + 1, &p->gear_shaft);
@@ -336,8 +338,8 @@ static int sim_node(void *t, void *c, const argv_opt_t *opt, const char *v, char
         }
         if (bad) {
             snprintf(err, errcap, "%s '%s': expected ID[,rated=N][,encoder=INC][,gear=M/S][,torque_unit=mNm|uNm]"
-                     "[,efficiency=E][,limit=NM][,accept_no_master_watchdog=true][,quick_stop=N], whole numbers >= 1, "
-                     "0 < E <= 1", opt->name, v);
+                     "[,efficiency=E][,limit=NM][,accept_no_master_watchdog=true][,quick_stop=N][,max=1..32767], whole "
+                     "numbers >= 1, 0 < E <= 1", opt->name, v);
             return -1;
         }
     }

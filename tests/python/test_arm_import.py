@@ -436,17 +436,46 @@ def holding(xml: str, q: list[float]) -> np.ndarray:
     return holding_torque(mujoco.MjModel.from_xml_string(xml), np.asarray(q))
 
 
-def test_a_drive_too_coarse_for_its_link_is_named_in_the_limitations(tmp_path: Path) -> None:
-    """SO-100's gripper: a 35 N m drive on a 2e-5 kg m^2 link. One step of a CiA 402 drive rated at the
-    limit (1 per mille: 0.035 N m) changes its speed by 1.6 rad/s in a period; the importer names the
-    joint and what to change (the run cycles between steps up to the safety layer's stop)."""
+def test_a_light_last_link_gets_a_motor_sized_for_it(tmp_path: Path) -> None:
+    """SO-100's gripper: a 35 N m limit on a 2e-5 kg m^2 link. One step of a CiA 402 drive rated at the
+    limit (1 per mille: 0.035 N m) would change its speed by 1.6 rad/s in a period (the run cycles
+    between steps up to the safety layer's stop). The importer sizes the emulated drive's motor as an
+    integrator would: rated so that a step changes the speed by a quarter rad/s, and its max torque
+    0x6072 (per-mille of that rating, above 1000) gives the joint's limit, in CiA 402 units: per-mille
+    of the motor's rated torque, times the gear. A joint the limit's motor serves keeps it."""
+    from gen import drives
+
     text = chain_mjcf(tip_mass=2e-3).replace('<motor joint="j2" ctrlrange="-50 50"/>',
                                              '<motor joint="j2" ctrlrange="-35 35"/>')
     p = prep(write(tmp_path, text))
+    assert p.info["limitations"] == []
+    j0, j1, j2 = p.info["joints"]
+    assert "motor_rated_torque_at_joint_nm" not in j0 and "motor_rated_torque_at_joint_nm" not in j1
+    w = [x for x in p.info["warnings"] if x.startswith("joint 'j2': a motor rated at its 35 N m limit is too coarse")]
+    assert len(w) == 1 and "0x6072" in w[0]
+    cfg = drives.load(p.info)
+    d0, d2 = cfg.drives[0], cfg.drives[2]
+    assert d0.max_torque_permille == 1000 and "max=" not in d0.node_spec(sim=True)
+    assert d0.joint_rated_torque_nm == pytest.approx(j0["torque_limit"], rel=1e-2)
+    # the sized motor: a step well under the limit's thousandth, and its 0x6072 still gives the limit
+    step = d2.joint_rated_torque_nm / 1000
+    assert step < 0.035 / 4 and d2.joint_rated_torque_nm == pytest.approx(d2.rated_torque_mnm / 1000 * 101)
+    assert 1000 < d2.max_torque_permille <= 32767 and "0x6072" in d2.given
+    assert d2.max_torque_permille * step >= 35.0 > (d2.max_torque_permille - 1) * step
+    assert f"max={d2.max_torque_permille}" in d2.node_spec(sim=True) and "max=" not in d2.node_spec()
+    assert prep(write(tmp_path, chain_mjcf(), "heavy.xml")).info["limitations"] == []
+
+
+def test_a_link_no_motor_can_serve_is_named_in_the_limitations(tmp_path: Path) -> None:
+    """A link so light that even a motor whose 0x6072 is an INTEGER16's 32767 per-mille steps too
+    coarsely for it: named, with what to change, and its drive stays rated at the limit."""
+    text = chain_mjcf(tip_mass=2e-3).replace('<motor joint="j2" ctrlrange="-50 50"/>',
+                                             '<motor joint="j2" ctrlrange="-5000 5000"/>')
+    p = prep(write(tmp_path, text))
     [lim] = p.info["limitations"]
     assert lim["joint"] == "j2" and lim["kind"] == "torque-step"
-    assert "0.035 N m" in lim["text"] and "rated_torque_nm" in lim["text"] and lim["text"] in p.info["warnings"]
-    assert prep(write(tmp_path, chain_mjcf(), "heavy.xml")).info["limitations"] == []
+    assert "32767" in lim["text"] and "rated_torque_nm" in lim["text"] and lim["text"] in p.info["warnings"]
+    assert "motor_rated_torque_at_joint_nm" not in p.info["joints"][2]
 
 
 def test_a_build_that_finds_its_arm_prepared_does_not_load_mujoco(tmp_path: Path) -> None:

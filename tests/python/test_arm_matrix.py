@@ -40,15 +40,13 @@ def test_the_matrix_is_large_and_every_row_says_what_happened() -> None:
 
 # Every arm of the committed matrix that is not ok, and how it ended: the floor the matrix holds
 # (one more arm not ok, or another outcome, fails here until this list says so; an arm made ok
-# fails too, so that the list shrinks with the fixes). Issue 50's target is the xfail below.
+# fails too, so that the list shrinks with the fixes).
 MATRIX_NOT_OK = {
     "example-robot-data/cmeel.prefix/share/example-robot-data/robots/finger_edu_description/robots/finger_edu.urdf":
         "refused",
-    "example-robot-data/cmeel.prefix/share/example-robot-data/robots/so_arm_description/urdf/so100.urdf": "failed",
     "gymnasium-robotics/gymnasium_robotics/envs/assets/adroit_hand/adroit_hammer.xml": "refused",
     "robosuite-models/robosuite_models/assets/robots/aloha/robot.xml#left/waist": "refused",
     "robosuite-models/robosuite_models/assets/robots/aloha/robot.xml#right/waist": "refused",
-    "robosuite/robosuite/models/assets/robots/jaco/robot.xml": "tracking-bound-exceeded",
     "robosuite/robosuite/models/assets/robots/spot_arm/robot.xml": "failed",
     "rtb-data/rtbdata/xacro/abb_irb140_description/urdf/irb140.urdf": "refused",
     "rtb-data/rtbdata/xacro/kuka_description/kuka_lbr_iiwa/urdf/lbr_iiwa_14_r820.urdf": "refused",
@@ -59,7 +57,7 @@ MATRIX_NOT_OK = {
 
 def test_every_arm_not_ok_is_known_and_the_rest_are_ok() -> None:
     """The floor: the matrix's arms that are not ok are exactly the known ones, each ending as it
-    did (54 of 65 ok); any other arm is ok."""
+    did (56 of 65 ok); any other arm is ok."""
     got = {r["id"]: r["result"] for r in DOC["arms"] if r["result"] != "ok"}
     assert got == MATRIX_NOT_OK, {"newly not ok": {k: v for k, v in got.items() if MATRIX_NOT_OK.get(k) != v},
                                   "no longer as listed": {k: v for k, v in MATRIX_NOT_OK.items() if got.get(k) != v}}
@@ -89,10 +87,9 @@ def test_every_arm_that_gives_its_physics_runs_or_says_why_and_refusals_name_the
     assert all(arms.file_defect(r["reason"]) for r in DOC["arms"] if r["result"] == "refused")
 
 
-@pytest.mark.xfail(strict=True, reason="issue 50's 95 %: 54 of the 57 arms that give their physics are ok (94.7 %): "
-                                       "SO-100 and robosuite's Jaco are named (a drive too coarse for a link), "
-                                       "robosuite's Spot arm is CONTROLLER_DEFECTS' (per-joint tuning, issue 47)")
 def test_of_the_arms_that_give_their_physics_95_percent_run_ok() -> None:
+    """Issue 50: 56 of the 57 (98 %): SO-100's gripper and robosuite's Jaco joint 7 run on the motor
+    the importer sized for their light links; robosuite's Spot arm is CONTROLLER_DEFECTS'."""
     assert arms_page.summary(DOC)["ok_fraction_with_physics"] >= 0.95
 
 

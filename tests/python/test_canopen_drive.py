@@ -272,20 +272,22 @@ def test_arm_overrides_preset_the_scaling(rig: Rig) -> None:
     assert node.sdo[0x6091][1].raw == 50 and node.sdo[0x6091][2].raw == 1
 
 
-@pytest.mark.parametrize("rig", [["--rated-torque-mnm", "100000", "--node", "1,rated=28000,encoder=4096,gear=160/1",
-                                  "--node", "2,rated=5000"]], indirect=True)
+@pytest.mark.parametrize("rig", [["--rated-torque-mnm", "100000", "--node",
+                                  "1,rated=28000,encoder=4096,gear=160/1,max=6418", "--node", "2,rated=5000"]],
+                         indirect=True)
 def test_a_nodes_own_preset_from_the_drive_table(rig: Rig) -> None:
     """--node (the arm's drive table, as armctl hil passes it): node 1's own scaling over every
-    node's --rated-torque-mnm; node 2's preset is not node 1's."""
+    node's --rated-torque-mnm, and the max torque of a motor the importer sized below the joint's
+    limit (0x6072 above 1000); node 2's preset is not node 1's."""
     node = rig.node
-    assert node.sdo[0x6076].raw == 28000
+    assert node.sdo[0x6076].raw == 28000 and node.sdo[0x6072].raw == 6418
     assert node.sdo[0x608F][1].raw == 4096
     assert node.sdo[0x6091][1].raw == 160 and node.sdo[0x6091][2].raw == 1
     # node 2 (the same bus: drives 1 and 2) reads its own rated torque, and none of node 1's scaling
     two = rig.net.add_node(2, str(EDS))
     assert two.sdo[0x1018][4].raw == 2  # its serial number is its node id: it is node 2 that answers
     assert two.sdo[0x6076].raw == 5000
-    assert two.sdo[0x608F][1].raw != 4096 and two.sdo[0x6091][1].raw != 160
+    assert two.sdo[0x608F][1].raw != 4096 and two.sdo[0x6091][1].raw != 160 and two.sdo[0x6072].raw == 1000
 
 
 def test_quick_stop_and_the_shortcut_to_operation_enabled_as_python_canopen_asks(rig: Rig) -> None:

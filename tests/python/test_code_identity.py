@@ -38,3 +38,17 @@ def test_documentation_does_not_move_it_and_sources_do(tree: Path) -> None:
     assert _identity() != before
     shutil.rmtree(tree / "gen")
     assert _identity() != before
+
+
+def test_the_real_identity_covers_the_firmware_the_simulator_the_synthesis_and_the_run() -> None:
+    """The identity of this repository hashes every source of the controller, the simulator and the
+    synthesis, and the run's own verdict (the test above holds its rule on a made-up tree)."""
+    from gen.lib.paths import REPO
+
+    hashed = {str(p.relative_to(REPO)) for name in ci.SOURCES for p in ci._files(REPO / name)}
+    for folder in ("firmware", "host_sim", "gen"):
+        sources = {str(p.relative_to(REPO)) for p in (REPO / folder).rglob("*") if p.suffix in (".c", ".h", ".py")
+                   and not ci.SKIP_PARTS.intersection(p.parts)}
+        assert sources and not sources - hashed, (folder, sorted(sources - hashed)[:5])
+    assert {"tools/run/verdict.py", "tools/run/hil.py", "firmware/params/params.toml"} <= hashed
+    assert not any(p.endswith(".md") for p in hashed)

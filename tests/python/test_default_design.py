@@ -11,6 +11,7 @@ import subprocess
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from gen.arm import AUTO_WN_MAX, AUTO_WN_MIN, DEFAULT_DESIGN, DEFAULT_MODEL, auto_bandwidth, load_arm_file, prepare
 from gen.lib import toml_input
@@ -26,6 +27,21 @@ def test_an_arm_without_a_design_gets_a_bandwidth_that_fits_it() -> None:
     ctl = toml_input.loads(prep.design_text)["controller"]
     wn = d["wn_rad_s"]
     assert math.isclose(ctl["E1"][0][0], wn * wn) and math.isclose(ctl["E2"][0][0], 2 * wn) and ctl["D12"] == [[1.0]]
+    # it fits: M_jj wn^2 e of an error at the 2 deg bound stays within the half of each joint's torque
+    # limit the reference leaves, and the tightest joint (named in the why) is at it (wn is no lower
+    # than it must be): M from the prepared model at home, computed here
+    import mujoco
+
+    m = mujoco.MjModel.from_xml_string(prep.xml)
+    data = mujoco.MjData(m)
+    joints = prep.info["joints"]
+    data.qpos[:] = [j["home"] for j in joints]
+    mujoco.mj_forward(m, data)
+    mass = np.zeros((m.nv, m.nv))
+    mujoco.mj_fullM(m, data, mass)
+    asks = np.diag(mass) * wn * wn * math.radians(2.0) / (0.5 * np.array([j["torque_limit"] for j in joints]))
+    assert asks.max() == pytest.approx(1.0, rel=1e-6), asks
+    assert f"(the tightest: {joints[int(asks.argmax())]['name']})" in d["why"], (d["why"], asks)
 
 
 def test_the_bandwidth_is_bounded_by_the_tightest_joint() -> None:

@@ -78,6 +78,25 @@ def test_armctl_docs_check_finds_every_figure_rendered_from_its_results_file() -
             f"files, each as it stands: {', '.join(sorted(found))}") in r.stdout, r.stdout
 
 
+
+def test_armctl_docs_check_fails_on_a_page_that_differs_and_changes_nothing(tmp_path: Path,
+                                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    """The check itself (the command's run, as armctl calls it): a page with a figure typed into a
+    region is named, the command fails, and the page is left as it was."""
+    import argparse
+
+    page = tmp_path / "benchmarks.md"
+    text = (DOCS / "reference" / "benchmarks.md").read_text()
+    m = docs_cmd.REGION.search(text)
+    figure = re.search(r"\d+\.\d+", m.group("body"))
+    typed = text[:m.start("body") + figure.start()] + "9" + text[m.start("body") + figure.start():]
+    page.write_text(typed)
+    monkeypatch.setattr(docs_cmd, "REPO", tmp_path)
+    monkeypatch.setattr(docs_cmd, "pages", lambda: [page])
+    with pytest.raises(docs_cmd.DocsError, match=r"^1 page\(s\) differ from their results files"):
+        docs_cmd.run(argparse.Namespace(check=True))
+    assert page.read_text() == typed
+
 def test_every_region_renders_and_a_typed_figure_is_caught() -> None:
     regions = {m.group("name") for p in docs_cmd.pages() for m in docs_cmd.REGION.finditer(p.read_text())}
     assert regions == set(docs_cmd.RENDERERS), f"regions without a renderer, or renderers no page uses: {regions}"

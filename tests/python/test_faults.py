@@ -98,12 +98,31 @@ def test_a_killed_logger_makes_the_run_incomplete_naming_the_logger_and_the_loss
     assert any(f"telemetry lost: {lost if lost is not None else 'unknown'} messages" in r for r in row["reasons"]), row
 
 
-def test_a_stalled_logger_is_incomplete_exactly_when_it_lost_telemetry(matrix: dict[str, dict]) -> None:
+def _distinct_logged(log: Path) -> dict[str, int]:
+    """Each channel's distinct sequence numbers in the log, read here."""
+    from tools.run.telemetry_log import read_log
+
+    out = {}
+    for ch, c in read_log(log).items():
+        msgs = c.messages
+        seqs = msgs["seq"] if hasattr(msgs, "dtype") else [m.seq for m in msgs]
+        out[ch] = len({int(s) for s in seqs})
+    return out
+
+
+def test_a_stalled_logger_is_incomplete_exactly_when_it_lost_telemetry(matrix: dict[str, dict],
+                                                                       faults_out: Path) -> None:
     """0.5 s stopped: what its receive queue could not hold is counted lost, by the messages'
     sequence numbers, and the run is incomplete for exactly that; nothing lost, the run is ok."""
     row = matrix["stalled-logger"]
     lost = row["telemetry_lost"]
     assert isinstance(lost, int) and lost >= 0 and not row["safe_state"], row  # counted, and the arm ran on
+    # the count is the log's: each channel's messages found in it (read here) are those sent less those lost
+    run = json.loads((faults_out / "stalled-logger" / "run.json").read_text())
+    tele = run["transport"]["telemetry"]
+    logged = _distinct_logged(faults_out / "stalled-logger" / "telemetry.lcmlog")
+    assert {ch: logged.get(ch, 0) for ch in tele} == {ch: t["sent"] - t["lost"] for ch, t in tele.items()}, tele
+    assert sum(t["lost"] for t in tele.values()) == lost, (tele, lost)
     if lost:
         assert row["verdict"] == "incomplete" and row["reasons"] == [f"incomplete: telemetry lost: {lost} messages"], row
     else:

@@ -95,7 +95,10 @@ BASE_DESIGN = parse_config(DESIGN)
 @given(_mutations(DESIGN))
 @example(m=(("arm",), {"\n": None}))  # a key of the user's with a line break, found by hypothesis in CI
 def test_design_config_parser_raises_only_config_error(m: tuple) -> None:
-    path, value = m
+    _parse_mutated_design(*m)
+
+
+def _parse_mutated_design(path: tuple, value: object) -> None:
     try:
         cfg = parse_config(_mutate(DESIGN, path, value))
     except ConfigError as exc:
@@ -110,6 +113,13 @@ def test_design_config_parser_raises_only_config_error(m: tuple) -> None:
     if isinstance(original, dict) or _contains(value, lambda v: v is None):
         return
     assert not _same(cfg, BASE_DESIGN) or _equivalent(value, original), (path, value, original)
+
+
+@pytest.mark.parametrize("factor", [0.5, 2.0])
+def test_design_config_parser_keeps_each_value_it_accepts(factor: float) -> None:
+    """Each leaf of the design, its numbers moved (what hypothesis may not happen to draw)."""
+    for path in _leaves(DESIGN):
+        _parse_mutated_design(path, _near(_get(DESIGN, path), factor))
 
 
 def _same(a: object, b: object) -> bool:
@@ -164,11 +174,31 @@ def load_text_of(text: str, where: Path | None = None) -> object:
         return load(f)
 
 
+BASE_STUDY = load_text_of(STUDY_TEXT)
+
+
 @SETTINGS
 @given(_mutations(STUDY))
 @example(m=(("scenario",), {"\n": False}))
 def test_study_config_loader_raises_only_study_config_error(tmp_path: Path, m: tuple) -> None:
-    path, value = m
+    _load_mutated_study(tmp_path, *m)
+
+
+def _leaves(doc: dict) -> list[tuple]:
+    """Every path _mutations() reaches whose value is no table."""
+    return [(k,) for k, v in doc.items() if not isinstance(v, dict)] + [
+        (k, k2) for k, v in doc.items() if isinstance(v, dict) for k2, v2 in v.items() if not isinstance(v2, dict)]
+
+
+@pytest.mark.parametrize("path", _leaves(STUDY), ids=".".join)
+@pytest.mark.parametrize("factor", [0.5, 2.0])
+def test_study_config_loader_keeps_each_value_it_accepts(tmp_path: Path, path: tuple, factor: float) -> None:
+    """Each leaf of the study, its numbers moved (what hypothesis may not happen to draw): loaded as
+    given, or refused in one line naming it."""
+    _load_mutated_study(tmp_path, path, _near(_get(STUDY, path), factor))
+
+
+def _load_mutated_study(tmp_path: Path, path: tuple, value: object) -> None:
     doc = _mutate(STUDY, path, value)
     try:
         text = dumps(doc)
@@ -183,7 +213,21 @@ def test_study_config_loader_raises_only_study_config_error(tmp_path: Path, m: t
     except StudyConfigError as exc:
         _one_line_naming(exc, *map(str, path), str(f))
         return
-    assert cfg is not None
+    assert type(cfg) is type(BASE_STUDY)
+    # what it accepted is what it was given (as for the design config above): a leaf given another
+    # TOML value gives another study (a loader that dropped or defaulted it would give the original)
+    original = _get(STUDY, path)
+    if isinstance(original, dict) or _contains(value, lambda v: v is None):
+        return
+    if path == ("study_tuning_cap",) and value >= cfg.cap:  # the study's cap is never above [tuning] cap
+        assert cfg.study_cap == cfg.cap, cfg.study_cap
+        return
+    assert not _same(_loaded(cfg), _loaded(BASE_STUDY)) or _equivalent(value, original), (path, value, original)
+
+
+def _loaded(cfg: object) -> object:
+    """What the loader made of the study, without where it was read from and the document it read."""
+    return dataclasses.replace(cfg, path=Path(), tuning_file=Path(cfg.tuning_file.name), raw={})
 
 
 @SETTINGS

@@ -14,8 +14,7 @@ import numpy as np
 import pytest
 
 from arm_models import heavy_wrist_variant
-from gen.arm import (DEFAULT_DESIGN, DEFAULT_MODEL, REF_TORQUE_FRACTION, load_arm_file, prepare,
-                     reference_peak_fraction)
+from gen.arm import DEFAULT_DESIGN, DEFAULT_MODEL, REF_TORQUE_FRACTION, load_arm_file, prepare
 from gen.lib.paths import REPO
 
 
@@ -67,15 +66,30 @@ def test_the_reported_peak_torque_is_the_trajectorys_peak() -> None:
     assert np.allclose(ref["peak_torque_fraction"], frac, rtol=1e-3), (ref["peak_torque_fraction"], frac)
 
 
-def test_a_heavy_wrists_default_reference_fits_its_torque_limits(tmp_path: Path) -> None:
+def _heavy_wrist_peak(tmp_path: Path) -> tuple[dict, list[float], np.ndarray]:
+    """The heavy wrist's default reference, its warnings and its peak torque against the limits,
+    computed here (not the code's own figure)."""
     prep, m = _prepared(heavy_wrist_variant(tmp_path))
     ref, joints = prep.info["reference"], prep.info["joints"]
-    frac = reference_peak_fraction(m, [j["home"] for j in joints], ref["amp"], ref["freq_hz"],
-                                   [j["torque_limit"] for j in joints])
-    assert max(frac) <= REF_TORQUE_FRACTION + 1e-6
-    assert min(frac[3:]) > 0.4  # scaled no more than it needs (steps of 10 %)
+    frac = _peak_torque(m, [j["home"] for j in joints], ref["amp"], ref["freq_hz"]) / np.array(
+        [j["torque_limit"] for j in joints])
+    return ref, prep.info["warnings"], frac
+
+
+@pytest.mark.xfail(strict=True, reason="the fit checks the code's own peak (reference_torque samples the slowest "
+                                       "joint's period, 5 s, not the trajectory's, 20 s): the heavy wrist's wrist_1 "
+                                       "peaks at 0.544 of its limit along the whole trajectory, 0.491 reported")
+def test_a_heavy_wrists_default_reference_fits_its_torque_limits(tmp_path: Path) -> None:
+    _, _, frac = _heavy_wrist_peak(tmp_path)
+    assert frac.max() <= REF_TORQUE_FRACTION + 1e-6, frac
+
+
+def test_a_heavy_wrists_default_reference_is_scaled_down_with_a_note(tmp_path: Path) -> None:
+    ref, warnings, frac = _heavy_wrist_peak(tmp_path)
+    assert min(frac[3:]) > 0.4, frac  # the wrists scaled no more than they need (steps of 10 %)
+    assert frac[5] <= REF_TORQUE_FRACTION, frac  # wrist_3, the joint the note names, fits (wrist_1 does not: above)
     assert ref["amp"][:3] == [0.25, 0.28, 0.31]  # the shoulders and elbow fit as they were
-    note = [w for w in prep.info["warnings"] if w.startswith("default reference")][0]
+    note = [w for w in warnings if w.startswith("default reference")][0]
     assert "wrist_3_joint: amplitude 0.4 rad scaled to" in note and "7.4 N m of its 7 N m" in note
 
 

@@ -70,8 +70,11 @@ def test_diverged_wins_over_everything_it_causes() -> None:
 
 
 def test_bounds_are_the_ones_asked_for() -> None:
-    assert verdict(results={"tracking_max_abs_deg": [0.5, 3.0]}, bounds=Bounds(max_error_deg=2.0))[0] == \
-        "tracking-bound-exceeded"
+    # bounds other than the defaults (2 deg, no command missed): each way
+    three = {"tracking_max_abs_deg": [0.5, 3.0]}
+    assert verdict(results=three, bounds=Bounds(max_error_deg=4.0)) == ("ok", [])
+    assert verdict(results={"tracking_max_abs_deg": [0.5, 1.0]}, bounds=Bounds(max_error_deg=0.8)) == \
+        ("tracking-bound-exceeded", ["tracking-bound-exceeded: b: max |e| 1 deg > 0.8 deg"])
     assert verdict(results={"commands_missed": 2}, bounds=Bounds(max_commands_missed=5))[0] == "ok"
     assert verdict(exits={"logger": None})[0] == "ok"  # no logger asked for: nothing to fail
 

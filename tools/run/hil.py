@@ -442,8 +442,8 @@ def _wait_sil(opt: HilOptions, sil: subprocess.Popen[bytes], log: Any) -> None:
 def canopen_args(info: dict[str, Any], drive_config: Path | None) -> tuple[list[str], list[str], Any]:
     """From the arm's drive table (gen/drives.py): arm_controller's --node per joint (joint order),
     the PDOs' transmission types, the heartbeats and the master's id; arm_sim's --node presets (the
-    same specs: its drives start with the table's scaling, as drives commissioned for this arm); and
-    the table itself."""
+    same specs and the max torque of a motor the importer sized: its drives start with the table's
+    scaling, as drives commissioned for this arm); and the table itself."""
     from gen import drives as drives_mod
 
     try:
@@ -451,12 +451,13 @@ def canopen_args(info: dict[str, Any], drive_config: Path | None) -> tuple[list[
     except drives_mod.DrivesError as exc:
         raise HilError(f"drive configuration: {exc}") from None
     node_args = [a for d in sorted(cfg.drives, key=lambda d: d.drive) for a in ("--node", d.node_spec())]
+    sim_node_args = [a for d in sorted(cfg.drives, key=lambda d: d.drive) for a in ("--node", d.node_spec(sim=True))]
     t = cfg.transmission
     ctl = [*node_args, *(["--rpdo-type", str(t["rpdo1"])] if t["rpdo1"] != 1 else []),
            *(["--tpdo2-type", str(t["tpdo2"])] if t["tpdo2"] != 1 else []),
            "--heartbeat-ms", str(cfg.heartbeat_ms), "--consumer-ms", str(cfg.consumer_ms),
            "--master-id", str(cfg.master_id)]
-    return ctl, node_args, cfg
+    return ctl, sim_node_args, cfg
 
 
 _CANOPEN_MEMO: dict[str, tuple[list[str], list[str], Any, str, str]] = {}
