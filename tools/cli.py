@@ -93,7 +93,9 @@ def run_command(ns: argparse.Namespace) -> int:
     procs.install()
     try:
         code = int(ns.run(ns))
-        if code == 0 and getattr(ns, "record", False):  # results kept for the docs: their figures at once
+        # results kept for the docs (--record, a flag): their figures at once; not a --record FILE
+        # (run, commission, identify: the commissioning record), which renders nothing
+        if code == 0 and getattr(ns, "record", None) is True:
             from tools.commands.docs import render
 
             skipped: list[str] = []  # regions of other results files that cannot be rendered yet

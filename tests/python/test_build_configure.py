@@ -62,3 +62,25 @@ def test_a_second_build_of_the_same_folder_waits_for_the_first() -> None:
     out, err = p.communicate(timeout=300)
     assert p.returncode == 0, err
     assert f"waiting for another build in {build_dir('release')}" in err
+
+
+def test_a_prebuilt_folder_is_not_checked_again_but_must_be_built(tmp_path: Path,
+                                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """ARMCTL_PREBUILT (what the qemu VM's commands get: the host built the tree they share): a
+    listed folder is not configured or built again, yet one with no configure record or no
+    controller is refused in one line, never run as it is."""
+    from tools.build import PREBUILT_ENV, BuildError, prebuilt
+    from gen.lib.paths import controller_binary
+
+    bdir = tmp_path / "release"
+    bdir.mkdir()
+    assert not prebuilt(bdir)  # not listed: the usual check
+    monkeypatch.setenv(PREBUILT_ENV, f"{tmp_path / 'other'}:{bdir}")
+    with pytest.raises(BuildError, match=f"{bdir} is in {PREBUILT_ENV} but not built"):
+        prebuilt(bdir)
+    (bdir / STAMP).write_text("{}")
+    controller_binary(bdir).parent.mkdir(parents=True)
+    controller_binary(bdir).write_text("")
+    assert prebuilt(bdir)
+    build("release", bdir=bdir)  # returns at once: no CMake, no ninja in an empty folder
+    assert not (bdir / "build.ninja").exists()

@@ -129,3 +129,17 @@ def test_a_bug_keeps_its_traceback() -> None:
 
     with pytest.raises(ZeroDivisionError):
         cli.run_command(_ns("x", run=run))
+
+
+def test_only_a_results_record_renders_the_docs(monkeypatch: pytest.MonkeyPatch, tmp_path) -> None:
+    """`--record` (store_true: results kept for the docs) renders the docs after the command; `run`,
+    `commission` and `identify` name a commissioning record FILE with `--record`: that renders nothing
+    (it once re-rendered every page after each rehearsal step: a minute a command in the qemu VM)."""
+    import tools.commands.docs as docs
+
+    rendered: list[str] = []
+    monkeypatch.setattr(docs, "render", lambda skipped: rendered.append("render"))
+    assert cli.run_command(_ns("run", run=lambda ns: 0, record=tmp_path / "record.json")) == 0
+    assert rendered == []
+    assert cli.run_command(_ns("timing", run=lambda ns: 0, record=True)) == 0
+    assert rendered == ["render"]

@@ -13,7 +13,7 @@ trajectory file, and `--hold` ended by Ctrl-C.
   enabled: a trajectory leaving a range, one asking more torque than a joint has, an interface that
   does not exist, a drive table that contradicts the drive.
 
-The same rehearsal on real SocketCAN (vcan in the qemu VM): test_run_on_arm_vm.py. Cost on the
+On real SocketCAN (vcan in the qemu VM), the part only a kernel with CAN proves: test_vcan_vm.py. Cost on the
 2-core machine: about 2-3 minutes of wall time, most of it the 20 start poses (two at a time).
 """
 
@@ -48,6 +48,7 @@ NAMES = ["shoulder_pan", "shoulder_lift", "elbow", "wrist_1", "wrist_2", "wrist_
 MOVED_AFTER_STOP_DEG = 1.0  # the most any joint may move in the 2 s after a stop
 FOLLOW_DEG = 1.0            # the most any joint may lag a task's reference
 STREAM_HELD_DEG = 3.0       # the most a stale stream's held pose may be from the last plan
+TRAJECTORY_S = 2.0          # the rehearsal's trajectory file: there and back
 
 
 class Plant:
@@ -135,17 +136,19 @@ class Rehearsal:
 
 @pytest.fixture(scope="module")
 def rehearsal(ports: int, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Rehearsal]:
-    """commission -> hold 5 s -> jog -> the built-in reference -> a trajectory file -> Ctrl-C."""
+    """commission -> hold 5 s -> jog -> the built-in reference 1 s -> a 2 s trajectory file -> Ctrl-C (the
+    hold as the rehearsal's spec says; the others as long as their claim needs: a task that ends,
+    followed within FOLLOW_DEG, stopped braked)."""
     out = tmp_path_factory.mktemp("rehearsal")
     record = out / "record.json"
     bus = ["--bus", f"udp:{ports}", "--record", str(record)]
-    traj = trajectory_csv(out / "traj.csv", [0.3, 0.2, -0.3, 0.2, 0.3, 0.4])
+    traj = trajectory_csv(out / "traj.csv", [0.3, 0.2, -0.3, 0.2, 0.3, 0.4], seconds=TRAJECTORY_S, rows=41)
     plant = Plant(ports, out / "plant")
     try:
         cm = armctl("commission", *bus, "--out", str(out / "commission"))
         runs = {"hold": armctl("run", "--hold", "--duration", "5", *bus, "--out", str(out / "hold")),
                 "jog": armctl("run", "--jog", "elbow=5", *bus, "--out", str(out / "jog")),
-                "reference": armctl("run", "--duration", "3", *bus, "--out", str(out / "reference")),
+                "reference": armctl("run", "--duration", "1", *bus, "--out", str(out / "reference")),
                 "trajectory": armctl("run", str(traj), *bus, "--out", str(out / "trajectory"))}
         # Ctrl-C at the terminal: SIGINT to armctl (its children have process groups of their own)
         p = subprocess.Popen([ARMCTL, "run", "--hold", *bus, "--out", str(out / "stop")], cwd=REPO,
@@ -188,11 +191,13 @@ def test_every_task_ends_as_asked_and_the_arm_follows(rehearsal: Rehearsal) -> N
         assert s["final_state"] == "safe-stop" and s["task_report"]["ended"], (name, s)
         worst = max(s["tracking"]["max_abs_deg"].values())
         assert worst < FOLLOW_DEG, (name, s["tracking"])
+    hold = rehearsal.sessions["hold"]["task_report"]
+    assert hold["name"] == "hold" and abs(hold["task_s"] - 5.0) < 1e-3, hold  # the must-hold's 5 s
     jog = rehearsal.sessions["jog"]["task_report"]
     moved = [b - a for a, b in zip(jog["start_pose"], jog["first_point"])]
     assert moved == pytest.approx([0, 0, math.radians(5), 0, 0, 0], abs=1e-6), jog
     traj = rehearsal.sessions["trajectory"]["task_report"]
-    assert traj["name"] == "trajectory" and abs(traj["task_s"] - 5.0) < 1e-3  # 4 s and the end's 1 s hold
+    assert traj["name"] == "trajectory" and abs(traj["task_s"] - (TRAJECTORY_S + 1.0)) < 1e-3  # and the end's 1 s hold
 
 
 def test_ctrl_c_is_a_controlled_stop_and_no_joint_moves_after_it(rehearsal: Rehearsal) -> None:

@@ -15,6 +15,15 @@ VM_SCRIPT below through `armctl vcan run`. One boot serves the tests that read i
    and drive 1's STATE on vcan1 (not drive 1's bus); 300 periods later SIGTERM stops the
    controller (a safe stop: zero torque, shutdown, NMT stop, then its summary).
 
+4. your arm's whole rehearsal on real SocketCAN (docs/run-on-your-arm.md), through the documented
+   commands on vcan0..vcan2: `armctl plant --bus vcan` (the arm, a process of its own), then
+   `armctl commission`, `armctl run --hold --duration 5`, `--jog`, the built-in reference, a
+   trajectory file and `--hold` ended by Ctrl-C: each ends as asked, the arm follows, the last stop
+   leaves it held and braked, no joint moving more than 1 deg after any stop; and an interface
+   that is down, refused in one line before anything starts. The release build those commands
+   run is brought up to date on the host before the boot and named in ARMCTL_PREBUILT, so no
+   command in the VM checks it again (tools/build/__init__.py).
+
 On the host: both processes ended as they should; every captured frame is either one of the injected ones
 (each exactly once) or decodes with the DBC via cantools with the DBC's length and FD/BRS format;
 both sides counted each injected frame in the right counter and nothing else went wrong.
@@ -26,9 +35,11 @@ root to install them, no Debian kernel package reachable).
 from __future__ import annotations
 
 import json
+import math
 import re
 import subprocess
 import sys
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -37,14 +48,20 @@ import pytest
 
 from host_sim.protocol import DBC_PATH
 from gen.lib.paths import REPO, env_with_repo
+from test_run_on_arm import trajectory_csv
+from tools.build import PREBUILT_ENV
+from tools.build.arm import DEFAULT_ARM, build_arm
 
-pytestmark = pytest.mark.long  # minutes: three runs of the qemu VM (five boots)
+pytestmark = pytest.mark.long  # minutes: three runs of the qemu VM (five boots); the first also runs your arm's whole rehearsal
 
 # Not serial: the guest's runs are lockstep (no wall clock decides them) and qemu takes one core,
 # so these share the machine with one other test file; a boot that hangs is booted again.
 
 PERIODS = 300
-VM_TIMEOUT_S = 420.0  # generous: the whole module takes ~2-4 min on the 2-core CI machine
+VM_TIMEOUT_S = 420.0  # generous: one boot's HIL run, or `hil --bus vm`, takes ~1-2 min on the 2-core CI machine
+REHEARSAL_TIMEOUT_S = 1800.0  # the rehearsal's part of vm_run's boot: eight armctl start-ups, commissioning, the tasks
+MOVED_AFTER_STOP_DEG = 1.0   # the most any joint may move in the 2 s the plant watches after the stop
+N_JOINTS = 6
 
 # (IFACE/cansend argument, where the controller counts it, where the simulator counts it). Frames
 # with a master's ids (SYNC, a command) are not here: only the master sends them, so the controller
@@ -70,6 +87,7 @@ def _frame_text(g: str) -> str:
 VM_SCRIPT = r"""#!/bin/sh
 # Runs inside the VM, chrooted into the host's filesystem (tests/python/test_vcan_vm.py).
 OUT=$1; CTL=$2; PY=$3; UNIT=$4; SELFTEST=$5; PERIODS=$6; GARBAGE=$7; CTL_EXTRA=$8; BUSES=$9; BUSLOG=${10}
+REHEARSAL=${11}; TRAJ=${12}
 # can-utils' canplayer reads a run's capture (armctl hil --capture: candump's log format), each
 # bus's lines printed as they would be sent (it needs AF_CAN even for that: here it has it); into
 # the guest's tmpfs, then copied out: a 9p write a line took 5 s
@@ -115,6 +133,66 @@ wait $SIM; echo $? > "$OUT/sim.rc"
 kill $INJ 2>/dev/null; wait $INJ 2>/dev/null
 sleep 0.5; kill $CD; wait $CD 2>/dev/null
 cp "$CAP" "$OUT/candump.log"
+# the same boot: your arm's rehearsal on vcan (REHEARSAL_SCRIPT)
+bash "$REHEARSAL" "$OUT/rehearsal" "$TRAJ"
+exit 0
+"""
+
+REHEARSAL_SCRIPT = r"""#!/bin/bash
+# Runs inside the VM after VM_SCRIPT's HIL run (tests/python/test_vcan_vm.py): your arm's whole
+# rehearsal through the documented commands on vcan0..vcan2, the plant a process of its own:
+# commission -> hold 5 s -> jog -> the built-in reference -> a file trajectory -> Ctrl-C.
+OUT=$1; TRAJ=$2
+A=tools/armctl
+RECORD=$OUT/record.json
+mkdir -p "$OUT"
+wait_for() {  # wait_for FILE TEXT SECONDS: until FILE says TEXT, at most SECONDS (the wall clock's)
+    local t0=$SECONDS
+    until grep -q "$2" "$1" 2>/dev/null; do sleep 0.5; [ $((SECONDS - t0)) -ge "$3" ] && return 1; done
+    return 0
+}
+step() {  # step NAME ARGS...: one armctl command, its output, exit code and wall time
+    local name=$1 t0; shift
+    t0=$(date +%s%N)
+    $A "$@" --out "$OUT/$name" > "$OUT/$name.out" 2>&1; echo $? > "$OUT/$name.rc"
+    echo "$name $(( ($(date +%s%N) - t0) / 1000000 )) ms" >> "$OUT/times.txt"
+}
+# what a command's start-up costs here: armctl itself (its checks, Python's imports), then the
+# build's check that ARMCTL_PREBUILT spares each command
+t0=$(date +%s%N); $A run --help > /dev/null 2>&1; echo "startup $(( ($(date +%s%N) - t0) / 1000000 )) ms" >> "$OUT/times.txt"
+t0=$(date +%s%N)
+env -u ARMCTL_PREBUILT PYTHONPYCACHEPREFIX="$PWD/build/pycache" .venv/bin/python -c "from tools.build.arm import DEFAULT_ARM, build_arm
+build_arm('release', DEFAULT_ARM, targets=['arm_controller', 'arm_sim', 'arm_lcm_logger'])" > "$OUT/buildcheck.out" 2>&1
+echo "build-check $(( ($(date +%s%N) - t0) / 1000000 )) ms" >> "$OUT/times.txt"
+$A plant --bus vcan --out "$OUT/plant" > "$OUT/plant.out" 2>&1 &
+PLANT=$!
+# meanwhile, a bus that is down: refused before anything starts (the plant, on vcan0..vcan2, never sees it)
+ip link add dev vcan9 type vcan
+$A run --hold --bus socketcan:vcan0,vcan1,vcan9 --record "$RECORD" > "$OUT/down.out" 2>&1 &
+DOWN=$!
+wait_for "$OUT/plant.out" "waiting for a master" 300 || echo "no plant" > "$OUT/plant.failed"
+wait $DOWN; echo $? > "$OUT/down.rc"
+R="--bus vcan --record $RECORD"
+step commission commission $R
+step hold run --hold --duration 5 $R
+step jog run --jog elbow=5 $R
+step reference run --duration 1 $R
+step trajectory run "$TRAJ" $R
+# a hold, ended by Ctrl-C once it holds
+$A run --hold $R --out "$OUT/stop" > "$OUT/stop.out" 2>&1 &
+RUN=$!
+wait_for "$OUT/stop/controller.log" "hold: holding" 300
+sleep 1
+kill -INT $RUN   # Ctrl-C
+wait $RUN; echo $? > "$OUT/stop.rc"
+# the plant watches the arm for 2 s after each stop: until its record of the last session is final
+settled() {
+    python3 -c "import json, sys; s = json.load(open('$OUT/plant/sessions.json'))['sessions']
+sys.exit(0 if len(s) >= 6 and s[-1]['complete'] else 1)" 2>/dev/null
+}
+t0=$SECONDS; until settled; do sleep 1; [ $((SECONDS - t0)) -ge 300 ] && break; done
+cp "$OUT/plant/sessions.json" "$OUT/plant_settled.json" 2>/dev/null
+kill -INT $PLANT; wait $PLANT; echo $? > "$OUT/plant.rc"
 exit 0
 """
 
@@ -182,25 +260,35 @@ def vm_run(tmp_path_factory: pytest.TempPathFactory, build_dir: Path) -> dict:
     out = tmp_path_factory.mktemp("vcan_vm")
     script = out / "vm_script.sh"
     script.write_text(VM_SCRIPT)
+    (out / "rehearsal.sh").write_text(REHEARSAL_SCRIPT)
     # no start-pose hold where the controller has one: the VM is slow, the periods are precious
     helptext = subprocess.run([str(exes["ctl"]), "--help"], capture_output=True, text=True).stdout
     ctl_extra = "--ref-hold 0" if "--ref-hold" in helptext else ""
     from tools.run.hil import CAPTURE_FILE, HilOptions, run_hil
 
+    # the VM's inputs, made before it boots (a file the host writes during the run may look stale
+    # in it: 9p's cache): the capture canplayer replays, the rehearsal's trajectory file, and the
+    # release build the rehearsal's commands run, brought up to date here (ARMCTL_PREBUILT: not
+    # checked again by each command in the VM, where ninja's look at the tree over 9p is slow)
     run_hil(HilOptions(out=out / "sil", duration_s=0.2, preset=build_dir.name, bus="sil", capture=True))
+    traj = trajectory_csv(out / "traj.csv", [0.3, 0.2, -0.3, 0.2, 0.3, 0.4], seconds=2.0, rows=41)
+    release = build_arm("release", DEFAULT_ARM, targets=["arm_controller", "arm_sim", "arm_lcm_logger"])
     # through the CLI, as a user runs a command in the VM (docs/drives.md)
     res = subprocess.run(
-        [ARMCTL, "vcan", "run", "--verbose", "--timeout", f"{VM_TIMEOUT_S:g}", "--",
+        [ARMCTL, "vcan", "run", "--verbose", "--timeout", f"{VM_TIMEOUT_S + REHEARSAL_TIMEOUT_S:g}", "--",
          "sh", str(script), str(out), str(exes["ctl"]), sys.executable, str(exes["unit"]),
          str(exes["selftest"]), str(PERIODS), " ".join(g for g, _, _ in GARBAGE), ctl_extra, BUSES,
-         str(out / "sil" / CAPTURE_FILE)],
-        cwd=REPO, capture_output=True, text=True, timeout=VM_TIMEOUT_S + 60)
+         str(out / "sil" / CAPTURE_FILE), str(out / "rehearsal.sh"), str(traj)],
+        cwd=REPO, capture_output=True, text=True, timeout=VM_TIMEOUT_S + REHEARSAL_TIMEOUT_S + 60,
+        env={**env_with_repo(), PREBUILT_ENV: str(release)})
     assert res.returncode == 0, f"armctl vcan run: exit {res.returncode}: {res.stdout[-3000:]}{res.stderr[-3000:]}"
 
     def read(name: str) -> str:
         p = out / name
         return p.read_text() if p.exists() else f"<{name} missing>"
 
+    print(f"test_vcan_vm: {res.stderr.strip().splitlines()[-1]}; the rehearsal's steps: "
+          f"{read('rehearsal/times.txt').strip()}", file=sys.stderr)
     return {"out": out, "read": read, "stdout": res.stdout, "stderr": res.stderr}
 
 
@@ -371,3 +459,67 @@ def test_a_hung_boot_is_booted_again_and_the_vm_dies_with_the_armctl_that_booted
     while time.monotonic() < deadline and Path(f"/proc/{qemu[0]}").exists():
         time.sleep(0.2)
     assert not Path(f"/proc/{qemu[0]}").exists(), f"qemu {qemu[0]} outlived its armctl"
+
+
+def _rehearsal(vm_run: dict, name: str) -> str:
+    return vm_run["read"](f"rehearsal/{name}")
+
+
+TASKS = ("hold", "jog", "reference", "trajectory")
+
+
+def test_commission_passes_on_vcan(vm_run: dict) -> None:
+    """`armctl commission --bus vcan` against `armctl plant --bus vcan`: the arm is the one the model
+    describes, each joint's direction, inertia and gravity checked on real SocketCAN."""
+    assert not (vm_run["out"] / "rehearsal" / "plant.failed").exists(), _rehearsal(vm_run, "plant.out")
+    cm = _rehearsal(vm_run, "commission.out")
+    assert _rc(vm_run, "rehearsal/commission") == 0 and "armctl commission: passed" in cm, cm
+    rec = json.loads(_rehearsal(vm_run, "record.json"))
+    assert rec["passed"] and rec["findings"] == [] and len(rec["joints"]) == N_JOINTS, rec
+    assert all(j["direction"] == "ok" for j in rec["joints"]), rec["joints"]
+
+
+def test_every_task_on_vcan_ends_as_asked_and_the_arm_follows(vm_run: dict) -> None:
+    """hold 5 s, jog, the built-in reference, a trajectory file: each `armctl run --bus vcan` on
+    vcan0..vcan2 ends as asked (exit 0), the arm within 1 deg of each task's reference."""
+    for name in TASKS:
+        assert _rc(vm_run, f"rehearsal/{name}") == 0, _rehearsal(vm_run, f"{name}.out")
+        s = json.loads(_rehearsal(vm_run, f"{name}/session.json"))
+        assert [b.split("@")[0] for b in s["buses"]] == ["socketcan:vcan0", "socketcan:vcan1", "socketcan:vcan2"], s
+        assert s["final_state"] == "safe-stop" and s["task_report"]["ended"], (name, s)
+        assert s["stop"]["cause"] == "end of the run" and s["stop"]["braked"], (name, s["stop"])
+        assert s["tracking"]["periods"] > 0 and max(s["tracking"]["max_abs_deg"].values()) < 1.0, (name, s["tracking"])
+    hold = json.loads(_rehearsal(vm_run, "hold/session.json"))["task_report"]
+    assert hold["name"] == "hold" and abs(hold["task_s"] - 5.0) < 1e-3, hold
+    jog = json.loads(_rehearsal(vm_run, "jog/session.json"))["task_report"]
+    moved = [b - a for a, b in zip(jog["start_pose"], jog["first_point"])]
+    assert moved == pytest.approx([0, 0, math.radians(5), 0, 0, 0], abs=1e-6), jog
+    traj = json.loads(_rehearsal(vm_run, "trajectory/session.json"))["task_report"]
+    assert traj["name"] == "trajectory" and abs(traj["task_s"] - 3.0) < 1e-3, traj  # 2 s and the end's 1 s hold
+
+
+def test_ctrl_c_on_vcan_stops_the_arm_and_it_stays(vm_run: dict) -> None:
+    """Ctrl-C on `armctl run --hold --bus vcan`: the controlled stop, exit 0, the arm held by its
+    brakes; after every stop of the rehearsal no joint moved more than 1 deg in the 2 s watched."""
+    stop_out = _rehearsal(vm_run, "stop.out")
+    assert _rc(vm_run, "rehearsal/stop") == 0 and "stopped by you" in stop_out, stop_out
+    session = json.loads(_rehearsal(vm_run, "stop/session.json"))
+    assert session["stopped_by_user"], session
+    stop = session["stop"]
+    assert stop["cause"] == "stop signal" and stop["braked"], stop  # the controlled stop, every brake closed
+    plant = json.loads(_rehearsal(vm_run, "plant/sessions.json"))
+    assert plant["brakes_closed"] == (1 << N_JOINTS) - 1 and not plant["in_session"], plant  # held by its brakes
+    sessions = plant["sessions"]
+    assert len(sessions) == 1 + len(TASKS) + 1 and all(s["ended"] == "stopped" for s in sessions), sessions
+    last = sessions[-1]
+    assert last["complete"] and last["window_s"] >= 2.0 - 1e-3, last
+    for s in sessions:
+        if s["window_s"] >= 2.0 - 1e-3:  # the sessions whose whole 2 s after the stop were watched
+            assert max(s["moved_after_stop_deg"]) <= MOVED_AFTER_STOP_DEG, s
+    assert _rc(vm_run, "rehearsal/plant") == 0, _rehearsal(vm_run, "plant.out")
+
+
+def test_a_down_interface_is_one_line(vm_run: dict) -> None:
+    down = _rehearsal(vm_run, "down.out").strip().splitlines()
+    assert _rc(vm_run, "rehearsal/down") == 2 and down[-1] == (
+        "armctl run: --bus socketcan:vcan9: the interface is down (as root: ip link set vcan9 up)"), down

@@ -23,7 +23,7 @@ from pathlib import Path
 
 from gen.lib.atomic_output import write_json_atomic
 from gen.lib.locks import flocked
-from gen.lib.paths import REPO, build_dir
+from gen.lib.paths import REPO, build_dir, controller_binary
 
 PRESETS = ("debug", "release")
 CROSS_PRESETS = ("aarch64", "cortex-m4", "cortex-m7", "cortex-m3")
@@ -163,6 +163,24 @@ def ensure_configured(preset: str, bdir: Path, quiet: bool = True, cache: dict[s
     write_json_atomic(stamp, want)
 
 
+# Build folders the caller brought up to date just before, on this very tree (os.pathsep between
+# them): a command run there does not check them again. The qemu VM's commands set it (the host
+# built the tree they share over 9p, where a check is cmake and compiler --version in an emulated
+# machine and ninja's stat of every file: tens of seconds a command). The folder must still hold
+# a successful configure and the controller.
+PREBUILT_ENV = "ARMCTL_PREBUILT"
+
+
+def prebuilt(bdir: Path) -> bool:
+    listed = {Path(p).resolve() for p in os.environ.get(PREBUILT_ENV, "").split(os.pathsep) if p}
+    if bdir.resolve() not in listed:
+        return False
+    if not (bdir / STAMP).exists() or not controller_binary(bdir).exists():
+        raise BuildError(f"armctl: build: {bdir} is in {PREBUILT_ENV} but not built (no configure record "
+                         "or no controller): build it first")
+    return True
+
+
 LOCK = ".armctl-build.lock"  # in the build folder: flocked for a configure and build
 _held = threading.local()     # the build folders this thread holds (a lock taken again is held)
 _in_process: dict[Path, threading.Lock] = {}  # threads of this process queue here, silently
@@ -203,6 +221,8 @@ def build(preset: str = "release", quiet: bool = True, bdir: Path | None = None,
     if missing:
         raise ToolchainMissing(f"armctl: build ({preset}): {missing}")
     bdir = bdir or build_dir(preset)
+    if prebuilt(bdir):
+        return
     with build_lock(bdir):
         fresh = not (bdir / "build.ninja").exists()
         ensure_configured(preset, bdir, quiet, cache)
