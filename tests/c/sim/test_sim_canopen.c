@@ -76,7 +76,7 @@ static void boot_up_and_defaults(void)
     CHECK(sim_co_od_get(&n.od, 0x1401u, 1u) == 0x80000303u);         /* RPDO2 invalid */
     CHECK(sim_co_od_get(&n.od, 0x6076u, 0u) == 1486u); /* the motor's, mN m */
     CHECK(sim_co_od_get(&n.od, 0x608Fu, 1u) == 524288u && sim_co_od_get(&n.od, 0x6091u, 1u) == 101u);
-    const sim_co_preset_t p = {560u, 4096u, 50u, 1u, 0u, 0.0, 0u};
+    const sim_co_preset_t p = {560u, 4096u, 50u, 1u, 0u, 0.0, 0u, 0u};
     CHECK(init(&n, 3, &p, 28.0) == 0);
     sim_co_node_boot(&n, 0);
     CHECK(sim_co_od_get(&n.od, 0x6076u, 0u) == 560u && sim_co_od_get(&n.od, 0x608Fu, 1u) == 4096u);
@@ -88,14 +88,14 @@ static void boot_up_and_defaults(void)
 static void torque_through_the_gear(void)
 {
     sim_co_node_t n;
-    const sim_co_preset_t p = {0u, 0u, 0u, 0u, 0u, 0.8, 0u};
+    const sim_co_preset_t p = {0u, 0u, 0u, 0u, 0u, 0.8, 0u, 0u};
     CHECK(init(&n, 3, &p, 150.0) == 0);
     sim_cia402_scale_t sc;
     CHECK(sim_cia402_scale(&n.od, &n.preset, &sc) == 0);
     CHECK(fabs(sc.joint_rated_nm - 1.486 * 101.0 * 0.8) < 1e-12);
     CHECK(fabs(sim_cia402_target_nm(&sc, 100, 1000u, 150.0) - 0.1 * 1.486 * 101.0 * 0.8) < 1e-12);
     CHECK(sim_cia402_permille(&sc, 0.1 * 1.486 * 101.0 * 0.8) == 100);
-    const sim_co_preset_t bad = {0u, 0u, 0u, 0u, 0u, 1.5, 0u}; /* an efficiency above 1: no units */
+    const sim_co_preset_t bad = {0u, 0u, 0u, 0u, 0u, 1.5, 0u, 0u}; /* an efficiency above 1: no units */
     CHECK(sim_cia402_scale(&n.od, &bad, &sc) == -1);
 }
 
