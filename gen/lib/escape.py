@@ -225,6 +225,8 @@ def markdown_text(text: str) -> str:
         else:
             out.append(ch)
     s = "".join(out)
+    if s[:1] in (" ", "\t"):  # after leading blanks a quote or list still starts, and four make code
+        return f"&#{ord(s[0])};" + s[1:]
     m = _MD_BLOCK_START.match(s)
     if m:  # a list item's "-", "+", a setext "=", a quote's ">", a numbered item's "1." at the start of a line
         if m.group(0)[0].isdigit():

@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import signal
 import struct
 import subprocess
@@ -94,7 +95,8 @@ class Injector:
         """The processes of this run (their command line names its bus port)."""
         r = subprocess.run(["pgrep", "-f", f"{exe} .*{GROUP}:{self.port}@"], capture_output=True, text=True)
         if exe == "arm_lcm_logger":
-            r = subprocess.run(["pgrep", "-f", f"arm_lcm_logger --lcm-url {lcm_url(self.lcm_port)}"],
+            # a pattern: the URL's '?' and '.' taken as they are written
+            r = subprocess.run(["pgrep", "-f", f"arm_lcm_logger --lcm-url {re.escape(lcm_url(self.lcm_port))}"],
                                capture_output=True, text=True)
         return [int(x) for x in r.stdout.split()]
 
